@@ -1,0 +1,78 @@
+"""The predictor's output: a mixture over actions of Gaussian future joint positions.
+
+Paper eq. motion_prediction: p(xi_next | F, p) = sum_c p(c | F, p) p(xi_next | F, p, c).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import torch
+
+from iplanner_torch.types import check_shape
+
+
+@dataclass(kw_only=True)
+class Forecast:
+    """Per-action Gaussian forecasts of the next ``n_f`` frames and the action weights.
+
+    Attributes:
+        weights: (B, A) p(c = a | F_prev, p), rows sum to 1.
+        mean: (B, A, n_f, K, 3) predicted joint positions [m], world (table) frame.
+        var: (B, A, n_f, K, 3) per-coordinate variances [m^2] (independent output channels).
+        dt: seconds between consecutive predicted frames (1 / fps).
+        joint_names: the K joint names.
+        action_names: the A action names.
+    """
+
+    weights: torch.Tensor
+    mean: torch.Tensor
+    var: torch.Tensor
+    dt: float
+    joint_names: tuple[str, ...]
+    action_names: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        check_shape("weights", self.weights, ("B", "A"))
+        b, a = self.weights.shape
+        check_shape("mean", self.mean, (b, a, "n_f", len(self.joint_names), 3))
+        check_shape("var", self.var, tuple(self.mean.shape))
+
+    @property
+    def batch_size(self) -> int:
+        """B."""
+        return int(self.weights.shape[0])
+
+    @property
+    def horizon(self) -> int:
+        """n_f, the number of predicted frames."""
+        return int(self.mean.shape[2])
+
+    @property
+    def times(self) -> torch.Tensor:
+        """(n_f,) seconds after the last observed frame at which each predicted frame lies."""
+        return self.dt * torch.arange(
+            1, self.horizon + 1, dtype=self.mean.dtype, device=self.mean.device
+        )
+
+    def joint_cov(self) -> torch.Tensor:
+        """(B, A, n_f, K, 3, 3) diagonal covariances built from ``var``."""
+        return torch.diag_embed(self.var)
+
+    def expected_mean(self) -> torch.Tensor:
+        """(B, n_f, K, 3) the mixture's mean: sum over actions of weight x mean."""
+        return torch.einsum("ba,bafkc->bfkc", self.weights, self.mean)
+
+    def to(self, device: torch.device | str) -> Forecast:
+        """A copy on ``device``."""
+        return replace(
+            self,
+            weights=self.weights.to(device),
+            mean=self.mean.to(device),
+            var=self.var.to(device),
+        )
+
+    def select(self, index: int | slice) -> Forecast:
+        """The forecast for a subset of the batch (keeps the batch dimension)."""
+        idx = slice(index, index + 1) if isinstance(index, int) else index
+        return replace(self, weights=self.weights[idx], mean=self.mean[idx], var=self.var[idx])
