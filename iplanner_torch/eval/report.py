@@ -1,0 +1,570 @@
+"""Tables and plots of closed-loop sweeps, and the paper's numbers to compare with.
+
+Per-episode results come from episode logs (``.mcap``, read with
+:func:`~iplanner_torch.recording.reader.read_episode`), JSON files or dicts; one row per
+episode holds the episode's metadata (flattened with ``.``) and its metrics, whose ``eval/``
+prefix is dropped (``eval/smoothness`` -> ``smoothness``). Group keys default to the metadata
+keys ``scenario`` and ``planner``.
+
+Units are SI throughout, including the paper's table (its centimetres are stored as metres).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.recording.reader import read_episode
+
+__all__ = [
+    "DEFAULT_METRICS",
+    "PLANNERS",
+    "PAPER_SCENARIOS",
+    "gather_results",
+    "summary_table",
+    "to_markdown",
+    "format_table",
+    "print_table",
+    "plot_comparison",
+    "plot_sweep",
+    "write_sweep_report",
+    "paper_table_simulation",
+    "side_by_side",
+]
+
+#: Metrics summarised by default, in display order, with their axis labels.
+DEFAULT_METRICS: dict[str, str] = {
+    "smoothness": "smoothness [rad²/s⁴]",
+    "jerkiness": "jerkiness [rad²/s⁴]",
+    "min_distance": "closest distance [m]",
+    "efficiency": "efficiency (alone / with robot)",
+    "mhd": "prediction MHD [m]",
+    "prediction_ms": "prediction time [ms]",
+}
+
+#: Planner keys and the paper's names for them.
+PLANNERS: dict[str, str] = {
+    "itomp": "ITOMP",
+    "iplanner_no_ni": "I-Planner, no NI",
+    "iplanner_ni": "I-Planner, NI",
+}
+
+#: Paper table performance: scenario key -> (label, arrangement, task order, confidence).
+PAPER_SCENARIOS: dict[str, tuple[str, str, str, float]] = {
+    "arrangements_1": ("Different Arrangements (1)", "1x4", "(0,1)->(2,3)", 0.95),
+    "arrangements_2": ("Different Arrangements (2)", "2x2", "(1,5)->(2,6)", 0.95),
+    "arrangements_3": ("Different Arrangements (3)", "2x4", "(0,4)->(1,5)->(2,6)->(3,7)", 0.95),
+    "temporal_coherence_1": ("Temporal Coherence (1)", "1x4", "0->1->2->3", 0.95),
+    "temporal_coherence_2": ("Temporal Coherence (2)", "1x4", "random", 0.95),
+    "temporal_coherence_3": ("Temporal Coherence (3)", "1x4", "(0,2)->(1,3)", 0.95),
+    "confidence_level_1": ("Confidence Level (1)", "1x4", "0->(1,2)->3", 0.90),
+    "confidence_level_2": ("Confidence Level (2)", "1x4", "0->(1,2)->3", 0.95),
+    "confidence_level_3": ("Confidence Level (3)", "1x4", "0->(1,2)->3", 0.99),
+}
+
+# Paper table performance_simulation, row by row: prediction time [ms] (None: N/A), MHD [cm]
+# (None: N/A), smoothness, jerkiness, distance [cm], efficiency; planners in PLANNERS order.
+_PAPER_SIM_ROWS: dict[str, tuple[tuple[float | None, ...], ...]] = {
+    "arrangements_1": (
+        (None, None, 2.96, 5.23, 3.2, 1.2),
+        (52.0, 6.7, 1.08, 1.52, 6.7, 1.6),
+        (58.5, 7.2, 0.92, 1.03, 8.1, 1.7),
+    ),
+    "arrangements_2": (
+        (None, None, 5.78, 7.19, 2.3, 1.1),
+        (72.4, 6.2, 1.04, 1.60, 8.2, 1.6),
+        (70.8, 7.0, 0.84, 1.32, 10.7, 1.6),
+    ),
+    "arrangements_3": (
+        (None, None, 4.82, 6.82, 1.6, 1.2),
+        (169.0, 10.4, 1.15, 1.30, 6.2, 1.6),
+        (150.0, 12.6, 1.02, 1.20, 8.9, 1.6),
+    ),
+    "temporal_coherence_1": (
+        (None, None, 1.79, 3.22, 6.0, 1.3),
+        (52.1, 4.3, 0.65, 1.56, 9.3, 1.5),
+        (48.9, 5.2, 0.62, 1.53, 9.7, 1.5),
+    ),
+    "temporal_coherence_2": (
+        (None, None, 5.49, 7.30, 2.0, 1.0),
+        (105.0, 8.2, 1.21, 1.28, 8.8, 1.6),
+        (110.0, 9.9, 1.08, 1.10, 9.9, 1.6),
+    ),
+    "temporal_coherence_3": (
+        (None, None, 3.12, 3.18, 8.0, 1.3),
+        (51.7, 6.8, 1.00, 1.20, 12.1, 1.5),
+        (60.0, 8.2, 0.79, 0.93, 13.2, 1.5),
+    ),
+    "confidence_level_1": (
+        (None, None, 2.90, 3.40, 7.2, 1.2),
+        (47.2, 7.9, 1.17, 1.58, 9.5, 1.6),
+        (52.1, 9.1, 1.08, 1.32, 10.2, 1.7),
+    ),
+    "confidence_level_2": (
+        (None, None, 3.12, 3.80, 10.3, 1.2),
+        (50.7, 7.9, 1.28, 1.71, 13.3, 1.6),
+        (48.2, 9.1, 1.20, 1.66, 14.1, 1.8),
+    ),
+    "confidence_level_3": (
+        (None, None, 3.76, 4.33, 13.0, 1.2),
+        (155.0, 7.9, 1.40, 1.90, 16.2, 1.7),
+        (129.0, 9.1, 1.35, 1.73, 17.7, 1.8),
+    ),
+}
+
+_METRIC_PREFIX = "eval/"
+
+
+# ---------------------------------------------------------------------------------------------
+# Gathering
+
+
+def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(_flatten(v, f"{key}."))
+        elif isinstance(v, list | tuple):
+            out[key] = str(tuple(v))
+        else:
+            out[key] = v
+    return out
+
+
+def _metric_name(key: str) -> str:
+    return key[len(_METRIC_PREFIX) :] if key.startswith(_METRIC_PREFIX) else key
+
+
+def _row_of_dict(d: Mapping[str, Any]) -> dict[str, Any]:
+    if "metadata" in d and "metrics" in d:  # {"metadata": {...}, "metrics": {...}} form
+        row = _flatten(d["metadata"])
+        row.update({_metric_name(k): v for k, v in _flatten(d["metrics"]).items()})
+        return row
+    return {_metric_name(k): v for k, v in _flatten(d).items()}
+
+
+def _row_of_path(p: Path) -> dict[str, Any]:
+    if p.suffix == ".mcap":
+        ep = read_episode(p)
+        row = _flatten(ep.metadata)
+        row.update({_metric_name(k): v for k, v in _flatten(ep.metrics()).items()})
+        row["complete"] = ep.complete
+    elif p.suffix == ".json":
+        try:
+            row = _row_of_dict(json.loads(p.read_text()))
+        except json.JSONDecodeError as err:
+            raise DataError(f"{p}: not valid JSON: {err}") from err
+    else:
+        raise DataError(f"{p}: expected a .mcap episode log or a .json result file")
+    row["path"] = str(p)
+    return row
+
+
+def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path) -> pd.DataFrame:
+    """One row per episode: metadata (scenario keys) and metrics.
+
+    Args:
+        items: result dicts (flat, or ``{"metadata": ..., "metrics": ...}``), paths of
+            ``.mcap`` episode logs or ``.json`` result files, or folders (searched recursively
+            for ``*.mcap``), or one such path.
+
+    Returns:
+        DataFrame, one row per episode, metric columns without the ``eval/`` prefix; rows read
+        from files have a ``path`` column.
+
+    Raises:
+        DataError: on a missing or unreadable file.
+    """
+    if isinstance(items, str | Path):
+        items = [items]
+    rows: list[dict[str, Any]] = []
+    for item in items:
+        if isinstance(item, Mapping):
+            rows.append(_row_of_dict(item))
+            continue
+        p = Path(item)
+        if p.is_dir():
+            rows.extend(_row_of_path(f) for f in sorted(p.rglob("*.mcap")))
+        elif p.is_file():
+            rows.append(_row_of_path(p))
+        else:
+            raise DataError(f"{p}: no such result file or folder")
+    return pd.DataFrame.from_records(rows)
+
+
+# ---------------------------------------------------------------------------------------------
+# Tables
+
+
+def _check_columns(df: pd.DataFrame, cols: Sequence[str], what: str) -> None:
+    missing = [c for c in cols if c not in df.columns]
+    if missing:
+        raise ConfigError(f"{what} {missing} not in the results' columns {list(df.columns)}")
+
+
+def _default_metrics(df: pd.DataFrame, exclude: Sequence[str]) -> list[str]:
+    known = [m for m in DEFAULT_METRICS if m in df.columns]
+    if known:
+        return known
+    skip = set(exclude) | {"contact", "seed", "complete"}
+    return [c for c in df.columns if c not in skip and pd.api.types.is_numeric_dtype(df[c])]
+
+
+def _contact_free(g: pd.DataFrame) -> int:
+    if "contact" in g.columns:
+        c = pd.to_numeric(g["contact"], errors="coerce")
+        return int((c == 0).sum())
+    if "min_distance" in g.columns:
+        return int((pd.to_numeric(g["min_distance"], errors="coerce") > 0).sum())
+    return 0
+
+
+def summary_table(
+    df: pd.DataFrame,
+    group_by: Sequence[str] = ("scenario", "planner"),
+    metrics: Sequence[str] | None = None,
+) -> pd.DataFrame:
+    """Mean and standard deviation of each metric per group, with counts.
+
+    Args:
+        df: per-episode results (:func:`gather_results`).
+        group_by: grouping columns.
+        metrics: metric columns (default: those of :data:`DEFAULT_METRICS` present, else every
+            numeric column).
+
+    Returns:
+        One row per group (in order of first appearance): the group keys, ``episodes``,
+        ``contact_free`` (episodes with ``contact == 0``, or ``min_distance > 0`` without a
+        contact column) and ``<metric>_mean``, ``<metric>_std`` (sample std; NaN for a single
+        episode). NaN values are left out of means.
+
+    Raises:
+        ConfigError: when a group or metric column is missing.
+    """
+    group_by = list(group_by)
+    _check_columns(df, group_by, "group columns")
+    metrics = list(metrics) if metrics is not None else _default_metrics(df, group_by)
+    _check_columns(df, metrics, "metric columns")
+    rows = []
+    for keys, g in df.groupby(group_by, sort=False, dropna=False):
+        keys = keys if isinstance(keys, tuple) else (keys,)
+        row: dict[str, Any] = dict(zip(group_by, keys))
+        row["episodes"] = len(g)
+        row["contact_free"] = _contact_free(g)
+        for m in metrics:
+            v = pd.to_numeric(g[m], errors="coerce")
+            row[f"{m}_mean"] = float(v.mean())
+            row[f"{m}_std"] = float(v.std(ddof=1)) if v.notna().sum() > 1 else math.nan
+        rows.append(row)
+    return pd.DataFrame.from_records(rows)
+
+
+def _fmt(v: Any, digits: int) -> str:
+    if isinstance(v, bool | np.bool_):
+        return str(bool(v))
+    if isinstance(v, int | np.integer):
+        return str(int(v))
+    if isinstance(v, float | np.floating):
+        return "–" if math.isnan(v) else f"{float(v):.{digits}g}"
+    return str(v)
+
+
+def _display_frame(df: pd.DataFrame, digits: int) -> tuple[list[str], list[list[str]], list[bool]]:
+    """Header, string cells and right-alignment flags; ``x_mean``/``x_std`` pairs merged."""
+    cols = list(df.columns)
+    header: list[str] = []
+    getters = []
+    numeric: list[bool] = []
+    for c in cols:
+        if c.endswith("_std") and f"{c[:-4]}_mean" in cols:
+            continue
+        if c.endswith("_mean") and f"{c[:-5]}_std" in cols:
+            base = c[:-5]
+
+            def get(r: pd.Series, base: str = base) -> str:
+                m, s = r[f"{base}_mean"], r[f"{base}_std"]
+                if isinstance(s, float) and math.isnan(s):
+                    return _fmt(m, digits)
+                return f"{_fmt(m, digits)} ± {_fmt(s, digits)}"
+
+            header.append(base)
+            getters.append(get)
+            numeric.append(True)
+        else:
+            header.append(str(c))
+            getters.append(lambda r, c=c: _fmt(r[c], digits))
+            numeric.append(pd.api.types.is_numeric_dtype(df[c]) and df[c].dtype != bool)
+    cells = [[g(r) for g in getters] for _, r in df.iterrows()]
+    return header, cells, numeric
+
+
+def to_markdown(df: pd.DataFrame, digits: int = 3) -> str:
+    """A GitHub-flavoured Markdown table (``x_mean``/``x_std`` shown as "mean ± std").
+
+    Args:
+        df: any table, e.g. :func:`summary_table`'s.
+        digits: significant digits of floats.
+    """
+    header, cells, numeric = _display_frame(df, digits)
+
+    def esc(s: str) -> str:
+        return s.replace("|", "\\|")
+
+    lines = ["| " + " | ".join(esc(h) for h in header) + " |"]
+    lines.append("| " + " | ".join("---:" if n else ":---" for n in numeric) + " |")
+    lines.extend("| " + " | ".join(esc(c) for c in row) + " |" for row in cells)
+    return "\n".join(lines) + "\n"
+
+
+def format_table(df: pd.DataFrame, digits: int = 3) -> str:
+    """Plain-text table with aligned columns (numbers right-aligned) for the console."""
+    header, cells, numeric = _display_frame(df, digits)
+    widths = [max([len(h)] + [len(r[i]) for r in cells]) for i, h in enumerate(header)]
+
+    def line(values: list[str]) -> str:
+        return "  ".join(
+            v.rjust(w) if n else v.ljust(w) for v, w, n in zip(values, widths, numeric)
+        ).rstrip()
+
+    out = [line(header), "  ".join("-" * w for w in widths)]
+    out.extend(line(r) for r in cells)
+    return "\n".join(out) + "\n"
+
+
+def print_table(df: pd.DataFrame, digits: int = 3) -> None:
+    """Print :func:`format_table` of ``df``."""
+    print(format_table(df, digits), end="")
+
+
+# ---------------------------------------------------------------------------------------------
+# Plots
+
+
+def _label(metric: str) -> str:
+    return DEFAULT_METRICS.get(metric, metric)
+
+
+def plot_comparison(
+    df: pd.DataFrame,
+    out_dir: str | Path,
+    metrics: Sequence[str] = ("smoothness", "jerkiness", "min_distance", "efficiency"),
+    group_by: tuple[str, str] = ("scenario", "planner"),
+) -> list[Path]:
+    """Grouped bar charts (mean ± std) of each metric: groups on x, one bar per planner.
+
+    Args:
+        df: per-episode results.
+        out_dir: folder for ``compare_<metric>.png`` (created).
+        metrics: metrics to plot; those absent from ``df`` are skipped.
+        group_by: ``(x-axis column, bar column)``.
+
+    Returns:
+        The written PNG paths.
+    """
+    x_col, bar_col = group_by
+    _check_columns(df, [x_col, bar_col], "group columns")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    xs = list(dict.fromkeys(df[x_col]))
+    bars = list(dict.fromkeys(df[bar_col]))
+    paths = []
+    for m in metrics:
+        if m not in df.columns:
+            continue
+        v = df.assign(_v=pd.to_numeric(df[m], errors="coerce"))
+        stats = v.groupby([x_col, bar_col], sort=False)["_v"].agg(["mean", "std"])
+        fig = Figure(figsize=(max(6.0, 1.1 * len(xs) * max(1, len(bars)) * 0.45 + 2), 4.2))
+        ax = fig.add_subplot()
+        width = 0.8 / max(1, len(bars))
+        for j, b in enumerate(bars):
+            means = [stats["mean"].get((x, b), np.nan) for x in xs]
+            stds = [stats["std"].get((x, b), np.nan) for x in xs]
+            pos = np.arange(len(xs)) - 0.4 + width * (j + 0.5)
+            ax.bar(
+                pos,
+                means,
+                width,
+                yerr=np.nan_to_num(stds),
+                capsize=3,
+                label=PLANNERS.get(str(b), str(b)),
+                color=f"C{j}",
+            )
+        ax.set_xticks(np.arange(len(xs)))
+        ax.set_xticklabels(
+            [str(x) for x in xs],
+            rotation=25 if len(xs) > 3 else 0,
+            ha="right" if len(xs) > 3 else "center",
+        )
+        ax.set_ylabel(_label(m))
+        ax.set_title(f"{_label(m).split(' [')[0]} by {x_col} and {bar_col}")
+        ax.grid(axis="y", alpha=0.3)
+        ax.legend(title=bar_col, fontsize="small")
+        fig.tight_layout()
+        path = out_dir / f"compare_{m}.png"
+        fig.savefig(path, dpi=110)
+        paths.append(path)
+    return paths
+
+
+def plot_sweep(df: pd.DataFrame, x: str, y: str, hue: str, out_path: str | Path) -> Path:
+    """Line plot of ``y`` (mean, ± std band) against a swept parameter ``x``, one line per hue.
+
+    Args:
+        df: per-episode results.
+        x: swept column (e.g. ``"confidence"``, ``"noise"``), numeric.
+        y: metric column.
+        hue: column naming the lines (e.g. ``"planner"``).
+        out_path: PNG to write (parent created).
+
+    Returns:
+        ``out_path``.
+    """
+    _check_columns(df, [x, y, hue], "columns")
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    v = df.assign(_y=pd.to_numeric(df[y], errors="coerce"))
+    fig = Figure(figsize=(6.4, 4.2))
+    ax = fig.add_subplot()
+    for j, (h, g) in enumerate(v.groupby(hue, sort=False)):
+        s = g.groupby(x)["_y"].agg(["mean", "std"]).sort_index()
+        xs = s.index.to_numpy(dtype=float)
+        mean, std = s["mean"].to_numpy(), np.nan_to_num(s["std"].to_numpy())
+        ax.plot(xs, mean, marker="o", color=f"C{j}", label=PLANNERS.get(str(h), str(h)))
+        ax.fill_between(xs, mean - std, mean + std, color=f"C{j}", alpha=0.2, linewidth=0)
+    ax.set_xlabel(x)
+    ax.set_ylabel(_label(y))
+    ax.set_title(f"{_label(y).split(' [')[0]} against {x}")
+    ax.grid(alpha=0.3)
+    ax.legend(title=hue, fontsize="small")
+    fig.tight_layout()
+    fig.savefig(out_path, dpi=110)
+    return out_path
+
+
+def write_sweep_report(
+    df: pd.DataFrame,
+    out_dir: str | Path,
+    group_by: Sequence[str] = ("scenario", "planner"),
+    sweep: str | None = None,
+) -> list[Path]:
+    """Write ``results.csv`` (per episode), ``results.md`` (summary) and the PNGs.
+
+    Args:
+        df: per-episode results.
+        out_dir: output folder (created).
+        group_by: summary groups; the first two also lay out the bar charts.
+        sweep: a swept numeric column: adds ``sweep_<metric>.png`` for each metric, one line
+            per ``group_by[-1]`` value.
+
+    Returns:
+        Every written path.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = summary_table(df, group_by)
+    written = [out_dir / "results.csv", out_dir / "results.md"]
+    df.to_csv(written[0], index=False)
+    md = ["# Results", "", f"{len(df)} episodes.", "", to_markdown(summary)]
+    written[1].write_text("\n".join(md))
+    if len(group_by) >= 2:
+        written += plot_comparison(df, out_dir, group_by=(group_by[0], group_by[1]))
+    if sweep is not None:
+        for m in _default_metrics(df, list(group_by) + [sweep]):
+            written.append(plot_sweep(df, sweep, m, group_by[-1], out_dir / f"sweep_{m}.png"))
+    return written
+
+
+# ---------------------------------------------------------------------------------------------
+# The paper's numbers
+
+
+def paper_table_simulation() -> pd.DataFrame:
+    """The paper's table performance_simulation, one row per scenario and planner.
+
+    Columns: ``scenario`` (key of :data:`PAPER_SCENARIOS`), ``label`` (the paper's), the
+    scenario's ``arrangement``, ``task_order`` and ``confidence`` (table performance),
+    ``planner`` (key of :data:`PLANNERS`), ``prediction_ms``, ``mhd`` [m], ``smoothness``,
+    ``jerkiness``, ``min_distance`` [m], ``efficiency``. N/A entries are NaN.
+    """
+    rows = []
+    for scen, planner_rows in _PAPER_SIM_ROWS.items():
+        label, arrangement, order, conf = PAPER_SCENARIOS[scen]
+        for planner, vals in zip(PLANNERS, planner_rows):
+            pred_ms, mhd_cm, smooth, jerk, dist_cm, eff = (
+                math.nan if v is None else float(v) for v in vals
+            )
+            rows.append(
+                {
+                    "scenario": scen,
+                    "label": label,
+                    "arrangement": arrangement,
+                    "task_order": order,
+                    "confidence": conf,
+                    "planner": planner,
+                    "prediction_ms": pred_ms,
+                    "mhd": mhd_cm / 100.0,
+                    "smoothness": smooth,
+                    "jerkiness": jerk,
+                    "min_distance": dist_cm / 100.0,
+                    "efficiency": eff,
+                }
+            )
+    return pd.DataFrame.from_records(rows)
+
+
+def side_by_side(
+    ours: pd.DataFrame,
+    paper: pd.DataFrame | None = None,
+    on: Sequence[str] = ("scenario", "planner"),
+    metrics: Sequence[str] = (
+        "prediction_ms",
+        "mhd",
+        "smoothness",
+        "jerkiness",
+        "min_distance",
+        "efficiency",
+    ),
+) -> pd.DataFrame:
+    """Our means next to the paper's numbers, per scenario and planner.
+
+    Args:
+        ours: per-episode results, or a :func:`summary_table` (its ``<metric>_mean`` columns).
+        paper: the paper's table (default :func:`paper_table_simulation`).
+        on: key columns present in both.
+        metrics: metrics to compare; those missing on our side are skipped.
+
+    Returns:
+        The keys, then ``<metric> (ours)`` and ``<metric> (paper)`` per metric, for every key
+        combination of ``ours`` (paper values NaN where the paper has no such row).
+    """
+    paper = paper_table_simulation() if paper is None else paper
+    on = list(on)
+    _check_columns(ours, on, "key columns")
+    _check_columns(paper, on, "key columns")
+    ours_means: dict[str, pd.Series] = {}
+    for m in metrics:
+        if f"{m}_mean" in ours.columns:
+            ours_means[m] = ours.groupby(on, sort=False)[f"{m}_mean"].mean()
+        elif m in ours.columns:
+            ours_means[m] = (
+                pd.to_numeric(ours[m], errors="coerce")
+                .groupby([ours[c] for c in on], sort=False)
+                .mean()
+            )
+    if not ours_means:
+        raise ConfigError(f"none of the metrics {list(metrics)} is in {list(ours.columns)}")
+    left = pd.DataFrame({f"{m} (ours)": s for m, s in ours_means.items()}).reset_index()
+    right_cols = [m for m in ours_means if m in paper.columns]
+    right = paper[on + right_cols].rename(columns={m: f"{m} (paper)" for m in right_cols})
+    merged = left.merge(right, on=on, how="left")
+    order = on + [c for m in ours_means for c in (f"{m} (ours)", f"{m} (paper)") if c in merged]
+    return merged[order]

@@ -1,0 +1,583 @@
+"""EpisodeWriter: one MCAP log per closed-loop episode, replayable in Foxglove.
+
+Every channel is JSON (``message_encoding="json"``, schema encoding ``"jsonschema"``), with the
+schemas of :mod:`iplanner_torch.recording.schemas`:
+
+=========================  =========================  =========================================
+topic                      schema                     written by
+=========================  =========================  =========================================
+``/tf``                    foxglove.FrameTransform    :meth:`EpisodeWriter.frame_transform`
+``/robot/joint_state``     iplanner.RobotJointState   :meth:`EpisodeWriter.robot_state`
+``/human/joints_true``     iplanner.HumanJoints       :meth:`EpisodeWriter.human_joints`
+``/human/joints_tracked``  iplanner.HumanJoints       :meth:`EpisodeWriter.human_joints`
+``/prediction/forecast``   iplanner.Forecast          :meth:`EpisodeWriter.forecast`
+``/planner/bound``         iplanner.CollisionBound    :meth:`EpisodeWriter.collision_bound`
+``/planner/plan``          iplanner.Plan              :meth:`EpisodeWriter.plan`
+``/task/events``           iplanner.TaskEvent         :meth:`EpisodeWriter.task_event`
+``/episode/metrics``       iplanner.EpisodeMetrics    :meth:`EpisodeWriter.metrics`
+``/scene``                 foxglove.SceneUpdate       :meth:`EpisodeWriter.scene`
+=========================  =========================  =========================================
+
+Times: ``t`` is simulation time [s]; a message's log time is ``round(t * 1e9) + time_offset_ns``
+nanoseconds, and every message of our own schemas also carries ``t`` itself. All geometry is
+in the frame ``"world"`` (the table frame).
+
+Robustness: messages are grouped in small compressed chunks and the file is flushed whenever a
+chunk is complete, so an episode killed midway leaves a file whose complete chunks
+:func:`~iplanner_torch.recording.reader.read_episode` still reads (with a ``DataWarning``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Literal
+
+import numpy as np
+import torch
+from mcap.writer import CompressionType, Writer
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.prediction.forecast import Forecast
+from iplanner_torch.recording.codec import as_numpy, dumps, encode_array, encode_value
+from iplanner_torch.recording.reader import EPISODE_METADATA_NAME, Episode, read_episode
+from iplanner_torch.recording.schemas import TOPIC_SCHEMAS, WORLD_FRAME
+from iplanner_torch.types import check_shape
+
+__all__ = ["EpisodeWriter", "SceneEllipsoid", "Episode", "read_episode", "ellipsoid_pose"]
+
+#: RGBA of robot spheres, human spheres and predicted joint ellipsoids in ``/scene``.
+ROBOT_RGBA = (1.0, 0.55, 0.1, 0.6)
+HUMAN_RGBA = (0.2, 0.5, 1.0, 0.6)
+ELLIPSOID_RGBA = (0.75, 0.2, 0.8, 0.25)
+
+_COMPRESSION = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
+
+
+@dataclass(frozen=True)
+class SceneEllipsoid:
+    """A predicted joint position drawn as an ellipsoid in ``/scene``.
+
+    Attributes:
+        mean: (3,) centre [m], world frame.
+        cov: (3, 3) covariance [m^2]; drawn as its ``confidence`` ellipsoid (the writer's
+            ``ellipsoid_confidence``). Give either ``cov`` or ``axes``.
+        axes: (3,) semi-axis lengths [m] along x, y, z (axis-aligned ellipsoid).
+        rgba: colour and opacity, each in [0, 1].
+    """
+
+    mean: Any
+    cov: Any = None
+    axes: Any = None
+    rgba: tuple[float, float, float, float] = ELLIPSOID_RGBA
+
+
+def ellipsoid_pose(
+    cov: torch.Tensor | np.ndarray, confidence: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Semi-axes and orientation of the ``confidence`` ellipsoids of 3D Gaussians.
+
+    The ellipsoid ``{x : (x - mu)^T cov^-1 (x - mu) <= chi2_3(confidence)}`` has semi-axes
+    ``sqrt(chi2_3(confidence) * s_i)`` along the eigenvectors ``u_i`` of ``cov = U diag(s) U^T``.
+
+    Args:
+        cov: (..., 3, 3) symmetric positive semi-definite covariances [m^2].
+        confidence: probability mass inside the ellipsoid, in (0, 1).
+
+    Returns:
+        ``(semi_axes (..., 3) [m], quaternion (..., 4) as x, y, z, w)``; the quaternion rotates
+        the x, y, z axes onto the eigenvectors (a proper rotation: det U = +1).
+    """
+    if not 0.0 < confidence < 1.0:
+        raise ConfigError(f"expected confidence in (0, 1), got {confidence}")
+    return _ellipsoid_axes(as_numpy(cov), float(chi2.ppf(confidence, df=3)))
+
+
+def _ellipsoid_axes(c: np.ndarray, k2: float) -> tuple[np.ndarray, np.ndarray]:
+    """Semi-axes (..., 3) and quaternions (..., 4) of covariances c (..., 3, 3) at scale k2."""
+    if c.shape[-2:] != (3, 3):
+        raise ShapeError(f"expected cov (..., 3, 3), got {c.shape}")
+    batch = c.shape[:-2]
+    c = c.reshape(-1, 3, 3)  # (E, 3, 3)
+    s, u = np.linalg.eigh(0.5 * (c + np.swapaxes(c, -1, -2)))
+    u[np.linalg.det(u) < 0, :, 2] *= -1.0  # proper rotations
+    semi = np.sqrt(k2 * np.clip(s, 0.0, None))
+    quat = Rotation.from_matrix(u).as_quat() if len(u) else np.zeros((0, 4))
+    return semi.reshape(*batch, 3), quat.reshape(*batch, 4)
+
+
+def _stamp_dict(ns: int) -> dict[str, int]:
+    return {"sec": int(ns // 1_000_000_000), "nsec": int(ns % 1_000_000_000)}
+
+
+def _xyz(v: Sequence[float]) -> dict[str, float]:
+    return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
+
+
+def _rgba(c: Sequence[float]) -> dict[str, float]:
+    if len(c) != 4 or not all(0.0 <= float(x) <= 1.0 for x in c):
+        raise ConfigError(f"expected rgba as 4 numbers in [0, 1], got {tuple(c)}")
+    return {"r": float(c[0]), "g": float(c[1]), "b": float(c[2]), "a": float(c[3])}
+
+
+def _sphere(center: Sequence[float], size: Sequence[float], quat: Sequence[float], rgba) -> dict:
+    return {
+        "pose": {
+            "position": _xyz(center),
+            "orientation": {
+                "x": float(quat[0]),
+                "y": float(quat[1]),
+                "z": float(quat[2]),
+                "w": float(quat[3]),
+            },
+        },
+        "size": _xyz(size),
+        "color": _rgba(rgba),
+    }
+
+
+_IDENTITY_QUAT = (0.0, 0.0, 0.0, 1.0)
+
+
+def _entity(ns: int, entity_id: str, kind: str, spheres: list[dict]) -> dict[str, Any]:
+    return {
+        "timestamp": _stamp_dict(ns),
+        "frame_id": WORLD_FRAME,
+        "id": entity_id,
+        "lifetime": {"sec": 0, "nsec": 0},
+        "frame_locked": False,
+        "metadata": [{"key": "kind", "value": kind}],
+        "arrows": [],
+        "cubes": [],
+        "spheres": spheres,
+        "cylinders": [],
+        "lines": [],
+        "triangles": [],
+        "texts": [],
+        "models": [],
+    }
+
+
+def _as_tensor(name: str, x: Any, expected: Sequence[int | str]) -> np.ndarray:
+    """Check the shape of a tensor / array argument and return it as a float64 numpy array."""
+    xt = x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x, dtype=np.float64))
+    check_shape(name, xt, expected)
+    return as_numpy(xt)
+
+
+def _names(name: str, names: Sequence[str], n: int) -> list[str]:
+    out = [str(s) for s in names]
+    if len(out) != n:
+        raise ShapeError(f"expected {n} {name}, got {len(out)}")
+    return out
+
+
+class EpisodeWriter:
+    """Writes one closed-loop episode to an MCAP file (a context manager).
+
+    Example::
+
+        with EpisodeWriter(path, metadata={"scenario": "arrangements_1"}) as log:
+            log.robot_state(t, q, qd, model.joint_names)
+            log.metrics(t_end, {"eval/smoothness": 1.2})
+
+    Args:
+        path: output file (parent folders are created; an existing file is replaced).
+        metadata: episode description (scenario, planner, seed, ...): any JSON-able dict; read
+            back as ``Episode.metadata``. Written first, so it survives a truncated file.
+        chunk_size: bytes of messages per chunk; a killed episode loses at most the last one.
+        compression: chunk compression.
+        ellipsoid_confidence: probability mass of the predicted joint ellipsoids in ``/scene``.
+        time_offset_ns: added to every log time (e.g. the wall clock at the episode start).
+
+    Raises:
+        ConfigError: on a non-positive chunk size, unknown compression or a confidence outside
+            (0, 1).
+        DataError: when ``metadata`` is not JSON-serialisable.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        metadata: Mapping[str, Any],
+        chunk_size: int = 256 * 1024,
+        compression: Literal["zstd", "lz4", "none"] = "zstd",
+        ellipsoid_confidence: float = 0.95,
+        time_offset_ns: int = 0,
+    ) -> None:
+        if chunk_size <= 0:
+            raise ConfigError(f"expected chunk_size > 0 bytes, got {chunk_size}")
+        if compression not in _COMPRESSION:
+            raise ConfigError(f"expected compression in {sorted(_COMPRESSION)}, got {compression}")
+        if not 0.0 < ellipsoid_confidence < 1.0:
+            raise ConfigError(
+                f"expected ellipsoid_confidence in (0, 1), got {ellipsoid_confidence}"
+            )
+        if time_offset_ns < 0:
+            raise ConfigError(f"expected time_offset_ns >= 0, got {time_offset_ns}")
+        self.path = Path(path)
+        try:
+            meta_json = json.dumps(encode_value(dict(metadata)), allow_nan=False)
+        except (TypeError, ValueError) as err:
+            raise DataError(f"{self.path}: metadata is not JSON-serialisable: {err}") from err
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._chi2_scale = float(chi2.ppf(ellipsoid_confidence, df=3))
+        self._offset_ns = int(time_offset_ns)
+        self._file = open(self.path, "wb")  # closed in close()
+        self._writer = Writer(
+            self._file, chunk_size=chunk_size, compression=_COMPRESSION[compression]
+        )
+        self._closed = False
+        self._writer.start(profile="", library="iplanner_torch")
+        self._writer.add_metadata(
+            EPISODE_METADATA_NAME,
+            {"json": meta_json, "time_offset_ns": str(self._offset_ns)},
+        )
+        self._channels: dict[str, int] = {}
+        self._sequence: dict[str, int] = {}
+        schema_ids: dict[str, int] = {}
+        for topic, schema in TOPIC_SCHEMAS.items():
+            name = schema["title"]
+            if name not in schema_ids:
+                schema_ids[name] = self._writer.register_schema(
+                    name=name, encoding="jsonschema", data=json.dumps(schema).encode()
+                )
+            self._channels[topic] = self._writer.register_channel(
+                topic=topic, message_encoding="json", schema_id=schema_ids[name]
+            )
+            self._sequence[topic] = 0
+        self._file.flush()
+        self.frame_transform(0.0, WORLD_FRAME, "table")
+
+    # -- context manager ----------------------------------------------------------------------
+
+    def __enter__(self) -> EpisodeWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Write the summary and footer and close the file (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._writer.finish()
+        finally:
+            self._file.close()
+
+    def flush(self) -> None:
+        """Close the chunk in progress and flush the file (e.g. at a task milestone)."""
+        self._check_open()
+        self._writer.flush()
+
+    # -- plumbing -----------------------------------------------------------------------------
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise DataError(f"{self.path}: episode log is already closed")
+
+    def _log_time(self, t: float) -> int:
+        t = float(t)
+        if not math.isfinite(t) or t < 0.0:
+            raise DataError(f"{self.path}: expected a finite time t >= 0 s, got {t}")
+        return int(round(t * 1e9)) + self._offset_ns
+
+    def _write(self, topic: str, log_time: int, message: Mapping[str, Any]) -> None:
+        self._check_open()
+        try:
+            data = dumps(message)
+        except (TypeError, ValueError) as err:
+            raise DataError(
+                f"{self.path}: a {topic} message is not JSON-serialisable: {err}"
+            ) from err
+        before = self._file.tell()
+        self._writer.add_message(
+            channel_id=self._channels[topic],
+            log_time=log_time,
+            data=data,
+            publish_time=log_time,
+            sequence=self._sequence[topic],
+        )
+        self._sequence[topic] += 1
+        if self._file.tell() != before:  # a chunk was completed: get it onto the disk
+            self._file.flush()
+
+    def _stamped(self, t: float) -> tuple[int, dict[str, Any]]:
+        ns = self._log_time(t)
+        return ns, {"timestamp": _stamp_dict(ns), "t": float(t)}
+
+    # -- channels -----------------------------------------------------------------------------
+
+    def frame_transform(
+        self,
+        t: float,
+        parent: str,
+        child: str,
+        translation: Sequence[float] = (0.0, 0.0, 0.0),
+        rotation_xyzw: Sequence[float] = _IDENTITY_QUAT,
+    ) -> None:
+        """Log a ``foxglove.FrameTransform`` on ``/tf`` (one from "world" to "table" at t=0).
+
+        Args:
+            t: simulation time [s].
+            parent: parent frame id.
+            child: child frame id.
+            translation: (3,) child origin in the parent frame [m].
+            rotation_xyzw: (4,) unit quaternion of the child frame in the parent frame.
+        """
+        ns = self._log_time(t)
+        self._write(
+            "/tf",
+            ns,
+            {
+                "timestamp": _stamp_dict(ns),
+                "parent_frame_id": parent,
+                "child_frame_id": child,
+                "translation": _xyz(translation),
+                "rotation": dict(zip("xyzw", (float(v) for v in rotation_xyzw))),
+            },
+        )
+
+    def robot_state(self, t: float, q: Any, qd: Any, joint_names: Sequence[str]) -> None:
+        """Log the robot's joint state on ``/robot/joint_state``.
+
+        Args:
+            t: simulation time [s].
+            q: (J,) joint positions [rad].
+            qd: (J,) joint velocities [rad/s].
+            joint_names: the J joint names.
+        """
+        q_np = _as_tensor("q", q, ("J",))
+        qd_np = _as_tensor("qd", qd, (q_np.shape[0],))
+        ns, msg = self._stamped(t)
+        msg["joint_names"] = _names("joint_names", joint_names, q_np.shape[0])
+        msg["position"] = encode_array(q_np)
+        msg["velocity"] = encode_array(qd_np)
+        self._write("/robot/joint_state", ns, msg)
+
+    def human_joints(
+        self, t: float, true: Any | None, tracked: Any | None, joint_names: Sequence[str]
+    ) -> None:
+        """Log the true and the tracked human joints on ``/human/joints_true`` / ``_tracked``.
+
+        Args:
+            t: simulation time [s].
+            true: (K, 3) ground-truth joint positions [m], or None to skip.
+            tracked: (K, 3) tracker output [m], NaN where a joint dropped out, or None to skip.
+            joint_names: the K joint names.
+        """
+        ns, base = self._stamped(t)
+        for topic, name, x in (
+            ("/human/joints_true", "true", true),
+            ("/human/joints_tracked", "tracked", tracked),
+        ):
+            if x is None:
+                continue
+            p = _as_tensor(name, x, ("K", 3))
+            msg = dict(base)
+            msg["joint_names"] = _names("joint_names", joint_names, p.shape[0])
+            msg["positions"] = encode_array(p)
+            self._write(topic, ns, msg)
+
+    def forecast(
+        self,
+        t: float,
+        weights: Any,
+        mean: Any,
+        var: Any,
+        action_names: Sequence[str],
+        dt: float,
+        joint_names: Sequence[str] | None = None,
+    ) -> None:
+        """Log one forecast on ``/prediction/forecast``.
+
+        Args:
+            t: simulation time of the last observed frame [s].
+            weights: (A,) action probabilities.
+            mean: (A, n_f, K, 3) predicted joint positions [m].
+            var: (A, n_f, K, 3) per-coordinate variances [m^2].
+            action_names: the A action names.
+            dt: seconds between predicted frames.
+            joint_names: the K joint names (default ``joint_0`` ... ``joint_{K-1}``).
+        """
+        w = _as_tensor("weights", weights, ("A",))
+        m = _as_tensor("mean", mean, (w.shape[0], "n_f", "K", 3))
+        v = _as_tensor("var", var, m.shape)
+        k = m.shape[2]
+        names = joint_names if joint_names is not None else [f"joint_{i}" for i in range(k)]
+        ns, msg = self._stamped(t)
+        msg["dt"] = float(dt)
+        msg["action_names"] = _names("action_names", action_names, w.shape[0])
+        msg["joint_names"] = _names("joint_names", names, k)
+        msg["weights"] = encode_array(w)
+        msg["mean"] = encode_array(m)
+        msg["var"] = encode_array(v)
+        self._write("/prediction/forecast", ns, msg)
+
+    def log_forecast(self, t: float, forecast: Forecast, index: int = 0) -> None:
+        """Log item ``index`` of the batch of a :class:`Forecast` (see :meth:`forecast`)."""
+        if not 0 <= index < forecast.batch_size:
+            raise ShapeError(f"expected index in [0, {forecast.batch_size}), got {index}")
+        self.forecast(
+            t,
+            forecast.weights[index],
+            forecast.mean[index],
+            forecast.var[index],
+            forecast.action_names,
+            forecast.dt,
+            forecast.joint_names,
+        )
+
+    def collision_bound(self, t: float, times: Any, bound: Any, confidence: float) -> None:
+        """Log the collision-probability bound along the plan on ``/planner/bound``.
+
+        Args:
+            t: simulation time [s].
+            times: (W,) waypoint times [s].
+            bound: (W,) upper bound of the collision probability at each waypoint.
+            confidence: the confidence level (safe where bound <= 1 - confidence).
+        """
+        tw = _as_tensor("times", times, ("W",))
+        b = _as_tensor("bound", bound, (tw.shape[0],))
+        ns, msg = self._stamped(t)
+        msg["times"] = encode_array(tw)
+        msg["bound"] = encode_array(b)
+        msg["confidence"] = float(confidence)
+        msg["max_bound"] = encode_array(np.nanmax(b) if b.size else np.nan)
+        self._write("/planner/bound", ns, msg)
+
+    def plan(
+        self, t: float, times: Any, q: Any, feasible: bool, wait_s: float, solve_ms: float
+    ) -> None:
+        """Log the planner's chosen trajectory on ``/planner/plan``.
+
+        Args:
+            t: simulation time [s].
+            times: (W,) waypoint times [s].
+            q: (W, J) waypoint joint positions [rad].
+            feasible: whether the plan met the bound (else the robot waits).
+            wait_s: time the robot waits before executing [s].
+            solve_ms: planner wall time [ms].
+        """
+        tw = _as_tensor("times", times, ("W",))
+        qw = _as_tensor("q", q, (tw.shape[0], "J"))
+        ns, msg = self._stamped(t)
+        msg["times"] = encode_array(tw)
+        msg["q"] = encode_array(qw)
+        msg["feasible"] = bool(feasible)
+        msg["wait_s"] = float(wait_s)
+        msg["solve_ms"] = float(solve_ms)
+        self._write("/planner/plan", ns, msg)
+
+    def task_event(self, t: float, kind: str, detail: Mapping[str, Any] | None = None) -> None:
+        """Log a task event on ``/task/events`` (``kind`` e.g. "action_start", "handover").
+
+        Args:
+            t: simulation time [s].
+            kind: event name.
+            detail: JSON-able details; NaN is stored as null and read back as NaN.
+        """
+        ns, msg = self._stamped(t)
+        msg["kind"] = str(kind)
+        msg["detail"] = encode_value(dict(detail or {}))
+        self._write("/task/events", ns, msg)
+
+    def metrics(self, t: float, metrics: Mapping[str, Any]) -> None:
+        """Log metric values on ``/episode/metrics`` (the last message is the episode's).
+
+        Args:
+            t: simulation time [s].
+            metrics: name -> value (numbers, bools, strings; NaN and inf survive).
+        """
+        ns, msg = self._stamped(t)
+        msg["metrics"] = encode_value(dict(metrics))
+        self._write("/episode/metrics", ns, msg)
+
+    def scene(
+        self,
+        t: float,
+        robot_spheres: Any,
+        human_spheres: Any,
+        ellipsoids: Sequence[SceneEllipsoid | tuple] = (),
+    ) -> None:
+        """Log the 3D scene on ``/scene`` as a ``foxglove.SceneUpdate``.
+
+        Three entities, each replacing the previous one of the same id: ``robot`` and ``human``
+        (spheres) and ``prediction`` (one ellipsoid per predicted joint position: a sphere
+        primitive scaled by the ellipsoid's axes and rotated onto the covariance's eigenvectors).
+
+        Args:
+            t: simulation time [s].
+            robot_spheres: (S_r, 4) robot sphere centres and radii [x, y, z, r] [m].
+            human_spheres: (S_h, 4) human sphere centres and radii [m] (rows with NaN skipped).
+            ellipsoids: :class:`SceneEllipsoid` items, or tuples ``(mean, cov_or_axes)`` /
+                ``(mean, cov_or_axes, rgba)``; a (3, 3) second item is a covariance, a (3,)
+                one the semi-axes.
+        """
+        rs = _as_tensor("robot_spheres", robot_spheres, ("S_r", 4))
+        hs = _as_tensor("human_spheres", human_spheres, ("S_h", 4))
+        ns = self._log_time(t)
+        entities = []
+        for entity_id, spheres, rgba in (("robot", rs, ROBOT_RGBA), ("human", hs, HUMAN_RGBA)):
+            prims = [
+                _sphere(s[:3], (2 * s[3],) * 3, _IDENTITY_QUAT, rgba)
+                for s in spheres
+                if np.isfinite(s).all()
+            ]
+            entities.append(_entity(ns, entity_id, f"{entity_id}_spheres", prims))
+        prims = self._ellipsoid_primitives(ellipsoids)
+        entities.append(_entity(ns, "prediction", "joint_ellipsoids", prims))
+        self._write("/scene", ns, {"deletions": [], "entities": entities})
+
+    def _ellipsoid_primitives(self, items: Sequence[SceneEllipsoid | tuple]) -> list[dict]:
+        """Sphere primitives of the ellipsoids (covariances decomposed in one batch)."""
+        means, shapes, colors, is_cov = [], [], [], []
+        for e in items:
+            if isinstance(e, SceneEllipsoid):
+                if (e.cov is None) == (e.axes is None):
+                    raise ShapeError(
+                        "expected exactly one of cov (3, 3) and axes (3,) per ellipsoid"
+                    )
+                second, rgba = (e.cov if e.cov is not None else e.axes), e.rgba
+            else:
+                if len(e) not in (2, 3):
+                    raise ShapeError(f"expected (mean, cov_or_axes[, rgba]), got {len(e)} items")
+                second, rgba = e[1], (tuple(e[2]) if len(e) == 3 else ELLIPSOID_RGBA)
+            mean, second = as_numpy(e[0] if isinstance(e, tuple) else e.mean), as_numpy(second)
+            if mean.shape != (3,) or second.shape not in ((3, 3), (3,)):
+                raise ShapeError(
+                    f"expected ellipsoid mean (3,) and cov (3, 3) or axes (3,), "
+                    f"got {mean.shape} and {second.shape}"
+                )
+            means.append(mean)
+            shapes.append(second)
+            colors.append(rgba)
+            is_cov.append(second.shape == (3, 3))
+        semi = np.zeros((len(items), 3))
+        quat = np.tile(np.array(_IDENTITY_QUAT), (len(items), 1))
+        cov_idx = [i for i, c in enumerate(is_cov) if c]
+        if cov_idx:
+            covs = np.stack([shapes[i] for i in cov_idx])  # (E_c, 3, 3)
+            semi[cov_idx], quat[cov_idx] = _ellipsoid_axes(covs, self._chi2_scale)
+        for i, c in enumerate(is_cov):
+            if not c:
+                semi[i] = shapes[i]
+        return [_sphere(means[i], 2.0 * semi[i], quat[i], colors[i]) for i in range(len(items))]

@@ -1,0 +1,400 @@
+"""read_episode: an episode's MCAP log back as pandas frames and tensors.
+
+A complete file is read through its summary (indexed reader). A file without summary or
+footer (an episode killed midway) or with a damaged record is read sequentially up to the last
+complete chunk, with a :class:`~iplanner_torch.errors.DataWarning`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+from mcap.reader import make_reader
+from mcap.records import Channel, Footer, Message, Metadata
+from mcap.stream_reader import StreamReader
+
+from iplanner_torch.errors import DataError, DataWarning
+from iplanner_torch.prediction.forecast import Forecast
+from iplanner_torch.recording.codec import decode_array, decode_scalar, loads
+
+__all__ = ["Episode", "read_episode", "EPISODE_METADATA_NAME"]
+
+#: Name of the MCAP metadata record holding the episode's metadata dict.
+EPISODE_METADATA_NAME = "iplanner.episode"
+_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _decode_value(x: Any) -> Any:
+    """Recursive inverse of ``codec.encode_value`` for dicts of metrics or event details."""
+    if isinstance(x, dict):
+        return {k: _decode_value(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_decode_value(v) for v in x]
+    return decode_scalar(x)
+
+
+def _t_of_stamp(stamp: dict[str, int], offset_ns: int) -> float:
+    return (stamp["sec"] * 1_000_000_000 + stamp["nsec"] - offset_ns) * 1e-9
+
+
+def _sphere_rows(entity: dict[str, Any]) -> np.ndarray:
+    """(S, 4) centres and radii of an entity's spheres (radius = size.x / 2)."""
+    rows = [
+        [
+            s["pose"]["position"]["x"],
+            s["pose"]["position"]["y"],
+            s["pose"]["position"]["z"],
+            0.5 * s["size"]["x"],
+        ]
+        for s in entity["spheres"]
+    ]
+    return np.array(rows, dtype=np.float64).reshape(len(rows), 4)
+
+
+def _ellipsoid_rows(entity: dict[str, Any]) -> list[dict[str, np.ndarray]]:
+    out = []
+    for s in entity["spheres"]:
+        p, o, z, c = s["pose"]["position"], s["pose"]["orientation"], s["size"], s["color"]
+        out.append(
+            {
+                "position": np.array([p["x"], p["y"], p["z"]]),
+                "semi_axes": 0.5 * np.array([z["x"], z["y"], z["z"]]),
+                "quaternion_xyzw": np.array([o["x"], o["y"], o["z"], o["w"]]),
+                "rgba": np.array([c["r"], c["g"], c["b"], c["a"]]),
+            }
+        )
+    return out
+
+
+def _row_joint_state(m: dict[str, Any], _: int) -> dict[str, Any]:
+    return {
+        "t": m["t"],
+        "q": decode_array(m["position"]),
+        "qd": decode_array(m["velocity"]),
+        "joint_names": tuple(m["joint_names"]),
+    }
+
+
+def _row_human(m: dict[str, Any], _: int) -> dict[str, Any]:
+    p = decode_array(m["positions"]).reshape(-1, 3)
+    return {"t": m["t"], "positions": p, "joint_names": tuple(m["joint_names"])}
+
+
+def _row_forecast(m: dict[str, Any], _: int) -> dict[str, Any]:
+    a, k = len(m["action_names"]), len(m["joint_names"])
+    mean = decode_array(m["mean"]).reshape(a, -1, k, 3)
+    return {
+        "t": m["t"],
+        "dt": m["dt"],
+        "weights": decode_array(m["weights"]).reshape(a),
+        "mean": mean,
+        "var": decode_array(m["var"]).reshape(mean.shape),
+        "action_names": tuple(m["action_names"]),
+        "joint_names": tuple(m["joint_names"]),
+    }
+
+
+def _row_bound(m: dict[str, Any], _: int) -> dict[str, Any]:
+    return {
+        "t": m["t"],
+        "times": decode_array(m["times"]),
+        "bound": decode_array(m["bound"]),
+        "confidence": m["confidence"],
+        "max_bound": float(decode_array(m["max_bound"])),
+    }
+
+
+def _row_plan(m: dict[str, Any], _: int) -> dict[str, Any]:
+    times = decode_array(m["times"])
+    q = decode_array(m["q"])
+    return {
+        "t": m["t"],
+        "times": times,
+        "q": q.reshape(times.shape[0], -1) if q.size else q.reshape(times.shape[0], 0),
+        "feasible": bool(m["feasible"]),
+        "wait_s": m["wait_s"],
+        "solve_ms": m["solve_ms"],
+    }
+
+
+def _row_event(m: dict[str, Any], _: int) -> dict[str, Any]:
+    return {"t": m["t"], "kind": m["kind"], "detail": _decode_value(m["detail"])}
+
+
+def _row_metrics(m: dict[str, Any], _: int) -> dict[str, Any]:
+    return {"t": m["t"], "metrics": _decode_value(m["metrics"])}
+
+
+def _row_scene(m: dict[str, Any], offset_ns: int) -> dict[str, Any]:
+    by_id = {e["id"]: e for e in m["entities"]}
+    t = _t_of_stamp(m["entities"][0]["timestamp"], offset_ns) if m["entities"] else math.nan
+    empty = {"spheres": []}
+    return {
+        "t": t,
+        "robot_spheres": _sphere_rows(by_id.get("robot", empty)),
+        "human_spheres": _sphere_rows(by_id.get("human", empty)),
+        "ellipsoids": _ellipsoid_rows(by_id.get("prediction", empty)),
+    }
+
+
+def _row_tf(m: dict[str, Any], offset_ns: int) -> dict[str, Any]:
+    tr, r = m["translation"], m["rotation"]
+    return {
+        "t": _t_of_stamp(m["timestamp"], offset_ns),
+        "parent_frame_id": m["parent_frame_id"],
+        "child_frame_id": m["child_frame_id"],
+        "translation": np.array([tr["x"], tr["y"], tr["z"]]),
+        "rotation_xyzw": np.array([r["x"], r["y"], r["z"], r["w"]]),
+    }
+
+
+_ROW_DECODERS: dict[str, Callable[[dict[str, Any], int], dict[str, Any]]] = {
+    "/tf": _row_tf,
+    "/robot/joint_state": _row_joint_state,
+    "/human/joints_true": _row_human,
+    "/human/joints_tracked": _row_human,
+    "/prediction/forecast": _row_forecast,
+    "/planner/bound": _row_bound,
+    "/planner/plan": _row_plan,
+    "/task/events": _row_event,
+    "/episode/metrics": _row_metrics,
+    "/scene": _row_scene,
+}
+
+
+def _stack(arrays: list[np.ndarray]) -> np.ndarray:
+    """Stack arrays of equal rank; ragged sizes are padded with NaN to the largest."""
+    if not arrays:
+        return np.zeros((0,))
+    shapes = {a.shape for a in arrays}
+    if len(shapes) == 1:
+        return np.stack(arrays)
+    ranks = {len(s) for s in shapes}
+    if len(ranks) != 1:
+        raise DataError(f"cannot stack arrays of different ranks: {sorted(shapes)}")
+    full = tuple(max(s[i] for s in shapes) for i in range(ranks.pop()))
+    out = np.full((len(arrays), *full), np.nan)
+    for i, a in enumerate(arrays):
+        out[(i, *(slice(0, n) for n in a.shape))] = a
+    return out
+
+
+@dataclass
+class Episode:
+    """One episode log, decoded.
+
+    Attributes:
+        path: the file read.
+        metadata: the dict given to ``EpisodeWriter(metadata=...)``.
+        frames: topic -> DataFrame with one row per message in file order, a ``t`` column
+            (simulation time [s]) and array-valued columns (e.g. ``/robot/joint_state`` has
+            ``q`` and ``qd``, each a (J,) array per row).
+        complete: False when the file had no footer (truncated) and was read up to its last
+            complete chunk.
+    """
+
+    path: Path
+    metadata: dict[str, Any]
+    frames: dict[str, pd.DataFrame] = field(default_factory=dict)
+    complete: bool = True
+
+    def _frame(self, topic: str) -> pd.DataFrame:
+        df = self.frames.get(topic)
+        if df is None or len(df) == 0:
+            raise DataError(f"{self.path}: no messages on {topic}")
+        return df
+
+    def _series(
+        self, topic: str, column: str, dtype: torch.dtype
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        df = self._frame(topic)
+        t = torch.as_tensor(df["t"].to_numpy(dtype=np.float64, copy=True), dtype=dtype)
+        return t, torch.as_tensor(_stack(list(df[column])), dtype=dtype)
+
+    def robot_q(self, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(t (T,) [s], q (T, J) [rad])`` from ``/robot/joint_state`` (float64 by default)."""
+        return self._series("/robot/joint_state", "q", dtype)
+
+    def robot_qd(self, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(t (T,) [s], qd (T, J) [rad/s])`` from ``/robot/joint_state``."""
+        return self._series("/robot/joint_state", "qd", dtype)
+
+    def human_true(self, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(t (T,) [s], positions (T, K, 3) [m])`` of the ground-truth human joints."""
+        return self._series("/human/joints_true", "positions", dtype)
+
+    def human_tracked(
+        self, dtype: torch.dtype = torch.float64
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(t (T,) [s], positions (T, K, 3) [m])`` of the tracker output (NaN: dropout)."""
+        return self._series("/human/joints_tracked", "positions", dtype)
+
+    def forecasts(self, dtype: torch.dtype = torch.float32) -> tuple[torch.Tensor, Forecast]:
+        """All forecasts as one :class:`Forecast` whose batch axis is time.
+
+        Returns:
+            ``(t (T,) [s], forecast)`` with ``forecast.weights`` (T, A) and ``forecast.mean``,
+            ``forecast.var`` (T, A, n_f, K, 3); ``t`` is float64.
+
+        Raises:
+            DataError: when there are no forecasts, or actions, joints or dt change over time.
+        """
+        df = self._frame("/prediction/forecast")
+        for col in ("action_names", "joint_names", "dt"):
+            if df[col].nunique() != 1:
+                raise DataError(f"{self.path}: {col} changes between forecasts")
+        t = torch.as_tensor(df["t"].to_numpy(dtype=np.float64, copy=True))
+        fc = Forecast(
+            weights=torch.as_tensor(_stack(list(df["weights"])), dtype=dtype),
+            mean=torch.as_tensor(_stack(list(df["mean"])), dtype=dtype),
+            var=torch.as_tensor(_stack(list(df["var"])), dtype=dtype),
+            dt=float(df["dt"].iloc[0]),
+            joint_names=tuple(df["joint_names"].iloc[0]),
+            action_names=tuple(df["action_names"].iloc[0]),
+        )
+        return t, fc
+
+    def bounds(
+        self, dtype: torch.dtype = torch.float64
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(t (T,), times (T, W), bound (T, W), confidence (T,))`` (ragged W: NaN-padded)."""
+        df = self._frame("/planner/bound")
+        t, times = self._series("/planner/bound", "times", dtype)
+        bound = torch.as_tensor(_stack(list(df["bound"])), dtype=dtype)
+        conf = torch.as_tensor(df["confidence"].to_numpy(dtype=np.float64, copy=True), dtype=dtype)
+        return t, times, bound, conf
+
+    def scene_spheres(
+        self, dtype: torch.dtype = torch.float64
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(t (T,), robot (T, S_r, 4), human (T, S_h, 4))`` sphere centres and radii [m]."""
+        df = self._frame("/scene")
+        t, robot = self._series("/scene", "robot_spheres", dtype)
+        human = torch.as_tensor(_stack(list(df["human_spheres"])), dtype=dtype)
+        return t, robot, human
+
+    def events(self) -> list[dict[str, Any]]:
+        """Task events in file order, each ``{"t": ..., "kind": ..., "detail": {...}}``."""
+        df = self.frames.get("/task/events")
+        return [] if df is None else df.to_dict("records")
+
+    def metrics(self) -> dict[str, Any]:
+        """The last ``/episode/metrics`` message's dict ({} when none was logged)."""
+        df = self.frames.get("/episode/metrics")
+        return {} if df is None or len(df) == 0 else dict(df["metrics"].iloc[-1])
+
+
+@dataclass
+class _Raw:
+    """Records of a file before decoding."""
+
+    messages: list[tuple[str, int, bytes]] = field(default_factory=list)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    complete: bool = False
+    problem: str = ""
+
+
+def _read_indexed(f: Any) -> _Raw:
+    reader = make_reader(f, validate_crcs=True)
+    if reader.get_summary() is None:
+        raise DataError("no summary section")
+    raw = _Raw(complete=True)
+    for _, channel, message in reader.iter_messages(log_time_order=False):
+        raw.messages.append((channel.topic, message.log_time, message.data))
+    for m in reader.iter_metadata():
+        raw.metadata[m.name] = dict(m.metadata)
+    return raw
+
+
+def _read_stream(f: Any, size: int) -> _Raw:
+    raw = _Raw()
+    channels: dict[int, Channel] = {}
+    records = StreamReader(f, validate_crcs=True, record_size_limit=max(size, 1)).records
+    while True:
+        try:
+            record = next(records)
+        except StopIteration:
+            break
+        except Exception as err:  # truncated or damaged record: keep what came before it
+            raw.problem = f"{type(err).__name__}: {err}"
+            break
+        if isinstance(record, Channel):
+            channels[record.id] = record
+        elif isinstance(record, Message):
+            ch = channels.get(record.channel_id)
+            if ch is not None:
+                raw.messages.append((ch.topic, record.log_time, record.data))
+        elif isinstance(record, Metadata):
+            raw.metadata[record.name] = dict(record.metadata)
+        elif isinstance(record, Footer):
+            raw.complete = True
+    return raw
+
+
+def read_episode(path: str | Path) -> Episode:
+    """Read an episode log written by ``EpisodeWriter``.
+
+    Args:
+        path: the ``.mcap`` file.
+
+    Returns:
+        The decoded :class:`Episode`.
+
+    Raises:
+        DataError: when the file is missing, is not MCAP, or a message cannot be decoded.
+
+    Warns:
+        DataWarning: when the file is truncated or damaged; the episode then holds the messages
+            of every chunk before the damage (a prefix of what was written).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: no such episode log")
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        if f.read(len(_MAGIC)) != _MAGIC:
+            raise DataError(f"{path} is not an MCAP file (bad magic bytes)")
+        f.seek(0)
+        try:
+            raw = _read_indexed(f)
+        except Exception as err:  # no or damaged summary: fall back to a sequential read
+            f.seek(0)
+            raw = _read_stream(f, size)
+            if not raw.problem:
+                raw.problem = f"{type(err).__name__}: {err}"
+    if not raw.complete or raw.problem:
+        warnings.warn(
+            f"{path}: episode log is truncated or damaged ({raw.problem or 'no footer'}); "
+            f"read {len(raw.messages)} messages from its complete chunks",
+            DataWarning,
+            stacklevel=2,
+        )
+    meta_rec = raw.metadata.get(EPISODE_METADATA_NAME, {})
+    try:
+        metadata = json.loads(meta_rec["json"]) if "json" in meta_rec else {}
+        offset_ns = int(meta_rec.get("time_offset_ns", "0"))
+    except (ValueError, TypeError) as err:
+        raise DataError(f"{path}: bad episode metadata record: {err}") from err
+    rows: dict[str, list[dict[str, Any]]] = {}
+    for topic, log_time, data in raw.messages:
+        try:
+            msg = loads(data)
+            decoder = _ROW_DECODERS.get(topic)
+            if decoder is None:
+                row = {"t": (log_time - offset_ns) * 1e-9, "message": msg}
+            else:
+                row = decoder(msg, offset_ns)
+        except (ValueError, KeyError, TypeError, IndexError) as err:
+            raise DataError(f"{path}: cannot decode a message on {topic}: {err!r}") from err
+        rows.setdefault(topic, []).append(row)
+    frames = {topic: pd.DataFrame.from_records(r) for topic, r in rows.items()}
+    return Episode(path=path, metadata=metadata, frames=frames, complete=raw.complete)

@@ -1,0 +1,37 @@
+"""NaN-safe JSON encoding of arrays and metric values."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from iplanner_torch.recording.codec import decode_array, dumps, encode_array, encode_value, loads
+
+
+def test_arrays_round_trip_with_nan_and_inf() -> None:
+    x = np.random.default_rng(0).normal(size=(4, 3, 2))
+    x[0, 1, 1] = np.nan
+    x[2, 0, 0] = np.inf
+    x[3, 2, 1] = -np.inf
+    enc = encode_array(torch.from_numpy(x))
+    text = json.dumps(enc, allow_nan=False)  # valid JSON: no NaN / Infinity tokens
+    assert "NaN" not in text and "Infinity" not in text and "null" in text
+    np.testing.assert_array_equal(decode_array(json.loads(text)), x)
+
+
+def test_float32_values_come_back_exactly() -> None:
+    x = torch.randn(100, dtype=torch.float32)
+    back = decode_array(loads(dumps({"v": encode_array(x)}))["v"])
+    assert np.array_equal(back.astype(np.float32), x.numpy())
+
+
+def test_encode_value_makes_nested_dicts_json_safe() -> None:
+    v = {"a": math.nan, "b": [1.0, math.inf], "c": {"d": np.float32(2.5), "e": np.int64(3)}}
+    enc = encode_value(v)
+    assert enc == {"a": None, "b": [1.0, "inf"], "c": {"d": 2.5, "e": 3}}
+    with pytest.raises(ValueError, match="Out of range float"):
+        dumps({"x": math.nan})  # raw NaN is refused, never written

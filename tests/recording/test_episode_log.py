@@ -1,0 +1,373 @@
+"""EpisodeWriter / read_episode: round trip, JSON schemas, Foxglove shape, truncation recovery."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import textwrap
+import time
+import warnings
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+import torch
+from mcap.reader import make_reader
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+from iplanner_torch.errors import ConfigError, DataError, DataWarning, ShapeError
+from iplanner_torch.prediction.forecast import Forecast
+from iplanner_torch.recording import EpisodeWriter, SceneEllipsoid, ellipsoid_pose, read_episode
+from iplanner_torch.recording.schemas import TOPIC_SCHEMAS
+
+J, K, A, NF, W = 7, 10, 4, 5, 6
+JOINTS = [f"j{i}" for i in range(J)]
+HUMAN = [f"k{i}" for i in range(K)]
+ACTIONS = [f"Take_{i}" for i in range(A)]
+STEPS = 40
+
+
+def _make_data(seed: int = 0) -> dict:
+    g = np.random.default_rng(seed)
+    d: dict = {"t": np.round(np.arange(STEPS) * 1 / 15, 6)}
+    d["q"] = g.normal(size=(STEPS, J)).astype(np.float32)
+    d["qd"] = g.normal(size=(STEPS, J))
+    d["true"] = g.normal(size=(STEPS, K, 3))
+    tracked = d["true"] + 0.01 * g.normal(size=(STEPS, K, 3))
+    tracked[g.random(size=(STEPS, K)) < 0.2] = np.nan  # dropouts
+    d["tracked"] = tracked
+    w = g.random(size=(STEPS, A))
+    d["weights"] = w / w.sum(1, keepdims=True)
+    d["mean"] = g.normal(size=(STEPS, A, NF, K, 3))
+    d["var"] = g.random(size=(STEPS, A, NF, K, 3)) * 1e-3
+    d["times"] = np.arange(W) * 0.25
+    d["bound"] = g.random(size=(STEPS, W)) * 0.05
+    d["plan_q"] = g.normal(size=(STEPS, W, J))
+    d["robot_spheres"] = np.concatenate(
+        [g.normal(size=(STEPS, 5, 3)), g.uniform(0.05, 0.1, size=(STEPS, 5, 1))], -1
+    )
+    d["human_spheres"] = np.concatenate(
+        [g.normal(size=(STEPS, 8, 3)), g.uniform(0.05, 0.1, size=(STEPS, 8, 1))], -1
+    )
+    b = g.normal(size=(3, 3))
+    d["cov"] = b @ b.T * 1e-3 + np.eye(3) * 1e-4
+    return d
+
+
+def _write(path: Path, d: dict, chunk_size: int = 256 * 1024, steps: int = STEPS) -> None:
+    meta = {"scenario": "arrangements_1", "planner": "iplanner_ni", "seed": 3, "noise": 0.01}
+    with EpisodeWriter(path, metadata=meta, chunk_size=chunk_size) as log:
+        for i in range(steps):
+            t = float(d["t"][i])
+            log.robot_state(t, torch.from_numpy(d["q"][i]), d["qd"][i], JOINTS)
+            log.human_joints(t, d["true"][i], d["tracked"][i], HUMAN)
+            log.forecast(t, d["weights"][i], d["mean"][i], d["var"][i], ACTIONS, 1 / 15, HUMAN)
+            log.collision_bound(t, d["times"], d["bound"][i], 0.95)
+            log.plan(t, d["times"], d["plan_q"][i], i % 3 != 0, 0.1 * i, 12.5)
+            log.scene(
+                t,
+                d["robot_spheres"][i],
+                d["human_spheres"][i],
+                [
+                    SceneEllipsoid(mean=np.zeros(3), cov=d["cov"]),
+                    (np.ones(3), np.array([0.1, 0.2, 0.3]), (1.0, 0.0, 0.0, 0.5)),
+                ],
+            )
+            if i == 10:
+                log.task_event(t, "handover", {"object": 2, "gap": math.nan, "who": "human"})
+        log.metrics(float(d["t"][-1]), {"eval/smoothness": 1.5, "eval/x": math.inf, "n": None})
+
+
+@pytest.fixture(scope="module")
+def data() -> dict:
+    return _make_data()
+
+
+@pytest.fixture(scope="module")
+def log_path(tmp_path_factory: pytest.TempPathFactory, data: dict) -> Path:
+    path = tmp_path_factory.mktemp("episode") / "sub" / "episode.mcap"
+    _write(path, data, chunk_size=8 * 1024)
+    return path
+
+
+def test_round_trip_every_channel(log_path: Path, data: dict) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a complete file reads without warnings
+        ep = read_episode(log_path)
+    assert ep.complete
+    assert ep.metadata == {
+        "scenario": "arrangements_1",
+        "planner": "iplanner_ni",
+        "seed": 3,
+        "noise": 0.01,
+    }
+    t, q = ep.robot_q()
+    assert q.shape == (STEPS, J) and q.dtype == torch.float64
+    np.testing.assert_array_equal(t.numpy(), data["t"])
+    np.testing.assert_array_equal(q.numpy(), data["q"].astype(np.float64))  # bit exact
+    np.testing.assert_array_equal(ep.robot_qd()[1].numpy(), data["qd"])
+    assert ep.frames["/robot/joint_state"]["joint_names"].iloc[0] == tuple(JOINTS)
+
+    _, true = ep.human_true()
+    _, tracked = ep.human_tracked()
+    assert tracked.shape == (STEPS, K, 3)
+    np.testing.assert_array_equal(true.numpy(), data["true"])
+    np.testing.assert_array_equal(tracked.numpy(), data["tracked"])  # NaN positions equal
+    assert np.isnan(tracked.numpy()).sum() == np.isnan(data["tracked"]).sum() > 0
+
+    tf, fc = ep.forecasts(dtype=torch.float64)
+    assert isinstance(fc, Forecast) and fc.action_names == tuple(ACTIONS)
+    assert fc.mean.shape == (STEPS, A, NF, K, 3) and fc.joint_names == tuple(HUMAN)
+    np.testing.assert_array_equal(fc.weights.numpy(), data["weights"])
+    np.testing.assert_array_equal(fc.mean.numpy(), data["mean"])
+    np.testing.assert_array_equal(fc.var.numpy(), data["var"])
+    assert fc.dt == 1 / 15
+
+    tb, times, bound, conf = ep.bounds()
+    np.testing.assert_array_equal(bound.numpy(), data["bound"])
+    np.testing.assert_array_equal(times.numpy(), np.tile(data["times"], (STEPS, 1)))
+    assert torch.all(conf == 0.95)
+    assert ep.frames["/planner/bound"]["max_bound"].to_numpy() == pytest.approx(
+        data["bound"].max(1)
+    )
+
+    plans = ep.frames["/planner/plan"]
+    np.testing.assert_array_equal(np.stack(plans["q"]), data["plan_q"])
+    assert list(plans["feasible"]) == [i % 3 != 0 for i in range(STEPS)]
+    assert plans["wait_s"].to_numpy() == pytest.approx(0.1 * np.arange(STEPS))
+
+    events = ep.events()
+    assert len(events) == 1 and events[0]["kind"] == "handover"
+    assert events[0]["t"] == data["t"][10]
+    assert events[0]["detail"]["object"] == 2 and events[0]["detail"]["who"] == "human"
+    assert math.isnan(events[0]["detail"]["gap"])
+
+    m = ep.metrics()
+    assert m["eval/smoothness"] == 1.5 and m["eval/x"] == math.inf and math.isnan(m["n"])
+
+    ts, robot, human = ep.scene_spheres()
+    np.testing.assert_allclose(ts.numpy(), data["t"], atol=1e-9)  # from the ns log time
+    np.testing.assert_allclose(robot.numpy(), data["robot_spheres"], rtol=1e-12)
+    np.testing.assert_allclose(human.numpy(), data["human_spheres"], rtol=1e-12)
+    axis_aligned = ep.frames["/scene"]["ellipsoids"].iloc[0][1]
+    np.testing.assert_allclose(axis_aligned["semi_axes"], [0.1, 0.2, 0.3])
+    np.testing.assert_allclose(axis_aligned["rgba"], [1.0, 0.0, 0.0, 0.5])
+
+
+def test_scene_ellipsoid_holds_95_percent_of_its_gaussian(log_path: Path, data: dict) -> None:
+    """Monte Carlo: samples of N(mean, cov) fall inside the logged ellipsoid 95 % of the time."""
+    ep = read_episode(log_path)
+    e = ep.frames["/scene"]["ellipsoids"].iloc[0][0]
+    rot = Rotation.from_quat(e["quaternion_xyzw"]).as_matrix()
+    assert np.linalg.det(rot) == pytest.approx(1.0)
+    g = np.random.default_rng(1)
+    n = 40_000
+    x = g.multivariate_normal(e["position"], data["cov"], size=n)
+    local = (x - e["position"]) @ rot  # coordinates along the ellipsoid's axes
+    inside = ((local / e["semi_axes"]) ** 2).sum(1) <= 1.0
+    assert inside.mean() == pytest.approx(0.95, abs=0.005)
+
+
+def test_every_message_validates_against_its_channel_schema(log_path: Path) -> None:
+    with open(log_path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        validators = {}
+        for ch in summary.channels.values():
+            schema = summary.schemas[ch.schema_id]
+            assert ch.message_encoding == "json" and schema.encoding == "jsonschema"
+            parsed = json.loads(schema.data)
+            jsonschema.Draft202012Validator.check_schema(parsed)
+            assert schema.name == parsed["title"] == TOPIC_SCHEMAS[ch.topic]["title"]
+            validators[ch.topic] = jsonschema.Draft202012Validator(parsed)
+        seen = set()
+        for _, ch, msg in reader.iter_messages():
+            validators[ch.topic].validate(json.loads(msg.data))
+            seen.add(ch.topic)
+    assert seen == set(TOPIC_SCHEMAS)
+
+
+def test_scene_is_a_foxglove_scene_update(log_path: Path) -> None:
+    with open(log_path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        names = {ch.topic: summary.schemas[ch.schema_id].name for ch in summary.channels.values()}
+        assert names["/scene"] == "foxglove.SceneUpdate"
+        assert names["/tf"] == "foxglove.FrameTransform"
+        _, _, msg = next(iter(reader.iter_messages(topics=["/scene"])))
+    scene = json.loads(msg.data)
+    assert scene["deletions"] == []
+    assert [e["id"] for e in scene["entities"]] == ["robot", "human", "prediction"]
+    for e in scene["entities"]:
+        assert e["frame_id"] == "world"
+        for prim in ("arrows", "cubes", "cylinders", "lines", "triangles", "texts", "models"):
+            assert e[prim] == []
+        assert set(e["spheres"][0]) == {"pose", "size", "color"}
+    robot = scene["entities"][0]["spheres"][0]
+    assert robot["pose"]["orientation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+    assert robot["size"]["x"] == robot["size"]["y"] == robot["size"]["z"] > 0
+
+
+def test_plain_mcap_reader_reads_every_message(log_path: Path) -> None:
+    ep = read_episode(log_path)
+    with open(log_path, "rb") as f:
+        n = sum(1 for _ in make_reader(f).iter_messages())
+    assert n == sum(len(df) for df in ep.frames.values())
+    assert n == 1 + 6 * STEPS + STEPS + 1 + 1  # tf, 6 per step (2 human), scene, event, metrics
+
+
+@pytest.mark.parametrize("fraction", [0.0005, 0.05, 0.3, 0.6, 0.95, 0.9995])
+def test_truncated_file_reads_a_prefix_with_a_warning(
+    log_path: Path, tmp_path: Path, fraction: float
+) -> None:
+    full = read_episode(log_path)
+    blob = log_path.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(blob[: int(len(blob) * fraction)])
+    with pytest.warns(DataWarning, match="truncated or damaged"):
+        ep = read_episode(cut)
+    assert not ep.complete
+    total = 0
+    for topic, df in ep.frames.items():
+        ref = full.frames[topic]
+        assert len(df) <= len(ref)
+        np.testing.assert_array_equal(df["t"].to_numpy(), ref["t"].to_numpy()[: len(df)])
+        total += len(df)
+    if "/robot/joint_state" in ep.frames:
+        _, q = ep.robot_q()
+        np.testing.assert_array_equal(q.numpy(), full.robot_q()[1].numpy()[: q.shape[0]])
+    if fraction >= 0.05:  # metadata precedes the chunks
+        assert ep.metadata == full.metadata
+    if fraction >= 0.3:  # several 8 KiB chunks survive
+        assert total > 0.2 * sum(len(df) for df in full.frames.values())
+
+
+def test_damaged_chunk_stops_the_read_there(log_path: Path, tmp_path: Path) -> None:
+    blob = bytearray(log_path.read_bytes())
+    mid = len(blob) // 2
+    blob[mid : mid + 64] = bytes(64)  # zero a stretch inside a chunk
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(blob))
+    with pytest.warns(DataWarning, match="damaged"):
+        ep = read_episode(bad)
+    n_full = len(read_episode(log_path).frames["/robot/joint_state"])
+    assert 0 < len(ep.frames["/robot/joint_state"]) < n_full
+
+
+@pytest.mark.slow
+def test_killed_writer_leaves_a_readable_file(tmp_path: Path) -> None:
+    """A process writing an episode is killed; its file reads up to the last chunk."""
+    path = tmp_path / "killed.mcap"
+    script = textwrap.dedent(
+        f"""
+        import numpy as np, time
+        from iplanner_torch.recording import EpisodeWriter
+        log = EpisodeWriter({str(path)!r}, metadata={{"run": "killed"}}, chunk_size=2048)
+        i = 0
+        while True:
+            log.robot_state(i * 0.01, np.full(7, i, dtype=float), np.zeros(7), list("abcdefg"))
+            i += 1
+            if i % 50 == 0:
+                time.sleep(0.01)
+        """
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], env=dict(os.environ))
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if path.exists() and path.stat().st_size > 30_000:
+                break
+            if proc.poll() is not None:
+                pytest.fail(f"writer exited early with code {proc.returncode}")
+            time.sleep(0.05)
+    finally:
+        proc.kill()
+        proc.wait()
+    with pytest.warns(DataWarning, match="truncated"):
+        ep = read_episode(path)
+    assert ep.metadata == {"run": "killed"}
+    _, q = ep.robot_q()
+    assert q.shape[0] > 50
+    np.testing.assert_array_equal(q[:, 0].numpy(), np.arange(q.shape[0]))
+
+
+def test_not_an_mcap_file_raises_naming_it(tmp_path: Path) -> None:
+    bad = tmp_path / "notes.mcap"
+    bad.write_text("hello, this is not MCAP")
+    with pytest.raises(DataError, match="notes.mcap is not an MCAP file"):
+        read_episode(bad)
+    with pytest.raises(DataError, match="missing.mcap: no such episode log"):
+        read_episode(tmp_path / "missing.mcap")
+
+
+def test_writer_rejects_bad_input(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="chunk_size"):
+        EpisodeWriter(tmp_path / "a.mcap", metadata={}, chunk_size=0)
+    log = EpisodeWriter(tmp_path / "b.mcap", metadata={})
+    with pytest.raises(ShapeError, match=r"expected q \(J\)"):
+        log.robot_state(0.0, np.zeros((2, 7)), np.zeros(7), JOINTS)
+    with pytest.raises(ShapeError, match="expected qd"):
+        log.robot_state(0.0, np.zeros(7), np.zeros(6), JOINTS)
+    with pytest.raises(ShapeError, match="expected 7 joint_names, got 2"):
+        log.robot_state(0.0, np.zeros(7), np.zeros(7), ["a", "b"])
+    with pytest.raises(ShapeError, match="expected mean"):
+        log.forecast(
+            0.0, np.ones(4), np.zeros((3, 5, 10, 3)), np.zeros((3, 5, 10, 3)), "abcd", 0.1
+        )
+    with pytest.raises(DataError, match="t >= 0"):
+        log.metrics(-1.0, {})
+    with pytest.raises(ShapeError, match="exactly one of cov"):
+        log.scene(0.0, np.zeros((1, 4)), np.zeros((1, 4)), [SceneEllipsoid(mean=np.zeros(3))])
+    log.close()
+    log.close()  # idempotent
+    with pytest.raises(DataError, match="already closed"):
+        log.metrics(1.0, {})
+    ep = read_episode(tmp_path / "b.mcap")
+    with pytest.raises(DataError, match="no messages on /robot/joint_state"):
+        ep.robot_q()
+    assert ep.metrics() == {} and ep.events() == []
+
+
+def test_log_forecast_from_a_batched_forecast(tmp_path: Path) -> None:
+    g = torch.Generator().manual_seed(0)
+    fc = Forecast(
+        weights=torch.softmax(torch.randn(2, A, generator=g), -1),
+        mean=torch.randn(2, A, NF, K, 3, generator=g),
+        var=torch.rand(2, A, NF, K, 3, generator=g),
+        dt=0.1,
+        joint_names=tuple(HUMAN),
+        action_names=tuple(ACTIONS),
+    )
+    with EpisodeWriter(tmp_path / "f.mcap", metadata={}) as log:
+        log.log_forecast(0.5, fc, index=1)
+    _, back = read_episode(tmp_path / "f.mcap").forecasts()
+    torch.testing.assert_close(back.mean[0], fc.mean[1], rtol=0, atol=0)
+    torch.testing.assert_close(back.weights[0], fc.weights[1], rtol=0, atol=0)
+
+
+def test_ellipsoid_pose_batch_rebuilds_each_covariance() -> None:
+    g = np.random.default_rng(2)
+    b = g.normal(size=(2, 6, 3, 3))
+    cov = b @ np.swapaxes(b, -1, -2) + 1e-3 * np.eye(3)  # (2, 6, 3, 3)
+    semi, quat = ellipsoid_pose(torch.from_numpy(cov), 0.95)
+    assert semi.shape == (2, 6, 3) and quat.shape == (2, 6, 4)
+    rot = Rotation.from_quat(quat.reshape(-1, 4)).as_matrix().reshape(2, 6, 3, 3)
+    scale = chi2.ppf(0.95, df=3)
+    rebuilt = rot @ (semi[..., :, None] ** 2 / scale * np.eye(3)) @ np.swapaxes(rot, -1, -2)
+    np.testing.assert_allclose(rebuilt, cov, rtol=1e-9, atol=1e-12)
+    with pytest.raises(ConfigError, match="confidence in"):
+        ellipsoid_pose(cov, 1.0)
+
+
+def test_unserialisable_values_raise_data_error(tmp_path: Path) -> None:
+    with pytest.raises(DataError, match="metadata is not JSON-serialisable"):
+        EpisodeWriter(tmp_path / "m.mcap", metadata={"x": object()})
+    with EpisodeWriter(tmp_path / "e.mcap", metadata={}) as log:
+        with pytest.raises(DataError, match="/task/events message is not JSON-serialisable"):
+            log.task_event(0.0, "bad", {"x": object()})
