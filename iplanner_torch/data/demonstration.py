@@ -24,6 +24,8 @@ class Demonstration:
             file gives none.
         name: an identifier (file stem or generated id).
         metadata: free-form provenance (subject, target, speed factor, noise sigma, seed ...).
+        clean_positions: (T, K, 3) noise-free joint positions [m], float32, when the recording
+            is synthetic (ground truth for evaluations); None for real recordings.
     """
 
     positions: np.ndarray
@@ -34,9 +36,12 @@ class Demonstration:
     timestamps: np.ndarray | None = None
     name: str = ""
     metadata: dict[str, Any] = field(default_factory=dict)
+    clean_positions: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.positions = np.asarray(self.positions, dtype=np.float32)
+        if self.clean_positions is not None:
+            self.clean_positions = np.asarray(self.clean_positions, dtype=np.float32)
         self.labels = np.asarray(self.labels, dtype=np.int64)
         self.joint_names = tuple(self.joint_names)
         self.action_names = tuple(self.action_names)
@@ -54,3 +59,27 @@ class Demonstration:
     def duration(self) -> float:
         """Seconds from the first to the last frame."""
         return float(self.timestamps[-1] - self.timestamps[0]) if self.num_frames else 0.0
+
+    @property
+    def num_joints(self) -> int:
+        """K, the number of joints."""
+        return int(self.positions.shape[1])
+
+    def select_joints(self, joints: tuple[str, ...] | list[str]) -> Demonstration:
+        """A copy holding only ``joints`` (in the given order).
+
+        Raises:
+            ValueError: when a joint is not in ``joint_names``.
+        """
+        idx = [self.joint_names.index(j) for j in joints]
+        return Demonstration(
+            positions=self.positions[:, idx],
+            labels=self.labels.copy(),
+            fps=self.fps,
+            joint_names=tuple(joints),
+            action_names=self.action_names,
+            timestamps=self.timestamps.copy(),
+            name=self.name,
+            metadata=dict(self.metadata),
+            clean_positions=None if self.clean_positions is None else self.clean_positions[:, idx],
+        )

@@ -1,0 +1,78 @@
+"""Helpers shared by the Hydra entry points (the only modules of the package that use Hydra)."""
+
+from __future__ import annotations
+
+import functools
+import logging
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from iplanner_torch.errors import ConfigError, IPlannerError
+
+#: conf/ at the repository root (the package is installed editable from the clone).
+CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
+
+log = logging.getLogger("iplanner_torch")
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def instantiate(node: Any) -> Any:
+    """Build the dataclass described by a config node (``_target_`` plus keyword arguments).
+
+    Raises:
+        ConfigError: when the node cannot be built (unknown key, wrong type, bad value), with
+            the underlying reason.
+    """
+    from hydra.errors import InstantiationException
+    from hydra.utils import instantiate as hydra_instantiate
+
+    try:
+        return hydra_instantiate(node, _convert_="all")
+    except InstantiationException as exc:
+        cause = exc.__cause__ or exc
+        if isinstance(cause, IPlannerError):
+            raise ConfigError(str(cause)) from exc
+        raise ConfigError(f"cannot build config node: {cause}") from exc
+
+
+def resolve_device(name: str) -> torch.device:
+    """``auto`` -> CUDA when available, else CPU; anything else is passed to torch.device."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        device = torch.device(name)
+    except RuntimeError as exc:
+        raise ConfigError(f"unknown device {name!r}") from exc
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("device=cuda asked for, but no CUDA device is available")
+    return device
+
+
+def repo_path(path: str | Path) -> Path:
+    """A config path: absolute as given, relative ones against the current directory."""
+    return Path(path).expanduser().resolve()
+
+
+def friendly_errors(fn: F) -> F:
+    """Turn library errors into a one-line message and exit code 2 instead of a traceback."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except IPlannerError as exc:
+            print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
+            raise SystemExit(2) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def dump_config(cfg: DictConfig) -> str:
+    """The resolved config as YAML (for logs and reports)."""
+    return OmegaConf.to_yaml(cfg, resolve=True)

@@ -1,0 +1,408 @@
+"""Demonstration files: NPZ and CSV, loading with validation, and the LEGO assembly recording.
+
+The formats are documented in ``datasets/README.md``. In short:
+
+* **NPZ** (one demonstration per file): ``positions`` (T, K, 3) float, ``labels`` (T,) int,
+  ``joint_names`` (K,) str, ``action_names`` (A,) str, ``fps`` scalar, optional
+  ``timestamps`` (T,) float seconds, optional ``clean_positions`` (T, K, 3) float, optional
+  ``metadata`` (a JSON object as a string). Saved without pickling.
+* **CSV** (one demonstration per file): optional header comment lines starting with ``#``
+  whose text after the ``#`` joined together is a JSON object with ``fps``, ``action_names``
+  and ``metadata``; then a column header row ``t,label,<joint>_x,<joint>_y,<joint>_z,...``
+  (joint-major), optionally followed by ``clean_<joint>_x,...`` columns; then one row per
+  frame. An empty cell is NaN (a lost joint). Without the JSON header, ``fps`` must be given
+  to the loader and actions are named ``action_0 ...``; without a ``label`` column every
+  frame is labelled 0 with the action name ``unlabelled``; ``t`` is optional too.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from iplanner_torch.data.demonstration import Demonstration
+from iplanner_torch.errors import DataError
+
+SUFFIXES: tuple[str, ...] = (".npz", ".csv")
+_REQUIRED_NPZ = ("positions", "labels", "joint_names", "action_names")
+_AXES = ("x", "y", "z")
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def save_demonstration(demo: Demonstration, path: str | Path) -> Path:
+    """Write ``demo`` to ``path``; the suffix (``.npz`` or ``.csv``) picks the format.
+
+    Args:
+        demo: the demonstration (NaN joints are written as NaN / empty cells).
+        path: destination file; parent folders are created.
+
+    Returns:
+        The path written.
+
+    Raises:
+        DataError: for an unknown suffix.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    meta = json.dumps(_jsonable(demo.metadata))
+    if path.suffix == ".npz":
+        arrays: dict[str, np.ndarray] = {
+            "positions": demo.positions.astype(np.float32),
+            "labels": demo.labels.astype(np.int64),
+            "joint_names": np.array(demo.joint_names, dtype=np.str_),
+            "action_names": np.array(demo.action_names, dtype=np.str_),
+            "fps": np.array(float(demo.fps)),
+            "timestamps": np.asarray(demo.timestamps, dtype=np.float64),
+            "metadata": np.array(meta),
+        }
+        if demo.clean_positions is not None:
+            arrays["clean_positions"] = demo.clean_positions.astype(np.float32)
+        with open(path, "wb") as fh:
+            np.savez(fh, **arrays)
+    elif path.suffix == ".csv":
+        header = {
+            "fps": float(demo.fps),
+            "action_names": list(demo.action_names),
+            "metadata": json.loads(meta),
+        }
+        cols = ["t", "label"] + [f"{j}_{a}" for j in demo.joint_names for a in _AXES]
+        t = demo.num_frames
+        blocks = [np.asarray(demo.timestamps)[:, None], demo.labels[:, None].astype(np.float64)]
+        blocks.append(demo.positions.reshape(t, -1).astype(np.float64))
+        if demo.clean_positions is not None:
+            cols += [f"clean_{j}_{a}" for j in demo.joint_names for a in _AXES]
+            blocks.append(demo.clean_positions.reshape(t, -1).astype(np.float64))
+        table = np.concatenate(blocks, axis=1)
+        lines = ["# " + json.dumps(header), ",".join(cols)]
+        for row in table:
+            cells = [repr(float(row[0])), str(int(row[1]))]
+            cells += ["" if np.isnan(v) else f"{v:.6g}" for v in row[2:]]
+            lines.append(",".join(cells))
+        path.write_text("\n".join(lines) + "\n")
+    else:
+        raise DataError(f"{path}: unknown suffix {path.suffix!r}, expected one of {SUFFIXES}")
+    return path
+
+
+def _read_npz(path: Path) -> dict[str, Any]:
+    if path.stat().st_size == 0:
+        raise DataError(f"{path}: empty file")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+        raise DataError(f"{path}: unreadable or corrupt NPZ file ({exc})") from exc
+    for key in _REQUIRED_NPZ:
+        if key not in data:
+            raise DataError(f"{path}: missing key {key!r} (has {sorted(data)})")
+    out: dict[str, Any] = {
+        "positions": data["positions"],
+        "labels": data["labels"],
+        "joint_names": tuple(str(s) for s in np.atleast_1d(data["joint_names"])),
+        "action_names": tuple(str(s) for s in np.atleast_1d(data["action_names"])),
+        "fps": float(data["fps"]) if "fps" in data else None,
+        "timestamps": data.get("timestamps"),
+        "clean_positions": data.get("clean_positions"),
+        "metadata": {},
+    }
+    if "metadata" in data:
+        try:
+            out["metadata"] = json.loads(str(data["metadata"]))
+        except json.JSONDecodeError as exc:
+            raise DataError(f"{path}: field 'metadata' is not valid JSON ({exc})") from exc
+    return out
+
+
+def _read_csv(path: Path) -> dict[str, Any]:
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: unreadable CSV file ({exc})") from exc
+    lines = text.splitlines()
+    comment = [ln[1:] for ln in lines if ln.startswith("#")]
+    body = [ln for ln in lines if ln.strip() and not ln.startswith("#")]
+    if not body:
+        raise DataError(f"{path}: empty file (no header row, no frames)")
+    header: dict[str, Any] = {}
+    if comment:
+        try:
+            header = json.loads("".join(comment))
+        except json.JSONDecodeError as exc:
+            raise DataError(f"{path}: field 'header' (# JSON comment) is invalid ({exc})") from exc
+    cols = [c.strip() for c in body[0].split(",")]
+    rows = body[1:]
+    if not rows:
+        raise DataError(f"{path}: empty file (a header row but no frames)")
+    try:
+        table = np.array(
+            [[float(c) if c.strip() else np.nan for c in r.split(",")] for r in rows],
+            dtype=np.float64,
+        )
+    except ValueError as exc:
+        raise DataError(f"{path}: unreadable or corrupt CSV row ({exc})") from exc
+    if table.ndim != 2 or table.shape[1] != len(cols):
+        raise DataError(
+            f"{path}: field 'positions' has wrong shape: rows must have {len(cols)} cells "
+            f"like the header row"
+        )
+    col = {c: i for i, c in enumerate(cols)}
+    joints: list[str] = []
+    for c in cols:
+        if c.endswith("_x") and not c.startswith("clean_"):
+            joints.append(c[:-2])
+    for j in joints:
+        for a in _AXES:
+            if f"{j}_{a}" not in col:
+                raise DataError(f"{path}: missing column '{j}_{a}'")
+    if not joints:
+        raise DataError(f"{path}: missing key 'positions' (no <joint>_x columns)")
+    t = table.shape[0]
+    pos = np.stack([table[:, [col[f"{j}_{a}"] for a in _AXES]] for j in joints], axis=1)
+    clean = None
+    if f"clean_{joints[0]}_x" in col:
+        clean = np.stack(
+            [table[:, [col[f"clean_{j}_{a}"] for a in _AXES]] for j in joints], axis=1
+        )
+    if "label" in col:
+        lab = table[:, col["label"]]
+        if np.isnan(lab).any() or (lab != np.round(lab)).any():
+            raise DataError(f"{path}: field 'labels' must be integers in every row")
+        labels = lab.astype(np.int64)
+        names = header.get("action_names")
+        if names is None:
+            names = [f"action_{i}" for i in range(max(int(labels.max()) + 1, 1))]
+    else:
+        labels = np.zeros(t, dtype=np.int64)
+        names = header.get("action_names", ["unlabelled"])
+    return {
+        "positions": pos,
+        "labels": labels,
+        "joint_names": tuple(joints),
+        "action_names": tuple(str(n) for n in names),
+        "fps": float(header["fps"]) if "fps" in header else None,
+        "timestamps": table[:, col["t"]] if "t" in col else None,
+        "clean_positions": clean,
+        "metadata": dict(header.get("metadata", {})),
+    }
+
+
+def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstration:
+    pos = np.asarray(raw["positions"])
+    joints = raw["joint_names"]
+    if pos.ndim != 3 or pos.shape[2] != 3:
+        raise DataError(f"{path}: field 'positions' must be (T, K, 3), got {pos.shape}")
+    if not np.issubdtype(pos.dtype, np.floating):
+        raise DataError(f"{path}: field 'positions' must be float, got {pos.dtype}")
+    t, k = pos.shape[:2]
+    if t == 0:
+        raise DataError(f"{path}: empty file (field 'positions' has 0 frames)")
+    if len(joints) != k:
+        raise DataError(
+            f"{path}: field 'joint_names' has {len(joints)} names, positions has K={k}"
+        )
+    if len(set(joints)) != len(joints):
+        raise DataError(f"{path}: field 'joint_names' has duplicates: {joints}")
+    labels = np.asarray(raw["labels"])
+    if labels.shape != (t,):
+        raise DataError(f"{path}: field 'labels' must be ({t},), got {labels.shape}")
+    if not np.issubdtype(labels.dtype, np.integer):
+        raise DataError(f"{path}: field 'labels' must be integer, got {labels.dtype}")
+    n_act = len(raw["action_names"])
+    if n_act == 0:
+        raise DataError(f"{path}: field 'action_names' is empty")
+    if labels.size and (labels.min() < -1 or labels.max() >= n_act):
+        raise DataError(
+            f"{path}: field 'labels' out of range: values in [{labels.min()}, {labels.max()}], "
+            f"expected -1 (unlabelled) or 0..{n_act - 1}"
+        )
+    file_fps = raw["fps"]
+    if file_fps is None and fps is None:
+        raise DataError(f"{path}: field 'fps' missing; pass fps= to the loader")
+    if file_fps is not None and fps is not None and not np.isclose(file_fps, fps):
+        raise DataError(f"{path}: field 'fps' is {file_fps}, but fps={fps} was requested")
+    the_fps = float(file_fps if file_fps is not None else fps)
+    if not the_fps > 0:
+        raise DataError(f"{path}: field 'fps' must be > 0, got {the_fps}")
+    ts = raw["timestamps"]
+    if ts is not None:
+        ts = np.asarray(ts, dtype=np.float64)
+        if ts.shape != (t,):
+            raise DataError(f"{path}: field 'timestamps' must be ({t},), got {ts.shape}")
+        if not np.all(np.isfinite(ts)) or np.any(np.diff(ts) <= 0):
+            raise DataError(f"{path}: field 'timestamps' must be finite and strictly increasing")
+    clean = raw["clean_positions"]
+    if clean is not None and np.shape(clean) != pos.shape:
+        raise DataError(
+            f"{path}: field 'clean_positions' must be {pos.shape}, got {np.shape(clean)}"
+        )
+    return Demonstration(
+        positions=pos,
+        labels=labels,
+        fps=the_fps,
+        joint_names=joints,
+        action_names=raw["action_names"],
+        timestamps=ts,
+        name=path.stem,
+        metadata=raw["metadata"],
+        clean_positions=clean,
+    )
+
+
+def load_demonstration(
+    path: str | Path, *, fps: float | None = None, joints: Sequence[str] | None = None
+) -> Demonstration:
+    """Load and validate one NPZ or CSV demonstration file (see :func:`load_demonstrations`)."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: no such file")
+    if path.suffix == ".npz":
+        raw = _read_npz(path)
+    elif path.suffix == ".csv":
+        raw = _read_csv(path)
+    else:
+        raise DataError(f"{path}: unknown suffix {path.suffix!r}, expected one of {SUFFIXES}")
+    demo = _validate(path, raw, fps)
+    if joints is not None:
+        missing = [j for j in joints if j not in demo.joint_names]
+        if missing:
+            raise DataError(
+                f"{path}: field 'joint_names' lacks unknown joint(s) {missing}; "
+                f"the file has {list(demo.joint_names)}"
+            )
+        demo = demo.select_joints(list(joints))
+    return demo
+
+
+def load_demonstrations(
+    path: str | Path, *, fps: float | None = None, joints: Sequence[str] | None = None
+) -> list[Demonstration]:
+    """Load every demonstration under ``path``.
+
+    Args:
+        path: one ``.npz`` / ``.csv`` file, or a folder searched recursively for them (other
+            files, e.g. a README, are ignored); files are taken in sorted path order.
+        fps: frame rate for files that do not state one; a file stating another rate is an
+            error.
+        joints: keep only these joints, in this order (e.g. ``["right_hand"]``).
+
+    Returns:
+        The demonstrations; NaN joints are kept as NaN.
+
+    Raises:
+        DataError: naming the file and the field: no files, unreadable or corrupt file, empty
+            file, missing key, wrong shape, label out of range, non-increasing timestamps,
+            unknown joint name in ``joints``, fps missing or contradicting ``fps``.
+    """
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(p for p in path.rglob("*") if p.suffix in SUFFIXES and p.is_file())
+        if not files:
+            raise DataError(f"{path}: no .npz or .csv demonstration files in this folder")
+    elif path.exists():
+        files = [path]
+    else:
+        raise DataError(f"{path}: no such file or folder")
+    return [load_demonstration(f, fps=fps, joints=joints) for f in files]
+
+
+#: Column order of the LEGO assembly recording (18 numbers per row).
+LEGO_JOINTS: tuple[str, ...] = (
+    "left_hand",
+    "right_hand",
+    "left_elbow",
+    "right_elbow",
+    "left_shoulder",
+    "right_shoulder",
+)
+#: The K axis of loaded LEGO demonstrations (the order of :data:`skeleton.JOINT_NAMES`).
+LEGO_OUTPUT_JOINTS: tuple[str, ...] = (
+    "left_shoulder",
+    "left_elbow",
+    "left_hand",
+    "right_shoulder",
+    "right_elbow",
+    "right_hand",
+)
+
+
+def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstration]:
+    """Load the real LEGO assembly recording (``Task*/Human*/trial*.txt``, 18 numbers a row).
+
+    The wrists are mapped to our ``*_hand`` joints. Positions stay in the camera frame
+    (metres): they are not in the table frame, so use them for motion, not for placement.
+    There are no action labels: every frame has label 0 of the single action
+    ``"unlabelled"``. NaN values are kept.
+
+    Args:
+        path: the recording's folder (searched recursively for ``*.txt``) or one trial file.
+        fps: the frame rate, which the recording does not state (the camera usually runs at
+            30 fps).
+
+    Returns:
+        One demonstration per trial, named ``Task1/Human1/trial1`` etc., in sorted order.
+
+    Raises:
+        DataError: when nothing is found or a file is not a (T, 18) table of numbers.
+    """
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(p for p in path.rglob("*.txt") if p.is_file())
+        root = path
+    elif path.is_file():
+        files, root = [path], path.parent
+    else:
+        raise DataError(f"{path}: no such file or folder")
+    if not files:
+        raise DataError(f"{path}: no trial .txt files found")
+    if not fps > 0:
+        raise DataError(f"{path}: fps must be > 0, got {fps}")
+    order = [LEGO_JOINTS.index(j) for j in LEGO_OUTPUT_JOINTS]
+    demos = []
+    for f in files:
+        try:
+            table = np.loadtxt(f, dtype=np.float64, ndmin=2)
+        except ValueError as exc:
+            raise DataError(f"{f}: unreadable LEGO trial ({exc})") from exc
+        if table.shape[0] == 0:
+            raise DataError(f"{f}: empty file")
+        if table.shape[1] != 18:
+            raise DataError(f"{f}: field 'positions' must have 18 columns, got {table.shape[1]}")
+        pos = table.reshape(-1, 6, 3)[:, order]  # (T, 6, 3)
+        rel = f.relative_to(root).with_suffix("")
+        parts = rel.parts
+        demos.append(
+            Demonstration(
+                positions=pos,
+                labels=np.zeros(pos.shape[0], dtype=np.int64),
+                fps=fps,
+                joint_names=LEGO_OUTPUT_JOINTS,
+                action_names=("unlabelled",),
+                name="/".join(parts),
+                metadata={
+                    "source": "intelligent-control-lab/Human_Assembly_Data",
+                    "frame": "camera",
+                    "file": str(rel),
+                    "task": parts[-3] if len(parts) >= 3 else "",
+                    "human": parts[-2] if len(parts) >= 2 else "",
+                },
+            )
+        )
+    return demos

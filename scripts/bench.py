@@ -1,0 +1,123 @@
+#!/usr/bin/env python
+"""Run every benchmark of iplanner_torch and print (and optionally save) its figures.
+
+Each area's benchmark lives in ``scripts/bench_<area>.py`` and exposes ``run(quick) -> dict``
+mapping figure names to ``{"value": number, "unit": text, ...}``; speed figures carry the
+reference they were measured against in the same run (``reference``, ``ratio``).
+
+Usage::
+
+    python scripts/bench.py                       # full run, prints a table
+    python scripts/bench.py --quick               # reduced sizes (CI smoke)
+    python scripts/bench.py --json experiments/bench/cpu.json
+    python scripts/bench.py --only collision,robot
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import platform
+import subprocess
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import torch
+
+HERE = Path(__file__).resolve().parent
+AREAS = ("dtw", "prediction", "robot", "collision", "planning", "sim")
+
+
+def _load(area: str):
+    path = HERE / f"bench_{area}.py"
+    if not path.exists():
+        return None
+    spec = importlib.util.spec_from_file_location(f"bench_{area}", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=HERE,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def _fmt(v: object) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="reduced sizes (CI smoke run)")
+    parser.add_argument("--json", type=Path, default=None, help="write the figures as JSON")
+    parser.add_argument("--only", default="", help="comma-separated areas: " + ",".join(AREAS))
+    parser.add_argument("--threads", type=int, default=None, help="torch.set_num_threads")
+    args = parser.parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    areas = [a for a in (args.only.split(",") if args.only else AREAS) if a]
+    figures: dict[str, dict] = {}
+    failed: list[str] = []
+    for area in areas:
+        module = _load(area)
+        if module is None:
+            print(f"[{area}] no benchmark module, skipped", flush=True)
+            continue
+        print(f"[{area}] running{' (quick)' if args.quick else ''} ...", flush=True)
+        t0 = time.perf_counter()
+        try:
+            result = module.run(quick=args.quick)
+        except Exception:  # noqa: BLE001 - report and continue with the other areas
+            traceback.print_exc()
+            failed.append(area)
+            continue
+        print(f"[{area}] done in {time.perf_counter() - t0:.1f} s", flush=True)
+        figures.update(result)
+    width = max((len(k) for k in figures), default=10)
+    print()
+    print(f"{'figure'.ljust(width)}  {'value':>12}  unit          reference / ratio")
+    for name, fig in figures.items():
+        extra = ""
+        if "reference" in fig:
+            extra = f"ref {_fmt(fig['reference'])}"
+        if "ratio" in fig:
+            extra += f"  ratio {_fmt(fig['ratio'])}"
+        value = _fmt(fig.get("value"))
+        print(f"{name.ljust(width)}  {value:>12}  {str(fig.get('unit', '')):<12}  {extra}")
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        meta = {
+            "command": "python scripts/bench.py " + " ".join(argv or sys.argv[1:]),
+            "commit": _commit(),
+            "quick": args.quick,
+            "torch": torch.__version__,
+            "threads": torch.get_num_threads(),
+            "cpu": platform.processor() or platform.machine(),
+            "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None,
+            "failed_areas": failed,
+        }
+        args.json.write_text(json.dumps(figures, indent=2) + "\n")
+        meta_path = args.json.with_suffix(".meta.json")
+        meta_path.write_text(json.dumps(meta, indent=2) + "\n")
+        print(f"\nwrote {args.json} and {meta_path}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

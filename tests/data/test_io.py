@@ -1,0 +1,201 @@
+"""Demonstration files: round trips, joint selection, each bad-file error, LEGO recording."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iplanner_torch.data.demonstration import Demonstration
+from iplanner_torch.data.io import (
+    load_demonstration,
+    load_demonstrations,
+    load_lego_assembly,
+    save_demonstration,
+)
+from iplanner_torch.data.skeleton import JOINT_NAMES
+from iplanner_torch.errors import DataError
+
+LEGO = Path(__file__).resolve().parents[3] / "shared" / "data" / "lego_assembly_3d"
+
+
+def _demo(t: int = 12, seed: int = 0) -> Demonstration:
+    rng = np.random.default_rng(seed)
+    clean = rng.normal(size=(t, len(JOINT_NAMES), 3)).astype(np.float32)
+    pos = clean + 0.01
+    pos[3, 2] = np.nan
+    pos[4:6, 9] = np.nan
+    return Demonstration(
+        positions=pos,
+        labels=np.r_[np.zeros(4), np.ones(t - 6), 2 * np.ones(2)].astype(int),
+        fps=15.0,
+        joint_names=JOINT_NAMES,
+        action_names=("idle", "reach_0", "return"),
+        timestamps=np.arange(t) / 15.0 + 100.0,
+        name="d",
+        metadata={"target": 3, "speed": 0.5, "note": "x"},
+        clean_positions=clean,
+    )
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_round_trip_keeps_nan_and_metadata(tmp_path, suffix):
+    d = _demo()
+    save_demonstration(d, tmp_path / f"a{suffix}")
+    (e,) = load_demonstrations(tmp_path / f"a{suffix}")
+    np.testing.assert_allclose(e.positions, d.positions, rtol=1e-5, atol=1e-6, equal_nan=True)
+    assert np.isnan(e.positions[3, 2]).all() and np.isnan(e.positions[4:6, 9]).all()
+    np.testing.assert_allclose(e.clean_positions, d.clean_positions, rtol=1e-5, atol=1e-6)
+    np.testing.assert_array_equal(e.labels, d.labels)
+    np.testing.assert_allclose(e.timestamps, d.timestamps)
+    assert e.joint_names == d.joint_names and e.action_names == d.action_names
+    assert e.fps == 15.0 and e.metadata == d.metadata and e.name == "a"
+
+
+def test_folder_is_sorted_and_readme_ignored(tmp_path):
+    for name in ("b.npz", "a.csv", "sub/c.npz"):
+        save_demonstration(_demo(), tmp_path / name)
+    (tmp_path / "README.md").write_text("hello")
+    names = [d.name for d in load_demonstrations(tmp_path)]
+    assert names == ["a", "b", "c"]
+
+
+def test_joint_subset_one_wrist(tmp_path):
+    d = _demo()
+    save_demonstration(d, tmp_path / "a.npz")
+    (e,) = load_demonstrations(tmp_path, joints=["right_hand"])
+    assert e.joint_names == ("right_hand",) and e.positions.shape == (12, 1, 3)
+    np.testing.assert_array_equal(e.positions[:, 0], d.positions[:, 9])
+    np.testing.assert_array_equal(e.clean_positions[:, 0], d.clean_positions[:, 9])
+
+
+def test_csv_without_header_needs_fps(tmp_path):
+    p = tmp_path / "raw.csv"
+    p.write_text("right_hand_x,right_hand_y,right_hand_z\n0,0,0\n1,,2\n")
+    with pytest.raises(DataError, match="'fps' missing"):
+        load_demonstrations(p)
+    (d,) = load_demonstrations(p, fps=30.0)
+    assert d.fps == 30.0 and d.action_names == ("unlabelled",) and d.labels.tolist() == [0, 0]
+    assert np.isnan(d.positions[1, 0, 1])
+
+
+def _npz(path: Path, **override) -> Path:
+    d = _demo()
+    arrays = {
+        "positions": d.positions,
+        "labels": d.labels,
+        "joint_names": np.array(d.joint_names),
+        "action_names": np.array(d.action_names),
+        "fps": np.array(15.0),
+        "metadata": np.array(json.dumps({})),
+    }
+    arrays.update(override)
+    arrays = {k: v for k, v in arrays.items() if v is not None}
+    np.savez(path, **arrays)
+    return path
+
+
+def test_error_wrong_shape(tmp_path):
+    p = _npz(tmp_path / "x.npz", positions=np.zeros((12, 10, 2), np.float32))
+    with pytest.raises(DataError, match=r"x\.npz: field 'positions' must be \(T, K, 3\)"):
+        load_demonstrations(p)
+
+
+def test_error_joint_count_mismatch(tmp_path):
+    p = _npz(tmp_path / "x.npz", joint_names=np.array(["a", "b"]))
+    with pytest.raises(DataError, match="x.npz: field 'joint_names' has 2 names"):
+        load_demonstrations(p)
+
+
+def test_error_unknown_joint(tmp_path):
+    p = _npz(tmp_path / "x.npz")
+    with pytest.raises(DataError, match=r"x\.npz: .*unknown joint\(s\) \['left_wrist'\]"):
+        load_demonstrations(p, joints=["left_wrist"])
+
+
+def test_error_labels_out_of_range(tmp_path):
+    p = _npz(tmp_path / "x.npz", labels=np.full(12, 3))
+    with pytest.raises(DataError, match="x.npz: field 'labels' out of range"):
+        load_demonstrations(p)
+
+
+def test_error_labels_wrong_length(tmp_path):
+    p = _npz(tmp_path / "x.npz", labels=np.zeros(5, int))
+    with pytest.raises(DataError, match=r"field 'labels' must be \(12,\)"):
+        load_demonstrations(p)
+
+
+def test_error_non_monotonic_timestamps(tmp_path):
+    ts = np.arange(12) / 15.0
+    ts[5] = ts[3]
+    p = _npz(tmp_path / "x.npz", timestamps=ts)
+    with pytest.raises(DataError, match="x.npz: field 'timestamps' must be finite and strictly"):
+        load_demonstrations(p)
+
+
+def test_error_empty_files(tmp_path):
+    (tmp_path / "e.npz").write_bytes(b"")
+    with pytest.raises(DataError, match="e.npz: empty file"):
+        load_demonstrations(tmp_path / "e.npz")
+    p = _npz(
+        tmp_path / "z.npz", positions=np.zeros((0, 10, 3), np.float32), labels=np.zeros(0, int)
+    )
+    with pytest.raises(DataError, match="z.npz: empty file"):
+        load_demonstrations(p)
+    (tmp_path / "e.csv").write_text("# {}\n")
+    with pytest.raises(DataError, match="e.csv: empty file"):
+        load_demonstrations(tmp_path / "e.csv")
+
+
+def test_error_corrupt_file(tmp_path):
+    (tmp_path / "c.npz").write_bytes(b"PK\x03\x04 this is not a zip archive")
+    with pytest.raises(DataError, match="c.npz: unreadable or corrupt"):
+        load_demonstrations(tmp_path / "c.npz")
+    (tmp_path / "c.csv").write_text("t,label,a_x,a_y,a_z\n0,0,1,2,abc\n")
+    with pytest.raises(DataError, match="c.csv: unreadable or corrupt CSV row"):
+        load_demonstrations(tmp_path / "c.csv", fps=10)
+
+
+def test_error_missing_key(tmp_path):
+    p = _npz(tmp_path / "x.npz", labels=None)
+    with pytest.raises(DataError, match="x.npz: missing key 'labels'"):
+        load_demonstrations(p)
+
+
+def test_error_fps_contradiction_and_missing_folder(tmp_path):
+    p = _npz(tmp_path / "x.npz")
+    with pytest.raises(DataError, match="field 'fps' is 15.0, but fps=30"):
+        load_demonstrations(p, fps=30.0)
+    with pytest.raises(DataError, match="no such file or folder"):
+        load_demonstrations(tmp_path / "missing")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(DataError, match="no .npz or .csv"):
+        load_demonstrations(tmp_path / "empty")
+
+
+def test_single_file_loader_rejects_unknown_suffix(tmp_path):
+    (tmp_path / "x.txt").write_text("1")
+    with pytest.raises(DataError, match="unknown suffix '.txt'"):
+        load_demonstration(tmp_path / "x.txt")
+
+
+@pytest.mark.skipif(not LEGO.is_dir(), reason="LEGO assembly recording not present")
+def test_lego_assembly_loader():
+    demos = load_lego_assembly(LEGO, fps=30.0)
+    assert len(demos) == 20
+    assert sum(d.num_frames for d in demos) == 20494
+    d = demos[0]
+    assert d.name == "Task1/Human1/trial1" and d.fps == 30.0
+    assert d.joint_names == (
+        "left_shoulder", "left_elbow", "left_hand", "right_shoulder", "right_elbow", "right_hand"
+    )  # fmt: skip
+    raw = np.loadtxt(LEGO / "Task1/Human1/trial1.txt")
+    np.testing.assert_allclose(d.positions[0, 2], raw[0, 0:3], rtol=1e-6)  # left wrist
+    np.testing.assert_allclose(d.positions[0, 3], raw[0, 15:18], rtol=1e-6)  # right shoulder
+    assert d.action_names == ("unlabelled",) and (d.labels == 0).all()
+    nan_demo = next(x for x in demos if x.name == "Task3/Human2/trial2")
+    assert np.isnan(nan_demo.positions).sum() == 12
+    upper = np.linalg.norm(d.positions[:, 1] - d.positions[:, 0], axis=1)
+    assert upper.std() < 1e-4  # fixed-length arm model upstream

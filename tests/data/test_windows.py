@@ -1,0 +1,213 @@
+"""Features, imputation, progress bitmasks, next actions, window counts and splits."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from iplanner_torch.data.demonstration import Demonstration
+from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
+from iplanner_torch.data.skeleton import JOINT_NAMES
+from iplanner_torch.data.windows import (
+    WindowCfg,
+    build_windows,
+    compute_features,
+    impute_nan,
+    next_action_labels,
+    progress_bitmask,
+    split_by_demonstration,
+)
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
+
+FPS = 15.0
+
+
+def _poly(t: np.ndarray, degree: int):
+    """A polynomial trajectory per joint-coordinate and its analytic derivatives."""
+    rng = np.random.default_rng(degree)
+    c = rng.normal(size=(degree + 1, 4, 3))
+    x = sum(c[i] * t[:, None, None] ** i for i in range(degree + 1))
+    v = sum(i * c[i] * t[:, None, None] ** (i - 1) for i in range(1, degree + 1))
+    a = sum(i * (i - 1) * c[i] * t[:, None, None] ** (i - 2) for i in range(2, degree + 1))
+    return x, v, a
+
+
+def test_features_layout_and_exact_on_quadratic():
+    t = np.arange(15) / FPS
+    x, v, a = _poly(t, 2)
+    f = compute_features(torch.tensor(x, dtype=torch.float64), FPS)
+    assert f.shape == (15, 36) and f.dtype == torch.float64
+    np.testing.assert_allclose(f[:, :12].numpy(), x.reshape(15, 12), atol=1e-12)
+    np.testing.assert_allclose(f[:, 12:24].numpy(), v.reshape(15, 12), atol=1e-9)
+    np.testing.assert_allclose(f[:, 24:].numpy(), np.broadcast_to(a, x.shape).reshape(15, 12),
+                               atol=1e-7)  # fmt: skip
+
+
+def test_features_match_cubic_derivatives_to_second_order():
+    t = np.arange(30) / FPS
+    x, v, a = _poly(t, 3)
+    f = compute_features(torch.tensor(x), FPS).numpy()
+    c3 = np.abs(np.random.default_rng(3).normal(size=(4, 4, 3))[3]).max()
+    dt = 1 / FPS
+    # central differences of a cubic are off by c3 dt^2 (velocity), edges by 2 c3 dt^2
+    assert np.abs(f[:, 12:24] - v.reshape(30, 12)).max() <= 2.5 * c3 * dt**2
+    assert np.abs(f[2:-2, 24:] - a.reshape(30, 12)[2:-2]).max() <= 1e-6
+    # a coarser grid has a larger error (the test can fail)
+    x2, v2, _ = _poly(np.arange(30) / 3.0, 3)
+    f2 = compute_features(torch.tensor(x2), 3.0).numpy()
+    assert np.abs(f2[:, 12:24] - v2.reshape(30, 12)).max() > 2.5 * c3 * dt**2
+
+
+def test_features_nan_free_with_interpolated_gaps():
+    t = np.arange(20) / FPS
+    x, _, _ = _poly(t, 1)  # linear: interpolation over a gap is exact
+    xn = x.copy()
+    xn[5:8, 1] = np.nan
+    xn[0:2, 2] = np.nan  # leading gap: held from the first observation
+    xn[-3:, 3, 0] = np.nan  # one coordinate lost -> the joint counts as lost
+    f = compute_features(torch.tensor(xn), FPS)
+    assert not torch.isnan(f).any()
+    pos = f[:, :12].reshape(20, 4, 3).numpy()
+    np.testing.assert_allclose(pos[5:8, 1], x[5:8, 1], atol=1e-12)
+    np.testing.assert_allclose(pos[0:2, 2], np.broadcast_to(x[2, 2], (2, 3)), atol=1e-12)
+    np.testing.assert_allclose(pos[-3:, 3], np.broadcast_to(x[-4, 3], (3, 3)), atol=1e-12)
+
+
+def test_batched_features_equal_single_calls():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(5, 15, 10, 3)).astype(np.float32)
+    x[1, 3:6, 4] = np.nan
+    x[3, 14, 9] = np.nan
+    f = compute_features(torch.tensor(x), FPS)
+    for b in range(5):
+        torch.testing.assert_close(f[b], compute_features(torch.tensor(x[b]), FPS))
+
+
+def test_joint_lost_in_whole_window():
+    x = np.random.default_rng(0).normal(size=(15, 10, 3))
+    x[:, JOINT_NAMES.index("left_hand")] = np.nan
+    with pytest.raises(DataError, match="lost \\(NaN\\) in every frame"):
+        compute_features(torch.tensor(x), FPS)
+    out = impute_nan(torch.tensor(x), JOINT_NAMES).numpy()
+    np.testing.assert_array_equal(out[:, 6], x[:, 5])  # from the left elbow
+    alone = np.full((15, 1, 3), np.nan)
+    with pytest.raises(DataError, match="no connected joint is observed"):
+        impute_nan(torch.tensor(alone), ["right_hand"])
+
+
+def test_feature_errors():
+    with pytest.raises(ShapeError, match=r"expected positions \(..., T, K, 3\)"):
+        compute_features(torch.zeros(15, 10, 2), FPS)
+    with pytest.raises(ShapeError, match="T >= 3"):
+        compute_features(torch.zeros(2, 10, 3), FPS)
+    with pytest.raises(ConfigError, match="must start with 'position'"):
+        compute_features(torch.zeros(15, 10, 3), FPS, ("velocity",))
+
+
+def test_progress_bitmask_brute_force():
+    rng = np.random.default_rng(1)
+    labels = rng.integers(-1, 5, size=60)
+    labels = np.repeat(labels, rng.integers(1, 4, size=60))
+    got = progress_bitmask(labels, [1, 2, 4]).numpy()
+    for t in range(len(labels)):
+        want = 0
+        for a in (1, 2, 4):
+            if any(labels[s] == a and labels[s + 1] != a for s in range(t)):
+                want |= 1 << a
+        assert got[t] == want, t
+
+
+def test_next_action_brute_force():
+    labels = np.array([0, 0, 3, 3, -1, 3, 5, 5, -1, -1, 0, 2, 2])
+    got = next_action_labels(labels)
+    for s, c in enumerate(labels):
+        later = [a for a in labels[s + 1 :] if a != c and a >= 0]
+        # the current segment ends at the first different label
+        end = next((u for u in range(s + 1, len(labels)) if labels[u] != c), len(labels))
+        want = next((a for a in labels[end:] if a != c and a >= 0), -1)
+        assert got[s] == want, (s, got[s], want, later)
+
+
+@pytest.fixture(scope="module")
+def reach_demos():
+    cfg = ReachingCfg(n_targets=4, reaches_per_target=6)
+    return [d for t in range(4) for r in range(6) for d in reaching_demonstrations(cfg, t, r)]
+
+
+@pytest.mark.parametrize("stride", [1, 3])
+def test_window_count_formula(reach_demos, stride):
+    cfg = WindowCfg(n_prev=10, n_future=8, stride=stride)
+    ws = build_windows(reach_demos, cfg)
+    want = sum((d.num_frames - 10 - 8) // stride + 1 for d in reach_demos)
+    assert len(ws) == want
+    assert ws.f_prev.shape == (want, 10, 90) and ws.xi_next.shape == (want, 8, 10, 3)
+    assert not torch.isnan(ws.f_prev).any()
+
+
+def test_window_contents(reach_demos):
+    cfg = WindowCfg(n_prev=10, n_future=8)
+    ws = build_windows(reach_demos, cfg)
+    i = 37
+    d = reach_demos[int(ws.demo_index[i])]
+    s = int(ws.frame_index[i])
+    np.testing.assert_array_equal(ws.xi_next[i].numpy(), d.clean_positions[s + 1 : s + 9])
+    torch.testing.assert_close(ws.pose_now[i], ws.f_prev[i, -1, :30].reshape(10, 3))
+    assert int(ws.current[i]) == d.labels[s]
+    assert int(ws.next_action[i]) == next_action_labels(d.labels)[s]
+    torch.testing.assert_close(
+        ws.f_prev[i], compute_features(torch.tensor(d.positions[s - 9 : s + 1]), d.fps)
+    )
+    # progress: reach_t done once the return started; idle/return never count
+    t = d.metadata["target"]
+    done = ws.progress[ws.demo_index == ws.demo_index[i]]
+    cur = ws.current[ws.demo_index == ws.demo_index[i]]
+    assert set(done[cur == 5].tolist()) == {1 << (1 + t)}
+    assert set(done[cur == 1 + t].tolist()) == {0}
+    sub = ws.subset(torch.tensor([0, 5]))
+    assert len(sub) == 2 and sub.f_prev.shape[1:] == ws.f_prev.shape[1:]
+
+
+def test_unlabelled_frames_skipped_and_joint_selection():
+    d = Demonstration(
+        positions=np.random.default_rng(0).normal(size=(30, 10, 3)),
+        labels=np.r_[np.full(15, -1), np.zeros(15)].astype(int),
+        fps=FPS,
+        joint_names=JOINT_NAMES,
+        action_names=("idle",),
+    )
+    ws = build_windows([d], WindowCfg(n_prev=5, n_future=3, joints=("right_hand",)))
+    assert (ws.frame_index >= 15).all() and len(ws) == 30 - 3 - 15
+    assert ws.xi_next.shape[2] == 1 and ws.f_prev.shape[2] == 9
+    with pytest.raises(DataError, match="unknown joint names"):
+        build_windows([d], WindowCfg(joints=("tail",)))
+
+
+def test_split_no_leakage_and_stratified(reach_demos):
+    tr, va, te = split_by_demonstration(reach_demos, (0.5, 0.25, 0.25), seed=3)
+    names = [{d.name for d in s} for s in (tr, va, te)]
+    assert not (names[0] & names[1] or names[0] & names[2] or names[1] & names[2])
+    assert sum(map(len, names)) == len(reach_demos)
+    for split in (tr, va, te):
+        assert {d.metadata["target"] for d in split} == {0, 1, 2, 3}
+    ws = [build_windows(s, WindowCfg()) for s in (tr, va, te)]
+    keys = [{(s[int(i)].name) for i in w.demo_index} for s, w in zip((tr, va, te), ws)]
+    assert not (keys[0] & keys[1] or keys[0] & keys[2] or keys[1] & keys[2])
+    again = split_by_demonstration(reach_demos, (0.5, 0.25, 0.25), seed=3)
+    assert [d.name for d in again[1]] == [d.name for d in va]
+    with pytest.raises(ConfigError, match="summing to 1"):
+        split_by_demonstration(reach_demos, (0.5, 0.5, 0.5))
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_features_and_progress_on_cuda_match_cpu():
+    x = np.random.default_rng(0).normal(size=(4, 15, 10, 3)).astype(np.float32)
+    x[0, 3:5, 2] = np.nan
+    cpu = compute_features(torch.tensor(x), FPS)
+    gpu = compute_features(torch.tensor(x, device="cuda"), FPS)
+    assert gpu.device.type == "cuda"
+    torch.testing.assert_close(gpu.cpu(), cpu, rtol=1e-5, atol=1e-5)
+    lab = torch.tensor([0, 1, 1, 2, 0, 3], device="cuda")
+    assert progress_bitmask(lab).device.type == "cuda"
+    torch.testing.assert_close(progress_bitmask(lab).cpu(), progress_bitmask(lab.cpu()))
