@@ -1,0 +1,222 @@
+"""RobotModel: our torch FK against pytorch-kinematics, gradients, limits, IK, errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import pytorch_kinematics as pk
+import torch
+
+from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.robot.model import RobotCfg, RobotModel
+
+ROBOTS = ("kuka_iiwa14", "fetch")
+
+
+def _uniform_q(model: RobotModel, n: int, frac: float = 1.0) -> torch.Tensor:
+    lo = torch.where(
+        torch.isfinite(model.q_min), model.q_min, torch.full_like(model.q_min, -math.pi)
+    )
+    hi = torch.where(
+        torch.isfinite(model.q_max), model.q_max, torch.full_like(model.q_max, math.pi)
+    )
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo) * frac
+    return mid + half * (2 * torch.rand(n, model.num_joints, dtype=model.dtype) - 1)
+
+
+def _pk_reference_spheres(model: RobotModel, q: torch.Tensor) -> torch.Tensor:
+    """Sphere centres from pytorch-kinematics link poses (float64), in the world frame."""
+    chain = pk.build_serial_chain_from_urdf(model.urdf_xml(), model.tool_link).to(
+        dtype=torch.float64
+    )
+    frames = chain.forward_kinematics(q.double(), end_only=False)
+    c, s = math.cos(model.base_yaw), math.sin(model.base_yaw)
+    t_wb = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
+    p_wb = model.base_position.double()
+    out = []
+    local = model.sphere_centers_local.double()
+    for i, link in enumerate(model.sphere_link):
+        m = frames[link].get_matrix()  # (N, 4, 4)
+        p_base = (m[:, :3, :3] @ local[i]) + m[:, :3, 3]
+        out.append(p_base @ t_wb.T + p_wb)
+    return torch.stack(out, dim=1)  # (N, S, 3)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_sphere_centers_equal_pytorch_kinematics(name: str) -> None:
+    model = RobotModel.load(
+        name, dtype=torch.float64, base_position=(0.5, 0.2, -0.1), base_yaw=2.0
+    )
+    q = _uniform_q(model, 500)
+    ours = model.sphere_centers(q)
+    assert ours.shape == (500, model.num_spheres, 3)
+    assert (ours - _pk_reference_spheres(model, q)).abs().max() < 1e-5
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_float32_close_to_float64_and_batch_shapes(name: str) -> None:
+    m64 = RobotModel.load(name, dtype=torch.float64)
+    m32 = RobotModel.load(name)
+    q = _uniform_q(m64, 3 * 20).view(3, 20, -1)  # (B, W, J)
+    c64 = m64.sphere_centers(q)
+    c32 = m32.sphere_centers(q.float())
+    assert c32.dtype == torch.float32 and c32.shape == (3, 20, m32.num_spheres, 3)
+    assert (c32.double() - c64).abs().max() < 1e-5
+    flat = m64.sphere_centers(q.reshape(60, -1)).view(3, 20, -1, 3)
+    assert torch.equal(flat, c64)
+    one = m64.sphere_centers(q[1, 7])
+    assert torch.allclose(one, c64[1, 7], atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_link_and_ee_positions_equal_pytorch_kinematics(name: str) -> None:
+    model = RobotModel.load(name, dtype=torch.float64, base_position=(0, 0, 0), base_yaw=0.0)
+    chain = pk.build_serial_chain_from_urdf(model.urdf_xml(), model.tool_link).to(
+        dtype=torch.float64
+    )
+    q = _uniform_q(model, 200)
+    frames = chain.forward_kinematics(q, end_only=False)
+    ours = model.link_positions(q)
+    assert set(ours) == set(frames) == set(model.link_names)
+    for link, tf in frames.items():
+        assert (ours[link] - tf.get_matrix()[:, :3, 3]).abs().max() < 1e-5, link
+    poses = model.link_poses(q)
+    for link, tf in frames.items():
+        assert (poses[link][0] - tf.get_matrix()[:, :3, :3]).abs().max() < 1e-6, link
+    ee = model.ee_position(q)
+    assert (ee - frames[model.tool_link].get_matrix()[:, :3, 3]).abs().max() < 1e-5
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_gradients_match_finite_differences(name: str) -> None:
+    model = RobotModel.load(name, dtype=torch.float64)
+    q = _uniform_q(model, 2).requires_grad_(True)
+    w = torch.randn(2, model.num_spheres, 3, dtype=torch.float64)
+    assert torch.autograd.gradcheck(
+        lambda x: (model.sphere_centers(x) * w).sum(), (q,), eps=1e-6, atol=1e-7
+    )
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_position_jacobian_matches_finite_differences(name: str) -> None:
+    model = RobotModel.load(name, dtype=torch.float64)
+    q = _uniform_q(model, 5)
+    jac = model.position_jacobian(q)  # (5, 3, J)
+    eps = 1e-6
+    for i in range(model.num_joints):
+        dq = torch.zeros_like(q)
+        dq[:, i] = eps
+        fd = (model.ee_position(q + dq) - model.ee_position(q - dq)) / (2 * eps)
+        assert (jac[..., i] - fd).abs().max() < 1e-7
+
+
+def test_limits_and_home() -> None:
+    iiwa = RobotModel.load("kuka_iiwa14")
+    deg = math.pi / 180
+    np.testing.assert_allclose(
+        iiwa.q_max.numpy(), np.array([170, 120, 170, 120, 170, 120, 175]) * deg, rtol=1e-6
+    )
+    np.testing.assert_allclose(
+        iiwa.v_max.numpy(), np.array([85, 85, 100, 75, 130, 135, 135]) * deg, rtol=1e-6
+    )
+    assert torch.equal(iiwa.q_min, -iiwa.q_max)
+    assert iiwa.joint_names == tuple(f"iiwa_joint_{i}" for i in range(1, 8))
+    fetch = RobotModel.load("fetch")
+    continuous = [
+        n in ("upperarm_roll_joint", "forearm_roll_joint", "wrist_roll_joint")
+        for n in fetch.joint_names
+    ]
+    assert torch.isinf(fetch.q_max).tolist() == continuous
+    assert torch.isinf(fetch.q_min).tolist() == continuous
+    assert fetch.q_min[1].item() == pytest.approx(-1.221) and fetch.q_max[
+        1
+    ].item() == pytest.approx(1.518)
+    for m in (iiwa, fetch):
+        assert m.num_joints == 7 and m.q_home.shape == (7,)
+        assert bool(((m.q_home >= m.q_min) & (m.q_home <= m.q_max)).all())
+        assert m.sphere_radii.shape == (m.num_spheres,) == (len(m.sphere_link),)
+        assert m.urdf_path.is_file() and m.mjcf_path.is_file()
+    assert RobotModel.available() == ("kuka_iiwa14", "fetch")
+
+
+def test_default_base_poses_in_the_table_frame() -> None:
+    iiwa = RobotModel.load("kuka_iiwa14")
+    ee = iiwa.ee_position(iiwa.q_home)
+    # Home flange (0.669, 0, 0.285) in the base frame, base at (0.75, 0, 0) facing -x.
+    assert torch.allclose(ee, torch.tensor([0.75 - 0.669, 0.0, 0.285]), atol=0.01)
+    fetch = RobotModel.load("fetch")
+    shoulder = fetch.link_positions(fetch.q_home)["shoulder_lift_link"]
+    assert abs(shoulder[2].item() - 0.3) < 0.02
+    assert fetch.ee_position(fetch.q_home)[2].item() > 0.05  # above the table top
+    taller = RobotModel.load("fetch", torso_height=0.36)
+    dz = taller.link_positions(taller.q_home)["shoulder_lift_link"][2] - shoulder[2]
+    assert dz.item() == pytest.approx(0.1, abs=1e-6)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_ik_reaches_reachable_targets(name: str) -> None:
+    model = RobotModel.load(name, dtype=torch.float64)
+    q_goal = _uniform_q(model, 30, frac=0.7)
+    target = model.ee_position(q_goal)
+    q = model.ik(target, model.q_home.expand(30, -1), iters=200)
+    err = (model.ee_position(q) - target).norm(dim=-1)
+    assert bool(((q >= model.q_min) & (q <= model.q_max)).all())
+    assert (err < 0.01).float().mean() >= 0.9, err
+    # Single target, the interface's (3,), (J,) -> (J,).
+    q1 = model.ik(target[0], model.q_home)
+    assert q1.shape == (model.num_joints,)
+    assert (model.ee_position(q1) - target[0]).norm() < 0.01
+
+
+def test_ik_clamps_to_limits_for_an_unreachable_target() -> None:
+    model = RobotModel.load("kuka_iiwa14", dtype=torch.float64)
+    q = model.ik(torch.tensor([5.0, 0.0, 0.0], dtype=torch.float64), model.q_home, iters=50)
+    assert bool(((q >= model.q_min) & (q <= model.q_max)).all())
+    reach = (model.ee_position(q) - model.link_positions(q)["iiwa_link_2"]).norm()
+    assert reach.item() > 0.9  # stretched towards the target
+
+
+def test_errors() -> None:
+    with pytest.raises(ConfigError, match="unknown robot 'ur5'"):
+        RobotModel.load("ur5")
+    with pytest.raises(ConfigError, match="has no torso"):
+        RobotModel.load("kuka_iiwa14", torso_height=0.2)
+    with pytest.raises(ConfigError, match="torso_height"):
+        RobotModel.load("fetch", torso_height=0.6)
+    with pytest.raises(ConfigError, match="base_position"):
+        RobotCfg(name="fetch", base_position=(0.0, 1.0))
+    model = RobotModel.load("kuka_iiwa14")
+    with pytest.raises(ShapeError, match=r"expected q \(\.\.\., 7\), got \(4, 6\)"):
+        model.sphere_centers(torch.zeros(4, 6))
+    with pytest.raises(ShapeError, match="floating"):
+        model.ee_position(torch.zeros(7, dtype=torch.long))
+    with pytest.raises(ShapeError, match="equal leading"):
+        model.ik(torch.zeros(2, 3), torch.zeros(3, 7))
+    with pytest.raises(ConfigError, match="damping > 0"):
+        model.ik(torch.zeros(3), model.q_home, damping=0.0)
+
+
+def test_from_cfg_equals_load() -> None:
+    cfg = RobotCfg(name="fetch", base_position=[1.1, 0.1, -0.75], base_yaw=3.0, torso_height=0.2)
+    assert cfg.base_position == (1.1, 0.1, -0.75)
+    a = RobotModel.from_cfg(cfg, dtype=torch.float64)
+    b = RobotModel.load(
+        "fetch",
+        dtype=torch.float64,
+        base_position=(1.1, 0.1, -0.75),
+        base_yaw=3.0,
+        torso_height=0.2,
+    )
+    q = _uniform_q(a, 4)
+    assert torch.equal(a.sphere_centers(q), b.sphere_centers(q))
+
+
+def test_device_follows_input(device: torch.device) -> None:
+    model = RobotModel.load("kuka_iiwa14", device=device)
+    q = _uniform_q(RobotModel.load("kuka_iiwa14"), 16).to(device)
+    out = model.sphere_centers(q)
+    assert out.device.type == device.type
+    ref = RobotModel.load("kuka_iiwa14").sphere_centers(q.cpu())
+    assert (out.cpu() - ref).abs().max() < 1e-5
