@@ -1,0 +1,656 @@
+"""Batched dynamic time warping and time-series kernels on tensors (paper sec. 4.1).
+
+The paper classifies and regresses windows ``F_prev`` with a "DTW kernel" (Mueller 2007). This
+module computes DTW for every pair of two batches of windows at once:
+
+* the local cost of frames ``x_i`` and ``y_j`` is the Euclidean distance ``||x_i - y_j||``
+  (computed for all pairs of a tile by one matrix product);
+* ``DTW(x, y)`` is the smallest sum of local costs along a warping path from ``(0, 0)`` to
+  ``(T - 1, T2 - 1)`` with steps ``(1, 0)``, ``(0, 1)`` and ``(1, 1)``;
+* the dynamic programme runs as an anti-diagonal wavefront: cells with the same ``i + j`` do not
+  depend on each other, so the only Python loop runs over the ``T + T2 - 1`` anti-diagonals, each
+  step updating all pairs of the tile in one vectorised operation. The local costs are copied once
+  into a padded cell-major layout ``((T + 1) (T2 + 1), P)`` in which every anti-diagonal and its
+  predecessors are strided views, and the accumulated costs overwrite them in place;
+* pairs are processed in tiles of at most ``max_cells`` cost cells, so memory stays bounded
+  (a 2000 x 2000 Gram of (15, 90) windows needs a few hundred MB); a Gram of a batch with itself
+  computes only the upper triangle of tiles.
+
+Sakoe-Chiba band, for unequal lengths: cell ``(i, j)`` is admissible iff
+``|i - j r| <= w`` with the slope ``r = (T - 1) / (T2 - 1)`` (the line through both corner cells)
+and the half-width ``w = max(band, max(1, r) / 2)``. The lower limit on ``w`` is the smallest one
+for which the admissible cells always contain a monotone path from corner to corner; for equal
+lengths ``band=0`` gives the Euclidean (lock-step) distance. With unequal lengths the band is
+measured along the first sequence's axis, so ``dtw(x, y)`` and ``dtw(y, x).T`` can differ.
+
+Kernels (classes with ``__call__(x1, x2) -> (B1, B2)`` and ``diag(x) -> (B,)``):
+
+* :class:`DTWKernel`: ``exp(-DTW / gamma)``. It is *not* positive definite in general (DTW is not
+  a metric of negative type); kernel logistic regression tolerates that, a GP needs jitter.
+* :class:`GlobalAlignmentKernel`: Cuturi's global alignment kernel (2011), the sum over all
+  alignments of the product of local Gaussian-like kernels; positive definite. Computed in log
+  space on the same wavefront with log-sum-exp.
+* :class:`RBFKernel`: Gaussian kernel on the flattened windows, the cheap alternative.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from collections.abc import Callable
+from typing import Any, Literal, Protocol
+
+import torch
+from torch import Tensor
+
+from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.types import check_shape
+
+__all__ = [
+    "DTWKernel",
+    "GlobalAlignmentKernel",
+    "KernelLike",
+    "RBFKernel",
+    "dtw_distance",
+    "dtw_paired",
+    "gak_log",
+    "gak_log_paired",
+    "kernel_from_state",
+    "median_dtw",
+]
+
+#: Default largest number of cost cells (pairs x T x T2) held by one tile.
+DEFAULT_MAX_CELLS = 2**23
+
+# Entries whose squared distance is below this fraction of ||a||^2 + ||b||^2 (after centring)
+# are recomputed from explicit differences: the matrix-product form loses them to cancellation.
+_EXACT_FRACTION = 1e-3
+
+_Mode = Literal["min", "logsumexp"]
+
+
+class KernelLike(Protocol):
+    """What the classifiers expect of a kernel on windows."""
+
+    def __call__(self, x1: Tensor, x2: Tensor) -> Tensor:
+        """(B1, T, D), (B2, T2, D) -> (B1, B2)."""
+        ...
+
+    def diag(self, x: Tensor) -> Tensor:
+        """(B, T, D) -> (B,) the kernel of each window with itself."""
+        ...
+
+
+# --------------------------------------------------------------------------------------------
+# the wavefront on a padded, cell-major layout
+
+
+class _Layout:
+    """Anti-diagonal bookkeeping for one (T, T2, band, device).
+
+    Cells live in a padded cell-major tensor ``(T + 1) (T2 + 1)`` x ``P`` whose flat index of
+    cell ``(i, j)`` is ``(i + 1) (T2 + 1) + j + 1`` (row and column 0 are the pads ``i = -1``,
+    ``j = -1``). Along an anti-diagonal ``i + j = k`` that index grows by ``T2`` per row, so each
+    anti-diagonal and its three predecessor sets are strided views: the programme runs in place.
+    """
+
+    def __init__(self, t1: int, t2: int, band: int | None, device: torch.device) -> None:
+        self.t1, self.t2, self.n_diag = t1, t2, t1 + t2 - 1
+        self.n_cells = (t1 + 1) * (t2 + 1)
+        i = torch.arange(t1).view(-1, 1)  # (T, 1)
+        j = torch.arange(t2).view(1, -1)  # (1, T2)
+        valid = torch.ones(t1, t2, dtype=torch.bool)  # (T, T2)
+        if band is not None and t1 > 1 and t2 > 1:
+            r = (t1 - 1) / (t2 - 1)
+            w = max(float(band), max(1.0, r) / 2.0)
+            valid = (i.double() - j.double() * r).abs() <= w + 1e-9
+        # padded mask of cells that must hold the neutral value: pads and cells outside the band
+        neutral = torch.ones(t1 + 1, t2 + 1, dtype=torch.bool)
+        neutral[1:, 1:] = ~valid
+        neutral[0, 0] = False  # the start M[-1, -1] (0 for DTW, log 1 for GAK)
+        self.neutral = neutral.view(-1, 1).to(device)  # ((T+1)(T2+1), 1)
+        self.pads_only = band is None or bool(valid.all())
+        # admissible rows [lo, hi] of each anti-diagonal (an interval: the band is convex)
+        self.rows: list[tuple[int, int]] = []
+        for k in range(self.n_diag):
+            ii = torch.arange(max(0, k - t2 + 1), min(k, t1 - 1) + 1)
+            ok = ii[valid[ii, k - ii]]
+            self.rows.append((int(ok[0]), int(ok[-1])) if len(ok) else (1, 0))
+
+
+_LAYOUT_CACHE: dict[tuple[int, int, int | None, str], _Layout] = {}
+
+
+def _layout(t1: int, t2: int, band: int | None, device: torch.device) -> _Layout:
+    key = (t1, t2, band, str(device))
+    if key not in _LAYOUT_CACHE:
+        if len(_LAYOUT_CACHE) > 64:
+            _LAYOUT_CACHE.clear()
+        _LAYOUT_CACHE[key] = _Layout(t1, t2, band, device)
+    return _LAYOUT_CACHE[key]
+
+
+def _prepare(cells: Tensor, lay: _Layout, kind: str) -> None:
+    """Set pads (and cells outside the band) to the neutral value and the start to 0."""
+    fill = _fill(kind)
+    view = cells.view(lay.t1 + 1, lay.t2 + 1, -1)  # (T+1, T2+1, P)
+    if lay.pads_only:
+        view[0].fill_(fill)
+        view[:, 0].fill_(fill)
+    else:
+        cells.masked_fill_(lay.neutral, fill)
+    view[0, 0].fill_(0.0)
+
+
+def _wavefront(cells: Tensor, lay: _Layout, mode: _Mode) -> Tensor:
+    """Run the DP in place, anti-diagonal by anti-diagonal.
+
+    Args:
+        cells: ((T+1)(T2+1), P) local terms in the padded layout of :class:`_Layout`, prepared
+            by :func:`_prepare`; overwritten with the accumulated values.
+        lay: the layout.
+        mode: ``min`` (DTW: cost + min of predecessors) or ``logsumexp`` (log GAK: log local
+            kernel + log-sum-exp of predecessors).
+
+    Returns:
+        (P,) the accumulated value of the last cell (T-1, T2-1).
+    """
+    t2 = lay.t2
+    w = t2 + 1
+    tmp = torch.empty_like(cells[: lay.t1])  # (T, P), enough for any anti-diagonal
+    for k in range(lay.n_diag):
+        lo, hi = lay.rows[k]
+        if hi < lo:
+            continue
+        n = hi - lo + 1
+        f0 = lo * t2 + t2 + k + 2  # flat index of cell (lo, k - lo)
+        span = (n - 1) * t2 + 1
+        cur = cells[f0 : f0 + span : t2]  # (n, P)
+        up = cells[f0 - w : f0 - w + span : t2]  # (i-1, j)
+        left = cells[f0 - 1 : f0 - 1 + span : t2]  # (i, j-1)
+        diag = cells[f0 - w - 1 : f0 - w - 1 + span : t2]  # (i-1, j-1)
+        t = tmp[:n]
+        if mode == "min":
+            torch.minimum(up, left, out=t)
+            torch.minimum(t, diag, out=t)
+        else:
+            torch.logaddexp(up, left, out=t)
+            torch.logaddexp(t, diag, out=t)
+        cur.add_(t)
+    return cells[lay.n_cells - 1]
+
+
+# --------------------------------------------------------------------------------------------
+# squared frame distances
+
+
+def _sqdist_rows(xf: Tensor, yf: Tensor) -> Tensor:
+    """(n, D), (m, D) -> (n, m) squared Euclidean distances, accurate near zero."""
+    mean = torch.cat([xf, yf]).mean(0, keepdim=True)  # distances are translation invariant
+    xc, yc = xf - mean, yf - mean
+    xn = (xc * xc).sum(-1)  # (n,)
+    yn = (yc * yc).sum(-1)  # (m,)
+    sq = torch.mm(xc, yc.T).mul_(-2.0)  # (n, m)
+    sq.add_(xn[:, None]).add_(yn[None, :])
+    # cancellation makes the product form inexact for nearly equal frames: recompute those
+    small = sq < _EXACT_FRACTION * float(xn.max() + yn.max())
+    if bool(small.any()):
+        r, c = small.nonzero(as_tuple=True)
+        sq[r, c] = (xc[r] - yc[c]).pow(2).sum(-1)
+    return sq.clamp_(min=0.0)
+
+
+def _local_terms(sq: Tensor, kind: str, sigma: float | None) -> Tensor:
+    """Map squared frame distances to the DP's local terms, in place."""
+    if kind == "dtw":
+        return sq.sqrt_()
+    if kind == "dtw_sq":
+        return sq
+    # GAK: log kappa = -(d^2 / (2 sigma^2) + log(2 - exp(-d^2 / (2 sigma^2))))
+    assert sigma is not None
+    u = sq.mul_(-0.5 / sigma**2)  # -d^2 / (2 sigma^2)
+    return u.sub_(torch.log(2.0 - torch.exp(u)))
+
+
+def _fill(kind: str) -> float:
+    return -math.inf if kind == "gak" else math.inf
+
+
+def _mode(kind: str) -> _Mode:
+    return "logsumexp" if kind == "gak" else "min"
+
+
+def _finish(v: Tensor, kind: str) -> Tensor:
+    return v.sqrt_() if kind == "dtw_sq" else v
+
+
+def _tile(
+    x: Tensor, y: Tensor, band: int | None, kind: str, sigma: float | None
+) -> Tensor:  # (b1, T, D), (b2, T2, D) -> (b1, b2)
+    b1, t1, d = x.shape
+    b2, t2, _ = y.shape
+    lay = _layout(t1, t2, band, x.device)
+    xt = x.transpose(0, 1).reshape(t1 * b1, d)  # (T*b1, D), time-major
+    yt = y.transpose(0, 1).reshape(t2 * b2, d)  # (T2*b2, D)
+    terms = _local_terms(_sqdist_rows(xt, yt), kind, sigma)  # (T*b1, T2*b2)
+    cells = x.new_empty(lay.n_cells, b1 * b2)  # ((T+1)(T2+1), P)
+    inner = cells.view(t1 + 1, t2 + 1, b1, b2)[1:, 1:]  # (T, T2, b1, b2)
+    inner.copy_(terms.view(t1, b1, t2, b2).permute(0, 2, 1, 3))
+    _prepare(cells, lay, kind)
+    return _finish(_wavefront(cells, lay, _mode(kind)), kind).view(b1, b2)
+
+
+def _paired(
+    x: Tensor, y: Tensor, band: int | None, kind: str, sigma: float | None
+) -> Tensor:  # (P, T, D), (P, T2, D) -> (P,)
+    p, t1, _ = x.shape
+    t2 = y.shape[1]
+    lay = _layout(t1, t2, band, x.device)
+    mean = torch.cat([x, y], 1).mean(1, keepdim=True)  # (P, 1, D)
+    d = torch.cdist(x - mean, y - mean, compute_mode="donot_use_mm_for_euclid_dist")
+    terms = _local_terms(d.pow_(2), kind, sigma)  # (P, T, T2)
+    cells = x.new_empty(lay.n_cells, p)  # ((T+1)(T2+1), P)
+    cells.view(t1 + 1, t2 + 1, p)[1:, 1:].copy_(terms.permute(1, 2, 0))
+    _prepare(cells, lay, kind)
+    return _finish(_wavefront(cells, lay, _mode(kind)), kind)
+
+
+def _check_pair(x: Tensor, y: Tensor) -> None:
+    check_shape("x", x, ("B1", "T", "D"))
+    check_shape("y", y, ("B2", "T2", x.shape[2]))
+    if x.shape[1] < 1 or y.shape[1] < 1:
+        raise ShapeError(
+            f"expected at least one frame, got x {tuple(x.shape)}, y {tuple(y.shape)}"
+        )
+    if x.dtype != y.dtype or x.device != y.device:
+        raise ShapeError(
+            f"expected x and y with the same dtype and device, got {x.dtype}/{x.device} and "
+            f"{y.dtype}/{y.device}"
+        )
+    if not x.is_floating_point():
+        raise ShapeError(f"expected floating point windows, got {x.dtype}")
+
+
+def _check_band(band: int | None) -> None:
+    if band is not None and (int(band) != band or band < 0):
+        raise ConfigError(f"expected band None or an integer >= 0, got {band!r}")
+
+
+def _gram(
+    x: Tensor,
+    y: Tensor,
+    band: int | None,
+    kind: str,
+    sigma: float | None,
+    max_cells: int,
+    symmetric: bool,
+) -> Tensor:
+    b1, t1, _ = x.shape
+    b2, t2, _ = y.shape
+    out = torch.empty(b1, b2, dtype=x.dtype, device=x.device)
+    if b1 == 0 or b2 == 0:
+        return out
+    per_pair = t1 * t2
+    pairs = max(1, max_cells // per_pair)
+    side = max(1, int(math.sqrt(pairs)))
+    r1 = min(b1, side)
+    r2 = min(b2, max(1, pairs // r1))
+    if symmetric:
+        r1 = r2 = min(r1, r2)
+    for s1 in range(0, b1, r1):
+        e1 = min(b1, s1 + r1)
+        start2 = s1 if symmetric else 0
+        for s2 in range(start2, b2, r2):
+            e2 = min(b2, s2 + r2)
+            block = _tile(x[s1:e1], y[s2:e2], band, kind, sigma)
+            out[s1:e1, s2:e2] = block
+            if symmetric and s2 != s1:
+                out[s2:e2, s1:e1] = block.T
+    if symmetric:
+        out = 0.5 * (out + out.T)  # the diagonal tiles are symmetric only up to rounding
+    return out
+
+
+def _chunked_paired(
+    x: Tensor, y: Tensor, band: int | None, kind: str, sigma: float | None, max_cells: int
+) -> Tensor:
+    t1, t2 = x.shape[1], y.shape[1]
+    per_pair = t1 * t2
+    step = max(1, max_cells // per_pair)
+    outs = [
+        _paired(x[s : s + step], y[s : s + step], band, kind, sigma)
+        for s in range(0, len(x), step)
+    ]
+    return torch.cat(outs) if outs else x.new_zeros(0)
+
+
+# --------------------------------------------------------------------------------------------
+# public functions
+
+
+def dtw_distance(
+    x: Tensor,
+    y: Tensor,
+    *,
+    band: int | None = None,
+    squared: bool = False,
+    max_cells: int = DEFAULT_MAX_CELLS,
+) -> Tensor:
+    """DTW between every window of ``x`` and every window of ``y``.
+
+    Args:
+        x: (B1, T, D) windows, any units (features of frames).
+        y: (B2, T2, D) windows, same units and D as ``x``; T2 may differ from T.
+        band: Sakoe-Chiba half-width in frames of ``x`` (see the module docstring for unequal
+            lengths); None for no band.
+        squared: False: sum of Euclidean local costs ``||x_i - y_j||`` along the optimal path.
+            True: ``sqrt`` of the smallest sum of *squared* local costs ``||x_i - y_j||^2``
+            (the definition of ``tslearn.metrics.dtw``).
+        max_cells: the largest number of cost cells (pairs x T x T2) one tile holds; peak memory
+            is about 3 x 4 bytes x ``max_cells`` in float32.
+
+    Returns:
+        (B1, B2) DTW distances, same units as the features, dtype and device of ``x``. When
+        ``y is x`` only the upper triangle of tiles is computed and the result is symmetric.
+
+    Raises:
+        ShapeError: on wrong ranks, different D, dtypes or devices.
+        ConfigError: on a negative band.
+    """
+    _check_pair(x, y)
+    _check_band(band)
+    kind = "dtw_sq" if squared else "dtw"
+    return _gram(x, y, band, kind, None, max_cells, symmetric=y is x)
+
+
+def dtw_paired(
+    x: Tensor,
+    y: Tensor,
+    *,
+    band: int | None = None,
+    squared: bool = False,
+    max_cells: int = DEFAULT_MAX_CELLS,
+) -> Tensor:
+    """DTW between ``x[b]`` and ``y[b]`` for each b (no cross pairs).
+
+    Args:
+        x: (B, T, D) windows.
+        y: (B, T2, D) windows.
+        band: as in :func:`dtw_distance`.
+        squared: as in :func:`dtw_distance`.
+        max_cells: as in :func:`dtw_distance`.
+
+    Returns:
+        (B,) DTW distances.
+
+    Raises:
+        ShapeError: on wrong ranks or different batch sizes.
+    """
+    _check_pair(x, y)
+    _check_band(band)
+    if x.shape[0] != y.shape[0]:
+        raise ShapeError(f"expected y with batch {x.shape[0]}, got {tuple(y.shape)}")
+    return _chunked_paired(x, y, band, "dtw_sq" if squared else "dtw", None, max_cells)
+
+
+def gak_log(
+    x: Tensor,
+    y: Tensor,
+    *,
+    sigma: float,
+    band: int | None = None,
+    max_cells: int = DEFAULT_MAX_CELLS,
+) -> Tensor:
+    """Log of Cuturi's global alignment kernel between every window of ``x`` and ``y``.
+
+    ``k(x, y) = sum over alignments pi of prod_{(i, j) in pi} kappa(x_i, y_j)`` with
+    ``kappa = exp(-phi)``, ``phi(a, b) = ||a - b||^2 / (2 sigma^2) + log(2 - exp(-||a - b||^2 /
+    (2 sigma^2)))``; recursion ``M[i, j] = kappa(x_i, y_j) (M[i-1, j] + M[i, j-1] + M[i-1, j-1])``
+    with ``M[-1, -1] = 1``, here in log space.
+
+    Args:
+        x: (B1, T, D) windows.
+        y: (B2, T2, D) windows.
+        sigma: bandwidth of the local kernel, in feature units.
+        band: as in :func:`dtw_distance` (restricts the alignments).
+        max_cells: as in :func:`dtw_distance`.
+
+    Returns:
+        (B1, B2) ``log k(x, y)``.
+
+    Raises:
+        ShapeError: on wrong shapes.
+        ConfigError: on ``sigma <= 0`` or a negative band.
+    """
+    _check_pair(x, y)
+    _check_band(band)
+    if not sigma > 0:
+        raise ConfigError(f"expected sigma > 0, got {sigma}")
+    return _gram(x, y, band, "gak", float(sigma), max_cells, symmetric=y is x)
+
+
+def gak_log_paired(
+    x: Tensor,
+    y: Tensor,
+    *,
+    sigma: float,
+    band: int | None = None,
+    max_cells: int = DEFAULT_MAX_CELLS,
+) -> Tensor:
+    """``log k(x[b], y[b])`` of the global alignment kernel for each b.
+
+    Args:
+        x: (B, T, D) windows.
+        y: (B, T2, D) windows.
+        sigma: as in :func:`gak_log`.
+        band: as in :func:`dtw_distance`.
+        max_cells: as in :func:`dtw_distance`.
+
+    Returns:
+        (B,) log kernel values.
+
+    Raises:
+        ShapeError: on wrong shapes.
+        ConfigError: on ``sigma <= 0``.
+    """
+    _check_pair(x, y)
+    _check_band(band)
+    if not sigma > 0:
+        raise ConfigError(f"expected sigma > 0, got {sigma}")
+    if x.shape[0] != y.shape[0]:
+        raise ShapeError(f"expected y with batch {x.shape[0]}, got {tuple(y.shape)}")
+    return _chunked_paired(x, y, band, "gak", float(sigma), max_cells)
+
+
+def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None = None) -> float:
+    """Median DTW distance over random pairs of distinct windows (the ``gamma`` heuristic).
+
+    Args:
+        x: (B, T, D) windows, B >= 2.
+        n_pairs: number of random pairs.
+        seed: seed of the pair sampler.
+        band: as in :func:`dtw_distance`.
+
+    Returns:
+        The median distance (a positive float; 1.0 if all sampled pairs coincide).
+
+    Raises:
+        ShapeError: when fewer than two windows are given.
+    """
+    check_shape("x", x, ("B", "T", "D"))
+    if x.shape[0] < 2:
+        raise ShapeError(f"expected x (B >= 2, T, D), got {tuple(x.shape)}")
+    g = torch.Generator().manual_seed(int(seed))
+    i = torch.randint(0, x.shape[0], (n_pairs,), generator=g)
+    j = (i + torch.randint(1, x.shape[0], (n_pairs,), generator=g)) % x.shape[0]
+    d = dtw_paired(x[i.to(x.device)], x[j.to(x.device)], band=band)
+    med = float(d.median())
+    return med if med > 0 else 1.0
+
+
+# --------------------------------------------------------------------------------------------
+# kernels
+
+
+class DTWKernel:
+    """``k(x, y) = exp(-DTW(x, y) / gamma)`` on windows.
+
+    Not positive definite in general (DTW is not of negative type): fine for the IVM (regularised
+    kernel logistic regression), a GP needs jitter. ``diag`` is exactly 1 since DTW(x, x) = 0.
+
+    Args:
+        gamma: length scale in the units of DTW distances (> 0); :func:`median_dtw` is a
+            common choice.
+        band: Sakoe-Chiba half-width, as in :func:`dtw_distance`.
+        max_cells: tile size, as in :func:`dtw_distance`.
+    """
+
+    name = "dtw"
+    positive_definite = False
+
+    def __init__(
+        self, gamma: float, band: int | None = None, *, max_cells: int = DEFAULT_MAX_CELLS
+    ) -> None:
+        if not gamma > 0:
+            raise ConfigError(f"expected gamma > 0, got {gamma}")
+        _check_band(band)
+        self.gamma = float(gamma)
+        self.band = band
+        self.max_cells = int(max_cells)
+
+    @property
+    def hparams(self) -> dict[str, Any]:
+        """Keyword arguments that rebuild this kernel."""
+        return {"gamma": self.gamma, "band": self.band}
+
+    def __call__(self, x1: Tensor, x2: Tensor) -> Tensor:
+        """(B1, T, D), (B2, T2, D) -> (B1, B2) kernel values in (0, 1]."""
+        d = dtw_distance(x1, x2, band=self.band, max_cells=self.max_cells)
+        return torch.exp(-d / self.gamma)
+
+    def diag(self, x: Tensor) -> Tensor:
+        """(B, T, D) -> (B,) ones."""
+        check_shape("x", x, ("B", "T", "D"))
+        return torch.ones(x.shape[0], dtype=x.dtype, device=x.device)
+
+    def __repr__(self) -> str:
+        return f"DTWKernel(gamma={self.gamma:g}, band={self.band})"
+
+
+class GlobalAlignmentKernel:
+    """Cuturi's global alignment kernel (positive definite), see :func:`gak_log`.
+
+    Args:
+        sigma: bandwidth of the local kernel in feature units (> 0); Cuturi suggests a multiple
+            of the median frame distance times ``sqrt(T)``.
+        band: restricts the alignments, as in :func:`dtw_distance`.
+        normalize: return ``k(x, y) / sqrt(k(x, x) k(y, y))`` (values in (0, 1], diag 1) instead
+            of the raw kernel, whose magnitude grows exponentially with T.
+        max_cells: tile size, as in :func:`dtw_distance`.
+    """
+
+    name = "gak"
+    positive_definite = True
+
+    def __init__(
+        self,
+        sigma: float,
+        band: int | None = None,
+        *,
+        normalize: bool = True,
+        max_cells: int = DEFAULT_MAX_CELLS,
+    ) -> None:
+        if not sigma > 0:
+            raise ConfigError(f"expected sigma > 0, got {sigma}")
+        _check_band(band)
+        self.sigma = float(sigma)
+        self.band = band
+        self.normalize = bool(normalize)
+        self.max_cells = int(max_cells)
+
+    @property
+    def hparams(self) -> dict[str, Any]:
+        """Keyword arguments that rebuild this kernel."""
+        return {"sigma": self.sigma, "band": self.band, "normalize": self.normalize}
+
+    def log_diag(self, x: Tensor) -> Tensor:
+        """(B, T, D) -> (B,) ``log k(x_b, x_b)`` of the raw kernel."""
+        check_shape("x", x, ("B", "T", "D"))
+        return gak_log_paired(x, x, sigma=self.sigma, band=self.band, max_cells=self.max_cells)
+
+    def __call__(self, x1: Tensor, x2: Tensor) -> Tensor:
+        """(B1, T, D), (B2, T2, D) -> (B1, B2) kernel values."""
+        lk = gak_log(x1, x2, sigma=self.sigma, band=self.band, max_cells=self.max_cells)
+        if self.normalize:
+            d1 = self.log_diag(x1)
+            d2 = d1 if x2 is x1 else self.log_diag(x2)
+            lk = lk - 0.5 * (d1[:, None] + d2[None, :])
+        return torch.exp(lk)
+
+    def diag(self, x: Tensor) -> Tensor:
+        """(B, T, D) -> (B,) ``k(x_b, x_b)`` (ones when normalised)."""
+        if self.normalize:
+            check_shape("x", x, ("B", "T", "D"))
+            return torch.ones(x.shape[0], dtype=x.dtype, device=x.device)
+        return torch.exp(self.log_diag(x))
+
+    def __repr__(self) -> str:
+        return f"GlobalAlignmentKernel(sigma={self.sigma:g}, band={self.band})"
+
+
+class RBFKernel:
+    """Gaussian kernel on flattened windows: ``exp(-||x - y||^2 / (2 lengthscale^2))``.
+
+    Args:
+        lengthscale: in feature units (> 0); windows must have equal T.
+    """
+
+    name = "rbf"
+    positive_definite = True
+
+    def __init__(self, lengthscale: float) -> None:
+        if not lengthscale > 0:
+            raise ConfigError(f"expected lengthscale > 0, got {lengthscale}")
+        self.lengthscale = float(lengthscale)
+
+    @property
+    def hparams(self) -> dict[str, Any]:
+        """Keyword arguments that rebuild this kernel."""
+        return {"lengthscale": self.lengthscale}
+
+    def __call__(self, x1: Tensor, x2: Tensor) -> Tensor:
+        """(B1, T, D), (B2, T, D) -> (B1, B2) kernel values in (0, 1]."""
+        check_shape("x1", x1, ("B1", "T", "D"))
+        check_shape("x2", x2, ("B2", x1.shape[1], x1.shape[2]))
+        sq = _sqdist_rows(x1.flatten(1), x2.flatten(1))  # (B1, B2)
+        return torch.exp(-0.5 * sq / self.lengthscale**2)
+
+    def diag(self, x: Tensor) -> Tensor:
+        """(B, T, D) -> (B,) ones."""
+        check_shape("x", x, ("B", "T", "D"))
+        return torch.ones(x.shape[0], dtype=x.dtype, device=x.device)
+
+    def __repr__(self) -> str:
+        return f"RBFKernel(lengthscale={self.lengthscale:g})"
+
+
+_KERNELS: dict[str, Callable[..., KernelLike]] = {
+    "dtw": DTWKernel,
+    "gak": GlobalAlignmentKernel,
+    "rbf": RBFKernel,
+}
+
+
+def kernel_from_state(name: str, hparams: dict[str, Any]) -> KernelLike:
+    """Rebuild one of this module's kernels from its ``name`` and ``hparams``.
+
+    Raises:
+        ConfigError: for an unknown name or arguments the kernel does not take.
+    """
+    if name not in _KERNELS:
+        raise ConfigError(f"unknown kernel {name!r}; known: {sorted(_KERNELS)}")
+    params = inspect.signature(_KERNELS[name]).parameters
+    unknown = set(hparams) - set(params)
+    if unknown:
+        raise ConfigError(f"kernel {name!r} takes no arguments {sorted(unknown)}")
+    return _KERNELS[name](**hparams)

@@ -1,0 +1,83 @@
+"""Benchmark: batched DTW Gram versus tslearn's ``cdist_dtw`` on the same windows.
+
+Run: ``python scripts/bench_dtw.py [--quick]``. Both sides run on one CPU thread (tslearn's
+``cdist_dtw`` with ``n_jobs=None`` is single-threaded), timings are medians of repeats after a
+warm-up; the values of both Grams are compared (tslearn's DTW is the square root of the sum of
+squared local costs, our ``squared=True``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from iplanner_torch.prediction.dtw import dtw_distance
+
+
+def _median_time(fn: Callable[[], object], repeats: int) -> float:
+    fn()  # warm-up (and numba compilation on the tslearn side)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def run(quick: bool) -> dict[str, dict]:
+    """Time our Gram and tslearn's on the same windows; return the figures."""
+    from tslearn.metrics import cdist_dtw
+
+    n, t, d = (60, 15, 30) if quick else (200, 15, 30)
+    repeats = 3 if quick else 5
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(n, t, d, generator=g, dtype=torch.float64)
+    x_np = x.numpy()
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        ours = dtw_distance(x, x, squared=True)
+        ref = torch.from_numpy(np.asarray(cdist_dtw(x_np)))
+        err = float((ours - ref).abs().max())
+        assert err < 1e-4, f"DTW Gram differs from tslearn by {err}"
+        t_ours = _median_time(lambda: dtw_distance(x, x, squared=True), repeats)
+        t_ref = _median_time(lambda: cdist_dtw(x_np), repeats)
+        x32 = x.float()
+        t_ours32 = _median_time(lambda: dtw_distance(x32, x32), repeats)
+    finally:
+        torch.set_num_threads(threads)
+    pairs = n * n
+    return {
+        "dtw.gram_speedup_vs_tslearn": {
+            "value": t_ref / t_ours,
+            "unit": "x",
+            "ours_s": t_ours,
+            "reference_s": t_ref,
+            "reference": "tslearn.metrics.cdist_dtw",
+            "windows": [n, t, d],
+            "dtype": "float64",
+            "threads": 1,
+            "max_abs_diff": err,
+        },
+        "dtw.gram_pairs_per_s": {
+            "value": pairs / t_ours32,
+            "unit": "pairs/s",
+            "seconds": t_ours32,
+            "reference_pairs_per_s": pairs / t_ref,
+            "windows": [n, t, d],
+            "dtype": "float32",
+            "threads": 1,
+        },
+    }
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    print(json.dumps(run(parser.parse_args().quick), indent=2))

@@ -1,0 +1,206 @@
+"""Batched DTW and window kernels against plain dynamic-programming references."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.prediction.dtw import (
+    DTWKernel,
+    GlobalAlignmentKernel,
+    RBFKernel,
+    dtw_distance,
+    dtw_paired,
+    gak_log,
+    kernel_from_state,
+    median_dtw,
+)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    """Small tensors: one intra-op thread avoids oversubscription on shared CPUs."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def _in_band(i: int, j: int, t1: int, t2: int, band: int | None) -> bool:
+    if band is None or t1 == 1 or t2 == 1:
+        return True
+    r = (t1 - 1) / (t2 - 1)
+    return abs(i - j * r) <= max(band, max(1.0, r) / 2) + 1e-9
+
+
+def dtw_reference(x: np.ndarray, y: np.ndarray, band: int | None, squared: bool) -> float:
+    """Textbook O(T T2) dynamic programme, one pair at a time."""
+    t1, t2 = len(x), len(y)
+    r = np.full((t1 + 1, t2 + 1), np.inf)
+    r[0, 0] = 0.0
+    for i in range(t1):
+        for j in range(t2):
+            if not _in_band(i, j, t1, t2, band):
+                continue
+            c = float(((x[i] - y[j]) ** 2).sum())
+            c = c if squared else math.sqrt(c)
+            r[i + 1, j + 1] = c + min(r[i, j + 1], r[i + 1, j], r[i, j])
+    return math.sqrt(r[t1, t2]) if squared else float(r[t1, t2])
+
+
+def gak_reference(x: np.ndarray, y: np.ndarray, sigma: float) -> float:
+    """Cuturi's recursion in plain probabilities (no logs)."""
+    t1, t2 = len(x), len(y)
+    m = np.zeros((t1 + 1, t2 + 1))
+    m[0, 0] = 1.0
+    for i in range(t1):
+        for j in range(t2):
+            d2 = float(((x[i] - y[j]) ** 2).sum()) / (2 * sigma**2)
+            kappa = math.exp(-d2) / (2.0 - math.exp(-d2))
+            m[i + 1, j + 1] = kappa * (m[i, j + 1] + m[i + 1, j] + m[i, j])
+    return float(m[t1, t2])
+
+
+@pytest.mark.parametrize("dtype,atol", [(torch.float32, 1e-5), (torch.float64, 1e-10)])
+@pytest.mark.parametrize("band", [None, 0, 2])
+@pytest.mark.parametrize("squared", [False, True])
+def test_dtw_matches_reference(dtype: torch.dtype, atol: float, band: int | None, squared: bool):
+    g = torch.Generator().manual_seed(1)
+    for t1, t2 in [(7, 5), (4, 9), (6, 6), (1, 3), (10, 2)]:
+        x = torch.randn(3, t1, 4, generator=g).to(dtype)
+        y = torch.randn(4, t2, 4, generator=g).to(dtype)
+        got = dtw_distance(x, y, band=band, squared=squared, max_cells=60)
+        want = torch.tensor(
+            [
+                [dtw_reference(a.double().numpy(), b.double().numpy(), band, squared) for b in y]
+                for a in x
+            ],
+            dtype=torch.float64,
+        )
+        assert got.dtype == dtype and got.shape == (3, 4)
+        torch.testing.assert_close(got.double(), want, atol=atol, rtol=0)
+
+
+def test_symmetry_batch_and_paired():
+    g = torch.Generator().manual_seed(2)
+    x = torch.randn(9, 6, 3, generator=g, dtype=torch.float64)
+    gram = dtw_distance(x, x, max_cells=100)  # several tiles, upper triangle mirrored
+    torch.testing.assert_close(gram, gram.T, atol=0, rtol=0)
+    torch.testing.assert_close(gram.diagonal(), torch.zeros(9, dtype=torch.float64))
+    full = dtw_distance(x, x.clone(), band=1)  # not the same object: every tile computed
+    torch.testing.assert_close(full, full.T, atol=1e-12, rtol=0)
+    stacked = torch.cat([dtw_distance(x[i : i + 1], x, band=1) for i in range(9)])
+    torch.testing.assert_close(full, stacked, atol=1e-12, rtol=0)
+    y = torch.randn(9, 4, 3, generator=g, dtype=torch.float64)
+    torch.testing.assert_close(dtw_paired(x, y), dtw_distance(x, y).diagonal(), atol=1e-12, rtol=0)
+
+
+@pytest.mark.slow  # tslearn compiles its numba code on first use (~30 s)
+def test_matches_tslearn_squared_variant():
+    tslearn = pytest.importorskip("tslearn.metrics")
+    g = torch.Generator().manual_seed(3)
+    x = torch.randn(5, 8, 3, generator=g, dtype=torch.float64)
+    y = torch.randn(4, 6, 3, generator=g, dtype=torch.float64)
+    want = torch.from_numpy(tslearn.cdist_dtw(x.numpy(), y.numpy()))
+    torch.testing.assert_close(dtw_distance(x, y, squared=True), want, atol=1e-10, rtol=0)
+
+
+def test_nearly_equal_frames_are_exact_in_float32():
+    g = torch.Generator().manual_seed(4)
+    x = 50.0 + torch.randn(4, 10, 30, generator=g)  # large offset: cancellation territory
+    y = x + 1e-3 * torch.randn(4, 10, 30, generator=g)
+    want = [
+        dtw_reference(a.double().numpy(), b.double().numpy(), None, False) for a, b in zip(x, y)
+    ]
+    got = dtw_distance(x, y).diagonal().double()
+    torch.testing.assert_close(got, torch.tensor(want, dtype=torch.float64), atol=1e-5, rtol=1e-4)
+
+
+def test_gak_matches_reference_and_is_psd():
+    g = torch.Generator().manual_seed(5)
+    x = torch.randn(12, 7, 2, generator=g, dtype=torch.float64)
+    y = torch.randn(3, 5, 2, generator=g, dtype=torch.float64)
+    sigma = 1.5
+    want = torch.tensor(
+        [[math.log(gak_reference(a.numpy(), b.numpy(), sigma)) for b in y] for a in x],
+        dtype=torch.float64,
+    )
+    torch.testing.assert_close(gak_log(x, y, sigma=sigma, max_cells=40), want, atol=1e-10, rtol=0)
+    for kernel in (GlobalAlignmentKernel(sigma), GlobalAlignmentKernel(sigma, normalize=False)):
+        gram = kernel(x, x)
+        torch.testing.assert_close(gram, gram.T, atol=1e-12, rtol=1e-12)
+        torch.testing.assert_close(kernel.diag(x), gram.diagonal(), atol=1e-10, rtol=1e-10)
+        assert float(torch.linalg.eigvalsh(gram)[0]) > -1e-6
+    x32 = torch.randn(40, 10, 3, generator=g)
+    gram32 = GlobalAlignmentKernel(2.0)(x32, x32).double()
+    assert float(torch.linalg.eigvalsh(gram32)[0]) > -1e-6
+
+
+@pytest.mark.parametrize(
+    "kernel", [DTWKernel(3.0), DTWKernel(2.0, band=1), GlobalAlignmentKernel(1.0), RBFKernel(4.0)]
+)
+def test_kernel_contract(kernel):
+    g = torch.Generator().manual_seed(6)
+    x = torch.randn(6, 5, 3, generator=g, dtype=torch.float64)
+    z = torch.randn(4, 5, 3, generator=g, dtype=torch.float64)
+    gram = kernel(x, x)
+    torch.testing.assert_close(gram, gram.T, atol=1e-12, rtol=1e-12)
+    torch.testing.assert_close(kernel.diag(x), gram.diagonal(), atol=1e-10, rtol=0)
+    cross = kernel(x, z)
+    stacked = torch.cat([kernel(x[i : i + 1], z) for i in range(6)])
+    torch.testing.assert_close(cross, stacked, atol=1e-12, rtol=0)
+    assert ((cross > 0) & (cross <= 1 + 1e-12)).all()
+    rebuilt = kernel_from_state(kernel.name, kernel.hparams)
+    torch.testing.assert_close(rebuilt(x, z), cross, atol=0, rtol=0)
+
+
+def test_dtw_kernel_value_and_median():
+    g = torch.Generator().manual_seed(7)
+    x = torch.randn(8, 5, 2, generator=g, dtype=torch.float64)
+    d = dtw_distance(x, x)
+    torch.testing.assert_close(DTWKernel(2.5)(x, x), torch.exp(-d / 2.5))
+    med = median_dtw(x, n_pairs=400, seed=0)
+    off = d[~torch.eye(8, dtype=torch.bool)]
+    assert float(off.min()) <= med <= float(off.max())
+    assert med == median_dtw(x, n_pairs=400, seed=0)
+
+
+def test_errors():
+    x = torch.randn(2, 5, 3)
+    with pytest.raises(ShapeError, match=r"expected y \(B2, T2, 3\)"):
+        dtw_distance(x, torch.randn(2, 5, 4))
+    with pytest.raises(ShapeError, match=r"expected x \(B1, T, D\), got \(5, 3\)"):
+        dtw_distance(torch.randn(5, 3), x)
+    with pytest.raises(ShapeError, match="same dtype"):
+        dtw_distance(x, x.double())
+    with pytest.raises(ConfigError, match="band"):
+        dtw_distance(x, x, band=-1)
+    with pytest.raises(ConfigError, match="gamma > 0"):
+        DTWKernel(0.0)
+    with pytest.raises(ConfigError, match="unknown kernel"):
+        kernel_from_state("nope", {})
+    with pytest.raises(ShapeError, match="B >= 2"):
+        median_dtw(x[:1])
+
+
+@pytest.mark.gpu
+def test_cuda_parity():
+    if not torch.cuda.is_available():
+        pytest.skip("no CUDA device")
+    g = torch.Generator().manual_seed(8)
+    x = torch.randn(30, 12, 9, generator=g)
+    y = torch.randn(20, 10, 9, generator=g)
+    for band in (None, 2):
+        cpu = dtw_distance(x, y, band=band)
+        gpu = dtw_distance(x.cuda(), y.cuda(), band=band)
+        assert gpu.device.type == "cuda"
+        torch.testing.assert_close(gpu.cpu(), cpu, atol=1e-4, rtol=1e-5)
+    k = GlobalAlignmentKernel(2.0)
+    torch.testing.assert_close(k(x.cuda(), y.cuda()).cpu(), k(x, y), atol=1e-5, rtol=1e-4)
+    torch.testing.assert_close(
+        DTWKernel(3.0)(x.cuda(), x.cuda()).cpu(), DTWKernel(3.0)(x, x), atol=1e-5, rtol=1e-5
+    )

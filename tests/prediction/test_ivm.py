@@ -1,0 +1,195 @@
+"""Import Vector Machine: learning on synthetic windows, greedy selection, fallbacks, I/O."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from scipy.optimize import minimize
+
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
+from iplanner_torch.prediction.dtw import DTWKernel, GlobalAlignmentKernel, RBFKernel, median_dtw
+from iplanner_torch.prediction.ivm import ActionClassifier, IVMClassifier
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    """Small tensors: one intra-op thread avoids oversubscription on shared CPUs."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def sine_windows(n: int, seed: int, classes=(0, 1, 2), t: int = 12, d: int = 3):
+    """Noisy sine windows whose frequency is set by the class, random phase."""
+    g = torch.Generator().manual_seed(seed)
+    cls = torch.tensor(classes)
+    y = cls[torch.randint(0, len(classes), (n,), generator=g)]
+    time = torch.linspace(0.0, 1.0, t)
+    freq = 1.0 + y.double()
+    phase = 2 * math.pi * torch.rand(n, generator=g, dtype=torch.float64)
+    base = torch.sin(2 * math.pi * freq[:, None] * time[None] + phase[:, None])  # (n, t)
+    x = base[:, :, None] + 0.25 * torch.randn(n, t, d, generator=g, dtype=torch.float64)
+    return x.float(), y
+
+
+@pytest.fixture(scope="module")
+def data():
+    return sine_windows(150, 0), sine_windows(150, 1)
+
+
+def test_dtw_ivm_learns_and_loss_is_monotone(data):
+    (x, y), (xt, yt) = data
+    kernel = DTWKernel(median_dtw(x, 300, seed=0))
+    ivm = IVMClassifier(kernel, num_classes=4, max_import=25, seed=0).fit(x, y)
+    assert (ivm.predict(x) == y).float().mean() >= 0.95
+    assert (ivm.predict(xt) == yt).float().mean() >= 0.90
+    h = np.array(ivm.loss_history_)
+    assert len(h) >= 3 and np.all(np.diff(h) <= 1e-9)
+    assert h[-1] < 0.5 * h[0]
+    prob = ivm.predict_proba(xt)
+    assert prob.shape == (150, 4) and prob.dtype == torch.float32
+    torch.testing.assert_close(prob.sum(-1), torch.ones(150), atol=1e-6, rtol=0)
+    assert (prob[:, 3] == 0).all()  # class 3 never seen: fixed -inf logit
+    assert torch.isinf(ivm.decision_function(xt[:2])[:, 3]).all()
+    assert len(ivm.import_index_) <= 25
+
+
+def test_gak_and_rbf_kernels_learn(data):
+    (x, y), (xt, yt) = data
+    for kernel in (GlobalAlignmentKernel(2.0), RBFKernel(3.0)):
+        ivm = IVMClassifier(kernel, num_classes=3, max_import=20).fit(x, y)
+        assert (ivm.predict(xt) == yt).float().mean() >= 0.90, kernel
+
+
+def test_same_seed_same_model(data):
+    (x, y), _ = data
+    kern = RBFKernel(3.0)
+    a = IVMClassifier(kern, num_classes=3, max_import=8, candidates=20, seed=3).fit(x, y)
+    b = IVMClassifier(kern, num_classes=3, max_import=8, candidates=20, seed=3).fit(x, y)
+    assert torch.equal(a.import_index_, b.import_index_)
+    torch.testing.assert_close(a.weights_, b.weights_, atol=0, rtol=0)
+
+
+def test_first_import_is_brute_force_argmin():
+    x, y = sine_windows(14, 5, classes=(0, 1), t=6, d=2)
+    kernel = RBFKernel(2.0)
+    lam = 0.05
+    ivm = IVMClassifier(
+        kernel, num_classes=2, lam=lam, max_import=1, candidates=None, newton_steps=300
+    ).fit(x, y)
+    kmat = kernel(x, x).double().numpy()
+    onehot = np.eye(2)[y.numpy()]
+    shift = 1e-8
+
+    def h(theta: np.ndarray, j: int) -> float:
+        b, v = theta[:2], theta[2:]
+        f = b[None, :] + kmat[:, j : j + 1] * v[None, :]  # (N, 2)
+        lse = np.logaddexp(f[:, 0], f[:, 1])
+        nll = -(onehot * (f - lse[:, None])).sum()
+        return nll + 0.5 * lam * (kmat[j, j] + shift) * float(v @ v)
+
+    best = [minimize(h, np.zeros(4), args=(j,), method="BFGS", tol=1e-12).fun for j in range(14)]
+    assert int(ivm.import_index_[0]) == int(np.argmin(best))
+    gap = sorted(best)[1] - sorted(best)[0]
+    assert gap > 1e-3  # the test problem has a unique winner
+    assert abs(ivm.loss_history_[1] - min(best)) < 1e-6 * abs(min(best))
+
+
+def test_state_dict_round_trip(data):
+    (x, y), (xt, _) = data
+    ivm = IVMClassifier(DTWKernel(4.0, band=3), num_classes=3, max_import=6).fit(x, y)
+    again = IVMClassifier.from_state_dict(ivm.state_dict())  # kernel rebuilt by name
+    assert torch.equal(again.predict_proba(xt), ivm.predict_proba(xt))
+    custom = IVMClassifier.from_state_dict(ivm.state_dict(), DTWKernel(4.0, band=3))
+    assert torch.equal(custom.predict_proba(xt), ivm.predict_proba(xt))
+    with pytest.raises(CheckpointError, match="format ivm/1"):
+        IVMClassifier.from_state_dict({"format": "other"})
+
+
+def test_single_class_and_errors():
+    x, _ = sine_windows(10, 2)
+    ivm = IVMClassifier(RBFKernel(1.0), num_classes=3).fit(x, torch.full((10,), 2))
+    prob = ivm.predict_proba(x)
+    assert torch.equal(prob, torch.tensor([0.0, 0.0, 1.0]).expand(10, 3))
+    with pytest.raises(ShapeError, match=r"expected y \(10\), got \(9,\)"):
+        ivm.fit(x, torch.zeros(9, dtype=torch.int64))
+    with pytest.raises(ShapeError, match=r"expected x \(N, T, D\)"):
+        ivm.predict_proba(x[0])
+    with pytest.raises(DataError, match=r"expected y in \[0, 3\)"):
+        ivm.fit(x, torch.full((10,), 3))
+    with pytest.raises(ShapeError, match="int64"):
+        ivm.fit(x, torch.zeros(10))
+    with pytest.raises(ConfigError, match="lam > 0"):
+        IVMClassifier(RBFKernel(1.0), num_classes=3, lam=0.0)
+    with pytest.raises(CheckpointError, match="not fitted"):
+        IVMClassifier(RBFKernel(1.0), num_classes=3).predict_proba(x)
+
+
+def _state_data():
+    """Progress 1: actions {0, 1} (frequencies 1, 2); progress 3: action 2 only."""
+    x01, y01 = sine_windows(80, 10, classes=(0, 1))
+    x2, y2 = sine_windows(20, 11, classes=(2,))
+    x = torch.cat([x01, x2])
+    cur = torch.cat([y01, y2])
+    prog = torch.cat([torch.full((80,), 1), torch.full((20,), 3)])
+    return x, prog, cur
+
+
+def test_action_classifier_states_and_fallbacks():
+    x, prog, cur = _state_data()
+    calls = []
+
+    def factory(xs):
+        calls.append(len(xs))
+        return RBFKernel(3.0)
+
+    clf = ActionClassifier().fit(
+        x, prog, cur, num_actions=3, kernel_factory=factory, ivm_kwargs={"max_import": 10}
+    )
+    assert sorted(calls) == [80, 100]  # state 1 and the global one; state 3 needs no kernel
+    # single-action state: exactly 1
+    p3 = clf.predict_proba(x[80:], torch.full((20,), 3))
+    assert torch.equal(p3, torch.tensor([0.0, 0.0, 1.0]).expand(20, 3))
+    # seen state 1 learns its two actions
+    p1 = clf.predict_proba(x[:80], prog[:80])
+    assert (p1.argmax(-1) == cur[:80]).float().mean() >= 0.95
+    assert (p1[:, 2] == 0).all()
+    # unseen 0b111: related seen states 1 (distance 2) and 3 (distance 1) -> 3
+    assert clf.resolve(7) == 3
+    # unseen 0b010: subset of 3 (distance 1), unrelated to 1 -> 3; 0b100: none -> global
+    assert clf.resolve(2) == 3
+    assert clf.resolve(4) == -1
+    # a mixed batch is grouped by state and equals the per-state calls
+    progress = torch.tensor([1, 3, 7, 4, 1])
+    batch = clf.predict_proba(x[[0, 85, 1, 2, 3]], progress)
+    torch.testing.assert_close(batch[2], clf.models_[3].predict_proba(x[[1]])[0])
+    torch.testing.assert_close(batch[3], clf.models_[-1].predict_proba(x[[2]])[0])
+    torch.testing.assert_close(batch.sum(-1), torch.ones(5), atol=1e-6, rtol=0)
+    # round trip
+    again = ActionClassifier.from_state_dict(clf.state_dict())
+    assert torch.equal(again.predict_proba(x[[0, 85, 1, 2, 3]], progress), batch)
+    with pytest.raises(ShapeError, match=r"expected progress \(5\)"):
+        clf.predict_proba(x[:5], progress[:4])
+
+
+def test_action_classifier_tie_prefers_subset_and_no_global():
+    x, prog, cur = _state_data()
+    prog = torch.where(prog == 3, torch.tensor(6), torch.tensor(3))  # seen: 3 (0b011), 6 (0b110)
+    clf = ActionClassifier().fit(
+        x,
+        prog,
+        cur,
+        num_actions=3,
+        kernel_factory=lambda: RBFKernel(3.0),
+        ivm_kwargs={"max_import": 4},
+        fit_global=False,
+    )
+    assert clf.resolve(2) == 3  # 0b010: subset of both at distance 1 -> smaller q
+    assert clf.resolve(7) == 3  # 0b111: both subsets at distance 1 -> smaller q
+    assert clf.resolve(8) == -1
+    uniform = clf.predict_proba(x[:2], torch.tensor([8, 8]))
+    torch.testing.assert_close(uniform, torch.full((2, 3), 1 / 3))
