@@ -1,0 +1,376 @@
+"""Cost terms of the trajectory optimiser (paper sec. 5) and the human-collision bound.
+
+Every term takes a batch of B trajectories and returns one value per trajectory, (B,), except
+:func:`human_collision_bound`, which returns the per-waypoint bound (B, W_x) that the confidence
+constraint reads (eq. max_collision_probability, summed over waypoints for eq.
+collision_probability).
+
+The sphere-versus-Gaussian bound here is the one of ``iplanner_torch.collision.gaussian``
+specialised to diagonal covariances (the forecast's channels are independent, and so are the
+sphere centres of eq. center_distribution) and evaluated on a pruned list of sphere pairs:
+``min(4/3 pi R^3 f(x_max), Phi(-m), 1)`` with ``R = r_robot + r_human`` (the ball's volume; the
+paper prints ``R^2``) and ``m`` the Mahalanobis distance from the mean to the ball. ``x_max`` is
+found by Newton's method on the secular equation; its gradient uses the envelope theorem
+(``d m^2 / d mu = 2 Sigma^-1 (mu - x_max)``), so the iterations are not differentiated. The
+optimiser's iterations use a cheaper isotropic bound, never below this one (see
+:func:`human_collision_bound`); acceptance uses the exact one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import torch
+
+from iplanner_torch.errors import ConfigError
+from iplanner_torch.planning.trajectory import accelerations, velocities
+from iplanner_torch.prediction.forecast import Forecast
+
+#: Mahalanobis distance beyond which a pair is pruned: its bound is below Phi(-5) < 3e-7.
+PRUNE_SIGMAS = 5.0
+#: Pair bounds (isotropic) above this get the exact diagonal-Gaussian bound.
+EXACT_FROM = 1e-6
+
+
+class ClearanceScene(Protocol):
+    """Anything with a signed-distance query for spheres (``collision.static.StaticScene``)."""
+
+    def clearance(self, centers: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
+        """(..., S, 3) centres [m], (S,) radii [m] -> (..., S) signed distance [m]."""
+        ...
+
+
+@dataclass(frozen=True, kw_only=True)
+class CostWeights:
+    """Weights of the optimiser's cost terms (all dimensionless multipliers)."""
+
+    # smoothness: integral of squared joint accelerations
+    joint_acc_l2: float = 1e-3
+    # squared joint-limit violation [rad^2]
+    joint_limit_violation: float = 100.0
+    # squared joint-velocity-limit violation [(rad/s)^2]
+    joint_vel_limit_violation: float = 10.0
+    # squared static-obstacle penetration beyond the margin [m^2]
+    static_clearance: float = 1000.0
+    # sum over the execution window of the human-collision bound (eq. collision_probability)
+    human_collision_bound: float = 1.0
+    # penalty on log(bound / target) above zero: the confidence constraint
+    human_confidence_penalty: float = 10.0
+    # squared penetration of robot spheres into the mean human spheres [m^2]
+    human_mean_penetration: float = 1000.0
+    # squared distance of the last waypoint to the goal (only when the goal is not pinned)
+    goal_distance: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if not (isinstance(value, (int, float)) and value >= 0.0 and math.isfinite(value)):
+                raise ConfigError(f"expected weight {name} finite and >= 0, got {value!r}")
+
+
+def joint_acc_l2(q: torch.Tensor, dt: float, qd_start: torch.Tensor | None = None) -> torch.Tensor:
+    """Smoothness: ``dt * sum ||q_ddot||^2`` over the waypoints.
+
+    Args:
+        q: (B, W, J) joint positions [rad].
+        dt: seconds between waypoints.
+        qd_start: (J,) velocity at the first waypoint [rad/s], or None (then the first
+            waypoint's acceleration is not counted).
+
+    Returns:
+        (B,) [rad^2/s^3].
+    """
+    acc = accelerations(q, dt, qd_start)
+    return dt * acc.square().sum(dim=(-2, -1))
+
+
+def joint_limit_violation(
+    q: torch.Tensor, q_min: torch.Tensor, q_max: torch.Tensor
+) -> torch.Tensor:
+    """Squared violation of the joint position limits.
+
+    Args:
+        q: (B, W, J) joint positions [rad].
+        q_min: (J,) lower limits [rad] (-inf for continuous joints).
+        q_max: (J,) upper limits [rad] (+inf for continuous joints).
+
+    Returns:
+        (B,) [rad^2].
+    """
+    over = torch.relu(q - q_max) + torch.relu(q_min - q)
+    return over.square().sum(dim=(-2, -1))
+
+
+def joint_vel_limit_violation(q: torch.Tensor, dt: float, v_max: torch.Tensor) -> torch.Tensor:
+    """Squared violation of the joint velocity limits by the waypoint differences.
+
+    Args:
+        q: (B, W, J) joint positions [rad].
+        dt: seconds between waypoints.
+        v_max: (J,) velocity limits [rad/s].
+
+    Returns:
+        (B,) [(rad/s)^2].
+    """
+    return torch.relu(velocities(q, dt).abs() - v_max).square().sum(dim=(-2, -1))
+
+
+def static_clearance(
+    centers: torch.Tensor, radii: torch.Tensor, scene: ClearanceScene, margin: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Hinge on the static scene's signed distance.
+
+    Args:
+        centers: (B, W, S_r, 3) robot sphere centres [m].
+        radii: (S_r,) robot sphere radii [m].
+        scene: the static obstacles.
+        margin: clearance below which the cost starts [m].
+
+    Returns:
+        cost (B,) ``sum relu(margin - clearance)^2`` [m^2] and the minimum clearance over
+        spheres (B, W) [m].
+    """
+    clear = scene.clearance(centers, radii)  # (B, W, S_r)
+    cost = torch.relu(margin - clear).square().sum(dim=(-2, -1))
+    return cost, clear.min(dim=-1).values
+
+
+def goal_distance(q_last: torch.Tensor, q_goal: torch.Tensor) -> torch.Tensor:
+    """Squared joint-space distance of the last waypoint to the goal.
+
+    Args:
+        q_last: (B, J) last waypoint [rad].
+        q_goal: (J,) goal configuration [rad].
+
+    Returns:
+        (B,) [rad^2].
+    """
+    return (q_last - q_goal).square().sum(-1)
+
+
+def goal_distance_ee(ee: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Squared end-effector distance to a target point.
+
+    Args:
+        ee: (B, 3) tool point of the last waypoint [m], world frame.
+        target: (3,) target point [m], world frame.
+
+    Returns:
+        (B,) [m^2].
+    """
+    return (ee - target).square().sum(-1)
+
+
+def _secular_lambda(d: torch.Tensor, var: torch.Tensor, rad: torch.Tensor) -> torch.Tensor:
+    """Newton's method for ``||d / (1 + lambda s)|| = R`` (points outside the ball only).
+
+    Args:
+        d: (..., 3) mean minus ball centre [m].
+        var: (..., 3) diagonal variances [m^2].
+        rad: (...) ball radius [m].
+
+    Returns:
+        (...) lambda >= 0 [1/m^2]; 0 where the mean lies inside the ball.
+    """
+    dn = d.norm(dim=-1)
+    lam = ((dn / rad - 1.0) / var.amax(-1)).clamp_min(0.0)  # lower bound: phi(lam) <= 0
+    d2 = d * d
+    for _ in range(8):
+        den = 1.0 + lam.unsqueeze(-1) * var
+        n2 = (d2 / den.square()).sum(-1)
+        n = n2.sqrt()
+        phi = 1.0 / n - 1.0 / rad
+        dphi = (d2 * var / den.pow(3)).sum(-1) / (n2 * n)
+        lam = (lam - phi / dphi).clamp_min(0.0)
+    return torch.where(dn > rad, lam, torch.zeros_like(lam))
+
+
+def gaussian_ball_bound_diag(
+    d: torch.Tensor, var: torch.Tensor, rad: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Upper bound of P(||x|| <= R) for x ~ N(d, diag(var)) (paper eq. approx_sphere_collision).
+
+    Args:
+        d: (..., 3) Gaussian mean relative to the ball's centre [m] (differentiable).
+        var: (..., 3) diagonal variances [m^2], > 0.
+        rad: (...) ball radius R = r_robot + r_human [m].
+
+    Returns:
+        bound (...) in [0, 1], ``min(4/3 pi R^3 f(x_max), Phi(-m), 1)``, and ``m^2`` (...)
+        the squared Mahalanobis distance from the mean to the ball (0 inside).
+    """
+    with torch.no_grad():
+        lam = _secular_lambda(d, var, rad)
+        y = d / (1.0 + lam.unsqueeze(-1) * var)  # x_max - ball centre, on the sphere
+    maha2 = ((y - d).square() / var).sum(-1)  # envelope theorem: y is held fixed
+    log_f = -0.5 * maha2 - 0.5 * torch.log(2.0 * math.pi * var).sum(-1)
+    log_vol = math.log(4.0 / 3.0 * math.pi) + 3.0 * torch.log(rad)
+    vol_bound = torch.exp(log_vol + log_f)
+    inside = lam <= 0.0
+    m = maha2.clamp_min(1e-12).sqrt()
+    phi_bound = torch.where(inside, torch.ones_like(m), 0.5 * torch.erfc(m / math.sqrt(2.0)))
+    bound = torch.minimum(torch.minimum(vol_bound, phi_bound), torch.ones_like(m))
+    return bound, maha2
+
+
+@dataclass(kw_only=True)
+class HumanObstacle:
+    """The forecast human as Gaussian spheres at the W_x waypoint times of the window.
+
+    Attributes:
+        mean: (W_x, A, S_h, 3) sphere-centre means [m], world frame.
+        var: (W_x, A, S_h, 3) sphere-centre variances [m^2].
+        radii: (S_h,) sphere radii [m].
+        weights: (A,) action weights p(c | F, p), summing to 1.
+    """
+
+    mean: torch.Tensor
+    var: torch.Tensor
+    radii: torch.Tensor
+    weights: torch.Tensor
+
+
+def candidate_pairs(
+    robot_centers: torch.Tensor,
+    robot_radii: torch.Tensor,
+    human: HumanObstacle,
+    margin: float,
+) -> torch.Tensor:
+    """Sphere pairs whose bound can exceed Phi(-PRUNE_SIGMAS) after a move of up to ``margin``.
+
+    Args:
+        robot_centers: (B, W_x, S_r, 3) robot sphere centres [m].
+        robot_radii: (S_r,) [m].
+        human: the Gaussian human spheres.
+        margin: extra distance the robot spheres may move before the pairs are refreshed [m].
+
+    Returns:
+        (P, 2) long tensor of (robot sphere, human sphere) indices.
+    """
+    with torch.no_grad():
+        sigma = human.var.amax(dim=(-1, 1, 0)).sqrt()  # (S_h,)
+        diff = robot_centers.unsqueeze(3).unsqueeze(3) - human.mean.unsqueeze(0).unsqueeze(2)
+        dist = diff.norm(dim=-1)  # (B, W_x, S_r, A, S_h)
+        gap = dist.amin(dim=(0, 1, 3))  # (S_r, S_h)
+        reach = robot_radii[:, None] + human.radii[None, :] + PRUNE_SIGMAS * sigma[None, :]
+        return torch.nonzero(gap <= reach + margin)
+
+
+def human_collision_bound(
+    robot_centers: torch.Tensor,
+    robot_radii: torch.Tensor,
+    human: HumanObstacle,
+    pairs: torch.Tensor | None = None,
+    *,
+    exact: bool = True,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-waypoint collision bound: max over sphere pairs of the action-weighted pair bound.
+
+    Eq. max_collision_probability with the mixture over actions:
+    ``max_{j,l} sum_a p(a) P(B_j(q_i) cap C_l^a(t_i) != empty)``.
+
+    Two pair bounds are available. The *isotropic* one, ``Phi(-(||mu - c|| - R) / s_max)``
+    with ``s_max`` the largest standard deviation, is cheap (no secular equation) and never
+    below the exact one (the Mahalanobis distance to the ball is at least the Euclidean gap
+    over ``s_max``); the optimiser's iterations use it. With ``exact=True`` the pairs whose
+    isotropic bound exceeds ``EXACT_FROM`` get :func:`gaussian_ball_bound_diag`, the rest keep
+    the isotropic value (still an upper bound, below ``EXACT_FROM``).
+
+    Args:
+        robot_centers: (B, W_x, S_r, 3) robot sphere centres at the window's waypoints [m].
+        robot_radii: (S_r,) [m].
+        human: the Gaussian human spheres at the same W_x times.
+        pairs: (P, 2) (robot, human) sphere indices to evaluate (from :func:`candidate_pairs`);
+            None evaluates all S_r x S_h pairs. Pruned pairs contribute at most Phi(-5).
+        exact: refine the large pair bounds with the exact diagonal-Gaussian bound.
+
+    Returns:
+        bound (B, W_x) in [0, 1] and the penetration cost (B,) ``sum_a p(a) sum relu(R -
+        ||c - mu||)^2`` [m^2] of robot spheres into the mean human spheres.
+    """
+    b, w = robot_centers.shape[:2]
+    if pairs is None:
+        s_r, s_h = robot_radii.shape[0], human.radii.shape[0]
+        ii, jj = torch.meshgrid(
+            torch.arange(s_r, device=robot_centers.device),
+            torch.arange(s_h, device=robot_centers.device),
+            indexing="ij",
+        )
+        pairs = torch.stack([ii.reshape(-1), jj.reshape(-1)], dim=-1)
+    if pairs.shape[0] == 0:
+        zero = robot_centers.sum() * 0.0
+        return robot_centers.new_zeros(b, w) + zero, robot_centers.new_zeros(b) + zero
+    ri, hi = pairs[:, 0], pairs[:, 1]
+    c = robot_centers[:, :, ri]  # (B, W_x, P, 3)
+    mu = human.mean[:, :, hi].transpose(1, 2)  # (W_x, P, A, 3)
+    var = human.var[:, :, hi].transpose(1, 2)  # (W_x, P, A, 3)
+    rad = (robot_radii[ri] + human.radii[hi])[:, None]  # (P, 1)
+    d = mu.unsqueeze(0) - c.unsqueeze(-2)  # (B, W_x, P, A, 3)
+    dist = d.norm(dim=-1)  # (B, W_x, P, A)
+    s_max = var.amax(-1).sqrt().unsqueeze(0)  # (1, W_x, P, A)
+    gap = (dist - rad) / s_max
+    bound = 0.5 * torch.erfc(gap / math.sqrt(2.0))  # isotropic upper bound
+    bound = torch.where(gap > 0.0, bound, torch.ones_like(bound))
+    if exact:
+        sel = bound.detach() > EXACT_FROM
+        if bool(sel.any()):
+            var_full = var.unsqueeze(0).expand_as(d)
+            exact_b, _ = gaussian_ball_bound_diag(
+                d[sel], var_full[sel], rad.expand(dist.shape)[sel]
+            )
+            bound = bound.masked_scatter(sel, torch.minimum(exact_b, bound[sel]))
+    mixed = (bound * human.weights).sum(-1)  # (B, W_x, P)
+    pen = torch.relu(rad - dist).square()  # (B, W_x, P, A)
+    pen_cost = (pen * human.weights).sum(dim=(1, 2, 3))
+    return mixed.amax(-1).clamp(max=1.0), pen_cost
+
+
+class SphereMap(Protocol):
+    """Joint Gaussians to sphere Gaussians (``HumanSphereMap`` or ``HumanSphereModel``)."""
+
+    radii: torch.Tensor
+
+    def centers_diag(
+        self, mean: torch.Tensor, var: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(..., K, 3), (..., K, 3) -> (..., S_h, 3), (..., S_h, 3)."""
+        ...
+
+
+def forecast_to_obstacle(
+    forecast: Forecast,
+    times: torch.Tensor,
+    forecast_t0: float,
+    spheres: SphereMap,
+    index: int = 0,
+) -> HumanObstacle:
+    """The forecast's human spheres at given times (linear interpolation between frames).
+
+    Frame ``f`` of the forecast lies at ``forecast_t0 + (f + 1) dt``; earlier times take the
+    first frame and later times the last (the prediction does not extend further).
+
+    Args:
+        forecast: the predictor's output; batch entry ``index`` is used.
+        times: (W_x,) absolute query times [s].
+        forecast_t0: time of the last observed frame the forecast starts from [s].
+        spheres: the joint-to-sphere map.
+        index: batch entry of the forecast.
+
+    Returns:
+        The Gaussian human spheres at ``times`` on the device/dtype of ``times``.
+    """
+    dev, dt_ = times.device, times.dtype
+    mean = forecast.mean[index].to(device=dev, dtype=dt_).transpose(0, 1)  # (n_f, A, K, 3)
+    var = forecast.var[index].to(device=dev, dtype=dt_).transpose(0, 1)  # (n_f, A, K, 3)
+    n_f = mean.shape[0]
+    u = ((times - forecast_t0) / forecast.dt - 1.0).clamp(0.0, n_f - 1.0)  # (W_x,)
+    lo = u.floor().long().clamp(max=n_f - 1)
+    hi = (lo + 1).clamp(max=n_f - 1)
+    a = (u - lo.to(dt_)).view(-1, 1, 1, 1)
+    m = (1.0 - a) * mean[lo] + a * mean[hi]  # (W_x, A, K, 3)
+    v = (1.0 - a) * var[lo] + a * var[hi]
+    s_mean, s_var = spheres.centers_diag(m, v)
+    weights = forecast.weights[index].to(device=dev, dtype=dt_)
+    radii = spheres.radii.to(device=dev, dtype=dt_)
+    return HumanObstacle(mean=s_mean, var=s_var.clamp_min(1e-10), radii=radii, weights=weights)

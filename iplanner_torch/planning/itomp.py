@@ -1,0 +1,91 @@
+"""The ITOMP baseline (paper sec. 7): the same optimiser, with the human as currently seen.
+
+ITOMP replans against the observed pose only: no prediction and no uncertainty. To run the
+same code path, the observed pose becomes a degenerate forecast: one action of weight 1, the
+pose repeated over the horizon, and a tiny variance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+
+from iplanner_torch.errors import ConfigError
+from iplanner_torch.planning.optimizer import PlanResult, TrajectoryOptimizer
+from iplanner_torch.prediction.forecast import Forecast
+from iplanner_torch.types import check_shape
+
+
+def static_human_forecast(
+    pose: torch.Tensor,
+    n_f: int,
+    dt: float,
+    joint_names: Sequence[str],
+    *,
+    std: float = 0.01,
+) -> Forecast:
+    """A forecast in which the human stays at ``pose`` (one action, weight 1).
+
+    Args:
+        pose: (K, 3) observed joint positions [m], world frame.
+        n_f: frames of the forecast.
+        dt: seconds between frames.
+        joint_names: the K joint names.
+        std: per-coordinate standard deviation [m] (1 cm: the pose is taken as exact).
+
+    Returns:
+        Forecast with weights (1, 1), mean and var (1, 1, n_f, K, 3).
+
+    Raises:
+        ShapeError: when ``pose`` is not (K, 3) with K = len(joint_names).
+        ConfigError: when n_f < 1, dt <= 0 or std <= 0.
+    """
+    check_shape("pose", pose, (len(joint_names), 3))
+    if n_f < 1 or not dt > 0.0 or not std > 0.0:
+        raise ConfigError(f"expected n_f >= 1, dt > 0, std > 0, got {n_f}, {dt}, {std}")
+    mean = pose.reshape(1, 1, 1, *pose.shape).expand(1, 1, n_f, *pose.shape).clone()
+    return Forecast(
+        weights=torch.ones(1, 1, dtype=pose.dtype, device=pose.device),
+        mean=mean,
+        var=torch.full_like(mean, std * std),
+        dt=dt,
+        joint_names=tuple(joint_names),
+        action_names=("observed",),
+    )
+
+
+class ITOMP(TrajectoryOptimizer):
+    """:class:`TrajectoryOptimizer` that sees only the currently observed human pose."""
+
+    #: per-coordinate std of the observed pose [m]
+    pose_std: float = 0.01
+
+    def forecast_from_pose(
+        self, pose: torch.Tensor, joint_names: Sequence[str], *, n_f: int = 30, dt: float = 0.1
+    ) -> Forecast:
+        """The degenerate forecast of :func:`static_human_forecast` for this planner."""
+        return static_human_forecast(pose, n_f, dt, joint_names, std=self.pose_std)
+
+    def solve_observed(
+        self,
+        q_start: torch.Tensor,
+        q_goal: torch.Tensor,
+        *,
+        pose: torch.Tensor,
+        joint_names: Sequence[str],
+        t0: float = 0.0,
+        **kwargs: object,
+    ) -> PlanResult:
+        """Plan against the observed pose.
+
+        Args:
+            q_start: (J,) start [rad].
+            q_goal: (J,) goal [rad].
+            pose: (K, 3) observed joint positions [m].
+            joint_names: the K joint names.
+            t0: plan start time [s]; the pose is taken as observed at ``t0``.
+            **kwargs: further arguments of :meth:`TrajectoryOptimizer.solve`.
+        """
+        forecast = self.forecast_from_pose(pose, joint_names)
+        return self.solve(q_start, q_goal, forecast=forecast, forecast_t0=t0, t0=t0, **kwargs)

@@ -1,0 +1,606 @@
+"""Batched probabilistic trajectory optimisation (paper sec. 5, ITOMP with a prediction).
+
+B trajectories of W space-time waypoints are optimised at once from diverse initial
+trajectories (the straight line in joint space plus random smooth perturbations: the paper's
+parallel threads, theorem threads). The optimiser is Adam on the free waypoints with a decaying
+step and projection onto the joint limits, on the second differences of the waypoints (so
+smoothness is a well-conditioned sum of squares and every step moves waypoints smoothly, as the
+covariant updates of CHOMP / ITOMP do): every term is cheap to differentiate, the
+collision-bound term is non-smooth (a max over sphere pairs) and badly scaled, which Adam's
+per-coordinate normalisation tolerates, and each trajectory's moments are separate so the B
+problems stay independent. The confidence constraint ``bound <= 1 - delta`` on every waypoint of
+the execution window enters as a quadratic penalty on ``log(bound / target)`` above zero, with
+``target`` a fraction of ``1 - delta`` so that solutions land inside the feasible set; the
+constraint is then checked exactly (all sphere pairs) when a trajectory is accepted. When no
+trajectory meets it, the plan follows the best one up to its last safe waypoint and waits there
+(sec. 5), reporting the delay.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import torch
+
+from iplanner_torch.errors import ConfigError, PlanningError
+from iplanner_torch.planning import costs as C
+from iplanner_torch.planning.human_model import HumanSphereMap
+from iplanner_torch.planning.trajectory import Trajectory, uniform_times
+from iplanner_torch.prediction.forecast import Forecast
+from iplanner_torch.types import check_shape
+
+#: Accepted plans keep every waypoint-to-waypoint velocity within this factor of the limits.
+VEL_TOL = 1.05
+#: Adam's first-moment decay.
+BETA1 = 0.9
+#: Adam's second-moment decay: short memory, so steps do not stall once the large early
+#: gradients are gone (with 0.999 the smoothness bowl stalls about 1e-2 rad from its minimum).
+BETA2 = 0.9
+
+
+@runtime_checkable
+class KinematicModel(Protocol):
+    """What the optimiser needs of a robot (``robot.model.RobotModel`` satisfies it).
+
+    Attributes:
+        q_min: (J,) lower joint limits [rad].
+        q_max: (J,) upper joint limits [rad].
+        v_max: (J,) joint velocity limits [rad/s].
+        sphere_radii: (S_r,) bounding-sphere radii [m]; its device and dtype are the planner's.
+        num_joints: J.
+    """
+
+    q_min: torch.Tensor
+    q_max: torch.Tensor
+    v_max: torch.Tensor
+    sphere_radii: torch.Tensor
+    num_joints: int
+
+    def sphere_centers(self, q: torch.Tensor) -> torch.Tensor:
+        """(..., J) joint positions [rad] -> (..., S_r, 3) sphere centres [m], differentiable."""
+        ...
+
+
+@dataclass(frozen=True, kw_only=True)
+class OptimizerCfg:
+    """Settings of :class:`TrajectoryOptimizer`."""
+
+    # B, trajectories optimised in parallel (the paper's threads)
+    num_trajectories: int = 8
+    # W, waypoints per trajectory including start and goal
+    num_waypoints: int = 20
+    # default time from start to goal [s] (lengthened to respect the velocity limits)
+    horizon_s: float = 3.0
+    # Adam iterations from cold initial trajectories
+    iterations: int = 40
+    # Adam iterations when warm-started from a previous plan
+    warm_iterations: int = 10
+    # Adam step size on the waypoints' second differences [rad] (a step moves a waypoint up to
+    # about lr (W - 2)^2 / 8)
+    lr: float = 0.005
+    # step size at the last iteration relative to the first (exponential decay)
+    lr_final_ratio: float = 0.1
+    # std of the amplitude of the smooth random perturbations of the initial trajectories [rad]
+    perturbation_std: float = 0.3
+    # delta_CL: the bound must be <= 1 - confidence at every waypoint of the window
+    confidence: float = 0.95
+    # the penalty aims at bound <= penalty_target * (1 - confidence)
+    penalty_target: float = 0.5
+    # collision checks per waypoint interval of the window (points at k / n, k = 1..n, of the
+    # segment ending at each waypoint), so a fast robot cannot pass between two checks
+    collision_substeps: int = 2
+    # static-obstacle clearance below which the hinge cost starts [m]
+    static_margin: float = 0.02
+    # distance robot spheres may move before the pruned sphere pairs are refreshed [m]
+    prune_margin: float = 0.15
+    # iterations between refreshes of the pruned sphere pairs
+    prune_every: int = 5
+    # cost weights
+    weights: C.CostWeights = field(default_factory=C.CostWeights)
+    # seed of the random initial perturbations (same seed -> same plan)
+    seed: int = 0
+    # device of the plan; None follows the robot model's tensors
+    device: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.num_trajectories < 1:
+            raise ConfigError(f"expected num_trajectories >= 1, got {self.num_trajectories}")
+        if self.num_waypoints < 3:
+            raise ConfigError(f"expected num_waypoints >= 3, got {self.num_waypoints}")
+        if not self.horizon_s > 0.0:
+            raise ConfigError(f"expected horizon_s > 0, got {self.horizon_s}")
+        if self.iterations < 0 or self.warm_iterations < 0:
+            raise ConfigError("expected iterations and warm_iterations >= 0")
+        if not self.lr > 0.0 or not 0.0 < self.lr_final_ratio <= 1.0:
+            raise ConfigError(f"expected lr > 0 and lr_final_ratio in (0, 1], got {self.lr}")
+        if self.perturbation_std < 0.0:
+            raise ConfigError(f"expected perturbation_std >= 0, got {self.perturbation_std}")
+        if not 0.0 < self.confidence < 1.0:
+            raise ConfigError(f"expected confidence in (0, 1), got {self.confidence}")
+        if not 0.0 < self.penalty_target <= 1.0:
+            raise ConfigError(f"expected penalty_target in (0, 1], got {self.penalty_target}")
+        if self.collision_substeps < 1:
+            raise ConfigError(f"expected collision_substeps >= 1, got {self.collision_substeps}")
+        if self.prune_every < 1 or self.prune_margin < 0.0:
+            raise ConfigError("expected prune_every >= 1 and prune_margin >= 0")
+        if not isinstance(self.weights, C.CostWeights):
+            raise ConfigError(f"expected weights to be CostWeights, got {type(self.weights)}")
+
+
+@dataclass(kw_only=True)
+class PlanResult:
+    """The accepted plan of one solve.
+
+    Attributes:
+        feasible: the plan meets the confidence constraint, the static clearance and the
+            velocity limits (within ``VEL_TOL``) on its own;
+            False means it is the best trajectory cut at its last safe waypoint plus a wait.
+        q: (W, J) waypoints [rad]; after a wait, the waypoints from the hold on repeat it.
+        times: (W,) waypoint times [s].
+        bound: (W,) human-collision bound per waypoint (0 outside the execution window).
+        wait_s: seconds the plan holds at its last safe pose inside the window (0 if feasible).
+        hold_index: the waypoint held from, or None.
+        qd_start: (J,) velocity at the first waypoint [rad/s] or None (rest).
+        candidates: (B, W, J) all optimised trajectories (warm starts of the next solve).
+        cost_terms: the accepted trajectory's unweighted cost terms and diagnostics.
+        timings: milliseconds: ``predict_ms`` (forecast to human spheres at the waypoint
+            times), ``collision_ms`` (bound evaluations, forward), ``optimiser_ms`` (the rest),
+            ``total_ms``.
+    """
+
+    feasible: bool
+    q: torch.Tensor
+    times: torch.Tensor
+    bound: torch.Tensor
+    wait_s: float
+    hold_index: int | None
+    qd_start: torch.Tensor | None
+    candidates: torch.Tensor
+    cost_terms: dict[str, float]
+    timings: dict[str, float]
+
+    def trajectory(self) -> Trajectory:
+        """The plan as an executable :class:`Trajectory`."""
+        return Trajectory(q=self.q, times=self.times, qd_start=self.qd_start)
+
+
+class _Timer:
+    """Accumulates wall-clock milliseconds, synchronising CUDA when needed."""
+
+    def __init__(self, device: torch.device) -> None:
+        self.cuda = device.type == "cuda"
+        self.ms = 0.0
+        self._t = 0.0
+
+    def __enter__(self) -> _Timer:
+        if self.cuda:
+            torch.cuda.synchronize()
+        self._t = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.cuda:
+            torch.cuda.synchronize()
+        self.ms += 1e3 * (time.perf_counter() - self._t)
+
+
+class TrajectoryOptimizer:
+    """Optimises B space-time trajectories against the probabilistic human-collision bound.
+
+    Args:
+        robot: the kinematic model (any :class:`KinematicModel`).
+        cfg: settings.
+        static_scene: static obstacles with a ``clearance`` query, or None.
+        human_spheres: joint-to-sphere map of the human (``centers_diag``, ``radii``); None
+            builds :class:`HumanSphereMap` from the forecast's joint names.
+    """
+
+    def __init__(
+        self,
+        robot: KinematicModel,
+        cfg: OptimizerCfg | None = None,
+        static_scene: C.ClearanceScene | None = None,
+        human_spheres: C.SphereMap | None = None,
+    ) -> None:
+        self.robot = robot
+        self.cfg = cfg or OptimizerCfg()
+        self.static_scene = static_scene
+        self.human_spheres = human_spheres
+        self._sphere_cache: dict[tuple[str, ...], C.SphereMap] = {}
+        self._d_cache: dict[tuple, tuple[torch.Tensor, torch.Tensor]] = {}
+        ref = robot.sphere_radii
+        self.device = torch.device(self.cfg.device) if self.cfg.device else ref.device
+        if self.device.type != ref.device.type:
+            raise ConfigError(f"cfg.device {self.device} differs from the robot's {ref.device}")
+        self.dtype = ref.dtype
+        self.q_min = robot.q_min.to(self.device, self.dtype)
+        self.q_max = robot.q_max.to(self.device, self.dtype)
+        self.v_max = robot.v_max.to(self.device, self.dtype)
+        self.radii = ref.to(self.device, self.dtype)
+        self.num_joints = int(robot.num_joints)
+
+    # ----------------------------------------------------------------- set-up helpers
+    def _spheres_for(self, joint_names: tuple[str, ...]) -> C.SphereMap:
+        if self.human_spheres is not None:
+            return self.human_spheres
+        if joint_names not in self._sphere_cache:
+            self._sphere_cache[joint_names] = HumanSphereMap.from_segments(joint_names)
+        return self._sphere_cache[joint_names]
+
+    def min_duration(self, q_start: torch.Tensor, q_goal: torch.Tensor) -> float:
+        """Shortest start-to-goal time of a straight line at 2/3 of the velocity limits [s]."""
+        ratio = ((q_goal - q_start).abs() / self.v_max).max()
+        return float(1.5 * ratio)
+
+    def initial_trajectories(
+        self, q_start: torch.Tensor, q_goal: torch.Tensor, num: int, seed: int
+    ) -> torch.Tensor:
+        """Straight line plus smooth random perturbations (the first one unperturbed).
+
+        Args:
+            q_start: (J,) start [rad].
+            q_goal: (J,) goal [rad].
+            num: how many trajectories.
+            seed: seed of the perturbations.
+
+        Returns:
+            (num, W, J) [rad], clamped to the joint limits, start and goal pinned.
+        """
+        w, j = self.cfg.num_waypoints, self.num_joints
+        s = torch.linspace(0.0, 1.0, w, device=self.device, dtype=self.dtype)
+        line = q_start + s[:, None] * (q_goal - q_start)  # (W, J)
+        gen = torch.Generator().manual_seed(seed)
+        amp = torch.randn(num, 3, j, generator=gen, dtype=torch.float64)  # (num, 3 modes, J)
+        amp = (amp * self.cfg.perturbation_std / torch.arange(1, 4).view(1, 3, 1)).to(
+            self.device, self.dtype
+        )
+        amp[0] = 0.0
+        modes = torch.stack([torch.sin(math.pi * k * s) for k in (1, 2, 3)])  # (3, W)
+        q = line + torch.einsum("nkj,kw->nwj", amp, modes)  # (num, W, J)
+        return torch.maximum(torch.minimum(q, self.q_max), self.q_min)
+
+    # ----------------------------------------------------------------- costs
+    def _terms(
+        self,
+        q: torch.Tensor,
+        dt: float,
+        qd_start: torch.Tensor | None,
+        q_goal: torch.Tensor,
+        human: C.HumanObstacle | None,
+        win_idx: torch.Tensor,
+        pairs: torch.Tensor | None,
+        timer: _Timer,
+        exact: bool = False,
+    ) -> tuple[dict[str, torch.Tensor], torch.Tensor | None, torch.Tensor | None]:
+        """Unweighted (B,) cost terms, the window bound (B, W_x), the min clearance (B, W)."""
+        terms = {
+            "joint_acc_l2": C.joint_acc_l2(q, dt, qd_start),
+            "joint_limit_violation": C.joint_limit_violation(q, self.q_min, self.q_max),
+            "joint_vel_limit_violation": C.joint_vel_limit_violation(q, dt, self.v_max),
+            "goal_distance": C.goal_distance(q[:, -1], q_goal),
+        }
+        bound = clearance = None
+        if self.static_scene is not None:
+            centers = self.robot.sphere_centers(q)  # (B, W, S_r, 3)
+            terms["static_clearance"], clearance = C.static_clearance(
+                centers, self.radii, self.static_scene, self.cfg.static_margin
+            )
+        if human is not None:
+            q_pts = self._collision_points(q, win_idx)  # (B, W_x * n_sub, J)
+            centers_x = self.robot.sphere_centers(q_pts)  # (B, W_x * n_sub, S_r, 3)
+            with timer:
+                bound, pen = C.human_collision_bound(
+                    centers_x, self.radii, human, pairs, exact=exact
+                )
+            bound = bound.view(q.shape[0], -1, self.cfg.collision_substeps).amax(-1)  # (B, W_x)
+            target = self.cfg.penalty_target * (1.0 - self.cfg.confidence)
+            excess = torch.relu(torch.log(bound.clamp_min(1e-30)) - math.log(target))
+            terms["human_collision_bound"] = bound.sum(-1)
+            terms["human_confidence_penalty"] = excess.square().sum(-1)
+            terms["human_mean_penetration"] = pen
+        return terms, bound, clearance
+
+    def _weighted(self, terms: dict[str, torch.Tensor]) -> torch.Tensor:
+        w = self.cfg.weights
+        return sum(getattr(w, name) * value for name, value in terms.items())  # (B,)
+
+    # ----------------------------------------------------------------- solve
+    def solve(
+        self,
+        q_start: torch.Tensor,
+        q_goal: torch.Tensor,
+        *,
+        forecast: Forecast | None = None,
+        forecast_t0: float = 0.0,
+        t0: float = 0.0,
+        duration: float | None = None,
+        window: tuple[float, float] | None = None,
+        q_init: torch.Tensor | None = None,
+        qd_start: torch.Tensor | None = None,
+        arrive: float | None = None,
+    ) -> PlanResult:
+        """Plan from ``q_start`` at ``t0`` to ``q_goal`` at ``t0 + duration``.
+
+        Args:
+            q_start: (J,) start configuration [rad] (pinned).
+            q_goal: (J,) goal configuration [rad] (pinned at the last waypoint).
+            forecast: the predicted human (batch entry 0), or None for no human.
+            forecast_t0: time of the last observed frame of the forecast [s].
+            t0: time of the first waypoint [s].
+            duration: seconds from start to goal; None uses ``cfg.horizon_s``, lengthened to
+                respect the velocity limits.
+            window: (t_a, t_b) absolute times [s] of the execution window whose waypoints
+                carry the human cost and the confidence constraint (eq. collision_probability);
+                None uses every waypoint after the start.
+            q_init: (B, W, J) initial trajectories [rad] (a warm start: ``cfg.warm_iterations``
+                iterations); None builds cold ones (``cfg.iterations``).
+            qd_start: (J,) velocity at the start [rad/s] (continuity with the previous plan).
+            arrive: absolute time [s] from which the plan holds the goal (the waypoints at or
+                after it are pinned to ``q_goal``); None means the last waypoint.
+
+        Returns:
+            The accepted plan.
+
+        Raises:
+            ShapeError: on inputs of the wrong shape.
+            PlanningError: when the optimisation produces non-finite waypoints.
+        """
+        t_begin = time.perf_counter()
+        cfg, j, w = self.cfg, self.num_joints, self.cfg.num_waypoints
+        check_shape("q_start", q_start, (j,))
+        check_shape("q_goal", q_goal, (j,))
+        q_start = q_start.to(self.device, self.dtype)
+        q_goal = q_goal.to(self.device, self.dtype)
+        if qd_start is not None:
+            check_shape("qd_start", qd_start, (j,))
+            qd_start = qd_start.to(self.device, self.dtype)
+        if duration is None:
+            duration = max(cfg.horizon_s, self.min_duration(q_start, q_goal))
+        if not duration > 0.0:
+            raise ConfigError(f"expected duration > 0, got {duration}")
+        times = uniform_times(t0, duration, w, q_start)
+        dt = duration / (w - 1)
+        win_idx = self._window_indices(times, window)
+
+        collision_timer = _Timer(self.device)
+        predict_timer = _Timer(self.device)
+        human = None
+        if forecast is not None:
+            with predict_timer:
+                spheres = self._spheres_for(tuple(forecast.joint_names))
+                t_pts = self._collision_points(times.view(1, -1, 1), win_idx)[0, :, 0]
+                human = C.forecast_to_obstacle(forecast, t_pts, forecast_t0, spheres)
+
+        if q_init is not None:
+            check_shape("q_init", q_init, (cfg.num_trajectories, w, j))
+            q0 = q_init.to(self.device, self.dtype).clone()
+            iterations = cfg.warm_iterations
+        else:
+            q0 = self.initial_trajectories(q_start, q_goal, cfg.num_trajectories, cfg.seed)
+            iterations = cfg.iterations
+        q0 = torch.maximum(torch.minimum(q0, self.q_max), self.q_min)
+
+        # Optimise the second differences z = D x + b of the free waypoints x (b carries the
+        # pinned ends): smoothness is then a well-conditioned sum of squares, and a step in z
+        # moves the waypoints smoothly (the covariant update of CHOMP / ITOMP).
+        n_goal = w - 1  # first waypoint pinned to the goal
+        if arrive is not None:
+            n_goal = int(torch.searchsorted(times, times.new_tensor([arrive - 1e-6]))[0])
+            n_goal = min(max(n_goal, 2), w - 1)
+        n_free = n_goal - 1
+        d_mat, d_inv = self._difference_operators(n_free)
+        b_vec = torch.zeros(cfg.num_trajectories, n_free, j, device=self.device, dtype=self.dtype)
+        b_vec[:, 0] += q_start
+        b_vec[:, -1] += q_goal
+        z = (d_mat @ q0[:, 1:n_goal] + b_vec).requires_grad_(True)  # (B, n_free, J)
+        head = q_start.expand(cfg.num_trajectories, 1, j)
+        tail = q_goal.expand(cfg.num_trajectories, w - n_goal, j)
+        adam_m = torch.zeros_like(z)
+        adam_v = torch.zeros_like(z)
+        decay = cfg.lr_final_ratio ** (1.0 / max(iterations - 1, 1))
+        pairs = None
+        x = q0[:, 1:n_goal]
+        for it in range(iterations):
+            x = d_inv @ (z - b_vec)  # (B, n_free, J)
+            q = torch.cat([head, x, tail], dim=1)  # (B, W, J)
+            if human is not None and it % cfg.prune_every == 0:
+                with collision_timer, torch.no_grad():
+                    pairs = C.candidate_pairs(
+                        self.robot.sphere_centers(self._collision_points(q, win_idx)),
+                        self.radii,
+                        human,
+                        cfg.prune_margin,
+                    )
+            terms, _, _ = self._terms(
+                q, dt, qd_start, q_goal, human, win_idx, pairs, collision_timer
+            )
+            loss = self._weighted(terms).sum()
+            (grad,) = torch.autograd.grad(loss, z)
+            with torch.no_grad():
+                step = it + 1
+                adam_m.mul_(BETA1).add_(grad, alpha=1 - BETA1)
+                adam_v.mul_(BETA2).addcmul_(grad, grad, value=1 - BETA2)
+                m_hat = adam_m / (1.0 - BETA1**step)
+                v_hat = adam_v / (1.0 - BETA2**step)
+                z -= cfg.lr * decay**it * m_hat / (v_hat.sqrt() + 1e-12)
+                x = d_inv @ (z - b_vec)
+                x_c = torch.maximum(torch.minimum(x, self.q_max), self.q_min)
+                if not torch.equal(x_c, x):
+                    x = x_c
+                    z.copy_(d_mat @ x + b_vec)
+        x = x.detach()
+
+        with torch.no_grad():
+            q_all = torch.cat([head, x, tail], dim=1)  # (B, W, J)
+            if not bool(torch.isfinite(q_all).all()):
+                raise PlanningError("the optimisation produced non-finite waypoints")
+            result = self._accept(
+                q_all, times, dt, qd_start, q_goal, human, win_idx, window, collision_timer
+            )
+        total = 1e3 * (time.perf_counter() - t_begin)
+        result.timings = {
+            "predict_ms": predict_timer.ms,
+            "collision_ms": collision_timer.ms,
+            "optimiser_ms": total - predict_timer.ms - collision_timer.ms,
+            "total_ms": total,
+            "iterations": float(iterations),
+        }
+        return result
+
+    def _collision_points(self, q: torch.Tensor, win_idx: torch.Tensor) -> torch.Tensor:
+        """(B, W_x * n_sub, J) points at k / n_sub along the segment ending at each window
+        waypoint (k = 1..n_sub), from q (B, W, J)."""
+        n = self.cfg.collision_substeps
+        if n == 1:
+            return q[:, win_idx]
+        qa, qb = q[:, win_idx - 1], q[:, win_idx]  # (B, W_x, J)
+        f = torch.arange(1, n + 1, device=q.device, dtype=q.dtype) / n  # (n,)
+        pts = qa.unsqueeze(2) + f.view(1, 1, n, 1) * (qb - qa).unsqueeze(2)  # (B, W_x, n, J)
+        return pts.flatten(1, 2)
+
+    def _difference_operators(self, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """(n, n) second-difference matrix D of n free waypoints and its inverse (cached)."""
+        key = (n, self.device, self.dtype)
+        if key not in self._d_cache:
+            d = torch.diag(torch.full((n,), -2.0, dtype=torch.float64))
+            d += torch.diag(torch.ones(n - 1, dtype=torch.float64), 1)
+            d += torch.diag(torch.ones(n - 1, dtype=torch.float64), -1)
+            self._d_cache[key] = (
+                d.to(self.device, self.dtype),
+                torch.linalg.inv(d).to(self.device, self.dtype),
+            )
+        return self._d_cache[key]
+
+    def _window_indices(
+        self, times: torch.Tensor, window: tuple[float, float] | None
+    ) -> torch.Tensor:
+        """(W_x,) waypoint indices inside the window (never the pinned start)."""
+        w = times.shape[0]
+        if window is None:
+            return torch.arange(1, w, device=times.device)
+        t_a, t_b = window
+        if t_b < t_a:
+            raise ConfigError(f"expected window (t_a, t_b) with t_a <= t_b, got {window}")
+        eps = 1e-6
+        # every segment [t_{i-1}, t_i] that overlaps the window: the plan runs until t_b
+        inside = (times[1:] > t_a + eps) & (times[:-1] < t_b - eps)
+        idx = torch.nonzero(inside).flatten() + 1
+        if idx.numel() == 0:  # a degenerate window: the segment containing t_a
+            idx = torch.searchsorted(times, times.new_tensor([t_a])).clamp(1, w - 1)
+        return idx
+
+    def _accept(
+        self,
+        q_all: torch.Tensor,
+        times: torch.Tensor,
+        dt: float,
+        qd_start: torch.Tensor | None,
+        q_goal: torch.Tensor,
+        human: C.HumanObstacle | None,
+        win_idx: torch.Tensor,
+        window: tuple[float, float] | None,
+        timer: _Timer,
+    ) -> PlanResult:
+        """Exact check of all B trajectories, then the best feasible one or a wait."""
+        cfg = self.cfg
+        b, w, _ = q_all.shape
+        limit = 1.0 - cfg.confidence
+        terms, bound, clearance = self._accept_terms(
+            q_all, dt, qd_start, q_goal, human, win_idx, timer
+        )
+        rank = self._weighted(
+            {k: v for k, v in terms.items() if not k.startswith("human_confidence")}
+        )
+        bad = torch.zeros(b, w, dtype=torch.bool, device=q_all.device)  # (B, W)
+        if bound is not None:
+            bad[:, win_idx] |= bound > limit
+        if clearance is not None:
+            bad[:, 1:] |= clearance[:, 1:] < 0.0
+        # a segment faster than the limits could jump past the checks
+        too_fast = ((q_all[:, 1:] - q_all[:, :-1]).abs() / dt > VEL_TOL * self.v_max).any(-1)
+        bad[:, 1:] |= too_fast
+        ok = ~bad.any(-1)
+        if bool(ok.any()):
+            best = int(torch.where(ok, rank, torch.full_like(rank, math.inf)).argmin())
+            return self._result(True, q_all, best, times, bound, win_idx, terms, qd_start, 0.0)
+        # No trajectory is safe: follow the one that stays safe longest, then wait (sec. 5).
+        first_bad = torch.where(
+            bad,
+            torch.arange(w, device=bad.device).expand(b, w),
+            torch.full_like(bad, w, dtype=torch.long),
+        ).amin(-1)  # (B,)
+        score = first_bad.to(rank.dtype) * 1e6 - rank.clamp(max=1e5)
+        best = int(score.argmax())
+        hold = max(int(first_bad[best]) - 1, 0)
+        q_hold = q_all[best].clone()
+        q_hold[hold + 1 :] = q_hold[hold]
+        q_one = q_hold.unsqueeze(0)
+        terms1, bound1, _ = self._accept_terms(q_one, dt, qd_start, q_goal, human, win_idx, timer)
+        t_end = float(times[-1]) if window is None else min(float(window[1]), float(times[-1]))
+        wait_s = max(t_end - float(times[hold]), 0.0)
+        q_cand = q_all.clone()
+        q_cand[best] = q_hold
+        res = self._result(
+            False, q_cand, best, times, bound1, win_idx, terms1, qd_start, wait_s, row=0
+        )
+        res.hold_index = hold
+        return res
+
+    def _accept_terms(
+        self,
+        q: torch.Tensor,
+        dt: float,
+        qd_start: torch.Tensor | None,
+        q_goal: torch.Tensor,
+        human: C.HumanObstacle | None,
+        win_idx: torch.Tensor,
+        timer: _Timer,
+    ) -> tuple[dict[str, torch.Tensor], torch.Tensor | None, torch.Tensor | None]:
+        """Cost terms with sphere pairs pruned at exactly PRUNE_SIGMAS (no margin)."""
+        pairs = None
+        if human is not None:
+            with timer:
+                pairs = C.candidate_pairs(
+                    self.robot.sphere_centers(self._collision_points(q, win_idx)),
+                    self.radii,
+                    human,
+                    0.0,
+                )
+        return self._terms(q, dt, qd_start, q_goal, human, win_idx, pairs, timer, exact=True)
+
+    def _result(
+        self,
+        feasible: bool,
+        q_all: torch.Tensor,
+        best: int,
+        times: torch.Tensor,
+        bound: torch.Tensor | None,
+        win_idx: torch.Tensor,
+        terms: dict[str, torch.Tensor],
+        qd_start: torch.Tensor | None,
+        wait_s: float,
+        row: int | None = None,
+    ) -> PlanResult:
+        r = best if row is None else row
+        full = torch.zeros_like(times)
+        if bound is not None:
+            full[win_idx] = bound[r]
+        cost_terms = {k: float(v[r]) for k, v in terms.items()}
+        cost_terms["max_bound"] = float(full.max())
+        vel = (q_all[best, 1:] - q_all[best, :-1]).abs() / (times[1] - times[0])
+        cost_terms["max_vel_ratio"] = float((vel / self.v_max).max())
+        return PlanResult(
+            feasible=feasible,
+            q=q_all[best].clone(),
+            times=times.clone(),
+            bound=full,
+            wait_s=wait_s,
+            hold_index=None,
+            qd_start=qd_start,
+            candidates=q_all,
+            cost_terms=cost_terms,
+            timings={},
+        )

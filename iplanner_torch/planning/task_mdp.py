@@ -1,0 +1,294 @@
+"""MDP task planner over progress states with Q-learning (paper sec. 3.1, 4.2).
+
+With n objects the human actions are ``Take_i`` and the robot actions ``Fetch_i``. A progress
+state ``p`` is a bitmask over both: bit ``i`` is ``Take_i`` done, bit ``n + i`` is ``Fetch_i``
+done. The robot picks the next ``Fetch_i``; Q is learned with
+
+    Q(p, a) <- (1 - alpha) Q(p, a) + alpha (R + gamma max_a' Q(p', a'))
+    R = w_prep R_prep(p, a) + w_delay R_delay,   R_prep(p, a) = sum_h p(n = h | p) H(h, a)
+
+(eq. reward), where ``p(n | p)`` is the predicted next human action (eq. next_action) and
+``R_delay = -d`` the delay of the robot's motion (waits forced by the human, sec. 5) plus the
+time the human stood waiting for an object not yet fetched.
+
+Episodes are simulated: during each fetch, the human picks the next object from ``p(n | p)``
+restricted to what the task order allows; ``Take_i`` is possible only after ``Fetch_i``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from iplanner_torch.errors import CheckpointError, ConfigError
+
+
+class TaskOrderLike(Protocol):
+    """The human's task order (``data.TaskOrder`` satisfies it)."""
+
+    def allowed_next(self, done: set[int]) -> set[int]:
+        """Objects the human may take next, given the set already taken."""
+        ...
+
+
+#: p(n | human progress): the human-progress bitmask -> (n,) probabilities of Take_i next.
+NextActionProbs = Callable[[int], Sequence[float]] | Mapping[int, Sequence[float]]
+#: delay of the robot's motion for Fetch_i in state p [s]: (p, i, rng) -> seconds.
+DelayFn = Callable[[int, int, np.random.Generator], float]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TaskMDPCfg:
+    """Settings of :class:`TaskPlanner`."""
+
+    # n, objects to hand over (robot actions Fetch_i, human actions Take_i)
+    num_objects: int
+    # alpha, the Q-learning rate (paper: 0.1)
+    alpha: float = 0.1
+    # gamma, the discount
+    gamma: float = 0.9
+    # epsilon of the epsilon-greedy exploration while training
+    epsilon: float = 0.2
+    # simulated training episodes
+    episodes: int = 2000
+    # w_prep, weight of the preparation reward
+    w_prep: float = 1.0
+    # w_delay, weight of the (negative) delay reward [1/s]
+    w_delay: float = 0.1
+    # seconds the human waits when the next object is not yet fetched (one fetch's time)
+    idle_delay_s: float = 2.0
+    # seed of the training episodes
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.num_objects <= 16:
+            raise ConfigError(f"expected num_objects in [1, 16], got {self.num_objects}")
+        if not 0.0 < self.alpha <= 1.0:
+            raise ConfigError(f"expected alpha in (0, 1], got {self.alpha}")
+        if not 0.0 <= self.gamma <= 1.0:
+            raise ConfigError(f"expected gamma in [0, 1], got {self.gamma}")
+        if not 0.0 <= self.epsilon <= 1.0:
+            raise ConfigError(f"expected epsilon in [0, 1], got {self.epsilon}")
+        if self.episodes < 0:
+            raise ConfigError(f"expected episodes >= 0, got {self.episodes}")
+        if self.w_prep < 0.0 or self.w_delay < 0.0 or self.idle_delay_s < 0.0:
+            raise ConfigError("expected w_prep, w_delay and idle_delay_s >= 0")
+
+
+def encode_state(taken: set[int] | int, fetched: set[int] | int, num_objects: int) -> int:
+    """The progress bitmask: bit i for Take_i, bit n + i for Fetch_i."""
+    t = taken if isinstance(taken, int) else sum(1 << i for i in taken)
+    f = fetched if isinstance(fetched, int) else sum(1 << i for i in fetched)
+    return t | (f << num_objects)
+
+
+def decode_state(state: int, num_objects: int) -> tuple[int, int]:
+    """(taken mask, fetched mask) of a progress bitmask."""
+    full = (1 << num_objects) - 1
+    return state & full, (state >> num_objects) & full
+
+
+def _bits(mask: int, n: int) -> set[int]:
+    return {i for i in range(n) if mask >> i & 1}
+
+
+class TaskPlanner:
+    """Q-learning task planner: which object the robot fetches next.
+
+    Args:
+        cfg: settings.
+        task_order: the human's order constraints (only needed for training).
+        next_action_probs: p(n | p) as a callable or a table keyed by the human-progress
+            bitmask (missing entries: uniform over the allowed objects).
+        h_table: (n, n) prior reward H[h, a] of fetching ``a`` before the human's ``Take_h``;
+            None is the identity (+1 when Fetch_i precedes Take_i, else 0).
+        delay_fn: the robot's motion delay for a fetch [s]; None means no delay.
+    """
+
+    def __init__(
+        self,
+        cfg: TaskMDPCfg,
+        task_order: TaskOrderLike | None = None,
+        next_action_probs: NextActionProbs | None = None,
+        h_table: np.ndarray | None = None,
+        delay_fn: DelayFn | None = None,
+    ) -> None:
+        n = cfg.num_objects
+        self.cfg = cfg
+        self.task_order = task_order
+        self.next_action_probs = next_action_probs
+        self.h_table = np.eye(n) if h_table is None else np.asarray(h_table, dtype=np.float64)
+        if self.h_table.shape != (n, n):
+            raise ConfigError(f"expected h_table ({n}, {n}), got {self.h_table.shape}")
+        self.delay_fn = delay_fn
+        self.q: dict[int, np.ndarray] = {}
+
+    # ------------------------------------------------------------ model pieces
+    def _allowed_takes(self, taken: int) -> set[int]:
+        done = _bits(taken, self.cfg.num_objects)
+        if self.task_order is None:
+            return set(range(self.cfg.num_objects)) - done
+        return set(self.task_order.allowed_next(done)) - done
+
+    def human_next_probs(self, taken: int) -> np.ndarray:
+        """(n,) p(n = Take_i | p) restricted to the allowed objects and renormalised.
+
+        Args:
+            taken: bitmask of the objects the human has taken.
+        """
+        n = self.cfg.num_objects
+        allowed = self._allowed_takes(taken)
+        raw = None
+        if callable(self.next_action_probs):
+            raw = self.next_action_probs(taken)
+        elif self.next_action_probs is not None:
+            raw = self.next_action_probs.get(taken)
+        p = np.zeros(n) if raw is None else np.asarray(raw, dtype=np.float64).copy()
+        if p.shape != (n,):
+            raise ConfigError(f"expected next-action probabilities of shape ({n},), got {p.shape}")
+        mask = np.array([i in allowed for i in range(n)])
+        p = np.where(mask, np.clip(p, 0.0, None), 0.0)
+        if p.sum() <= 0.0 and mask.any():
+            p = mask.astype(np.float64)
+        return p / p.sum() if p.sum() > 0 else p
+
+    def r_prep(self, state: int, action: int) -> float:
+        """Eq. reward: ``sum_h p(n = h | p) H(h, a)``."""
+        taken, _ = decode_state(state, self.cfg.num_objects)
+        return float(self.human_next_probs(taken) @ self.h_table[:, action])
+
+    def available(self, state: int) -> list[int]:
+        """Objects not yet fetched in ``state``."""
+        _, fetched = decode_state(state, self.cfg.num_objects)
+        return [i for i in range(self.cfg.num_objects) if not fetched >> i & 1]
+
+    def q_values(self, state: int) -> np.ndarray:
+        """(n,) Q(p, Fetch_i); -inf for objects already fetched."""
+        q = self.q.get(state)
+        out = np.full(self.cfg.num_objects, -math.inf)
+        avail = self.available(state)
+        out[avail] = 0.0 if q is None else q[avail]
+        return out
+
+    # ------------------------------------------------------------ learning
+    def update(self, state: int, action: int, reward: float, next_state: int | None) -> None:
+        """One Q-learning update (``next_state`` None: terminal)."""
+        n = self.cfg.num_objects
+        q = self.q.setdefault(state, np.zeros(n))
+        future = 0.0
+        if next_state is not None and self.available(next_state):
+            future = float(np.max(self.q_values(next_state)))
+        a = self.cfg.alpha
+        q[action] = (1.0 - a) * q[action] + a * (reward + self.cfg.gamma * future)
+
+    def simulate_step(
+        self, state: int, action: int, rng: np.random.Generator
+    ) -> tuple[int, float, float]:
+        """The robot fetches ``action`` while the human picks a next object.
+
+        Returns:
+            next state, reward, delay [s] (robot motion delay plus human idle time).
+        """
+        n = self.cfg.num_objects
+        taken, fetched = decode_state(state, n)
+        reward_prep = self.r_prep(state, action)
+        delay = 0.0 if self.delay_fn is None else float(self.delay_fn(state, action, rng))
+        fetched |= 1 << action
+        probs = self.human_next_probs(taken)
+        if probs.sum() > 0:
+            h = int(rng.choice(n, p=probs))
+            if fetched >> h & 1:
+                taken |= 1 << h
+            else:
+                delay += self.cfg.idle_delay_s
+        reward = self.cfg.w_prep * reward_prep - self.cfg.w_delay * delay
+        return encode_state(taken, fetched, n), reward, delay
+
+    def train(self, episodes: int | None = None) -> list[float]:
+        """Epsilon-greedy Q-learning over simulated episodes.
+
+        Args:
+            episodes: how many; None uses ``cfg.episodes``.
+
+        Returns:
+            The return (sum of rewards) of each episode.
+        """
+        rng = np.random.default_rng(self.cfg.seed)
+        returns = []
+        for _ in range(self.cfg.episodes if episodes is None else episodes):
+            state, total = 0, 0.0
+            while self.available(state):
+                avail = self.available(state)
+                if rng.random() < self.cfg.epsilon:
+                    action = int(rng.choice(avail))
+                else:
+                    action = self._greedy(state)
+                nxt, reward, _ = self.simulate_step(state, action, rng)
+                self.update(state, action, reward, nxt if self.available(nxt) else None)
+                state, total = nxt, total + reward
+            returns.append(total)
+        return returns
+
+    def _greedy(self, state: int) -> int:
+        q = self.q_values(state)
+        if state not in self.q:  # unseen: the immediate preparation reward decides
+            q = np.array(
+                [
+                    self.r_prep(state, a) if a in self.available(state) else -math.inf
+                    for a in range(self.cfg.num_objects)
+                ]
+            )
+        return int(np.argmax(q))
+
+    def policy(self, taken: set[int] | int, fetched: set[int] | int) -> int | None:
+        """pi(p): the object to fetch next, or None when all are fetched."""
+        state = encode_state(taken, fetched, self.cfg.num_objects)
+        return self._greedy(state) if self.available(state) else None
+
+    # ------------------------------------------------------------ persistence
+    def save(self, path: str | Path) -> None:
+        """Write the settings, H and the Q table as JSON."""
+        data = {
+            "format": "iplanner_torch.task_mdp/1",
+            "cfg": asdict(self.cfg),
+            "h_table": self.h_table.tolist(),
+            "q": {str(k): v.tolist() for k, v in self.q.items()},
+        }
+        Path(path).write_text(json.dumps(data))
+
+    @classmethod
+    def load(
+        cls,
+        path: str | Path,
+        task_order: TaskOrderLike | None = None,
+        next_action_probs: NextActionProbs | None = None,
+        delay_fn: DelayFn | None = None,
+    ) -> TaskPlanner:
+        """Read a planner written by :meth:`save`.
+
+        Raises:
+            CheckpointError: when the file is missing or not a task-planner file.
+        """
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise CheckpointError(f"cannot read task planner {path}: {exc}") from exc
+        if data.get("format") != "iplanner_torch.task_mdp/1":
+            raise CheckpointError(
+                f"{path} is not a task planner file (format {data.get('format')!r})"
+            )
+        planner = cls(
+            TaskMDPCfg(**data["cfg"]),
+            task_order,
+            next_action_probs,
+            np.asarray(data["h_table"]),
+            delay_fn,
+        )
+        planner.q = {int(k): np.asarray(v, dtype=np.float64) for k, v in data["q"].items()}
+        return planner

@@ -1,0 +1,197 @@
+"""Space-time waypoint trajectories (paper sec. 3.2: Q = [q_s q_1 ... q_g; t_0 ... t_n]).
+
+Waypoints are uniformly spaced in time. Between waypoints the executed motion is a cubic
+Hermite spline whose tangents are central differences (Catmull-Rom), with a given velocity at
+the start (continuity with the previous plan), rest at the end and where a joint holds or
+turns (so a hold does not overshoot); before the first and after
+the last waypoint the trajectory holds its end pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import torch
+
+from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.types import check_shape
+
+
+def velocities(q: torch.Tensor, dt: float) -> torch.Tensor:
+    """Forward-difference velocities between consecutive waypoints.
+
+    Args:
+        q: (..., W, J) joint positions [rad].
+        dt: seconds between waypoints.
+
+    Returns:
+        (..., W - 1, J) velocities [rad/s]; entry i is (q_{i+1} - q_i) / dt.
+    """
+    return (q[..., 1:, :] - q[..., :-1, :]) / dt
+
+
+def accelerations(
+    q: torch.Tensor, dt: float, qd_start: torch.Tensor | None = None
+) -> torch.Tensor:
+    """Second-difference accelerations at the interior waypoints.
+
+    Args:
+        q: (..., W, J) joint positions [rad].
+        dt: seconds between waypoints.
+        qd_start: (..., J) or (J,) velocity at the first waypoint [rad/s]; when given, the
+            acceleration at the first waypoint ``((q_1 - q_0) / dt - qd_start) / dt`` is
+            prepended.
+
+    Returns:
+        (..., W - 2, J) accelerations [rad/s^2] (``W - 1`` rows when ``qd_start`` is given).
+    """
+    acc = (q[..., 2:, :] - 2.0 * q[..., 1:-1, :] + q[..., :-2, :]) / (dt * dt)
+    if qd_start is None:
+        return acc
+    a0 = ((q[..., 1, :] - q[..., 0, :]) / dt - qd_start) / dt
+    return torch.cat([a0.unsqueeze(-2).expand(*acc.shape[:-2], 1, acc.shape[-1]), acc], dim=-2)
+
+
+def uniform_times(
+    t0: float, duration: float, num_waypoints: int, like: torch.Tensor
+) -> torch.Tensor:
+    """(W,) waypoint times [s] from ``t0`` to ``t0 + duration``, on ``like``'s device/dtype."""
+    return t0 + torch.linspace(0.0, duration, num_waypoints, device=like.device, dtype=like.dtype)
+
+
+@dataclass(kw_only=True)
+class Trajectory:
+    """One space-time trajectory.
+
+    Attributes:
+        q: (W, J) waypoint joint positions [rad].
+        times: (W,) waypoint times [s], strictly increasing (uniform from the optimiser; a
+            hold segment may make the last interval longer).
+        qd_start: (J,) velocity at the first waypoint [rad/s]; None means rest.
+    """
+
+    q: torch.Tensor
+    times: torch.Tensor
+    qd_start: torch.Tensor | None = None
+
+    def __post_init__(self) -> None:
+        check_shape("q", self.q, ("W", "J"))
+        check_shape("times", self.times, (self.q.shape[0],))
+        if self.q.shape[0] < 2:
+            raise ShapeError(f"expected at least 2 waypoints, got q {tuple(self.q.shape)}")
+        if bool((self.times[1:] <= self.times[:-1]).any()):
+            raise ConfigError("expected strictly increasing waypoint times")
+        if self.qd_start is not None:
+            check_shape("qd_start", self.qd_start, (self.q.shape[1],))
+
+    @property
+    def t_start(self) -> float:
+        """Time of the first waypoint [s]."""
+        return float(self.times[0])
+
+    @property
+    def t_end(self) -> float:
+        """Time of the last waypoint [s]."""
+        return float(self.times[-1])
+
+    def _tangents(self) -> torch.Tensor:
+        """(W, J) Catmull-Rom tangents [rad/s]; given velocity at the start, rest at the end
+        and wherever a joint holds or turns."""
+        q, t = self.q, self.times
+        m = torch.zeros_like(q)
+        if q.shape[0] > 2:
+            m[1:-1] = (q[2:] - q[:-2]) / (t[2:] - t[:-2]).unsqueeze(-1)
+            # rest at holds and turning points (no overshoot past a waypoint)
+            turn = (q[2:] - q[1:-1]) * (q[1:-1] - q[:-2]) <= 0.0
+            m[1:-1] = torch.where(turn, torch.zeros_like(m[1:-1]), m[1:-1])
+        if self.qd_start is not None:
+            m[0] = self.qd_start
+        return m
+
+    def sample(self, t: float | torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Positions and velocities of the cubic Hermite spline at times ``t``.
+
+        Args:
+            t: scalar or (N,) query times [s]; outside [t_start, t_end] the end pose is held
+                with zero velocity.
+
+        Returns:
+            q (J,) or (N, J) [rad] and qd of the same shape [rad/s].
+        """
+        scalar = not isinstance(t, torch.Tensor) or t.dim() == 0
+        tq = torch.as_tensor(t, dtype=self.times.dtype, device=self.times.device).reshape(-1)
+        times, q = self.times, self.q
+        m = self._tangents()
+        idx = torch.searchsorted(times, tq, right=True) - 1
+        idx = idx.clamp(0, times.shape[0] - 2)
+        t_a, t_b = times[idx], times[idx + 1]
+        h = (t_b - t_a).unsqueeze(-1)  # (N, 1)
+        s = ((tq - t_a) / (t_b - t_a)).clamp(0.0, 1.0).unsqueeze(-1)  # (N, 1)
+        p0, p1, m0, m1 = q[idx], q[idx + 1], m[idx] * h, m[idx + 1] * h
+        s2, s3 = s * s, s * s * s
+        pos = (
+            (2 * s3 - 3 * s2 + 1) * p0
+            + (s3 - 2 * s2 + s) * m0
+            + (-2 * s3 + 3 * s2) * p1
+            + (s3 - s2) * m1
+        )
+        vel = (
+            (6 * s2 - 6 * s) * p0
+            + (3 * s2 - 4 * s + 1) * m0
+            + (-6 * s2 + 6 * s) * p1
+            + (3 * s2 - 2 * s) * m1
+        ) / h
+        outside = ((tq < times[0]) | (tq > times[-1])).unsqueeze(-1)
+        vel = torch.where(outside, torch.zeros_like(vel), vel)
+        if scalar:
+            return pos[0], vel[0]
+        return pos, vel
+
+    def resample(self, t0: float, duration: float, num_waypoints: int) -> Trajectory:
+        """The trajectory sampled at ``num_waypoints`` uniform times from ``t0`` (a warm start).
+
+        Args:
+            t0: new start time [s].
+            duration: new span [s].
+            num_waypoints: W of the result.
+        """
+        times = uniform_times(t0, duration, num_waypoints, self.times)
+        q, qd = self.sample(times)
+        return Trajectory(q=q, times=times, qd_start=qd[0])
+
+    def with_hold(self, index: int, until: float) -> Trajectory:
+        """Keep waypoints ``0..index`` and hold ``q[index]`` until time ``until`` (paper sec. 5:
+        a waypoint appended at the last safe pose makes the robot wait).
+
+        Args:
+            index: last waypoint kept.
+            until: time [s] to hold the pose to; later than ``times[index]``.
+
+        Raises:
+            ConfigError: when ``index`` is out of range.
+        """
+        if not 0 <= index < self.q.shape[0]:
+            raise ConfigError(f"expected hold index in [0, {self.q.shape[0]}), got {index}")
+        q = self.q[: index + 1]
+        times = self.times[: index + 1]
+        t_hold = max(float(until), float(times[-1]) + 1e-3)
+        q = torch.cat([q, q[-1:]], dim=0)
+        times = torch.cat([times, times.new_tensor([t_hold])])
+        return replace(self, q=q, times=times)
+
+
+def resample_linear(q: torch.Tensor, times: torch.Tensor, new_times: torch.Tensor) -> torch.Tensor:
+    """Piecewise-linear resampling of a batch of trajectories (holding the end poses).
+
+    Args:
+        q: (B, W, J) joint positions [rad] at ``times``.
+        times: (W,) strictly increasing times [s].
+        new_times: (W',) query times [s].
+
+    Returns:
+        (B, W', J) joint positions [rad].
+    """
+    tq = new_times.clamp(times[0], times[-1])
+    idx = (torch.searchsorted(times, tq, right=True) - 1).clamp(0, times.shape[0] - 2)
+    a = ((tq - times[idx]) / (times[idx + 1] - times[idx])).view(1, -1, 1)  # (1, W', 1)
+    return (1.0 - a) * q[:, idx] + a * q[:, idx + 1]

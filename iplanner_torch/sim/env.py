@@ -1,0 +1,368 @@
+"""The MuJoCo environment of the closed loop: robot execution, human, blocks and events.
+
+:meth:`SimEnv.step` advances one control period: the robot's position actuators track the
+commanded ``q_des + qd_des * tau`` (``tau`` the time since the command, a first-order hold of
+the planned trajectory) for ``physics_dt``-sized MuJoCo steps. A MuJoCo position actuator
+applies ``kp (ctrl - q) - kv qd``; its set point is advanced by ``(kv / kp) qd_des`` so that the
+force is the PD tracking law ``kp (q_des - q) + kv (qd_des - qd)`` (no velocity lag). The
+human's capsules follow the scripted human at every physics step, and robot-human contacts are
+read from ``data.contact``. After the physics, blocks are picked / placed, the human's script
+advances and the tracker samples the human.
+
+Blocks are kinematic (mocap): resting on the table, following the robot's tool point after a
+pick (fixed offset), resting on the delivery spot after the release, following the human's
+hand after the human grasps them, and finally put down beside the human.
+
+Task events (``TaskEvent.kind``): ``fetch_started``, ``picked``, ``delivered``,
+``fetch_done``, ``human_take_started``, ``human_grasped``, ``human_took``,
+``blocking_started``, ``done`` (every block taken by the human).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.sim.human import HumanCfg, ScriptedHuman
+from iplanner_torch.sim.scene import (
+    RobotLike,
+    SceneCfg,
+    SceneHandles,
+    build_scene,
+    pose_human,
+)
+from iplanner_torch.sim.tasks import FetchCfg, FetchPhase, FetchTask
+from iplanner_torch.sim.tracker import Tracker, TrackerCfg
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimCfg:
+    """Simulation rates, sensing and the human's behaviour."""
+
+    # MuJoCo physics timestep [s]
+    physics_dt: float = 0.002
+    # rate at which new joint commands are applied [Hz]
+    control_hz: float = 100.0
+    # tracker frame rate [Hz]
+    tracker_fps: float = 15.0
+    # tracker noise standard deviation per coordinate [m]
+    tracker_noise: float = 0.01
+    # probability that a joint is lost in a tracker frame
+    tracker_dropout: float = 0.0
+    # frames in the tracker window (the predictor's n_p)
+    tracker_window: int = 15
+    # human behaviour (speed, holds, idles, blocking)
+    human: HumanCfg = field(default_factory=HumanCfg)
+    # robot delivery tolerances
+    fetch: FetchCfg = field(default_factory=FetchCfg)
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.physics_dt <= 0.01:
+            raise ConfigError(f"expected physics_dt in (0, 0.01] s, got {self.physics_dt}")
+        if self.control_hz <= 0 or self.control_hz * self.physics_dt > 1.0 + 1e-9:
+            raise ConfigError(
+                f"expected 0 < control_hz <= 1 / physics_dt, got {self.control_hz} Hz with "
+                f"physics_dt {self.physics_dt} s"
+            )
+        self.tracker_cfg()  # validates the tracker fields
+
+    @property
+    def substeps(self) -> int:
+        """Physics steps per control period."""
+        return max(1, round(1.0 / (self.control_hz * self.physics_dt)))
+
+    def tracker_cfg(self) -> TrackerCfg:
+        """The tracker's configuration."""
+        return TrackerCfg(
+            fps=self.tracker_fps,
+            noise_sigma=self.tracker_noise,
+            dropout_rate=self.tracker_dropout,
+            window=self.tracker_window,
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class TaskEvent:
+    """A task event at a simulated time (kinds in the module docstring)."""
+
+    kind: str
+    block: int
+    time: float
+
+
+@dataclass(kw_only=True)
+class StepInfo:
+    """What happened during one control period.
+
+    Attributes:
+        events: task events, in order.
+        contact: whether any robot-human contact existed during the period.
+        new_contact: whether a contact began in this period (none in the previous one).
+    """
+
+    events: list[TaskEvent]
+    contact: bool
+    new_contact: bool
+
+
+class SimEnv:
+    """The closed-loop simulation of paper sec. 7.
+
+    Args:
+        scene_cfg: workspace geometry.
+        robot: the robot model (``mjcf_path``, ``joint_names``, ``q_home``, base pose).
+        human: the scripted human (its ``targets`` are the delivery grasp points).
+        tracker: the skeleton tracker.
+        seed: seed of the environment (only the MuJoCo state here; human and tracker carry
+            their own seeds).
+        cfg: rates and tolerances.
+    """
+
+    def __init__(
+        self,
+        scene_cfg: SceneCfg,
+        robot: RobotLike,
+        human: ScriptedHuman,
+        tracker: Tracker,
+        seed: int,
+        cfg: SimCfg | None = None,
+    ) -> None:
+        self.scene_cfg = scene_cfg
+        self.robot = robot
+        self.human = human
+        self.tracker = tracker
+        self.seed = int(seed)
+        self.cfg = cfg or SimCfg()
+        self.model = build_scene(scene_cfg, robot, physics_dt=self.cfg.physics_dt)
+        self.data = mujoco.MjData(self.model)
+        self.handles = SceneHandles.resolve(self.model, scene_cfg, robot)
+        self.num_joints = len(robot.joint_names)
+        self._ctrl_lo = self.model.actuator_ctrlrange[self.handles.actuator_ids, 0].copy()
+        self._ctrl_hi = self.model.actuator_ctrlrange[self.handles.actuator_ids, 1].copy()
+        limited = self.model.actuator_ctrllimited[self.handles.actuator_ids].astype(bool)
+        self._ctrl_lo[~limited] = -np.inf
+        self._ctrl_hi[~limited] = np.inf
+        kp = -self.model.actuator_biasprm[self.handles.actuator_ids, 1]
+        kv = -self.model.actuator_biasprm[self.handles.actuator_ids, 2]
+        self._vel_ff_s = np.where(kp > 0, kv / np.where(kp > 0, kp, 1.0), 0.0)  # (J,) [s]
+        self.reset()
+
+    # -- state --------------------------------------------------------------------------------
+
+    def reset(self, q_init: np.ndarray | None = None) -> None:
+        """Back to t = 0: robot at ``q_init`` (default ``q_home``) at rest, blocks at their far
+        positions, human at rest, tracker empty (its first frame is taken here).
+
+        Args:
+            q_init: (J,) initial joint positions [rad].
+        """
+        mujoco.mj_resetData(self.model, self.data)
+        q0 = _numpy(self.robot.q_home) if q_init is None else np.asarray(q_init, np.float64)
+        if q0.shape != (self.num_joints,):
+            raise ShapeError(f"expected q_init ({self.num_joints},), got {q0.shape}")
+        self.data.qpos[self.handles.qpos_adr] = q0
+        self.data.ctrl[self.handles.actuator_ids] = q0
+        self.human.reset()
+        self.tracker.reset()
+        self.block_state: dict[int, str] = {i: "far" for i in self.scene_cfg.block_ids}
+        self._block_offset: dict[int, np.ndarray] = {}
+        for i in self.scene_cfg.block_ids:
+            self.data.mocap_pos[self.handles.block_mocap[i]] = self.scene_cfg.block_position(i)
+        self.fetch: FetchTask | None = None
+        self.delivered: set[int] = set()
+        self.taken: set[int] = set()
+        self.contact_steps = 0
+        self.contact_onsets = 0
+        self._in_contact = False
+        self.all_done = False
+        pose_human(self.model, self.data, self.handles, self.human.joint_positions(0.0))
+        mujoco.mj_forward(self.model, self.data)
+        self.tracker.observe(0.0, self.human.joint_positions(0.0))
+
+    @property
+    def time(self) -> float:
+        """Simulated time [s]."""
+        return float(self.data.time)
+
+    @property
+    def control_dt(self) -> float:
+        """Seconds per :meth:`step`."""
+        return self.cfg.substeps * self.model.opt.timestep
+
+    def robot_q(self) -> np.ndarray:
+        """(J,) measured joint positions [rad]."""
+        return self.data.qpos[self.handles.qpos_adr].copy()
+
+    def robot_qd(self) -> np.ndarray:
+        """(J,) measured joint velocities [rad/s]."""
+        return self.data.qvel[self.handles.dof_adr].copy()
+
+    def ee_position(self) -> np.ndarray:
+        """(3,) the tool point in the table frame [m] (MuJoCo's ``ee_site``)."""
+        if self.handles.ee_site < 0:
+            return _numpy(self.robot.ee_position(_like_q(self.robot, self.robot_q())))
+        return self.data.site_xpos[self.handles.ee_site].copy()
+
+    def human_joints(self) -> np.ndarray:
+        """(K, 3) true human joint positions now [m]."""
+        return self.human.joint_positions(self.time)
+
+    def block_position(self, block: int) -> np.ndarray:
+        """(3,) current centre of a block [m]."""
+        return self.data.mocap_pos[self.handles.block_mocap[block]].copy()
+
+    # -- actions ------------------------------------------------------------------------------
+
+    def start_fetch(self, block: int) -> TaskEvent:
+        """Begin ``Fetch_block`` (replaces an action in its return phase).
+
+        Raises:
+            ConfigError: when the block is absent or not waiting at its far position, or
+                another fetch is still carrying.
+        """
+        if self.block_state.get(block) != "far":
+            raise ConfigError(
+                f"expected block {block} at its far position, got {self.block_state.get(block)}"
+            )
+        if self.fetch is not None and self.fetch.phase is not FetchPhase.RETURN:
+            raise ConfigError(f"Fetch_{self.fetch.block} is still in {self.fetch.phase.value}")
+        self.fetch = FetchTask.create(block, self.scene_cfg, self.cfg.fetch, self.time)
+        return TaskEvent(kind="fetch_started", block=block, time=self.time)
+
+    def step(self, q_des: np.ndarray, qd_des: np.ndarray) -> StepInfo:
+        """Advance one control period tracking ``q_des + qd_des * tau``.
+
+        Args:
+            q_des: (J,) commanded joint positions [rad].
+            qd_des: (J,) commanded joint velocities [rad/s].
+
+        Returns:
+            Events and contacts of the period.
+        """
+        q_des = _numpy(q_des)
+        qd_des = _numpy(qd_des)
+        if q_des.shape != (self.num_joints,) or qd_des.shape != (self.num_joints,):
+            raise ShapeError(
+                f"expected q_des and qd_des ({self.num_joints},), got {q_des.shape}, "
+                f"{qd_des.shape}"
+            )
+        m, d, h = self.model, self.data, self.handles
+        dt = m.opt.timestep
+        contact = False
+        for k in range(self.cfg.substeps):
+            target = q_des + qd_des * (k * dt + self._vel_ff_s)
+            d.ctrl[h.actuator_ids] = np.clip(target, self._ctrl_lo, self._ctrl_hi)
+            pose_human(m, d, h, self.human.joint_positions(d.time + dt))
+            self._move_blocks()
+            mujoco.mj_step(m, d)
+            if not contact and d.ncon:
+                contact = self._robot_human_contact()
+        t = self.time
+        events: list[TaskEvent] = []
+        new_contact = contact and not self._in_contact
+        self._in_contact = contact
+        self.contact_steps += int(contact)
+        self.contact_onsets += int(new_contact)
+        events.extend(self._update_fetch(t))
+        for ev in self.human.update(t, set(self.delivered)):
+            events.append(TaskEvent(kind=ev.kind, block=ev.block, time=ev.time))
+            if ev.kind == "human_grasped":
+                self.block_state[ev.block] = "human"
+                self.delivered.discard(ev.block)
+            elif ev.kind == "human_took":
+                self.block_state[ev.block] = "taken"
+                self.taken.add(ev.block)
+        self._move_blocks()
+        if (
+            not self.all_done
+            and self.human.cfg.mode == "tasks"
+            and self.taken
+            and self.taken == set(self.human.order)
+        ):
+            self.all_done = True
+            events.append(TaskEvent(kind="done", block=-1, time=t))
+        self.tracker.observe(t, self.human.joint_positions(t))
+        return StepInfo(events=events, contact=contact, new_contact=new_contact)
+
+    # -- internals ----------------------------------------------------------------------------
+
+    def _robot_human_contact(self) -> bool:
+        d, h = self.data, self.handles
+        geoms = d.contact.geom[: d.ncon]  # (ncon, 2)
+        rob = h.robot_geom[geoms]
+        hum = h.human_geom[geoms]
+        return bool(((rob[:, 0] & hum[:, 1]) | (rob[:, 1] & hum[:, 0])).any())
+
+    def robot_human_contacts(self) -> list[tuple[int, int, float]]:
+        """(robot geom, human geom, penetration distance [m]) of the current contacts."""
+        d, h = self.data, self.handles
+        out = []
+        for c in range(d.ncon):
+            g1, g2 = int(d.contact.geom[c, 0]), int(d.contact.geom[c, 1])
+            if h.robot_geom[g1] and h.human_geom[g2]:
+                out.append((g1, g2, float(d.contact.dist[c])))
+            elif h.robot_geom[g2] and h.human_geom[g1]:
+                out.append((g2, g1, float(d.contact.dist[c])))
+        return out
+
+    def _update_fetch(self, t: float) -> list[TaskEvent]:
+        f = self.fetch
+        if f is None:
+            return []
+        cfg = self.cfg.fetch
+        ee = self.ee_position()
+        if f.phase is FetchPhase.APPROACH:
+            if np.linalg.norm(ee - f.pick_point) <= cfg.pick_radius:
+                self.block_state[f.block] = "robot"
+                self._block_offset[f.block] = self.block_position(f.block) - ee
+                f.phase = FetchPhase.CARRY
+                return [TaskEvent(kind="picked", block=f.block, time=t)]
+        elif f.phase is FetchPhase.CARRY:
+            if np.linalg.norm(ee - f.place_point) <= cfg.place_radius:
+                self.block_state[f.block] = "delivered"
+                self.delivered.add(f.block)
+                f.phase = FetchPhase.RETURN
+                return [TaskEvent(kind="delivered", block=f.block, time=t)]
+        else:
+            err = np.abs(self.robot_q() - _numpy(self.robot.q_home)).max()
+            if err <= cfg.home_tolerance:
+                self.fetch = None
+                return [TaskEvent(kind="fetch_done", block=f.block, time=t)]
+        return []
+
+    def _move_blocks(self) -> None:
+        d, h, sc = self.data, self.handles, self.scene_cfg
+        ee = None
+        for i, state in self.block_state.items():
+            if state == "robot":
+                ee = self.ee_position() if ee is None else ee
+                d.mocap_pos[h.block_mocap[i]] = ee + self._block_offset[i]
+            elif state == "delivered":
+                d.mocap_pos[h.block_mocap[i]] = sc.delivery_position(i)
+            elif state == "human":
+                carry = self.human.carrying
+                if carry is not None and carry[0] == i:
+                    hand = self.human.joint_positions(d.time)[carry[1]]
+                    d.mocap_pos[h.block_mocap[i]] = hand - np.array([0.0, 0.0, 0.02])
+            elif state == "taken":
+                d.mocap_pos[h.block_mocap[i]] = sc.stash_position(i)
+
+
+def _numpy(x: object) -> np.ndarray:
+    """A float64 numpy copy of a tensor or array."""
+    if hasattr(x, "detach"):
+        x = x.detach().cpu().numpy()  # type: ignore[union-attr]
+    return np.asarray(x, dtype=np.float64)
+
+
+def _like_q(robot: RobotLike, q: np.ndarray) -> object:
+    """``q`` as a tensor on the robot's device and dtype (for its kinematics)."""
+    import torch
+
+    ref = robot.q_home
+    if isinstance(ref, torch.Tensor):
+        return torch.as_tensor(q, dtype=ref.dtype, device=ref.device)
+    return q

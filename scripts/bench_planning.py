@@ -1,0 +1,149 @@
+#!/usr/bin/env python
+"""Benchmark of one replanning cycle (forecast to optimised plan) on the KUKA iiwa 14.
+
+B = 8 and B = 64 trajectories, 20 waypoints, 7 joints, the 22 spheres of the upper body,
+A = 10 actions. The forecast is synthetic (the predictor is timed by its own benchmark), so
+``predict_ms`` counts only turning the forecast into Gaussian spheres at the waypoint times.
+Cycles are warm-started, as in closed loop: each timing is one ``Replanner.step`` after a
+first cold one. Runs single-threaded (``torch.set_num_threads(1)``): these tensors are small
+and intra-op threads only add synchronisation.
+
+Usage::
+
+    python scripts/bench_planning.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import torch
+
+from iplanner_torch.data.skeleton import JOINT_NAMES
+from iplanner_torch.planning.optimizer import OptimizerCfg, TrajectoryOptimizer
+from iplanner_torch.planning.replanner import Replanner, ReplannerCfg
+from iplanner_torch.prediction.forecast import Forecast
+
+#: the cycle-time goal [ms] for B = 8 on a 2-core CPU
+GOAL_MS = 50.0
+
+
+def synthetic_forecast(num_actions: int = 10, n_f: int = 30, dt: float = 1 / 15) -> Forecast:
+    """A seated person across the table reaching with the right hand towards A targets."""
+    gen = torch.Generator().manual_seed(0)
+    pose = torch.tensor(
+        [
+            [0.95, 0.00, 0.55],  # head
+            [0.95, 0.00, 0.40],  # neck
+            [0.97, 0.00, 0.20],  # torso
+            [1.00, 0.00, 0.00],  # waist
+            [0.95, 0.18, 0.38],  # left shoulder
+            [0.85, 0.25, 0.15],  # left elbow
+            [0.70, 0.20, 0.05],  # left hand
+            [0.95, -0.18, 0.38],  # right shoulder
+            [0.80, -0.25, 0.20],  # right elbow
+            [0.62, -0.20, 0.08],  # right hand
+        ]
+    )
+    pose[:, 0] += 0.35  # seated across the table from the robot's home pose
+    targets = pose[9] + 0.25 * torch.randn(num_actions, 3, generator=gen) * torch.tensor(
+        [1.0, 1.0, 0.3]
+    )
+    s = torch.linspace(0.0, 1.0, n_f).view(1, n_f, 1)  # (1, n_f, 1)
+    mean = pose.expand(num_actions, n_f, 10, 3).clone()  # (A, n_f, K, 3)
+    hand_path = pose[9] + s * (targets.view(-1, 1, 3) - pose[9])  # (A, n_f, 3)
+    mean[:, :, 9] = hand_path
+    mean[:, :, 8] = 0.5 * (pose[8] + hand_path)
+    std = 0.01 + 0.04 * s.unsqueeze(-1)  # (1, n_f, 1, 1)
+    var = (std**2).expand(num_actions, n_f, 10, 3).clone()
+    weights = torch.softmax(torch.randn(num_actions, generator=gen), 0)
+    return Forecast(
+        weights=weights.unsqueeze(0),
+        mean=mean.unsqueeze(0),
+        var=var.unsqueeze(0),
+        dt=dt,
+        joint_names=JOINT_NAMES,
+        action_names=tuple(f"reach_{a}" for a in range(num_actions)),
+    )
+
+
+def _cycle_times(robot, b: int, forecast: Forecast, repeats: int) -> dict[str, float]:
+    cfg = OptimizerCfg(num_trajectories=b, num_waypoints=20, iterations=20, warm_iterations=6)
+    rp = Replanner(TrajectoryOptimizer(robot, cfg), ReplannerCfg(replan_step_s=0.5))
+    q0 = robot.q_home.clone()
+    qg = q0.clone()
+    qg[0] += 1.2
+    qg[3] += 0.4
+    rp.reset(q0, qg, t=0.0)
+    rp.step(0.0, q0, forecast)  # cold start
+    totals, parts = [], {"predict_ms": [], "collision_ms": [], "optimiser_ms": []}
+    t = 0.5
+    for i in range(repeats + 2):  # two warm-up cycles
+        q_now = rp.command(t)[0]
+        t_wall = time.perf_counter()
+        res = rp.step(t, q_now, forecast, forecast_t0=t)
+        ms = 1e3 * (time.perf_counter() - t_wall)
+        if i >= 2:
+            totals.append(ms)
+            for k in parts:
+                parts[k].append(res.timings[k])
+        t += 0.5
+        if t > 2.5:  # restart the motion so every cycle plans a real move
+            rp.reset(q0, qg, t=t)
+            rp.step(t, q0, forecast)
+            t += 0.5
+    out = {"cycle_ms": statistics.median(totals)}
+    out.update({k: statistics.median(v) for k, v in parts.items()})
+    out["feasible_rate"] = rp.stats.cycles and 1.0 - rp.stats.waits / rp.stats.cycles
+    return out
+
+
+def run(quick: bool) -> dict[str, dict]:
+    """Replanning-cycle figures (medians over repeated warm-started cycles)."""
+    from iplanner_torch.robot.model import RobotModel
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        robot = RobotModel.load("kuka_iiwa14")
+        forecast = synthetic_forecast()
+        repeats = 5 if quick else 30
+        b8 = _cycle_times(robot, 8, forecast, repeats)
+        b64 = _cycle_times(robot, 64, forecast, max(3, repeats // 3))
+    finally:
+        torch.set_num_threads(threads)
+    note = (
+        f"iiwa, W=20, S_r={robot.num_spheres}, S_h=22, A=10, warm-started "
+        "(6 iterations), 1 thread; synthetic forecast: predict_ms excludes the predictor"
+    )
+    return {
+        "replan.cycle_b8_ms": {
+            "value": b8["cycle_ms"],
+            "unit": "ms",
+            "reference": GOAL_MS,
+            "ratio": b8["cycle_ms"] / GOAL_MS,
+            "note": note,
+            "feasible_rate": b8["feasible_rate"],
+        },
+        "replan.cycle_b64_ms": {
+            "value": b64["cycle_ms"],
+            "unit": "ms",
+            "reference": b8["cycle_ms"],
+            "ratio": b64["cycle_ms"] / b8["cycle_ms"],
+            "note": "reference: the B = 8 cycle of the same run",
+        },
+        "replan.cycle_b8_predict_ms": {"value": b8["predict_ms"], "unit": "ms", "note": note},
+        "replan.cycle_b8_collision_ms": {"value": b8["collision_ms"], "unit": "ms"},
+        "replan.cycle_b8_optimiser_ms": {"value": b8["optimiser_ms"], "unit": "ms"},
+    }
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args()
+    for name, fig in run(args.quick).items():
+        extra = {k: v for k, v in fig.items() if k not in ("value", "unit", "note")}
+        print(f"{name:32s} {fig['value']:10.2f} {fig['unit']}  {extra}")

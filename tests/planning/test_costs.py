@@ -1,0 +1,201 @@
+"""Cost terms: the Gaussian ball bound against Monte Carlo and the collision module, gradients
+against finite differences, pruning, forecast interpolation, sphere maps."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+from planning_fakes import mc_ball_probability, static_forecast
+
+from iplanner_torch.data.skeleton import JOINT_NAMES
+from iplanner_torch.errors import ConfigError
+from iplanner_torch.planning import costs as C
+from iplanner_torch.planning.human_model import HumanSphereMap
+from iplanner_torch.prediction.forecast import Forecast
+
+
+def _cases(n: int, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    gen = torch.Generator().manual_seed(seed)
+    d = torch.randn(n, 3, generator=gen, dtype=torch.float64) * 0.3
+    var = (0.02 + 0.15 * torch.rand(n, 3, generator=gen, dtype=torch.float64)) ** 2
+    rad = 0.05 + 0.2 * torch.rand(n, generator=gen, dtype=torch.float64)
+    return d, var, rad
+
+
+def _bisection_lambda(d, var, rad, iters: int = 200):
+    lo = torch.zeros_like(rad)
+    hi = torch.full_like(rad, 1e12)
+    for _ in range(iters):
+        mid = 0.5 * (lo + hi)
+        n = (d / (1 + mid[:, None] * var)).norm(dim=-1)
+        lo = torch.where(n > rad, mid, lo)
+        hi = torch.where(n > rad, hi, mid)
+    return 0.5 * (lo + hi)
+
+
+def test_newton_lambda_matches_bisection() -> None:
+    d, var, rad = _cases(300)
+    outside = d.norm(dim=-1) > rad
+    lam = C._secular_lambda(d, var, rad)
+    ref = _bisection_lambda(d, var, rad)
+    assert torch.allclose(lam[outside], ref[outside], rtol=1e-6)
+    assert bool((lam[~outside] == 0).all())
+
+
+def test_bound_is_never_below_monte_carlo_probability() -> None:
+    d, var, rad = _cases(40, seed=1)
+    bound, _ = C.gaussian_ball_bound_diag(d, var, rad)
+    for i in range(d.shape[0]):
+        p = mc_ball_probability(d[i], var[i], float(rad[i]), n=100_000, seed=i)
+        se = math.sqrt(max(p * (1 - p), 1e-6) / 100_000)
+        assert float(bound[i]) >= p - 4 * se, (i, float(bound[i]), p)
+    # the bound is informative: far pairs are tiny, pairs with the mean inside are large
+    far, _ = C.gaussian_ball_bound_diag(
+        torch.tensor([[1.0, 0.0, 0.0]]), torch.full((1, 3), 0.01), torch.tensor([0.2])
+    )
+    assert float(far) < 1e-10
+
+
+def test_bound_matches_collision_module() -> None:
+    gaussian = pytest.importorskip("iplanner_torch.collision.gaussian")
+    d, var, rad = _cases(200, seed=2)
+    ours, _ = C.gaussian_ball_bound_diag(d, var, rad)
+    ref = gaussian.sphere_collision_bound_diag(
+        torch.zeros_like(d), 0.5 * rad, d, var, 0.5 * rad, method="min"
+    )
+    assert torch.allclose(ours, ref, rtol=1e-6, atol=1e-12)
+
+
+def _fd_check(fn, x: torch.Tensor, eps: float = 1e-6, rtol: float = 1e-4) -> None:
+    x = x.clone().requires_grad_(True)
+    fn(x).backward()
+    num = torch.zeros_like(x)
+    flat = x.detach().view(-1)
+    for i in range(flat.numel()):
+        xp, xm = flat.clone(), flat.clone()
+        xp[i] += eps
+        xm[i] -= eps
+        num.view(-1)[i] = (fn(xp.view_as(x)) - fn(xm.view_as(x))) / (2 * eps)
+    assert torch.allclose(x.grad, num, rtol=rtol, atol=1e-7), (x.grad, num)
+
+
+def test_gradients_of_joint_terms_match_finite_differences() -> None:
+    gen = torch.Generator().manual_seed(4)
+    q = torch.randn(2, 6, 3, generator=gen, dtype=torch.float64)
+    q_min = torch.full((3,), -0.8, dtype=torch.float64)
+    v_max = torch.full((3,), 2.0, dtype=torch.float64)
+    qd0 = torch.tensor([0.1, -0.2, 0.3], dtype=torch.float64)
+    _fd_check(lambda x: C.joint_acc_l2(x, 0.2, qd0).sum(), q)
+    _fd_check(lambda x: C.joint_limit_violation(x, q_min, -q_min).sum(), q)
+    _fd_check(lambda x: C.joint_vel_limit_violation(x, 0.2, v_max).sum(), q)
+    _fd_check(lambda x: C.goal_distance(x[:, -1], q[0, 0]).sum(), q)
+
+
+class _Floor:
+    """z = 0 floor: signed distance of a sphere is z - r."""
+
+    def clearance(self, centers: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
+        return centers[..., 2] - radii
+
+
+def test_static_clearance_gradient_and_value() -> None:
+    centers = torch.tensor([[[[0.0, 0.0, 0.01], [0.0, 0.0, 0.5]]]], dtype=torch.float64)
+    radii = torch.tensor([0.02, 0.05], dtype=torch.float64)
+    cost, clear = C.static_clearance(centers, radii, _Floor(), margin=0.02)
+    assert float(cost) == pytest.approx((0.02 - (-0.01)) ** 2)
+    assert float(clear[0, 0]) == pytest.approx(-0.01)
+    _fd_check(lambda x: C.static_clearance(x, radii, _Floor(), 0.02)[0].sum(), centers)
+
+
+def _obstacle(dtype=torch.float64) -> C.HumanObstacle:
+    gen = torch.Generator().manual_seed(5)
+    mean = torch.randn(3, 2, 4, 3, generator=gen, dtype=dtype) * 0.3  # (W_x, A, S_h, 3)
+    var = (0.03 + 0.05 * torch.rand(3, 2, 4, 3, generator=gen, dtype=dtype)) ** 2
+    radii = torch.tensor([0.05, 0.08, 0.1, 0.06], dtype=dtype)
+    return C.HumanObstacle(
+        mean=mean, var=var, radii=radii, weights=torch.tensor([0.7, 0.3], dtype=dtype)
+    )
+
+
+def test_human_bound_gradient_matches_finite_differences() -> None:
+    human = _obstacle()
+    gen = torch.Generator().manual_seed(6)
+    centers = torch.randn(2, 3, 5, 3, generator=gen, dtype=torch.float64) * 0.3 + 0.25
+    radii = torch.full((5,), 0.04, dtype=torch.float64)
+    bound, _ = C.human_collision_bound(centers, radii, human)
+    assert bool(((bound > 1e-6) & (bound < 0.9)).any())  # the smooth regime is exercised
+    _fd_check(lambda x: C.human_collision_bound(x, radii, human)[0].sum(), centers, rtol=1e-3)
+    _fd_check(lambda x: C.human_collision_bound(x, radii, human)[1].sum(), centers, rtol=1e-3)
+
+
+def test_human_bound_is_max_over_pairs_of_weighted_sum_and_pruning_is_safe() -> None:
+    human = _obstacle()
+    gen = torch.Generator().manual_seed(7)
+    centers = torch.randn(2, 3, 5, 3, generator=gen, dtype=torch.float64) * 0.5
+    radii = torch.full((5,), 0.04, dtype=torch.float64)
+    bound, _ = C.human_collision_bound(centers, radii, human)
+    # brute force over every (b, w, robot sphere, human sphere)
+    ref = torch.zeros(2, 3, dtype=torch.float64)
+    for b in range(2):
+        for w in range(3):
+            for j in range(5):
+                for ll in range(4):
+                    d = human.mean[w, :, ll] - centers[b, w, j]
+                    r = (radii[j] + human.radii[ll]).expand(2)
+                    pb, _ = C.gaussian_ball_bound_diag(d, human.var[w, :, ll], r)
+                    ref[b, w] = max(ref[b, w], float((pb * human.weights).sum()))
+    # pairs below EXACT_FROM keep the (larger) isotropic bound
+    assert bool((bound >= ref.clamp(max=1.0) - 1e-12).all())
+    assert torch.allclose(bound, ref.clamp(max=1.0), atol=C.EXACT_FROM)
+    pairs = C.candidate_pairs(centers, radii, human, margin=0.0)
+    assert 0 < pairs.shape[0] < 20
+    pruned, _ = C.human_collision_bound(centers, radii, human, pairs)
+    assert float((bound - pruned).abs().max()) <= math.erfc(5 / math.sqrt(2)) / 2
+
+
+def test_forecast_interpolation_hits_frames_and_midpoints() -> None:
+    n_f, dt = 5, 0.1
+    mean = torch.arange(n_f, dtype=torch.float32).view(1, 1, n_f, 1, 1).expand(1, 1, n_f, 1, 3)
+    fc = Forecast(
+        weights=torch.ones(1, 1),
+        mean=mean.clone(),
+        var=torch.full((1, 1, n_f, 1, 3), 0.01),
+        dt=dt,
+        joint_names=("j",),
+        action_names=("a",),
+    )
+    sm = HumanSphereMap(torch.ones(1, 1), torch.tensor([0.1]))
+    t0 = 2.0
+    times = torch.tensor([t0, t0 + 0.1, t0 + 0.25, t0 + 0.5, t0 + 3.0])
+    obs = C.forecast_to_obstacle(fc, times, t0, sm)
+    got = obs.mean[:, 0, 0, 0]
+    assert torch.allclose(got, torch.tensor([0.0, 0.0, 1.5, 4.0, 4.0]), atol=1e-6)
+
+
+def test_sphere_map_interpolates_joints() -> None:
+    sm = HumanSphereMap.from_segments(JOINT_NAMES)
+    assert sm.num_spheres == 22
+    gen = torch.Generator().manual_seed(8)
+    mean = torch.randn(10, 3, generator=gen)
+    var = torch.rand(10, 3, generator=gen)
+    m, v = sm.centers_diag(mean, var)
+    # first upper-arm sphere: u = 1/6 from left shoulder to left elbow (eq. center_distribution)
+    row = 6  # head, neck, 2 upper torso, 2 lower torso -> index 6 is the left shoulder sphere
+    i_ls, i_le = JOINT_NAMES.index("left_shoulder"), JOINT_NAMES.index("left_elbow")
+    k = row + 2  # after both shoulder spheres
+    u = 1 / 6
+    assert torch.allclose(m[k], (1 - u) * mean[i_ls] + u * mean[i_le], atol=1e-6)
+    assert torch.allclose(v[k], (1 - u) ** 2 * var[i_ls] + u**2 * var[i_le], atol=1e-6)
+    with pytest.raises(ConfigError, match="needs joint 'head'"):
+        HumanSphereMap.from_segments(JOINT_NAMES[1:])
+
+
+def test_cost_weights_validate() -> None:
+    with pytest.raises(ConfigError, match="joint_acc_l2"):
+        C.CostWeights(joint_acc_l2=-1.0)
+
+
+def test_static_forecast_fixture_is_float() -> None:
+    assert static_forecast([0, 0, 0], 0.1).var.dtype == torch.float32

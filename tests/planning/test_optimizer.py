@@ -1,0 +1,185 @@
+"""The trajectory optimiser on analytic problems, a 2-D point robot around a Gaussian obstacle,
+the iiwa beside a Gaussian human sphere, and the infeasible case that waits."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from planning_fakes import (
+    PlanarArm,
+    PointRobot,
+    mc_ball_probability,
+    one_sphere_map,
+    static_forecast,
+)
+
+from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.planning.costs import CostWeights
+from iplanner_torch.planning.itomp import ITOMP, static_human_forecast
+from iplanner_torch.planning.optimizer import KinematicModel, OptimizerCfg, TrajectoryOptimizer
+
+
+def test_smoothness_bowl_converges_to_the_straight_line() -> None:
+    """Squared accelerations with pinned ends: the unique minimum is the uniform straight line."""
+    arm = PlanarArm(dtype=torch.float64)
+    cfg = OptimizerCfg(
+        num_trajectories=4,
+        iterations=200,
+        lr=0.005,
+        lr_final_ratio=0.001,
+        perturbation_std=0.5,
+        weights=CostWeights(joint_acc_l2=1.0),
+    )
+    opt = TrajectoryOptimizer(arm, cfg)
+    q_s = torch.tensor([0.1, -0.5, 0.3], dtype=torch.float64)
+    q_g = torch.tensor([1.0, 0.4, -0.6], dtype=torch.float64)
+    res = opt.solve(q_s, q_g, duration=2.0)
+    s = torch.linspace(0, 1, cfg.num_waypoints, dtype=torch.float64)[:, None]
+    line = q_s + s * (q_g - q_s)
+    assert float((res.candidates - line).abs().max()) < 1e-3
+    assert res.feasible and res.wait_s == 0.0
+
+
+def test_point_robot_goes_around_a_gaussian_obstacle(point_robot: PointRobot) -> None:
+    std, r_h = 0.05, 0.1
+    cfg = OptimizerCfg(iterations=60, confidence=0.95)
+    opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(r_h))
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    res = opt.solve(q_s, q_g, forecast=static_forecast([0.0, 0.0, 0.0], std), duration=3.0)
+    assert res.feasible
+    assert torch.equal(res.q[0], q_s) and torch.equal(res.q[-1], q_g)
+    assert float(res.bound.max()) <= 1 - cfg.confidence
+    # independent check: Monte Carlo collision probability of every waypoint, and the path is
+    # a detour, not a flight away from the obstacle
+    rad = r_h + 0.05
+    for q in res.q:
+        d = torch.tensor([0.0, 0.0, 0.0]) - torch.cat([q, torch.zeros(1)])
+        p = mc_ball_probability(d, torch.full((3,), std**2), rad, n=50_000)
+        assert p <= 1 - cfg.confidence
+    assert float(res.q[:, 1].abs().max()) < 0.6
+    assert res.cost_terms["max_vel_ratio"] <= 1.0
+    # the straight line would have collided
+    assert float(res.q[:, 1].abs().max()) > rad
+
+
+def test_same_seed_same_plan(point_robot: PointRobot) -> None:
+    opt = TrajectoryOptimizer(
+        point_robot, OptimizerCfg(iterations=10), human_spheres=one_sphere_map(0.1)
+    )
+    args = (torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0]))
+    fc = static_forecast([0.0, 0.05, 0.0], 0.05)
+    a = opt.solve(*args, forecast=fc)
+    b = opt.solve(*args, forecast=fc)
+    assert torch.equal(a.candidates, b.candidates)
+
+
+def test_infeasible_goal_inside_the_human_waits(point_robot: PointRobot) -> None:
+    cfg = OptimizerCfg(iterations=30, confidence=0.99)
+    opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.15))
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([0.9, 0.0])
+    res = opt.solve(q_s, q_g, forecast=static_forecast([1.0, 0.0, 0.0], 0.05), duration=2.0)
+    assert not res.feasible
+    assert res.wait_s > 0.0 and res.hold_index is not None
+    h = res.hold_index
+    assert torch.equal(res.q[h:], res.q[h].expand_as(res.q[h:]))
+    # the held pose is safe (independent Monte Carlo) and the prefix respects the bound
+    d = torch.tensor([1.0, 0.0, 0.0]) - torch.cat([res.q[h], torch.zeros(1)])
+    assert mc_ball_probability(d, torch.full((3,), 0.05**2), 0.2, n=50_000) <= 0.01
+    assert float(res.bound.max()) <= 1 - cfg.confidence
+    assert res.wait_s == pytest.approx(float(res.times[-1] - res.times[h]))
+
+
+def test_itomp_avoids_the_observed_pose(point_robot: PointRobot) -> None:
+    pose = torch.tensor([[0.0, 0.0, 0.0]])
+    fc = static_human_forecast(pose, n_f=10, dt=0.1, joint_names=("j",))
+    assert fc.mean.shape == (1, 1, 10, 1, 3) and float(fc.var.max()) == pytest.approx(1e-4)
+    opt = ITOMP(point_robot, OptimizerCfg(iterations=60), human_spheres=one_sphere_map(0.1))
+    res = opt.solve_observed(
+        torch.tensor([-1.0, 0.0]),
+        torch.tensor([1.0, 0.0]),
+        pose=pose,
+        joint_names=("j",),
+        duration=3.0,
+    )
+    assert res.feasible
+    dist = (res.q - pose[0, :2]).norm(dim=-1)
+    assert float(dist.min()) > 0.15  # r_robot + r_human
+    with pytest.raises(ShapeError, match=r"expected pose \(1, 3\)"):
+        static_human_forecast(torch.zeros(2, 3), 5, 0.1, ("j",))
+
+
+def test_window_restricts_the_constraint(point_robot: PointRobot) -> None:
+    opt = TrajectoryOptimizer(
+        point_robot, OptimizerCfg(iterations=0), human_spheres=one_sphere_map(0.1)
+    )
+    res = opt.solve(
+        torch.tensor([-1.0, 0.0]),
+        torch.tensor([1.0, 0.0]),
+        forecast=static_forecast([0.0, 0.0, 0.0], 0.05),
+        duration=1.9,
+        window=(0.0, 0.5),
+    )
+    inside = res.times <= 0.5 + 1e-6
+    assert float(res.bound[~inside].abs().max()) == 0.0
+    assert res.feasible  # the straight line meets the human only after the window
+
+
+def test_inputs_and_config_are_validated(point_robot: PointRobot) -> None:
+    assert isinstance(point_robot, KinematicModel)
+    with pytest.raises(ConfigError, match="confidence"):
+        OptimizerCfg(confidence=1.0)
+    with pytest.raises(ConfigError, match="num_waypoints"):
+        OptimizerCfg(num_waypoints=2)
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg(iterations=1))
+    with pytest.raises(ShapeError, match=r"expected q_start \(2\)"):
+        opt.solve(torch.zeros(3), torch.zeros(2))
+    with pytest.raises(ShapeError, match=r"expected q_init \(8, 20, 2\)"):
+        opt.solve(torch.zeros(2), torch.ones(2), q_init=torch.zeros(8, 10, 2))
+
+
+def test_runs_on_the_device(device: torch.device) -> None:
+    robot = PointRobot(device=device)
+    opt = TrajectoryOptimizer(robot, OptimizerCfg(iterations=5), human_spheres=one_sphere_map(0.1))
+    fc = static_forecast([0.0, 0.3, 0.0], 0.05, device=device)
+    res = opt.solve(
+        torch.tensor([-1.0, 0.0], device=device),
+        torch.tensor([1.0, 0.0], device=device),
+        forecast=fc,
+    )
+    assert res.q.device.type == device.type
+
+
+def _iiwa():
+    model = pytest.importorskip("iplanner_torch.robot.model")
+    try:
+        return model.RobotModel.load("kuka_iiwa14")
+    except Exception as exc:  # the robot module may not be complete
+        pytest.skip(f"RobotModel.load('kuka_iiwa14') failed: {exc}")
+
+
+def test_iiwa_plan_beside_a_gaussian_human_sphere() -> None:
+    robot = _iiwa()
+    q_s = robot.q_home.clone()
+    q_g = q_s.clone()
+    q_g[0] = 1.2
+    # put a human sphere on the tool point's straight-line path, halfway
+    mid = 0.5 * (q_s + q_g)
+    p_mid = robot.ee_position(mid)
+    cfg = OptimizerCfg(iterations=60, confidence=0.95)
+    opt = TrajectoryOptimizer(robot, cfg, human_spheres=one_sphere_map(0.08))
+    fc = static_forecast(p_mid.tolist(), 0.03)
+    straight = opt.solve(q_s, q_g, forecast=fc, duration=3.0)
+    assert straight.feasible, straight.cost_terms
+    assert float(straight.bound.max()) <= 1 - cfg.confidence
+    # independent check on the accepted plan: Monte Carlo over every robot sphere and waypoint
+    centers = robot.sphere_centers(straight.q)  # (W, S_r, 3)
+    d = p_mid - centers  # (W, S_r, 3)
+    rad = robot.sphere_radii + 0.08
+    near = (d.norm(dim=-1) - rad).flatten().argsort()[:5]
+    for k in near.tolist():
+        w, s = divmod(k, centers.shape[1])
+        p = mc_ball_probability(d[w, s], torch.full((3,), 0.03**2), float(rad[s]), n=50_000)
+        assert p <= 1 - cfg.confidence
+    # without the human the straight line passes through it
+    line_c = robot.sphere_centers(mid)
+    assert float(((p_mid - line_c).norm(dim=-1) - rad).min()) < 0.0

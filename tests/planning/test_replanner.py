@@ -1,0 +1,159 @@
+"""The replanner: cycles, warm starts, overrun reporting, waits; the planner configs."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+from planning_fakes import PointRobot, one_sphere_map, static_forecast
+
+from iplanner_torch.errors import ConfigError
+from iplanner_torch.planning.itomp import ITOMP
+from iplanner_torch.planning.optimizer import OptimizerCfg, PlanResult, TrajectoryOptimizer
+from iplanner_torch.planning.replanner import (
+    PlannerCfg,
+    PlanningOverrunWarning,
+    Replanner,
+    ReplannerCfg,
+    build_replanner,
+)
+from iplanner_torch.planning.trajectory import resample_linear
+
+CONF = Path(__file__).resolve().parents[2] / "conf" / "planner"
+
+
+class SpyOptimizer(TrajectoryOptimizer):
+    """Records the arguments of every solve and optionally sleeps."""
+
+    def __init__(self, *args, sleep_s: float = 0.0, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.sleep_s = sleep_s
+        self.calls: list[dict] = []
+
+    def solve(self, q_start, q_goal, **kwargs) -> PlanResult:
+        self.calls.append({"q_start": q_start.clone(), **kwargs})
+        time.sleep(self.sleep_s)
+        return super().solve(q_start, q_goal, **kwargs)
+
+
+def _spy(robot, sleep_s: float = 0.0) -> SpyOptimizer:
+    cfg = OptimizerCfg(iterations=5, warm_iterations=2, horizon_s=2.0)
+    return SpyOptimizer(robot, cfg, human_spheres=one_sphere_map(0.1), sleep_s=sleep_s)
+
+
+def test_cycles_every_m_and_warm_starts_from_the_shifted_plan(point_robot: PointRobot) -> None:
+    opt = _spy(point_robot)
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, fresh_fraction=0.5))
+    q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    rp.reset(q0, qg, t=0.0)
+    fc = static_forecast([0.0, 0.8, 0.0], 0.05)
+    first = rp.step(0.0, q0, fc)
+    assert first is not None and opt.calls[0]["q_init"] is None
+    assert opt.calls[0]["t0"] == pytest.approx(0.5)
+    assert opt.calls[0]["window"] == pytest.approx((0.5, 1.0))
+    assert rp.step(0.2, q0, fc) is None  # not due
+    # until t + m the old plan (a hold) runs; then the new one
+    assert torch.allclose(rp.command(0.3)[0], q0)
+    q_mid, _ = first.trajectory().sample(0.75)
+    assert torch.allclose(rp.command(0.75)[0], q_mid)
+    q_now, _ = rp.command(0.5)
+    second = rp.step(0.5, q_now, fc)
+    assert second is not None and rp.stats.cycles == 2
+    call = opt.calls[1]
+    # starts where the first plan is at t + m, with its velocity
+    q_s, qd_s = first.trajectory().sample(1.0)
+    assert torch.allclose(call["q_start"], q_s) and torch.allclose(call["qd_start"], qd_s)
+    # warm start: row 0 is the previous plan shifted onto the new waypoint times
+    times = 1.0 + torch.linspace(0.0, call["duration"], opt.cfg.num_waypoints)
+    ref = resample_linear(first.q.unsqueeze(0), first.times, times)[0]
+    assert torch.allclose(call["q_init"][0], ref, atol=1e-5)
+    assert rp.stats.overruns == 0
+
+
+def test_overruns_are_counted_and_warned(point_robot: PointRobot) -> None:
+    opt = _spy(point_robot, sleep_s=0.06)
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, budget_s=0.05))
+    q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    rp.reset(q0, qg, t=0.0)
+    with pytest.warns(PlanningOverrunWarning, match="over its budget"):
+        rp.step(0.0, q0, None)
+        rp.step(0.5, rp.command(0.5)[0], None)
+    assert rp.stats.cycles == 2 and rp.stats.overruns == 2
+    assert rp.stats.mean_solve_ms >= 60.0
+
+
+def test_wait_delays_the_goal_and_is_counted(point_robot: PointRobot) -> None:
+    cfg = OptimizerCfg(iterations=0, warm_iterations=0, horizon_s=2.0, perturbation_std=0.0)
+    opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.1))
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5))
+    q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([0.3, 0.0])
+    rp.reset(q0, qg, t=0.0)
+    blocker = static_forecast([-0.8, 0.0, 0.0], 0.03)  # right in front of the robot
+    res = rp.step(0.0, q0, blocker)
+    assert res is not None and not res.feasible
+    assert rp.stats.waits == 1 and rp.stats.wait_s == pytest.approx(res.wait_s)
+    assert res.wait_s > 0.0 and res.hold_index is not None
+    t_goal_before = 0.5 + 2.0
+    second = rp.step(0.5, rp.command(0.5)[0], blocker)
+    # the second plan ends at the goal, pushed back by the wait
+    assert float(second.times[-1]) >= t_goal_before + res.wait_s - 1e-4
+
+
+def test_reset_is_required_and_goal_change_restarts_cold(point_robot: PointRobot) -> None:
+    opt = _spy(point_robot)
+    rp = Replanner(opt)
+    with pytest.raises(ConfigError, match="reset"):
+        rp.step(0.0, torch.zeros(2), None)
+    rp.reset(torch.zeros(2), torch.ones(2), t=0.0)
+    rp.step(0.0, torch.zeros(2), None)
+    rp.set_goal(torch.tensor([-1.0, 0.5]))
+    rp.step(0.5, rp.command(0.5)[0], None)
+    assert opt.calls[1]["q_init"] is None
+    assert not rp.goal_reached(torch.zeros(2))
+
+
+def test_closed_loop_reaches_the_goal(point_robot: PointRobot) -> None:
+    opt = TrajectoryOptimizer(
+        point_robot,
+        OptimizerCfg(iterations=10, warm_iterations=4, horizon_s=1.5),
+        human_spheres=one_sphere_map(0.1),
+    )
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5))
+    q, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    rp.reset(q, qg, t=0.0)
+    fc = static_forecast([0.0, 0.0, 0.0], 0.05)
+    t = 0.0
+    while t < 4.0:
+        rp.step(t, q, fc)
+        q = rp.command(t)[0]
+        d = (q - torch.tensor([0.0, 0.0])).norm()
+        assert float(d) > 0.15  # never inside the (mean) human sphere
+        t += 0.1
+    assert rp.goal_reached(q, tol=1e-3)
+
+
+def test_planner_cfg_validates_and_builds() -> None:
+    with pytest.raises(ConfigError, match="predictor_variant"):
+        PlannerCfg(kind="iplanner", predictor_variant=None)
+    with pytest.raises(ConfigError, match="replan_step_s"):
+        ReplannerCfg(replan_step_s=0.0)
+    cfg = PlannerCfg(kind="itomp", predictor_variant=None, confidence=0.99, replan_step_s=0.25)
+    rp = build_replanner(cfg, PointRobot())
+    assert isinstance(rp.optimizer, ITOMP)
+    assert rp.optimizer.cfg.confidence == 0.99 and rp.cfg.replan_step_s == 0.25
+    assert replace(cfg, kind="iplanner", predictor_variant="ni").kind == "iplanner"
+
+
+@pytest.mark.parametrize("name", ["itomp", "iplanner_no_ni", "iplanner_ni"])
+def test_planner_option_files_instantiate(name: str) -> None:
+    hydra_utils = pytest.importorskip("hydra.utils")
+    omegaconf = pytest.importorskip("omegaconf")
+    cfg = hydra_utils.instantiate(omegaconf.OmegaConf.load(CONF / f"{name}.yaml"))
+    assert isinstance(cfg, PlannerCfg)
+    assert cfg.kind == ("itomp" if name == "itomp" else "iplanner")
+    assert isinstance(cfg.optimizer, OptimizerCfg) and isinstance(cfg.replanner, ReplannerCfg)
+    if name != "itomp":
+        assert cfg.predictor_variant == name.removeprefix("iplanner_")

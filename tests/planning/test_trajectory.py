@@ -1,0 +1,90 @@
+"""Trajectories: finite differences, Hermite sampling, holds, resampling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.planning.trajectory import (
+    Trajectory,
+    accelerations,
+    resample_linear,
+    uniform_times,
+    velocities,
+)
+
+
+def test_differences_of_a_quadratic_are_exact() -> None:
+    t = torch.linspace(0.0, 2.0, 11, dtype=torch.float64)
+    a = torch.tensor([0.5, -1.5], dtype=torch.float64)
+    q = (t[:, None] ** 2) * a  # (W, J)
+    dt = float(t[1] - t[0])
+    acc = accelerations(q.unsqueeze(0), dt)[0]
+    assert torch.allclose(acc, (2 * a).expand_as(acc), atol=1e-9)
+    vel = velocities(q, dt)
+    assert torch.allclose(vel, (t[:-1] + t[1:])[:, None] * a, atol=1e-9)
+    acc0 = accelerations(q.unsqueeze(0), dt, qd_start=torch.zeros(2, dtype=torch.float64))[0]
+    assert acc0.shape == (10, 2)
+    assert torch.allclose(acc0[0], (q[1] - q[0]) / dt**2)
+
+
+def test_sample_passes_waypoints_and_velocity_is_derivative() -> None:
+    gen = torch.Generator().manual_seed(3)
+    times = uniform_times(1.0, 2.0, 9, torch.zeros((), dtype=torch.float64))
+    q = torch.randn(9, 3, generator=gen, dtype=torch.float64)
+    traj = Trajectory(
+        q=q, times=times, qd_start=torch.tensor([0.3, 0.0, -0.2], dtype=torch.float64)
+    )
+    pos, _ = traj.sample(times)
+    assert torch.allclose(pos, q, atol=1e-12)
+    # velocity against central finite differences of the sampled positions
+    tq = torch.linspace(1.01, 2.99, 57, dtype=torch.float64)
+    h = 1e-6
+    p_plus, _ = traj.sample(tq + h)
+    p_minus, _ = traj.sample(tq - h)
+    _, vel = traj.sample(tq)
+    assert torch.allclose(vel, (p_plus - p_minus) / (2 * h), atol=1e-4)
+    _, v0 = traj.sample(times[0])
+    assert torch.allclose(v0, traj.qd_start)
+    _, v_end = traj.sample(times[-1] - 1e-12)
+    assert float(v_end.abs().max()) < 1e-6
+
+
+def test_sample_holds_outside_and_linear_motion_is_reproduced() -> None:
+    times = torch.linspace(0.0, 1.0, 5)
+    q = torch.linspace(0.0, 1.0, 5)[:, None].repeat(1, 2)
+    traj = Trajectory(q=q, times=times, qd_start=torch.ones(2))
+    qa, va = traj.sample(-1.0)
+    qb, vb = traj.sample(5.0)
+    assert torch.equal(qa, q[0]) and torch.equal(qb, q[-1])
+    assert float(va.abs().max()) == 0.0 and float(vb.abs().max()) == 0.0
+    qm, vm = traj.sample(torch.tensor([0.3, 0.6]))
+    assert torch.allclose(qm[:, 0], torch.tensor([0.3, 0.6]), atol=1e-6)
+    assert torch.allclose(vm, torch.ones(2, 2), atol=1e-5)
+
+
+def test_with_hold_and_resample() -> None:
+    times = torch.linspace(0.0, 1.0, 6)
+    q = torch.arange(12.0).view(6, 2)
+    held = Trajectory(q=q, times=times).with_hold(2, until=3.0)
+    assert held.q.shape == (4, 2) and torch.equal(held.q[3], q[2])
+    assert held.t_end == pytest.approx(3.0)
+    assert torch.equal(held.sample(2.5)[0], q[2])
+    with pytest.raises(ConfigError, match="hold index"):
+        Trajectory(q=q, times=times).with_hold(9, until=2.0)
+    new_t = torch.linspace(-0.5, 1.5, 13)
+    out = resample_linear(q.unsqueeze(0), times, new_t)[0]
+    for j in range(2):
+        ref = np.interp(new_t.numpy(), times.numpy(), q[:, j].numpy())
+        assert np.allclose(out[:, j].numpy(), ref, atol=1e-6)
+    re = Trajectory(q=q, times=times).resample(0.2, 0.5, 4)
+    assert re.q.shape == (4, 2) and re.t_start == pytest.approx(0.2)
+
+
+def test_trajectory_validates_inputs() -> None:
+    with pytest.raises(ShapeError, match=r"expected times \(3\), got \(4,\)"):
+        Trajectory(q=torch.zeros(3, 2), times=torch.zeros(4))
+    with pytest.raises(ConfigError, match="strictly increasing"):
+        Trajectory(q=torch.zeros(3, 2), times=torch.tensor([0.0, 0.0, 1.0]))

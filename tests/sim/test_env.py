@@ -1,0 +1,118 @@
+"""SimEnv: actuator tracking, robot-human contacts, pick and delivery, task events."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from sim_fakes import FakeMotion, FakeOrder
+
+from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.sim.env import SimCfg, SimEnv
+from iplanner_torch.sim.human import HumanCfg, ScriptedHuman
+from iplanner_torch.sim.scene import SceneCfg
+from iplanner_torch.sim.tracker import Tracker, TrackerCfg
+
+
+def _env(robot, human_cfg: HumanCfg | None = None, order=(0, 1, 2, 3)) -> SimEnv:
+    scene = SceneCfg()
+    targets = {i: scene.delivery_position(i) + [0.0, 0.0, 0.015] for i in scene.block_ids}
+    cfg = human_cfg or HumanCfg()
+    human = ScriptedHuman(
+        cfg,
+        FakeMotion(),
+        task_order=FakeOrder(order) if cfg.mode == "tasks" else None,
+        targets=targets,
+        seed=0,
+    )
+    return SimEnv(scene, robot, human, Tracker(TrackerCfg(), seed=0), seed=0)
+
+
+def _track(env: SimEnv, q0: np.ndarray, amp: float, seconds: float) -> float:
+    worst = 0.0
+    w = 2 * np.pi * 0.5
+    while env.time < seconds:
+        t = env.time
+        q_des = q0 + amp * np.sin(w * t)
+        qd_des = np.full_like(q0, amp * w * np.cos(w * t))
+        env.step(q_des, qd_des)
+        worst = max(worst, np.abs(env.robot_q() - (q0 + amp * np.sin(w * env.time))).max())
+    return worst
+
+
+def test_position_actuators_track_a_slow_trajectory(arm) -> None:
+    env = _env(arm)
+    assert _track(env, arm.q_home.numpy(), 0.2, 2.0) < 0.02
+
+
+def test_real_robot_tracks_a_slow_trajectory() -> None:
+    from iplanner_torch.robot.model import RobotModel
+
+    robot = RobotModel.load("kuka_iiwa14")
+    env = _env(robot)
+    assert _track(env, robot.q_home.numpy(), 0.15, 1.0) < 0.03
+
+
+def _ik_path(arm, q0: torch.Tensor, point: np.ndarray, n: int = 150) -> list[np.ndarray]:
+    q1 = arm.ik(torch.tensor(point), q0)
+    return [(q0 + (q1 - q0) * s).numpy() for s in np.linspace(0.0, 1.0, n)]
+
+
+def test_contact_when_arm_goes_through_the_human(arm) -> None:
+    cfg = HumanCfg(
+        mode="blocking",
+        blocking_start_s=0.0,
+        blocking_target=(0.15, -0.05, 0.2),
+        blocking_hold_s=5.0,
+    )
+    env = _env(arm, cfg)
+    for _ in range(150):  # the human's right hand moves into the workspace
+        env.step(arm.q_home.numpy(), np.zeros(3))
+    assert env.contact_steps == 0
+    hand = env.human_joints()[9]
+    q = torch.as_tensor(env.robot_q(), dtype=torch.float32)
+    seen, listed = [], []
+    for q_des in _ik_path(arm, q, hand) + [None] * 50:
+        info = env.step(q_des if q_des is not None else env.robot_q(), np.zeros(3))
+        seen.append(info.contact)
+        listed.append(len(env.robot_human_contacts()))
+    assert env.contact_onsets >= 1
+    assert env.contact_steps == sum(seen) >= 1
+    assert max(listed) >= 1
+
+
+def test_no_contact_far_from_the_human(arm) -> None:
+    env = _env(arm)
+    for _ in range(100):
+        env.step(arm.q_home.numpy(), np.zeros(3))
+    assert env.contact_steps == 0
+
+
+def test_pick_and_deliver_by_a_scripted_path(arm) -> None:
+    env = _env(arm, order=(1, 0, 2, 3))
+    events = [env.start_fetch(1)]
+    q = torch.as_tensor(env.robot_q(), dtype=torch.float32)
+    above = env.fetch.pick_point + [0.0, 0.0, 0.1]
+    for point in (above, env.fetch.pick_point, above, env.fetch.place_point):
+        for q_des in _ik_path(arm, q, point, n=100) + [None] * 30:
+            events += env.step(q_des if q_des is not None else q.numpy(), np.zeros(3)).events
+        q = torch.as_tensor(env.robot_q(), dtype=torch.float32)
+    kinds = [e.kind for e in events]
+    assert kinds[:3] == ["fetch_started", "picked", "delivered"]
+    assert env.block_state[1] in ("delivered", "human", "taken")
+    # the block was carried: it left its far position and lies on its spot now
+    for _ in range(300):
+        events += env.step(q.numpy(), np.zeros(3)).events
+        if env.block_state[1] == "delivered":
+            np.testing.assert_allclose(env.block_position(1), env.scene_cfg.delivery_position(1))
+    assert "human_take_started" in [e.kind for e in events]
+    with pytest.raises(ConfigError, match="far position"):
+        env.start_fetch(1)
+
+
+def test_step_rejects_bad_commands(arm) -> None:
+    env = _env(arm)
+    with pytest.raises(ShapeError, match=r"expected q_des and qd_des \(3,\)"):
+        env.step(np.zeros(4), np.zeros(4))
+    with pytest.raises(ConfigError, match="control_hz"):
+        SimCfg(control_hz=1000.0, physics_dt=0.002)

@@ -1,0 +1,98 @@
+"""Scripted human: waits for deliveries, follows its order, grasps, reports progress."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sim_fakes import FakeMotion, FakeOrder
+
+from iplanner_torch.data.skeleton import JOINT_INDEX
+from iplanner_torch.errors import ConfigError
+from iplanner_torch.sim.human import HumanCfg, ScriptedHuman
+from iplanner_torch.sim.scene import SceneCfg
+
+SCENE = SceneCfg()
+TARGETS = {i: SCENE.delivery_position(i) + [0.0, 0.0, 0.015] for i in SCENE.block_ids}
+
+
+def _human(order=(2, 0, 1, 3), **kw) -> ScriptedHuman:
+    return ScriptedHuman(
+        HumanCfg(**kw), FakeMotion(), task_order=FakeOrder(order), targets=TARGETS, seed=4
+    )
+
+
+def _run(human: ScriptedHuman, delivered: set[int], until: float, dt: float = 0.01):
+    events = []
+    t = human.time
+    while t < until:
+        t += dt
+        events += human.update(t, delivered)
+    return events
+
+
+def test_waits_for_delivery_then_takes_in_order() -> None:
+    human = _human()
+    assert _run(human, {0, 1}, 3.0) == []  # block 2 comes first and is not there
+    np.testing.assert_allclose(human.joint_positions(), FakeMotion().rest_pose())
+    events = _run(human, {0, 1, 2, 3}, 30.0)
+    took = [e.block for e in events if e.kind == "human_took"]
+    assert took == [2, 0, 1, 3]
+    assert human.done
+    kinds = [e.kind for e in events if e.block == 2]
+    assert kinds == ["human_take_started", "human_grasped", "human_took"]
+
+
+def test_hand_reaches_the_block_when_it_grasps() -> None:
+    human = _human(order=(1, 0, 2, 3))
+    delivered = {1}
+    t = 0.0
+    while True:
+        t += 0.01
+        ev = human.update(t, delivered)
+        if any(e.kind == "human_grasped" for e in ev):
+            break
+        assert t < 10.0
+    hand = human.joint_positions(t)[JOINT_INDEX["left_hand"]]  # block 1 lies at y > 0
+    assert np.linalg.norm(hand - TARGETS[1]) < 0.02
+    assert human.carrying == (1, JOINT_INDEX["left_hand"])
+    assert human.action_label == "take_1"
+
+
+def test_progress_bitmask_maps_take_to_predictor_actions() -> None:
+    human = _human(order=(0, 1, 2, 3))
+    _run(human, {0, 1}, 40.0)
+    assert human.completed == [0, 1]
+    names = ("idle", "reach_0", "reach_1", "reach_2", "return")
+    assert human.progress_bitmask(names) == (1 << 1) | (1 << 2)
+    assert human.progress_bitmask(("Take_1", "take_0")) == 0b11
+
+
+def test_faster_human_finishes_sooner_and_seed_repeats() -> None:
+    times = {}
+    for speed in ("slow", "fast"):
+        human = _human(speed=speed, idle_s=(0.5, 0.5))
+        ev = _run(human, set(TARGETS), 60.0)
+        times[speed] = [e.time for e in ev if e.kind == "human_took"][-1]
+    assert times["fast"] < 0.6 * times["slow"]
+    a = _run(_human(), set(TARGETS), 20.0)
+    b = _run(_human(), set(TARGETS), 20.0)
+    assert a == b
+
+
+def test_blocking_mode_moves_the_arm_into_the_path() -> None:
+    cfg = dict(mode="blocking", blocking_start_s=0.3, blocking_target=(0.1, -0.1, 0.25))
+    human = ScriptedHuman(HumanCfg(**cfg), FakeMotion(), task_order=None, targets={}, seed=0)
+    events = _run(human, set(), 0.5)
+    assert [e.kind for e in events] == ["blocking_started"]
+    _run(human, set(), 2.0)
+    hand = human.joint_positions()[JOINT_INDEX["right_hand"]]
+    assert np.linalg.norm(hand - np.array(cfg["blocking_target"])) < 0.02
+
+
+def test_errors() -> None:
+    with pytest.raises(ConfigError, match="speed"):
+        HumanCfg(speed="sprint")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="task_order"):
+        ScriptedHuman(HumanCfg(), FakeMotion(), task_order=None, targets=TARGETS, seed=0)
+    with pytest.raises(ConfigError, match="absent"):
+        ScriptedHuman(HumanCfg(), FakeMotion(), task_order=FakeOrder([9]), targets=TARGETS, seed=0)
