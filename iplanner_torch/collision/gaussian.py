@@ -1,0 +1,582 @@
+"""Upper bounds on the probability that a robot sphere meets a Gaussian human sphere (sec. 5).
+
+A robot sphere (centre ``c``, radius ``r1``) and a human sphere (radius ``r2``) whose centre is
+``X ~ N(mu, Sigma)`` (eq. center_distribution) intersect when ``||X - c|| <= R``, ``R = r1 + r2``
+(eq. sphere_collision). That probability has no closed form; two upper bounds are computed from
+the point ``x_max`` of the ball ``||x - c|| <= R`` where the density ``f`` is highest:
+
+* **volume** (eq. approx_sphere_collision): ``P <= (4/3) pi R^3 f(x_max)``. The paper prints
+  ``R^2``; a density has units m^-3, so a probability needs the ball's *volume*
+  ``(4/3) pi R^3`` (with R^2 the bound is looser in metres and wrong in millimetres).
+* **halfspace**: ``x_max`` minimises the Mahalanobis distance ``m`` from ``mu`` over the ball.
+  In whitened coordinates ``z = Sigma^{-1/2} x`` the ball becomes a convex ellipsoid whose
+  point nearest to the whitened mean is the whitened ``x_max``; the ellipsoid therefore lies in
+  the half-space beyond the plane through that point orthogonal to the whitened
+  ``x_max - mu``, whose standard-normal mass is ``Phi(-m)``. Hence ``P <= Phi(-m)`` when the
+  mean lies outside the ball (the bound is 1 when it lies inside).
+* **min** (default): ``min(volume, halfspace, 1)``. Every bound is clamped to ``[0, 1]``.
+
+``x_max`` solves the secular equation. With ``Sigma = U diag(s) U^T`` and
+``d = U^T (mu - c)``, the Lagrange condition gives ``y(lambda) = d / (1 + lambda s)`` (in the
+eigenbasis, relative to ``c``) on the sphere ``||y|| = R``; the paper's
+``x_max = (Sigma^-1 + lambda I)^-1 (Sigma^-1 mu + lambda c)`` is the same point. The default
+solver is Newton on ``g(lambda) = 1/||y(lambda)|| - 1/R``; the paper's bisection is kept as the
+reference (``solver="bisection"``). Why Newton is safe:
+
+* ``q(lambda) = 1/||y(lambda)||`` is increasing and concave on ``lambda > -1/s_max`` (Moré and
+  Sorensen 1983, the trust-region secular equation with the positive definite ``Sigma^-1``;
+  checked numerically in the tests).
+* ``lambda_lo = (||d||/R - 1)/s_max`` lies left of the root: since
+  ``||y(lambda)|| >= ||d|| / (1 + lambda s_max)``, ``||y(lambda_lo)|| >= R``, i.e. ``g <= 0``;
+  so does each ``(|d_k|/R - 1)/s_k``, and Newton starts from the largest of these.
+* Newton on a concave increasing function from the left never overshoots: the tangent lies
+  above the curve, so every iterate stays left of the root and increases monotonically.
+* Stopping early is safe: the Mahalanobis distance of ``y(lambda)`` from ``d`` increases with
+  ``lambda``, so an iterate left of the root gives a smaller ``m`` and both bounds a *larger*
+  value. An unconverged Newton (or the lower end of a bisection bracket) is still an upper
+  bound.
+
+Only squares ``d_k^2`` enter: ``m^2 = lambda^2 sum_k s_k d_k^2 / (1 + lambda s_k)^2``.
+
+Gradients: the Newton iterations run without autograd and one last Newton step is taken with
+autograd on; at the fixed point its derivative equals the implicit-function derivative
+``-g_theta / g_lambda``, so gradients with respect to the sphere centres are exact and cheap.
+
+Pruning (``prune_sigma``): with ``gap = ||mu - c|| - R`` (the Euclidean distance from the mean
+to the ball) and ``s_max`` the largest variance, ``m >= gap / sqrt(s_max)``. Pairs with
+``gap > prune_sigma * sqrt(s_max)`` skip the solver and get ``Phi(-gap/sqrt(s_max))`` and
+``(4/3) pi R^3 (2 pi)^-1.5 det(Sigma)^-0.5 exp(-gap^2 / (2 s_max))``, which are upper bounds on
+the halfspace and volume bounds: pruning never lowers a bound; it raises the halfspace bound
+of a pruned pair to at most ``Phi(-prune_sigma)`` (about 1e-9 for 6).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Literal
+
+import torch
+
+from iplanner_torch.errors import ConfigError, NumericalWarning, ShapeError
+from iplanner_torch.types import check_shape
+
+Method = Literal["min", "volume", "halfspace"]
+Solver = Literal["newton", "bisection"]
+
+#: Newton iterations always run (vectorised, no data-dependent branching).
+NEWTON_ITERS = 6
+#: Extra Newton iterations allowed when the tolerance check fails after ``NEWTON_ITERS``.
+NEWTON_MAX_EXTRA_ITERS = 40
+#: Halvings of the bisection bracket (the paper's solver, kept as the reference).
+BISECTION_ITERS = 60
+#: Smallest variance used [m^2]; smaller eigenvalues are raised to it (1 micrometre std).
+VAR_FLOOR = 1e-12
+#: Default pruning threshold in standard deviations (see the module docstring).
+DEFAULT_PRUNE_SIGMA = 6.0
+
+_LOG_2PI = math.log(2.0 * math.pi)
+_LOG_4PI_3 = math.log(4.0 * math.pi / 3.0)
+_METHODS = ("min", "volume", "halfspace")
+_SOLVERS = ("newton", "bisection")
+
+
+def _check_choices(method: str, solver: str) -> None:
+    if method not in _METHODS:
+        raise ConfigError(f"expected method in {_METHODS}, got {method!r}")
+    if solver not in _SOLVERS:
+        raise ConfigError(f"expected solver in {_SOLVERS}, got {solver!r}")
+
+
+def _tolerance(dtype: torch.dtype) -> float:
+    """Relative residual ``|R/||y|| - 1|`` accepted by the Newton tolerance check."""
+    return 64.0 * torch.finfo(dtype).eps
+
+
+# The solver works component-first: d2 and s are (3, N), R and lambda are (N,), so that the
+# sums over the 3 eigen-directions are plain additions of contiguous rows.
+
+
+def _secular_residual(lam: torch.Tensor, d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor):
+    """Return ``g = 1/||y|| - 1/R`` and ``g' = dg/dlambda`` for ``y = d / (1 + lambda s)``."""
+    w = 1.0 / (1.0 + lam * s)  # (3, N)
+    y2 = d2 * w * w  # (3, N) squared components of y
+    q = torch.rsqrt(y2.sum(0))  # (N,) 1/||y||
+    g = q - 1.0 / R
+    gp = (y2 * s * w).sum(0) * q * q * q
+    return g, gp
+
+
+def _newton_step(
+    lam: torch.Tensor, d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor
+) -> torch.Tensor:
+    g, gp = _secular_residual(lam, d2, s, R)
+    return lam - g / gp
+
+
+def _lambda_bracket(d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor):
+    """Return ``(lambda_lo, lambda_hi)`` bracketing the root (mean outside the ball)."""
+    ratio = torch.sqrt(d2.sum(0)) / R - 1.0
+    return ratio / s.amax(0), ratio / s.amin(0)
+
+
+def _newton_start(d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor) -> torch.Tensor:
+    """A start left of the root, at least ``lambda_lo``.
+
+    ``||y(lambda)|| >= ||d|| / (1 + lambda s_max)`` and ``||y(lambda)|| >= |d_k| / (1 + lambda
+    s_k)`` for each k, so ``lambda_lo`` and every ``(|d_k|/R - 1)/s_k`` lie left of the root;
+    the largest is taken (it saves one or two iterations on anisotropic covariances).
+    """
+    lam_lo, _ = _lambda_bracket(d2, s, R)
+    per_axis = ((torch.sqrt(d2) / R - 1.0) / s).amax(0)
+    return torch.maximum(lam_lo, per_axis)
+
+
+def _solve_newton(d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor) -> torch.Tensor:
+    """Root of the secular equation by Newton from the left (no autograd).
+
+    ``NEWTON_ITERS`` vectorised iterations, then a tolerance check; the pairs that have not
+    converged (rare: strongly anisotropic covariances) are iterated further on their own.
+
+    Args:
+        d2: (3, N) squared eigen-coordinates of ``mu - c`` [m^2], all with ``||d|| > R``.
+        s: (3, N) eigenvalues [m^2].
+        R: (N,) radius sums [m].
+
+    Returns:
+        (N,) multipliers lambda [m^-2].
+    """
+    with torch.no_grad():
+        d2, s, R = d2.detach(), s.detach(), R.detach()
+        lam = _newton_start(d2, s, R)
+        for _ in range(NEWTON_ITERS):
+            lam = _newton_step(lam, d2, s, R)
+        if lam.numel() == 0:
+            return lam
+        tol = _tolerance(d2.dtype)
+        g, _ = _secular_residual(lam, d2, s, R)
+        todo = ((g * R).abs() > tol).nonzero().squeeze(-1)  # (N_todo,)
+        for _ in range(NEWTON_MAX_EXTRA_ITERS):
+            if todo.numel() == 0:
+                break
+            args = (d2[:, todo], s[:, todo], R[todo])
+            lam_t = _newton_step(lam[todo], *args)
+            lam[todo] = lam_t
+            g, _ = _secular_residual(lam_t, *args)
+            todo = todo[(g * args[2]).abs() > tol]
+        if todo.numel() > 0:
+            warnings.warn(
+                f"secular equation: Newton left {todo.numel()} pairs above relative residual "
+                f"{tol:.1e} after {NEWTON_ITERS + NEWTON_MAX_EXTRA_ITERS} iterations; their "
+                "iterates lie left of the root, so the bounds are still upper bounds",
+                NumericalWarning,
+                stacklevel=3,
+            )
+    return lam
+
+
+def _solve_bisection(d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor) -> torch.Tensor:
+    """The paper's bisection on ``[lambda_lo, lambda_hi]``; returns the bracket's lower end.
+
+    Args and returns as :func:`_solve_newton`.
+    """
+    with torch.no_grad():
+        d2, s, R = d2.detach(), s.detach(), R.detach()
+        lo, hi = _lambda_bracket(d2, s, R)
+        for _ in range(BISECTION_ITERS):
+            mid = 0.5 * (lo + hi)
+            g, _ = _secular_residual(mid, d2, s, R)
+            left = g < 0
+            lo = torch.where(left, mid, lo)
+            hi = torch.where(left, hi, mid)
+    return lo
+
+
+def _log_volume_factor(R: torch.Tensor, log_det: torch.Tensor) -> torch.Tensor:
+    """``log((4/3) pi R^3 (2 pi)^-1.5 det(Sigma)^-0.5)``: the volume bound is this x e^(-m^2/2)."""
+    return _LOG_4PI_3 + 3.0 * torch.log(R) - 1.5 * _LOG_2PI - 0.5 * log_det
+
+
+def _combine(m2: torch.Tensor, log_vf: torch.Tensor, method: str) -> torch.Tensor:
+    """``min`` / ``volume`` / ``halfspace`` bound from a squared Mahalanobis distance."""
+    if method == "halfspace":
+        return 0.5 * torch.erfc(torch.sqrt(m2) * (0.5**0.5))
+    volume = torch.exp((log_vf - 0.5 * m2).clamp_max(0.0))
+    if method == "volume":
+        return volume
+    return torch.minimum(volume, 0.5 * torch.erfc(torch.sqrt(m2) * (0.5**0.5)))
+
+
+def _pair_bounds(
+    d2: torch.Tensor,
+    s: torch.Tensor,
+    R: torch.Tensor,
+    *,
+    method: str,
+    solver: str,
+    prune_sigma: float | None,
+) -> torch.Tensor:
+    """Bound for every pair given squared eigen-coordinates ``d2`` and eigenvalues ``s``.
+
+    Args:
+        d2: (3, ...) squared components of ``U^T (mu - c)`` [m^2] (component first).
+        s: (3, ...) covariance eigenvalues (variances) [m^2], broadcastable to ``d2``.
+        R: (...) sum of the two radii [m], broadcastable to ``d2[0]``.
+        method: which bound.
+        solver: secular-equation solver.
+        prune_sigma: skip the solver beyond this many standard deviations (None: never).
+
+    Returns:
+        (...) bound in [0, 1], the broadcast shape of the three inputs.
+    """
+    s = s.clamp_min(VAR_FLOOR)
+    log_det = torch.log(s).sum(0)  # (...) broadcastable, computed before expanding
+    log_vf = _log_volume_factor(R, log_det)  # (...) broadcastable
+    shape = torch.broadcast_shapes(d2.shape[1:], s.shape[1:], R.shape)
+    dist2 = d2.sum(0)  # (...)
+    outside = dist2 > R * R  # (shape)
+    # Mean inside the ball: x_max = mu, m = 0, the half-space bound does not apply (1).
+    if method == "halfspace":
+        base = torch.ones(shape, dtype=d2.dtype, device=d2.device)
+    else:
+        base = torch.exp(log_vf.clamp_max(0.0)).expand(shape)
+    active = outside
+    if prune_sigma is not None:
+        # m >= gap / sqrt(s_max): pruned pairs get bounds that are never below their own.
+        s_max = s.amax(0)
+        gap = torch.sqrt(dist2) - R
+        near = gap <= prune_sigma * torch.sqrt(s_max)
+        far = outside & ~near
+        if method == "volume":
+            far_val = torch.exp((log_vf - 0.5 * gap.clamp_min(0.0).square() / s_max).clamp_max(0))
+        else:
+            far_val = torch.full((), 0.5 * math.erfc(prune_sigma * 0.5**0.5), dtype=d2.dtype)
+            far_val = far_val.to(d2.device)
+        base = torch.where(far, far_val, base)
+        active = outside & near
+    idx = active.reshape(-1).nonzero().squeeze(1)  # (N_act,) flat indices of active pairs
+    if idx.numel() == 0:
+        return base.expand(shape)
+    coords = torch.unravel_index(idx, shape)  # gather through broadcast strides, no copies
+    d2_a = d2.expand((3,) + shape)[(slice(None),) + coords]  # (3, N_act)
+    s_a = s.expand((3,) + shape)[(slice(None),) + coords]  # (3, N_act)
+    R_a = R.expand(shape)[coords]  # (N_act,)
+    if solver == "newton":
+        lam = _solve_newton(d2_a, s_a, R_a)
+        lam = _newton_step(lam, d2_a, s_a, R_a)  # differentiable (implicit-function) step
+    else:
+        lam = _solve_bisection(d2_a, s_a, R_a)
+    w = lam * s_a / (1.0 + lam * s_a)  # (3, N_act)
+    m2 = (d2_a * w * w / s_a).sum(0)  # (N_act,) squared Mahalanobis distance of x_max
+    vals = _combine(m2, log_vf.expand(shape)[coords], method)  # (N_act,)
+    out = base.expand(shape).reshape(-1).index_put((idx,), vals.to(base.dtype))
+    return out.view(shape)
+
+
+def _check_entry(
+    robot_center: torch.Tensor,
+    robot_radius: torch.Tensor,
+    mean: torch.Tensor,
+    human_radius: torch.Tensor,
+) -> None:
+    check_shape("robot_center", robot_center, ("...", 3))
+    check_shape("mean", mean, ("...", 3))
+    for name, t in (("robot_radius", robot_radius), ("human_radius", human_radius)):
+        if not isinstance(t, torch.Tensor):
+            raise ShapeError(f"expected {name} to be a torch.Tensor, got {type(t).__name__}")
+
+
+def _radius_sum(robot_radius: torch.Tensor, human_radius: torch.Tensor) -> torch.Tensor:
+    R = robot_radius + human_radius
+    if bool((R <= 0).any()):
+        raise ShapeError("expected robot_radius + human_radius > 0 everywhere")
+    return R
+
+
+def sphere_collision_bound(
+    robot_center: torch.Tensor,
+    robot_radius: torch.Tensor,
+    mean: torch.Tensor,
+    cov: torch.Tensor,
+    human_radius: torch.Tensor,
+    *,
+    method: Method = "min",
+    solver: Solver = "newton",
+    prune_sigma: float | None = None,
+) -> torch.Tensor:
+    """Upper bound on P(robot sphere meets a human sphere with Gaussian centre) (sec. 5).
+
+    Bounds ``P(||X - c|| <= r1 + r2)``, ``X ~ N(mean, cov)``, by eq. approx_sphere_collision
+    with the ball's volume ``(4/3) pi R^3`` (the paper prints ``R^2``; see the module
+    docstring), by the half-space bound ``Phi(-m)``, or by their minimum. Leading dimensions
+    broadcast. Differentiable with respect to ``robot_center`` and ``mean``.
+
+    Args:
+        robot_center: (..., 3) robot sphere centres [m].
+        robot_radius: (...) robot sphere radii [m].
+        mean: (..., 3) mean of the human sphere centre [m].
+        cov: (..., 3, 3) covariance of the human sphere centre [m^2], symmetric positive
+            (semi)definite; eigenvalues below ``VAR_FLOOR`` are raised to it.
+        human_radius: (...) human sphere radii [m].
+        method: ``"min"`` (default), ``"volume"`` or ``"halfspace"``.
+        solver: ``"newton"`` (default) or the paper's ``"bisection"`` (reference, no exact
+            gradient through the multiplier).
+        prune_sigma: skip the solver for pairs farther than this many standard deviations
+            (cheap, never lower bound; None: never prune).
+
+    Returns:
+        (...) bound in [0, 1], dtype of the inputs.
+
+    Raises:
+        ShapeError: on wrong trailing dimensions or non-positive radius sums.
+        ConfigError: on an unknown method or solver.
+    """
+    _check_choices(method, solver)
+    _check_entry(robot_center, robot_radius, mean, human_radius)
+    check_shape("cov", cov, ("...", 3, 3))
+    R = _radius_sum(robot_radius, human_radius)
+    s, U = torch.linalg.eigh(0.5 * (cov + cov.transpose(-1, -2)))  # (..., 3), (..., 3, 3)
+    diff = mean - robot_center  # (..., 3)
+    batch = torch.broadcast_shapes(U.shape[:-2], diff.shape[:-1])
+    d = torch.einsum("...ji,...j->...i", U.expand(batch + (3, 3)), diff.expand(batch + (3,)))
+    d2 = (d * d).movedim(-1, 0)  # (3, ...)
+    return _pair_bounds(
+        d2, s.movedim(-1, 0), R, method=method, solver=solver, prune_sigma=prune_sigma
+    )
+
+
+def sphere_collision_bound_diag(
+    robot_center: torch.Tensor,
+    robot_radius: torch.Tensor,
+    mean: torch.Tensor,
+    var: torch.Tensor,
+    human_radius: torch.Tensor,
+    *,
+    method: Method = "min",
+    solver: Solver = "newton",
+    prune_sigma: float | None = None,
+) -> torch.Tensor:
+    """:func:`sphere_collision_bound` for diagonal covariances (no eigendecomposition).
+
+    Args:
+        robot_center: (..., 3) robot sphere centres [m].
+        robot_radius: (...) robot sphere radii [m].
+        mean: (..., 3) mean of the human sphere centre [m].
+        var: (..., 3) per-axis variances of the human sphere centre [m^2].
+        human_radius: (...) human sphere radii [m].
+        method: ``"min"`` (default), ``"volume"`` or ``"halfspace"``.
+        solver: ``"newton"`` (default) or ``"bisection"`` (reference).
+        prune_sigma: see :func:`sphere_collision_bound`.
+
+    Returns:
+        (...) bound in [0, 1].
+
+    Raises:
+        ShapeError: on wrong trailing dimensions or non-positive radius sums.
+        ConfigError: on an unknown method or solver.
+    """
+    _check_choices(method, solver)
+    _check_entry(robot_center, robot_radius, mean, human_radius)
+    check_shape("var", var, ("...", 3))
+    R = _radius_sum(robot_radius, human_radius)
+    diff = mean - robot_center
+    d2 = (diff * diff).movedim(-1, 0)  # (3, ...)
+    return _pair_bounds(
+        d2, var.movedim(-1, 0), R, method=method, solver=solver, prune_sigma=prune_sigma
+    )
+
+
+def max_density_point(
+    robot_center: torch.Tensor,
+    radius: torch.Tensor,
+    mean: torch.Tensor,
+    cov: torch.Tensor,
+    *,
+    solver: Solver = "newton",
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``x_max``, the point of the ball ``||x - c|| <= radius`` with the highest density.
+
+    Args:
+        robot_center: (..., 3) ball centre ``c`` [m].
+        radius: (...) ball radius ``R = r1 + r2`` [m].
+        mean: (..., 3) Gaussian mean [m].
+        cov: (..., 3, 3) Gaussian covariance [m^2].
+        solver: ``"newton"`` or ``"bisection"``.
+
+    Returns:
+        ``(x_max (..., 3) [m], lambda (...) [m^-2])``; ``lambda = 0`` and ``x_max = mean`` when
+        the mean lies inside the ball.
+
+    Raises:
+        ShapeError: on wrong trailing dimensions.
+        ConfigError: on an unknown solver.
+    """
+    _check_choices("min", solver)
+    check_shape("robot_center", robot_center, ("...", 3))
+    check_shape("mean", mean, ("...", 3))
+    check_shape("cov", cov, ("...", 3, 3))
+    s, U = torch.linalg.eigh(0.5 * (cov + cov.transpose(-1, -2)))
+    s = s.clamp_min(VAR_FLOOR)
+    diff = mean - robot_center
+    batch = torch.broadcast_shapes(U.shape[:-2], diff.shape[:-1], radius.shape)
+    U = U.expand(batch + (3, 3))
+    s = s.expand(batch + (3,))
+    d = torch.einsum("...ji,...j->...i", U, diff.expand(batch + (3,)))  # (..., 3)
+    R = radius.expand(batch)
+    outside = (d * d).sum(-1) > R * R
+    lam = torch.zeros(batch, dtype=d.dtype, device=d.device)
+    if bool(outside.any()):
+        args = (d[outside].T ** 2, s[outside].T, R[outside])  # (3, N), (3, N), (N,)
+        lam_a = _solve_newton(*args) if solver == "newton" else _solve_bisection(*args)
+        lam = lam.masked_scatter(outside, lam_a)
+    y = d / (1.0 + lam.unsqueeze(-1) * s)  # (..., 3) eigen-coordinates relative to c
+    x = robot_center.expand(batch + (3,)) + torch.einsum("...ij,...j->...i", U, y)
+    return x, lam
+
+
+def _weights_per_waypoint(weights: torch.Tensor, W: int, A: int) -> torch.Tensor:
+    if weights.dim() == 1:
+        check_shape("weights", weights, (A,))
+        return weights.expand(W, A)
+    check_shape("weights", weights, (W, A))
+    return weights
+
+
+def pairwise_bound_matrix(
+    robot_centers: torch.Tensor,
+    robot_radii: torch.Tensor,
+    human_mean: torch.Tensor,
+    human_cov: torch.Tensor,
+    human_radii: torch.Tensor,
+    weights: torch.Tensor,
+    *,
+    method: Method = "min",
+    prune_sigma: float | None = DEFAULT_PRUNE_SIGMA,
+    max_pairs_per_chunk: int = 2_000_000,
+) -> torch.Tensor:
+    """Action-mixture bound for every robot/human sphere pair (eq. max_collision_probability).
+
+    Entry ``[b, w, j, l]`` is ``sum_a weights[a] * bound(robot sphere j of trajectory b at
+    waypoint w, human sphere l of action a at waypoint w)``.
+
+    Args:
+        robot_centers: (B, W, S_r, 3) robot sphere centres [m].
+        robot_radii: (S_r,) robot sphere radii [m].
+        human_mean: (W, A, S_h, 3) mean human sphere centres per action [m].
+        human_cov: (W, A, S_h, 3, 3) covariances [m^2], or (W, A, S_h, 3) per-axis variances
+            [m^2] (diagonal covariances: no eigendecomposition).
+        human_radii: (S_h,) human sphere radii [m].
+        weights: (A,) or (W, A) action probabilities p(c | F, p).
+        method: ``"min"``, ``"volume"`` or ``"halfspace"``.
+        prune_sigma: see :func:`sphere_collision_bound` (None: never prune).
+        max_pairs_per_chunk: the batch is processed in chunks of at most this many pairs.
+
+    Returns:
+        (B, W, S_r, S_h) mixture bounds (may exceed 1 only by rounding; each term is <= 1).
+
+    Raises:
+        ShapeError: on inconsistent shapes.
+        ConfigError: on an unknown method or a non-positive chunk size.
+    """
+    _check_choices(method, "newton")
+    if max_pairs_per_chunk <= 0:
+        raise ConfigError(f"expected max_pairs_per_chunk > 0, got {max_pairs_per_chunk}")
+    check_shape("robot_centers", robot_centers, ("B", "W", "S_r", 3))
+    B, W, S_r, _ = robot_centers.shape
+    check_shape("robot_radii", robot_radii, (S_r,))
+    check_shape("human_mean", human_mean, (W, "A", "S_h", 3))
+    _, A, S_h, _ = human_mean.shape
+    check_shape("human_radii", human_radii, (S_h,))
+    diagonal = human_cov.dim() == 4
+    if diagonal:
+        check_shape("human_cov", human_cov, (W, A, S_h, 3))
+    else:
+        check_shape("human_cov", human_cov, (W, A, S_h, 3, 3))
+    w = _weights_per_waypoint(weights, W, A).to(robot_centers.dtype)  # (W, A)
+    R = _radius_sum(robot_radii[:, None, None], human_radii[None, None, :])  # (S_r, 1, S_h)
+
+    if diagonal:
+        s = human_cov.movedim(-1, 0)  # (3, W, A, S_h)
+        mu_e = human_mean.movedim(-1, 0)  # (3, W, A, S_h)
+        U = None
+    else:
+        s, U = torch.linalg.eigh(0.5 * (human_cov + human_cov.transpose(-1, -2)))
+        s = s.movedim(-1, 0)  # (3, W, A, S_h) eigenvalues
+        mu_e = torch.einsum("walji,walj->iwal", U, human_mean)  # (3, W, A, S_h) eigen-coords
+
+    pairs_per_traj = W * S_r * A * S_h
+    chunk = max(1, max_pairs_per_chunk // max(pairs_per_traj, 1))
+    out = []
+    for b0 in range(0, B, chunk):
+        c = robot_centers[b0 : b0 + chunk]  # (b, W, S_r, 3)
+        if U is None:
+            c_e = c.movedim(-1, 0)[..., None, None]  # (3, b, W, S_r, 1, 1)
+        else:
+            c_e = torch.einsum("walji,bwrj->ibwral", U, c)  # (3, b, W, S_r, A, S_h)
+        d = mu_e[:, None, :, None] - c_e  # (3, b, W, S_r, A, S_h)
+        p = _pair_bounds(
+            d * d,
+            s[:, None, :, None],
+            R,
+            method=method,
+            solver="newton",
+            prune_sigma=prune_sigma,
+        )  # (b, W, S_r, A, S_h)
+        out.append(torch.einsum("bwral,wa->bwrl", p, w))
+    return torch.cat(out, dim=0)
+
+
+def trajectory_collision_bound(
+    robot_centers: torch.Tensor,
+    robot_radii: torch.Tensor,
+    human_mean: torch.Tensor,
+    human_cov: torch.Tensor,
+    human_radii: torch.Tensor,
+    weights: torch.Tensor,
+    *,
+    method: Method = "min",
+    reduce: Literal["max", "none"] = "max",
+    prune_sigma: float | None = DEFAULT_PRUNE_SIGMA,
+    max_pairs_per_chunk: int = 2_000_000,
+) -> torch.Tensor:
+    """Collision-probability bound per trajectory and waypoint (eq. max_collision_probability).
+
+    ``max_{j, l} sum_a weights[a] * bound(robot sphere j, human sphere l of action a)``: the
+    mixture over actions of the pair bounds, maximised over sphere pairs.
+
+    Args:
+        robot_centers: (B, W, S_r, 3) robot sphere centres [m].
+        robot_radii: (S_r,) robot sphere radii [m].
+        human_mean: (W, A, S_h, 3) mean human sphere centres per action [m].
+        human_cov: (W, A, S_h, 3, 3) covariances [m^2] or (W, A, S_h, 3) variances [m^2].
+        human_radii: (S_h,) human sphere radii [m].
+        weights: (A,) or (W, A) action probabilities.
+        method: ``"min"``, ``"volume"`` or ``"halfspace"``.
+        reduce: ``"max"`` -> (B, W); ``"none"`` -> (B, W, S_r, S_h) as
+            :func:`pairwise_bound_matrix`.
+        prune_sigma: see :func:`sphere_collision_bound`.
+        max_pairs_per_chunk: memory cap, see :func:`pairwise_bound_matrix`.
+
+    Returns:
+        (B, W) bounds in [0, 1] (or the pair matrix for ``reduce="none"``).
+
+    Raises:
+        ShapeError: on inconsistent shapes.
+        ConfigError: on an unknown method or reduce.
+    """
+    if reduce not in ("max", "none"):
+        raise ConfigError(f"expected reduce in ('max', 'none'), got {reduce!r}")
+    pair = pairwise_bound_matrix(
+        robot_centers,
+        robot_radii,
+        human_mean,
+        human_cov,
+        human_radii,
+        weights,
+        method=method,
+        prune_sigma=prune_sigma,
+        max_pairs_per_chunk=max_pairs_per_chunk,
+    )
+    if reduce == "none":
+        return pair
+    return pair.flatten(2).amax(-1).clamp(0.0, 1.0)

@@ -1,0 +1,168 @@
+"""Static obstacles (the table, the chair): signed distances from robot spheres.
+
+Distances are between the sphere's surface and the obstacle: negative values are penetration
+depths. Everything is differentiable with respect to the sphere centres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import torch
+
+from iplanner_torch.errors import ConfigError
+from iplanner_torch.types import check_shape
+
+
+def sphere_box_distance(
+    centers: torch.Tensor,
+    radii: torch.Tensor,
+    box_center: torch.Tensor,
+    box_half_extents: torch.Tensor,
+    box_rotation: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """Signed distance between sphere surfaces and an oriented box.
+
+    Args:
+        centers: (..., 3) sphere centres [m], world frame.
+        radii: (...) sphere radii [m], broadcastable to ``centers[..., 0]``.
+        box_center: (3,) box centre [m], world frame.
+        box_half_extents: (3,) half side lengths [m], box frame.
+        box_rotation: (3, 3) rotation ``R_world_box`` (columns: box axes in the world frame);
+            identity when None.
+
+    Returns:
+        (...) signed distance [m]: the box's signed distance at the centre minus the radius.
+
+    Raises:
+        ShapeError: on wrong shapes.
+    """
+    check_shape("centers", centers, ("...", 3))
+    check_shape("box_center", box_center, (3,))
+    check_shape("box_half_extents", box_half_extents, (3,))
+    p = centers - box_center.to(centers)  # (..., 3)
+    if box_rotation is not None:
+        check_shape("box_rotation", box_rotation, (3, 3))
+        p = p @ box_rotation.to(centers)  # (..., 3) box frame
+    q = p.abs() - box_half_extents.to(centers)  # (..., 3)
+    outside = torch.linalg.vector_norm(q.clamp_min(0.0), dim=-1)
+    inside = q.amax(-1).clamp_max(0.0)
+    return outside + inside - radii
+
+
+def sphere_plane_distance(
+    centers: torch.Tensor, radii: torch.Tensor, normal: torch.Tensor, offset: float
+) -> torch.Tensor:
+    """Signed distance between sphere surfaces and the half-space ``n . x <= offset``.
+
+    Args:
+        centers: (..., 3) sphere centres [m].
+        radii: (...) sphere radii [m].
+        normal: (3,) plane normal pointing out of the obstacle (normalised here).
+        offset: plane offset [m]: the plane is ``n . x = offset``.
+
+    Returns:
+        (...) signed distance [m] (negative: penetration).
+
+    Raises:
+        ShapeError: on wrong shapes.
+        ConfigError: on a zero normal.
+    """
+    check_shape("centers", centers, ("...", 3))
+    check_shape("normal", normal, (3,))
+    norm = torch.linalg.vector_norm(normal)
+    if not bool(norm > 0):
+        raise ConfigError("expected a non-zero plane normal")
+    n = (normal / norm).to(centers)
+    return centers @ n - offset - radii
+
+
+@dataclass(frozen=True, kw_only=True)
+class Box:
+    """An oriented box obstacle."""
+
+    center: tuple[float, float, float]  # box centre [m], world frame
+    half_extents: tuple[float, float, float]  # half side lengths [m]
+    rotation: tuple[tuple[float, float, float], ...] = (  # R_world_box, rows
+        (1.0, 0.0, 0.0),
+        (0.0, 1.0, 0.0),
+        (0.0, 0.0, 1.0),
+    )
+    name: str = "box"  # label in logs
+
+    def __post_init__(self) -> None:
+        if len(self.center) != 3 or len(self.half_extents) != 3:
+            raise ConfigError(f"expected 3 values for center and half_extents of {self.name}")
+        if min(self.half_extents) <= 0:
+            raise ConfigError(f"expected positive half_extents, got {self.half_extents}")
+        if len(self.rotation) != 3 or any(len(r) != 3 for r in self.rotation):
+            raise ConfigError(f"expected a 3x3 rotation for {self.name}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Plane:
+    """A half-space obstacle ``normal . x <= offset`` (e.g. the floor)."""
+
+    normal: tuple[float, float, float]  # outward normal (normalised when used)
+    offset: float  # plane offset along the normal [m]
+    name: str = "plane"  # label in logs
+
+    def __post_init__(self) -> None:
+        if len(self.normal) != 3 or all(v == 0 for v in self.normal):
+            raise ConfigError(f"expected a non-zero 3-vector normal, got {self.normal}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class StaticScene:
+    """Static obstacles of a scene: boxes (table, chair) and planes (floor)."""
+
+    boxes: tuple[Box, ...] = field(default_factory=tuple)  # oriented boxes
+    planes: tuple[Plane, ...] = field(default_factory=tuple)  # half-spaces
+
+    def __post_init__(self) -> None:
+        if not self.boxes and not self.planes:
+            raise ConfigError("expected at least one box or plane in a StaticScene")
+
+    def distances(self, centers: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
+        """Signed distance of every sphere to every obstacle.
+
+        Args:
+            centers: (..., S, 3) sphere centres [m].
+            radii: (S,) sphere radii [m].
+
+        Returns:
+            (..., S, O) signed distances [m], boxes first, then planes.
+
+        Raises:
+            ShapeError: on wrong shapes.
+        """
+        check_shape("centers", centers, ("...", "S", 3))
+        check_shape("radii", radii, (centers.shape[-2],))
+        kw = {"dtype": centers.dtype, "device": centers.device}
+        out = []
+        for box in self.boxes:
+            out.append(
+                sphere_box_distance(
+                    centers,
+                    radii,
+                    torch.tensor(box.center, **kw),
+                    torch.tensor(box.half_extents, **kw),
+                    torch.tensor(box.rotation, **kw),
+                )
+            )
+        for plane in self.planes:
+            normal = torch.tensor(plane.normal, **kw)
+            out.append(sphere_plane_distance(centers, radii, normal, plane.offset))
+        return torch.stack(out, dim=-1)
+
+    def clearance(self, centers: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
+        """Smallest signed distance of each sphere to all obstacles.
+
+        Args:
+            centers: (..., S, 3) sphere centres [m].
+            radii: (S,) sphere radii [m].
+
+        Returns:
+            (..., S) signed clearance [m] (negative: penetration), differentiable.
+        """
+        return self.distances(centers, radii).amin(-1)

@@ -1,0 +1,153 @@
+#!/usr/bin/env python
+"""Benchmark of the probabilistic collision bound (iplanner_torch.collision.gaussian).
+
+Figures: pair bounds per second on a planner-sized batch (diagonal and full covariances),
+Newton versus the paper's bisection on the same pairs, and the tightness of the bounds
+against the exact probability (Ruben's series).
+
+Usage::
+
+    python scripts/bench_collision.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+import numpy as np
+import torch
+
+from iplanner_torch.collision import gaussian as G
+from iplanner_torch.collision.exact import ruben_series
+
+
+def _median_time(fn, repeats: int, warmup: int = 1) -> float:
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def _scene(B: int, seed: int, *, W=20, S_r=40, A=10, S_h=20):
+    """A robot arm reaching around a seated human: robot spheres spread over the workspace,
+    human spheres around the torso and arms, predictive std 1-6 cm."""
+    gen = torch.Generator().manual_seed(seed)
+    rc = torch.rand(B, W, S_r, 3, generator=gen) * torch.tensor([1.2, 1.0, 0.8])
+    rr = 0.04 + 0.04 * torch.rand(S_r, generator=gen)
+    hm = torch.tensor([0.0, 0.3, 0.2]) + torch.rand(W, A, S_h, 3, generator=gen) * 0.5
+    hv = (0.01 + 0.05 * torch.rand(W, A, S_h, 3, generator=gen)) ** 2
+    hr = 0.04 + 0.08 * torch.rand(S_h, generator=gen)
+    w = torch.softmax(torch.randn(A, generator=gen), 0)
+    Q = torch.linalg.qr(torch.randn(W, A, S_h, 3, 3, generator=gen))[0]
+    cov = Q @ torch.diag_embed(hv) @ Q.transpose(-1, -2)
+    return rc, rr, hm, hv, cov, hr, w
+
+
+def _tightness(n: int, seed: int) -> tuple[float, float, int]:
+    rng = np.random.default_rng(seed)
+    R = rng.uniform(0.05, 0.4, n)
+    # Std 0.25 R to 4 R, anisotropy up to 2 in std (where a 120-term Ruben series is exact).
+    sig = R[:, None] * np.exp(
+        rng.uniform(np.log(0.25), np.log(4.0), (n, 1)) + rng.uniform(0, np.log(2.0), (n, 3))
+    )
+    s = sig**2
+    far = R + sig.max(1) * rng.uniform(0, 6, n)
+    dist = np.where(rng.random(n) < 0.25, R * rng.uniform(0, 1, n), far)
+    d2 = (rng.dirichlet(np.ones(3), n)) * dist[:, None] ** 2
+    lower, exact = ruben_series(s, d2, R * R, max_terms=120)
+    assert np.all(exact - lower <= 1e-9 * exact + 1e-300), "Ruben series did not converge"
+    t = torch.from_numpy
+    zeros = torch.zeros(n, 3, dtype=torch.float64)
+    mean = t(np.sqrt(d2))
+    out = {}
+    for method in ("min", "volume"):
+        b = G.sphere_collision_bound_diag(zeros, t(R / 2), mean, t(s), t(R / 2), method=method)
+        keep = exact >= 1e-6
+        out[method] = float(np.median(b.numpy()[keep] / exact[keep]))
+    return out["min"], out["volume"], int(keep.sum())
+
+
+def run(quick: bool) -> dict[str, dict]:
+    """Run the collision benchmark; ``quick`` uses smaller batches (well under 20 s)."""
+    B = 4 if quick else 64
+    repeats = 3 if quick else 7
+    rc, rr, hm, hv, cov, hr, w = _scene(B, 0)
+    n_pairs = rc.shape[0] * rc.shape[1] * rc.shape[2] * hm.shape[1] * hm.shape[2]
+    t_diag = _median_time(lambda: G.trajectory_collision_bound(rc, rr, hm, hv, hr, w), repeats)
+    t_full = _median_time(lambda: G.trajectory_collision_bound(rc, rr, hm, cov, hr, w), repeats)
+    # Dense worst case: no pruning, every pair through the solver.
+    t_dense = _median_time(
+        lambda: G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, prune_sigma=None), repeats
+    )
+    # Newton versus bisection on the same pairs (all of them, no pruning).
+    n_solver = 50_000 if quick else 1_000_000
+    gen = torch.Generator().manual_seed(1)
+    c = torch.rand(n_solver, 3, generator=gen)
+    mu = torch.rand(n_solver, 3, generator=gen)
+    var = (0.01 + 0.1 * torch.rand(n_solver, 3, generator=gen)) ** 2
+    r = torch.full((n_solver,), 0.06)
+    t_newton = _median_time(lambda: G.sphere_collision_bound_diag(c, r, mu, var, r), repeats)
+    t_bisect = _median_time(
+        lambda: G.sphere_collision_bound_diag(c, r, mu, var, r, solver="bisection"), repeats
+    )
+    tight_min, tight_vol, n_tight = _tightness(2000 if quick else 10_000, 2)
+    threads = torch.get_num_threads()
+    return {
+        "collision.pairs_per_s": {
+            "value": n_pairs / t_diag,
+            "unit": "pairs/s",
+            "covariance": "diagonal",
+            "pairs": n_pairs,
+            "dense_no_pruning_pairs_per_s": n_pairs / t_dense,
+            "goal": 1e7,
+            "threads": threads,
+        },
+        "collision.pairs_per_s_full_cov": {
+            "value": n_pairs / t_full,
+            "unit": "pairs/s",
+            "covariance": "full",
+            "pairs": n_pairs,
+            "goal": 1e7,
+            "threads": threads,
+        },
+        "collision.newton_vs_bisection_speedup": {
+            "value": t_bisect / t_newton,
+            "unit": "x",
+            "newton_s": t_newton,
+            "reference": t_bisect,
+            "reference_name": "bisection (60 halvings) on the same pairs [s]",
+            "pairs": n_solver,
+            "goal": 5.0,
+        },
+        "collision.tightness_median": {
+            "value": tight_min,
+            "unit": "bound/exact",
+            "method": "min",
+            "cases": n_tight,
+            "goal": 3.0,
+        },
+        "collision.tightness_median_volume_only": {
+            "value": tight_vol,
+            "unit": "bound/exact",
+            "method": "volume",
+            "cases": n_tight,
+            "reference": tight_min,
+            "ratio": tight_vol / tight_min,
+        },
+    }
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args()
+    t0 = time.perf_counter()
+    print(json.dumps(run(args.quick), indent=2))
+    print(f"# {time.perf_counter() - t0:.1f} s", flush=True)

@@ -1,0 +1,298 @@
+"""Pictures of the simulated workspace and of recorded closed-loop episodes.
+
+Scene mode: the default workspace for both robots and the three block arrangements, each from
+the overview, side and top cameras, as one contact sheet::
+
+    python scripts/render_episode.py --scene                  # experiments/scenes/overview.png
+
+Episode mode: replay an episode log (robot joint positions, true human joints, blocks moved
+as the task events say) and draw N snapshots evenly spaced in time; ``--video`` also writes an
+animation (GIF with Pillow, or MP4 when imageio with ffmpeg is installed)::
+
+    python scripts/render_episode.py --mcap runs/ep.mcap --frames 6 --camera overview \
+        --overlay --video runs/ep.gif
+
+Rendering needs a GL backend: ``MUJOCO_GL=osmesa`` (package libosmesa6) on CPU machines,
+``MUJOCO_GL=egl`` on GPU machines.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import torch
+
+from iplanner_torch.data.skeleton import JOINT_INDEX
+from iplanner_torch.errors import DataError
+from iplanner_torch.recording import Episode, read_episode
+from iplanner_torch.robot.model import RobotModel
+from iplanner_torch.sim.human import ReachingMotionSource
+from iplanner_torch.sim.render import (
+    HUMAN_SPHERE_RGBA,
+    ROBOT_SPHERE_RGBA,
+    SceneRenderer,
+    gl_available,
+    save_contact_sheet,
+)
+from iplanner_torch.sim.scene import SceneCfg, SceneHandles, build_scene, pose_human
+
+ROOT = Path(__file__).resolve().parents[1]
+CAMERA_NAMES = ("overview", "side", "top")
+
+
+@dataclass
+class Workspace:
+    """A compiled scene with its state, handles and robot."""
+
+    cfg: SceneCfg
+    robot: RobotModel
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    handles: SceneHandles
+
+    @classmethod
+    def build(cls, robot_name: str, arrangement: str) -> Workspace:
+        cfg = SceneCfg(arrangement=arrangement)  # type: ignore[arg-type]
+        robot = RobotModel.load(robot_name, dtype=torch.float64)
+        model = build_scene(cfg, robot)
+        data = mujoco.MjData(model)
+        return cls(cfg, robot, model, data, SceneHandles.resolve(model, cfg, robot))
+
+    def pose(self, q: np.ndarray, human: np.ndarray) -> None:
+        """Set robot joints (J,) [rad] and human joints (K, 3) [m], then update the state."""
+        self.data.qpos[self.handles.qpos_adr] = q
+        pose_human(self.model, self.data, self.handles, human)
+        mujoco.mj_forward(self.model, self.data)
+
+    def ee(self) -> np.ndarray:
+        """(3,) tool point [m] of the current robot pose."""
+        if self.handles.ee_site >= 0:
+            return self.data.site_xpos[self.handles.ee_site].copy()
+        q = torch.as_tensor(self.data.qpos[self.handles.qpos_adr], dtype=torch.float64)
+        return self.robot.ee_position(q).numpy()
+
+    def robot_spheres(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding spheres of the robot at q: centres (S_r, 3) [m], radii (S_r,) [m]."""
+        c = self.robot.sphere_centers(torch.as_tensor(q, dtype=torch.float64))
+        return c.numpy(), self.robot.sphere_radii.numpy()
+
+
+def render_scene_sheet(out: Path, width: int, height: int) -> Path:
+    """Both robots x three arrangements, each from every camera, at home / rest poses."""
+    frames, titles = [], []
+    for robot_name in ("kuka_iiwa14", "fetch"):
+        for arrangement in ("1x4", "2x2", "2x4"):
+            ws = Workspace.build(robot_name, arrangement)
+            rest = ReachingMotionSource(0, seat_x=ws.cfg.human_seat_x).rest_pose()
+            ws.pose(ws.robot.q_home.numpy(), rest)
+            with SceneRenderer(ws.model, width=width, height=height) as r:
+                for cam in CAMERA_NAMES:
+                    frames.append(r.render(ws.data, camera=cam))
+                    titles.append(f"{robot_name}, {arrangement}, {cam}")
+    return save_contact_sheet(frames, titles, out, columns=len(CAMERA_NAMES))
+
+
+class BlockReplay:
+    """Block positions over time from the task events (as the environment moves them)."""
+
+    def __init__(self, ws: Workspace, events: list[dict], q_of_t, human_of_t) -> None:
+        self.ws = ws
+        self.timeline: dict[int, list[tuple[float, str, np.ndarray | None]]] = {
+            i: [(-np.inf, "far", None)] for i in ws.cfg.block_ids
+        }
+        for e in events:
+            detail = e.get("detail") or {}
+            block = detail.get("block") if isinstance(detail, dict) else None
+            if block not in self.timeline:
+                continue
+            t, kind = float(e["t"]), e["kind"]
+            if kind == "picked":
+                ws.pose(q_of_t(t), human_of_t(t))
+                self.timeline[block].append((t, "robot", ws.cfg.block_position(block) - ws.ee()))
+            elif kind == "delivered":
+                self.timeline[block].append((t, "delivered", None))
+            elif kind == "human_grasped":
+                hand = self._hand(block)
+                self.timeline[block].append((t, "human", np.array([hand])))
+            elif kind == "human_took":
+                self.timeline[block].append((t, "taken", None))
+
+    def _hand(self, block: int) -> int:
+        side = "left" if self.ws.cfg.delivery_position(block)[1] > 0 else "right"
+        return JOINT_INDEX[f"{side}_hand"]
+
+    def apply(self, t: float, human: np.ndarray) -> None:
+        """Move the block mocap bodies to time t (robot kinematics already at t)."""
+        ws = self.ws
+        for block, line in self.timeline.items():
+            _, state, extra = [s for s in line if s[0] <= t][-1]
+            if state == "far":
+                pos = ws.cfg.block_position(block)
+            elif state == "robot":
+                pos = ws.ee() + extra
+            elif state == "delivered":
+                pos = ws.cfg.delivery_position(block)
+            elif state == "human":
+                pos = human[int(extra[0])] - np.array([0.0, 0.0, 0.02])
+            else:
+                pos = ws.cfg.stash_position(block)
+            ws.data.mocap_pos[ws.handles.block_mocap[block]] = pos
+
+
+def render_episode(
+    ep: Episode,
+    out: Path,
+    *,
+    frames: int,
+    camera: str,
+    overlay: bool,
+    robot_name: str | None,
+    width: int,
+    height: int,
+    video: Path | None,
+    video_fps: float,
+) -> list[Path]:
+    """Contact sheet of ``frames`` snapshots of an episode log (and optionally a video)."""
+    meta = ep.metadata
+    name = robot_name or meta.get("robot")
+    if name not in RobotModel.available():
+        known = RobotModel.available()
+        sys.exit(f"robot {name!r} of {ep.path} is not one of {known}; use --robot")
+    ws = Workspace.build(name, meta.get("arrangement", "1x4"))
+    t_q, q = (x.numpy() for x in ep.robot_q())
+    t_h, h = (x.numpy() for x in ep.human_true())
+    if q.shape[1] != ws.robot.num_joints:
+        sys.exit(f"{ep.path} has {q.shape[1]} joints, {name} has {ws.robot.num_joints}")
+
+    def q_of_t(t: float) -> np.ndarray:
+        return np.stack([np.interp(t, t_q, q[:, j]) for j in range(q.shape[1])])
+
+    def human_of_t(t: float) -> np.ndarray:
+        i = int(np.clip(np.searchsorted(t_h, t), 0, len(t_h) - 1))
+        return h[i]
+
+    blocks = BlockReplay(ws, ep.events(), q_of_t, human_of_t)
+    forecasts = _forecasts(ep) if overlay else None
+    t0, t1 = float(max(t_q[0], t_h[0])), float(min(t_q[-1], t_h[-1]))
+
+    def snapshot(r: SceneRenderer, t: float, cam: str) -> np.ndarray:
+        qt, ht = q_of_t(t), human_of_t(t)
+        ws.pose(qt, ht)
+        blocks.apply(t, ht)
+        mujoco.mj_forward(ws.model, ws.data)
+        spheres = []
+        if overlay:
+            c, rad = ws.robot_spheres(qt)
+            spheres.append((c, rad, ROBOT_SPHERE_RGBA))
+            if forecasts is not None:
+                spheres.append(_predicted_joints(forecasts, t))
+        return r.render(ws.data, camera=cam, spheres=spheres)  # type: ignore[arg-type]
+
+    written = []
+    times = np.linspace(t0, t1, frames)
+    with SceneRenderer(ws.model, width=width, height=height) as r:
+        shots = [snapshot(r, float(t), camera) for t in times]
+        written.append(
+            save_contact_sheet(
+                shots, [f"t = {t:.2f} s" for t in times], out, columns=min(3, frames)
+            )
+        )
+        if video is not None:
+            n = max(2, int((t1 - t0) * video_fps) + 1)
+            anim = [snapshot(r, float(t), camera) for t in np.linspace(t0, t1, n)]
+            written.append(_write_video(anim, video, video_fps))
+    return written
+
+
+def _forecasts(ep: Episode) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(t (T,), most likely action's last predicted joints (T, K, 3), their std (T, K))."""
+    try:
+        t, fc = ep.forecasts()
+    except Exception:  # no forecasts in this log (e.g. ITOMP)
+        return None
+    best = fc.weights.argmax(dim=1)  # (T,)
+    idx = torch.arange(len(best))
+    mean = fc.mean[idx, best, -1]  # (T, K, 3)
+    std = fc.var[idx, best, -1].clamp_min(0).sqrt().mean(dim=-1)  # (T, K)
+    return t.numpy(), mean.double().numpy(), std.double().numpy()
+
+
+def _predicted_joints(forecasts, t: float) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """Overlay group of the latest forecast before t: joints at the end of its horizon."""
+    t_f, mean, std = forecasts
+    i = int(np.searchsorted(t_f, t, side="right")) - 1
+    if i < 0:
+        return np.zeros((0, 3)), np.zeros(0), HUMAN_SPHERE_RGBA
+    return mean[i], 0.04 + 2.0 * std[i], HUMAN_SPHERE_RGBA
+
+
+def _write_video(frames: list[np.ndarray], path: Path, fps: float) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix.lower() == ".mp4":
+        try:
+            import imageio.v3 as iio
+        except ImportError:
+            path = path.with_suffix(".gif")
+            print(f"imageio is not installed: writing {path} instead of an MP4")
+        else:
+            iio.imwrite(path, np.stack(frames), fps=fps)
+            return path
+    from PIL import Image
+
+    images = [Image.fromarray(f) for f in frames]
+    images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    mode = parser.add_mutually_exclusive_group(required=True)
+    mode.add_argument("--scene", action="store_true", help="contact sheet of the workspaces")
+    mode.add_argument("--mcap", type=Path, help="episode log to replay")
+    parser.add_argument("--out", type=Path, help="PNG to write (default per mode)")
+    parser.add_argument("--frames", type=int, default=6, help="snapshots of an episode")
+    parser.add_argument("--camera", choices=CAMERA_NAMES, default="overview")
+    parser.add_argument("--overlay", action="store_true", help="draw robot / predicted spheres")
+    parser.add_argument("--robot", help="robot name when the log's is not a known robot")
+    parser.add_argument("--video", type=Path, help="also write an animation (.gif or .mp4)")
+    parser.add_argument("--fps", type=float, default=10.0, help="animation frame rate")
+    parser.add_argument("--width", type=int, help="image width [px] (scene 480, episode 640)")
+    parser.add_argument("--height", type=int, help="image height [px] (scene 360, episode 480)")
+    args = parser.parse_args(argv)
+    if not gl_available():
+        sys.exit("no OpenGL backend loads: install libosmesa6 and set MUJOCO_GL=osmesa")
+    if args.frames < 1:
+        sys.exit("--frames must be >= 1")
+    if args.scene:
+        out = args.out or ROOT / "experiments" / "scenes" / "overview.png"
+        written = [render_scene_sheet(out, args.width or 480, args.height or 360)]
+    else:
+        out = args.out or args.mcap.with_suffix(".png")
+        try:
+            ep = read_episode(args.mcap)
+        except DataError as err:
+            sys.exit(str(err))
+        written = render_episode(
+            ep,
+            out,
+            frames=args.frames,
+            camera=args.camera,
+            overlay=args.overlay,
+            robot_name=args.robot,
+            width=args.width or 640,
+            height=args.height or 480,
+            video=args.video,
+            video_fps=args.fps,
+        )
+    for p in written:
+        print(f"wrote {p}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

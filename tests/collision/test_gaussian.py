@@ -1,0 +1,288 @@
+"""The probabilistic collision bound: never below the exact probability, solver agreement,
+gradients, and the mixture / maximum over sphere pairs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from scipy import special
+
+from iplanner_torch.collision import gaussian as G
+from iplanner_torch.collision.exact import ruben_series
+from iplanner_torch.errors import ConfigError, ShapeError
+
+F64 = torch.float64
+
+
+def _random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
+    q, r = np.linalg.qr(rng.standard_normal((n, 3, 3)))
+    return q * np.sign(np.diagonal(r, axis1=1, axis2=2))[:, None, :]
+
+
+def _cases(rng: np.random.Generator, n: int, *, sig_over_r, var_ratio, far_sigmas=8.0):
+    """Random ball / Gaussian pairs: returns c, R, mu, cov (numpy float64) and s, d2."""
+    R = rng.uniform(0.05, 0.4, n)
+    sig_min = R * np.exp(rng.uniform(*np.log(sig_over_r), n))
+    ratios = np.exp(rng.uniform(0.0, 0.5 * math.log(var_ratio), (n, 3)))
+    ratios[np.arange(n), rng.integers(0, 3, n)] = 1.0
+    s = (sig_min[:, None] * ratios) ** 2  # (n, 3) eigenvalues
+    U = _random_rotations(rng, n)
+    cov = np.einsum("nij,nj,nkj->nik", U, s, U)
+    inside = rng.random(n) < 0.25
+    dist = np.where(
+        inside,
+        R * rng.uniform(0.0, 0.999, n),
+        R + np.sqrt(s.max(1)) * rng.uniform(0.0, far_sigmas, n),
+    )
+    direction = rng.standard_normal((n, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    c = rng.uniform(-1.0, 1.0, (n, 3))
+    mu = c + direction * dist[:, None]
+    d = np.einsum("nji,nj->ni", U, mu - c)
+    return c, R, mu, cov, s, d * d
+
+
+def _bounds(c, R, mu, cov, method: str) -> np.ndarray:
+    t = lambda a: torch.from_numpy(a)  # noqa: E731
+    r1 = t(0.6 * R)
+    return G.sphere_collision_bound(t(c), r1, t(mu), t(cov), t(R) - r1, method=method).numpy()
+
+
+@pytest.mark.parametrize("method", ["min", "volume", "halfspace"])
+def test_bound_never_below_exact_10000_cases(method: str) -> None:
+    rng = np.random.default_rng(1)
+    c, R, mu, cov, s, d2 = _cases(rng, 10_000, sig_over_r=(0.25, 4.0), var_ratio=4.0)
+    lower, upper = ruben_series(s, d2, R * R, max_terms=120)
+    # The series bracket is tight here (rigorous truncation bound): the reference is exact.
+    assert np.all(upper - lower <= 1e-10 * upper + 1e-300)
+    bound = _bounds(c, R, mu, cov, method)
+    assert np.all(bound >= upper * (1.0 - 1e-9)), (bound / upper).min()
+    assert np.all(bound <= 1.0) and np.all(bound >= 0.0)
+    if method == "min":
+        exact = upper[upper >= 1e-6]
+        assert np.median(bound[upper >= 1e-6] / exact) < 3.0
+
+
+def test_bound_never_below_exact_small_sigma_anisotropic() -> None:
+    """Small sigma and strong anisotropy: Ruben needs many terms; where the series bracket
+    does not close, Monte Carlo with a 5-sigma margin is the reference."""
+    rng = np.random.default_rng(2)
+    c, R, mu, cov, s, d2 = _cases(rng, 300, sig_over_r=(0.03, 0.3), var_ratio=100.0)
+    lower, upper = ruben_series(s, d2, R * R, max_terms=1500)
+    bound = _bounds(c, R, mu, cov, "min")
+    closed = upper - lower <= 1e-8 * upper + 1e-300
+    assert closed.mean() > 0.8
+    assert np.all(bound[closed] >= upper[closed] * (1.0 - 1e-9))
+    open_ = np.flatnonzero(~closed)
+    if open_.size:
+        from iplanner_torch.collision.exact import mc_ball_probability
+
+        t = torch.from_numpy
+        p, se = mc_ball_probability(
+            t(c[open_]), t(R[open_]), t(mu[open_]), t(cov[open_]), n=200_000, seed=3
+        )
+        assert np.all(bound[open_] >= p.numpy() - 5.0 * se.numpy() - 1e-12)
+
+
+def test_isotropic_bound_matches_closed_form() -> None:
+    """Isotropic: x_max lies on the line to the mean, m = (||mu - c|| - R)/sigma."""
+    c = torch.zeros(4, 3, dtype=F64)
+    dist = torch.tensor([0.3, 0.5, 0.8, 1.2], dtype=F64)
+    mu = torch.stack([dist, torch.zeros(4, dtype=F64), torch.zeros(4, dtype=F64)], -1)
+    sigma, R = 0.1, torch.full((4,), 0.2, dtype=F64)
+    cov = torch.eye(3, dtype=F64).expand(4, 3, 3) * sigma**2
+    m = (dist - R) / sigma
+    half = 0.5 * special.erfc(m.numpy() / math.sqrt(2))
+    vol = 4 / 3 * math.pi * 0.2**3 * (2 * math.pi * sigma**2) ** -1.5 * np.exp(-0.5 * m**2)
+    got_h = G.sphere_collision_bound(c, R / 2, mu, cov, R / 2, method="halfspace")
+    got_v = G.sphere_collision_bound(c, R / 2, mu, cov, R / 2, method="volume")
+    np.testing.assert_allclose(got_h.numpy(), half, rtol=1e-10)
+    np.testing.assert_allclose(got_v.numpy(), np.minimum(vol.numpy(), 1.0), rtol=1e-10)
+
+
+def test_secular_function_concave_and_start_left_of_root() -> None:
+    rng = np.random.default_rng(4)
+    _, R, _, _, s, d2 = _cases(rng, 2000, sig_over_r=(0.01, 3.0), var_ratio=1e4)
+    outside = d2.sum(1) > R**2
+    d2_t = torch.from_numpy(d2[outside].T.copy())
+    s_t = torch.from_numpy(s[outside].T.copy())
+    R_t = torch.from_numpy(R[outside])
+    start = G._newton_start(d2_t, s_t, R_t)
+    g0, _ = G._secular_residual(start, d2_t, s_t, R_t)
+    assert torch.all(g0 <= 1e-12)
+    root = G._solve_bisection(d2_t, s_t, R_t)
+    h = 1e-3 * root + 1e-6
+    lam = torch.stack([root - h, root, root + h])  # (3, N)
+    q = torch.stack([G._secular_residual(lam[i], d2_t, s_t, R_t)[0] for i in range(3)])
+    assert torch.all(q[0] - 2 * q[1] + q[2] <= 1e-12 * q[1].abs().clamp_min(1.0))
+
+
+def test_newton_equals_bisection() -> None:
+    rng = np.random.default_rng(5)
+    c, R, mu, cov, _, _ = _cases(rng, 5000, sig_over_r=(0.005, 5.0), var_ratio=1e4)
+    t = torch.from_numpy
+    x_n, lam_n = G.max_density_point(t(c), t(R), t(mu), t(cov), solver="newton")
+    x_b, lam_b = G.max_density_point(t(c), t(R), t(mu), t(cov), solver="bisection")
+    assert torch.allclose(lam_n, lam_b, rtol=1e-6, atol=0.0)
+    assert (x_n - x_b).norm(dim=-1).max() <= 1e-6 * float(R.max())
+    outside = lam_n > 0
+    assert torch.allclose((x_n - t(c)).norm(dim=-1)[outside], t(R)[outside], rtol=1e-8)
+    for method in ("min", "volume", "halfspace"):
+        r1 = t(R) / 2
+        b_n = G.sphere_collision_bound(t(c), r1, t(mu), t(cov), r1, method=method)
+        b_b = G.sphere_collision_bound(
+            t(c), r1, t(mu), t(cov), r1, method=method, solver="bisection"
+        )
+        assert torch.allclose(b_n, b_b, rtol=1e-6, atol=1e-300)
+
+
+def test_x_max_maximises_density_over_the_ball() -> None:
+    """Brute force: no point sampled in the ball has a higher density than x_max."""
+    gen = torch.Generator().manual_seed(6)
+    c = torch.zeros(3, dtype=F64)
+    mu = torch.tensor([0.4, -0.1, 0.2], dtype=F64)
+    A = torch.randn(3, 3, generator=gen, dtype=F64) * 0.1
+    cov = A @ A.T + 1e-3 * torch.eye(3, dtype=F64)
+    R = torch.tensor(0.15, dtype=F64)
+    x, _ = G.max_density_point(c, R, mu, cov)
+    pts = torch.randn(200_000, 3, generator=gen, dtype=F64)
+    pts = pts / pts.norm(dim=-1, keepdim=True) * R * torch.rand(200_000, 1, generator=gen)
+    P = torch.linalg.inv(cov)
+    maha = lambda p: torch.einsum("ni,ij,nj->n", p - mu, P, p - mu)  # noqa: E731
+    assert maha(x[None]).item() <= maha(pts).min().item() + 1e-12
+
+
+@pytest.mark.parametrize("method", ["min", "volume", "halfspace"])
+@pytest.mark.parametrize("diag", [False, True])
+def test_gradients_match_finite_differences(method: str, diag: bool) -> None:
+    gen = torch.Generator().manual_seed(7)
+    n = 6
+    c = (torch.rand(n, 3, generator=gen, dtype=F64) * 0.1).requires_grad_(True)
+    mu = torch.tensor([0.25, 0.05, 0.0], dtype=F64) + 0.02 * torch.randn(n, 3, generator=gen)
+    var = (0.04 + 0.06 * torch.rand(n, 3, generator=gen, dtype=F64)) ** 2
+    r1 = torch.full((n,), 0.06, dtype=F64)
+    r2 = torch.full((n,), 0.05, dtype=F64)
+    if diag:
+        f = lambda cc: G.sphere_collision_bound_diag(cc, r1, mu, var, r2, method=method)  # noqa: E731
+    else:
+        Q = torch.linalg.qr(torch.randn(n, 3, 3, generator=gen, dtype=F64))[0]
+        cov = Q @ torch.diag_embed(var) @ Q.transpose(-1, -2)
+        f = lambda cc: G.sphere_collision_bound(cc, r1, mu, cov, r2, method=method)  # noqa: E731
+    assert bool((f(c) < 1).all()) and bool((f(c) > 1e-8).all())
+    assert torch.autograd.gradcheck(f, (c,), eps=1e-7, atol=1e-6, rtol=1e-4)
+
+
+def _problem(gen: torch.Generator, B=3, W=4, S_r=5, A=3, S_h=4, dtype=F64):
+    rc = torch.rand(B, W, S_r, 3, generator=gen, dtype=dtype) * 0.6
+    rr = 0.03 + 0.05 * torch.rand(S_r, generator=gen, dtype=dtype)
+    hm = torch.rand(W, A, S_h, 3, generator=gen, dtype=dtype) * 0.6
+    hv = (0.02 + 0.1 * torch.rand(W, A, S_h, 3, generator=gen, dtype=dtype)) ** 2
+    hr = 0.03 + 0.05 * torch.rand(S_h, generator=gen, dtype=dtype)
+    w = torch.softmax(torch.randn(W, A, generator=gen, dtype=dtype), -1)
+    return rc, rr, hm, hv, hr, w
+
+
+@pytest.mark.parametrize("diag", [True, False])
+def test_trajectory_bound_equals_brute_force_loop(diag: bool) -> None:
+    gen = torch.Generator().manual_seed(8)
+    rc, rr, hm, hv, hr, w = _problem(gen)
+    B, W, S_r, _ = rc.shape
+    _, A, S_h, _ = hm.shape
+    Q = torch.linalg.qr(torch.randn(W, A, S_h, 3, 3, generator=gen, dtype=F64))[0]
+    cov = Q @ torch.diag_embed(hv) @ Q.transpose(-1, -2)
+    h_cov = hv if diag else cov
+    got = G.trajectory_collision_bound(rc, rr, hm, h_cov, hr, w, prune_sigma=None)
+    pair = G.pairwise_bound_matrix(rc, rr, hm, h_cov, hr, w, prune_sigma=None)
+    want = torch.zeros(B, W, dtype=F64)
+    want_pair = torch.zeros(B, W, S_r, S_h, dtype=F64)
+    for b in range(B):
+        for i in range(W):
+            for j in range(S_r):
+                for l in range(S_h):
+                    total = 0.0
+                    for a in range(A):
+                        p = G.sphere_collision_bound(
+                            rc[b, i, j],
+                            rr[j],
+                            hm[i, a, l],
+                            cov[i, a, l] if not diag else torch.diag(hv[i, a, l]),
+                            hr[l],
+                            solver="bisection",
+                        )
+                        total += float(w[i, a]) * float(p)
+                    want_pair[b, i, j, l] = total
+                    want[b, i] = max(float(want[b, i]), total)
+    torch.testing.assert_close(pair, want_pair, rtol=1e-6, atol=1e-12)
+    torch.testing.assert_close(got, want.clamp(0, 1), rtol=1e-6, atol=1e-12)
+
+
+def test_batched_equals_looped_and_chunking() -> None:
+    gen = torch.Generator().manual_seed(9)
+    rc, rr, hm, hv, hr, w = _problem(gen, B=7)
+    full = G.trajectory_collision_bound(rc, rr, hm, hv, hr, w[0])
+    chunked = G.trajectory_collision_bound(rc, rr, hm, hv, hr, w[0], max_pairs_per_chunk=100)
+    looped = torch.cat(
+        [G.trajectory_collision_bound(rc[b : b + 1], rr, hm, hv, hr, w[0]) for b in range(7)]
+    )
+    torch.testing.assert_close(full, chunked, rtol=0, atol=0)
+    torch.testing.assert_close(full, looped, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("method", ["min", "volume", "halfspace"])
+def test_pruning_never_lowers_the_bound(method: str) -> None:
+    gen = torch.Generator().manual_seed(10)
+    rc, rr, hm, hv, hr, w = _problem(gen, B=4, W=3, S_r=6, A=2, S_h=8)
+    hv = hv * 0.05  # small variances: many pairs beyond 3 sigma
+    exact = G.pairwise_bound_matrix(rc, rr, hm, hv, hr, w, method=method, prune_sigma=None)
+    pruned = G.pairwise_bound_matrix(rc, rr, hm, hv, hr, w, method=method, prune_sigma=3.0)
+    assert not torch.equal(exact, pruned)  # some pairs were pruned
+    assert torch.all(pruned >= exact * (1 - 1e-12))
+    if method != "volume":
+        assert torch.all(pruned - exact <= 0.5 * math.erfc(3.0 / math.sqrt(2)) + 1e-15)
+
+
+def test_trajectory_gradient_matches_finite_differences() -> None:
+    gen = torch.Generator().manual_seed(11)
+    rc, rr, hm, hv, hr, w = _problem(gen, B=1, W=2, S_r=2, A=2, S_h=2)
+    rc = rc.requires_grad_(True)
+    f = lambda x: G.pairwise_bound_matrix(x, rr, hm, hv, hr, w).sum()  # noqa: E731
+    assert torch.autograd.gradcheck(f, (rc,), eps=1e-7, atol=1e-6, rtol=1e-4)
+
+
+def test_float32_matches_float64(device: torch.device) -> None:
+    gen = torch.Generator().manual_seed(12)
+    prob = _problem(gen, B=4, W=5, S_r=8, A=3, S_h=6)
+    want = G.trajectory_collision_bound(*prob)
+    got = G.trajectory_collision_bound(*(x.to(device, torch.float32) for x in prob))
+    assert got.device.type == device.type and got.dtype == torch.float32
+    torch.testing.assert_close(got.cpu().double(), want, rtol=1e-3, atol=1e-6)
+
+
+def test_seeded_inputs_give_identical_outputs() -> None:
+    a = G.trajectory_collision_bound(*_problem(torch.Generator().manual_seed(13)))
+    b = G.trajectory_collision_bound(*_problem(torch.Generator().manual_seed(13)))
+    assert torch.equal(a, b)
+
+
+def test_errors() -> None:
+    gen = torch.Generator().manual_seed(14)
+    rc, rr, hm, hv, hr, w = _problem(gen)
+    with pytest.raises(ShapeError, match=r"expected human_mean \(4, A, S_h, 3\)"):
+        G.trajectory_collision_bound(rc, rr, hm[:2], hv, hr, w)
+    with pytest.raises(ShapeError, match="expected robot_radii"):
+        G.trajectory_collision_bound(rc, rr[:2], hm, hv, hr, w)
+    with pytest.raises(ShapeError, match="expected weights"):
+        G.trajectory_collision_bound(rc, rr, hm, hv, hr, w[:, :2])
+    with pytest.raises(ConfigError, match="expected method"):
+        G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, method="area")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="expected reduce"):
+        G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, reduce="sum")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="expected solver"):
+        G.sphere_collision_bound_diag(rc, rr[0], rc, rc, rr[0], solver="golden")  # type: ignore[arg-type]
+    with pytest.raises(ShapeError, match=r"expected cov \(\.\.\., 3, 3\)"):
+        G.sphere_collision_bound(rc, rr[0], rc, rc, rr[0])
+    with pytest.raises(ShapeError, match="radius"):
+        G.sphere_collision_bound_diag(rc[0, 0, 0], -rr[0], rc[0, 0, 0], hv[0, 0, 0], rr[0] * 0)

@@ -1,0 +1,85 @@
+"""Static obstacle distances against brute-force sampling of the box."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from iplanner_torch.collision.static import (
+    Box,
+    Plane,
+    StaticScene,
+    sphere_box_distance,
+    sphere_plane_distance,
+)
+from iplanner_torch.errors import ConfigError, ShapeError
+
+F64 = torch.float64
+
+
+def _rot_z(a: float) -> torch.Tensor:
+    c, s = math.cos(a), math.sin(a)
+    return torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=F64)
+
+
+def test_box_distance_matches_brute_force() -> None:
+    gen = torch.Generator().manual_seed(0)
+    center = torch.tensor([0.5, -0.2, 0.3], dtype=F64)
+    half = torch.tensor([0.3, 0.2, 0.1], dtype=F64)
+    R = _rot_z(0.4) @ torch.tensor(
+        [[1.0, 0, 0], [0, math.cos(0.3), -math.sin(0.3)], [0, math.sin(0.3), math.cos(0.3)]],
+        dtype=F64,
+    )
+    # Dense sampling of the box surface (box frame), then to world.
+    g = torch.linspace(-1, 1, 81, dtype=F64)
+    a, b = torch.meshgrid(g, g, indexing="ij")
+    faces = []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            pts = torch.zeros(a.numel(), 3, dtype=F64)
+            others = [i for i in range(3) if i != axis]
+            pts[:, axis] = sign
+            pts[:, others[0]] = a.flatten()
+            pts[:, others[1]] = b.flatten()
+            faces.append(pts)
+    surf = (torch.cat(faces) * half) @ R.T + center  # (P, 3) world
+    x = center + (torch.rand(400, 3, generator=gen, dtype=F64) - 0.5) * 1.2
+    radii = torch.rand(400, generator=gen, dtype=F64) * 0.05
+    got = sphere_box_distance(x, radii, center, half, R)
+    to_surface = torch.cdist(x, surf).amin(-1)
+    local = (x - center) @ R
+    inside = (local.abs() <= half).all(-1)
+    want = torch.where(inside, -to_surface, to_surface) - radii
+    spacing = float(half.max()) * 2 / 80
+    assert torch.all((got - want).abs() <= spacing)
+    # Samples can only over-estimate the distance to the surface.
+    assert torch.all(got[~inside] <= want[~inside] + 1e-12)
+    assert torch.all(got[inside] >= want[inside] - 1e-12)
+    assert inside.any() and (~inside).any()
+
+
+def test_plane_and_scene_clearance_and_gradient() -> None:
+    scene = StaticScene(
+        boxes=(Box(center=(0.6, 0.0, -0.02), half_extents=(0.4, 0.6, 0.02), name="table"),),
+        planes=(Plane(normal=(0.0, 0.0, 1.0), offset=-0.75, name="floor"),),
+    )
+    x = torch.tensor([[[0.6, 0.0, 0.1], [0.6, 0.0, -0.7], [2.0, 0.0, -0.7]]], dtype=F64)
+    r = torch.tensor([0.05, 0.01, 0.1], dtype=F64)
+    d = scene.clearance(x, r)
+    want = torch.tensor([[0.1 - 0.05, 0.05 - 0.01, 0.05 - 0.1]], dtype=F64)
+    torch.testing.assert_close(d, want)
+    plane = sphere_plane_distance(x, r, torch.tensor([0, 0, 2.0], dtype=F64), -0.75)
+    torch.testing.assert_close(plane, x[..., 2] + 0.75 - r)
+    xg = torch.tensor([[0.9, 0.1, 0.3], [1.2, 0.8, 0.1]], dtype=F64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda p: scene.clearance(p, r[:2]), (xg,))
+
+
+def test_errors() -> None:
+    with pytest.raises(ConfigError, match="positive half_extents"):
+        Box(center=(0, 0, 0), half_extents=(0.1, 0.0, 0.1))
+    with pytest.raises(ConfigError, match="at least one"):
+        StaticScene()
+    with pytest.raises(ShapeError, match="expected box_center"):
+        sphere_box_distance(torch.zeros(2, 3), torch.zeros(2), torch.zeros(2), torch.ones(3))
