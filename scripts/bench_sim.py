@@ -1,20 +1,25 @@
 """Closed-loop simulation speed: simulated seconds per wall-clock second.
 
-``sim.realtime_factor`` runs the KUKA delivery scenario with the real ITOMP replanner in the
-loop; its reference, ``sim.realtime_factor_physics``, is the same scene with the robot holding
-its pose and no planner (MuJoCo, human and tracker only), measured in the same run.
+``sim.realtime_factor`` runs the KUKA delivery scenario with the real planner in the loop:
+I-Planner (NI) with the real predictor when a checkpoint is given (``--predictor PATH`` or the
+environment variable ``IPLANNER_PREDICTOR``), else ITOMP; its reference,
+``sim.realtime_factor_physics``, is the same scene with the robot holding its pose and no
+planner (MuJoCo, human and tracker only), measured in the same run. Episodes run with one
+torch thread (``EpisodeCfg.torch_threads``) and the planner settings of ``conf/planner``
+(25 cold / 8 warm iterations). ``plan.solve_ms`` is the mean wall-clock time of a replanning
+solve in those episodes, against the step m = 0.5 s.
 
-Run: ``python scripts/bench_sim.py [--full]``.
+Run: ``python scripts/bench_sim.py [--full] [--predictor PATH]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import time
 import warnings
-from dataclasses import replace
 
 import numpy as np
 
@@ -48,7 +53,7 @@ def _motion():
     return ReachingMotionSource(0, seat_x=-0.45)
 
 
-def run(quick: bool) -> dict[str, dict]:
+def run(quick: bool, predictor_path: str | None = None) -> dict[str, dict]:
     """``{figure: {"value", "unit", ...}}`` (quick: a few simulated seconds)."""
     from iplanner_torch.eval.episode import EpisodeCfg, run_episode
     from iplanner_torch.planning.optimizer import OptimizerCfg
@@ -57,21 +62,37 @@ def run(quick: bool) -> dict[str, dict]:
 
     warnings.filterwarnings("ignore", message="replanning cycle")
     robot = RobotModel.load("kuka_iiwa14")
-    sim_s = 1.5 if quick else 20.0
+    sim_s = 3.0 if quick else 20.0
     repeats = 1 if quick else 3
-    planner = PlannerCfg(kind="itomp", predictor_variant=None)
-    if quick:
-        planner = replace(planner, optimizer=OptimizerCfg(iterations=10, num_trajectories=4))
+    predictor_path = predictor_path or os.environ.get("IPLANNER_PREDICTOR")
+    predictor = None
+    kind = "itomp"
+    if predictor_path:
+        from iplanner_torch.prediction.predictor import HumanMotionPredictor
+
+        predictor = HumanMotionPredictor.load(predictor_path)
+        kind = "iplanner_ni"
+    planner = PlannerCfg(optimizer=OptimizerCfg(iterations=25, warm_iterations=8))
     cfg = EpisodeCfg(max_duration_s=sim_s, planner=planner)
     _physics_only(robot, 0.2)  # warm-up
     ref = statistics.median(_physics_only(robot, sim_s) for _ in range(repeats))
-    rtf = statistics.median(
+    runs = [
         run_episode(
-            cfg, robot=robot, predictor=None, planner_kind="itomp", writer_path=None, seed=s
-        ).metrics["sim/realtime_factor"]
+            cfg, robot=robot, predictor=predictor, planner_kind=kind, writer_path=None, seed=s
+        ).metrics
         for s in range(repeats)
-    )
+    ]
+    rtf = statistics.median(m["sim/realtime_factor"] for m in runs)
+    solve = statistics.median(m["plan/mean_solve_ms"] for m in runs)
     return {
+        "plan.solve_ms": {
+            "value": float(solve),
+            "unit": "ms",
+            "reference": 500.0,
+            "reference_name": "replanning step m",
+            "ratio": float(solve / 500.0),
+            "planner": kind,
+        },
         "sim.realtime_factor": {
             "value": float(rtf),
             "unit": "sim s / wall s",
@@ -79,12 +100,14 @@ def run(quick: bool) -> dict[str, dict]:
             "reference_name": "sim.realtime_factor_physics (no planner)",
             "ratio": float(rtf / ref),
             "sim_seconds": sim_s,
-        }
+            "planner": kind,
+        },
     }
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--full", action="store_true", help="longer episodes, 3 repeats")
+    parser.add_argument("--predictor", default=None, help="predictor checkpoint (I-Planner)")
     args = parser.parse_args()
-    print(json.dumps(run(quick=not args.full), indent=2))
+    print(json.dumps(run(quick=not args.full, predictor_path=args.predictor), indent=2))

@@ -34,6 +34,10 @@ from iplanner_torch.types import check_shape
 
 #: Accepted plans keep every waypoint-to-waypoint velocity within this factor of the limits.
 VEL_TOL = 1.05
+#: Slack [m] below the clearance of a plan's pinned ends within which its waypoints still pass
+#: the static check: the start is where the robot is and the goal is what the task asks (a
+#: grasp point just above the table), so a plan is only required to do as well as its ends.
+END_CLEARANCE_SLACK = 0.01
 #: Adam's first-moment decay.
 BETA1 = 0.9
 #: Adam's second-moment decay: short memory, so steps do not stall once the large early
@@ -518,7 +522,9 @@ class TrajectoryOptimizer:
         if bound is not None:
             bad[:, win_idx] |= bound > limit
         if clearance is not None:
-            bad[:, 1:] |= clearance[:, 1:] < 0.0
+            ends = torch.minimum(clearance[:, :1], clearance[:, -1:])  # (B, 1)
+            floor = (ends - END_CLEARANCE_SLACK).clamp(max=0.0)
+            bad[:, 1:] |= clearance[:, 1:] < floor
         # a segment faster than the limits could jump past the checks
         too_fast = ((q_all[:, 1:] - q_all[:, :-1]).abs() / dt > VEL_TOL * self.v_max).any(-1)
         bad[:, 1:] |= too_fast

@@ -47,6 +47,8 @@ class ReplannerCfg:
     fresh_fraction: float = 0.5
     # joint distance [rad] between the measured and the planned state that re-anchors the plan
     resync_tol: float = 0.2
+    # set_goal(q, t) makes a cycle due at t (a task event replans at once, not at the next tick)
+    replan_on_goal_change: bool = True
 
     def __post_init__(self) -> None:
         if not self.replan_step_s > 0.0:
@@ -209,10 +211,14 @@ class Replanner:
 
         Args:
             q_goal: (J,) goal [rad].
-            t: current time [s] (the goal time is set from it); None uses the next cycle's.
+            t: current time [s] (the goal time is set from it, and with
+                ``cfg.replan_on_goal_change`` a cycle is due from it); None uses the next
+                cycle's.
         """
         check_shape("q_goal", q_goal, (self.optimizer.num_joints,))
         self._goal = self._to(q_goal)
+        if t is not None and self.cfg.replan_on_goal_change:
+            self._next_cycle = min(self._next_cycle, t)
         t_ref = self._next_cycle if t is None else t
         self._t_goal = t_ref + self.cfg.replan_step_s + self.optimizer.cfg.horizon_s
         self._goal_changed = True

@@ -49,11 +49,23 @@ def test_short_iplanner_episode_writes_mcap(tmp_path: Path) -> None:
     assert kinds[:3] == ["fetch_started", "picked", "delivered"]
     took = [(t, b) for t, k, b in res.events if k == "human_took"]
     assert took and took[0][1] == 0
-    # one forecast per replanning step m = 0.5 s, from the 15-frame tracker window
-    assert len(predictor.calls) == 10 == res.metrics["plan/cycles"]
+    # one forecast per replanning cycle: every m = 0.5 s, and at once after each goal change
+    cycle_t = np.array([t for t, _ in replanner.forecasts])
+    assert len(predictor.calls) == len(cycle_t) == res.metrics["plan/cycles"]
+    changes = [t for t, k, _ in res.events if k in ("picked", "delivered", "fetch_done")]
+    assert changes
+    for t_ev in changes:
+        assert np.abs(cycle_t - t_ev).min() <= 0.011  # the control step after the event
+    gaps = np.diff(cycle_t)
+    assert gaps.max() <= 0.5 + 1e-6
+    regular = [g for g, t1 in zip(gaps, cycle_t[1:]) if min(abs(t1 - c) for c in changes) > 0.011]
+    np.testing.assert_allclose(regular, 0.5, atol=0.011)
+    assert len(cycle_t) >= 10 + 1
     pos, progress = predictor.calls[-1]
     assert tuple(pos.shape) == (1, 15, 10, 3)
-    assert progress.tolist() == [1]  # Take_0 done -> bit of "reach_0"
+    # Take_i done -> bit of "reach_<i>" (the stand-in knows reach_0 and reach_1 only)
+    taken = {b for t, k, b in res.events if k == "human_took" and t <= cycle_t[-1]}
+    assert taken and progress.tolist() == [sum(1 << b for b in taken if b < 2)]
     assert predictor.calls[0][1].tolist() == [0]
     m = res.metrics
     assert m["sim/duration_s"] == pytest.approx(5.0, abs=0.02)
@@ -62,7 +74,11 @@ def test_short_iplanner_episode_writes_mcap(tmp_path: Path) -> None:
     assert m["eval/prediction_ms"] > 0
     assert math.isnan(m["eval/efficiency"]) and m["eval/completed"] == 0.0
     ep = read_episode(path)
-    assert ep.metrics()["plan/cycles"] == 10
+    assert ep.metrics()["plan/cycles"] == len(cycle_t)
+    meta = ep.metadata
+    assert meta["planner"] == "iplanner_ni" and meta["seed"] == 3
+    assert meta["speed"] == "medium" and meta["noise"] == pytest.approx(0.01)
+    assert meta["scenario"] == "arrangement_1x4" and meta["confidence"] == pytest.approx(0.95)
     assert [e["kind"] for e in ep.events()][:3] == kinds[:3]
     t, q = ep.robot_q()
     assert q.shape[1] == 3 and len(t) >= 70
@@ -134,3 +150,57 @@ def test_full_episode_completes_all_tasks(tmp_path: Path) -> None:
     assert kinds[-1] == "done" and res.metrics["eval/completed"] == 1.0
     assert res.metrics["eval/efficiency"] > 0
     assert res.metrics["eval/mhd_count"] > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["itomp", "iplanner_no_ni", "iplanner_ni"])
+def test_real_kuka_episode_delivers_every_block(tmp_path: Path, kind: str) -> None:
+    """The real ITOMP / I-Planner optimiser on the KUKA iiwa in MuJoCo (stand-in predictor)."""
+    from iplanner_torch.recording.reader import read_episode
+    from iplanner_torch.robot.model import RobotModel
+
+    robot = RobotModel.load("kuka_iiwa14")
+    path = tmp_path / f"{kind}.mcap"
+    res = run_episode(
+        EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=60.0),
+        robot=robot,
+        predictor=None if kind == "itomp" else fakes.ConstantPredictor(),
+        planner_kind=kind,  # type: ignore[arg-type]
+        writer_path=path,
+        seed=0,
+    )
+    kinds = [k for _, k, _ in res.events]
+    assert kinds.count("delivered") == 4 and kinds.count("human_took") == 4
+    assert res.metrics["eval/completed"] == 1.0
+    for name in ("eval/smoothness", "eval/min_distance", "eval/efficiency", "plan/mean_solve_ms"):
+        assert math.isfinite(res.metrics[name]), name
+    assert res.metrics["plan/mean_solve_ms"] < 500.0  # well inside the step m = 0.5 s
+    ep = read_episode(path)
+    assert ep.metadata["planner"] == kind
+    assert ep.metrics()["eval/completed"] == 1.0
+
+
+def test_task_policy_follows_the_predicted_next_action() -> None:
+    """The Q-learning task planner fetches first what the next-action model says comes next."""
+    import torch
+
+    from iplanner_torch.eval.episode import predictor_task_policy
+    from iplanner_torch.sim.tasks import parse_order
+
+    class NextPredictor:
+        action_names = ("idle", "reach_0", "reach_1", "reach_2", "reach_3", "return")
+
+        def next_action(self, progress: int, current: int) -> torch.Tensor:
+            p = torch.full((6,), 0.01)
+            # nothing taken: the human goes for block 1, then for block 0; then 3 before 2
+            p[2 if progress == 0 else 1 if progress == 1 << 2 else 4] = 1.0
+            return p / p.sum()
+
+    order = parse_order("(0,1)->(2,3)", (0, 1, 2, 3))
+    policy = predictor_task_policy(NextPredictor(), (0, 1, 2, 3), order, episodes=200, seed=0)
+    assert policy is not None
+    assert policy(set(), set()) == 1
+    assert policy(set(), {1}) == 0
+    assert policy({0, 1}, {0, 1}) == 3
+    assert policy({0, 1, 2, 3}, {0, 1, 2, 3}) is None
+    assert predictor_task_policy(fakes.ConstantPredictor(), (0, 1, 2, 3), order) is None

@@ -183,3 +183,53 @@ def test_iiwa_plan_beside_a_gaussian_human_sphere() -> None:
     # without the human the straight line passes through it
     line_c = robot.sphere_centers(mid)
     assert float(((p_mid - line_c).norm(dim=-1) - rad).min()) < 0.0
+
+
+class _Wall:
+    """Half-space x >= x0 (signed distance of spheres to it)."""
+
+    def __init__(self, x0: float) -> None:
+        self.x0 = x0
+
+    def clearance(self, centers: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
+        return self.x0 - centers[..., 0] - radii
+
+
+class _Box:
+    """Axis-aligned square |x|, |y| <= h (signed distance of spheres to it, brute force)."""
+
+    def __init__(self, h: float) -> None:
+        self.h = h
+
+    def clearance(self, centers: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
+        d = centers[..., :2].abs() - self.h
+        outside = d.clamp_min(0.0).norm(dim=-1)
+        inside = d.max(dim=-1).values.clamp(max=0.0)
+        return outside + inside - radii
+
+
+def test_static_check_tolerates_a_goal_the_task_puts_in_contact() -> None:
+    """A goal 1 cm into the wall (sphere model) is reachable; a path through a box is not."""
+    from iplanner_torch.planning.optimizer import END_CLEARANCE_SLACK
+
+    robot = PointRobot(r=0.05, dtype=torch.float64)
+    cfg = OptimizerCfg(num_trajectories=4, num_waypoints=12, iterations=10, seed=0)
+    opt = TrajectoryOptimizer(robot, cfg, static_scene=_Wall(1.0))
+    q_s = torch.tensor([0.0, 0.0], dtype=torch.float64)
+    q_g = torch.tensor([0.96, 0.0], dtype=torch.float64)  # clearance -0.01 m
+    res = opt.solve(q_s, q_g, duration=2.0)
+    assert res.feasible and res.wait_s == 0.0
+    clear = 1.0 - res.q[:, 0] - 0.05
+    assert float(clear.min()) >= -0.01 - END_CLEARANCE_SLACK - 1e-9
+    # ends well clear, straight line (no iterations) through the box: rejected, and it waits
+    opt_box = TrajectoryOptimizer(
+        robot, OptimizerCfg(num_trajectories=1, num_waypoints=12, iterations=0), _Box(0.2)
+    )
+    res = opt_box.solve(
+        torch.tensor([0.0, -1.0], dtype=torch.float64),
+        torch.tensor([0.0, 1.0], dtype=torch.float64),
+        duration=2.0,
+    )
+    assert not res.feasible and res.hold_index is not None
+    held = torch.cat([res.q[res.hold_index], torch.zeros(1, dtype=torch.float64)])
+    assert float(_Box(0.2).clearance(held.view(1, 3), robot.sphere_radii).min()) >= 0.0
