@@ -76,3 +76,53 @@ def friendly_errors(fn: F) -> F:
 def dump_config(cfg: DictConfig) -> str:
     """The resolved config as YAML (for logs and reports)."""
     return OmegaConf.to_yaml(cfg, resolve=True)
+
+
+def load_dataset(
+    data_cfg: DictConfig, *, generate_if_missing: bool = False, progress: bool = True
+) -> list[Any]:
+    """Load the demonstrations a ``data`` config node describes.
+
+    Args:
+        data_cfg: the ``data`` node (``path``, optional ``format``, ``fps``, ``generator``,
+            ``windows``).
+        generate_if_missing: generate the dataset with its generator when the folder is absent.
+        progress: progress bars.
+
+    Returns:
+        The list of :class:`~iplanner_torch.data.demonstration.Demonstration`.
+
+    Raises:
+        DataError: when the folder is absent and cannot (or may not) be generated.
+    """
+    from iplanner_torch.data.io import load_demonstrations, load_lego_assembly
+    from iplanner_torch.errors import DataError
+
+    path = repo_path(data_cfg.path)
+    fps = data_cfg.get("fps", None)
+    if data_cfg.get("format", "native") == "lego_assembly":
+        return load_lego_assembly(path, fps=float(fps or 30.0))
+    if not path.exists() or not any(path.iterdir()):
+        if not generate_if_missing or data_cfg.get("generator") is None:
+            raise DataError(
+                f"{path}: dataset not found; generate it with `iplanner-data generate "
+                f"data.path={data_cfg.path}`"
+            )
+        _generate_into(data_cfg, path, progress=progress)
+    joints = data_cfg.windows.get("joints", None) if "windows" in data_cfg else None
+    return load_demonstrations(path, fps=fps, joints=list(joints) if joints else None)
+
+
+def _generate_into(data_cfg: DictConfig, path: Path, *, progress: bool) -> None:
+    from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
+    from iplanner_torch.data.tasks import TaskDatasetCfg, generate_task_dataset
+
+    gen_cfg = instantiate(data_cfg.generator)
+    log.info("generating %s into %s", type(gen_cfg).__name__, path)
+    print(f"dataset {path} missing: generating it ({type(gen_cfg).__name__})", flush=True)
+    if isinstance(gen_cfg, ReachingCfg):
+        generate_reaching_dataset(gen_cfg, path, progress=progress)
+    elif isinstance(gen_cfg, TaskDatasetCfg):
+        generate_task_dataset(gen_cfg, path, progress=progress)
+    else:
+        raise ConfigError(f"data.generator builds {type(gen_cfg).__name__}: not a generator")

@@ -1,0 +1,142 @@
+"""``iplanner-evaluate``: evaluate trained predictors and study episode logs.
+
+Modes (``evaluate.mode``)::
+
+    iplanner-evaluate                                   # prediction: held-out metrics
+    iplanner-evaluate evaluate.checkpoint=checkpoints/iplanner_no_ni/predictor.ckpt
+    iplanner-evaluate evaluate.mode=noise_sweep         # fig. result_prediction (NI vs no NI)
+    iplanner-evaluate evaluate.mode=episode evaluate.logs=outputs/experiment/<run>/episodes
+
+``prediction`` evaluates one checkpoint on the held-out demonstrations of ``data`` (the same
+split by demonstration as training); ``noise_sweep`` re-noises the held-out clean motion at
+each ``evaluate.noises`` level and replays it at each ``evaluate.speeds`` speed, for each
+predictor in ``evaluate.compare`` (trained when missing), and writes CSV, PNG plots and a
+README; ``episode`` summarises MCAP episode logs (one row per episode, a summary table and
+plots).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig
+
+from iplanner_torch.cli._common import (
+    CONF_DIR,
+    friendly_errors,
+    load_dataset,
+    repo_path,
+)
+from iplanner_torch.errors import CheckpointError, ConfigError
+
+MODES = ("prediction", "noise_sweep", "episode")
+
+
+def _out_dir(cfg: DictConfig) -> Path:
+    if cfg.evaluate.out_dir:
+        path = repo_path(cfg.evaluate.out_dir)
+    else:
+        path = Path(HydraConfig.get().runtime.output_dir)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _held_out(cfg: DictConfig) -> list:
+    from iplanner_torch.data.windows import split_by_demonstration
+
+    demos = load_dataset(cfg.data, generate_if_missing=False, progress=bool(cfg.progress))
+    fractions = tuple(float(f) for f in cfg.data.get("split", (0.8, 0.1, 0.1)))
+    _, _, test = split_by_demonstration(demos, fractions, int(cfg.seed))
+    if not test:
+        raise ConfigError(f"data.split={list(fractions)} leaves no held-out demonstrations")
+    return test
+
+
+def _prediction(cfg: DictConfig) -> None:
+    from iplanner_torch.eval.prediction import evaluate_prediction
+    from iplanner_torch.prediction.predictor import HumanMotionPredictor
+
+    ckpt = repo_path(cfg.evaluate.checkpoint)
+    if not ckpt.exists():
+        raise CheckpointError(f"{ckpt}: no checkpoint; train one with `iplanner-train`")
+    predictor = HumanMotionPredictor.load(ckpt)
+    metrics = evaluate_prediction(predictor, _held_out(cfg))
+    out = _out_dir(cfg) / "prediction_metrics.json"
+    out.write_text(json.dumps(metrics, indent=2, default=float))
+    print(f"{ckpt} on held-out demonstrations of {cfg.data.path}:")
+    for key, value in metrics.items():
+        print(f"  {key:28s} {value:.4g}" if isinstance(value, float) else f"  {key:28s} {value}")
+    print(f"wrote {out}")
+
+
+def _noise_sweep(cfg: DictConfig) -> None:
+    from iplanner_torch.cli.experiment import option_node
+    from iplanner_torch.cli.train import train_from_config
+    from iplanner_torch.eval.prediction_sweep import prediction_vs_noise, write_noise_report
+    from iplanner_torch.prediction.predictor import HumanMotionPredictor
+
+    predictors = {}
+    for option in cfg.evaluate.compare:
+        out_dir = repo_path(Path(cfg.paths.checkpoints) / str(option))
+        ckpt = out_dir / "predictor.ckpt"
+        if not ckpt.exists():
+            print(f"training missing predictor {option} ...", flush=True)
+            train_from_config(
+                cfg,
+                option_node("predictor", str(option), cfg),
+                out_dir,
+                trainer_node=cfg.trainer,
+            )
+        predictors[str(option)] = HumanMotionPredictor.load(ckpt)
+    df = prediction_vs_noise(
+        predictors,
+        _held_out(cfg),
+        noises=[float(n) for n in cfg.evaluate.noises],
+        speeds=[str(s) for s in cfg.evaluate.speeds],
+        seed=int(cfg.seed),
+        progress=bool(cfg.progress),
+    )
+    out_dir = _out_dir(cfg)
+    written = write_noise_report(df, out_dir)
+    print(df.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    print("wrote " + ", ".join(str(p) for p in written))
+
+
+def _episode(cfg: DictConfig) -> None:
+    from iplanner_torch.eval.report import gather_results, print_table, write_sweep_report
+
+    if not cfg.evaluate.logs:
+        raise ConfigError("evaluate.mode=episode needs evaluate.logs=<an .mcap file or a folder>")
+    path = repo_path(cfg.evaluate.logs)
+    items = sorted(path.glob("**/*.mcap")) if path.is_dir() else [path]
+    if not items:
+        raise ConfigError(f"{path}: no .mcap episode logs found")
+    df = gather_results(items)
+    out_dir = _out_dir(cfg)
+    group_by = tuple(c for c in ("scenario", "planner") if c in df.columns) or ("planner",)
+    written = write_sweep_report(df, out_dir, group_by=group_by)
+    from iplanner_torch.eval.report import summary_table
+
+    print_table(summary_table(df, group_by))
+    print(f"{len(df)} episode(s); wrote " + ", ".join(str(p) for p in written))
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
+@friendly_errors
+def _app(cfg: DictConfig) -> None:
+    mode = str(cfg.evaluate.mode)
+    if mode not in MODES:
+        raise ConfigError(f"evaluate.mode must be one of {MODES}, got {mode!r}")
+    {"prediction": _prediction, "noise_sweep": _noise_sweep, "episode": _episode}[mode](cfg)
+
+
+def main() -> None:
+    """Console entry point."""
+    _app()
+
+
+if __name__ == "__main__":
+    main()

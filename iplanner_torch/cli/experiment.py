@@ -1,0 +1,220 @@
+"""``iplanner-experiment``: closed-loop human-robot experiments in MuJoCo (paper sec. 7).
+
+Examples::
+
+    iplanner-experiment                                # the main job: one scenario, 3 planners
+    iplanner-experiment robot=fetch scenario=arrangement_2x2 'run.seeds=[0,1,2]'
+    iplanner-experiment experiment=table_simulation    # paper table performance_simulation
+    iplanner-experiment experiment=speed_response      # paper fig. speed_response
+    iplanner-experiment -m tracker.noise=0,0.02,0.05 human.speed=slow,medium,fast \\
+        planner.confidence=0.9,0.95,0.99              # a sweep (one job per combination)
+    iplanner-experiment -m hydra/launcher=joblib tracker.noise=0,0.02   # local processes
+
+Without ``experiment=...`` the run uses the ``scenario`` group (its confidence replaced by
+``planner.confidence``), the planners in ``run.planners`` and the seeds in ``run.seeds``. With
+it, the experiment file lists its own scenarios, planners, seeds, speeds and noises; the
+``sim`` and ``planner`` groups give the episode settings it does not override. Missing
+predictors (``checkpoints/iplanner_ni``, ``checkpoints/iplanner_no_ni``) are trained first on a
+small budget (``run.train_trainer``) when ``run.train_if_missing`` is true; the dataset is
+generated when absent. Results: ``results.csv``, ``results.md``, plots and ``episodes/*.mcap``
+in the run folder.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig, OmegaConf
+
+from iplanner_torch.cli._common import (
+    CONF_DIR,
+    dump_config,
+    friendly_errors,
+    instantiate,
+    repo_path,
+    resolve_device,
+)
+
+#: predictor variant of a planner (see eval.episode.PLANNER_KINDS) -> conf/predictor option
+VARIANT_OPTION = {"no_ni": "iplanner_no_ni", "ni": "iplanner_ni"}
+
+#: columns of the console comparison table: metric -> (header, scale)
+TABLE_COLUMNS = {
+    "prediction_ms": ("pred. ms", 1.0),
+    "mhd": ("MHD cm", 100.0),
+    "smoothness": ("smoothness", 1.0),
+    "jerkiness": ("jerkiness", 1.0),
+    "min_distance": ("distance cm", 100.0),
+    "efficiency": ("efficiency", 1.0),
+    "contact": ("contact", 1.0),
+    "waits": ("waits", 1.0),
+}
+
+
+def option_node(group: str, option: str, cfg: DictConfig) -> DictConfig:
+    """The ``conf/<group>/<option>.yaml`` node, with ``${seed}`` resolved against ``cfg``."""
+    from iplanner_torch.errors import ConfigError
+
+    path = Path(CONF_DIR) / group / f"{option}.yaml"
+    if not path.exists():
+        raise ConfigError(f"no config option {group}={option} ({path})")
+    root = OmegaConf.create({"seed": int(cfg.seed), "node": OmegaConf.load(path)})
+    return root.node
+
+
+def ensure_predictors(cfg: DictConfig, variants: list[str]) -> dict[str, str]:
+    """Checkpoint path per predictor variant; trains the missing ones when allowed."""
+    from iplanner_torch.cli.train import train_from_config
+    from iplanner_torch.errors import CheckpointError
+
+    paths: dict[str, str] = {}
+    for variant in variants:
+        option = VARIANT_OPTION[variant]
+        out_dir = repo_path(Path(cfg.paths.checkpoints) / option)
+        ckpt = out_dir / "predictor.ckpt"
+        if not ckpt.exists():
+            if not cfg.run.train_if_missing:
+                raise CheckpointError(
+                    f"{ckpt}: no trained predictor; run `iplanner-train predictor={option}`"
+                )
+            print(f"training predictor {option} (trainer={cfg.run.train_trainer}) ...", flush=True)
+            t0 = time.perf_counter()
+            train_from_config(
+                cfg,
+                option_node("predictor", option, cfg),
+                out_dir,
+                trainer_node=option_node("trainer", str(cfg.run.train_trainer), cfg),
+            )
+            print(f"  trained in {time.perf_counter() - t0:.0f} s -> {ckpt}", flush=True)
+        paths[variant] = str(ckpt)
+    return paths
+
+
+def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
+    """The :class:`~iplanner_torch.eval.experiment.ExperimentCfg` this run describes."""
+    from dataclasses import replace
+
+    from iplanner_torch.eval.experiment import ExperimentCfg
+
+    episode_node = OmegaConf.create(
+        {
+            "_target_": "iplanner_torch.eval.episode.EpisodeCfg",
+            "scenario": OmegaConf.to_container(cfg.scenario, resolve=True),
+            "sim": OmegaConf.to_container(cfg.sim, resolve=True),
+            "planner": OmegaConf.to_container(cfg.planner, resolve=True),
+            "max_duration_s": float(cfg.run.max_duration_s),
+            "progress_bar": bool(cfg.progress),
+        }
+    )
+    exp_node = cfg.get("experiment")
+    if exp_node is not None and exp_node.get("episode") is not None:
+        episode_node = OmegaConf.merge(episode_node, exp_node.episode)
+    episode = instantiate(episode_node)
+    device = str(resolve_device(str(cfg.device)))
+    if exp_node is None:
+        scenario = replace(episode.scenario, confidence=float(cfg.planner.confidence))
+        return ExperimentCfg(
+            name="main",
+            robot=str(cfg.robot.name),
+            device=device,
+            scenarios=[scenario],
+            planners=list(cfg.run.planners),
+            seeds=[int(s) for s in cfg.run.seeds],
+            predictor_paths=predictor_paths,
+            episode=replace(episode, scenario=scenario),
+            write_mcap=bool(cfg.run.write_mcap),
+        )
+    node = OmegaConf.to_container(exp_node, resolve=True)
+    assert isinstance(node, dict)
+    node.pop("episode", None)
+    node.setdefault("robot", str(cfg.robot.name))
+    node["device"] = device
+    node["predictor_paths"] = predictor_paths
+    exp = instantiate(OmegaConf.create(node))
+    return replace(exp, episode=episode)
+
+
+def comparison_table(df: Any) -> Any:
+    """Per planner (and scenario), the paper's columns: means over episodes."""
+    import pandas as pd
+
+    groups = [c for c in ("scenario", "planner") if c in df.columns]
+    rows = []
+    for key, g in df.groupby(groups, sort=False):
+        key = key if isinstance(key, tuple) else (key,)
+        row: dict[str, Any] = dict(zip(groups, key))
+        row["episodes"] = len(g)
+        for metric, (header, scale) in TABLE_COLUMNS.items():
+            col = next((c for c in g.columns if c == metric or c.endswith("/" + metric)), None)
+            row[header] = float(g[col].mean()) * scale if col is not None else float("nan")
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
+@friendly_errors
+def _app(cfg: DictConfig) -> None:
+    from iplanner_torch.eval.episode import PLANNER_KINDS
+    from iplanner_torch.eval.experiment import run_experiment
+    from iplanner_torch.eval.report import gather_results, print_table, write_sweep_report
+
+    t0 = time.perf_counter()
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
+    exp_node = cfg.get("experiment")
+    planners = list(exp_node.planners) if exp_node is not None else list(cfg.run.planners)
+    unknown = [p for p in planners if p not in PLANNER_KINDS]
+    if unknown:
+        from iplanner_torch.errors import ConfigError
+
+        raise ConfigError(f"unknown planners {unknown}; expected some of {sorted(PLANNER_KINDS)}")
+    variants = sorted({v for p in planners if (v := PLANNER_KINDS[p]) is not None})
+    predictor_paths = ensure_predictors(cfg, variants)
+    experiment = build_experiment(cfg, predictor_paths)
+    n = len(experiment.scenarios) * len(experiment.planners) * len(experiment.seeds)
+    n *= max(1, len(experiment.speeds)) * max(1, len(experiment.noises))
+    print(f"running {n} episode(s) of experiment {experiment.name!r} ...", flush=True)
+    df = run_experiment(experiment, out_dir)
+    df = gather_results(df.to_dict("records"))
+    sweep = None
+    if len(experiment.speeds) > 1:
+        sweep = None  # categorical; the bar charts show it
+    if len(experiment.noises) > 1:
+        sweep = "noise"
+    written = write_sweep_report(df, out_dir, group_by=("scenario", "planner"), sweep=sweep)
+    table = comparison_table(df)
+    (out_dir / "comparison.json").write_text(
+        json.dumps(table.to_dict("records"), indent=2, default=float)
+    )
+    print()
+    print_table(table)
+    print()
+    mcaps = sorted((out_dir / "episodes").glob("*.mcap"))
+    print(f"results: {out_dir / 'results.md'} and {out_dir / 'results.csv'}")
+    pngs = [p for p in written if str(p).endswith(".png")]
+    print(f"plots:   {', '.join(str(p) for p in pngs) if pngs else '(none)'}")
+    print(f"logs:    {len(mcaps)} MCAP episode log(s) in {out_dir / 'episodes'}")
+    print("         read one with iplanner_torch.recording.read_episode, or open it in Foxglove")
+    print(f"done in {time.perf_counter() - t0:.0f} s")
+
+
+def dump_config_safe(cfg: DictConfig) -> str:
+    """The resolved config, or the unresolved one where a resolver is not available."""
+    try:
+        return dump_config(cfg)
+    except Exception:  # noqa: BLE001 - best effort for a log file
+        return OmegaConf.to_yaml(cfg)
+
+
+def main() -> None:
+    """Console entry point."""
+    _app()
+
+
+if __name__ == "__main__":
+    main()
