@@ -519,6 +519,9 @@ def _run_episode(
                         JOINT_NAMES,
                     )
                 result = replanner.step(t, tens(q_now_np), forecast, forecast_t0=t_obs)
+                due = getattr(replanner, "next_cycle", None)
+                if isinstance(due, float) and due > t:  # the replanner keeps its own cadence
+                    next_cycle = due
                 if writer is not None:
                     if use_prediction:
                         writer.log_forecast(t_obs, forecast)

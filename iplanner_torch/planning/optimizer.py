@@ -76,8 +76,9 @@ class OptimizerCfg:
     num_trajectories: int = 8
     # W, waypoints per trajectory including start and goal
     num_waypoints: int = 20
-    # default time from start to goal [s] (lengthened to respect the velocity limits)
-    horizon_s: float = 3.0
+    # default time from start to goal [s] (lengthened to respect the velocity limits; 1 s lets
+    # the velocity limits set the pace of a delivery)
+    horizon_s: float = 1.0
     # Adam iterations from cold initial trajectories
     iterations: int = 40
     # Adam iterations when warm-started from a previous plan

@@ -6,6 +6,23 @@ against the human over its execution window ``[t + m, t + 2m]``. Solves are warm
 the previous cycle's trajectories shifted in time, mixed with fresh ones. A solve that takes
 longer than its budget (``m`` by default) would miss its deadline on a real robot: it is
 counted and warned about (:class:`PlanningOverrunWarning`), not raised.
+
+Execution (``ReplannerCfg.tracking``): with ``"exact"`` :meth:`Replanner.command` samples the
+plan. With ``"filtered"`` (the default) it is the robot's trajectory interface, as industrial
+controllers have one (online trajectory generation): a reference state ``(q, qd)`` follows the
+plan with the plan's acceleration as feed-forward plus a critically damped correction of
+bandwidth ``tracking_bandwidth``, its acceleration clipped to ``acc_max`` and its velocity to
+the joint limits. A plan switch, a wait cut short at a waypoint, a goal change or a re-anchor
+then never makes the commanded motion jump: accelerations stay within ``acc_max``; on a smooth
+plan the reference equals the plan up to integration error. By default a cycle still plans from
+the current plan's state at ``t + m`` (the plans form one continuous trajectory, position and
+velocity, which the reference tracks); ``plan_from_reference`` plans from the reference's own
+state rolled out to ``t + m`` instead (exact agreement of plan and execution), which in the
+closed loop let the reference lag plans near the velocity limits and caused many more waits.
+
+A goal change (task event) starts a cycle at once whose plan takes over ``goal_change_lead_s``
+later (its solve budget; overruns are counted against it) instead of ``m`` later, so the robot
+does not dwell at a pick or place point; the regular cadence resumes from the take-over.
 """
 
 from __future__ import annotations
@@ -49,6 +66,25 @@ class ReplannerCfg:
     resync_tol: float = 0.2
     # set_goal(q, t) makes a cycle due at t (a task event replans at once, not at the next tick)
     replan_on_goal_change: bool = True
+    # lead time [s] of the cycle a goal change starts: its plan takes over this long after the
+    # event (its solve budget) instead of m later; None means m
+    goal_change_lead_s: float | None = 0.2
+    # "exact": command() samples the plan; "filtered": acceleration-limited tracking (module doc)
+    tracking: Literal["exact", "filtered"] = "filtered"
+    # per-joint acceleration limit of the filtered reference [rad/s^2]
+    acc_max: float = 6.0
+    # bandwidth of the filtered reference's correction towards the plan [rad/s]
+    tracking_bandwidth: float = 20.0
+    # filtered: a cycle plans from the reference's state rolled out to t + m (True) or from the
+    # current plan's state there (False: the plans form one continuous trajectory that the
+    # reference tracks; measured to give fewer waits, see the module docstring)
+    plan_from_reference: bool = False
+    # integration step of the filtered reference [s] (a larger gap between command() calls is
+    # integrated in steps of at most this)
+    tracking_dt: float = 0.01
+    # a command() call further than this from the previous one (or earlier) restarts the
+    # filtered reference at the plan's state [s]
+    tracking_max_gap_s: float = 0.1
 
     def __post_init__(self) -> None:
         if not self.replan_step_s > 0.0:
@@ -61,6 +97,25 @@ class ReplannerCfg:
             raise ConfigError(f"expected fresh_fraction in [0, 1], got {self.fresh_fraction}")
         if not self.resync_tol > 0.0:
             raise ConfigError(f"expected resync_tol > 0, got {self.resync_tol}")
+        if self.goal_change_lead_s is not None and not (
+            0.0 < self.goal_change_lead_s <= self.replan_step_s
+        ):
+            raise ConfigError(
+                f"expected goal_change_lead_s in (0, replan_step_s] or None, got "
+                f"{self.goal_change_lead_s}"
+            )
+        if self.tracking not in ("exact", "filtered"):
+            raise ConfigError(f"expected tracking 'exact' or 'filtered', got {self.tracking!r}")
+        if not (self.acc_max > 0.0 and self.tracking_bandwidth > 0.0):
+            raise ConfigError(
+                f"expected acc_max > 0 and tracking_bandwidth > 0, got {self.acc_max}, "
+                f"{self.tracking_bandwidth}"
+            )
+        if not 0.0 < self.tracking_dt <= self.tracking_max_gap_s:
+            raise ConfigError(
+                f"expected 0 < tracking_dt <= tracking_max_gap_s, got {self.tracking_dt}, "
+                f"{self.tracking_max_gap_s}"
+            )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -165,6 +220,8 @@ class Replanner:
         self._t_goal = 0.0
         self._next_cycle = 0.0
         self._goal_changed = True
+        # filtered reference: (time [s], q (J,) [rad], qd (J,) [rad/s]) or None
+        self._ref: tuple[float, torch.Tensor, torch.Tensor] | None = None
 
     @property
     def budget_s(self) -> float:
@@ -175,6 +232,11 @@ class Replanner:
     def last_result(self) -> PlanResult | None:
         """The most recent solve's result."""
         return self._last
+
+    @property
+    def next_cycle(self) -> float:
+        """Time [s] at which the next replanning cycle is due."""
+        return self._next_cycle
 
     @property
     def goal(self) -> torch.Tensor | None:
@@ -204,6 +266,8 @@ class Replanner:
         self._next_plan = None
         self._last = None
         self._next_cycle = t
+        q0 = self._to(q_start)
+        self._ref = (float(t), q0.clone(), torch.zeros_like(q0))
         self.set_goal(q_goal, t=t)
 
     def set_goal(self, q_goal: torch.Tensor, t: float | None = None) -> None:
@@ -220,8 +284,13 @@ class Replanner:
         if t is not None and self.cfg.replan_on_goal_change:
             self._next_cycle = min(self._next_cycle, t)
         t_ref = self._next_cycle if t is None else t
-        self._t_goal = t_ref + self.cfg.replan_step_s + self.optimizer.cfg.horizon_s
+        self._t_goal = t_ref + self._lead(True) + self.optimizer.cfg.horizon_s
         self._goal_changed = True
+
+    def _lead(self, goal_changed: bool) -> float:
+        """Seconds from a cycle to the take-over of its plan [s]."""
+        lead = self.cfg.goal_change_lead_s
+        return lead if goal_changed and lead is not None else self.cfg.replan_step_s
 
     def _current(self, t: float) -> Trajectory:
         if self._next_plan is not None and t >= self._next_plan.t_start - TIME_EPS:
@@ -231,15 +300,62 @@ class Replanner:
         return self._plan
 
     def command(self, t: float) -> tuple[torch.Tensor, torch.Tensor]:
-        """The plan sampled at ``t`` (holding at its end).
+        """The commanded state at ``t``: the plan sampled at ``t`` (holding at its end), or
+        with ``cfg.tracking == "filtered"`` the acceleration-limited reference (module
+        docstring), integrated from the previous call.
 
         Args:
-            t: time [s].
+            t: time [s]; filtered tracking expects non-decreasing calls (an earlier time or a
+                gap over ``cfg.tracking_max_gap_s`` restarts the reference at the plan).
 
         Returns:
             q_des (J,) [rad] and qd_des (J,) [rad/s].
         """
-        return self._current(t).sample(t)
+        if self.cfg.tracking == "exact":
+            return self._current(t).sample(t)
+        if self._plan is None:
+            raise ConfigError("call reset(q_start, q_goal, t) before step or command")
+        self._ref = self._reference_at(t, self._plan, self._next_plan)
+        self._current(t)
+        _, q, qd = self._ref
+        return q.clone(), qd.clone()
+
+    def _target(
+        self, tau: float, plan: Trajectory, nxt: Trajectory | None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(J,) position [rad] and velocity [rad/s] of the plan executing at ``tau``; at the
+        take-over time itself the old plan (its state there is what the new one starts from)."""
+        p = nxt if nxt is not None and tau > nxt.t_start + TIME_EPS else plan
+        return p.sample(tau)
+
+    def _reference_at(
+        self, t: float, plan: Trajectory, nxt: Trajectory | None, *, predict: bool = False
+    ) -> tuple[float, torch.Tensor, torch.Tensor]:
+        """The filtered reference rolled out from its last state to ``t`` along ``plan``
+        (then ``nxt`` from its start); restarted at the plan's state after a jump in time
+        unless ``predict`` (a look-ahead of a cycle)."""
+        cfg = self.cfg
+        ref = self._ref
+        jump = ref is not None and t - ref[0] > cfg.tracking_max_gap_s and not predict
+        if ref is None or t < ref[0] - TIME_EPS or jump:
+            q, qd = self._target(t, plan, nxt)
+            return float(t), q, qd
+        t_f, x, v = ref
+        w, a_max = cfg.tracking_bandwidth, cfg.acc_max
+        v_max = self.optimizer.v_max
+        q0, v0 = self._target(t_f, plan, nxt)
+        while t_f < t - TIME_EPS:
+            h = min(cfg.tracking_dt, t - t_f)
+            q1, v1 = self._target(t_f + h, plan, nxt)
+            # plan acceleration as feed-forward, critically damped correction, then limits
+            acc = (v1 - v0) / h + w * w * (q0 - x) + 2.0 * w * (v0 - v)
+            acc = acc.clamp(-a_max, a_max)
+            v_new = torch.maximum(torch.minimum(v + acc * h, v_max), -v_max)
+            x = x + 0.5 * (v + v_new) * h
+            v = v_new
+            t_f += h
+            q0, v0 = q1, v1
+        return t_f, x, v
 
     def step(
         self,
@@ -268,16 +384,31 @@ class Replanner:
         if t < self._next_cycle - TIME_EPS:
             return None
         m = self.cfg.replan_step_s
+        filtered = self.cfg.tracking == "filtered"
+        if filtered:  # the reference up to now, along the plans as they were
+            self._ref = self._reference_at(t, self._plan, self._next_plan)
         plan = self._current(t + TIME_EPS)  # a plan due now takes over before it is replaced
-        q_plan_now, _ = plan.sample(t)
+        q_ref_now = self._ref[1] if filtered and self._ref is not None else plan.sample(t)[0]
         q_now = self._to(q_now)
-        if float((q_plan_now - q_now).abs().max()) > self.cfg.resync_tol:
+        if float((q_ref_now - q_now).abs().max()) > self.cfg.resync_tol:
             plan = self._plan = self._hold(q_now, t)
             self._next_plan = None
-        t_plan = t + m
-        q_s, qd_s = plan.sample(t_plan)
+            if filtered and self._ref is not None:  # re-anchor where the robot is, same speed
+                self._ref = (float(t), q_now.clone(), self._ref[2])
+        lead = self._lead(self._goal_changed)
+        t_plan = t + lead
+        if filtered and self.cfg.plan_from_reference:
+            _, q_s, qd_s = self._reference_at(t_plan, plan, None, predict=True)
+        else:
+            q_s, qd_s = plan.sample(t_plan)
         opt = self.optimizer
-        travel = max(self._t_goal - t_plan, opt.min_duration(q_s, self._goal))
+        # a straight line at 2/3 of the velocity limits, plus (filtered tracking) the time to
+        # reach that speed and to change the current velocity within acc_max
+        ramp = 0.0
+        if filtered and self.cfg.plan_from_reference:
+            speed = (2.0 / 3.0) * opt.v_max
+            ramp = float(((speed + qd_s.abs()) / self.cfg.acc_max).max())
+        travel = max(self._t_goal - t_plan, opt.min_duration(q_s, self._goal) + ramp)
         duration = max(travel, self.cfg.min_duration_s)
         q_init = self._warm_start(q_s, t_plan, duration)
         t_wall = time.perf_counter()
@@ -296,11 +427,12 @@ class Replanner:
         wall = time.perf_counter() - t_wall
         self.stats.cycles += 1
         self.stats.solve_ms.append(1e3 * wall)
-        if wall > self.budget_s:
+        budget = min(self.budget_s, lead)
+        if wall > budget:
             self.stats.overruns += 1
             warnings.warn(
                 f"replanning cycle at t={t:.2f} s took {wall:.3f} s, over its budget "
-                f"{self.budget_s:.3f} s",
+                f"{budget:.3f} s",
                 PlanningOverrunWarning,
                 stacklevel=2,
             )
@@ -312,7 +444,8 @@ class Replanner:
         self._next_plan = result.trajectory()
         self._last = result
         self._goal_changed = False
-        self._next_cycle += m
+        # the next cycle plans what follows this plan's window
+        self._next_cycle = t + lead if lead < m else self._next_cycle + m
         if self._next_cycle <= t:
             self._next_cycle = t + m
         return result

@@ -134,6 +134,10 @@ class HumanCfg:
     hold_s: float = 0.4
     # idle time before each Take_i is drawn uniformly from this range [s]
     idle_s: tuple[float, float] = (0.3, 1.0)
+    # reaction time [s]: Take_i starts no earlier than this after block i landed on its spot
+    # (people do not grab the instant an object lands: seeing it placed and the gripper
+    # open is a choice reaction, about 0.3-0.5 s)
+    reaction_s: float = 0.4
     # True: take the first delivered block of the personal order that the order allows next;
     # False: wait for exactly the next block of the personal order
     flexible_order: bool = False
@@ -151,6 +155,8 @@ class HumanCfg:
             raise ConfigError(f"expected speed in {sorted(SPEED_FACTORS)}, got {self.speed!r}")
         if self.mode not in ("tasks", "blocking"):
             raise ConfigError(f"expected mode 'tasks' or 'blocking', got {self.mode!r}")
+        if self.reaction_s < 0:
+            raise ConfigError(f"expected reaction_s >= 0, got {self.reaction_s}")
         if self.hold_s < 0 or self.blocking_hold_s < 0 or self.blocking_start_s < 0:
             raise ConfigError("expected non-negative hold and start times")
         lo, hi = self.idle_s
@@ -240,6 +246,7 @@ class ScriptedHuman:
         if unknown:
             raise ConfigError(f"task order names blocks {unknown} absent from the scene")
         self.completed: list[int] = []
+        self._landed: dict[int, float] = {}  # block id -> time it was first seen delivered
         self._motion: _Motion | None = None
         self._idle_until = self._draw_idle(0.0)
         self._blocking_done = False
@@ -324,6 +331,11 @@ class ScriptedHuman:
         """
         events: list[HumanEvent] = []
         self.time = t
+        for i in delivered:
+            self._landed.setdefault(int(i), t)
+        delivered = {
+            i for i in delivered if t - self._landed[int(i)] >= self.cfg.reaction_s - 1e-9
+        }
         m = self._motion
         if m is not None:
             frame = (t - m.t_start) * self.motion.fps

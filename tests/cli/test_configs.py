@@ -83,3 +83,14 @@ def test_bad_value_is_a_config_error() -> None:
     cfg = compose(config_name="config", overrides=["scenario.confidence=1.5"])
     with pytest.raises(ConfigError, match="confidence"):
         instantiate(cfg.scenario)
+
+
+def test_sweep_aliases_reach_the_simulation() -> None:
+    cfg = compose(
+        config_name="config",
+        overrides=["tracker.noise=0.05", "human.speed=fast", "tracker.dropout=0.01"],
+    )
+    sim = instantiate(cfg.sim)
+    assert sim.tracker_noise == 0.05
+    assert sim.tracker_dropout == 0.01
+    assert sim.human.speed == "fast"

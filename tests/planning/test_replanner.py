@@ -46,7 +46,10 @@ def _spy(robot, sleep_s: float = 0.0) -> SpyOptimizer:
 
 def test_cycles_every_m_and_warm_starts_from_the_shifted_plan(point_robot: PointRobot) -> None:
     opt = _spy(point_robot)
-    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, fresh_fraction=0.5))
+    cfg = ReplannerCfg(
+        replan_step_s=0.5, fresh_fraction=0.5, goal_change_lead_s=None, tracking="exact"
+    )
+    rp = Replanner(opt, cfg)
     q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
     rp.reset(q0, qg, t=0.0)
     fc = static_forecast([0.0, 0.8, 0.0], 0.05)
@@ -73,6 +76,116 @@ def test_cycles_every_m_and_warm_starts_from_the_shifted_plan(point_robot: Point
     assert rp.stats.overruns == 0
 
 
+def _drive(rp: Replanner, q: torch.Tensor, until: float, dt: float = 0.01, fc=None):
+    """Closed loop at 100 Hz with perfect tracking; returns times and commanded q, qd."""
+    ts, qs, vs = [], [], []
+    t = 0.0
+    while t < until - 1e-9:
+        rp.step(t, q, fc)
+        q, qd = rp.command(t)
+        ts.append(t)
+        qs.append(q)
+        vs.append(qd)
+        t = round(t + dt, 10)
+    return (
+        torch.tensor(ts, dtype=torch.float64),
+        torch.stack(qs).double(),
+        torch.stack(vs).double(),
+    )
+
+
+def test_goal_change_plan_takes_over_after_the_lead_then_every_m(point_robot) -> None:
+    opt = _spy(point_robot)
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, goal_change_lead_s=0.2))
+    q0 = torch.tensor([-1.0, 0.0])
+    rp.reset(q0, torch.tensor([1.0, 0.0]), t=0.0)
+    rp.step(0.0, q0, None)
+    assert opt.calls[0]["t0"] == pytest.approx(0.2)
+    assert opt.calls[0]["window"] == pytest.approx((0.2, 0.7))
+    assert rp.next_cycle == pytest.approx(0.2)
+    rp.step(0.2, rp.command(0.2)[0], None)
+    assert opt.calls[1]["t0"] == pytest.approx(0.7)  # a regular cycle: m ahead
+    assert rp.next_cycle == pytest.approx(0.7)
+    rp.set_goal(torch.tensor([0.0, 1.0]), t=0.45)
+    assert rp.next_cycle == pytest.approx(0.45)
+    rp.step(0.45, rp.command(0.45)[0], None)
+    assert opt.calls[2]["t0"] == pytest.approx(0.65) and opt.calls[2]["q_init"] is None
+    with pytest.raises(ConfigError, match="goal_change_lead_s"):
+        ReplannerCfg(replan_step_s=0.5, goal_change_lead_s=0.6)
+
+
+def test_filtered_command_limits_acceleration_and_starts_plans_on_its_state(
+    point_robot: PointRobot,
+) -> None:
+    opt = _spy(point_robot)
+    cfg = ReplannerCfg(
+        replan_step_s=0.5, acc_max=4.0, tracking="filtered", plan_from_reference=True
+    )
+    rp = Replanner(opt, cfg)
+    q0 = torch.tensor([-1.0, 0.0])
+    rp.reset(q0, torch.tensor([1.0, 0.5]), t=0.0)
+    # a goal change mid-motion reverses the direction: the plan's velocity jumps
+    t, q, qd = _drive(rp, q0, 1.3)
+    rp.set_goal(torch.tensor([-1.0, -0.5]), t=1.3)
+    t2, q2, qd2 = _drive_from(rp, q[-1], 1.3, 3.0)
+    t, q, qd = torch.cat([t, t2]), torch.cat([q, q2]), torch.cat([qd, qd2])
+    # finite differences of the commanded positions: continuous velocity, bounded acceleration
+    vel = torch.diff(q, dim=0) / 0.01
+    acc = torch.diff(vel, dim=0) / 0.01
+    assert float(acc.abs().max()) <= 4.0 * 1.05
+    assert float((vel - qd[1:]).abs().max()) < 0.05  # qd_des is the position's derivative
+    assert float(qd.abs().max()) > 0.5  # it did move
+    # every executed solve started at the reference state the commands reached at its start
+    # (a plan replaced by a goal change before its start never runs)
+    checked = 0
+    for i, call in enumerate(opt.calls):
+        if any(later["t0"] < call["t0"] for later in opt.calls[i + 1 :]):
+            continue
+        k = int(torch.argmin((t - call["t0"]).abs()))
+        if abs(float(t[k]) - call["t0"]) < 1e-6:
+            assert torch.allclose(call["q_start"].double(), q[k], atol=1e-5)
+            assert torch.allclose(call["qd_start"].double(), qd[k], atol=1e-4)
+            checked += 1
+    assert checked >= 4
+
+
+def _drive_from(rp: Replanner, q: torch.Tensor, t0: float, until: float, dt: float = 0.01):
+    ts, qs, vs = [], [], []
+    t = t0
+    while t < until - 1e-9:
+        rp.step(t, q.float(), None)
+        q, qd = rp.command(t)
+        ts.append(t)
+        qs.append(q)
+        vs.append(qd)
+        t = round(t + dt, 10)
+    return (
+        torch.tensor(ts, dtype=torch.float64),
+        torch.stack(qs).double(),
+        torch.stack(vs).double(),
+    )
+
+
+def test_filtered_command_follows_a_smooth_plan_closely(point_robot: PointRobot) -> None:
+    """On a slow smooth plan the reference equals the exact plan samples (independent path)."""
+    cfg = OptimizerCfg(iterations=5, warm_iterations=2, horizon_s=4.0, perturbation_std=0.0)
+    opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.1))
+    rp_f = Replanner(opt, ReplannerCfg(tracking="filtered", acc_max=50.0))
+    q0, qg = torch.tensor([-0.5, 0.0]), torch.tensor([0.5, 0.2])
+    rp_f.reset(q0, qg, t=0.0)
+    rp_f.step(0.0, q0, None)
+    plan = rp_f._next_plan
+    assert plan is not None
+    t = 0.0
+    err = 0.0
+    while t < 3.0:
+        q, _ = rp_f.command(t)
+        if t >= plan.t_start:
+            err = max(err, float((q - plan.sample(t)[0]).abs().max()))
+        t = round(t + 0.01, 10)
+    assert err < 2e-3
+
+
 def test_overruns_are_counted_and_warned(point_robot: PointRobot) -> None:
     opt = _spy(point_robot, sleep_s=0.06)
     rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, budget_s=0.05))
@@ -88,7 +201,7 @@ def test_overruns_are_counted_and_warned(point_robot: PointRobot) -> None:
 def test_wait_delays_the_goal_and_is_counted(point_robot: PointRobot) -> None:
     cfg = OptimizerCfg(iterations=0, warm_iterations=0, horizon_s=2.0, perturbation_std=0.0)
     opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.1))
-    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5))
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, goal_change_lead_s=None))
     q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([0.3, 0.0])
     rp.reset(q0, qg, t=0.0)
     blocker = static_forecast([-0.8, 0.0, 0.0], 0.03)  # right in front of the robot
@@ -121,7 +234,7 @@ def test_closed_loop_reaches_the_goal(point_robot: PointRobot) -> None:
         OptimizerCfg(iterations=10, warm_iterations=4, horizon_s=1.5),
         human_spheres=one_sphere_map(0.1),
     )
-    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5))
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, tracking="exact"))
     q, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
     rp.reset(q, qg, t=0.0)
     fc = static_forecast([0.0, 0.0, 0.0], 0.05)

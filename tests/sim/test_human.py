@@ -42,6 +42,17 @@ def test_waits_for_delivery_then_takes_in_order() -> None:
     assert kinds == ["human_take_started", "human_grasped", "human_took"]
 
 
+@pytest.mark.parametrize("reaction", [0.0, 0.4, 1.0])
+def test_take_starts_a_reaction_time_after_the_block_lands(reaction: float) -> None:
+    human = _human(order=(1, 0, 2, 3), idle_s=(0.0, 0.0), reaction_s=reaction)
+    _run(human, set(), 2.0)  # idle long over, nothing delivered yet
+    t_land = human.time
+    events = _run(human, {1}, t_land + 2.0)
+    start = next(e.time for e in events if e.kind == "human_take_started")
+    # the first update that sees block 1 is one step after t_land
+    assert start - (t_land + 0.01) == pytest.approx(reaction, abs=0.011)
+
+
 def test_hand_reaches_the_block_when_it_grasps() -> None:
     human = _human(order=(1, 0, 2, 3))
     delivered = {1}
@@ -92,6 +103,8 @@ def test_blocking_mode_moves_the_arm_into_the_path() -> None:
 def test_errors() -> None:
     with pytest.raises(ConfigError, match="speed"):
         HumanCfg(speed="sprint")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="reaction_s"):
+        HumanCfg(reaction_s=-0.1)
     with pytest.raises(ConfigError, match="task_order"):
         ScriptedHuman(HumanCfg(), FakeMotion(), task_order=None, targets=TARGETS, seed=0)
     with pytest.raises(ConfigError, match="absent"):
