@@ -39,7 +39,15 @@ def test_conf_option_files_instantiate() -> None:
         assert isinstance(sc, ScenarioCfg) and sc.name == path.stem
         if sc.kind == "delivery":
             parse_order(sc.task_order, sc.scene().block_ids)
-    assert isinstance(instantiate(OmegaConf.load(CONF / "sim" / "default.yaml")), SimCfg)
+    # conf/sim reads the root sweep aliases tracker.* and human.speed (conf/config.yaml)
+    root = OmegaConf.create(
+        {
+            "tracker": {"noise": 0.01, "dropout": 0.0},
+            "human": {"speed": "medium"},
+            "sim": OmegaConf.load(CONF / "sim" / "default.yaml"),
+        }
+    )
+    assert isinstance(instantiate(root.sim), SimCfg)
     for name in ("table_simulation", "speed_response"):
         node = OmegaConf.load(CONF / "experiment" / f"{name}.yaml")
         exp = instantiate(node.experiment, _convert_="all")
