@@ -1,0 +1,484 @@
+"""The human motion predictor (paper eq. motion_prediction).
+
+``p(xi_next | F, p) = sum_c p(c | F, p) p(xi_next | F, p, c)``: the action classifier gives the
+weights ``p(c | F, p)``; one sparse variational GP per (progress state p, current action c)
+gives the Gaussian future positions; the next-action model gives ``p(n | p, c)``.
+
+GP inputs are the observed windows ``F_prev`` flattened (``n_p * D``, normalised inside each
+GP); GP outputs are the future positions *relative to the current pose* (ARCHITECTURE 4.10),
+the pose is added back at prediction, so a forecast lies in the world (table) frame.
+
+Fallbacks for a (p, c) without its own GP, in order:
+
+1. the GP of action c pooled over all progress states;
+2. a constant-velocity extrapolation with the window's mean velocity
+   ``(p_last - p_first) / ((n_p - 1) / fps)`` (robust to tracker noise), with the large variance
+   ``fallback_sigma0^2 + (fallback_sigma_rate * t)^2`` per coordinate (t seconds ahead): a
+   conservative forecast for collision checking.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import torch
+
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError
+from iplanner_torch.prediction.forecast import Forecast
+from iplanner_torch.prediction.svgp import SVGPCfg, SVGPRegressor
+from iplanner_torch.types import check_shape
+
+CHECKPOINT_VERSION = 1
+
+
+@dataclass(frozen=True, kw_only=True)
+class PredictorCfg:
+    """Settings of the whole predictor: classifier, GPs, next-action model, fallbacks."""
+
+    # settings of every per-(p, c) GP (eq. GPRlearning) and its noisy-input correction.
+    svgp: SVGPCfg = field(default_factory=SVGPCfg)
+    # kernel of the action classifier (eq. IVMclassifier): the paper uses DTW.
+    classifier_kernel: Literal["dtw", "gak", "rbf"] = "dtw"
+    # classifier kernel bandwidth (DTW gamma, GAK sigma, RBF lengthscale); None = median rule.
+    classifier_bandwidth: float | None = None
+    # IVM regularisation lambda.
+    ivm_lam: float = 1e-3
+    # IVM maximum number of import vectors.
+    ivm_max_import: int = 60
+    # IVM stopping tolerance on the relative loss change.
+    ivm_tol: float = 1e-3
+    # IVM candidate import vectors tried per greedy step.
+    ivm_candidates: int = 64
+    # IVM Newton steps per candidate evaluation.
+    ivm_newton_steps: int = 3
+    # training windows given to the classifier at most (random subset, seeded).
+    classifier_max_train: int = 1500
+    # additive smoothing of the next-action histograms (eq. next_action).
+    coherence_smoothing: float = 1.0
+    # a (p, c) group needs at least this many windows for its own GP.
+    min_group_size: int = 20
+    # training windows per GP at most (random subset, seeded).
+    max_gp_points: int = 3000
+    # fallback forecast: standard deviation at t = 0 [m].
+    fallback_sigma0: float = 0.1
+    # fallback forecast: growth of the standard deviation [m/s].
+    fallback_sigma_rate: float = 1.0
+    # seed of subsampling.
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.svgp, dict):
+            object.__setattr__(self, "svgp", SVGPCfg(**self.svgp))
+        if self.classifier_kernel not in ("dtw", "gak", "rbf"):
+            raise ConfigError(
+                f"classifier_kernel must be dtw, gak or rbf, got {self.classifier_kernel!r}"
+            )
+        if self.classifier_bandwidth is not None and self.classifier_bandwidth <= 0:
+            raise ConfigError(f"classifier_bandwidth must be > 0, got {self.classifier_bandwidth}")
+        if self.ivm_lam <= 0 or self.ivm_max_import < 1 or self.ivm_candidates < 1:
+            raise ConfigError("need ivm_lam > 0, ivm_max_import >= 1, ivm_candidates >= 1")
+        if self.ivm_tol < 0 or self.ivm_newton_steps < 1:
+            raise ConfigError("need ivm_tol >= 0 and ivm_newton_steps >= 1")
+        if self.classifier_max_train < 2 or self.max_gp_points < 2:
+            raise ConfigError("classifier_max_train and max_gp_points must be >= 2")
+        if self.coherence_smoothing < 0:
+            raise ConfigError(f"coherence_smoothing must be >= 0, got {self.coherence_smoothing}")
+        if self.min_group_size < 2:
+            raise ConfigError(f"min_group_size must be >= 2, got {self.min_group_size}")
+        if self.fallback_sigma0 <= 0 or self.fallback_sigma_rate < 0:
+            raise ConfigError("need fallback_sigma0 > 0 and fallback_sigma_rate >= 0")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-dict form (saved in checkpoints)."""
+        return asdict(self)
+
+
+def dataset_fingerprint(*tensors: torch.Tensor) -> str:
+    """A short hash of the training tensors (shapes and a sample of values)."""
+    h = hashlib.sha256()
+    for t in tensors:
+        t = t.detach().cpu().contiguous()
+        h.update(str(tuple(t.shape)).encode())
+        flat = t.reshape(-1)
+        step = max(1, flat.numel() // 4096)
+        h.update(flat[::step].double().numpy().tobytes())
+    return h.hexdigest()[:16]
+
+
+class HumanMotionPredictor:
+    """Action-weighted mixture of per-action Gaussian forecasts (eq. motion_prediction).
+
+    Args:
+        cfg: predictor settings.
+        joint_names: the K joint names (order of the K axis).
+        action_names: the A action names.
+        fps: frame rate of the windows [Hz].
+        n_prev: n_p, observed frames per window.
+        n_future: n_f, predicted frames.
+        feature_kinds: feature blocks per frame ("position" first).
+        progress_actions: indices of the actions that count for the progress state.
+        feat_mean: (D,) feature means of the training windows (classifier normalisation).
+        feat_std: (D,) feature standard deviations.
+        classifier: object with ``predict_proba(x (B, n_p, D), progress (B,)) -> (B, A)`` on
+            normalised features, or None for uniform weights.
+        next_model: object with ``prob(progress (B,), current (B,)) -> (B, A)``, or None.
+        gps: GP per (progress bitmask, action).
+        pooled: GP per action pooled over progress states.
+        fingerprint: hash of the training data.
+        window_cfg: the data's window settings, kept for reference (a dict).
+    """
+
+    def __init__(
+        self,
+        *,
+        cfg: PredictorCfg,
+        joint_names: tuple[str, ...],
+        action_names: tuple[str, ...],
+        fps: float,
+        n_prev: int,
+        n_future: int,
+        feature_kinds: tuple[str, ...],
+        progress_actions: tuple[int, ...],
+        feat_mean: torch.Tensor,
+        feat_std: torch.Tensor,
+        classifier: Any = None,
+        next_model: Any = None,
+        gps: dict[tuple[int, int], SVGPRegressor] | None = None,
+        pooled: dict[int, SVGPRegressor] | None = None,
+        fingerprint: str = "",
+        window_cfg: dict[str, Any] | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.joint_names = tuple(joint_names)
+        self.action_names = tuple(action_names)
+        self.fps = float(fps)
+        self.n_prev = int(n_prev)
+        self.n_future = int(n_future)
+        self.feature_kinds = tuple(feature_kinds)
+        self.progress_actions = tuple(int(a) for a in progress_actions)
+        self.feat_mean = feat_mean.float()
+        self.feat_std = feat_std.float()
+        self.classifier = classifier
+        self.next_model = next_model
+        self.gps = dict(gps or {})
+        self.pooled = dict(pooled or {})
+        self.fingerprint = fingerprint
+        self.window_cfg = dict(window_cfg or {})
+        k = len(self.joint_names)
+        d = 3 * k * len(self.feature_kinds)
+        check_shape("feat_mean", self.feat_mean, (d,))
+        check_shape("feat_std", self.feat_std, (d,))
+
+    # ------------------------------------------------------------------------------ sizes
+    @property
+    def num_joints(self) -> int:
+        """K."""
+        return len(self.joint_names)
+
+    @property
+    def num_actions(self) -> int:
+        """A."""
+        return len(self.action_names)
+
+    @property
+    def num_features(self) -> int:
+        """D = 3 K x number of feature kinds."""
+        return 3 * self.num_joints * len(self.feature_kinds)
+
+    @property
+    def device(self) -> torch.device:
+        """Where the model's tensors live."""
+        return self.feat_mean.device
+
+    def to(self, device: torch.device | str) -> HumanMotionPredictor:
+        """Move every tensor (GPs, normalisation, classifier when it can) to ``device``."""
+        self.feat_mean = self.feat_mean.to(device)
+        self.feat_std = self.feat_std.to(device)
+        for reg in list(self.gps.values()) + list(self.pooled.values()):
+            reg.to(device)
+            reg._cache = None
+        for obj in (self.classifier, self.next_model):
+            if obj is not None and hasattr(obj, "to"):
+                obj.to(device)
+        return self
+
+    # -------------------------------------------------------------------------- inference
+    def normalise_features(self, f_prev: torch.Tensor) -> torch.Tensor:
+        """(B, n_p, D) features -> normalised features (classifier input)."""
+        return (f_prev - self.feat_mean) / self.feat_std
+
+    def model_for(self, progress: int, action: int) -> SVGPRegressor | None:
+        """The GP used for (p, c): its own, else the pooled one of c, else None (fallback)."""
+        reg = self.gps.get((int(progress), int(action)))
+        return reg if reg is not None else self.pooled.get(int(action))
+
+    def action_weights(self, f_prev: torch.Tensor, progress: torch.Tensor) -> torch.Tensor:
+        """(B, A) p(c | F_prev, p) (eq. IVMclassifier); uniform without a classifier."""
+        b = f_prev.shape[0]
+        if self.classifier is None:
+            return torch.full(
+                (b, self.num_actions),
+                1.0 / self.num_actions,
+                dtype=f_prev.dtype,
+                device=f_prev.device,
+            )
+        x = self.normalise_features(f_prev)
+        if not hasattr(self.classifier, "to"):  # a CPU-only classifier: evaluate it there
+            x, progress = x.cpu(), progress.cpu()
+        w = self.classifier.predict_proba(x, progress)
+        return w.to(f_prev)
+
+    def _fallback(self, f_prev: torch.Tensor, pose: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """Constant-velocity mean (B, n_f, K, 3) and the large fallback variance."""
+        k = self.num_joints
+        t = (
+            torch.arange(1, self.n_future + 1, dtype=f_prev.dtype, device=f_prev.device) / self.fps
+        )  # (n_f,)
+        pos = f_prev[:, :, : 3 * k].reshape(f_prev.shape[0], -1, k, 3)  # (B, n_p, K, 3)
+        # mean velocity over the window: far less noisy than the last frame's derivative
+        vel = ((pos[:, -1] - pos[:, 0]) * self.fps / (pos.shape[1] - 1)).unsqueeze(1)
+        mean = pose.unsqueeze(1) + vel * t.view(1, -1, 1, 1)
+        sd = self.cfg.fallback_sigma0**2 + (self.cfg.fallback_sigma_rate * t) ** 2
+        var = sd.view(1, -1, 1, 1).expand(mean.shape).clone()
+        return mean, var
+
+    def predict(self, f_prev: torch.Tensor, progress: torch.Tensor) -> Forecast:
+        """Forecast the next n_f frames for a batch of windows (eq. motion_prediction).
+
+        Args:
+            f_prev: (B, n_p, D) features of the observed frames (positions [m], velocities
+                [m/s], accelerations [m/s^2], as :func:`data.windows.compute_features`).
+            progress: (B,) int64 progress-state bitmasks.
+
+        Returns:
+            The Forecast: weights (B, A), mean/var (B, A, n_f, K, 3) in the world frame.
+
+        Raises:
+            ShapeError: for wrong shapes.
+        """
+        check_shape("f_prev", f_prev, ("B", self.n_prev, self.num_features))
+        check_shape("progress", progress, (f_prev.shape[0],))
+        f_prev = f_prev.to(self.device, torch.float32)
+        progress = progress.to(self.device, torch.int64)
+        b, k, a_n = f_prev.shape[0], self.num_joints, self.num_actions
+        pose = f_prev[:, -1, : 3 * k].reshape(b, k, 3)  # (B, K, 3) current pose
+        x = f_prev.reshape(b, -1)  # (B, n_p * D)
+        weights = self.action_weights(f_prev, progress)
+        mean = torch.empty(b, a_n, self.n_future, k, 3, dtype=f_prev.dtype, device=f_prev.device)
+        var = torch.empty_like(mean)
+        fb = None
+        uniq = torch.unique(progress).tolist()
+        for p in uniq:
+            rows = slice(None) if len(uniq) == 1 else (progress == p).nonzero()[:, 0]
+            xr, pr = x[rows], pose[rows]
+            for a in range(a_n):
+                reg = self.model_for(p, a)
+                if reg is None:
+                    if fb is None:
+                        fb = self._fallback(f_prev, pose)
+                    mean[rows, a], var[rows, a] = fb[0][rows], fb[1][rows]
+                    continue
+                m, v = reg.predict(xr)  # (b, n_f K 3) each
+                m = m.view(-1, self.n_future, k, 3)  # (b, n_f, K, 3)
+                mean[rows, a] = m + pr.unsqueeze(1)
+                var[rows, a] = v.view(-1, self.n_future, k, 3)
+        return Forecast(
+            weights=weights,
+            mean=mean,
+            var=var,
+            dt=1.0 / self.fps,
+            joint_names=self.joint_names,
+            action_names=self.action_names,
+        )
+
+    def predict_positions(self, positions: torch.Tensor, progress: torch.Tensor) -> Forecast:
+        """Forecast from raw tracked positions (features computed here).
+
+        NaN joints are imputed by :func:`data.windows.compute_features` (linear interpolation
+        in time, edge hold; a joint lost in the whole window takes a connected joint's
+        trajectory). A joint with no observation at all in the window raises, never a silent
+        NaN forecast.
+
+        Args:
+            positions: (B, n_p, K, 3) tracked joint positions [m], NaN where lost.
+            progress: (B,) int64 progress-state bitmasks.
+
+        Returns:
+            As :meth:`predict`.
+
+        Raises:
+            ShapeError: for wrong shapes.
+            DataError: when a joint is NaN in every frame of a window.
+        """
+        from iplanner_torch.data.windows import compute_features
+
+        check_shape("positions", positions, ("B", self.n_prev, self.num_joints, 3))
+        lost = ~torch.isfinite(positions).all(-1).any(1)  # (B, K) joint never observed
+        if bool(lost.any()):
+            bi, ki = (int(v) for v in lost.nonzero()[0])
+            raise DataError(
+                f"joint {self.joint_names[ki]!r} is NaN in every frame of window {bi}: "
+                "cannot forecast"
+            )
+        f = compute_features(
+            positions.to(self.device, torch.float32),
+            self.fps,
+            self.feature_kinds,
+            joint_names=self.joint_names,
+        )
+        return self.predict(f, progress)
+
+    def next_action(self, progress: int, current: int) -> torch.Tensor:
+        """(A,) p(n | p, c) (eq. next_action); uniform without a next-action model."""
+        if self.next_model is None:
+            return torch.full((self.num_actions,), 1.0 / self.num_actions)
+        p = torch.tensor([int(progress)], dtype=torch.int64)
+        c = torch.tensor([int(current)], dtype=torch.int64)
+        return self.next_model.prob(p, c)[0]
+
+    # -------------------------------------------------------------------------- storing
+    def to_checkpoint(self) -> dict[str, Any]:
+        """Everything needed to rebuild the predictor."""
+
+        def state(obj: Any) -> Any:
+            return None if obj is None else obj.state_dict()
+
+        return {
+            "version": CHECKPOINT_VERSION,
+            "kind": "HumanMotionPredictor",
+            "cfg": self.cfg.to_dict(),
+            "joint_names": self.joint_names,
+            "action_names": self.action_names,
+            "fps": self.fps,
+            "n_prev": self.n_prev,
+            "n_future": self.n_future,
+            "feature_kinds": self.feature_kinds,
+            "progress_actions": self.progress_actions,
+            "feat_mean": self.feat_mean.cpu(),
+            "feat_std": self.feat_std.cpu(),
+            "classifier": state(self.classifier),
+            "classifier_class": None
+            if self.classifier is None
+            else type(self.classifier).__module__ + ":" + type(self.classifier).__qualname__,
+            "next_model": state(self.next_model),
+            "next_model_class": None
+            if self.next_model is None
+            else type(self.next_model).__module__ + ":" + type(self.next_model).__qualname__,
+            "gps": {f"{p}:{c}": reg.to_checkpoint() for (p, c), reg in self.gps.items()},
+            "pooled": {
+                str(c): (self._alias(reg) or reg.to_checkpoint()) for c, reg in self.pooled.items()
+            },
+            "fingerprint": self.fingerprint,
+            "window_cfg": self.window_cfg,
+        }
+
+    def _alias(self, reg: SVGPRegressor) -> str | None:
+        for (p, c), r in self.gps.items():
+            if r is reg:
+                return f"{p}:{c}"
+        return None
+
+    def save(self, path: str | Path) -> Path:
+        """Write the predictor to ``path`` (a torch file, conventionally ``predictor.ckpt``)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        torch.save(self.to_checkpoint(), tmp)
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def load(
+        cls,
+        path: str | Path,
+        map_location: torch.device | str | None = None,
+        *,
+        expect_joints: tuple[str, ...] | list[str] | None = None,
+    ) -> HumanMotionPredictor:
+        """Rebuild a predictor from a checkpoint alone.
+
+        Args:
+            path: the file written by :meth:`save` (or by ``train_predictor``).
+            map_location: device for every tensor (default: CPU).
+            expect_joints: when given, the joint names the caller needs.
+
+        Raises:
+            CheckpointError: for a missing, corrupt or truncated file (naming it), or a
+                checkpoint of another joint set than ``expect_joints``.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise CheckpointError(f"predictor checkpoint {path} does not exist")
+        try:
+            d = torch.load(path, map_location="cpu", weights_only=False)
+        except Exception as err:  # noqa: BLE001 - any unpickling failure means corrupt
+            raise CheckpointError(f"cannot read predictor checkpoint {path}: {err}") from err
+        if not isinstance(d, dict) or d.get("kind") != "HumanMotionPredictor":
+            raise CheckpointError(f"{path} is not a HumanMotionPredictor checkpoint")
+        if expect_joints is not None and tuple(expect_joints) != tuple(d["joint_names"]):
+            raise CheckpointError(
+                f"{path} was trained on joints {tuple(d['joint_names'])}, expected "
+                f"{tuple(expect_joints)}"
+            )
+        try:
+            pred = cls._from_dict(d)
+        except (KeyError, TypeError, ValueError, RuntimeError) as err:
+            raise CheckpointError(f"predictor checkpoint {path} is incomplete: {err}") from err
+        if map_location is not None:
+            pred.to(map_location)
+        return pred
+
+    @classmethod
+    def _from_dict(cls, d: dict[str, Any]) -> HumanMotionPredictor:
+        cfg_d = dict(d["cfg"])
+        cfg_d["svgp"] = SVGPCfg(**cfg_d["svgp"])
+        cfg = PredictorCfg(**cfg_d)
+        gps = {}
+        for key, sd in d["gps"].items():
+            p, c = (int(v) for v in key.split(":"))
+            gps[(p, c)] = SVGPRegressor.from_checkpoint(sd)
+        pooled = {}
+        for key, sd in d["pooled"].items():
+            if isinstance(sd, str):
+                p, c = (int(v) for v in sd.split(":"))
+                pooled[int(key)] = gps[(p, c)]
+            else:
+                pooled[int(key)] = SVGPRegressor.from_checkpoint(sd)
+        return cls(
+            cfg=cfg,
+            joint_names=tuple(d["joint_names"]),
+            action_names=tuple(d["action_names"]),
+            fps=d["fps"],
+            n_prev=d["n_prev"],
+            n_future=d["n_future"],
+            feature_kinds=tuple(d["feature_kinds"]),
+            progress_actions=tuple(d["progress_actions"]),
+            feat_mean=d["feat_mean"],
+            feat_std=d["feat_std"],
+            classifier=_rebuild(d.get("classifier_class"), d.get("classifier")),
+            next_model=_rebuild(d.get("next_model_class"), d.get("next_model")),
+            gps=gps,
+            pooled=pooled,
+            fingerprint=d.get("fingerprint", ""),
+            window_cfg=d.get("window_cfg"),
+        )
+
+
+def _rebuild(qualname: str | None, state: Any) -> Any:
+    """Rebuild a sub-model from ``module:Class`` and its ``state_dict`` via ``from_state_dict``."""
+    if qualname is None or state is None:
+        return None
+    import importlib
+
+    mod_name, cls_name = qualname.split(":")
+    obj_cls = getattr(importlib.import_module(mod_name), cls_name)
+    return obj_cls.from_state_dict(state)
+
+
+def check_finite(name: str, x: torch.Tensor) -> None:
+    """Raise :class:`DataError` when ``x`` has NaN or inf."""
+    if not bool(torch.isfinite(x).all()):
+        raise DataError(f"{name} contains NaN or inf")

@@ -1,0 +1,554 @@
+"""Lightning training of the whole predictor: classifier, next-action model and every GP.
+
+* :class:`SVGPModule` trains one :class:`SVGPRegressor` on its minibatch ELBO
+  (``gpytorch.mlls.VariationalELBO``), logging ``train/elbo``; every ``q_refresh_every`` steps
+  and at the end q is set to its closed-form optimum; after training it logs ``val/nll`` and
+  ``val/rmse`` on the validation windows of its group. NIGP rounds are successive fits.
+* :class:`IVMModule` lets Lightning drive the IVM's greedy fit: the greedy import loop runs
+  inside the single training step of a single epoch (the IVM is not a gradient method), and
+  the loss after each import step is logged as ``train/ivm_loss`` (step = import count).
+* :func:`train_predictor` trains everything, writes a Lightning ``.ckpt`` per sub-model
+  (``classifier.ckpt``, ``gp_p{p}_c{c}.ckpt``, ``gp_pooled_c{c}.ckpt``) and the combined
+  ``predictor.ckpt`` (loadable by :meth:`HumanMotionPredictor.load`), with CSV and TensorBoard
+  logs under ``out_dir``. ``resume=True`` reuses sub-model checkpoints already written.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import lightning as L
+import torch
+from torch.utils.data import DataLoader, TensorDataset
+
+from iplanner_torch.data.windows import WindowSet
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError
+from iplanner_torch.prediction.predictor import (
+    HumanMotionPredictor,
+    PredictorCfg,
+    dataset_fingerprint,
+)
+from iplanner_torch.prediction.svgp import SVGPCfg, SVGPRegressor
+
+__all__ = [
+    "IVMModule",
+    "PredictorCfg",
+    "SVGPCfg",
+    "SVGPModule",
+    "TrainerCfg",
+    "train_predictor",
+]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainerCfg:
+    """Lightning settings shared by every sub-model's training."""
+
+    # cap on the GP epochs (None: SVGPCfg.epochs); the step cap SVGPCfg.max_steps also holds.
+    max_epochs: int | None = None
+    # Lightning accelerator: auto picks CUDA when present.
+    accelerator: Literal["auto", "cpu", "gpu", "cuda"] = "auto"
+    # devices per sub-model fit.
+    devices: int = 1
+    # logging interval [steps].
+    log_every_n_steps: int = 10
+    # seed of every fit (Lightning seed_everything).
+    seed: int = 0
+    # write TensorBoard logs beside the CSV logs.
+    tensorboard: bool = True
+
+    def __post_init__(self) -> None:
+        if self.max_epochs is not None and self.max_epochs < 0:
+            raise ConfigError(f"max_epochs must be >= 0 or None, got {self.max_epochs}")
+        if self.accelerator not in ("auto", "cpu", "gpu", "cuda"):
+            raise ConfigError(
+                f"accelerator must be auto, cpu, gpu or cuda, got {self.accelerator!r}"
+            )
+        if self.devices < 1 or self.log_every_n_steps < 1:
+            raise ConfigError("devices and log_every_n_steps must be >= 1")
+
+
+class SVGPModule(L.LightningModule):
+    """Trains one SVGP (eq. GPRlearning) on its minibatch ELBO.
+
+    Args:
+        reg: the regressor (initialised with :meth:`SVGPRegressor.from_data`).
+        x: (N, D_in) raw training inputs.
+        y: (N, C) raw training outputs.
+        extra: (N, C) or (N, 1) extra observation noise (normalised units).
+        x_val: (N_v, D_in) validation inputs, or None.
+        y_val: (N_v, C) validation outputs, or None.
+    """
+
+    def __init__(
+        self,
+        reg: SVGPRegressor,
+        x: torch.Tensor,
+        y: torch.Tensor,
+        extra: torch.Tensor,
+        x_val: torch.Tensor | None = None,
+        y_val: torch.Tensor | None = None,
+    ) -> None:
+        super().__init__()
+        self.reg = reg
+        self.register_buffer("x", x, persistent=False)
+        self.register_buffer("y", y, persistent=False)
+        self.register_buffer("extra", extra, persistent=False)
+        self.register_buffer("x_val", x_val, persistent=False)
+        self.register_buffer("y_val", y_val, persistent=False)
+        self.val_metrics: dict[str, float] = {}
+        self.reg.train()
+
+    def on_train_start(self) -> None:
+        self.reg.freeze_q(not self.reg.cfg.train_q)
+        self.reg.train()
+
+    def train_dataloader(self) -> DataLoader:
+        n = self.x.shape[0]
+        g = torch.Generator().manual_seed(self.reg.cfg.seed)
+        return DataLoader(
+            TensorDataset(torch.arange(n)),
+            shuffle=True,
+            generator=g,
+            batch_size=min(self.reg.cfg.batch_size, n),
+            drop_last=True,
+        )
+
+    def training_step(self, batch: list[torch.Tensor], batch_idx: int) -> torch.Tensor:
+        (idx,) = batch
+        every = self.reg.cfg.q_refresh_every
+        if every and self.global_step % every == 0:
+            self.reg.finalise(self.x, self.y, self.extra)
+        xn = self.reg.normalise_x(self.x[idx])
+        yn = self.reg.normalise_y(self.y[idx])
+        loss = self.reg.elbo_loss(xn, yn, self.extra[idx], self.x.shape[0])
+        self.log("train/elbo", -loss, prog_bar=True, on_step=True, on_epoch=False)
+        return loss
+
+    def configure_optimizers(self) -> torch.optim.Optimizer:
+        return torch.optim.Adam(self.reg.trainable_parameters(), lr=self.reg.cfg.lr)
+
+    def on_train_end(self) -> None:
+        self.reg.freeze_q(False)
+        self.reg.eval()
+        self.reg.finalise(self.x, self.y, self.extra)
+        if self.x_val is not None and self.x_val.shape[0]:
+            mean, var = self.reg.predict(self.x_val)
+            nll = 0.5 * (torch.log(2 * math.pi * var) + (self.y_val - mean) ** 2 / var)
+            self.val_metrics = {
+                "val/nll": float(nll.mean()),
+                "val/rmse": float((self.y_val - mean).pow(2).mean().sqrt()),
+            }
+            for lg in self.loggers:
+                lg.log_metrics(self.val_metrics, step=self.global_step)
+
+    def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        checkpoint["svgp"] = self.reg.to_checkpoint()
+
+
+class IVMModule(L.LightningModule):
+    """Lightning wrapper of the action classifier's greedy IVM fit (eq. IVMclassifier).
+
+    The whole greedy import loop runs in the single training step of a single epoch; the loss
+    history (one value per import step) is logged as ``train/ivm_loss``.
+
+    Args:
+        classifier: an unfitted ``ActionClassifier``.
+        x: (N, n_p, D) normalised windows.
+        progress: (N,) int64 progress bitmasks.
+        current: (N,) int64 current actions.
+        fit_kwargs: keyword arguments of ``classifier.fit`` (num_actions, kernel_factory, ...).
+    """
+
+    def __init__(
+        self,
+        classifier: Any,
+        x: torch.Tensor,
+        progress: torch.Tensor,
+        current: torch.Tensor,
+        fit_kwargs: dict[str, Any],
+    ) -> None:
+        super().__init__()
+        self.automatic_optimization = False
+        self.classifier = classifier
+        self.data = (x, progress, current)
+        self.fit_kwargs = fit_kwargs
+        self.dummy = torch.nn.Parameter(torch.zeros(()))  # Lightning needs a parameter
+
+    def train_dataloader(self) -> DataLoader:
+        return DataLoader(TensorDataset(torch.zeros(1)), batch_size=1)
+
+    def training_step(self, batch: Any, batch_idx: int) -> None:
+        x, p, c = (t.to(self.device) for t in self.data)
+        self.classifier.fit(x, p, c, **self.fit_kwargs)
+        for step, loss in enumerate(_loss_history(self.classifier)):
+            for lg in self.loggers:
+                lg.log_metrics({"train/ivm_loss": float(loss)}, step=step)
+
+    def configure_optimizers(self) -> torch.optim.Optimizer:
+        # never stepped (the IVM is fitted greedily); returned to keep Lightning quiet
+        return torch.optim.SGD([self.dummy], lr=0.0)
+
+    def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        checkpoint["classifier"] = self.classifier.state_dict()
+
+
+def _loss_history(classifier: Any) -> list[float]:
+    hist = getattr(classifier, "loss_history_", None)
+    if hist is None:
+        models = getattr(classifier, "models_", None) or getattr(classifier, "ivms_", None) or {}
+        vals = models.values() if isinstance(models, dict) else models
+        hist = [v for m in vals for v in getattr(m, "loss_history_", [])]
+    return [float(v) for v in hist]
+
+
+# ------------------------------------------------------------------------------ orchestration
+def _trainer(
+    tcfg: TrainerCfg,
+    out_dir: Path,
+    name: str,
+    max_steps: int,
+    progress: bool,
+    max_epochs: int = -1,
+) -> L.Trainer:
+    from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
+
+    loggers: list[Any] = [CSVLogger(out_dir / "logs", name=name, version=0)]
+    if tcfg.tensorboard:
+        loggers.append(TensorBoardLogger(out_dir / "tb", name=name, version=0))
+    return L.Trainer(
+        max_steps=max_steps,
+        max_epochs=max_epochs,
+        accelerator=tcfg.accelerator,
+        devices=tcfg.devices,
+        logger=loggers,
+        enable_checkpointing=False,
+        enable_model_summary=False,
+        enable_progress_bar=progress,
+        log_every_n_steps=tcfg.log_every_n_steps,
+        num_sanity_val_steps=0,
+        limit_val_batches=0,
+    )
+
+
+def _quiet() -> None:
+    warnings.filterwarnings("ignore", ".*does not have many workers.*")
+    warnings.filterwarnings("ignore", ".*`configure_optimizers` returned `None`.*")
+    warnings.filterwarnings("ignore", ".*GPU available but not used.*")
+    warnings.filterwarnings("ignore", ".*Number of training batches.*")
+    warnings.filterwarnings("ignore", ".*LeafSpec.*")
+    warnings.filterwarnings("ignore", ".*in eval mode at the start of training.*")
+    import logging
+
+    for name in ("lightning.pytorch", "lightning.fabric", "lightning"):
+        logging.getLogger(name).setLevel(logging.ERROR)
+
+
+def train_svgp(
+    x: torch.Tensor,
+    y: torch.Tensor,
+    *,
+    cfg: SVGPCfg,
+    tcfg: TrainerCfg,
+    out_dir: Path,
+    name: str,
+    window: tuple[int, int] | None = None,
+    x_val: torch.Tensor | None = None,
+    y_val: torch.Tensor | None = None,
+    progress: bool = True,
+    resume: bool = False,
+) -> SVGPRegressor:
+    """Train one SVGP with Lightning (NIGP rounds included) and write ``<name>.ckpt``.
+
+    Args:
+        x: (N, D_in) raw inputs.
+        y: (N, C) raw outputs.
+        cfg: GP settings.
+        tcfg: Lightning settings.
+        out_dir: where the checkpoint and the logs go.
+        name: sub-model name (file stem, logger name).
+        window: (n_p, D) for the time-series kernels.
+        x_val: (N_v, D_in) validation inputs, or None.
+        y_val: (N_v, C) validation outputs, or None.
+        progress: progress bars.
+        resume: reuse ``<name>.ckpt`` when it exists.
+
+    Returns:
+        The trained regressor (on the CPU).
+    """
+    ckpt = out_dir / f"{name}.ckpt"
+    if resume and ckpt.is_file():
+        try:
+            d = torch.load(ckpt, map_location="cpu", weights_only=False)
+            return SVGPRegressor.from_checkpoint(d["svgp"])
+        except Exception as err:  # noqa: BLE001 - a broken file is an error the user must see
+            raise CheckpointError(f"cannot resume from {ckpt}: {err}") from err
+    L.seed_everything(tcfg.seed, verbose=False)
+    reg = SVGPRegressor.from_data(cfg, x, y, window=window)
+    n = x.shape[0]
+    bs = min(cfg.batch_size, n)
+    epochs = cfg.epochs if tcfg.max_epochs is None else min(cfg.epochs, tcfg.max_epochs)
+    steps = min(epochs * (n // bs), cfg.max_steps)
+    rounds = cfg.nigp_iterations + 1 if cfg.noisy_input == "nigp" else 1
+    extra = (
+        torch.zeros(n, 1, dtype=x.dtype) if cfg.noisy_input == "nigp" else reg.extra_train_noise(x)
+    )
+    module = None
+    trainer = None
+    for r in range(rounds):
+        if r > 0:
+            reg.to(x.device)
+            extra = reg.extra_train_noise(x)
+        module = SVGPModule(reg, x, y, extra, x_val, y_val)
+        trainer = _trainer(
+            tcfg, out_dir, f"{name}" if rounds == 1 else f"{name}_r{r}", max(steps, 0), progress
+        )
+        if steps > 0:
+            trainer.fit(module)
+        else:
+            module.on_train_end()
+    assert trainer is not None and module is not None
+    if steps > 0:
+        trainer.save_checkpoint(ckpt)
+    else:
+        torch.save({"svgp": reg.to_checkpoint()}, ckpt)
+    reg.to("cpu")
+    reg._cache = None
+    return reg
+
+
+def _as_train_val(data: Any) -> tuple[WindowSet, WindowSet | None]:
+    if isinstance(data, WindowSet):
+        return data, None
+    if isinstance(data, tuple | list) and len(data) == 2:
+        return data[0], data[1]
+    if hasattr(data, "train_windows"):
+        if getattr(data, "train_windows", None) is None:
+            data.setup("fit")
+        return data.train_windows, data.val_windows
+    raise DataError(
+        f"expected a WindowSet, (train, val) WindowSets or a DataModule, got {type(data).__name__}"
+    )
+
+
+def _gp_xy(w: WindowSet) -> tuple[torch.Tensor, torch.Tensor]:
+    """Flattened windows (N, n_p D) and future positions relative to the pose (N, n_f K 3)."""
+    n = len(w)
+    x = w.f_prev.reshape(n, -1).float()  # (N, n_p * D)
+    y = (w.xi_next - w.pose_now.unsqueeze(1)).reshape(n, -1).float()  # (N, n_f * K * 3)
+    return x, y
+
+
+def _subsample(idx: torch.Tensor, n_max: int, seed: int) -> torch.Tensor:
+    if idx.numel() <= n_max:
+        return idx
+    g = torch.Generator().manual_seed(seed)
+    return idx[torch.randperm(idx.numel(), generator=g)[:n_max]].sort().values
+
+
+def _classifier_kernel_factory(cfg: PredictorCfg) -> Any:
+    """A callable ``windows (N, n_p, D) -> kernel`` with the median bandwidth rule."""
+    from iplanner_torch.prediction import dtw
+
+    def factory(x: torch.Tensor) -> Any:
+        bw = cfg.classifier_bandwidth
+        if cfg.classifier_kernel == "rbf":
+            if bw is None:
+                flat = x.reshape(x.shape[0], -1)
+                bw = float(torch.cdist(flat[:256], flat[:256]).median().clamp_min(1e-6))
+            return dtw.RBFKernel(bw)
+        if bw is None:
+            med = dtw.median_dtw(x, 256, cfg.seed)
+            bw = med if cfg.classifier_kernel == "dtw" else max(math.sqrt(med / x.shape[1]), 1e-3)
+        if cfg.classifier_kernel == "dtw":
+            return dtw.DTWKernel(bw)
+        return dtw.GlobalAlignmentKernel(bw)
+
+    return factory
+
+
+def train_predictor(
+    data: Any,
+    *,
+    predictor_cfg: PredictorCfg,
+    trainer_cfg: TrainerCfg,
+    out_dir: str | Path,
+    progress: bool = True,
+    resume: bool = False,
+) -> Path:
+    """Train the classifier, the next-action model and all GPs; write ``predictor.ckpt``.
+
+    Args:
+        data: training windows: a WindowSet, a (train, val) pair of WindowSets (val may be
+            None), or a DataModule with ``train_windows`` / ``val_windows``.
+        predictor_cfg: predictor settings.
+        trainer_cfg: Lightning settings.
+        out_dir: folder for checkpoints (``*.ckpt``) and logs (``logs/`` CSV, ``tb/``).
+        progress: progress bars.
+        resume: skip sub-models whose checkpoint already exists in ``out_dir``.
+
+    Returns:
+        The path of ``predictor.ckpt``.
+
+    Raises:
+        DataError: for empty data.
+    """
+    _quiet()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    train, val = _as_train_val(data)
+    if len(train) == 0:
+        raise DataError("no training windows")
+    cfg = predictor_cfg
+    n_p, d = train.f_prev.shape[1], train.f_prev.shape[2]
+    feat_mean = train.f_prev.reshape(-1, d).mean(0)
+    feat_std = train.f_prev.reshape(-1, d).std(0).clamp_min(1e-6)
+    progress_actions = train.cfg.progress_indices(train.action_names)
+
+    classifier = _train_classifier(
+        train, cfg, trainer_cfg, out_dir, feat_mean, feat_std, progress, resume
+    )
+    next_model = _train_next_action(train, cfg)
+
+    x_all, y_all = _gp_xy(train)
+    xv_all, yv_all = _gp_xy(val) if val is not None and len(val) else (None, None)
+    groups: dict[tuple[int, int], torch.Tensor] = {}
+    for p in torch.unique(train.progress).tolist():
+        for c in torch.unique(train.current[train.progress == p]).tolist():
+            idx = torch.nonzero((train.progress == p) & (train.current == c))[:, 0]
+            groups[(int(p), int(c))] = idx
+
+    def val_rows(p: int | None, c: int) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+        if xv_all is None:
+            return None, None
+        m = val.current == c
+        if p is not None:
+            m &= val.progress == p
+        return xv_all[m], yv_all[m]
+
+    gps: dict[tuple[int, int], SVGPRegressor] = {}
+    jobs = [(pc, idx) for pc, idx in sorted(groups.items()) if idx.numel() >= cfg.min_group_size]
+    for (p, c), idx in jobs:
+        idx = _subsample(idx, cfg.max_gp_points, cfg.seed)
+        xv, yv = val_rows(p, c)
+        gps[(p, c)] = train_svgp(
+            x_all[idx],
+            y_all[idx],
+            cfg=cfg.svgp,
+            tcfg=trainer_cfg,
+            out_dir=out_dir,
+            name=f"gp_p{p}_c{c}",
+            window=(n_p, d),
+            x_val=xv,
+            y_val=yv,
+            progress=progress,
+            resume=resume,
+        )
+    pooled: dict[int, SVGPRegressor] = {}
+    for c in torch.unique(train.current).tolist():
+        own = [pc for pc in groups if pc[1] == c]
+        if len(own) == 1 and own[0] in gps:
+            pooled[c] = gps[own[0]]
+            continue
+        idx = torch.nonzero(train.current == c)[:, 0]
+        if idx.numel() < cfg.min_group_size:
+            continue
+        idx = _subsample(idx, cfg.max_gp_points, cfg.seed)
+        xv, yv = val_rows(None, c)
+        pooled[c] = train_svgp(
+            x_all[idx],
+            y_all[idx],
+            cfg=cfg.svgp,
+            tcfg=trainer_cfg,
+            out_dir=out_dir,
+            name=f"gp_pooled_c{c}",
+            window=(n_p, d),
+            x_val=xv,
+            y_val=yv,
+            progress=progress,
+            resume=resume,
+        )
+
+    predictor = HumanMotionPredictor(
+        cfg=cfg,
+        joint_names=train.joint_names,
+        action_names=train.action_names,
+        fps=train.fps,
+        n_prev=n_p,
+        n_future=train.xi_next.shape[1],
+        feature_kinds=train.cfg.feature_kinds,
+        progress_actions=progress_actions,
+        feat_mean=feat_mean,
+        feat_std=feat_std,
+        classifier=classifier,
+        next_model=next_model,
+        gps=gps,
+        pooled=pooled,
+        fingerprint=dataset_fingerprint(train.f_prev, train.xi_next, train.current),
+        window_cfg=asdict(train.cfg),
+    )
+    return predictor.save(out_dir / "predictor.ckpt")
+
+
+def _train_classifier(
+    train: WindowSet,
+    cfg: PredictorCfg,
+    tcfg: TrainerCfg,
+    out_dir: Path,
+    feat_mean: torch.Tensor,
+    feat_std: torch.Tensor,
+    progress: bool,
+    resume: bool,
+) -> Any:
+    """Fit the action classifier with Lightning (None when the IVM module is unavailable)."""
+    try:
+        from iplanner_torch.prediction.ivm import ActionClassifier
+    except ImportError:
+        warnings.warn("prediction.ivm is unavailable: uniform action weights", stacklevel=2)
+        return None
+    ckpt = out_dir / "classifier.ckpt"
+    if resume and ckpt.is_file():
+        d = torch.load(ckpt, map_location="cpu", weights_only=False)
+        return ActionClassifier.from_state_dict(d["classifier"])
+    L.seed_everything(tcfg.seed, verbose=False)
+    idx = _subsample(torch.arange(len(train)), cfg.classifier_max_train, cfg.seed)
+    x = (train.f_prev[idx] - feat_mean) / feat_std
+    fit_kwargs = {
+        "num_actions": len(train.action_names),
+        "kernel_factory": _classifier_kernel_factory(cfg),
+        "ivm_kwargs": {
+            "lam": cfg.ivm_lam,
+            "max_import": cfg.ivm_max_import,
+            "tol": cfg.ivm_tol,
+            "candidates": cfg.ivm_candidates,
+            "newton_steps": cfg.ivm_newton_steps,
+            "seed": cfg.seed,
+        },
+    }
+    clf = ActionClassifier()
+    module = IVMModule(clf, x, train.progress[idx], train.current[idx], fit_kwargs)
+    # manual optimisation never steps an optimiser, so the budget is one epoch, not one step
+    trainer = _trainer(tcfg, out_dir, "classifier", -1, progress, max_epochs=1)
+    trainer.fit(module)
+    trainer.save_checkpoint(ckpt)
+    return clf
+
+
+def _train_next_action(train: WindowSet, cfg: PredictorCfg) -> Any:
+    """Fit the next-action histograms (None when the coherence module is unavailable)."""
+    try:
+        from iplanner_torch.prediction.coherence import NextActionModel
+    except ImportError:
+        warnings.warn("prediction.coherence is unavailable: uniform next actions", stacklevel=2)
+        return None
+    return NextActionModel().fit(
+        train.progress,
+        train.current,
+        train.next_action,
+        num_actions=len(train.action_names),
+        smoothing=cfg.coherence_smoothing,
+    )

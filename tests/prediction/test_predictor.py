@@ -1,0 +1,144 @@
+"""HumanMotionPredictor: mixture forecasts, fallbacks, NaN handling, checkpoints."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
+from iplanner_torch.data.windows import WindowCfg, build_windows, compute_features
+from iplanner_torch.errors import CheckpointError, DataError, ShapeError
+from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
+from iplanner_torch.prediction.svgp import SVGPCfg
+from iplanner_torch.prediction.training import TrainerCfg, train_predictor
+
+JOINTS = ("torso", "left_hand", "right_hand")
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory):
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    rc = ReachingCfg(n_targets=2, reaches_per_target=5)
+    demos = [d for t in range(2) for r in range(5) for d in reaching_demonstrations(rc, t, r)]
+    wc = WindowCfg(n_prev=6, n_future=8, stride=2, joints=JOINTS)
+    windows = build_windows(demos, wc)
+    cfg = PredictorCfg(
+        svgp=SVGPCfg(num_inducing=20, epochs=3, max_steps=20),
+        classifier_kernel="rbf",
+        ivm_max_import=8,
+        ivm_candidates=16,
+        min_group_size=10,
+    )
+    out = tmp_path_factory.mktemp("pred")
+    path = train_predictor(
+        windows,
+        predictor_cfg=cfg,
+        trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False),
+        out_dir=out,
+        progress=False,
+    )
+    yield path, windows
+    torch.set_num_threads(threads)
+
+
+def test_forecast_is_gp_mean_plus_pose(trained) -> None:
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    fc = pred.predict(w.f_prev[:5], w.progress[:5])
+    assert fc.weights.shape == (5, pred.num_actions)
+    torch.testing.assert_close(fc.weights.sum(-1), torch.ones(5))
+    for b in range(5):
+        p, c = int(w.progress[b]), int(w.current[b])
+        reg = pred.model_for(p, c)
+        assert reg is not None
+        m_ref, v_ref = reg.predict_gpytorch(w.f_prev[b : b + 1].reshape(1, -1))
+        m_ref = m_ref.view(pred.n_future, 3, 3) + w.pose_now[b]
+        torch.testing.assert_close(fc.mean[b, c], m_ref, atol=1e-4, rtol=1e-4)
+        torch.testing.assert_close(
+            fc.var[b, c], v_ref.view(pred.n_future, 3, 3), atol=1e-5, rtol=1e-3
+        )
+
+
+def test_unseen_progress_uses_pooled_gp_or_constant_velocity(trained) -> None:
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    unseen = torch.full((2,), 1 << 20, dtype=torch.int64)
+    fc = pred.predict(w.f_prev[:2], unseen)
+    for a in range(pred.num_actions):
+        reg = pred.pooled.get(a)
+        if reg is not None:
+            m, _ = reg.predict(w.f_prev[:2].reshape(2, -1))
+            torch.testing.assert_close(
+                fc.mean[:, a], m.view(2, pred.n_future, 3, 3) + w.pose_now[:2].unsqueeze(1)
+            )
+    # no model at all: constant velocity with the documented variance
+    pred.gps.clear()
+    pred.pooled.clear()
+    fc = pred.predict(w.f_prev[:2], unseen)
+    t = torch.arange(1, pred.n_future + 1) / pred.fps
+    pos = w.f_prev[:2, :, :9].reshape(2, -1, 3, 3)
+    vel = ((pos[:, -1] - pos[:, 0]) * pred.fps / (pos.shape[1] - 1)).unsqueeze(1)
+    expect = w.pose_now[:2].unsqueeze(1) + vel * t.view(1, -1, 1, 1)
+    for a in range(pred.num_actions):
+        torch.testing.assert_close(fc.mean[:, a], expect)
+    var_t = pred.cfg.fallback_sigma0**2 + (pred.cfg.fallback_sigma_rate * t) ** 2
+    torch.testing.assert_close(fc.var[0, 0, :, 0, 0], var_t)
+
+
+def test_predict_positions_with_nan(trained) -> None:
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    g = torch.Generator().manual_seed(0)
+    pos = w.f_prev[:3, :, :9].reshape(3, pred.n_prev, 3, 3).clone()
+    pos = pos + 0.001 * torch.randn(pos.shape, generator=g)
+    pos[0, 2, 1] = float("nan")  # one lost joint-frame
+    fc = pred.predict_positions(pos, w.progress[:3])
+    ref = pred.predict(
+        compute_features(pos, pred.fps, pred.feature_kinds, joint_names=pred.joint_names),
+        w.progress[:3],
+    )
+    assert bool(torch.isfinite(fc.mean).all())
+    torch.testing.assert_close(fc.mean, ref.mean)
+    pos[1, :, 2] = float("nan")
+    with pytest.raises(DataError, match="'right_hand' is NaN in every frame"):
+        pred.predict_positions(pos, w.progress[:3])
+
+
+def test_wrong_shapes_raise(trained) -> None:
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    with pytest.raises(ShapeError, match=r"expected f_prev \(B, 6, 27\)"):
+        pred.predict(w.f_prev[0], w.progress[:1])
+    with pytest.raises(ShapeError, match="expected progress"):
+        pred.predict(w.f_prev[:2], w.progress[:3])
+    with pytest.raises(ShapeError, match="expected positions"):
+        pred.predict_positions(torch.zeros(1, 6, 4, 3), w.progress[:1])
+
+
+def test_checkpoint_roundtrip_and_errors(trained, tmp_path: Path) -> None:
+    path, w = trained
+    pred = HumanMotionPredictor.load(path, expect_joints=JOINTS)
+    fc1 = pred.predict(w.f_prev[:4], w.progress[:4])
+    p2 = pred.save(tmp_path / "again.ckpt")
+    fc2 = HumanMotionPredictor.load(p2).predict(w.f_prev[:4], w.progress[:4])
+    torch.testing.assert_close(fc1.mean, fc2.mean)
+    torch.testing.assert_close(fc1.weights, fc2.weights)
+    assert pred.fingerprint and len(pred.next_action(0, 0)) == pred.num_actions
+    with pytest.raises(CheckpointError, match="trained on joints"):
+        HumanMotionPredictor.load(path, expect_joints=("head",))
+    bad = tmp_path / "truncated.ckpt"
+    bad.write_bytes(path.read_bytes()[:1000])
+    with pytest.raises(CheckpointError, match="truncated.ckpt"):
+        HumanMotionPredictor.load(bad)
+    with pytest.raises(CheckpointError, match="missing.ckpt does not exist"):
+        HumanMotionPredictor.load(tmp_path / "missing.ckpt")
+
+
+def test_runs_on_device(trained, device: torch.device) -> None:
+    path, w = trained
+    pred = HumanMotionPredictor.load(path, map_location=device)
+    fc = pred.predict(w.f_prev[:3].to(device), w.progress[:3].to(device))
+    assert fc.mean.device.type == device.type

@@ -1,0 +1,124 @@
+"""Lightning training of the predictor: checkpoints, logs, resume, K = 1, configs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import torch
+from hydra.utils import instantiate
+from omegaconf import OmegaConf
+
+from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
+from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
+from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
+from iplanner_torch.prediction.svgp import SVGPCfg
+from iplanner_torch.prediction.training import TrainerCfg, train_predictor
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def _windows(joints: tuple[str, ...]):
+    rc = ReachingCfg(n_targets=2, reaches_per_target=5)
+    demos = [d for t in range(2) for r in range(5) for d in reaching_demonstrations(rc, t, r)]
+    tr, va, _ = split_by_demonstration(demos, (0.7, 0.3, 0.0))
+    wc = WindowCfg(n_prev=6, n_future=8, stride=2, joints=joints)
+    return build_windows(tr, wc), build_windows(va, wc)
+
+
+def _cfg(noisy_input: str = "simple") -> PredictorCfg:
+    return PredictorCfg(
+        svgp=SVGPCfg(
+            num_inducing=16, epochs=2, max_steps=12, noisy_input=noisy_input, nigp_iterations=1
+        ),
+        classifier_kernel="rbf",
+        ivm_max_import=6,
+        ivm_candidates=8,
+        min_group_size=10,
+    )
+
+
+def test_writes_checkpoints_logs_and_resumes(tmp_path: Path) -> None:
+    tr, va = _windows(("torso", "left_hand", "right_hand"))
+    tcfg = TrainerCfg(accelerator="cpu", log_every_n_steps=1)
+    path = train_predictor(
+        (tr, va), predictor_cfg=_cfg(), trainer_cfg=tcfg, out_dir=tmp_path, progress=False
+    )
+    assert path == tmp_path / "predictor.ckpt"
+    gp_ckpts = sorted(tmp_path.glob("gp_*.ckpt"))
+    assert gp_ckpts and (tmp_path / "classifier.ckpt").is_file()
+    lightning_ckpt = torch.load(gp_ckpts[0], weights_only=False)
+    assert "state_dict" in lightning_ckpt and "svgp" in lightning_ckpt
+    assert "pytorch-lightning_version" in lightning_ckpt
+    metrics = pd.read_csv(next((tmp_path / "logs").glob("gp_*/version_0/metrics.csv")))
+    assert metrics["train/elbo"].notna().any()
+    assert {"val/nll", "val/rmse"} <= set(metrics.columns)
+    ivm_log = pd.read_csv(tmp_path / "logs" / "classifier" / "version_0" / "metrics.csv")
+    assert ivm_log["train/ivm_loss"].notna().sum() >= 1
+    assert any((tmp_path / "tb").rglob("events.out.tfevents*"))
+    pred = HumanMotionPredictor.load(path)
+    fc = pred.predict(va.f_prev[:3], va.progress[:3])
+    before = {p: p.stat().st_mtime_ns for p in gp_ckpts}
+    path2 = train_predictor(
+        (tr, va),
+        predictor_cfg=_cfg(),
+        trainer_cfg=tcfg,
+        out_dir=tmp_path,
+        progress=False,
+        resume=True,
+    )
+    assert {p: p.stat().st_mtime_ns for p in gp_ckpts} == before
+    fc2 = HumanMotionPredictor.load(path2).predict(va.f_prev[:3], va.progress[:3])
+    torch.testing.assert_close(fc.mean, fc2.mean)
+
+
+def test_single_wrist_dataset_with_nigp(tmp_path: Path) -> None:
+    tr, va = _windows(("right_hand",))
+    path = train_predictor(
+        (tr, None),
+        predictor_cfg=_cfg("nigp"),
+        trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False),
+        out_dir=tmp_path,
+        progress=False,
+    )
+    pred = HumanMotionPredictor.load(path, expect_joints=("right_hand",))
+    fc = pred.predict(va.f_prev[:4], va.progress[:4])
+    assert fc.mean.shape == (4, len(tr.action_names), 8, 1, 3)
+    assert bool(torch.isfinite(fc.var).all()) and bool((fc.var > 0).all())
+    assert any((tmp_path / "logs").glob("gp_*_r1"))  # the NIGP refit round was logged
+
+
+def test_errors(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="accelerator"):
+        TrainerCfg(accelerator="tpu")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="max_epochs"):
+        TrainerCfg(max_epochs=-1)
+    with pytest.raises(ConfigError, match="classifier_kernel"):
+        PredictorCfg(classifier_kernel="poly")  # type: ignore[arg-type]
+    with pytest.raises(DataError, match="expected a WindowSet"):
+        train_predictor("nope", predictor_cfg=_cfg(), trainer_cfg=TrainerCfg(), out_dir=tmp_path)
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["predictor/iplanner_ni", "predictor/iplanner_no_ni", "trainer/default", "trainer/fast"],
+)
+def test_config_files_instantiate(name: str) -> None:
+    node = OmegaConf.merge({"seed": 3}, {"node": OmegaConf.load(REPO / "conf" / f"{name}.yaml")})
+    obj = instantiate(node.node)
+    if name.startswith("predictor"):
+        assert isinstance(obj, PredictorCfg) and isinstance(obj.svgp, SVGPCfg)
+        assert obj.svgp.noisy_input == ("none" if name.endswith("no_ni") else "simple")
+        assert obj.seed == 3
+    else:
+        assert isinstance(obj, TrainerCfg)
