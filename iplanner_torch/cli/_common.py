@@ -19,6 +19,10 @@ CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
 log = logging.getLogger("iplanner_torch")
 
+# ${basename:some/path} -> "path" (checkpoint folders are named after their dataset folder)
+if not OmegaConf.has_resolver("basename"):
+    OmegaConf.register_new_resolver("basename", lambda p: Path(str(p)).name)
+
 F = TypeVar("F", bound=Callable[..., Any])
 
 

@@ -3,7 +3,7 @@
 Modes (``evaluate.mode``)::
 
     iplanner-evaluate                                   # prediction: held-out metrics
-    iplanner-evaluate evaluate.checkpoint=checkpoints/iplanner_no_ni/predictor.ckpt
+    iplanner-evaluate evaluate.checkpoint=checkpoints/reaching/iplanner_no_ni/predictor.ckpt
     iplanner-evaluate evaluate.mode=noise_sweep         # fig. result_prediction (NI vs no NI)
     iplanner-evaluate evaluate.mode=episode evaluate.logs=outputs/experiment/<run>/episodes
 
@@ -80,7 +80,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
 
     predictors = {}
     for option in cfg.evaluate.compare:
-        out_dir = repo_path(Path(cfg.paths.checkpoints) / str(option))
+        out_dir = repo_path(Path(cfg.paths.checkpoints) / Path(cfg.data.path).name / str(option))
         ckpt = out_dir / "predictor.ckpt"
         if not ckpt.exists():
             print(f"training missing predictor {option} ...", flush=True)

@@ -13,16 +13,19 @@ Examples::
 Without ``experiment=...`` the run uses the ``scenario`` group (its confidence replaced by
 ``planner.confidence``), the planners in ``run.planners`` and the seeds in ``run.seeds``. With
 it, the experiment file lists its own scenarios, planners, seeds, speeds and noises; the
-``sim`` and ``planner`` groups give the episode settings it does not override. Missing
-predictors (``checkpoints/iplanner_ni``, ``checkpoints/iplanner_no_ni``) are trained first on a
-small budget (``run.train_trainer``) when ``run.train_if_missing`` is true; the dataset is
-generated when absent. Results: ``results.csv``, ``results.md``, plots and ``episodes/*.mcap``
+``sim`` and ``planner`` groups give the episode settings it does not override. The I-Planner
+variants need predictors: by default (``run.train_data=tasks``) each scenario's predictors learn
+from task demonstrations of its arrangement and task order (``datasets/tasks_<...>``, generated
+when absent), kept in ``checkpoints/<dataset>/iplanner_{ni,no_ni}/``; missing ones are trained
+first on a small budget (``run.train_trainer``) when ``run.train_if_missing`` is true.
+Results: ``results.csv``, ``results.md``, plots and ``episodes/*.mcap``
 in the run folder.
 """
 
 from __future__ import annotations
 
 import json
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -67,28 +70,56 @@ def option_node(group: str, option: str, cfg: DictConfig) -> DictConfig:
     return root.node
 
 
-def ensure_predictors(cfg: DictConfig, variants: list[str]) -> dict[str, str]:
-    """Checkpoint path per predictor variant; trains the missing ones when allowed."""
+def scenario_data_node(cfg: DictConfig, scenario: Any) -> DictConfig:
+    """The dataset a scenario's predictors learn from.
+
+    ``run.train_data=tasks`` (default): task demonstrations of the scenario's arrangement and
+    task order (``conf/data/tasks.yaml``), so the progress states and next-action statistics
+    are those of the task (paper sec. 4.1); ``run.train_data=data``: the ``data`` group.
+    """
+    if str(cfg.run.train_data) == "data":
+        return cfg.data
+    node = option_node("data", "tasks", cfg)
+    node.generator.order = str(scenario.task_order)
+    node.generator.arrangement = str(scenario.arrangement)
+    slug = re.sub(r"[^0-9a-zA-Z]+", "-", str(scenario.task_order)).strip("-") or "x"
+    node.path = str(Path(cfg.paths.datasets) / f"tasks_{scenario.arrangement}_{slug}")
+    return node
+
+
+def ensure_predictors(
+    cfg: DictConfig, variants: list[str], data_node: DictConfig
+) -> dict[str, str]:
+    """Checkpoint path per predictor variant; trains the missing ones when allowed.
+
+    Checkpoints live in ``<paths.checkpoints>/<dataset folder name>/<predictor option>/``.
+    """
     from iplanner_torch.cli.train import train_from_config
     from iplanner_torch.errors import CheckpointError
 
     paths: dict[str, str] = {}
     for variant in variants:
         option = VARIANT_OPTION[variant]
-        out_dir = repo_path(Path(cfg.paths.checkpoints) / option)
+        out_dir = repo_path(Path(cfg.paths.checkpoints) / Path(data_node.path).name / option)
         ckpt = out_dir / "predictor.ckpt"
         if not ckpt.exists():
             if not cfg.run.train_if_missing:
                 raise CheckpointError(
-                    f"{ckpt}: no trained predictor; run `iplanner-train predictor={option}`"
+                    f"{ckpt}: no trained predictor; run `iplanner-train predictor={option} "
+                    f"train.out_dir={out_dir}` on {data_node.path}"
                 )
-            print(f"training predictor {option} (trainer={cfg.run.train_trainer}) ...", flush=True)
+            print(
+                f"training predictor {option} on {data_node.path} "
+                f"(trainer={cfg.run.train_trainer}) ...",
+                flush=True,
+            )
             t0 = time.perf_counter()
             train_from_config(
                 cfg,
                 option_node("predictor", option, cfg),
                 out_dir,
                 trainer_node=option_node("trainer", str(cfg.run.train_trainer), cfg),
+                data_node=data_node,
             )
             print(f"  trained in {time.perf_counter() - t0:.0f} s -> {ckpt}", flush=True)
         paths[variant] = str(ckpt)
@@ -159,6 +190,10 @@ def comparison_table(df: Any) -> Any:
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 @friendly_errors
 def _app(cfg: DictConfig) -> None:
+    from dataclasses import replace
+
+    import pandas as pd
+
     from iplanner_torch.eval.episode import PLANNER_KINDS
     from iplanner_torch.eval.experiment import run_experiment
     from iplanner_torch.eval.report import gather_results, print_table, write_sweep_report
@@ -174,12 +209,22 @@ def _app(cfg: DictConfig) -> None:
 
         raise ConfigError(f"unknown planners {unknown}; expected some of {sorted(PLANNER_KINDS)}")
     variants = sorted({v for p in planners if (v := PLANNER_KINDS[p]) is not None})
-    predictor_paths = ensure_predictors(cfg, variants)
-    experiment = build_experiment(cfg, predictor_paths)
+    experiment = build_experiment(cfg, {})
     n = len(experiment.scenarios) * len(experiment.planners) * len(experiment.seeds)
     n *= max(1, len(experiment.speeds)) * max(1, len(experiment.noises))
-    print(f"running {n} episode(s) of experiment {experiment.name!r} ...", flush=True)
-    df = run_experiment(experiment, out_dir)
+    print(f"experiment {experiment.name!r}: {n} episode(s)", flush=True)
+    frames = []
+    for scenario in experiment.scenarios:
+        paths = ensure_predictors(cfg, variants, scenario_data_node(cfg, scenario))
+        one = replace(experiment, scenarios=[scenario], predictor_paths=paths)
+        sub = out_dir if len(experiment.scenarios) == 1 else out_dir / scenario.name
+        print(f"running scenario {scenario.name} ...", flush=True)
+        frames.append(run_experiment(one, sub))
+        if sub != out_dir:
+            for mcap in (sub / "episodes").glob("*.mcap"):
+                (out_dir / "episodes").mkdir(parents=True, exist_ok=True)
+                mcap.replace(out_dir / "episodes" / mcap.name)
+    df = pd.concat(frames, ignore_index=True)
     df = gather_results(df.to_dict("records"))
     sweep = None
     if len(experiment.speeds) > 1:

@@ -7,7 +7,7 @@ Examples::
     iplanner-train train.resume=true                 # skip sub-models already trained
     iplanner-train data=lego 'data.windows.joints=[right_hand]'
 
-Writes ``<train.out_dir>/predictor.ckpt`` (default ``checkpoints/<predictor>/``), the
+Writes ``<train.out_dir>/predictor.ckpt`` (default ``checkpoints/<dataset>/<predictor>/``), the
 sub-models' Lightning checkpoints and CSV / TensorBoard logs, then prints held-out metrics.
 """
 
@@ -30,9 +30,23 @@ from iplanner_torch.cli._common import (
 
 
 def train_from_config(
-    cfg: DictConfig, predictor_node: DictConfig, out_dir: Path, *, trainer_node: DictConfig
+    cfg: DictConfig,
+    predictor_node: DictConfig,
+    out_dir: Path,
+    *,
+    trainer_node: DictConfig,
+    data_node: DictConfig | None = None,
 ) -> tuple[Path, dict]:
-    """Train one predictor as the config says; returns (checkpoint path, held-out metrics)."""
+    """Train one predictor as the config says; returns (checkpoint path, held-out metrics).
+
+    Args:
+        cfg: the root config (seed, progress, train.resume).
+        predictor_node: a ``conf/predictor`` node.
+        out_dir: where ``predictor.ckpt``, sub-model checkpoints and logs go.
+        trainer_node: a ``conf/trainer`` node.
+        data_node: a ``conf/data`` node (default ``cfg.data``); generated when absent.
+    """
+    data_node = cfg.data if data_node is None else data_node
     from iplanner_torch.data.windows import build_windows, split_by_demonstration
     from iplanner_torch.eval.prediction import evaluate_prediction
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
@@ -40,9 +54,9 @@ def train_from_config(
 
     predictor_cfg = instantiate(predictor_node)
     trainer_cfg = instantiate(trainer_node)
-    window_cfg = instantiate(cfg.data.windows)
-    demos = load_dataset(cfg.data, generate_if_missing=True, progress=bool(cfg.progress))
-    fractions = tuple(float(f) for f in cfg.data.get("split", (0.8, 0.1, 0.1)))
+    window_cfg = instantiate(data_node.windows)
+    demos = load_dataset(data_node, generate_if_missing=True, progress=bool(cfg.progress))
+    fractions = tuple(float(f) for f in data_node.get("split", (0.8, 0.1, 0.1)))
     train, val, test = split_by_demonstration(demos, fractions, int(cfg.seed))
     train_w = build_windows(train, window_cfg)
     val_w = build_windows(val, window_cfg) if val else None
