@@ -82,7 +82,9 @@ def scenario_data_node(cfg: DictConfig, scenario: Any) -> DictConfig:
     node = option_node("data", "tasks", cfg)
     node.generator.order = str(scenario.task_order)
     node.generator.arrangement = str(scenario.arrangement)
-    slug = re.sub(r"[^0-9a-zA-Z]+", "-", str(scenario.task_order)).strip("-") or "x"
+    order = str(scenario.task_order).replace(" ", "")
+    slug = order.replace("->", "_then_").replace("(", "any").replace(")", "").replace(",", "-")
+    slug = re.sub(r"[^0-9a-zA-Z_-]+", "", slug) or "x"
     node.path = str(Path(cfg.paths.datasets) / f"tasks_{scenario.arrangement}_{slug}")
     return node
 
