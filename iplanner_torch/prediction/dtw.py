@@ -9,12 +9,17 @@ module computes DTW for every pair of two batches of windows at once:
   ``(T - 1, T2 - 1)`` with steps ``(1, 0)``, ``(0, 1)`` and ``(1, 1)``;
 * the dynamic programme runs as an anti-diagonal wavefront: cells with the same ``i + j`` do not
   depend on each other, so the only Python loop runs over the ``T + T2 - 1`` anti-diagonals, each
-  step updating all pairs of the tile in one vectorised operation. The local costs are copied once
-  into a padded cell-major layout ``((T + 1) (T2 + 1), P)`` in which every anti-diagonal and its
-  predecessors are strided views, and the accumulated costs overwrite them in place;
-* pairs are processed in tiles of at most ``max_cells`` cost cells, so memory stays bounded
-  (a 2000 x 2000 Gram of (15, 90) windows needs a few hundred MB); a Gram of a batch with itself
-  computes only the upper triangle of tiles.
+  step updating all pairs of the tile in one vectorised operation;
+* a Gram tile of ``b1 x b2`` pairs gets its local costs from one matrix product
+  ``(T b1, D) x (D, T2 b2)`` whose output already is the layout ``(T, b1, T2, b2)``: every
+  anti-diagonal and its three predecessor sets are strided views of that buffer (built once per
+  tile shape, :class:`_GridPlan`), row 0 and column 0 are cumulative sums, and the accumulated
+  costs overwrite the local ones in place: no copy or permutation of the cost cells;
+* on CPU tiles hold about ``2**18`` cells (2 MB in float64) so the wavefront runs in cache; on
+  other devices and always at most ``max_cells`` cells, so memory stays bounded; a Gram of a
+  batch with itself computes only the upper triangle of tiles;
+* paired DTW (``x[b]`` against ``y[b]``) uses a padded cell-major layout
+  ``((T + 1) (T2 + 1), P)`` with the same in-place wavefront.
 
 Sakoe-Chiba band, for unequal lengths: cell ``(i, j)`` is admissible iff
 ``|i - j r| <= w`` with the slope ``r = (T - 1) / (T2 - 1)`` (the line through both corner cells)
@@ -224,20 +229,105 @@ def _finish(v: Tensor, kind: str) -> Tensor:
     return v.sqrt_() if kind == "dtw_sq" else v
 
 
-def _tile(
-    x: Tensor, y: Tensor, band: int | None, kind: str, sigma: float | None
-) -> Tensor:  # (b1, T, D), (b2, T2, D) -> (b1, b2)
-    b1, t1, d = x.shape
-    b2, t2, _ = y.shape
-    lay = _layout(t1, t2, band, x.device)
-    xt = x.transpose(0, 1).reshape(t1 * b1, d)  # (T*b1, D), time-major
-    yt = y.transpose(0, 1).reshape(t2 * b2, d)  # (T2*b2, D)
-    terms = _local_terms(_sqdist_rows(xt, yt), kind, sigma)  # (T*b1, T2*b2)
-    cells = x.new_empty(lay.n_cells, b1 * b2)  # ((T+1)(T2+1), P)
-    inner = cells.view(t1 + 1, t2 + 1, b1, b2)[1:, 1:]  # (T, T2, b1, b2)
-    inner.copy_(terms.view(t1, b1, t2, b2).permute(0, 2, 1, 3))
-    _prepare(cells, lay, kind)
-    return _finish(_wavefront(cells, lay, _mode(kind)), kind).view(b1, b2)
+class _GridPlan:
+    """Wavefront views on one Gram tile laid out as ``(T, b1, T2, b2)``, for a fixed shape.
+
+    The tile's local terms come from one matrix product ``(T b1, D) x (D, T2 b2)``, whose
+    output *is* the layout ``(T, b1, T2, b2)``: cell ``(i, j)`` of pair ``(a, b)`` sits at
+    ``i s_i + a s_a + j s_j + b`` with ``s_i = b1 T2 b2``, ``s_a = T2 b2``, ``s_j = b2``. Along an
+    anti-diagonal ``i + j = k`` the offset grows by ``s_i - s_j`` per row, so every anti-diagonal
+    and its three predecessor sets are strided ``(n, b1, b2)`` views of the same buffer, built
+    once per tile shape and reused by every tile of that shape. Row 0 and column 0 have one
+    predecessor each and are cumulative sums; the interior starts at ``k = 2``.
+    """
+
+    def __init__(
+        self,
+        t1: int,
+        t2: int,
+        b1: int,
+        b2: int,
+        band: int | None,
+        dtype: torch.dtype,
+        device: torch.device,
+    ) -> None:
+        self.t1, self.t2, self.b1, self.b2 = t1, t2, b1, b2
+        self.buf = torch.empty(t1 * b1, t2 * b2, dtype=dtype, device=device)  # (T*b1, T2*b2)
+        self.grid = self.buf.view(t1, b1, t2, b2)
+        lay = _layout(t1, t2, band, torch.device("cpu"))
+        self.outside: Tensor | None = None
+        if not lay.pads_only:  # cells outside the band: (T, 1, T2, 1) mask
+            self.outside = lay.neutral.view(t1 + 1, t2 + 1)[1:, 1:].reshape(t1, 1, t2, 1)
+            self.outside = self.outside.to(device)
+        s_i, s_a, s_j = b1 * t2 * b2, t2 * b2, b2
+        step = (s_i - s_j, s_a, 1)
+        self.tmp = torch.empty(min(t1, t2), b1, b2, dtype=dtype, device=device)
+        self.steps: list[tuple[Tensor, Tensor, Tensor, Tensor, Tensor]] = []
+        buf = self.buf
+        for k in range(2, t1 + t2 - 1):
+            lo, hi = lay.rows[k]
+            lo, hi = max(lo, 1, k - t2 + 1), min(hi, k - 1, t1 - 1)
+            if hi < lo:
+                continue
+            size = (hi - lo + 1, b1, b2)
+            f0 = lo * s_i + (k - lo) * s_j  # cell (lo, k - lo)
+            self.steps.append(
+                (
+                    buf.as_strided(size, step, f0),  # (i, j)
+                    buf.as_strided(size, step, f0 - s_i),  # (i-1, j)
+                    buf.as_strided(size, step, f0 - s_j),  # (i, j-1)
+                    buf.as_strided(size, step, f0 - s_i - s_j),  # (i-1, j-1)
+                    self.tmp[: size[0]],
+                )
+            )
+
+    def run(self, mode: _Mode) -> Tensor:
+        """Accumulate the local terms held in ``buf`` in place; (b1, b2) value of the last cell."""
+        g = self.grid
+        row0 = g[0]  # (b1, T2, b2)
+        row0.copy_(row0.cumsum(1))
+        col0 = g[:, :, 0]  # (T, b1, b2)
+        col0.copy_(col0.cumsum(0))
+        if mode == "min":
+            for cur, up, left, diag, t in self.steps:
+                torch.minimum(up, left, out=t)
+                torch.minimum(t, diag, out=t)
+                cur.add_(t)
+        else:
+            for cur, up, left, diag, t in self.steps:
+                torch.logaddexp(up, left, out=t)
+                torch.logaddexp(t, diag, out=t)
+                cur.add_(t)
+        return g[self.t1 - 1, :, self.t2 - 1]
+
+    def fill(
+        self,
+        xc: Tensor,
+        yc: Tensor,
+        xn: Tensor,
+        yn: Tensor,
+        kind: str,
+        sigma: float | None,
+        scale: float,
+    ) -> None:
+        """Write the tile's local terms into ``buf``.
+
+        Args:
+            xc: (T*b1, D) centred frames, time-major. yc: (T2*b2, D).
+            xn: (T*b1,) their squared norms. yn: (T2*b2,).
+            kind: ``dtw``, ``dtw_sq`` or ``gak``. sigma: the GAK bandwidth.
+            scale: ``||a||^2 + ||b||^2`` bound below which entries are recomputed exactly.
+        """
+        sq = torch.addmm(xn[:, None], xc, yc.T, alpha=-2.0, out=self.buf)  # (T*b1, T2*b2)
+        sq.add_(yn[None, :])
+        small = sq < _EXACT_FRACTION * scale
+        if bool(small.any()):
+            r, c = small.nonzero(as_tuple=True)
+            sq[r, c] = (xc[r] - yc[c]).pow(2).sum(-1)
+        sq.clamp_(min=0.0)
+        _local_terms(sq, kind, sigma)
+        if self.outside is not None:
+            self.grid.masked_fill_(self.outside, _fill(kind))
 
 
 def _paired(
@@ -276,6 +366,10 @@ def _check_band(band: int | None) -> None:
         raise ConfigError(f"expected band None or an integer >= 0, got {band!r}")
 
 
+#: Cost cells per Gram tile on CPU: about 2 MB in float64, so a tile stays in cache.
+_CACHE_CELLS = 2**18
+
+
 def _gram(
     x: Tensor,
     y: Tensor,
@@ -290,19 +384,36 @@ def _gram(
     out = torch.empty(b1, b2, dtype=x.dtype, device=x.device)
     if b1 == 0 or b2 == 0:
         return out
-    per_pair = t1 * t2
-    pairs = max(1, max_cells // per_pair)
+    cells = min(max_cells, _CACHE_CELLS) if x.device.type == "cpu" else max_cells
+    pairs = max(1, cells // (t1 * t2))
     side = max(1, int(math.sqrt(pairs)))
     r1 = min(b1, side)
     r2 = min(b2, max(1, pairs // r1))
     if symmetric:
         r1 = r2 = min(r1, r2)
+    # centre once (distances are translation invariant) and lay frames out time-major per tile
+    mean = torch.cat([x.reshape(-1, x.shape[2]), y.reshape(-1, y.shape[2])]).mean(0)  # (D,)
+    xc_all, yc_all = x - mean, y - mean  # (B1, T, D), (B2, T2, D)
+    xn_all, yn_all = (xc_all * xc_all).sum(-1), (yc_all * yc_all).sum(-1)  # (B1, T), (B2, T2)
+    scale = float(xn_all.max() + yn_all.max())
+    mode = _mode(kind)
+    plans: dict[tuple[int, int], _GridPlan] = {}
+
+    def frames(xc: Tensor, xn: Tensor, s: int, e: int) -> tuple[Tensor, Tensor]:
+        return xc[s:e].transpose(0, 1).reshape(-1, xc.shape[2]), xn[s:e].T.reshape(-1)
+
     for s1 in range(0, b1, r1):
         e1 = min(b1, s1 + r1)
-        start2 = s1 if symmetric else 0
-        for s2 in range(start2, b2, r2):
+        xs, xns = frames(xc_all, xn_all, s1, e1)  # (T*b1, D), (T*b1,)
+        for s2 in range(s1 if symmetric else 0, b2, r2):
             e2 = min(b2, s2 + r2)
-            block = _tile(x[s1:e1], y[s2:e2], band, kind, sigma)
+            ys, yns = frames(yc_all, yn_all, s2, e2)  # (T2*b2, D), (T2*b2,)
+            key = (e1 - s1, e2 - s2)
+            if key not in plans:
+                plans[key] = _GridPlan(t1, t2, *key, band, x.dtype, x.device)
+            plan = plans[key]
+            plan.fill(xs, ys, xns, yns, kind, sigma, scale)
+            block = _finish(plan.run(mode), kind)  # (b1, b2)
             out[s1:e1, s2:e2] = block
             if symmetric and s2 != s1:
                 out[s2:e2, s1:e1] = block.T

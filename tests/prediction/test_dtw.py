@@ -204,3 +204,19 @@ def test_cuda_parity():
     torch.testing.assert_close(
         DTWKernel(3.0)(x.cuda(), x.cuda()).cpu(), DTWKernel(3.0)(x, x), atol=1e-5, rtol=1e-5
     )
+
+
+@pytest.mark.parametrize("band", [None, 1])
+@pytest.mark.parametrize("squared", [False, True])
+def test_gram_with_uneven_tiles_matches_reference(band: int | None, squared: bool):
+    """13 windows in tiles of 4 (last tile 1): every tile shape and both triangles checked."""
+    g = torch.Generator().manual_seed(9)
+    x = torch.randn(13, 6, 3, generator=g, dtype=torch.float64)
+    y = torch.randn(5, 4, 3, generator=g, dtype=torch.float64)
+    for a, b in ((x, x), (x, y)):
+        got = dtw_distance(a, b, band=band, squared=squared, max_cells=4 * 4 * a.shape[1] ** 2)
+        want = torch.tensor(
+            [[dtw_reference(u.numpy(), v.numpy(), band, squared) for v in b] for u in a],
+            dtype=torch.float64,
+        )
+        torch.testing.assert_close(got, want, atol=1e-10, rtol=0)

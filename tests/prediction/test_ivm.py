@@ -9,9 +9,10 @@ import pytest
 import torch
 from scipy.optimize import minimize
 
+from iplanner_torch.data.windows import compute_features
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.dtw import DTWKernel, GlobalAlignmentKernel, RBFKernel, median_dtw
-from iplanner_torch.prediction.ivm import ActionClassifier, IVMClassifier
+from iplanner_torch.prediction.ivm import ActionClassifier, IVMClassifier, feature_columns
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -193,3 +194,82 @@ def test_action_classifier_tie_prefers_subset_and_no_global():
     assert clf.resolve(8) == -1
     uniform = clf.predict_proba(x[:2], torch.tensor([8, 8]))
     torch.testing.assert_close(uniform, torch.full((2, 3), 1 / 3))
+
+
+def test_feature_columns_pick_the_blocks_of_compute_features():
+    names = ("head", "left_hand", "right_hand")
+    kinds = ("position", "velocity", "acceleration")
+    t = torch.linspace(0.0, 1.0, 9, dtype=torch.float64)
+    pos = torch.stack(
+        [torch.stack([t * (k + 1), t**2 * (k + 2), -t * (k + 3)], -1) for k in range(3)], 1
+    )  # (T, K, 3), a different trajectory per joint
+    feats = compute_features(pos, fps=8.0, kinds=kinds)  # (T, 27)
+    vel = torch.gradient(pos, spacing=1.0 / 8.0, dim=0, edge_order=2)[0]
+    cols = feature_columns(names, kinds, ("right_hand", "left_hand"), ("velocity", "position"))
+    want = torch.cat([vel[:, 2], vel[:, 1], pos[:, 2], pos[:, 1]], -1)  # (T, 12)
+    torch.testing.assert_close(feats[:, cols], want, atol=1e-12, rtol=0)
+    assert feature_columns(names, kinds) == [3, 4, 5, 6, 7, 8, 12, 13, 14, 15, 16, 17]
+    with pytest.raises(ConfigError, match="no joints or feature kinds.*'left_elbow'"):
+        feature_columns(names, kinds, ("left_elbow",))
+    with pytest.raises(ConfigError, match="no joints or feature kinds.*'jerk'"):
+        feature_columns(names, kinds, kinds=("jerk",))
+
+
+def test_action_classifier_feature_index_equals_selected_input():
+    x, prog, cur = _state_data()
+    g = torch.Generator().manual_seed(12)
+    noise = torch.randn(x.shape[0], x.shape[1], 4, generator=g)
+    full = torch.cat([noise[..., :2], x, noise[..., 2:]], -1)  # (N, T, 7): columns 2..4 signal
+    kw = {"num_actions": 3, "kernel_factory": lambda: RBFKernel(3.0)}
+    kw["ivm_kwargs"] = {"max_import": 6}
+    sel = ActionClassifier(feature_index=[2, 3, 4]).fit(full, prog, cur, **kw)
+    ref = ActionClassifier().fit(x, prog, cur, **kw)
+    progress = torch.tensor([1, 3, 1, 4])
+    rows = [0, 85, 7, 3]
+    want = ref.predict_proba(x[rows], progress)
+    assert torch.equal(sel.predict_proba(full[rows], progress), want)
+    again = ActionClassifier.from_state_dict(sel.state_dict())
+    assert again.feature_index == [2, 3, 4]
+    assert torch.equal(again.predict_proba(full[rows], progress), want)
+    with pytest.raises(ShapeError, match=r"more than 4 features, got \(4, 12, 3\)"):
+        sel.predict_proba(x[rows], progress)
+    with pytest.raises(ConfigError, match="non-negative columns"):
+        ActionClassifier(feature_index=[-1, 2])
+
+
+def _fitted_classifier():
+    x, prog, cur = _state_data()
+    clf = ActionClassifier().fit(
+        x,
+        prog,
+        cur,
+        num_actions=3,
+        kernel_factory=lambda xs: DTWKernel(median_dtw(xs, 100, seed=0)),
+        ivm_kwargs={"max_import": 6},
+    )
+    return clf, x[[0, 85, 1, 2]], torch.tensor([1, 3, 7, 4])
+
+
+def test_to_keeps_predictions_on_cpu():
+    clf, x, progress = _fitted_classifier()
+    before = clf.predict_proba(x, progress)
+    assert clf.to("cpu") is clf
+    assert torch.equal(clf.predict_proba(x, progress), before)
+    assert clf.models_[1].weights_.dtype == torch.float64
+
+
+@pytest.mark.gpu
+def test_to_cuda_matches_cpu():
+    if not torch.cuda.is_available():
+        pytest.skip("no CUDA device")
+    clf, x, progress = _fitted_classifier()
+    want = clf.predict_proba(x, progress)
+    clf.to("cuda")
+    ivm = clf.models_[1]
+    assert ivm.import_vectors_.is_cuda and ivm.weights_.is_cuda and ivm.classes_.is_cuda
+    got = clf.predict_proba(x.cuda(), progress.cuda())
+    assert got.is_cuda
+    torch.testing.assert_close(got.cpu(), want, atol=1e-5, rtol=1e-5)
+    state = ActionClassifier.from_state_dict(clf.state_dict())  # a CUDA model saves CPU tensors
+    assert not state.models_[1].weights_.is_cuda
+    torch.testing.assert_close(state.predict_proba(x, progress), want, atol=1e-6, rtol=0)
