@@ -31,7 +31,7 @@ import torch
 from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
 from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
 from iplanner_torch.eval.prediction import evaluate_prediction
-from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
+from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg, gp_inputs
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
 
@@ -51,7 +51,7 @@ def _gpytorch_forecast(
 ) -> None:
     """The reference path: every action's GP through GPyTorch (plus the classifier)."""
     pred.action_weights(f_prev, progress)
-    x = f_prev.reshape(f_prev.shape[0], -1)
+    x = gp_inputs(f_prev, pred.num_joints, pred.cfg.gp_input)
     for a in range(pred.num_actions):
         reg = pred.model_for(int(progress[0]), a)
         if reg is not None:
@@ -60,7 +60,8 @@ def _gpytorch_forecast(
 
 
 def run(quick: bool = False, *, predictor_cfg: PredictorCfg | None = None) -> dict[str, dict]:
-    """Train, time and evaluate the predictor on synthetic reaching data."""
+    """Train, time and evaluate the predictor on synthetic reaching data (one torch thread)."""
+    torch.set_num_threads(1)
     rc = ReachingCfg(reaches_per_target=4 if quick else 30)
     demos = [
         d
@@ -76,7 +77,7 @@ def run(quick: bool = False, *, predictor_cfg: PredictorCfg | None = None) -> di
     if quick:
         cfg = replace(
             cfg,
-            svgp=replace(cfg.svgp, max_steps=30),
+            svgp=replace(cfg.svgp, max_steps=40),
             classifier_max_train=400,
             ivm_max_import=20,
             ivm_candidates=32,

@@ -100,7 +100,8 @@ def _noise_sweep(cfg: DictConfig) -> None:
         progress=bool(cfg.progress),
     )
     out_dir = _out_dir(cfg)
-    written = write_noise_report(df, out_dir)
+    command = "iplanner-evaluate " + " ".join(HydraConfig.get().overrides.task)
+    written = write_noise_report(df, out_dir, command=command)
     print(df.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     print("wrote " + ", ".join(str(p) for p in written))
 

@@ -6,8 +6,8 @@ periods come before and after. Each demonstration is one reach, labelled per fra
 actions ``("idle", "reach_0", ..., "reach_{n-1}", "return")`` (the hold at the target belongs to
 ``reach_i``).
 
-Target layout (:func:`reach_targets`): two rows on the table, the near row at x = -0.06 m and
-the far row at x = 0.10 m, each with ``n_targets / 2`` targets spread evenly over
+Target layout (:func:`reach_targets`): two rows on the table, the near row at x = 0.04 m and
+the far row at x = 0.18 m, each with ``n_targets / 2`` targets spread evenly over
 y in [+0.36, -0.36] m from the human's left to right; target ``i`` is row ``i // cols``,
 column ``i % cols`` (column 0 on the human's far left). With the default 8 targets, 0, 1, 4, 5
 lie on the left half (reached with the left arm) and 2, 3, 6, 7 on the right half (right arm).
@@ -78,7 +78,9 @@ def reach_targets(n_targets: int = 8) -> np.ndarray:
         raise ConfigError(f"n_targets must be even and in [2, 16], got {n_targets}")
     cols = n_targets // 2
     ys = np.linspace(0.36, -0.36, cols) if cols > 1 else np.array([0.2])
-    xs = np.array([-0.06, 0.10])
+    # rows far enough from the resting hands (x ~ -0.25) that a robot gripper placing a block
+    # there keeps ~10 cm from them
+    xs = np.array([0.04, 0.18])
     grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
     return np.concatenate([grid, np.full((n_targets, 1), 0.04)], axis=1)
 

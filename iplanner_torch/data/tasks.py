@@ -297,6 +297,10 @@ class TaskDatasetCfg:
     fps: float = 15.0  # frame rate [Hz]
     noise_sigma: float = 0.01  # tracker noise per coordinate [m]
     dropout_rate: float = 0.005  # expected fraction of lost joint-frames
+    # uniform range of the idle before the first and after every take [s]; long idles teach
+    # the predictor that a waiting person stays put (in the closed loop the person waits for
+    # the robot's delivery)
+    idle_s: tuple[float, float] = (0.5, 4.0)
     seed: int = 0  # everything is a function of this seed
     file_format: Literal["npz", "csv"] = "npz"  # one file per demonstration
 
@@ -316,6 +320,8 @@ class TaskDatasetCfg:
             raise ConfigError("need noise_sigma >= 0 and 0 <= dropout_rate < 1")
         if self.file_format not in ("npz", "csv"):
             raise ConfigError(f"file_format must be 'npz' or 'csv', got {self.file_format!r}")
+        if len(self.idle_s) != 2 or not 0 <= self.idle_s[0] <= self.idle_s[1]:
+            raise ConfigError(f"idle_s must be (low, high), 0 <= low <= high; got {self.idle_s}")
 
     def task_order(self) -> TaskOrder:
         """The parsed order (``random`` -> one group of the arrangement's ids)."""
@@ -344,6 +350,7 @@ def generate_task_dataset(
         demo = generate_task_demonstration(
             order.sample(rng), targets, body, rng, fps=cfg.fps, object_ids=ids,
             noise_sigma=cfg.noise_sigma, dropout_rate=cfg.dropout_rate,
+            idle_s=tuple(cfg.idle_s),
         )  # fmt: skip
         demo.name = f"task_{i:03d}"
         demo.metadata.update(

@@ -67,7 +67,8 @@ def impute_nan(positions: torch.Tensor, joint_names: Sequence[str] | None = None
     A gap is filled by linear interpolation between the observed frames around it; before the
     first (after the last) observed frame the first (last) observation is held. A joint lost
     in every frame takes the trajectory of the nearest joint along the skeleton's bones that
-    is observed (e.g. a lost hand takes its elbow's), which needs ``joint_names``.
+    is observed (e.g. a lost hand takes its elbow's), else of any observed joint (a tracked
+    subset may hold no connected joint), which needs ``joint_names``.
 
     Args:
         positions: (..., T, K, 3) joint positions [m], NaN where lost.
@@ -77,8 +78,8 @@ def impute_nan(positions: torch.Tensor, joint_names: Sequence[str] | None = None
         (..., T, K, 3) positions without NaN.
 
     Raises:
-        DataError: when a joint is lost in every frame and no observed joint is connected to
-            it (or ``joint_names`` is not given).
+        DataError: when a joint is lost in every frame and no other joint is observed (or
+            ``joint_names`` is not given).
     """
     x = positions
     obs = torch.isfinite(x).all(dim=-1)  # (..., T, K)
@@ -119,16 +120,20 @@ def _impute_sequences(x: torch.Tensor, joint_names: Sequence[str] | None) -> tor
                 "from a neighbouring joint"
             )
         orders = _fallback_order(joint_names)
+        n_joints = len(joint_names)
         for k in bad:
             need = lost[..., k]
-            for j in orders[k]:
+            # connected joints first (nearest along the bones), then any other observed joint
+            others = [j for j in range(n_joints) if j != k and j not in orders[k]]
+            candidates = [*orders[k], *others]
+            for j in candidates:
                 use = need & ~lost[..., j]
                 out[..., k, :] = torch.where(use[..., None, None], out[..., j, :], out[..., k, :])
                 need = need & ~use
             if bool(need.any()):
                 raise DataError(
-                    f"joint {joint_names[k]!r} lost (NaN) in every frame and no connected "
-                    "joint is observed"
+                    f"joint {joint_names[k]!r} lost (NaN) in every frame and no other joint "
+                    "is observed"
                 )
     return out
 

@@ -229,6 +229,43 @@ class HumanObstacle:
     var: torch.Tensor
     radii: torch.Tensor
     weights: torch.Tensor
+    # total weight of actions left out (see :func:`drop_light_actions`); every pair's mixture
+    # bound adds it, as those actions' collision probabilities are at most 1
+    residual: float = 0.0
+
+
+def drop_light_actions(human: HumanObstacle, max_mass: float) -> HumanObstacle:
+    """The obstacle without its lightest actions, their total weight at most ``max_mass``.
+
+    The mixture bound ``sum_a w_a P_a`` is at most ``sum_kept w_a P_a + sum_dropped w_a``, so
+    :func:`human_collision_bound` on the result (which adds ``residual``) is still an upper
+    bound, looser by at most ``max_mass``; it evaluates fewer sphere pairs when the classifier
+    is confident (a weight of 0.99 on one action is common).
+
+    Args:
+        human: the Gaussian human spheres.
+        max_mass: largest total weight that may be dropped (>= 0).
+
+    Returns:
+        ``human`` itself when nothing can be dropped, else a new obstacle with the kept actions.
+    """
+    if max_mass < 0.0:
+        raise ConfigError(f"expected max_mass >= 0, got {max_mass}")
+    w = human.weights
+    order = torch.argsort(w)
+    cum = torch.cumsum(w[order], 0)
+    n_drop = int((cum <= max_mass).sum())
+    n_drop = min(n_drop, w.shape[0] - 1)  # keep at least one action
+    if n_drop == 0:
+        return human
+    keep = order[n_drop:].sort().values
+    return HumanObstacle(
+        mean=human.mean[:, keep],
+        var=human.var[:, keep],
+        radii=human.radii,
+        weights=w[keep],
+        residual=human.residual + float(cum[n_drop - 1]),
+    )
 
 
 def candidate_pairs(
@@ -300,7 +337,8 @@ def human_collision_bound(
         pairs = torch.stack([ii.reshape(-1), jj.reshape(-1)], dim=-1)
     if pairs.shape[0] == 0:
         zero = robot_centers.sum() * 0.0
-        return robot_centers.new_zeros(b, w) + zero, robot_centers.new_zeros(b) + zero
+        floor = min(human.residual, 1.0)
+        return robot_centers.new_zeros(b, w) + zero + floor, robot_centers.new_zeros(b) + zero
     ri, hi = pairs[:, 0], pairs[:, 1]
     c = robot_centers[:, :, ri]  # (B, W_x, P, 3)
     mu = human.mean[:, :, hi].transpose(1, 2)  # (W_x, P, A, 3)
@@ -320,7 +358,7 @@ def human_collision_bound(
                 d[sel], var_full[sel], rad.expand(dist.shape)[sel]
             )
             bound = bound.masked_scatter(sel, torch.minimum(exact_b, bound[sel]))
-    mixed = (bound * human.weights).sum(-1)  # (B, W_x, P)
+    mixed = (bound * human.weights).sum(-1) + human.residual  # (B, W_x, P)
     pen = torch.relu(rad - dist).square()  # (B, W_x, P, A)
     pen_cost = (pen * human.weights).sum(dim=(1, 2, 3))
     return mixed.amax(-1).clamp(max=1.0), pen_cost

@@ -38,6 +38,11 @@ VEL_TOL = 1.05
 #: the static check: the start is where the robot is and the goal is what the task asks (a
 #: grasp point just above the table), so a plan is only required to do as well as its ends.
 END_CLEARANCE_SLACK = 0.01
+#: Initial trajectories keep every waypoint-to-waypoint velocity within this share of the
+#: limits: their random perturbations are scaled down per joint where needed (a perturbed
+#: trajectory that starts too fast is rarely repaired by the few iterations of a cycle, and the
+#: acceptance check rejects it).
+INIT_VEL_FRACTION = 0.9
 #: Adam's first-moment decay.
 BETA1 = 0.9
 #: Adam's second-moment decay: short memory, so steps do not stall once the large early
@@ -94,6 +99,9 @@ class OptimizerCfg:
     confidence: float = 0.95
     # the penalty aims at bound <= penalty_target * (1 - confidence)
     penalty_target: float = 0.5
+    # actions whose total weight is at most this share of 1 - confidence are left out of the
+    # bound and their weight added to it instead (still an upper bound; fewer sphere pairs)
+    drop_action_mass: float = 0.01
     # collision checks per waypoint interval of the window (points at k / n, k = 1..n, of the
     # segment ending at each waypoint), so a fast robot cannot pass between two checks
     collision_substeps: int = 2
@@ -127,6 +135,8 @@ class OptimizerCfg:
             raise ConfigError(f"expected confidence in (0, 1), got {self.confidence}")
         if not 0.0 < self.penalty_target <= 1.0:
             raise ConfigError(f"expected penalty_target in (0, 1], got {self.penalty_target}")
+        if not 0.0 <= self.drop_action_mass < 1.0:
+            raise ConfigError(f"expected drop_action_mass in [0, 1), got {self.drop_action_mass}")
         if self.collision_substeps < 1:
             raise ConfigError(f"expected collision_substeps >= 1, got {self.collision_substeps}")
         if self.prune_every < 1 or self.prune_margin < 0.0:
@@ -241,7 +251,12 @@ class TrajectoryOptimizer:
         return float(1.5 * ratio)
 
     def initial_trajectories(
-        self, q_start: torch.Tensor, q_goal: torch.Tensor, num: int, seed: int
+        self,
+        q_start: torch.Tensor,
+        q_goal: torch.Tensor,
+        num: int,
+        seed: int,
+        duration: float | None = None,
     ) -> torch.Tensor:
         """Straight line plus smooth random perturbations (the first one unperturbed).
 
@@ -250,6 +265,9 @@ class TrajectoryOptimizer:
             q_goal: (J,) goal [rad].
             num: how many trajectories.
             seed: seed of the perturbations.
+            duration: seconds from start to goal; when given, each trajectory's perturbation
+                is scaled down per joint so that its waypoint velocities stay within
+                ``INIT_VEL_FRACTION`` of the limits (the line itself is not changed).
 
         Returns:
             (num, W, J) [rad], clamped to the joint limits, start and goal pinned.
@@ -264,7 +282,15 @@ class TrajectoryOptimizer:
         )
         amp[0] = 0.0
         modes = torch.stack([torch.sin(math.pi * k * s) for k in (1, 2, 3)])  # (3, W)
-        q = line + torch.einsum("nkj,kw->nwj", amp, modes)  # (num, W, J)
+        pert = torch.einsum("nkj,kw->nwj", amp, modes)  # (num, W, J)
+        if duration is not None and duration > 0.0:
+            dt = duration / (w - 1)
+            v_line = (q_goal - q_start).abs() / duration  # (J,)
+            v_pert = (pert[:, 1:] - pert[:, :-1]).abs().amax(1) / dt  # (num, J)
+            room = (INIT_VEL_FRACTION * self.v_max - v_line).clamp_min(0.0)  # (J,)
+            scale = (room / v_pert.clamp_min(1e-12)).clamp(max=1.0)  # (num, J)
+            pert = pert * scale.unsqueeze(1)
+        q = line + pert  # (num, W, J)
         return torch.maximum(torch.minimum(q, self.q_max), self.q_min)
 
     # ----------------------------------------------------------------- costs
@@ -288,14 +314,12 @@ class TrajectoryOptimizer:
             "goal_distance": C.goal_distance(q[:, -1], q_goal),
         }
         bound = clearance = None
+        centers, centers_x = self._sphere_centers(q, win_idx, human is not None)
         if self.static_scene is not None:
-            centers = self.robot.sphere_centers(q)  # (B, W, S_r, 3)
             terms["static_clearance"], clearance = C.static_clearance(
                 centers, self.radii, self.static_scene, self.cfg.static_margin
             )
         if human is not None:
-            q_pts = self._collision_points(q, win_idx)  # (B, W_x * n_sub, J)
-            centers_x = self.robot.sphere_centers(q_pts)  # (B, W_x * n_sub, S_r, 3)
             with timer:
                 bound, pen = C.human_collision_bound(
                     centers_x, self.radii, human, pairs, exact=exact
@@ -307,6 +331,27 @@ class TrajectoryOptimizer:
             terms["human_confidence_penalty"] = excess.square().sum(-1)
             terms["human_mean_penetration"] = pen
         return terms, bound, clearance
+
+    def _sphere_centers(
+        self, q: torch.Tensor, win_idx: torch.Tensor, with_window: bool
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Robot sphere centres [m] at the waypoints of q (B, W, J), (B, W, S_r, 3), and at the
+        collision points of the window (B, W_x * n_sub, S_r, 3) (as :meth:`_collision_points`)
+        or None, from one forward-kinematics call (the last point of each window segment is the
+        waypoint itself, so only the intermediate points are added)."""
+        b, w, _ = q.shape
+        n = self.cfg.collision_substeps
+        if not with_window or n == 1:
+            centers = self.robot.sphere_centers(q)
+            return centers, (centers[:, win_idx] if with_window else None)
+        qa, qb = q[:, win_idx - 1], q[:, win_idx]  # (B, W_x, J)
+        f = torch.arange(1, n, device=q.device, dtype=q.dtype) / n  # (n - 1,)
+        mids = qa.unsqueeze(2) + f.view(1, 1, n - 1, 1) * (qb - qa).unsqueeze(2)
+        c = self.robot.sphere_centers(torch.cat([q, mids.flatten(1, 2)], dim=1))
+        centers = c[:, :w]  # (B, W, S_r, 3)
+        mid_c = c[:, w:].reshape(b, win_idx.shape[0], n - 1, *c.shape[2:])
+        centers_x = torch.cat([mid_c, centers[:, win_idx].unsqueeze(2)], dim=2).flatten(1, 2)
+        return centers, centers_x
 
     def _weighted(self, terms: dict[str, torch.Tensor]) -> torch.Tensor:
         w = self.cfg.weights
@@ -378,13 +423,16 @@ class TrajectoryOptimizer:
                 spheres = self._spheres_for(tuple(forecast.joint_names))
                 t_pts = self._collision_points(times.view(1, -1, 1), win_idx)[0, :, 0]
                 human = C.forecast_to_obstacle(forecast, t_pts, forecast_t0, spheres)
+                human = C.drop_light_actions(human, cfg.drop_action_mass * (1.0 - cfg.confidence))
 
         if q_init is not None:
             check_shape("q_init", q_init, (cfg.num_trajectories, w, j))
             q0 = q_init.to(self.device, self.dtype).clone()
             iterations = cfg.warm_iterations
         else:
-            q0 = self.initial_trajectories(q_start, q_goal, cfg.num_trajectories, cfg.seed)
+            q0 = self.initial_trajectories(
+                q_start, q_goal, cfg.num_trajectories, cfg.seed, duration
+            )
             iterations = cfg.iterations
         q0 = torch.maximum(torch.minimum(q0, self.q_max), self.q_min)
 

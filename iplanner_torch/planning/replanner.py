@@ -222,6 +222,9 @@ class Replanner:
         self._goal_changed = True
         # filtered reference: (time [s], q (J,) [rad], qd (J,) [rad/s]) or None
         self._ref: tuple[float, torch.Tensor, torch.Tensor] | None = None
+        # last plan sample of the filtered reference: (time, plan, (q, qd))
+        self._target_cache: tuple[float, Trajectory, tuple[torch.Tensor, torch.Tensor]] | None
+        self._target_cache = None
 
     @property
     def budget_s(self) -> float:
@@ -326,7 +329,12 @@ class Replanner:
         """(J,) position [rad] and velocity [rad/s] of the plan executing at ``tau``; at the
         take-over time itself the old plan (its state there is what the new one starts from)."""
         p = nxt if nxt is not None and tau > nxt.t_start + TIME_EPS else plan
-        return p.sample(tau)
+        cache = self._target_cache
+        if cache is not None and cache[0] == tau and cache[1] is p:
+            return cache[2]  # the previous step's end state, on the same plan
+        out = p.sample(tau)
+        self._target_cache = (tau, p, out)
+        return out
 
     def _reference_at(
         self, t: float, plan: Trajectory, nxt: Trajectory | None, *, predict: bool = False
@@ -465,11 +473,15 @@ class Replanner:
         cand = last.candidates.clone()
         cand[0] = last.q
         q_init = resample_linear(cand, last.times, new_times)  # (B, W, J)
+        # each previous trajectory is moved to start where this plan starts (a re-anchor or a
+        # wait leaves them elsewhere): the offset fades out linearly towards the goal
+        fade = torch.linspace(1.0, 0.0, w, device=q_init.device, dtype=q_init.dtype)
+        q_init = q_init + fade.view(1, w, 1) * (q_s.to(q_init) - q_init[:, :1])
         n_fresh = int(round(self.cfg.fresh_fraction * b))
-        if n_fresh > 0:
+        if n_fresh > 0:  # the straight line and smooth perturbations of it
             seed = opt.cfg.seed + self.stats.cycles + 1
-            fresh = opt.initial_trajectories(q_s, self._goal, n_fresh + 1, seed)[1:]
-            q_init[b - n_fresh :] = fresh
+            fresh = opt.initial_trajectories(q_s, self._goal, n_fresh, seed, duration)
+            q_init[b - n_fresh :] = fresh.to(q_init)
         return q_init
 
     def goal_reached(self, q_now: torch.Tensor, tol: float = 1e-2) -> bool:

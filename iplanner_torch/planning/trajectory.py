@@ -9,7 +9,7 @@ the last waypoint the trajectory holds its end pose.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import torch
 
@@ -73,6 +73,10 @@ class Trajectory:
     q: torch.Tensor
     times: torch.Tensor
     qd_start: torch.Tensor | None = None
+    # (W, J) tangents, computed on the first sample (the waypoints are not changed after)
+    _tangent_cache: torch.Tensor | None = field(
+        default=None, init=False, repr=False, compare=False
+    )
 
     def __post_init__(self) -> None:
         check_shape("q", self.q, ("W", "J"))
@@ -121,7 +125,9 @@ class Trajectory:
         scalar = not isinstance(t, torch.Tensor) or t.dim() == 0
         tq = torch.as_tensor(t, dtype=self.times.dtype, device=self.times.device).reshape(-1)
         times, q = self.times, self.q
-        m = self._tangents()
+        if self._tangent_cache is None:
+            self._tangent_cache = self._tangents()
+        m = self._tangent_cache
         idx = torch.searchsorted(times, tq, right=True) - 1
         idx = idx.clamp(0, times.shape[0] - 2)
         t_a, t_b = times[idx], times[idx + 1]

@@ -5,7 +5,10 @@ weights ``p(c | F, p)``; one sparse variational GP per (progress state p, curren
 gives the Gaussian future positions; the next-action model gives ``p(n | p, c)``.
 
 GP inputs are the observed windows ``F_prev`` flattened (``n_p * D``, normalised inside each
-GP); GP outputs are the future positions *relative to the current pose* (ARCHITECTURE 4.10),
+GP), by default with every frame's positions taken relative to the current pose
+(:func:`gp_inputs`); all actions' GPs of a progress state are stacked once (at load) into an
+:class:`~iplanner_torch.prediction.svgp.SVGPBank`, so a forecast is a few batched matmuls.
+GP outputs are the future positions *relative to the current pose* (ARCHITECTURE 4.10),
 the pose is added back at prediction, so a forecast lies in the world (table) frame.
 
 Fallbacks for a (p, c) without its own GP, in order:
@@ -28,7 +31,7 @@ import torch
 
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError
 from iplanner_torch.prediction.forecast import Forecast
-from iplanner_torch.prediction.svgp import SVGPCfg, SVGPRegressor
+from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
 from iplanner_torch.types import check_shape
 
 CHECKPOINT_VERSION = 1
@@ -45,7 +48,7 @@ class PredictorCfg:
     # classifier kernel bandwidth (DTW gamma, GAK sigma, RBF lengthscale); None = median rule.
     classifier_bandwidth: float | None = None
     # IVM regularisation lambda.
-    ivm_lam: float = 1e-3
+    ivm_lam: float = 0.03
     # IVM maximum number of import vectors.
     ivm_max_import: int = 60
     # IVM stopping tolerance on the relative loss change.
@@ -62,6 +65,9 @@ class PredictorCfg:
     min_group_size: int = 20
     # training windows per GP at most (random subset, seeded).
     max_gp_points: int = 3000
+    # GP inputs: "window" = the flattened features; "relative" = the same with each frame's
+    # positions taken relative to the current pose (the current pose itself kept absolute).
+    gp_input: Literal["window", "relative"] = "relative"
     # fallback forecast: standard deviation at t = 0 [m].
     fallback_sigma0: float = 0.1
     # fallback forecast: growth of the standard deviation [m/s].
@@ -88,12 +94,35 @@ class PredictorCfg:
             raise ConfigError(f"coherence_smoothing must be >= 0, got {self.coherence_smoothing}")
         if self.min_group_size < 2:
             raise ConfigError(f"min_group_size must be >= 2, got {self.min_group_size}")
+        if self.gp_input not in ("window", "relative"):
+            raise ConfigError(f"gp_input must be window or relative, got {self.gp_input!r}")
         if self.fallback_sigma0 <= 0 or self.fallback_sigma_rate < 0:
             raise ConfigError("need fallback_sigma0 > 0 and fallback_sigma_rate >= 0")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-dict form (saved in checkpoints)."""
         return asdict(self)
+
+
+def gp_inputs(f_prev: torch.Tensor, num_joints: int, kind: str = "relative") -> torch.Tensor:
+    """The GP input of each window (eq. GPRlearning), flattened.
+
+    Args:
+        f_prev: (B, n_p, D) window features, positions [m] first (3 K columns).
+        num_joints: K.
+        kind: "window" (features as they are) or "relative" (every frame's positions minus
+            the current, last frame's; the current pose stays absolute).
+
+    Returns:
+        (B, n_p * D) inputs.
+    """
+    b = f_prev.shape[0]
+    if kind == "relative":
+        k3 = 3 * num_joints
+        pos = f_prev[:, :, :k3]  # (B, n_p, 3K)
+        rel = torch.cat([pos[:, :-1] - pos[:, -1:], pos[:, -1:]], 1)  # (B, n_p, 3K)
+        f_prev = torch.cat([rel, f_prev[:, :, k3:]], -1)  # (B, n_p, D)
+    return f_prev.reshape(b, -1)
 
 
 def dataset_fingerprint(*tensors: torch.Tensor) -> str:
@@ -167,6 +196,8 @@ class HumanMotionPredictor:
         self.pooled = dict(pooled or {})
         self.fingerprint = fingerprint
         self.window_cfg = dict(window_cfg or {})
+        # progress state -> (bank of its actions' GPs or None, the actions that have a GP)
+        self._banks: dict[int, tuple[SVGPBank | None, list[int]]] = {}
         k = len(self.joint_names)
         d = 3 * k * len(self.feature_kinds)
         check_shape("feat_mean", self.feat_mean, (d,))
@@ -203,7 +234,34 @@ class HumanMotionPredictor:
         for obj in (self.classifier, self.next_model):
             if obj is not None and hasattr(obj, "to"):
                 obj.to(device)
+        self._banks = {}
         return self
+
+    def prepare(self) -> HumanMotionPredictor:
+        """(Re)compute every GP's fast-path tensors and the per-progress-state banks.
+
+        Call after changing ``gps`` or ``pooled`` in place.
+        """
+        self._banks = {}
+        for reg in list(self.gps.values()) + list(self.pooled.values()):
+            reg.refresh_cache()
+        for p in sorted({p for p, _ in self.gps}):
+            self._bank(p)
+        return self
+
+    def _bank(self, progress: int) -> tuple[SVGPBank | None, list[int]]:
+        """The stacked GPs of every action at ``progress`` (None when they cannot stack)."""
+        hit = self._banks.get(progress)
+        if hit is not None:
+            return hit
+        regs = [self.model_for(progress, a) for a in range(self.num_actions)]
+        have = [a for a, r in enumerate(regs) if r is not None]
+        kernels = {regs[a].cfg.kernel for a in have}
+        bank = None
+        if have and len(kernels) == 1 and kernels <= {"rbf", "matern"}:
+            bank = SVGPBank([regs[a] for a in have])
+        self._banks[progress] = (bank, have)
+        return bank, have
 
     # -------------------------------------------------------------------------- inference
     def normalise_features(self, f_prev: torch.Tensor) -> torch.Tensor:
@@ -265,26 +323,39 @@ class HumanMotionPredictor:
         progress = progress.to(self.device, torch.int64)
         b, k, a_n = f_prev.shape[0], self.num_joints, self.num_actions
         pose = f_prev[:, -1, : 3 * k].reshape(b, k, 3)  # (B, K, 3) current pose
-        x = f_prev.reshape(b, -1)  # (B, n_p * D)
+        x = gp_inputs(f_prev, k, self.cfg.gp_input)  # (B, n_p * D)
         weights = self.action_weights(f_prev, progress)
-        mean = torch.empty(b, a_n, self.n_future, k, 3, dtype=f_prev.dtype, device=f_prev.device)
-        var = torch.empty_like(mean)
-        fb = None
         uniq = torch.unique(progress).tolist()
+        banks = {p: self._bank(int(p)) for p in uniq}
+        if all(len(have) == a_n for _, have in banks.values()):
+            mean = torch.empty(b, a_n, self.n_future, k, 3, dtype=f_prev.dtype, device=self.device)
+            var = torch.empty_like(mean)
+        else:
+            mean, var = self._fallback(f_prev, pose)  # (B, n_f, K, 3) each
+            mean = mean.unsqueeze(1).repeat(1, a_n, 1, 1, 1)  # (B, A, n_f, K, 3)
+            var = var.unsqueeze(1).repeat(1, a_n, 1, 1, 1)
         for p in uniq:
             rows = slice(None) if len(uniq) == 1 else (progress == p).nonzero()[:, 0]
             xr, pr = x[rows], pose[rows]
-            for a in range(a_n):
-                reg = self.model_for(p, a)
-                if reg is None:
-                    if fb is None:
-                        fb = self._fallback(f_prev, pose)
-                    mean[rows, a], var[rows, a] = fb[0][rows], fb[1][rows]
-                    continue
-                m, v = reg.predict(xr)  # (b, n_f K 3) each
-                m = m.view(-1, self.n_future, k, 3)  # (b, n_f, K, 3)
-                mean[rows, a] = m + pr.unsqueeze(1)
-                var[rows, a] = v.view(-1, self.n_future, k, 3)
+            bank, have = banks[p]
+            nb = xr.shape[0]
+            if bank is not None:
+                m, v = bank.predict(xr)  # (b, G, n_f K 3) each
+                m = m.view(nb, len(have), self.n_future, k, 3) + pr.view(nb, 1, 1, k, 3)
+                v = v.view(nb, len(have), self.n_future, k, 3)
+                if len(have) == a_n:
+                    mean[rows], var[rows] = m, v
+                else:
+                    cols = torch.tensor(have, device=self.device)
+                    if isinstance(rows, slice):
+                        mean[:, cols], var[:, cols] = m, v
+                    else:
+                        mean[rows.unsqueeze(-1), cols], var[rows.unsqueeze(-1), cols] = m, v
+                continue
+            for a in have:
+                m, v = self.model_for(p, a).predict(xr)  # (b, n_f K 3) each
+                mean[rows, a] = m.view(nb, self.n_future, k, 3) + pr.unsqueeze(1)
+                var[rows, a] = v.view(nb, self.n_future, k, 3)
         return Forecast(
             weights=weights,
             mean=mean,
@@ -299,8 +370,8 @@ class HumanMotionPredictor:
 
         NaN joints are imputed by :func:`data.windows.compute_features` (linear interpolation
         in time, edge hold; a joint lost in the whole window takes a connected joint's
-        trajectory). A joint with no observation at all in the window raises, never a silent
-        NaN forecast.
+        trajectory, else any observed joint's). A window with no observed joint at all raises,
+        never a silent NaN forecast.
 
         Args:
             positions: (B, n_p, K, 3) tracked joint positions [m], NaN where lost.
@@ -429,7 +500,7 @@ class HumanMotionPredictor:
             raise CheckpointError(f"predictor checkpoint {path} is incomplete: {err}") from err
         if map_location is not None:
             pred.to(map_location)
-        return pred
+        return pred.prepare()
 
     @classmethod
     def _from_dict(cls, d: dict[str, Any]) -> HumanMotionPredictor:

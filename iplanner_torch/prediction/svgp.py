@@ -1,67 +1,81 @@
 """Sparse variational GP regression with the noisy-input correction (paper eq. GPRlearning, 6.1).
 
 One :class:`SVGPRegressor` is trained per (progress state, current action). Its inputs are the
-flattened, normalised observed windows ``F_prev`` and its outputs are all ``n_f x K x 3`` future
-coordinates (the output channels of eq. GPRlearning). The predictor feeds it positions relative
-to the current pose, so one model generalises across where the person sits (ARCHITECTURE 4.10).
+flattened observed windows (normalised per dimension) and its outputs are all ``C = n_f x K x 3``
+future coordinates (the output channels of eq. GPRlearning), standardised per channel. The
+predictor feeds it positions relative to the current pose, so one model generalises across
+where the person sits (ARCHITECTURE 4.10).
 
-Design (chosen for speed and memory, see the module's tests for the checks):
+Model (normalised units; ``y_c`` is channel c divided by its training standard deviation):
 
-* All C channels share the kernel hyperparameters and the M inducing inputs Z; each channel has
-  its own variational distribution ``q(v_c) = N(m_c, S_c)`` (a ``CholeskyVariationalDistribution``
-  with ``batch_shape=[C]``, whitened: ``u_c = L v_c`` with ``K_ZZ = L L^T``). The kernel matrix
-  and its Cholesky factor are thus computed once per batch for all channels.
-* Hyperparameters, Z and the noise floor are trained with Adam on the minibatch ELBO
-  (``gpytorch.mlls.VariationalELBO``); q is not a gradient variable by default (``train_q``):
-  every ``q_refresh_every`` steps and after training it is set to its closed-form optimum for
-  the full training set (the exact maximiser of the ELBO in q for a Gaussian likelihood; a
-  variational-EM scheme, several times faster per step and converging in far fewer steps):
-  ``S = (I + Phi Lam^-1 Phi^T)^-1``, ``m = S Phi Lam^-1 y`` with ``Phi = L^-1 K_ZX``.
-  When the observation noise does not depend on the channel (``none``/``simple``) all channels
-  share one ``S``, which is stored once.
-* The observation noise is ``floor + extra_{i,c}``: a learned floor (one scalar, in normalised
-  output units) plus a fixed per-point, per-channel term from the noisy-input correction:
+    y_c(x_i) = g_c(x_i) + eps_ic,   g_c ~ GP(0, s k_l) i.i.d. over c,   eps_ic ~ N(0, lam_i),
+    lam_i = floor + e_i.
 
-  - ``none``: ``extra = 0``;
-  - ``simple`` (paper sec. 6.1): ``extra = sigma^2 (1 + ||v||^2)`` with ``sigma`` the sensor noise
-    [m] and ``v`` the joint velocity limit [m/s] (the paper's formula, its units taken as printed);
-  - ``nigp`` (McHutchon and Rasmussen 2011): fit, take the gradient of the posterior mean at
-    each training input by autograd, set ``extra_{i,c} = sigma_x^2 ||d m_c / d x (x_i)||^2``
-    (in raw input units, i.e. gradients w.r.t. the un-normalised features), refit; repeated
-    ``nigp_iterations`` times.
+All C channels share the kernel (outputscale s, lengthscale l), the M inducing inputs Z and the
+observation noise ``lam_i``, so the optimal variational posterior ``q(v_c) = N(m_c, S)``
+(whitened, ``u_c = L v_c`` with ``K_ZZ = L L^T``) has *one* covariance
+``S = (I + Phi Lam^-1 Phi^T)^-1`` for every channel and means ``m_c = S Phi Lam^-1 y_c``
+(``Phi = L^-1 K_ZX``): one M x M matrix and an M x C mean matrix are stored
+(:class:`SharedCovarianceVariationalDistribution`, used by GPyTorch's ``VariationalStrategy``).
 
-* Prediction (the fast path used online) uses cached tensors, without GPyTorch objects:
-  ``mean_c = K_*Z alpha_c`` with ``alpha_c = L^-T m_c`` and
-  ``var_c = k_** - ||L^-1 k_Z*||^2 + ||Q_c^T k_Z*||^2`` with ``Q_c = L^-T R_c``
-  (``S_c = R_c R_c^T``), which equals
-  ``k_** - k_*Z (K_ZZ^-1 - K_ZZ^-1 Sigma_u K_ZZ^-1) k_Z*``. The returned predictive
-  variance of an output is ``var_c + floor + extra_test_c``: the test input is as noisy as the
-  training inputs, so the input-noise term inflates it too; ``extra_test_c`` is
-  ``sigma^2 (1 + ||v||^2)`` for ``simple``, the mean over the training points of the NIGP term
-  for ``nigp``, and 0 for ``none``.
+Training maximises Titsias's collapsed bound (the ELBO at that optimal q; exact for a Gaussian
+likelihood with diagonal, per-point noise) with Adam over the hyperparameters: outputscale,
+lengthscale(s), the noise floor and (rbf/matern) the inducing inputs; q is then set in closed
+form from all N points. Each step costs ``O(N M D_in + N M^2 + M N C)``, independent of C in
+its M^2 terms. A step may use a random subset of ``batch_size`` points (the bound on the subset
+scaled to N), q always uses every point.
+
+Noisy-input corrections (the per-point term ``e_i``, normalised output units, shared by all
+channels):
+
+* ``none``: ``e_i = 0``;
+* ``simple`` (paper sec. 6.1): the paper's term ``sigma^2 (1 + ||v||^2)`` [m^2] (``sigma`` the
+  sensor noise [m], ``v`` the joint velocity limit [m/s], units as printed) divided by the mean
+  output variance ``mean_c std_c^2``: the term of a channel of average spread, so a channel gets
+  ``sigma^2 (1 + ||v||^2) std_c^2 / mean_c(std_c^2)`` in metres (the same on average);
+* ``nigp`` (McHutchon and Rasmussen 2011): fit, then
+  ``e_i = sigma_x^2 mean_c ||d g_c / d x (x_i)||^2`` with the gradient of the posterior mean with
+  respect to the raw inputs (closed form for rbf, autograd otherwise), refit; repeated
+  ``nigp_iterations`` times. Averaging over channels keeps one S; in normalised output units
+  the channels' gradients are of comparable size.
+
+Calibration (``calibrate_floor``): windows of one demonstration are strongly correlated, so a
+floor fitted on the training windows alone is overconfident on new demonstrations; when
+validation windows (other demonstrations) are given, the floor is raised to the maximiser of
+their likelihood and q recomputed (:meth:`SVGPRegressor.calibrate`); it is never lowered.
+
+Prediction uses tensors cached from the trained model (:meth:`SVGPRegressor.refresh_cache`,
+:class:`SVGPBank` for several regressors at once): with ``k = k(x, Z)`` and ``w = L^-1 k``,
+``mean_c = w^T m_c`` (one (B, M) x (M, C) matmul) and
+``var = s - w^T (I - S) w + floor + e_test`` (shared by all channels), scaled back by
+``std_c^2``. The test input is as noisy as the training inputs, so the input-noise term
+inflates the predictive variance too: ``e_test`` is the simple term, the mean of the training
+``e_i`` for nigp, and 0 for none.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 import gpytorch
 import torch
 from gpytorch.distributions import MultivariateNormal
-from gpytorch.likelihoods import Likelihood
 from gpytorch.models import ApproximateGP
-from gpytorch.variational import CholeskyVariationalDistribution, VariationalStrategy
+from gpytorch.variational import VariationalStrategy, _VariationalDistribution
 from linear_operator.operators import DenseLinearOperator
 from torch import nn
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import CheckpointError, ConfigError, ShapeError
 from iplanner_torch.types import check_shape
 
 KernelName = Literal["rbf", "matern", "gak", "dtw"]
 NoisyInput = Literal["none", "simple", "nigp"]
+
+#: version of :meth:`SVGPRegressor.to_checkpoint`'s layout
+CHECKPOINT_FORMAT = 2
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -83,24 +97,28 @@ class SVGPCfg:
     velocity_limit: float = 1.5
     # fit -> gradient -> refit rounds of the NIGP correction.
     nigp_iterations: int = 2
-    # Adam learning rate.
-    lr: float = 0.02
+    # optimiser steps of each NIGP refit (warm started from the previous round).
+    nigp_refit_steps: int = 30
+    # Adam learning rate (hyperparameters and inducing inputs).
+    lr: float = 0.05
     # passes over the training set per fit (the number of steps is also capped by max_steps).
     epochs: int = 30
-    # maximum optimiser steps per fit (keeps large groups affordable).
-    max_steps: int = 60
-    # minibatch size of the ELBO.
-    batch_size: int = 128
-    # every this many steps q is reset to its closed-form optimum (0 = only at the end).
-    q_refresh_every: int = 10
-    # also train q by Adam between refreshes (slower; q's closed form is exact anyway).
-    train_q: bool = False
+    # maximum optimiser steps per fit.
+    max_steps: int = 150
+    # points per optimiser step: a random subset of the training set when N is larger.
+    batch_size: int = 1024
     # learn the inducing inputs (rbf/matern; time-series kernels keep training windows).
     learn_inducing: bool = True
     # initial observation-noise floor in normalised output units (variance).
     noise_floor_init: float = 1e-2
     # lower bound of the noise floor (variance, normalised units).
     noise_floor_min: float = 1e-6
+    # raise the noise floor to the maximiser of the likelihood of validation windows (other
+    # demonstrations) when they are given: windows of one demonstration are correlated, so the
+    # floor fitted on the training windows alone is overconfident on new demonstrations.
+    calibrate_floor: bool = True
+    # validation windows needed for that calibration.
+    calibrate_min_windows: int = 10
     # DTW kernel gamma / GAK sigma; None picks the median heuristic on the training windows.
     series_bandwidth: float | None = None
     # Sakoe-Chiba band of the time-series kernels (frames); None = unconstrained.
@@ -123,16 +141,16 @@ class SVGPCfg:
             raise ConfigError(f"velocity_limit must be >= 0, got {self.velocity_limit}")
         if self.nigp_iterations < 1:
             raise ConfigError(f"nigp_iterations must be >= 1, got {self.nigp_iterations}")
+        if self.nigp_refit_steps < 0:
+            raise ConfigError(f"nigp_refit_steps must be >= 0, got {self.nigp_refit_steps}")
         if self.lr <= 0:
             raise ConfigError(f"lr must be > 0, got {self.lr}")
         if self.epochs < 0 or self.max_steps < 0:
             raise ConfigError(
                 f"epochs and max_steps must be >= 0, got {self.epochs}, {self.max_steps}"
             )
-        if self.batch_size < 1:
-            raise ConfigError(f"batch_size must be >= 1, got {self.batch_size}")
-        if self.q_refresh_every < 0:
-            raise ConfigError(f"q_refresh_every must be >= 0, got {self.q_refresh_every}")
+        if self.batch_size < 2:
+            raise ConfigError(f"batch_size must be >= 2, got {self.batch_size}")
         if not self.noise_floor_init > self.noise_floor_min >= 0:
             raise ConfigError(
                 f"need noise_floor_init > noise_floor_min >= 0, got {self.noise_floor_init}, "
@@ -140,11 +158,20 @@ class SVGPCfg:
             )
         if self.series_bandwidth is not None and self.series_bandwidth <= 0:
             raise ConfigError(f"series_bandwidth must be > 0, got {self.series_bandwidth}")
+        if self.calibrate_min_windows < 1:
+            raise ConfigError(
+                f"calibrate_min_windows must be >= 1, got {self.calibrate_min_windows}"
+            )
 
     @property
     def simple_extra_var(self) -> float:
         """The paper's input-noise term ``sigma^2 (1 + ||v||^2)`` [m^2]."""
         return self.input_noise_sigma**2 * (1.0 + self.velocity_limit**2)
+
+    def steps_for(self, n: int, max_epochs: int | None = None) -> int:
+        """Optimiser steps of a first fit on ``n`` points (``max_epochs`` caps ``epochs``)."""
+        epochs = self.epochs if max_epochs is None else min(self.epochs, max_epochs)
+        return min(epochs * math.ceil(n / min(self.batch_size, max(n, 1))), self.max_steps)
 
 
 class SeriesKernel(gpytorch.kernels.Kernel):
@@ -181,8 +208,46 @@ class SeriesKernel(gpytorch.kernels.Kernel):
         return out.reshape(*batch, x1.shape[-2], x2.shape[-2])
 
 
+class SharedCovarianceVariationalDistribution(_VariationalDistribution):
+    """``q(v_c) = N(m_c, S)`` for C channels with one shared ``S = R R^T`` (whitened).
+
+    The tensors are buffers, not gradient parameters: they are set in closed form by
+    :meth:`SVGPRegressor.finalise` (the exact ELBO optimum for a Gaussian likelihood).
+    """
+
+    def __init__(self, num_inducing_points: int, num_channels: int) -> None:
+        super().__init__(num_inducing_points, batch_shape=torch.Size([num_channels]))
+        # (C, M) whitened means m_c
+        self.register_buffer("variational_mean", torch.zeros(num_channels, num_inducing_points))
+        # (M, M) a square root R of the shared covariance S = R R^T
+        self.register_buffer("covar_root", torch.eye(num_inducing_points))
+
+    @property
+    def device(self) -> torch.device:
+        return self.variational_mean.device
+
+    @property
+    def dtype(self) -> torch.dtype:
+        return self.variational_mean.dtype
+
+    @property
+    def covariance(self) -> torch.Tensor:
+        """(M, M) the shared S."""
+        return self.covar_root @ self.covar_root.mT
+
+    def forward(self) -> MultivariateNormal:
+        c, m = self.variational_mean.shape
+        cov = self.covariance.expand(c, m, m)  # (C, M, M)
+        return MultivariateNormal(self.variational_mean, DenseLinearOperator(cov))
+
+    def initialize_variational_distribution(self, prior_dist: MultivariateNormal) -> None:
+        with torch.no_grad():
+            self.variational_mean.zero_()
+            self.covar_root.copy_(torch.eye(self.num_inducing_points, dtype=self.dtype))
+
+
 class ChannelSVGPModel(ApproximateGP):
-    """The variational GP: shared kernel and inducing inputs, one q(v_c) per output channel."""
+    """The variational GP: shared kernel, inducing inputs and q covariance over C channels."""
 
     def __init__(
         self,
@@ -199,9 +264,7 @@ class ChannelSVGPModel(ApproximateGP):
             covar_module: the shared kernel.
             learn_inducing: whether Z is a trained parameter.
         """
-        vd = CholeskyVariationalDistribution(
-            inducing.shape[0], batch_shape=torch.Size([num_channels])
-        )
+        vd = SharedCovarianceVariationalDistribution(inducing.shape[0], num_channels)
         strategy = VariationalStrategy(self, inducing, vd, learn_inducing_locations=learn_inducing)
         super().__init__(strategy)
         self.mean_module = gpytorch.means.ZeroMean()
@@ -215,11 +278,8 @@ class ChannelSVGPModel(ApproximateGP):
         return MultivariateNormal(self.mean_module(x), cov)
 
 
-class PointNoiseGaussianLikelihood(Likelihood):
-    """Gaussian likelihood with noise ``floor + extra_{i,c}`` (learned floor, fixed extra).
-
-    ``extra_noise`` is passed per call: (C, N) or (1, N) variances in normalised output units.
-    """
+class NoiseFloor(nn.Module):
+    """The learned observation-noise floor (variance, normalised units), ``> floor_min``."""
 
     def __init__(self, floor_init: float, floor_min: float) -> None:
         super().__init__()
@@ -229,50 +289,8 @@ class PointNoiseGaussianLikelihood(Likelihood):
 
     @property
     def floor(self) -> torch.Tensor:
-        """() the learned noise floor (variance, normalised units)."""
+        """() the noise floor."""
         return nn.functional.softplus(self.raw_floor) + self.floor_min
-
-    def _noise(self, like: torch.Tensor, extra_noise: torch.Tensor | None) -> torch.Tensor:
-        noise = self.floor.to(like)
-        return noise if extra_noise is None else noise + extra_noise
-
-    def expected_log_prob(
-        self,
-        target: torch.Tensor,
-        input: MultivariateNormal,
-        *args: Any,
-        extra_noise: torch.Tensor | None = None,
-        **kwargs: Any,
-    ) -> torch.Tensor:
-        """(C, N) E_q[log N(y | f, noise)] for targets (C, N)."""
-        mean, var = input.mean, input.variance
-        noise = self._noise(mean, extra_noise)
-        return -0.5 * (torch.log(2 * math.pi * noise) + ((target - mean) ** 2 + var) / noise)
-
-    def forward(
-        self,
-        function_samples: torch.Tensor,
-        *args: Any,
-        extra_noise: torch.Tensor | None = None,
-        **kwargs: Any,
-    ) -> torch.distributions.Normal:
-        """p(y | f) for latent samples (..., C, N)."""
-        noise = self._noise(function_samples, extra_noise)
-        return torch.distributions.Normal(
-            function_samples, noise.sqrt().expand_as(function_samples)
-        )
-
-    def marginal(
-        self,
-        function_dist: MultivariateNormal,
-        *args: Any,
-        extra_noise: torch.Tensor | None = None,
-        **kwargs: Any,
-    ) -> MultivariateNormal:
-        """p(y) with the observation noise added to the diagonal (independent outputs)."""
-        mean, var = function_dist.mean, function_dist.variance
-        noise = self._noise(mean, extra_noise)
-        return MultivariateNormal(mean, torch.diag_embed(var + noise))
 
 
 def _median_sq_dist(x: torch.Tensor, n: int, generator: torch.Generator) -> float:
@@ -282,12 +300,23 @@ def _median_sq_dist(x: torch.Tensor, n: int, generator: torch.Generator) -> floa
     return float(vals.median()) if vals.numel() else 1.0
 
 
+def _chol(a: torch.Tensor, jitter: float) -> torch.Tensor:
+    """Cholesky factor of ``a + jitter I``, raising the jitter tenfold on failure."""
+    eye = torch.eye(a.shape[-1], dtype=a.dtype, device=a.device)
+    for _ in range(6):
+        l_a, info = torch.linalg.cholesky_ex(a + jitter * eye)
+        if not bool(info.any()):
+            return l_a
+        jitter = jitter * 10
+    return torch.linalg.cholesky(a + jitter * eye)
+
+
 class SVGPRegressor(nn.Module):
-    """A multi-output sparse variational GP on flattened windows, with input normalisation.
+    """A multi-output sparse variational GP on flattened windows (see the module docstring).
 
     Build with :meth:`from_data` (chooses Z, the normalisation and the kernel bandwidth), train
-    with :meth:`fit`, predict with :meth:`predict`. Save with :meth:`to_checkpoint`, restore
-    with :meth:`from_checkpoint`.
+    with :meth:`fit` (or :class:`~iplanner_torch.prediction.training.SVGPModule`), predict with
+    :meth:`predict`. Save with :meth:`to_checkpoint`, restore with :meth:`from_checkpoint`.
     """
 
     def __init__(
@@ -323,18 +352,17 @@ class SVGPRegressor(nn.Module):
                 f"kernel {cfg.kernel!r} needs window (n_p, D) with n_p * D = {self.input_dim}, "
                 f"got {self.window}"
             )
-        base = self._make_base_kernel()
-        covar = gpytorch.kernels.ScaleKernel(base)
+        covar = gpytorch.kernels.ScaleKernel(self._make_base_kernel())
         z0 = torch.zeros(num_inducing, self.input_dim)
         learn_z = cfg.learn_inducing and cfg.kernel in ("rbf", "matern")
         self.model = ChannelSVGPModel(z0, self.num_channels, covar, learn_z)
-        self.likelihood = PointNoiseGaussianLikelihood(cfg.noise_floor_init, cfg.noise_floor_min)
+        self.likelihood = NoiseFloor(cfg.noise_floor_init, cfg.noise_floor_min)
         self.register_buffer("x_mean", torch.zeros(self.input_dim))
         self.register_buffer("x_std", torch.ones(self.input_dim))
         self.register_buffer("y_mean", torch.zeros(self.num_channels))
         self.register_buffer("y_std", torch.ones(self.num_channels))
-        # (C,) input-noise variance added at prediction [output units^2]
-        self.register_buffer("extra_test_var", torch.zeros(self.num_channels))
+        # () input-noise variance e_test added at prediction (normalised output units)
+        self.register_buffer("test_extra_noise", torch.zeros(()))
         # cached fast-path tensors (rebuilt by refresh_cache, not saved)
         self._cache: dict[str, torch.Tensor] | None = None
 
@@ -428,11 +456,24 @@ class SVGPRegressor(nn.Module):
             return max(math.sqrt(med / window[0]), 1e-3)
         return max(med, 1e-6)
 
+    @property
+    def num_inducing(self) -> int:
+        """M."""
+        return int(self.model.variational_strategy.inducing_points.shape[0])
+
+    @property
+    def variational(self) -> SharedCovarianceVariationalDistribution:
+        """The shared-covariance q (means (C, M), covariance root (M, M))."""
+        return self.model.variational_strategy._variational_distribution
+
+    @property
+    def jitter(self) -> float:
+        """Jitter added to K_ZZ (the same as GPyTorch's variational strategy)."""
+        return float(self.model.variational_strategy.jitter_val)
+
     def set_inducing(self, z: torch.Tensor) -> None:
         """Set the inducing inputs. ``z``: (M, D_in) in normalised input units."""
-        check_shape(
-            "z", z, (self.model.variational_strategy.inducing_points.shape[0], self.input_dim)
-        )
+        check_shape("z", z, (self.num_inducing, self.input_dim))
         with torch.no_grad():
             self.model.variational_strategy.inducing_points.copy_(z)
         self._cache = None
@@ -447,63 +488,122 @@ class SVGPRegressor(nn.Module):
         return (y - self.y_mean) / self.y_std
 
     def extra_noise_simple(self) -> torch.Tensor:
-        """(C,) the paper's input-noise term in normalised output units."""
-        return self.cfg.simple_extra_var / self.y_std**2
+        """() the paper's input-noise term in normalised units (over the mean output variance)."""
+        return self.cfg.simple_extra_var / self.y_std.pow(2).mean()
 
     # ------------------------------------------------------------------------------ training
+    def _kernel_terms(self, xn: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``L`` (M, M), ``Phi = L^-1 K_ZX`` (M, N) and ``diag K_XX`` (N,) at normalised x."""
+        z = self.model.variational_strategy.inducing_points
+        kern = self.model.covar_module
+        l_zz = _chol(kern(z).to_dense(), self.jitter)
+        kzx = torch.cat(
+            [kern(z, xn[s : s + 4096]).to_dense() for s in range(0, xn.shape[0], 4096)], -1
+        )  # (M, N)
+        phi = torch.linalg.solve_triangular(l_zz, kzx, upper=False)  # (M, N)
+        if self.cfg.kernel in ("rbf", "matern"):
+            kdiag = kern.outputscale.expand(xn.shape[0])
+        else:
+            kdiag = kern(xn, diag=True)
+        return l_zz, phi, kdiag
+
     def elbo_loss(
         self, xn: torch.Tensor, yn: torch.Tensor, extra: torch.Tensor | None, num_data: int
     ) -> torch.Tensor:
-        """Negative ELBO per datum and channel on a minibatch (normalised units).
+        """Negative collapsed ELBO (Titsias 2009) per datum and channel, normalised units.
+
+        ``log N(y_c | 0, Q + Lam) - tr(Lam^-1 (K - Q)) / 2`` summed over channels, with
+        ``Q = K_XZ K_ZZ^-1 K_ZX`` and ``Lam = diag(floor + e_i)``; on a subset of the data it
+        is scaled by ``num_data / B``.
 
         Args:
             xn: (B, D_in) normalised inputs.
             yn: (B, C) normalised outputs.
-            extra: (B, C) or (B, 1) extra observation noise (normalised units), or None.
+            extra: (B,) extra observation noise ``e_i`` (normalised units), or None.
             num_data: N, the size of the full training set.
 
         Returns:
-            () the loss, mean over channels of ``-ELBO_c``.
+            () the loss.
         """
-        mll = gpytorch.mlls.VariationalELBO(self.likelihood, self.model, num_data=num_data)
-        out = self.model(xn)
-        kw = {} if extra is None else {"extra_noise": extra.T}
-        return -mll(out, yn.T, **kw).mean()
+        b, c = yn.shape
+        _, phi, kdiag = self._kernel_terms(xn)
+        lam = self.likelihood.floor.expand(b)
+        if extra is not None:
+            lam = lam + extra.reshape(b)
+        isd = lam.rsqrt()  # (B,)
+        psi = phi * isd  # (M, B)
+        eye = torch.eye(phi.shape[0], dtype=phi.dtype, device=phi.device)
+        l_b = _chol(eye + psi @ psi.T, 1e-8)
+        yt = yn * isd.unsqueeze(-1)  # (B, C)
+        cc = torch.linalg.solve_triangular(l_b, psi @ yt, upper=False)  # (M, C)
+        logdet = lam.log().sum() + 2.0 * l_b.diagonal().log().sum()
+        quad = yt.pow(2).sum() - cc.pow(2).sum()
+        trace = ((kdiag - phi.pow(2).sum(0)).clamp_min(0.0) / lam).sum()
+        bound = -0.5 * (c * b * math.log(2 * math.pi) + c * logdet + quad + c * trace)
+        return -bound / (b * c)
 
     def extra_train_noise(self, x: torch.Tensor) -> torch.Tensor:
-        """(N, C) or (N, 1) extra observation noise (normalised units) at raw x (N, D_in).
+        """(N,) extra observation noise ``e_i`` (normalised units) at raw x (N, D_in).
 
         ``simple`` gives the constant paper term; ``nigp`` uses the current posterior mean's
         gradient (call after a first fit); ``none`` gives zeros.
         """
         n = x.shape[0]
         if self.cfg.noisy_input == "none":
-            return torch.zeros(n, 1, dtype=x.dtype, device=x.device)
+            return torch.zeros(n, dtype=x.dtype, device=x.device)
         if self.cfg.noisy_input == "simple":
-            return self.extra_noise_simple().to(x).expand(n, -1).clone()
-        return self.nigp_extra_noise(x) / self.y_std**2
+            return self.extra_noise_simple().to(x).expand(n).clone()
+        return self.cfg.input_noise_sigma**2 * self.mean_grad_sq(x) / self.num_channels
 
-    def nigp_extra_noise(self, x: torch.Tensor, chunk: int = 256) -> torch.Tensor:
-        """(N, C) NIGP term ``sigma_x^2 ||d mean_c / d x||^2`` [output units^2] at raw x (N, D_in).
+    @torch.no_grad()
+    def mean_grad_sq(self, x: torch.Tensor, chunk: int = 512) -> torch.Tensor:
+        """(N,) ``sum_c ||d g_c / d x||^2`` of the normalised posterior means at raw x (N, D_in).
 
-        The gradient is taken by autograd of the cached posterior mean with respect to the raw
-        (un-normalised) inputs.
+        Closed form for rbf: with ``k_j`` the kernel to inducing input ``j``, ``W`` (M, C) the
+        mean weights, ``P = W W^T`` and ``Lam = diag(1 / (l^4 std_x^2))``, the sum is
+        ``sum_jl k_j k_l P_jl (x - z_j)^T Lam (x - z_l)`` (in float64); autograd otherwise.
         """
         self.refresh_cache()
+        c = self._cache
+        if self.cfg.kernel != "rbf":
+            return self._mean_grad_sq_autograd(x, chunk)
+        dt = torch.float64
+        ls = self.model.covar_module.base_kernel.lengthscale.detach().to(dt).reshape(-1)
+        lam_d = 1.0 / (ls.pow(4) * self.x_std.to(dt).pow(2))  # (D_in,)
+        z = c["z"].to(dt)  # (M, D_in)
+        w = c["w"].to(dt)  # (M, C)
+        p = w @ w.T  # (M, M)
+        pq = p * ((z * lam_d) @ z.T)  # (M, M)
+        out = []
+        for s in range(0, x.shape[0], chunk):
+            xn = self.normalise_x(x[s : s + chunk]).to(dt)  # (b, D_in)
+            k = self.model.covar_module(xn, z).to_dense()  # (b, M)
+            a = (xn * lam_d * xn).sum(-1)  # (b,)
+            bm = (xn * lam_d) @ z.T  # (b, M)
+            kp = k @ p  # (b, M)
+            t = a * (kp * k).sum(-1) - 2 * (((k * bm) @ p) * k).sum(-1) + ((k @ pq) * k).sum(-1)
+            out.append(t.clamp_min(0.0))
+        return torch.cat(out).to(x.dtype)
+
+    def _mean_grad_sq_autograd(self, x: torch.Tensor, chunk: int) -> torch.Tensor:
         out = []
         for s in range(0, x.shape[0], chunk):
             xb = x[s : s + chunk].detach().clone().requires_grad_(True)
-            rows = []
+            total = torch.zeros(xb.shape[0], dtype=x.dtype, device=x.device)
             with torch.enable_grad():
-                mean = self._mean_raw(xb)  # (b, C)
-                for c in range(self.num_channels):
-                    (g,) = torch.autograd.grad(mean[:, c].sum(), xb, retain_graph=True)
-                    rows.append(g.pow(2).sum(-1))
-            out.append(torch.stack(rows, -1))
-        return self.cfg.input_noise_sigma**2 * torch.cat(out).detach()
+                mean = self._mean_normalised(xb)  # (b, C)
+                for ch in range(self.num_channels):
+                    (g,) = torch.autograd.grad(mean[:, ch].sum(), xb, retain_graph=True)
+                    total = total + g.pow(2).sum(-1)
+            out.append(total.detach())
+        return torch.cat(out)
+
+    def trainable_parameters(self) -> list[nn.Parameter]:
+        """Parameters given to Adam: kernel hyperparameters, Z (when learned), noise floor."""
+        return [p for p in self.parameters() if p.requires_grad]
 
     def fit(self, x: torch.Tensor, y: torch.Tensor, *, progress: bool = False) -> list[float]:
-        """Train on (x, y) with Adam, then set q to its optimum; NIGP refits as configured.
+        """Train on (x, y) with Adam on the collapsed bound, set q; NIGP refits as configured.
 
         Args:
             x: (N, D_in) raw inputs.
@@ -518,155 +618,183 @@ class SVGPRegressor(nn.Module):
         rounds = self.cfg.nigp_iterations + 1 if self.cfg.noisy_input == "nigp" else 1
         losses: list[float] = []
         extra = (
-            torch.zeros(x.shape[0], 1, dtype=x.dtype, device=x.device)
+            torch.zeros(x.shape[0], dtype=x.dtype, device=x.device)
             if self.cfg.noisy_input == "nigp"
             else self.extra_train_noise(x)
         )
         for r in range(rounds):
             if r > 0:
                 extra = self.extra_train_noise(x)
-            losses += self.train_steps(x, y, extra, progress=progress)
+            steps = self.cfg.steps_for(x.shape[0]) if r == 0 else self.cfg.nigp_refit_steps
+            losses += self.train_steps(x, y, extra, steps=steps, progress=progress)
             self.finalise(x, y, extra)
         return losses
 
-    def freeze_q(self, frozen: bool) -> None:
-        """Stop (or restart) gradients to the variational parameters of q."""
-        for p in self.model.variational_strategy._variational_distribution.parameters():
-            p.requires_grad_(not frozen)
-
-    def trainable_parameters(self) -> list[nn.Parameter]:
-        """Parameters given to Adam: hyperparameters, Z, noise floor (and q if ``train_q``)."""
-        vd = self.model.variational_strategy._variational_distribution
-        skip = set() if self.cfg.train_q else {id(p) for p in vd.parameters()}
-        return [p for p in self.parameters() if id(p) not in skip]
+    def batch_indices(self, n: int, steps: int, device: torch.device) -> list[torch.Tensor]:
+        """Seeded point subsets of every step (all points when ``n <= batch_size``)."""
+        bs = min(self.cfg.batch_size, n)
+        if bs >= n:
+            return [torch.arange(n, device=device)] * steps
+        g = torch.Generator().manual_seed(self.cfg.seed)
+        return [torch.randperm(n, generator=g)[:bs].to(device) for _ in range(steps)]
 
     def train_steps(
-        self, x: torch.Tensor, y: torch.Tensor, extra: torch.Tensor, *, progress: bool = False
+        self,
+        x: torch.Tensor,
+        y: torch.Tensor,
+        extra: torch.Tensor,
+        *,
+        steps: int,
+        progress: bool = False,
     ) -> list[float]:
-        """Adam on the minibatch ELBO for ``min(epochs * ceil(N / batch), max_steps)`` steps."""
-        n = x.shape[0]
-        xn, yn = self.normalise_x(x), self.normalise_y(y)
-        bs = min(self.cfg.batch_size, n)
-        steps = min(self.cfg.epochs * math.ceil(n / bs), self.cfg.max_steps)
+        """Adam on the collapsed bound for ``steps`` steps (q is not touched)."""
         if steps == 0:
             return []
-        g = torch.Generator().manual_seed(self.cfg.seed)
+        n = x.shape[0]
+        xn, yn = self.normalise_x(x), self.normalise_y(y)
         opt = torch.optim.Adam(self.trainable_parameters(), lr=self.cfg.lr)
-        self.freeze_q(not self.cfg.train_q)
         self.train()
         losses = []
-        it = range(steps)
+        batches = self.batch_indices(n, steps, x.device)
+        it: Any = batches
         if progress:
             from tqdm import tqdm
 
-            it = tqdm(it, desc="svgp", leave=False)
-        perm = torch.randperm(n, generator=g)
-        pos = 0
-        every = self.cfg.q_refresh_every
-        for step in it:
-            if every and step % every == 0:
-                self.finalise(x, y, extra)
-            if pos + bs > n:
-                perm, pos = torch.randperm(n, generator=g), 0
-            idx = perm[pos : pos + bs].to(x.device)
-            pos += bs
+            it = tqdm(batches, desc="svgp", leave=False)
+        for idx in it:
             opt.zero_grad(set_to_none=True)
             loss = self.elbo_loss(xn[idx], yn[idx], extra[idx], n)
             loss.backward()
             opt.step()
             losses.append(float(loss.detach()))
-        self.freeze_q(False)
         self.eval()
         self._cache = None
         return losses
 
     @torch.no_grad()
     def finalise(self, x: torch.Tensor, y: torch.Tensor, extra: torch.Tensor) -> None:
-        """Set q(v_c) to the closed-form ELBO optimum on the full set; set ``extra_test_var``.
+        """Set q to the closed-form ELBO optimum on the full set; set the test noise term.
+
+        ``S = (I + Phi Lam^-1 Phi^T)^-1``, ``m_c = S Phi Lam^-1 y_c`` (whitened).
 
         Args:
             x: (N, D_in) raw inputs.
             y: (N, C) raw outputs.
-            extra: (N, C) or (N, 1) extra observation noise (normalised units).
+            extra: (N,) extra observation noise ``e_i`` (normalised units).
         """
         xn, yn = self.normalise_x(x), self.normalise_y(y)
-        z = self.model.variational_strategy.inducing_points
-        kern = self.model.covar_module
-        kzz = kern(z).to_dense()
-        m = z.shape[0]
-        # same jitter as GPyTorch's strategy and the fast path, so q matches their L exactly
-        l_zz = self._chol(kzz, self.model.variational_strategy.jitter_val)
-        kzx = torch.cat(
-            [kern(z, xn[s : s + 2048]).to_dense() for s in range(0, xn.shape[0], 2048)], -1
-        )  # (M, N)
-        phi = torch.linalg.solve_triangular(l_zz, kzx, upper=False)  # (M, N)
-        lam = self.likelihood.floor + extra.T  # (C|1, N)
-        eye = torch.eye(m, dtype=x.dtype, device=x.device)
-        w = 1.0 / lam  # (C|1, N)
-        prec = torch.cat(
-            [eye + (phi * w[s : s + 32].unsqueeze(1)) @ phi.T for s in range(0, w.shape[0], 32)]
-        )  # (C|1, M, M)
-        l_p = self._chol(prec, 1e-8)
-        rhs = (phi.unsqueeze(0) * (yn.T / lam).unsqueeze(1)).sum(-1)  # (C, M)
-        mean = torch.cholesky_solve(rhs.unsqueeze(-1), l_p).squeeze(-1)  # (C, M)
-        # S = P^-1 = L_p^-T L_p^-1: its Cholesky factor via the flipped factorisation
-        s_cov = torch.cholesky_inverse(l_p)  # (C|1, M, M)
-        r = self._chol(s_cov, 1e-10)
-        vd = self.model.variational_strategy._variational_distribution
-        vd.variational_mean.copy_(mean)
-        vd.chol_variational_covar.copy_(r.expand(self.num_channels, m, m))
+        _, phi, _ = self._kernel_terms(xn)
+        lam = self.likelihood.floor + extra.reshape(-1)  # (N,)
+        m = phi.shape[0]
+        eye = torch.eye(m, dtype=phi.dtype, device=phi.device)
+        l_b = _chol(eye + (phi / lam) @ phi.T, 1e-8)  # B = I + Phi Lam^-1 Phi^T = L_B L_B^T
+        rhs = phi @ (yn / lam.unsqueeze(-1))  # (M, C)
+        mean = torch.cholesky_solve(rhs, l_b)  # (M, C)
+        root = torch.linalg.solve_triangular(l_b.T, eye, upper=True)  # S = B^-1 = R R^T
+        vd = self.variational
+        vd.variational_mean.copy_(mean.T)
+        vd.covar_root.copy_(root)
         self.model.variational_strategy.variational_params_initialized.fill_(1)
-        self._shared_cov = r.shape[0] == 1
-        if self.cfg.noisy_input == "simple":
-            self.extra_test_var.fill_(self.cfg.simple_extra_var)
-        elif self.cfg.noisy_input == "nigp":
-            self.extra_test_var.copy_((extra * self.y_std**2).mean(0).expand(self.num_channels))
+        if self.cfg.noisy_input == "none":
+            self.test_extra_noise.zero_()
         else:
-            self.extra_test_var.zero_()
+            self.test_extra_noise.copy_(extra.mean())
         self._cache = None
 
-    @staticmethod
-    def _chol(a: torch.Tensor, jitter: float = 1e-6) -> torch.Tensor:
-        eye = torch.eye(a.shape[-1], dtype=a.dtype, device=a.device)
-        for _ in range(6):
-            l, info = torch.linalg.cholesky_ex(a + jitter * eye)
-            if not bool(info.any()):
-                return l
-            jitter = jitter * 10
-        return torch.linalg.cholesky(a + jitter * eye)
+    @torch.no_grad()
+    def calibrate(
+        self,
+        x_val: torch.Tensor,
+        y_val: torch.Tensor,
+        x: torch.Tensor,
+        y: torch.Tensor,
+        extra: torch.Tensor,
+        rounds: int = 2,
+    ) -> float:
+        """Raise the noise floor to the validation-likelihood maximiser, then reset q.
+
+        With ``r_i`` the mean over channels of the squared normalised validation residuals and
+        ``b_i = var_f(x_i) + e_test``, the floor ``f`` maximises
+        ``sum_i -(log(b_i + f) + r_i / (b_i + f)) / 2`` (bisection on its derivative); it is
+        never lowered below the ELBO's floor. q is then recomputed from the training points
+        with the new floor (``rounds`` times, since q depends on the floor).
+
+        Args:
+            x_val: (N_v, D_in) raw validation inputs (other demonstrations than training).
+            y_val: (N_v, C) raw validation outputs.
+            x: (N, D_in) raw training inputs.
+            y: (N, C) raw training outputs.
+            extra: (N,) training extra noise ``e_i`` (normalised units).
+            rounds: calibrate -> refit q rounds.
+
+        Returns:
+            The final noise floor (normalised units).
+        """
+        check_shape("x_val", x_val, ("N_v", self.input_dim))
+        check_shape("y_val", y_val, (x_val.shape[0], self.num_channels))
+        for _ in range(rounds):
+            mean, var = self.predict(x_val)
+            c = self._cache
+            base = var[:, 0] / self.y_std[0] ** 2 - c["floor"]  # (N_v,) var_f + e_test
+            r2 = ((y_val - mean) / self.y_std).pow(2).mean(-1)  # (N_v,)
+            floor = float(c["floor"])
+
+            def slope(f: float, base: torch.Tensor = base, r2: torch.Tensor = r2) -> float:
+                t = base + f
+                return float((1.0 / t - r2 / t.pow(2)).sum())
+
+            if slope(floor) >= 0:  # the training floor is already wide enough
+                break
+            lo, hi = floor, max(2 * floor, 1e-6)
+            while slope(hi) < 0 and hi < 1e6:
+                lo, hi = hi, 2 * hi
+            for _ in range(50):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if slope(mid) < 0 else (lo, mid)
+            new = 0.5 * (lo + hi)
+            raw = math.log(math.expm1(max(new - self.likelihood.floor_min, 1e-12)))
+            self.likelihood.raw_floor.fill_(raw)
+            self.finalise(x, y, extra)
+        return float(self.likelihood.floor)
 
     # ---------------------------------------------------------------------------- prediction
     @torch.no_grad()
     def refresh_cache(self) -> None:
-        """Precompute ``L``, ``alpha`` and ``Q`` from the current parameters (fast path)."""
+        """Precompute the fast-path tensors from the current parameters.
+
+        ``z`` (M, D_in), ``t = L^-T`` (M, M) so that ``w = k t`` is ``L^-1 k``, the whitened
+        means ``mw`` (M, C), ``p = I - S`` (M, M), the mean weights ``w = L^-T mw`` (M, C),
+        ``outputscale`` and ``noise = floor + e_test``; computed in float64, stored in the
+        model's dtype.
+        """
+        dt = torch.float64
         vs = self.model.variational_strategy
         z = vs.inducing_points.detach()
-        kern = self.model.covar_module
-        kzz = kern(z).to_dense()
-        l_zz = self._chol(kzz, vs.jitter_val)
-        vd = vs._variational_distribution
-        mvec = vd.variational_mean.detach()  # (C, M)
-        r = vd.chol_variational_covar.detach().tril()  # (C, M, M)
-        if getattr(self, "_shared_cov", False) or bool((r == r[:1]).all()):
-            r = r[:1]
-        alpha = torch.linalg.solve_triangular(l_zz.mT, mvec.unsqueeze(-1), upper=True)
-        q = torch.linalg.solve_triangular(l_zz.mT, r, upper=True)  # (C|1, M, M)
+        kzz = self.model.covar_module(z).to_dense().to(dt)
+        l_zz = _chol(kzz, self.jitter)
+        m = z.shape[0]
+        eye = torch.eye(m, dtype=dt, device=z.device)
+        linv = torch.linalg.solve_triangular(l_zz, eye, upper=False)  # (M, M)
+        vd = self.variational
+        mw = vd.variational_mean.detach().to(dt).T  # (M, C)
+        s_cov = vd.covariance.detach().to(dt)
+        out_dt = z.dtype
         self._cache = {
             "z": z,
-            "l": l_zz,
-            "alpha": alpha.squeeze(-1).T.contiguous(),
-            "q": q,
-            "outputscale": kern.outputscale.detach(),
+            "t": linv.T.to(out_dt).contiguous(),
+            "mw": mw.to(out_dt).contiguous(),
+            "p": (eye - s_cov).to(out_dt).contiguous(),
+            "w": (linv.T @ mw).to(out_dt).contiguous(),
+            "outputscale": self.model.covar_module.outputscale.detach().to(out_dt),
+            "noise": (self.likelihood.floor.detach() + self.test_extra_noise).to(out_dt),
+            "floor": self.likelihood.floor.detach().to(out_dt),
         }
 
-    def _kernel_cross(self, xn: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
-        return self.model.covar_module(xn, z).to_dense()
-
-    def _mean_raw(self, x: torch.Tensor) -> torch.Tensor:
-        """(B, C) posterior mean [output units] at raw x (B, D_in), differentiable in x."""
+    def _mean_normalised(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, C) posterior mean of the normalised outputs at raw x (B, D_in), differentiable."""
         c = self._cache
-        k = self._kernel_cross(self.normalise_x(x), c["z"])  # (B, M)
-        return (k @ c["alpha"]) * self.y_std + self.y_mean
+        k = self.model.covar_module(self.normalise_x(x), c["z"]).to_dense()  # (B, M)
+        return k @ c["w"]
 
     def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Predictive mean and variance of the outputs (fast path, cached tensors).
@@ -684,19 +812,17 @@ class SVGPRegressor(nn.Module):
         c = self._cache
         with torch.no_grad():
             xn = self.normalise_x(x)
-            k = self._kernel_cross(xn, c["z"])  # (B, M)
-            mean = k @ c["alpha"]  # (B, C)
+            k = self.model.covar_module(xn, c["z"]).to_dense()  # (B, M)
             kss = (
                 c["outputscale"].expand(x.shape[0])
                 if self.cfg.kernel in ("rbf", "matern")
                 else self.model.covar_module(xn, diag=True)
             )
-            v = torch.linalg.solve_triangular(c["l"], k.T, upper=False)  # (M, B)
-            qk = torch.einsum("cmk,bm->cbk", c["q"], k)  # (C|1, B, M)
-            var_f = (kss - v.pow(2).sum(0)).unsqueeze(0) + qk.pow(2).sum(-1)  # (C|1, B)
-            var_f = var_f.clamp_min(0.0).T  # (B, C|1)
-            var = (var_f + self.likelihood.floor) * self.y_std**2 + self.extra_test_var
-            return mean * self.y_std + self.y_mean, var.expand(-1, self.num_channels)
+            w = k @ c["t"]  # (B, M) = (L^-1 k)^T
+            mean = w @ c["mw"]  # (B, C)
+            var_f = (kss - ((w @ c["p"]) * w).sum(-1)).clamp_min(0.0)  # (B,)
+            var = (var_f + c["noise"]).unsqueeze(-1) * self.y_std.pow(2)  # (B, C)
+            return mean * self.y_std + self.y_mean, var
 
     def predict_gpytorch(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Reference prediction through GPyTorch's own variational strategy (slow).
@@ -711,20 +837,21 @@ class SVGPRegressor(nn.Module):
         with torch.no_grad(), gpytorch.settings.fast_pred_var(False):
             out = self.model(self.normalise_x(x))
             mean, var = out.mean.T, out.variance.T  # (B, C)
-        var = (var + self.likelihood.floor) * self.y_std**2 + self.extra_test_var
-        return mean * self.y_std + self.y_mean, var
+            noise = self.likelihood.floor + self.test_extra_noise
+            var = (var + noise) * self.y_std.pow(2)
+            return mean * self.y_std + self.y_mean, var
 
     # ------------------------------------------------------------------------------ storing
     def to_checkpoint(self) -> dict[str, Any]:
         """Everything needed to rebuild the regressor (config, sizes, tensors)."""
         return {
+            "format": CHECKPOINT_FORMAT,
             "cfg": asdict(self.cfg),
             "input_dim": self.input_dim,
             "num_channels": self.num_channels,
-            "num_inducing": int(self.model.variational_strategy.inducing_points.shape[0]),
+            "num_inducing": self.num_inducing,
             "window": self.window,
             "bandwidth": self.bandwidth,
-            "shared_cov": bool(getattr(self, "_shared_cov", False)),
             "state_dict": {k: v.detach().cpu() for k, v in self.state_dict().items()},
         }
 
@@ -732,7 +859,16 @@ class SVGPRegressor(nn.Module):
     def from_checkpoint(
         cls, d: dict[str, Any], map_location: torch.device | str | None = None
     ) -> SVGPRegressor:
-        """Rebuild a regressor saved with :meth:`to_checkpoint`."""
+        """Rebuild a regressor saved with :meth:`to_checkpoint`.
+
+        Raises:
+            CheckpointError: for a checkpoint of another layout (an older version).
+        """
+        if d.get("format") != CHECKPOINT_FORMAT:
+            raise CheckpointError(
+                f"GP checkpoint format {d.get('format')} is not {CHECKPOINT_FORMAT}: retrain "
+                "the predictor with this version"
+            )
         reg = cls(
             SVGPCfg(**d["cfg"]),
             input_dim=d["input_dim"],
@@ -741,9 +877,105 @@ class SVGPRegressor(nn.Module):
             window=d["window"],
             bandwidth=d["bandwidth"],
         )
-        reg.load_state_dict(d["state_dict"])
-        reg._shared_cov = d.get("shared_cov", False)
+        sd = d["state_dict"]
+        reg.to(sd["x_mean"].dtype)
+        reg.load_state_dict(sd)
         reg.eval()
         if map_location is not None:
             reg.to(map_location)
         return reg
+
+
+class SVGPBank:
+    """G trained rbf/matern regressors of equal D_in and C, evaluated together.
+
+    Every regressor's fast-path tensors are stacked (inducing inputs zero-padded to the largest
+    M, with zero weights, so padding changes nothing) and one batched matmul chain predicts all
+    of them: the online forecast of every action's GP in a few tensor operations.
+
+    Args:
+        regs: the regressors (the same object may appear several times).
+
+    Raises:
+        ConfigError: for time-series kernels or mismatched sizes.
+    """
+
+    def __init__(self, regs: Sequence[SVGPRegressor]) -> None:
+        if not regs:
+            raise ConfigError("an SVGPBank needs at least one regressor")
+        kinds = {r.cfg.kernel for r in regs}
+        if not kinds <= {"rbf", "matern"} or len(kinds) != 1:
+            raise ConfigError(f"SVGPBank needs one of rbf or matern for all GPs, got {kinds}")
+        d_in, c = regs[0].input_dim, regs[0].num_channels
+        if any(r.input_dim != d_in or r.num_channels != c for r in regs):
+            raise ConfigError("SVGPBank needs regressors of equal input_dim and num_channels")
+        self.kernel = kinds.pop()
+        m = max(r.num_inducing for r in regs)
+        g = len(regs)
+        ref = regs[0].x_mean
+        z = torch.zeros(g, m, d_in, dtype=ref.dtype, device=ref.device)
+        t = torch.zeros(g, m, m, dtype=ref.dtype, device=ref.device)
+        p = torch.zeros_like(t)
+        mw = torch.zeros(g, m, c, dtype=ref.dtype, device=ref.device)
+        scale = torch.empty(g, d_in, dtype=ref.dtype, device=ref.device)
+        shift = torch.empty_like(scale)
+        os_, noise = torch.empty(g, dtype=ref.dtype), torch.empty(g, dtype=ref.dtype)
+        for i, r in enumerate(regs):
+            if r._cache is None:
+                r.refresh_cache()
+            cc = r._cache
+            mi = r.num_inducing
+            ls = r.model.covar_module.base_kernel.lengthscale.detach().reshape(-1)  # (1|D_in,)
+            z[i, :mi] = cc["z"] / ls
+            t[i, :mi, :mi] = cc["t"]
+            p[i, :mi, :mi] = cc["p"]
+            mw[i, :mi] = cc["mw"]
+            scale[i] = 1.0 / (r.x_std * ls)
+            shift[i] = r.x_mean * scale[i]
+            os_[i], noise[i] = cc["outputscale"], cc["noise"]
+        self.z, self.t, self.p, self.mw = z, t, p, mw
+        self.z2 = z.pow(2).sum(-1)  # (G, M)
+        self.scale, self.shift = scale, shift  # (G, D_in): x_scaled = x * scale - shift
+        self.outputscale = os_.to(ref.device).view(g, 1)
+        self.noise = noise.to(ref.device).view(g, 1)
+        self.y_mean = torch.stack([r.y_mean for r in regs])  # (G, C)
+        self.y_std = torch.stack([r.y_std for r in regs])  # (G, C)
+        self.num_gps = g
+
+    @torch.no_grad()
+    def predict(self, x: torch.Tensor, chunk: int = 256) -> tuple[torch.Tensor, torch.Tensor]:
+        """Every regressor's predictive mean and variance at the same inputs.
+
+        Args:
+            x: (B, D_in) raw inputs.
+            chunk: windows per batched pass (bounds the (G, chunk, D_in) temporary).
+
+        Returns:
+            mean: (B, G, C) [output units]; var: (B, G, C) [output units^2].
+        """
+        check_shape("x", x, ("B", self.z.shape[-1]))
+        means, vars_ = [], []
+        for s in range(0, x.shape[0], chunk):
+            xs = x[s : s + chunk].unsqueeze(0) * self.scale.unsqueeze(1) - self.shift.unsqueeze(
+                1
+            )  # (G, b, D_in)
+            d2 = torch.baddbmm(
+                xs.pow(2).sum(-1, keepdim=True) + self.z2.unsqueeze(1),
+                xs,
+                self.z.mT,
+                alpha=-2.0,
+            ).clamp_min_(0.0)  # (G, b, M)
+            if self.kernel == "rbf":
+                k = torch.exp(-0.5 * d2)
+            else:
+                r5 = (5.0 * d2).sqrt()
+                k = (1.0 + r5 + r5.pow(2) / 3.0) * torch.exp(-r5)
+            k = k * self.outputscale.unsqueeze(-1)  # (G, b, M)
+            w = torch.bmm(k, self.t)  # (G, b, M)
+            mean = torch.bmm(w, self.mw)  # (G, b, C)
+            var_f = (self.outputscale - (torch.bmm(w, self.p) * w).sum(-1)).clamp_min(0.0)
+            var = (var_f + self.noise).unsqueeze(-1) * self.y_std.pow(2).unsqueeze(1)
+            mean = mean * self.y_std.unsqueeze(1) + self.y_mean.unsqueeze(1)
+            means.append(mean.transpose(0, 1))  # (b, G, C)
+            vars_.append(var.transpose(0, 1))
+        return torch.cat(means), torch.cat(vars_)

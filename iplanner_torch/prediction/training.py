@@ -1,9 +1,9 @@
 """Lightning training of the whole predictor: classifier, next-action model and every GP.
 
-* :class:`SVGPModule` trains one :class:`SVGPRegressor` on its minibatch ELBO
-  (``gpytorch.mlls.VariationalELBO``), logging ``train/elbo``; every ``q_refresh_every`` steps
-  and at the end q is set to its closed-form optimum; after training it logs ``val/nll`` and
-  ``val/rmse`` on the validation windows of its group. NIGP rounds are successive fits.
+* :class:`SVGPModule` trains one :class:`SVGPRegressor` with Adam on its collapsed ELBO
+  (Titsias's bound; q in closed form, see :mod:`iplanner_torch.prediction.svgp`), logging
+  ``train/elbo``; at the end q is set from all points and ``val/nll``, ``val/rmse`` are logged
+  on the validation windows of its group. NIGP rounds are successive (warm-started) fits.
 * :class:`IVMModule` lets Lightning drive the IVM's greedy fit: the greedy import loop runs
   inside the single training step of a single epoch (the IVM is not a gradient method), and
   the loss after each import step is logged as ``train/ivm_loss`` (step = import count).
@@ -31,6 +31,7 @@ from iplanner_torch.prediction.predictor import (
     HumanMotionPredictor,
     PredictorCfg,
     dataset_fingerprint,
+    gp_inputs,
 )
 from iplanner_torch.prediction.svgp import SVGPCfg, SVGPRegressor
 
@@ -50,6 +51,8 @@ class TrainerCfg:
 
     # cap on the GP epochs (None: SVGPCfg.epochs); the step cap SVGPCfg.max_steps also holds.
     max_epochs: int | None = None
+    # cap on the optimiser steps of every GP fit (None: only SVGPCfg's caps).
+    max_steps: int | None = None
     # Lightning accelerator: auto picks CUDA when present.
     accelerator: Literal["auto", "cpu", "gpu", "cuda"] = "auto"
     # devices per sub-model fit.
@@ -68,20 +71,35 @@ class TrainerCfg:
             raise ConfigError(
                 f"accelerator must be auto, cpu, gpu or cuda, got {self.accelerator!r}"
             )
+        if self.max_steps is not None and self.max_steps < 0:
+            raise ConfigError(f"max_steps must be >= 0 or None, got {self.max_steps}")
         if self.devices < 1 or self.log_every_n_steps < 1:
             raise ConfigError("devices and log_every_n_steps must be >= 1")
 
+    def cap_steps(self, steps: int) -> int:
+        """``steps`` capped by :attr:`max_steps`."""
+        return steps if self.max_steps is None else min(steps, self.max_steps)
+
 
 class SVGPModule(L.LightningModule):
-    """Trains one SVGP (eq. GPRlearning) on its minibatch ELBO.
+    """Trains one SVGP (eq. GPRlearning) on its collapsed ELBO (Titsias's bound).
+
+    Each training step is one Adam step on the bound over a seeded subset of at most
+    ``batch_size`` points (all points when N is smaller), logged as ``train/elbo``; at the end
+    q is set in closed form from all points, the noise floor is calibrated on the validation
+    windows of the group (:meth:`SVGPRegressor.calibrate`) and ``val/nll``, ``val/rmse`` are
+    logged on them.
 
     Args:
         reg: the regressor (initialised with :meth:`SVGPRegressor.from_data`).
         x: (N, D_in) raw training inputs.
         y: (N, C) raw training outputs.
-        extra: (N, C) or (N, 1) extra observation noise (normalised units).
+        extra: (N,) extra observation noise ``e_i`` (normalised units).
+        steps: optimiser steps of this fit.
         x_val: (N_v, D_in) validation inputs, or None.
         y_val: (N_v, C) validation outputs, or None.
+        calibrate: raise the noise floor on the validation windows at the end
+            (:meth:`SVGPRegressor.calibrate`, when ``cfg.calibrate_floor``).
     """
 
     def __init__(
@@ -90,42 +108,36 @@ class SVGPModule(L.LightningModule):
         x: torch.Tensor,
         y: torch.Tensor,
         extra: torch.Tensor,
+        steps: int,
         x_val: torch.Tensor | None = None,
         y_val: torch.Tensor | None = None,
+        calibrate: bool = True,
     ) -> None:
         super().__init__()
         self.reg = reg
+        self.steps = int(steps)
+        self.calibrate = bool(calibrate)
         self.register_buffer("x", x, persistent=False)
         self.register_buffer("y", y, persistent=False)
         self.register_buffer("extra", extra, persistent=False)
         self.register_buffer("x_val", x_val, persistent=False)
         self.register_buffer("y_val", y_val, persistent=False)
         self.val_metrics: dict[str, float] = {}
-        self.reg.train()
+        self._xn: torch.Tensor | None = None
+        self._yn: torch.Tensor | None = None
 
     def on_train_start(self) -> None:
-        self.reg.freeze_q(not self.reg.cfg.train_q)
         self.reg.train()
+        self._xn = self.reg.normalise_x(self.x)
+        self._yn = self.reg.normalise_y(self.y)
 
     def train_dataloader(self) -> DataLoader:
-        n = self.x.shape[0]
-        g = torch.Generator().manual_seed(self.reg.cfg.seed)
-        return DataLoader(
-            TensorDataset(torch.arange(n)),
-            shuffle=True,
-            generator=g,
-            batch_size=min(self.reg.cfg.batch_size, n),
-            drop_last=True,
-        )
+        idx = self.reg.batch_indices(self.x.shape[0], max(self.steps, 1), torch.device("cpu"))
+        return DataLoader(_IndexBatches(idx), batch_size=None, shuffle=False)
 
-    def training_step(self, batch: list[torch.Tensor], batch_idx: int) -> torch.Tensor:
-        (idx,) = batch
-        every = self.reg.cfg.q_refresh_every
-        if every and self.global_step % every == 0:
-            self.reg.finalise(self.x, self.y, self.extra)
-        xn = self.reg.normalise_x(self.x[idx])
-        yn = self.reg.normalise_y(self.y[idx])
-        loss = self.reg.elbo_loss(xn, yn, self.extra[idx], self.x.shape[0])
+    def training_step(self, batch: torch.Tensor, batch_idx: int) -> torch.Tensor:
+        idx = batch.to(self.x.device)
+        loss = self.reg.elbo_loss(self._xn[idx], self._yn[idx], self.extra[idx], self.x.shape[0])
         self.log("train/elbo", -loss, prog_bar=True, on_step=True, on_epoch=False)
         return loss
 
@@ -133,9 +145,17 @@ class SVGPModule(L.LightningModule):
         return torch.optim.Adam(self.reg.trainable_parameters(), lr=self.reg.cfg.lr)
 
     def on_train_end(self) -> None:
-        self.reg.freeze_q(False)
         self.reg.eval()
         self.reg.finalise(self.x, self.y, self.extra)
+        self._xn = self._yn = None
+        cfg = self.reg.cfg
+        if (
+            self.calibrate
+            and cfg.calibrate_floor
+            and self.x_val is not None
+            and self.x_val.shape[0] >= cfg.calibrate_min_windows
+        ):
+            self.reg.calibrate(self.x_val, self.y_val, self.x, self.y, self.extra)
         if self.x_val is not None and self.x_val.shape[0]:
             mean, var = self.reg.predict(self.x_val)
             nll = 0.5 * (torch.log(2 * math.pi * var) + (self.y_val - mean) ** 2 / var)
@@ -148,6 +168,19 @@ class SVGPModule(L.LightningModule):
 
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         checkpoint["svgp"] = self.reg.to_checkpoint()
+
+
+class _IndexBatches(torch.utils.data.Dataset):
+    """A dataset whose items are precomputed index batches (one per optimiser step)."""
+
+    def __init__(self, batches: list[torch.Tensor]) -> None:
+        self.batches = batches
+
+    def __len__(self) -> int:
+        return len(self.batches)
+
+    def __getitem__(self, i: int) -> torch.Tensor:
+        return self.batches[i]
 
 
 class IVMModule(L.LightningModule):
@@ -290,29 +323,27 @@ def train_svgp(
     L.seed_everything(tcfg.seed, verbose=False)
     reg = SVGPRegressor.from_data(cfg, x, y, window=window)
     n = x.shape[0]
-    bs = min(cfg.batch_size, n)
-    epochs = cfg.epochs if tcfg.max_epochs is None else min(cfg.epochs, tcfg.max_epochs)
-    steps = min(epochs * (n // bs), cfg.max_steps)
     rounds = cfg.nigp_iterations + 1 if cfg.noisy_input == "nigp" else 1
-    extra = (
-        torch.zeros(n, 1, dtype=x.dtype) if cfg.noisy_input == "nigp" else reg.extra_train_noise(x)
-    )
-    module = None
+    nigp = cfg.noisy_input == "nigp"
+    extra = torch.zeros(n, dtype=x.dtype) if nigp else reg.extra_train_noise(x)
     trainer = None
     for r in range(rounds):
         if r > 0:
             reg.to(x.device)
             extra = reg.extra_train_noise(x)
-        module = SVGPModule(reg, x, y, extra, x_val, y_val)
-        trainer = _trainer(
-            tcfg, out_dir, f"{name}" if rounds == 1 else f"{name}_r{r}", max(steps, 0), progress
+        steps = tcfg.cap_steps(
+            cfg.steps_for(n, tcfg.max_epochs) if r == 0 else cfg.nigp_refit_steps
         )
+        # the floor is calibrated once, after the last round
+        module = SVGPModule(reg, x, y, extra, steps, x_val, y_val, calibrate=r == rounds - 1)
         if steps > 0:
+            trainer = _trainer(
+                tcfg, out_dir, name if rounds == 1 else f"{name}_r{r}", steps, progress
+            )
             trainer.fit(module)
         else:
             module.on_train_end()
-    assert trainer is not None and module is not None
-    if steps > 0:
+    if trainer is not None:
         trainer.save_checkpoint(ckpt)
     else:
         torch.save({"svgp": reg.to_checkpoint()}, ckpt)
@@ -335,10 +366,10 @@ def _as_train_val(data: Any) -> tuple[WindowSet, WindowSet | None]:
     )
 
 
-def _gp_xy(w: WindowSet) -> tuple[torch.Tensor, torch.Tensor]:
-    """Flattened windows (N, n_p D) and future positions relative to the pose (N, n_f K 3)."""
+def _gp_xy(w: WindowSet, gp_input: str) -> tuple[torch.Tensor, torch.Tensor]:
+    """GP inputs (N, n_p D) and future positions relative to the pose (N, n_f K 3)."""
     n = len(w)
-    x = w.f_prev.reshape(n, -1).float()  # (N, n_p * D)
+    x = gp_inputs(w.f_prev.float(), len(w.joint_names), gp_input)  # (N, n_p * D)
     y = (w.xi_next - w.pose_now.unsqueeze(1)).reshape(n, -1).float()  # (N, n_f * K * 3)
     return x, y
 
@@ -414,8 +445,8 @@ def train_predictor(
     )
     next_model = _train_next_action(train, cfg)
 
-    x_all, y_all = _gp_xy(train)
-    xv_all, yv_all = _gp_xy(val) if val is not None and len(val) else (None, None)
+    x_all, y_all = _gp_xy(train, cfg.gp_input)
+    xv_all, yv_all = _gp_xy(val, cfg.gp_input) if val is not None and len(val) else (None, None)
     groups: dict[tuple[int, int], torch.Tensor] = {}
     for p in torch.unique(train.progress).tolist():
         for c in torch.unique(train.current[train.progress == p]).tolist():
@@ -529,7 +560,18 @@ def _train_classifier(
             "seed": cfg.seed,
         },
     }
-    clf = ActionClassifier()
+    # the classifier sees the hands' positions and velocities (what separates reaches early);
+    # the windows are still passed whole and the columns are picked inside the classifier
+    from iplanner_torch.prediction.ivm import feature_columns
+
+    kinds = [k for k in ("position", "velocity") if k in train.cfg.feature_kinds]
+    hands = [j for j in ("left_hand", "right_hand") if j in train.joint_names]
+    index = (
+        feature_columns(train.joint_names, train.cfg.feature_kinds, hands, kinds)
+        if hands and kinds
+        else None
+    )
+    clf = ActionClassifier(feature_index=index)
     module = IVMModule(clf, x, train.progress[idx], train.current[idx], fit_kwargs)
     # manual optimisation never steps an optimiser, so the budget is one epoch, not one step
     trainer = _trainer(tcfg, out_dir, "classifier", -1, progress, max_epochs=1)

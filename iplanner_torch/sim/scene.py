@@ -10,8 +10,8 @@ robot, y to the human's left, z up, table top at z = 0.
 Block ids (the paper's task orders name them): ``id = 4 row + col`` with ``col`` 0..3 running
 from the human's left (+y) to the human's right (-y) and ``row`` 0 (front, nearer the human) or
 1 (back, nearer the robot). Delivery spot ``i`` is exactly target ``i`` of the reaching data set
-(:func:`iplanner_torch.data.reaching.reach_targets` with 8 targets: rows at x = -0.06 and
-0.10 m, columns at y = 0.36, 0.12, -0.12, -0.36 m), so ``Take_i`` is the reach ``reach_i`` the
+(:func:`iplanner_torch.data.reaching.reach_targets` with 8 targets: rows at x = 0.04 and
+0.18 m, columns at y = 0.36, 0.12, -0.12, -0.36 m), so ``Take_i`` is the reach ``reach_i`` the
 predictor was trained on.
 
 ====  ====================  =================================
@@ -98,7 +98,7 @@ class SceneCfg:
     # x of the front (row 0) and back (row 1) far block positions [m]
     block_rows_x: tuple[float, float] = (0.32, 0.44)
     # x of the front (row 0) and back (row 1) delivery spots [m]
-    delivery_rows_x: tuple[float, float] = (-0.06, 0.10)
+    delivery_rows_x: tuple[float, float] = (0.04, 0.18)
     # x of the seated human's torso; the chair is placed behind it [m]
     human_seat_x: float = -0.45
     # whether the robot's bodies are gravity-compensated (joint-torque controllers do this)

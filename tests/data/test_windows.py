@@ -92,8 +92,14 @@ def test_joint_lost_in_whole_window():
     out = impute_nan(torch.tensor(x), JOINT_NAMES).numpy()
     np.testing.assert_array_equal(out[:, 6], x[:, 5])  # from the left elbow
     alone = np.full((15, 1, 3), np.nan)
-    with pytest.raises(DataError, match="no connected joint is observed"):
+    with pytest.raises(DataError, match="no other joint is observed"):
         impute_nan(torch.tensor(alone), ["right_hand"])
+    # a subset with no connected joint: the lost torso takes an observed hand's trajectory
+    subset = np.random.default_rng(1).normal(size=(15, 3, 3))
+    subset[:, 0] = np.nan
+    out = impute_nan(torch.tensor(subset), ["torso", "left_hand", "right_hand"]).numpy()
+    assert np.isfinite(out).all()
+    np.testing.assert_array_equal(out[:, 1:], subset[:, 1:])
 
 
 def test_feature_errors():

@@ -199,3 +199,34 @@ def test_cost_weights_validate() -> None:
 
 def test_static_forecast_fixture_is_float() -> None:
     assert static_forecast([0, 0, 0], 0.1).var.dtype == torch.float32
+
+
+def test_dropping_light_actions_keeps_an_upper_bound() -> None:
+    """full <= dropped <= full + dropped mass, on random sphere pairs (reference: all actions)."""
+    from iplanner_torch.errors import ConfigError
+    from iplanner_torch.planning.costs import (
+        HumanObstacle,
+        drop_light_actions,
+        human_collision_bound,
+    )
+
+    gen = torch.Generator().manual_seed(5)
+    w_x, a, s_h, s_r = 4, 4, 3, 2
+    human = HumanObstacle(
+        mean=0.3 * torch.randn(w_x, a, s_h, 3, generator=gen, dtype=torch.float64),
+        var=0.01 + 0.02 * torch.rand(w_x, a, s_h, 3, generator=gen, dtype=torch.float64),
+        radii=torch.full((s_h,), 0.08, dtype=torch.float64),
+        weights=torch.tensor([0.0001, 0.9, 0.0004, 0.0995], dtype=torch.float64),
+    )
+    centers = 0.3 * torch.randn(5, w_x, s_r, 3, generator=gen, dtype=torch.float64)
+    radii = torch.full((s_r,), 0.1, dtype=torch.float64)
+    full, _ = human_collision_bound(centers, radii, human)
+    light = drop_light_actions(human, 5e-4)
+    assert light.weights.tolist() == [0.9, 0.0995] and light.residual == pytest.approx(5e-4)
+    dropped, _ = human_collision_bound(centers, radii, light)
+    assert bool((dropped >= full - 1e-12).all())
+    assert bool((dropped <= full + 5e-4 + 1e-12).all())
+    assert float(full.max()) > 1e-3  # some pairs are close: the comparison is not vacuous
+    assert drop_light_actions(human, 0.0) is human
+    with pytest.raises(ConfigError, match="max_mass"):
+        drop_light_actions(human, -1.0)

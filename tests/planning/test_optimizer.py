@@ -233,3 +233,40 @@ def test_static_check_tolerates_a_goal_the_task_puts_in_contact() -> None:
     assert not res.feasible and res.hold_index is not None
     held = torch.cat([res.q[res.hold_index], torch.zeros(1, dtype=torch.float64)])
     assert float(_Box(0.2).clearance(held.view(1, 3), robot.sphere_radii).min()) >= 0.0
+
+
+def test_initial_trajectories_respect_the_velocity_limits_for_a_duration() -> None:
+    """Large perturbations are scaled down per joint so finite-difference velocities stay within
+    INIT_VEL_FRACTION of the limits; the straight line and the pinned ends are unchanged."""
+    from iplanner_torch.planning.optimizer import INIT_VEL_FRACTION
+
+    arm = PlanarArm(dtype=torch.float64)
+    opt = TrajectoryOptimizer(arm, OptimizerCfg(num_trajectories=16, perturbation_std=1.0))
+    q_s = torch.tensor([0.0, -0.2, 0.1], dtype=torch.float64)
+    q_g = torch.tensor([0.5, 0.3, -0.4], dtype=torch.float64)
+    duration = 1.0
+    free = opt.initial_trajectories(q_s, q_g, 16, seed=3)
+    dt = duration / (opt.cfg.num_waypoints - 1)
+    vel_free = (free[:, 1:] - free[:, :-1]).abs() / dt / opt.v_max
+    assert float(vel_free.max()) > 1.0  # the unscaled perturbations are too fast
+    q = opt.initial_trajectories(q_s, q_g, 16, seed=3, duration=duration)
+    vel = (q[:, 1:] - q[:, :-1]).abs() / dt / opt.v_max
+    assert float(vel.max()) <= INIT_VEL_FRACTION + 1e-9
+    assert torch.allclose(q[:, 0], q_s.expand(16, 3))
+    assert torch.allclose(q[:, -1], q_g.expand(16, 3))
+    s = torch.linspace(0, 1, opt.cfg.num_waypoints, dtype=torch.float64)[:, None]
+    assert torch.allclose(q[0], q_s + s * (q_g - q_s))
+    # a long duration leaves room: no scaling, the same trajectories as without a duration
+    assert torch.allclose(opt.initial_trajectories(q_s, q_g, 16, seed=3, duration=100.0), free)
+
+
+def test_one_kinematics_call_gives_the_collision_point_spheres() -> None:
+    """The merged forward kinematics equals sphere_centers of _collision_points (reference)."""
+    arm = PlanarArm(dtype=torch.float64)
+    opt = TrajectoryOptimizer(arm, OptimizerCfg(num_trajectories=3, collision_substeps=3))
+    q = torch.randn(3, opt.cfg.num_waypoints, 3, generator=torch.Generator().manual_seed(0))
+    q = q.double()
+    win = torch.tensor([4, 5, 6, 7])
+    centers, centers_x = opt._sphere_centers(q, win, True)
+    assert torch.allclose(centers, arm.sphere_centers(q))
+    assert torch.allclose(centers_x, arm.sphere_centers(opt._collision_points(q, win)))

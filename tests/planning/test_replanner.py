@@ -69,9 +69,15 @@ def test_cycles_every_m_and_warm_starts_from_the_shifted_plan(point_robot: Point
     # starts where the first plan is at t + m, with its velocity
     q_s, qd_s = first.trajectory().sample(1.0)
     assert torch.allclose(call["q_start"], q_s) and torch.allclose(call["qd_start"], qd_s)
-    # warm start: row 0 is the previous plan shifted onto the new waypoint times
-    times = 1.0 + torch.linspace(0.0, call["duration"], opt.cfg.num_waypoints)
+    # warm start: row 0 is the previous plan shifted onto the new waypoint times, moved to
+    # start at q_s with an offset fading out linearly towards the goal
+    w = opt.cfg.num_waypoints
+    times = 1.0 + torch.linspace(0.0, call["duration"], w)
     ref = resample_linear(first.q.unsqueeze(0), first.times, times)[0]
+    ref = ref + torch.linspace(1.0, 0.0, w).unsqueeze(-1) * (q_s - ref[0])
+    # every row (shifted or fresh) starts where the plan starts
+    rows = opt.cfg.num_trajectories
+    assert torch.allclose(call["q_init"][:, 0], q_s.expand(rows, -1), atol=1e-6)
     assert torch.allclose(call["q_init"][0], ref, atol=1e-5)
     assert rp.stats.overruns == 0
 

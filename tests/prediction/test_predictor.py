@@ -10,7 +10,7 @@ import torch
 from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
 from iplanner_torch.data.windows import WindowCfg, build_windows, compute_features
 from iplanner_torch.errors import CheckpointError, DataError, ShapeError
-from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
+from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg, gp_inputs
 from iplanner_torch.prediction.svgp import SVGPCfg
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
@@ -54,12 +54,38 @@ def test_forecast_is_gp_mean_plus_pose(trained) -> None:
         p, c = int(w.progress[b]), int(w.current[b])
         reg = pred.model_for(p, c)
         assert reg is not None
-        m_ref, v_ref = reg.predict_gpytorch(w.f_prev[b : b + 1].reshape(1, -1))
+        m_ref, v_ref = reg.predict_gpytorch(gp_inputs(w.f_prev[b : b + 1], 3, "relative"))
         m_ref = m_ref.view(pred.n_future, 3, 3) + w.pose_now[b]
         torch.testing.assert_close(fc.mean[b, c], m_ref, atol=1e-4, rtol=1e-4)
         torch.testing.assert_close(
             fc.var[b, c], v_ref.view(pred.n_future, 3, 3), atol=1e-5, rtol=1e-3
         )
+
+
+def test_gp_inputs_relative_to_the_current_pose() -> None:
+    g = torch.Generator().manual_seed(0)
+    f = torch.randn(4, 5, 18, generator=g)  # (B, n_p, D) with K = 2 joints, 3 kinds
+    x = gp_inputs(f, 2, "relative").view(4, 5, 18)
+    torch.testing.assert_close(x[:, -1], f[:, -1])  # current frame unchanged
+    torch.testing.assert_close(x[:, :-1, :6], f[:, :-1, :6] - f[:, -1:, :6])
+    torch.testing.assert_close(x[:, :, 6:], f[:, :, 6:])  # derivatives unchanged
+    torch.testing.assert_close(gp_inputs(f, 2, "window"), f.reshape(4, -1))
+    # a shifted person gives the same relative past, only the current pose moves
+    shift = torch.zeros(18)
+    shift[:6] = 0.3
+    d = gp_inputs(f + shift, 2, "relative").view(4, 5, 18) - x
+    assert float(d[:, :-1].abs().max()) < 1e-6 and float((d[:, -1, :6] - 0.3).abs().max()) < 1e-6
+
+
+def test_batched_forecast_equals_single_window_forecasts(trained) -> None:
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    idx = torch.arange(0, len(w), max(1, len(w) // 12))  # several progress states
+    fc = pred.predict(w.f_prev[idx], w.progress[idx])
+    for j, i in enumerate(idx.tolist()):
+        one = pred.predict(w.f_prev[i : i + 1], w.progress[i : i + 1])
+        torch.testing.assert_close(fc.mean[j], one.mean[0], atol=1e-5, rtol=1e-5)
+        torch.testing.assert_close(fc.var[j], one.var[0], atol=1e-7, rtol=1e-5)
 
 
 def test_unseen_progress_uses_pooled_gp_or_constant_velocity(trained) -> None:
@@ -70,13 +96,14 @@ def test_unseen_progress_uses_pooled_gp_or_constant_velocity(trained) -> None:
     for a in range(pred.num_actions):
         reg = pred.pooled.get(a)
         if reg is not None:
-            m, _ = reg.predict(w.f_prev[:2].reshape(2, -1))
+            m, _ = reg.predict(gp_inputs(w.f_prev[:2], 3))
             torch.testing.assert_close(
                 fc.mean[:, a], m.view(2, pred.n_future, 3, 3) + w.pose_now[:2].unsqueeze(1)
             )
     # no model at all: constant velocity with the documented variance
     pred.gps.clear()
     pred.pooled.clear()
+    pred.prepare()
     fc = pred.predict(w.f_prev[:2], unseen)
     t = torch.arange(1, pred.n_future + 1) / pred.fps
     pos = w.f_prev[:2, :, :9].reshape(2, -1, 3, 3)

@@ -103,6 +103,11 @@ def test_errors(tmp_path: Path) -> None:
         TrainerCfg(accelerator="tpu")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="max_epochs"):
         TrainerCfg(max_epochs=-1)
+    with pytest.raises(ConfigError, match="max_steps"):
+        TrainerCfg(max_steps=-1)
+    assert TrainerCfg(max_steps=7).cap_steps(100) == 7 and TrainerCfg().cap_steps(100) == 100
+    with pytest.raises(ConfigError, match="gp_input"):
+        PredictorCfg(gp_input="raw")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="classifier_kernel"):
         PredictorCfg(classifier_kernel="poly")  # type: ignore[arg-type]
     with pytest.raises(DataError, match="expected a WindowSet"):
