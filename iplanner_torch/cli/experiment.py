@@ -192,6 +192,7 @@ def comparison_table(df: Any) -> Any:
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 @friendly_errors
 def _app(cfg: DictConfig) -> None:
+    import warnings
     from dataclasses import replace
 
     import pandas as pd
@@ -199,7 +200,11 @@ def _app(cfg: DictConfig) -> None:
     from iplanner_torch.eval.episode import PLANNER_KINDS
     from iplanner_torch.eval.experiment import run_experiment
     from iplanner_torch.eval.report import gather_results, print_table, write_sweep_report
+    from iplanner_torch.planning.replanner import PlanningOverrunWarning
 
+    # overruns are counted per episode (plan/overruns in results.csv); one line each would
+    # drown the console
+    warnings.simplefilter("ignore", PlanningOverrunWarning)
     t0 = time.perf_counter()
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
