@@ -75,10 +75,14 @@ def scenario_data_node(cfg: DictConfig, scenario: Any) -> DictConfig:
 
     ``run.train_data=tasks`` (default): task demonstrations of the scenario's arrangement and
     task order (``conf/data/tasks.yaml``), so the progress states and next-action statistics
-    are those of the task (paper sec. 4.1); ``run.train_data=data``: the ``data`` group.
+    are those of the task (paper sec. 4.1); a blocking scenario (fig. speed_response) learns
+    from the reaching set; ``run.train_data=data``: the ``data`` group.
     """
     if str(cfg.run.train_data) == "data":
         return cfg.data
+    if str(getattr(scenario, "kind", "delivery")) == "blocking":
+        # the blocking arm movement is a reach: learn from the reaching set
+        return option_node("data", "reaching", cfg)
     node = option_node("data", "tasks", cfg)
     node.generator.order = str(scenario.task_order)
     node.generator.arrangement = str(scenario.arrangement)
