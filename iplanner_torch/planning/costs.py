@@ -32,6 +32,8 @@ from iplanner_torch.prediction.forecast import Forecast
 PRUNE_SIGMAS = 5.0
 #: Pair bounds (isotropic) above this get the exact diagonal-Gaussian bound.
 EXACT_FROM = 1e-6
+#: Relative slack [m per m] on the triangle-inequality pre-check of :func:`candidate_pairs`.
+_LOWER_BOUND_SLACK = 1e-4
 
 
 class ClearanceScene(Protocol):
@@ -287,11 +289,27 @@ def candidate_pairs(
     """
     with torch.no_grad():
         sigma = human.var.amax(dim=(-1, 1, 0)).sqrt()  # (S_h,)
-        diff = robot_centers.unsqueeze(3).unsqueeze(3) - human.mean.unsqueeze(0).unsqueeze(2)
-        dist = diff.norm(dim=-1)  # (B, W_x, S_r, A, S_h)
-        gap = dist.amin(dim=(0, 1, 3))  # (S_r, S_h)
         reach = robot_radii[:, None] + human.radii[None, :] + PRUNE_SIGMAS * sigma[None, :]
-        return torch.nonzero(gap <= reach + margin)
+        thresh = reach + margin  # (S_r, S_h)
+        # Cheap lower bound first: at each time, the B robot centres lie in a ball around their
+        # mean and the A human means in a ball around theirs, so the distance of any two is at
+        # least the distance of the ball centres minus both radii (triangle inequality).
+        c_bar = robot_centers.mean(0)  # (W_x, S_r, 3)
+        rho_r = (robot_centers - c_bar).norm(dim=-1).amax(0)  # (W_x, S_r)
+        m_bar = human.mean.mean(1)  # (W_x, S_h, 3)
+        rho_h = (human.mean - m_bar.unsqueeze(1)).norm(dim=-1).amax(1)  # (W_x, S_h)
+        centre_dist = (c_bar.unsqueeze(2) - m_bar.unsqueeze(1)).norm(dim=-1)  # (W_x, S_r, S_h)
+        lower = (centre_dist - rho_r.unsqueeze(2) - rho_h.unsqueeze(1)).amin(0)  # (S_r, S_h)
+        # slack for the rounding of the bound (it must never exceed the true distance)
+        maybe = lower <= thresh + _LOWER_BOUND_SLACK * (1.0 + thresh.abs())
+        ri, hi = torch.nonzero(maybe, as_tuple=True)
+        if ri.numel() == 0:
+            return torch.nonzero(maybe)
+        # exact minimum distance over (B, W_x, A) for the remaining pairs
+        diff = robot_centers[:, :, ri].unsqueeze(2) - human.mean[:, :, hi]  # (B, W_x, A, P, 3)
+        gap = diff.norm(dim=-1).amin(dim=(0, 1, 2))  # (P,)
+        keep = gap <= thresh[ri, hi]
+        return torch.stack([ri[keep], hi[keep]], dim=-1)
 
 
 def human_collision_bound(

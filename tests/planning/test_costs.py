@@ -230,3 +230,30 @@ def test_dropping_light_actions_keeps_an_upper_bound() -> None:
     assert drop_light_actions(human, 0.0) is human
     with pytest.raises(ConfigError, match="max_mass"):
         drop_light_actions(human, -1.0)
+
+
+@pytest.mark.parametrize("scale", [0.2, 0.6, 2.0])
+@pytest.mark.parametrize("margin", [0.0, 0.15])
+def test_candidate_pairs_match_brute_force_distance_list(scale: float, margin: float) -> None:
+    gen = torch.Generator().manual_seed(int(10 * scale))
+    b, w, s_r, a, s_h = 4, 6, 9, 3, 11
+    centers = scale * torch.randn(b, w, s_r, 3, generator=gen)
+    radii = 0.02 + 0.08 * torch.rand(s_r, generator=gen)
+    human = C.HumanObstacle(
+        mean=scale * torch.randn(w, a, s_h, 3, generator=gen),
+        var=1e-4 + 2e-3 * torch.rand(w, a, s_h, 3, generator=gen),
+        radii=0.03 + 0.07 * torch.rand(s_h, generator=gen),
+        weights=torch.full((a,), 1.0 / a),
+    )
+    # brute force: every (robot, human) pair whose smallest distance over trajectories, times
+    # and actions is within reach
+    expected = []
+    sigma = human.var.amax(dim=(0, 1, 3)).sqrt()
+    for r in range(s_r):
+        for h in range(s_h):
+            gap = (centers[:, :, r, None] - human.mean[None, :, :, h]).norm(dim=-1).min()
+            if gap <= radii[r] + human.radii[h] + C.PRUNE_SIGMAS * sigma[h] + margin:
+                expected.append((r, h))
+    got = [tuple(p) for p in C.candidate_pairs(centers, radii, human, margin).tolist()]
+    assert got == expected
+    assert 0 < len(expected) < s_r * s_h or scale < 1.0  # the far case prunes some pairs
