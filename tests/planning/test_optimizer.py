@@ -150,11 +150,9 @@ def test_runs_on_the_device(device: torch.device) -> None:
 
 
 def _iiwa():
-    model = pytest.importorskip("iplanner_torch.robot.model")
-    try:
-        return model.RobotModel.load("kuka_iiwa14")
-    except Exception as exc:  # the robot module may not be complete
-        pytest.skip(f"RobotModel.load('kuka_iiwa14') failed: {exc}")
+    from iplanner_torch.robot.model import RobotModel
+
+    return RobotModel.load("kuka_iiwa14")
 
 
 def test_iiwa_plan_beside_a_gaussian_human_sphere() -> None:

@@ -284,7 +284,8 @@ def test_runs_on_device(device: torch.device) -> None:
 
 
 def test_time_series_kernel_gak() -> None:
-    dtw = pytest.importorskip("iplanner_torch.prediction.dtw")
+    from iplanner_torch.prediction import dtw
+
     assert hasattr(dtw, "GlobalAlignmentKernel")
     g = torch.Generator().manual_seed(9)
     w = torch.randn(60, 5, 3, generator=g).cumsum(1) * 0.1  # (N, n_p, D) windows
