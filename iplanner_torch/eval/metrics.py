@@ -29,6 +29,7 @@ __all__ = [
     "jerkiness",
     "closest_distance",
     "modified_hausdorff",
+    "modified_hausdorff_batch",
     "prediction_mhd",
     "efficiency",
     "regression_precision",
@@ -172,8 +173,21 @@ def modified_hausdorff(a: Any, b: Any) -> float:
         raise ShapeError(
             f"expected non-empty point sets, got a {tuple(pa.shape)}, b {tuple(pb.shape)}"
         )
-    d = torch.cdist(pa, pb)  # (N, M)
-    return float(torch.maximum(d.min(dim=1).values.mean(), d.min(dim=0).values.mean()))
+    return float(modified_hausdorff_batch(pa[None], pb[None])[0])
+
+
+def modified_hausdorff_batch(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """:func:`modified_hausdorff` for a batch of point-set pairs (no checks: a hot path).
+
+    Args:
+        a: (B, N, 3) points [m].
+        b: (B, M, 3) points [m].
+
+    Returns:
+        (B,) ``max(mean_i min_j |a_i - b_j|, mean_j min_i |a_i - b_j|)`` [m].
+    """
+    d = torch.cdist(a, b)  # (B, N, M)
+    return torch.maximum(d.min(dim=-1).values.mean(-1), d.min(dim=-2).values.mean(-1))
 
 
 def prediction_mhd(pred_mean: Any, true: Any) -> float:

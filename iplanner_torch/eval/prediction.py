@@ -28,24 +28,11 @@ from scipy.stats import chi2
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.windows import WindowCfg, WindowSet, build_windows
 from iplanner_torch.errors import DataError
+from iplanner_torch.eval.metrics import modified_hausdorff_batch as modified_hausdorff
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import check_shape
 
 COVERAGE_LEVELS = (0.90, 0.95, 0.99)
-
-
-def modified_hausdorff(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Modified Hausdorff distance (Dubuisson and Jain 1994) between point sequences.
-
-    Args:
-        a: (B, n, 3) points [m].
-        b: (B, m, 3) points [m].
-
-    Returns:
-        (B,) ``max(mean_i min_j |a_i - b_j|, mean_j min_i |a_i - b_j|)`` [m].
-    """
-    d = torch.cdist(a, b)  # (B, n, m)
-    return torch.maximum(d.min(-1).values.mean(-1), d.min(-2).values.mean(-1))
 
 
 def window_metrics(fc: Forecast, xi_true: torch.Tensor, current: torch.Tensor) -> dict[str, Any]:
