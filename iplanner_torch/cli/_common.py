@@ -112,21 +112,35 @@ def load_dataset(
                 f"{path}: dataset not found; generate it with `iplanner-data generate "
                 f"data.path={data_cfg.path}`"
             )
-        _generate_into(data_cfg, path, progress=progress)
+        log.info("generating dataset into %s", path)
+        print(f"dataset {path} missing: generating it", flush=True)
+        generate_dataset(data_cfg, path, progress=progress)
     joints = data_cfg.windows.get("joints", None) if "windows" in data_cfg else None
     return load_demonstrations(path, fps=fps, joints=list(joints) if joints else None)
 
 
-def _generate_into(data_cfg: DictConfig, path: Path, *, progress: bool) -> None:
+def generate_dataset(
+    data_cfg: DictConfig, path: Path, *, progress: bool, command: str | None = None
+) -> Any:
+    """Run the generator a ``data`` node names (reaching or task demonstrations) into ``path``.
+
+    Returns:
+        The generator's :class:`~iplanner_torch.data.dataset_card.DatasetSummary`.
+
+    Raises:
+        ConfigError: when the node has no generator or it builds something else.
+    """
     from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
     from iplanner_torch.data.tasks import TaskDatasetCfg, generate_task_dataset
 
+    if data_cfg.get("generator") is None:
+        raise ConfigError(
+            f"data config has no generator (a recorded dataset at {data_cfg.path}): "
+            "nothing to generate; use `iplanner-data info` to check it"
+        )
     gen_cfg = instantiate(data_cfg.generator)
-    log.info("generating %s into %s", type(gen_cfg).__name__, path)
-    print(f"dataset {path} missing: generating it ({type(gen_cfg).__name__})", flush=True)
     if isinstance(gen_cfg, ReachingCfg):
-        generate_reaching_dataset(gen_cfg, path, progress=progress)
-    elif isinstance(gen_cfg, TaskDatasetCfg):
-        generate_task_dataset(gen_cfg, path, progress=progress)
-    else:
-        raise ConfigError(f"data.generator builds {type(gen_cfg).__name__}: not a generator")
+        return generate_reaching_dataset(gen_cfg, path, progress=progress, command=command)
+    if isinstance(gen_cfg, TaskDatasetCfg):
+        return generate_task_dataset(gen_cfg, path, progress=progress, command=command)
+    raise ConfigError(f"data.generator builds {type(gen_cfg).__name__}: not a generator")

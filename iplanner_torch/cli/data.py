@@ -16,36 +16,17 @@ import time
 import hydra
 from omegaconf import DictConfig
 
-from iplanner_torch.cli._common import CONF_DIR, friendly_errors, instantiate, repo_path
+from iplanner_torch.cli._common import CONF_DIR, friendly_errors, generate_dataset, repo_path
 
 COMMANDS = ("generate", "info")
 _command = "generate"
 
 
 def _generate(cfg: DictConfig) -> None:
-    from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
-    from iplanner_torch.data.tasks import TaskDatasetCfg, generate_task_dataset
-    from iplanner_torch.errors import ConfigError
-
-    if cfg.data.get("generator") is None:
-        raise ConfigError(
-            f"data config has no generator (a recorded dataset at {cfg.data.path}): "
-            "nothing to generate; use `iplanner-data info` to check it"
-        )
-    gen_cfg = instantiate(cfg.data.generator)
     out_dir = repo_path(cfg.data.path)
     t0 = time.perf_counter()
     command = ("iplanner-data generate " + " ".join(sys.argv[1:])).strip()
-    if isinstance(gen_cfg, ReachingCfg):
-        summary = generate_reaching_dataset(
-            gen_cfg, out_dir, progress=bool(cfg.progress), command=command
-        )
-    elif isinstance(gen_cfg, TaskDatasetCfg):
-        summary = generate_task_dataset(
-            gen_cfg, out_dir, progress=bool(cfg.progress), command=command
-        )
-    else:
-        raise ConfigError(f"data.generator builds {type(gen_cfg).__name__}: not a generator")
+    summary = generate_dataset(cfg.data, out_dir, progress=bool(cfg.progress), command=command)
     mb = summary.bytes_on_disk / 1e6
     print(
         f"wrote {summary.n_demonstrations} demonstrations ({summary.n_frames} frames, {mb:.1f} MB)"
