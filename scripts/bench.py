@@ -28,6 +28,7 @@ from pathlib import Path
 import torch
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # the bench modules share scripts/_timing.py
 AREAS = ("dtw", "prediction", "robot", "collision", "planning", "sim")
 
 

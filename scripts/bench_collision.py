@@ -14,25 +14,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import time
 
 import numpy as np
 import torch
+from _timing import median_seconds
 
 from iplanner_torch.collision import gaussian as G
 from iplanner_torch.collision.exact import ruben_series
 
 
 def _median_time(fn, repeats: int, warmup: int = 1) -> float:
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return median_seconds(fn, repeats, warmup=warmup)
 
 
 def _scene(B: int, seed: int, *, W=20, S_r=40, A=10, S_h=20):

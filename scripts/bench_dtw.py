@@ -10,24 +10,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
-import time
 from collections.abc import Callable
 
 import numpy as np
 import torch
+from _timing import median_seconds
 
 from iplanner_torch.prediction.dtw import dtw_distance
 
 
 def _median_time(fn: Callable[[], object], repeats: int) -> float:
-    fn()  # warm-up (and numba compilation on the tslearn side)
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    # one warm-up call (and numba compilation on the tslearn side)
+    return median_seconds(fn, repeats, warmup=1)
 
 
 def run(quick: bool) -> dict[str, dict]:

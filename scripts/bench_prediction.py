@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import torch
+from _timing import median_seconds
 
 from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
 from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
@@ -36,14 +36,7 @@ from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
 
 def _median_ms(fn, repeats: int, warmup: int = 3) -> float:
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
+    return 1e3 * median_seconds(fn, repeats, warmup=warmup)
 
 
 def _gpytorch_forecast(

@@ -15,12 +15,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
-import time
 from collections.abc import Callable
 
 import pytorch_kinematics as pk
 import torch
+from _timing import median_seconds
 
 from iplanner_torch.robot.model import RobotModel
 from iplanner_torch.types import default_device
@@ -29,20 +28,8 @@ BATCH, WAYPOINTS = 1024, 20
 
 
 def _median_ms(fn: Callable[[], object], device: torch.device, reps: int, warmup: int) -> float:
-    def sync() -> None:
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-
-    for _ in range(warmup):
-        fn()
-    sync()
-    times = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        fn()
-        sync()
-        times.append((time.perf_counter() - t0) * 1e3)
-    return statistics.median(times)
+    sync = (lambda: torch.cuda.synchronize(device)) if device.type == "cuda" else None
+    return 1e3 * median_seconds(fn, reps, warmup=warmup, sync=sync)
 
 
 def _bench_robot(name: str, device: torch.device, reps: int, warmup: int) -> dict[str, dict]:
