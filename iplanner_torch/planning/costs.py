@@ -19,7 +19,7 @@ optimiser's iterations use a cheaper isotropic bound, never below this one (see
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import torch
@@ -234,6 +234,31 @@ class HumanObstacle:
     # total weight of actions left out (see :func:`drop_light_actions`); every pair's mixture
     # bound adds it, as those actions' collision probabilities are at most 1
     residual: float = 0.0
+    # the per-pair tensors of the last ``pairs`` seen (the optimiser reuses one pair set for
+    # several iterations): key, then (mean, var, 1 / s_max, radius sums)
+    _pair_cache: tuple[tuple, tuple] | None = field(default=None, repr=False, compare=False)
+
+    def pair_tensors(
+        self, pairs: torch.Tensor, robot_radii: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Human-side tensors of the sphere pairs (cached for the last ``pairs`` given).
+
+        Args:
+            pairs: (P, 2) (robot, human) sphere indices.
+            robot_radii: (S_r,) [m].
+
+        Returns:
+            mean (W_x, P, A, 3) [m], var (W_x, P, A, 3) [m^2], ``1 / s_max`` (W_x, P, A)
+            [1/m] with ``s_max`` the largest standard deviation, and ``R`` (P, 1) [m].
+        """
+        key = (id(pairs), pairs.data_ptr(), pairs.shape[0], id(robot_radii))
+        if self._pair_cache is None or self._pair_cache[0] != key:
+            ri, hi = pairs[:, 0], pairs[:, 1]
+            mean = self.mean.transpose(1, 2)[:, hi]  # (W_x, P, A, 3)
+            var = self.var.transpose(1, 2)[:, hi]
+            rad = (robot_radii[ri] + self.radii[hi])[:, None]
+            self._pair_cache = (key, (mean, var, var.amax(-1).rsqrt(), rad))
+        return self._pair_cache[1]
 
 
 def drop_light_actions(human: HumanObstacle, max_mass: float) -> HumanObstacle:
@@ -312,6 +337,42 @@ def candidate_pairs(
         return torch.stack([ri[keep], hi[keep]], dim=-1)
 
 
+def _pair_bounds(
+    c: torch.Tensor,
+    mu: torch.Tensor,
+    var: torch.Tensor,
+    inv_s: torch.Tensor,
+    rad: torch.Tensor,
+    exact: bool,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Pair bounds and centre distances for every action.
+
+    Args:
+        c: (..., 3) robot sphere centres [m].
+        mu: (..., A, 3) human sphere-centre means [m] (broadcast with ``c``).
+        var: (..., A, 3) their variances [m^2].
+        inv_s: (..., A) ``1 / s_max``, the largest standard deviation's inverse [1/m].
+        rad: (..., 1) or (..., A) sums of the two radii [m].
+        exact: refine the large bounds with :func:`gaussian_ball_bound_diag`.
+
+    Returns:
+        bound (..., A) in [0, 1] and distance (..., A) [m] between centre and mean.
+    """
+    d = mu - c.unsqueeze(-2)  # (..., A, 3)
+    dist = d.norm(dim=-1)  # (..., A)
+    gap = (dist - rad) * inv_s
+    bound = 0.5 * torch.erfc(gap * (1.0 / math.sqrt(2.0)))  # isotropic upper bound
+    bound = torch.where(gap > 0.0, bound, torch.ones_like(bound))
+    if exact:
+        sel = bound.detach() > EXACT_FROM
+        if bool(sel.any()):
+            exact_b, _ = gaussian_ball_bound_diag(
+                d[sel], var.expand_as(d)[sel], rad.expand(dist.shape)[sel]
+            )
+            bound = bound.masked_scatter(sel, torch.minimum(exact_b, bound[sel]))
+    return bound, dist
+
+
 def human_collision_bound(
     robot_centers: torch.Tensor,
     robot_radii: torch.Tensor,
@@ -331,6 +392,11 @@ def human_collision_bound(
     over ``s_max``); the optimiser's iterations use it. With ``exact=True`` the pairs whose
     isotropic bound exceeds ``EXACT_FROM`` get :func:`gaussian_ball_bound_diag`, the rest keep
     the isotropic value (still an upper bound, below ``EXACT_FROM``).
+
+    When ``robot_centers`` requires a gradient, every pair is first evaluated without autograd
+    and only the maximising pair of each waypoint (the only one the max passes a gradient to)
+    and the pairs that penetrate are evaluated again with it: the values are the same, and
+    the backward pass costs O(B W_x A) instead of O(B W_x P A).
 
     Args:
         robot_centers: (B, W_x, S_r, 3) robot sphere centres at the window's waypoints [m].
@@ -357,29 +423,32 @@ def human_collision_bound(
         zero = robot_centers.sum() * 0.0
         floor = min(human.residual, 1.0)
         return robot_centers.new_zeros(b, w) + zero + floor, robot_centers.new_zeros(b) + zero
-    ri, hi = pairs[:, 0], pairs[:, 1]
-    c = robot_centers[:, :, ri]  # (B, W_x, P, 3)
-    mu = human.mean[:, :, hi].transpose(1, 2)  # (W_x, P, A, 3)
-    var = human.var[:, :, hi].transpose(1, 2)  # (W_x, P, A, 3)
-    rad = (robot_radii[ri] + human.radii[hi])[:, None]  # (P, 1)
-    d = mu.unsqueeze(0) - c.unsqueeze(-2)  # (B, W_x, P, A, 3)
-    dist = d.norm(dim=-1)  # (B, W_x, P, A)
-    s_max = var.amax(-1).sqrt().unsqueeze(0)  # (1, W_x, P, A)
-    gap = (dist - rad) / s_max
-    bound = 0.5 * torch.erfc(gap / math.sqrt(2.0))  # isotropic upper bound
-    bound = torch.where(gap > 0.0, bound, torch.ones_like(bound))
-    if exact:
-        sel = bound.detach() > EXACT_FROM
-        if bool(sel.any()):
-            var_full = var.unsqueeze(0).expand_as(d)
-            exact_b, _ = gaussian_ball_bound_diag(
-                d[sel], var_full[sel], rad.expand(dist.shape)[sel]
-            )
-            bound = bound.masked_scatter(sel, torch.minimum(exact_b, bound[sel]))
-    mixed = (bound * human.weights).sum(-1) + human.residual  # (B, W_x, P)
-    pen = torch.relu(rad - dist).square()  # (B, W_x, P, A)
-    pen_cost = (pen * human.weights).sum(dim=(1, 2, 3))
-    return mixed.amax(-1).clamp(max=1.0), pen_cost
+    ri = pairs[:, 0]
+    mean_p, var_p, inv_s_p, rad_p = human.pair_tensors(pairs, robot_radii)
+    weights = human.weights
+    need_grad = torch.is_grad_enabled() and robot_centers.requires_grad
+    with torch.set_grad_enabled(torch.is_grad_enabled() and not need_grad):
+        bound, dist = _pair_bounds(
+            robot_centers[:, :, ri], mean_p.unsqueeze(0), var_p, inv_s_p, rad_p, exact
+        )  # (B, W_x, P, A)
+        mixed = bound @ weights + human.residual  # (B, W_x, P)
+        if not need_grad:
+            pen = torch.relu(rad_p - dist).square()  # (B, W_x, P, A)
+            return mixed.amax(-1).clamp(max=1.0), (pen @ weights).sum(dim=(1, 2))
+        top = mixed.argmax(-1)  # (B, W_x) index into the pairs
+        touching = torch.nonzero((dist < rad_p).flatten(0, 1).any(0).any(-1)).squeeze(-1)  # (Q,)
+    # the maximising pair of each waypoint, again with autograd
+    w_idx = torch.arange(w, device=robot_centers.device).unsqueeze(0)  # (1, W_x)
+    c_top = robot_centers[torch.arange(b, device=ri.device)[:, None], w_idx, ri[top]]
+    bound_top, _ = _pair_bounds(
+        c_top, mean_p[w_idx, top], var_p[w_idx, top], inv_s_p[w_idx, top], rad_p[top], exact
+    )  # (B, W_x, A)
+    mixed_top = (bound_top * weights).sum(-1) + human.residual  # (B, W_x)
+    # the penetrating pairs, again with autograd
+    d_q = mean_p[:, touching].unsqueeze(0) - robot_centers[:, :, ri[touching]].unsqueeze(-2)
+    pen_q = torch.relu(rad_p[touching] - d_q.norm(dim=-1)).square()  # (B, W_x, Q, A)
+    pen_cost = (pen_q * weights).sum(dim=(1, 2, 3))
+    return mixed_top.clamp(max=1.0), pen_cost
 
 
 class SphereMap(Protocol):

@@ -110,7 +110,7 @@ class OptimizerCfg:
     # distance robot spheres may move before the pruned sphere pairs are refreshed [m]
     prune_margin: float = 0.15
     # iterations between refreshes of the pruned sphere pairs
-    prune_every: int = 5
+    prune_every: int = 8
     # cost weights
     weights: C.CostWeights = field(default_factory=C.CostWeights)
     # seed of the random initial perturbations (same seed -> same plan)
@@ -305,8 +305,13 @@ class TrajectoryOptimizer:
         pairs: torch.Tensor | None,
         timer: _Timer,
         exact: bool = False,
-    ) -> tuple[dict[str, torch.Tensor], torch.Tensor | None, torch.Tensor | None]:
-        """Unweighted (B,) cost terms, the window bound (B, W_x), the min clearance (B, W)."""
+        prune: float | None = None,
+    ) -> tuple[
+        dict[str, torch.Tensor], torch.Tensor | None, torch.Tensor | None, torch.Tensor | None
+    ]:
+        """Unweighted (B,) cost terms, the window bound (B, W_x), the min clearance (B, W) and
+        the sphere pairs used; ``prune`` (a margin [m]) first refreshes the pairs from this
+        trajectory's own sphere centres (:func:`costs.candidate_pairs`)."""
         terms = {
             "joint_acc_l2": C.joint_acc_l2(q, dt, qd_start),
             "joint_limit_violation": C.joint_limit_violation(q, self.q_min, self.q_max),
@@ -321,6 +326,8 @@ class TrajectoryOptimizer:
             )
         if human is not None:
             with timer:
+                if prune is not None:
+                    pairs = C.candidate_pairs(centers_x.detach(), self.radii, human, prune)
                 bound, pen = C.human_collision_bound(
                     centers_x, self.radii, human, pairs, exact=exact
                 )
@@ -330,7 +337,7 @@ class TrajectoryOptimizer:
             terms["human_collision_bound"] = bound.sum(-1)
             terms["human_confidence_penalty"] = excess.square().sum(-1)
             terms["human_mean_penetration"] = pen
-        return terms, bound, clearance
+        return terms, bound, clearance, pairs
 
     def _sphere_centers(
         self, q: torch.Tensor, win_idx: torch.Tensor, with_window: bool
@@ -459,16 +466,9 @@ class TrajectoryOptimizer:
         for it in range(iterations):
             x = d_inv @ (z - b_vec)  # (B, n_free, J)
             q = torch.cat([head, x, tail], dim=1)  # (B, W, J)
-            if human is not None and it % cfg.prune_every == 0:
-                with collision_timer, torch.no_grad():
-                    pairs = C.candidate_pairs(
-                        self.robot.sphere_centers(self._collision_points(q, win_idx)),
-                        self.radii,
-                        human,
-                        cfg.prune_margin,
-                    )
-            terms, _, _ = self._terms(
-                q, dt, qd_start, q_goal, human, win_idx, pairs, collision_timer
+            prune = cfg.prune_margin if it % cfg.prune_every == 0 else None
+            terms, _, _, pairs = self._terms(
+                q, dt, qd_start, q_goal, human, win_idx, pairs, collision_timer, prune=prune
             )
             loss = self._weighted(terms).sum()
             (grad,) = torch.autograd.grad(loss, z)
@@ -615,16 +615,10 @@ class TrajectoryOptimizer:
         timer: _Timer,
     ) -> tuple[dict[str, torch.Tensor], torch.Tensor | None, torch.Tensor | None]:
         """Cost terms with sphere pairs pruned at exactly PRUNE_SIGMAS (no margin)."""
-        pairs = None
-        if human is not None:
-            with timer:
-                pairs = C.candidate_pairs(
-                    self.robot.sphere_centers(self._collision_points(q, win_idx)),
-                    self.radii,
-                    human,
-                    0.0,
-                )
-        return self._terms(q, dt, qd_start, q_goal, human, win_idx, pairs, timer, exact=True)
+        terms, bound, clearance, _ = self._terms(
+            q, dt, qd_start, q_goal, human, win_idx, None, timer, exact=True, prune=0.0
+        )
+        return terms, bound, clearance
 
     def _result(
         self,

@@ -4,7 +4,9 @@ Per joint ``i`` the child frame is ``T_i = T_{i-1} T_origin_i T_joint_i(q_i)``. 
 joint with unit axis ``k`` (skew matrix ``K``), Rodrigues gives ``R_origin Rot(k, q) =
 R_origin + sin q (R_origin K) + (1 - cos q) (R_origin K^2)``: the three constant matrices are
 precomputed once, so a joint costs one product with a constant matrix and a few element-wise
-operations. Everything is differentiable with autograd.
+operations. Everything is differentiable with autograd; ``SerialChainKinematics.sphere_centers``
+has its own analytic backward pass (a few tensor operations instead of one autograd node per
+element-wise step), which the trajectory optimiser calls every iteration.
 """
 
 from __future__ import annotations
@@ -80,6 +82,18 @@ class SerialChainKinematics:
             self._kinds.append(kind)
             self._n_spheres.append(len(centers))
         self._cache: dict[tuple[torch.device, torch.dtype], tuple] = {}
+        # Actuated joints in q-column order: (child link index, kind, local axis); and the
+        # link of every sphere (spheres are concatenated in chain order).
+        self._actuated = [
+            (i + 1, "slide" if j.type == "prismatic" else "rev", np.asarray(j.axis, float))
+            for i, j in enumerate(desc.joints)
+            if j.actuated
+        ]
+        sphere_link = np.repeat(np.arange(len(self.link_names)), self._n_spheres)
+        # downstream[j, s] = 1 when sphere s moves with joint j (it lies on its child or later)
+        self._downstream = np.stack(
+            [(sphere_link >= child).astype(np.float64) for child, _, _ in self._actuated]
+        ).reshape(len(self._actuated), self.num_spheres)
 
     def _constants(self, device: torch.device, dtype: torch.dtype) -> tuple:
         key = (device, dtype)
@@ -94,6 +108,8 @@ class SerialChainKinematics:
                 [t(b.T).contiguous() for b in self._blocks],  # (11 + S_l, 3)
                 [t(b[:, :11].T).contiguous() for b in self._blocks],  # (11, 3)
                 [t(b[:, 11:].T).contiguous() for b in self._blocks],  # (S_l, 3)
+                t(self._downstream),  # (J, S)
+                [t(a) for _, _, a in self._actuated],  # J x (3,)
             )
         return self._cache[key]
 
@@ -113,7 +129,7 @@ class SerialChainKinematics:
         """
         # Rotations are carried as x[k, n, r] = R_n[r, k] (shape (3, n, 3)): then the product
         # with a constant block is one GEMM, and every slice below is contiguous.
-        x_wb, p_wb, blocks, joint_blocks, sphere_blocks = self._constants(q.device, q.dtype)
+        x_wb, p_wb, blocks, joint_blocks, sphere_blocks = self._constants(q.device, q.dtype)[:5]
         n = q.shape[0]
         x, pos = x_wb, p_wb
         xs, positions, parts = [], [], []
@@ -180,3 +196,66 @@ class SerialChainKinematics:
             axes.append((rot @ a).expand(q.shape[0], 3))
             origins.append(pos.expand(q.shape[0], 3))
         return axes, origins, positions[-1].expand(q.shape[0], 3)
+
+    def sphere_centers(self, q: torch.Tensor) -> torch.Tensor:
+        """Sphere centres with an analytic backward pass (no second derivatives).
+
+        Args:
+            q: (N, J) joint positions [rad or m], flat batch; not shape-checked (hot path).
+
+        Returns:
+            (N, S, 3) sphere centres in the world frame [m].
+        """
+        if not (torch.is_grad_enabled() and q.requires_grad):
+            return self.frames(q, with_spheres=True)[2]  # type: ignore[return-value]
+        return _SphereCenters.apply(q, self)
+
+    def _sphere_jacobian_t(
+        self,
+        rotations: list[torch.Tensor],
+        positions: list[torch.Tensor],
+        centers: torch.Tensor,
+        grad: torch.Tensor,
+    ) -> torch.Tensor:
+        """Vector-Jacobian product of :meth:`sphere_centers`: (N, S, 3) -> (N, J).
+
+        A revolute joint with world axis ``a`` through ``o`` moves a downstream sphere centre
+        ``c`` by ``a x (c - o)`` per radian, so ``dL/dq = a . (sum_s c_s x g_s - o x sum_s
+        g_s)`` over the spheres downstream of the joint; a prismatic joint gives ``a . sum g``.
+        """
+        down, axes_local = self._constants(centers.device, centers.dtype)[5:]
+        n = centers.shape[0]
+        moment = torch.einsum("js,nsc->njc", down, torch.linalg.cross(centers, grad))  # (N, J, 3)
+        force = torch.einsum("js,nsc->njc", down, grad)  # (N, J, 3)
+        axes = torch.stack(
+            [(rotations[c] @ a).expand(n, 3) for (c, _, _), a in zip(self._actuated, axes_local)],
+            dim=1,
+        )  # (N, J, 3) world axes
+        origins = torch.stack([positions[c].expand(n, 3) for c, _, _ in self._actuated], dim=1)
+        revolute = [k for k, (_, kind, _) in enumerate(self._actuated) if kind == "rev"]
+        if len(revolute) == len(self._actuated):
+            torque = moment - torch.linalg.cross(origins, force)
+        else:  # prismatic joints: a . sum g (no moment)
+            torque = force.clone()
+            torque[:, revolute] = moment[:, revolute] - torch.linalg.cross(
+                origins[:, revolute], force[:, revolute]
+            )
+        return (axes * torque).sum(-1)
+
+
+class _SphereCenters(torch.autograd.Function):
+    """Sphere centres of a chain with the analytic vector-Jacobian product."""
+
+    @staticmethod
+    def forward(ctx, q: torch.Tensor, fk: SerialChainKinematics) -> torch.Tensor:  # type: ignore[override]
+        rotations, positions, centers = fk.frames(q, with_spheres=True)
+        ctx.fk = fk
+        ctx.frames = (rotations, positions)  # outputs of no autograd graph (no-grad forward)
+        ctx.save_for_backward(centers)
+        return centers
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:  # type: ignore[override]
+        (centers,) = ctx.saved_tensors
+        rotations, positions = ctx.frames
+        return ctx.fk._sphere_jacobian_t(rotations, positions, centers, grad), None

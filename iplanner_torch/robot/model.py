@@ -239,7 +239,7 @@ class RobotModel:
             ShapeError: when the last dimension of ``q`` is not J.
         """
         qf, lead = self._flat(q)
-        _, _, spheres = self._fk.frames(qf, with_spheres=True)
+        spheres = self._fk.sphere_centers(qf)
         return spheres.reshape(*lead, self.num_spheres, 3)
 
     def link_positions(self, q: torch.Tensor) -> dict[str, torch.Tensor]:

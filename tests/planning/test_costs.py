@@ -131,6 +131,30 @@ def test_human_bound_gradient_matches_finite_differences() -> None:
     _fd_check(lambda x: C.human_collision_bound(x, radii, human)[1].sum(), centers, rtol=1e-3)
 
 
+@pytest.mark.parametrize("exact", [True, False])
+def test_human_bound_with_gradient_equals_plain_evaluation(exact: bool) -> None:
+    # with autograd only the maximising and the penetrating pairs are re-evaluated: values
+    # must equal the no-grad evaluation of every pair, and gradients finite differences
+    human = _obstacle()
+    gen = torch.Generator().manual_seed(11)
+    centers = torch.randn(3, 3, 5, 3, generator=gen, dtype=torch.float64) * 0.3
+    centers[0, 1, 2] = human.mean[1, 0, 1]  # one sphere penetrates a human mean sphere
+    radii = torch.full((5,), 0.04, dtype=torch.float64)
+    with torch.no_grad():
+        ref_bound, ref_pen = C.human_collision_bound(centers, radii, human, exact=exact)
+    x = centers.clone().requires_grad_(True)
+    bound, pen = C.human_collision_bound(x, radii, human, exact=exact)
+    assert float(ref_pen[0]) > 0.0
+    assert torch.allclose(bound, ref_bound, rtol=1e-12, atol=1e-15)
+    assert torch.allclose(pen, ref_pen, rtol=1e-12, atol=1e-15)
+    _fd_check(lambda y: C.human_collision_bound(y, radii, human, exact=exact)[1].sum(), centers)
+    far = centers.clone()
+    far[0, 1, 2] += 0.02  # off the kink of the norm at the mean itself
+    _fd_check(
+        lambda y: C.human_collision_bound(y, radii, human, exact=exact)[0].sum(), far, rtol=1e-3
+    )
+
+
 def test_human_bound_is_max_over_pairs_of_weighted_sum_and_pruning_is_safe() -> None:
     human = _obstacle()
     gen = torch.Generator().manual_seed(7)

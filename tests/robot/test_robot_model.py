@@ -100,6 +100,19 @@ def test_gradients_match_finite_differences(name: str) -> None:
 
 
 @pytest.mark.parametrize("name", ROBOTS)
+def test_analytic_sphere_backward_equals_autograd_through_the_chain(name: str) -> None:
+    # sphere_centers has its own vector-Jacobian product; autograd through the plain chain
+    # product (frames) is the reference
+    model = RobotModel.load(name, dtype=torch.float64)
+    q = _uniform_q(model, 64).requires_grad_(True)
+    g = torch.randn(64, model.num_spheres, 3, dtype=torch.float64)
+    (grad,) = torch.autograd.grad((model.sphere_centers(q) * g).sum(), q)
+    (ref,) = torch.autograd.grad((model._fk.frames(q, with_spheres=True)[2] * g).sum(), q)
+    assert torch.allclose(grad, ref, rtol=1e-10, atol=1e-12)
+    assert float(ref.abs().max()) > 0.1
+
+
+@pytest.mark.parametrize("name", ROBOTS)
 def test_position_jacobian_matches_finite_differences(name: str) -> None:
     model = RobotModel.load(name, dtype=torch.float64)
     q = _uniform_q(model, 5)
