@@ -152,7 +152,8 @@ class PlanResult:
     Attributes:
         feasible: the plan meets the confidence constraint, the static clearance and the
             velocity limits (within ``VEL_TOL``) on its own;
-            False means it is the best trajectory cut at its last safe waypoint plus a wait.
+            False means it is the best trajectory cut at its last safe waypoint plus a wait,
+            or (``evasive``) the trajectory with the smallest peak bound.
         q: (W, J) waypoints [rad]; after a wait, the waypoints from the hold on repeat it.
         times: (W,) waypoint times [s].
         bound: (W,) human-collision bound per waypoint (0 outside the execution window).
@@ -164,6 +165,8 @@ class PlanResult:
         timings: milliseconds: ``predict_ms`` (forecast to human spheres at the waypoint
             times), ``collision_ms`` (bound evaluations, forward), ``optimiser_ms`` (the rest),
             ``total_ms``.
+        evasive: no trajectory met the constraint and waiting would have been riskier than
+            moving: the plan is the candidate with the smallest peak bound (no wait).
     """
 
     feasible: bool
@@ -176,6 +179,7 @@ class PlanResult:
     candidates: torch.Tensor
     cost_terms: dict[str, float]
     timings: dict[str, float]
+    evasive: bool = False
 
     def trajectory(self) -> Trajectory:
         """The plan as an executable :class:`Trajectory`."""
@@ -568,8 +572,6 @@ class TrajectoryOptimizer:
             {k: v for k, v in terms.items() if not k.startswith("human_confidence")}
         )
         bad = torch.zeros(b, w, dtype=torch.bool, device=q_all.device)  # (B, W)
-        if bound is not None:
-            bad[:, win_idx] |= bound > limit
         if clearance is not None:
             ends = torch.minimum(clearance[:, :1], clearance[:, -1:])  # (B, 1)
             floor = (ends - END_CLEARANCE_SLACK).clamp(max=0.0)
@@ -577,6 +579,9 @@ class TrajectoryOptimizer:
         # a segment faster than the limits could jump past the checks
         too_fast = ((q_all[:, 1:] - q_all[:, :-1]).abs() / dt > VEL_TOL * self.v_max).any(-1)
         bad[:, 1:] |= too_fast
+        static_ok = ~bad.any(-1)  # (B,) clear of the static scene and within the limits
+        if bound is not None:
+            bad[:, win_idx] |= bound > limit
         ok = ~bad.any(-1)
         if bool(ok.any()):
             best = int(torch.where(ok, rank, torch.full_like(rank, math.inf)).argmin())
@@ -596,6 +601,18 @@ class TrajectoryOptimizer:
         terms1, bound1, _ = self._accept_terms(q_one, dt, qd_start, q_goal, human, win_idx, timer)
         t_end = float(times[-1]) if window is None else min(float(window[1]), float(times[-1]))
         wait_s = max(t_end - float(times[hold]), 0.0)
+        if bound is not None and bound1 is not None and bool(static_ok.any()):
+            # Holding is itself unsafe (the person comes towards the held pose): move along
+            # the candidate with the smallest peak bound instead, when that is lower.
+            peak = torch.where(static_ok, bound.amax(-1), torch.full_like(rank, math.inf))
+            evade = int(peak.argmin())
+            hold_peak = float(bound1.amax())
+            if hold_peak > limit and float(peak[evade]) < hold_peak:
+                res = self._result(
+                    False, q_all, evade, times, bound, win_idx, terms, qd_start, 0.0
+                )
+                res.evasive = True
+                return res
         q_cand = q_all.clone()
         q_cand[best] = q_hold
         res = self._result(

@@ -186,6 +186,8 @@ class ReplannerStats:
         overruns: solves whose wall-clock time exceeded the budget.
         waits: solves that ended in a wait (no trajectory met the confidence constraint).
         wait_s: total seconds of waits planned.
+        evasions: solves where no trajectory met the constraint and holding was riskier than
+            moving (``PlanResult.evasive``: the least risky trajectory, no wait).
         solve_ms: wall-clock milliseconds of each solve.
     """
 
@@ -193,6 +195,7 @@ class ReplannerStats:
     overruns: int = 0
     waits: int = 0
     wait_s: float = 0.0
+    evasions: int = 0
     solve_ms: list[float] = field(default_factory=list)
 
     @property
@@ -444,7 +447,9 @@ class Replanner:
                 PlanningOverrunWarning,
                 stacklevel=2,
             )
-        if not result.feasible:
+        if result.evasive:
+            self.stats.evasions += 1
+        elif not result.feasible:
             self.stats.waits += 1
             self.stats.wait_s += result.wait_s
             self._t_goal += result.wait_s

@@ -72,6 +72,34 @@ class Forecast:
             var=self.var.to(device),
         )
 
+    def mask_actions(self, keep: torch.Tensor) -> Forecast:
+        """The forecast with some actions ruled out and the weights renormalised.
+
+        Task-state conditioning: an action whose precondition does not hold (e.g. taking a
+        block that is not on its delivery spot) gets weight 0. A batch row where every action
+        with weight would be ruled out keeps its weights unchanged (the predictor's belief is
+        then all there is).
+
+        Args:
+            keep: (A,) or (B, A) bool, True for the actions still possible.
+
+        Returns:
+            A forecast with the same means and variances and new weights (B, A).
+
+        Raises:
+            ShapeError: when ``keep`` is not (A,) or (B, A).
+        """
+        b, a = self.weights.shape
+        if keep.dim() == 1:
+            check_shape("keep", keep, (a,))
+            keep = keep.expand(b, a)
+        check_shape("keep", keep, (b, a))
+        w = torch.where(keep.to(self.weights.device), self.weights, 0.0)
+        total = w.sum(-1, keepdim=True)  # (B, 1)
+        ok = total > 0.0
+        w = torch.where(ok, w / torch.where(ok, total, 1.0), self.weights)
+        return replace(self, weights=w)
+
     def select(self, index: int | slice) -> Forecast:
         """The forecast for a subset of the batch (keeps the batch dimension)."""
         idx = slice(index, index + 1) if isinstance(index, int) else index

@@ -17,6 +17,7 @@ from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.planning.costs import CostWeights
 from iplanner_torch.planning.itomp import ITOMP, static_human_forecast
 from iplanner_torch.planning.optimizer import KinematicModel, OptimizerCfg, TrajectoryOptimizer
+from iplanner_torch.prediction.forecast import Forecast
 
 
 def test_smoothness_bowl_converges_to_the_straight_line() -> None:
@@ -268,3 +269,58 @@ def test_one_kinematics_call_gives_the_collision_point_spheres() -> None:
     centers, centers_x = opt._sphere_centers(q, win, True)
     assert torch.allclose(centers, arm.sphere_centers(q))
     assert torch.allclose(centers_x, arm.sphere_centers(opt._collision_points(q, win)))
+
+
+def _approaching_forecast(std: float) -> Forecast:
+    """One sphere on the x axis moving from x = 0.6 to 0 over 1 s, then resting."""
+    n_f, dt = 30, 0.05
+    t = dt * torch.arange(1, n_f + 1, dtype=torch.float64)
+    mean = torch.zeros(1, 1, n_f, 1, 3, dtype=torch.float64)
+    mean[0, 0, :, 0, 0] = 0.6 * (1.0 - t).clamp_min(0.0)
+    return Forecast(
+        weights=torch.ones(1, 1, dtype=torch.float64),
+        mean=mean,
+        var=torch.full_like(mean, std * std),
+        dt=dt,
+        joint_names=("j",),
+        action_names=("approach",),
+    )
+
+
+def test_when_holding_is_riskier_than_moving_the_least_risky_trajectory_is_taken() -> None:
+    # The person comes towards the start pose: no candidate meets the bound, and holding at
+    # the last safe waypoint of the best one would be riskier than moving away on it.
+    robot = PointRobot(dtype=torch.float64)
+    cfg = OptimizerCfg(
+        num_trajectories=2, num_waypoints=5, warm_iterations=0, collision_substeps=1
+    )
+    opt = TrajectoryOptimizer(robot, cfg, human_spheres=one_sphere_map(0.1))
+    k = torch.arange(5, dtype=torch.float64)
+    away = torch.stack([-0.1 * k, torch.zeros(5, dtype=torch.float64)], -1)  # (5, 2)
+    towards = torch.stack([0.1 * k, torch.zeros(5, dtype=torch.float64)], -1)
+    q_init = torch.stack([towards, away])
+    res = opt.solve(
+        away[0], away[-1], forecast=_approaching_forecast(0.2), duration=1.0, q_init=q_init
+    )
+    assert not res.feasible and res.evasive
+    assert res.wait_s == 0.0 and res.hold_index is None
+    assert torch.equal(res.q, away)
+
+    # independent check: Monte Carlo risk of the chosen path's worst waypoint is below that of
+    # holding at the away path's last safe waypoint (x = -0.2, first violation at t = 0.75)
+    def risk(x: float, t: float) -> float:
+        d = torch.tensor([0.6 * max(1.0 - t, 0.0) - x, 0.0, 0.0], dtype=torch.float64)
+        return mc_ball_probability(d, torch.full((3,), 0.04, dtype=torch.float64), 0.15, n=50_000)
+
+    moving = max(risk(float(q[0]), float(t)) for q, t in zip(res.q[1:], res.times[1:]))
+    holding = max(risk(-0.2, float(t)) for t in res.times[3:])
+    assert float(res.bound.max()) > 1 - cfg.confidence  # the bound rules the path out
+    assert moving < holding
+    # a hold that is itself safe is still a wait (paper sec. 5): a person resting further away
+    res2 = opt.solve(
+        away[0],
+        torch.tensor([0.9, 0.0], dtype=torch.float64),
+        forecast=static_forecast([1.0, 0.0, 0.0], 0.05, dtype=torch.float64),
+        duration=1.0,
+    )
+    assert not res2.feasible and not res2.evasive and res2.wait_s > 0.0

@@ -1,0 +1,48 @@
+"""Task-state conditioning of forecasts: Forecast.mask_actions and the episode's action_mask."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from iplanner_torch.errors import ShapeError
+from iplanner_torch.eval.episode import action_mask
+from iplanner_torch.prediction.forecast import Forecast
+
+
+def _forecast(weights: list[list[float]]) -> Forecast:
+    w = torch.tensor(weights, dtype=torch.float64)
+    b, a = w.shape
+    mean = torch.randn(b, a, 4, 2, 3, dtype=torch.float64)
+    return Forecast(
+        weights=w,
+        mean=mean,
+        var=torch.ones_like(mean),
+        dt=0.1,
+        joint_names=("a", "b"),
+        action_names=tuple(f"x{i}" for i in range(a)),
+    )
+
+
+def test_mask_renormalises_the_kept_weights_and_keeps_the_gaussians() -> None:
+    f = _forecast([[0.5, 0.3, 0.2], [0.0, 0.0, 1.0]])
+    g = f.mask_actions(torch.tensor([True, False, True]))
+    assert torch.allclose(
+        g.weights[0], torch.tensor([0.5 / 0.7, 0.0, 0.2 / 0.7], dtype=g.weights.dtype)
+    )
+    assert torch.equal(g.weights[1], f.weights[1])
+    assert g.mean is f.mean and g.var is f.var
+    # a row whose every weighted action is ruled out keeps its belief
+    h = f.mask_actions(torch.tensor([[True, True, False], [True, True, False]]))
+    assert torch.equal(h.weights[1], f.weights[1])
+    expected = torch.tensor([0.625, 0.375, 0.0], dtype=h.weights.dtype)
+    assert torch.allclose(h.weights[0], expected)
+    with pytest.raises(ShapeError):
+        f.mask_actions(torch.tensor([True, False]))
+
+
+def test_action_mask_rules_out_takes_of_blocks_not_on_their_spot() -> None:
+    names = ("idle", "take_0", "take_1", "reach_3", "Take_2")
+    keep = action_mask(names, available={1, 2})
+    assert keep.tolist() == [True, False, True, False, True]
+    assert action_mask(names, available=set()).tolist() == [True, False, False, False, False]
