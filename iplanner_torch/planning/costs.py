@@ -54,6 +54,9 @@ class CostWeights:
     joint_limit_violation: float = 100.0
     # squared joint-velocity-limit violation [(rad/s)^2]
     joint_vel_limit_violation: float = 10.0
+    # squared violation of the acceleration limit the robot's controller tracks [(rad/s^2)^2]
+    # (only with OptimizerCfg.acc_max)
+    joint_acc_limit_violation: float = 1.0
     # squared static-obstacle penetration beyond the margin [m^2]
     static_clearance: float = 1000.0
     # sum over the execution window of the human-collision bound (eq. collision_probability)
@@ -116,6 +119,25 @@ def joint_vel_limit_violation(q: torch.Tensor, dt: float, v_max: torch.Tensor) -
         (B,) [(rad/s)^2].
     """
     return torch.relu(velocities(q, dt).abs() - v_max).square().sum(dim=(-2, -1))
+
+
+def joint_acc_limit_violation(
+    q: torch.Tensor, dt: float, a_max: float, qd_start: torch.Tensor | None = None
+) -> torch.Tensor:
+    """Squared violation of a per-joint acceleration limit by the waypoint accelerations.
+
+    Args:
+        q: (B, W, J) joint positions [rad].
+        dt: seconds between waypoints.
+        a_max: acceleration limit [rad/s^2], the same for every joint.
+        qd_start: (J,) velocity at the first waypoint [rad/s] (then the first waypoint's
+            acceleration counts too), or None.
+
+    Returns:
+        (B,) [(rad/s^2)^2].
+    """
+    acc = accelerations(q, dt, qd_start)
+    return torch.relu(acc.abs() - a_max).square().sum(dim=(-2, -1))
 
 
 def static_clearance(

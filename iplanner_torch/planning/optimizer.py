@@ -28,12 +28,14 @@ import torch
 from iplanner_torch.errors import ConfigError, PlanningError
 from iplanner_torch.planning import costs as C
 from iplanner_torch.planning.human_model import HumanSphereMap
-from iplanner_torch.planning.trajectory import Trajectory, uniform_times
+from iplanner_torch.planning.trajectory import Trajectory, accelerations, uniform_times
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import check_shape
 
 #: Accepted plans keep every waypoint-to-waypoint velocity within this factor of the limits.
 VEL_TOL = 1.05
+#: Acceptance tolerance on the acceleration limit (``OptimizerCfg.acc_max``).
+ACC_TOL = 1.1
 #: Slack [m] below the clearance of a plan's pinned ends within which its waypoints still pass
 #: the static check: the start is where the robot is and the goal is what the task asks (a
 #: grasp point just above the table), so a plan is only required to do as well as its ends.
@@ -105,6 +107,10 @@ class OptimizerCfg:
     # collision checks per waypoint interval of the window (points at k / n, k = 1..n, of the
     # segment ending at each waypoint), so a fast robot cannot pass between two checks
     collision_substeps: int = 2
+    # acceleration limit of the robot's trajectory interface [rad/s^2] (the replanner's
+    # filtered tracking): a cost term keeps the plans within it and the acceptance rejects a
+    # plan above ACC_TOL times it, so the executed motion is the one checked; None: no limit
+    acc_max: float | None = None
     # static-obstacle clearance below which the hinge cost starts [m]
     static_margin: float = 0.02
     # distance robot spheres may move before the pruned sphere pairs are refreshed [m]
@@ -137,6 +143,8 @@ class OptimizerCfg:
             raise ConfigError(f"expected penalty_target in (0, 1], got {self.penalty_target}")
         if not 0.0 <= self.drop_action_mass < 1.0:
             raise ConfigError(f"expected drop_action_mass in [0, 1), got {self.drop_action_mass}")
+        if self.acc_max is not None and not self.acc_max > 0.0:
+            raise ConfigError(f"expected acc_max > 0 or None, got {self.acc_max}")
         if self.collision_substeps < 1:
             raise ConfigError(f"expected collision_substeps >= 1, got {self.collision_substeps}")
         if self.prune_every < 1 or self.prune_margin < 0.0:
@@ -204,6 +212,30 @@ class _Timer:
         if self.cuda:
             torch.cuda.synchronize()
         self.ms += 1e3 * (time.perf_counter() - self._t)
+
+
+def smooth_stop(q: torch.Tensor, hold: int) -> torch.Tensor:
+    """The path of ``q`` slowed down at a constant rate until it stops (a wait without the
+    abrupt halt at a waypoint).
+
+    With waypoint index ``s(k) = k - k^2 / (2 K)`` for ``k <= K = min(2 hold, W - 1)``
+    (then constant), the path starts at its own speed (``s'(0) = 1``) and stops at
+    ``s = K / 2 <= hold``, so it never passes the held waypoint.
+
+    Args:
+        q: (W, J) waypoints [rad] at uniform times.
+        hold: the last waypoint that may be reached (>= 1).
+
+    Returns:
+        (W, J) waypoints [rad] at the same times.
+    """
+    w = q.shape[0]
+    k_stop = min(2 * hold, w - 1)
+    k = torch.arange(w, device=q.device, dtype=q.dtype).clamp(max=k_stop)
+    s = k - k.square() / (2.0 * k_stop)  # (W,) fractional waypoint index
+    lo = s.floor().long().clamp(max=w - 2)
+    frac = (s - lo.to(q.dtype)).unsqueeze(-1)
+    return (1.0 - frac) * q[lo] + frac * q[lo + 1]
 
 
 class TrajectoryOptimizer:
@@ -322,6 +354,10 @@ class TrajectoryOptimizer:
             "joint_vel_limit_violation": C.joint_vel_limit_violation(q, dt, self.v_max),
             "goal_distance": C.goal_distance(q[:, -1], q_goal),
         }
+        if self.cfg.acc_max is not None:
+            terms["joint_acc_limit_violation"] = C.joint_acc_limit_violation(
+                q, dt, self.cfg.acc_max, qd_start
+            )
         bound = clearance = None
         centers, centers_x = self._sphere_centers(q, win_idx, human is not None)
         if self.static_scene is not None:
@@ -583,6 +619,13 @@ class TrajectoryOptimizer:
         if bound is not None:
             bad[:, win_idx] |= bound > limit
         ok = ~bad.any(-1)
+        if cfg.acc_max is not None:
+            # prefer plans the acceleration-limited tracking follows exactly (else the executed
+            # motion leaves the checked path); when none is, the best safe one still goes
+            acc = accelerations(q_all, dt, qd_start).abs().amax(dim=(-2, -1))  # (B,)
+            smooth_ok = ok & (acc <= ACC_TOL * cfg.acc_max)
+            if bool(smooth_ok.any()):
+                ok = smooth_ok
         if bool(ok.any()):
             best = int(torch.where(ok, rank, torch.full_like(rank, math.inf)).argmin())
             return self._result(True, q_all, best, times, bound, win_idx, terms, qd_start, 0.0)
@@ -599,6 +642,18 @@ class TrajectoryOptimizer:
         q_hold[hold + 1 :] = q_hold[hold]
         q_one = q_hold.unsqueeze(0)
         terms1, bound1, _ = self._accept_terms(q_one, dt, qd_start, q_goal, human, win_idx, timer)
+        if cfg.acc_max is not None and hold >= 1:
+            # the stop the acceleration-limited tracking can follow: the same path, slowed
+            # down at a constant rate until it stops at or before the held waypoint; kept
+            # when its bound is no higher than the abrupt stop's (or within the limit)
+            q_soft = smooth_stop(q_all[best], hold).unsqueeze(0)
+            terms2, bound2, _ = self._accept_terms(
+                q_soft, dt, qd_start, q_goal, human, win_idx, timer
+            )
+            if bound2 is None or bound1 is None:
+                q_hold, terms1, bound1 = q_soft[0], terms2, bound2
+            elif float(bound2.amax()) <= max(limit, float(bound1.amax())):
+                q_hold, terms1, bound1 = q_soft[0], terms2, bound2
         t_end = float(times[-1]) if window is None else min(float(window[1]), float(times[-1]))
         wait_s = max(t_end - float(times[hold]), 0.0)
         if bound is not None and bound1 is not None and bool(static_ok.any()):

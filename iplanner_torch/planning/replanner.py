@@ -14,7 +14,11 @@ plan with the plan's acceleration as feed-forward plus a critically damped corre
 bandwidth ``tracking_bandwidth``, its acceleration clipped to ``acc_max`` and its velocity to
 the joint limits. A plan switch, a wait cut short at a waypoint, a goal change or a re-anchor
 then never makes the commanded motion jump: accelerations stay within ``acc_max``; on a smooth
-plan the reference equals the plan up to integration error. By default a cycle still plans from
+plan the reference equals the plan up to integration error. The optimiser is given the same
+limit (``PlannerCfg.optimizer_cfg``: ``OptimizerCfg.acc_max``), so that the plans, and the waits
+(:func:`~iplanner_torch.planning.optimizer.smooth_stop`), stay within it and the executed motion
+is the one whose collision bound was checked (without it, a closed-loop episode measured up to
+0.32 rad between command and plan, and the arm touched the person's hand off the checked path). By default a cycle still plans from
 the current plan's state at ``t + m`` (the plans form one continuous trajectory, position and
 velocity, which the reference tracks); ``plan_from_reference`` plans from the reference's own
 state rolled out to ``t + m`` instead (exact agreement of plan and execution), which in the
@@ -153,8 +157,12 @@ class PlannerCfg:
             raise ConfigError(f"expected replan_step_s > 0, got {self.replan_step_s}")
 
     def optimizer_cfg(self) -> OptimizerCfg:
-        """The optimiser's settings with this planner's confidence."""
-        return replace(self.optimizer, confidence=self.confidence)
+        """The optimiser's settings with this planner's confidence; with filtered tracking
+        and no ``acc_max`` of its own, the tracking's acceleration limit."""
+        acc_max = self.optimizer.acc_max
+        if acc_max is None and self.replanner.tracking == "filtered":
+            acc_max = self.replanner.acc_max
+        return replace(self.optimizer, confidence=self.confidence, acc_max=acc_max)
 
     def replanner_cfg(self) -> ReplannerCfg:
         """The replanner's settings with this planner's step."""

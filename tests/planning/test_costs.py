@@ -91,6 +91,11 @@ def test_gradients_of_joint_terms_match_finite_differences() -> None:
     _fd_check(lambda x: C.joint_acc_l2(x, 0.2, qd0).sum(), q)
     _fd_check(lambda x: C.joint_limit_violation(x, q_min, -q_min).sum(), q)
     _fd_check(lambda x: C.joint_vel_limit_violation(x, 0.2, v_max).sum(), q)
+    qd0 = torch.tensor([0.5, -2.0, 1.0], dtype=torch.float64)
+    _fd_check(lambda x: C.joint_acc_limit_violation(x, 0.2, 3.0, qd0).sum(), q)
+    # value: only the part of |acceleration| above the limit counts
+    acc = torch.tensor([[[0.0], [0.0], [0.2 * 0.2 * 5.0]]], dtype=torch.float64)  # a = 5 at k=1
+    assert float(C.joint_acc_limit_violation(acc, 0.2, 3.0)[0]) == pytest.approx(4.0)
     _fd_check(lambda x: C.goal_distance(x[:, -1], q[0, 0]).sum(), q)
 
 

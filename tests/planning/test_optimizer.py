@@ -16,7 +16,14 @@ from planning_fakes import (
 from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.planning.costs import CostWeights
 from iplanner_torch.planning.itomp import ITOMP, static_human_forecast
-from iplanner_torch.planning.optimizer import KinematicModel, OptimizerCfg, TrajectoryOptimizer
+from iplanner_torch.planning.optimizer import (
+    ACC_TOL,
+    KinematicModel,
+    OptimizerCfg,
+    TrajectoryOptimizer,
+    smooth_stop,
+)
+from iplanner_torch.planning.trajectory import accelerations
 from iplanner_torch.prediction.forecast import Forecast
 
 
@@ -324,3 +331,45 @@ def test_when_holding_is_riskier_than_moving_the_least_risky_trajectory_is_taken
         duration=1.0,
     )
     assert not res2.feasible and not res2.evasive and res2.wait_s > 0.0
+
+
+def test_smooth_stop_slows_down_along_the_path_and_never_passes_the_hold() -> None:
+    w = 20
+    s = torch.linspace(0.0, 1.0, w, dtype=torch.float64)
+    path = torch.stack([s, s.square()], -1)  # (W, 2), a curved path at uniform times
+    for hold in (1, 4, 12):
+        q = smooth_stop(path, hold)
+        assert torch.equal(q[0], path[0])
+        # starts at the path's own speed (first step within the second-order term)
+        assert float((q[1] - path[1]).abs().max()) <= float((path[1] - path[0]).abs().max())
+        # stops: constant from k = min(2 hold, W - 1) on, at or before the held waypoint
+        k_stop = min(2 * hold, w - 1)
+        assert torch.allclose(q[k_stop:], q[k_stop].expand_as(q[k_stop:]))
+        assert float(q[:, 0].max()) <= float(path[hold, 0]) + 1e-12
+        # on the path: every waypoint lies between two consecutive path waypoints (x = s)
+        assert torch.allclose(q[:, 1], q[:, 0].square(), atol=(1 / (w - 1)) ** 2)
+        # the speed never increases (a constant-rate slow-down)
+        speed = (q[1:] - q[:-1]).norm(dim=-1)
+        assert bool((speed[1:] <= speed[:-1] + 1e-9).all())
+
+
+def test_acceleration_limit_is_met_by_the_accepted_plan(point_robot: PointRobot) -> None:
+    # rest to rest over 1 m in 0.8 s (arrive): the least-squared-acceleration path peaks near
+    # 6 / 0.8^2 = 9.4 m/s^2, a bang-bang profile needs 4 / 0.8^2 = 6.25; with acc_max = 0.8 x
+    # the free peak the plan keeps
+    # every waypoint acceleration (the first one, from the start velocity, included) within it
+    q_s, q_g = torch.tensor([0.0, 0.0]), torch.tensor([1.0, 0.0])
+    qd = torch.zeros(2)
+    free = TrajectoryOptimizer(point_robot, OptimizerCfg(iterations=60))
+    res_free = free.solve(q_s, q_g, duration=1.0, qd_start=qd, arrive=0.8)
+    acc_free = accelerations(res_free.q, float(res_free.times[1] - res_free.times[0]), qd)
+    limit = 0.8 * float(acc_free.abs().max())
+    assert limit > 6.25 * 1.05  # feasible: above the bang-bang minimum
+    capped = TrajectoryOptimizer(point_robot, OptimizerCfg(iterations=60, acc_max=limit))
+    res = capped.solve(q_s, q_g, duration=1.0, qd_start=qd, arrive=0.8)
+    acc = accelerations(res.q, float(res.times[1] - res.times[0]), qd)
+    assert res.feasible
+    assert float(acc.abs().max()) <= ACC_TOL * limit
+    assert res.cost_terms["joint_acc_limit_violation"] >= 0.0
+    with pytest.raises(ConfigError, match="acc_max"):
+        OptimizerCfg(acc_max=0.0)
