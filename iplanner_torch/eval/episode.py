@@ -634,6 +634,7 @@ def _run_episode(
             "plan/waits": float(getattr(stats, "waits", 0)),
             "plan/wait_s": float(getattr(stats, "wait_s", 0.0)),
             "plan/evasions": float(getattr(stats, "evasions", 0)),
+            "plan/emergencies": float(getattr(stats, "emergencies", 0)),
             "plan/mean_solve_ms": float(getattr(stats, "mean_solve_ms", 0.0)),
             "eval/completed": float(t_done is not None or (blocking and t_goal is not None)),
         }

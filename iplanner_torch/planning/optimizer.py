@@ -543,6 +543,42 @@ class TrajectoryOptimizer:
         }
         return result
 
+    def collision_bound(
+        self,
+        q: torch.Tensor,
+        times: torch.Tensor,
+        forecast: Forecast,
+        forecast_t0: float,
+    ) -> torch.Tensor:
+        """The human-collision bound of given configurations at given times (no optimisation).
+
+        Args:
+            q: (N, J) configurations [rad].
+            times: (N,) absolute times [s] at which the robot is at them.
+            forecast: the predicted human (batch entry 0).
+            forecast_t0: time of the forecast's last observed frame [s].
+
+        Returns:
+            (N,) upper bounds of the collision probability (exact pair bounds).
+
+        Raises:
+            ShapeError: on inputs of the wrong shape.
+        """
+        check_shape("q", q, ("N", self.num_joints))
+        check_shape("times", times, (q.shape[0],))
+        cfg = self.cfg
+        q = q.to(self.device, self.dtype)
+        with torch.no_grad():
+            spheres = self._spheres_for(tuple(forecast.joint_names))
+            human = C.forecast_to_obstacle(
+                forecast, times.to(self.device, self.dtype), forecast_t0, spheres
+            )
+            human = C.drop_light_actions(human, cfg.drop_action_mass * (1.0 - cfg.confidence))
+            centers = self.robot.sphere_centers(q).unsqueeze(0)  # (1, N, S_r, 3)
+            pairs = C.candidate_pairs(centers, self.radii, human, 0.0)
+            bound, _ = C.human_collision_bound(centers, self.radii, human, pairs, exact=True)
+        return bound[0]
+
     def _collision_points(self, q: torch.Tensor, win_idx: torch.Tensor) -> torch.Tensor:
         """(B, W_x * n_sub, J) points at k / n_sub along the segment ending at each window
         waypoint (k = 1..n_sub), from q (B, W, J)."""

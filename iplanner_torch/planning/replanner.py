@@ -18,11 +18,17 @@ plan the reference equals the plan up to integration error. The optimiser is giv
 limit (``PlannerCfg.optimizer_cfg``: ``OptimizerCfg.acc_max``), so that the plans, and the waits
 (:func:`~iplanner_torch.planning.optimizer.smooth_stop`), stay within it and the executed motion
 is the one whose collision bound was checked (without it, a closed-loop episode measured up to
-0.32 rad between command and plan, and the arm touched the person's hand off the checked path). By default a cycle still plans from
-the current plan's state at ``t + m`` (the plans form one continuous trajectory, position and
-velocity, which the reference tracks); ``plan_from_reference`` plans from the reference's own
-state rolled out to ``t + m`` instead (exact agreement of plan and execution), which in the
-closed loop let the reference lag plans near the velocity limits and caused many more waits.
+0.32 rad between command and plan, and the arm touched the person's hand off the checked path).
+By default a cycle plans from the current plan's state at ``t + m`` (the plans form one
+continuous trajectory, position and velocity, which the reference tracks);
+``plan_from_reference`` plans from the reference's own state rolled out to ``t + m`` instead
+(exact agreement of plan and execution), which in the closed loop let the reference lag plans
+near the velocity limits and caused many more waits.
+
+Every cycle first re-checks, against its new forecast, the plans already committed until its own
+plan takes over; when they break the confidence limit (the person did something the previous
+forecast did not expect) the new plan takes over after ``emergency_lead_s`` instead of ``m``
+(``ReplannerStats.emergencies``).
 
 A goal change (task event) starts a cycle at once whose plan takes over ``goal_change_lead_s``
 later (its solve budget; overruns are counted against it) instead of ``m`` later, so the robot
@@ -73,6 +79,12 @@ class ReplannerCfg:
     # lead time [s] of the cycle a goal change starts: its plan takes over this long after the
     # event (its solve budget) instead of m later; None means m
     goal_change_lead_s: float | None = 0.2
+    # a cycle first checks, against its new forecast, the plans that run until its own plan
+    # would take over (t + m); when they break the confidence limit the new plan takes over
+    # after this lead [s] instead (an emergency re-plan); None: never
+    emergency_lead_s: float | None = 0.2
+    # configurations checked per second of that span
+    emergency_check_hz: float = 20.0
     # "exact": command() samples the plan; "filtered": acceleration-limited tracking (module doc)
     tracking: Literal["exact", "filtered"] = "filtered"
     # per-joint acceleration limit of the filtered reference [rad/s^2]
@@ -108,6 +120,15 @@ class ReplannerCfg:
                 f"expected goal_change_lead_s in (0, replan_step_s] or None, got "
                 f"{self.goal_change_lead_s}"
             )
+        if self.emergency_lead_s is not None and not (
+            0.0 < self.emergency_lead_s <= self.replan_step_s
+        ):
+            raise ConfigError(
+                f"expected emergency_lead_s in (0, replan_step_s] or None, got "
+                f"{self.emergency_lead_s}"
+            )
+        if not self.emergency_check_hz > 0.0:
+            raise ConfigError(f"expected emergency_check_hz > 0, got {self.emergency_check_hz}")
         if self.tracking not in ("exact", "filtered"):
             raise ConfigError(f"expected tracking 'exact' or 'filtered', got {self.tracking!r}")
         if not (self.acc_max > 0.0 and self.tracking_bandwidth > 0.0):
@@ -196,6 +217,8 @@ class ReplannerStats:
         wait_s: total seconds of waits planned.
         evasions: solves where no trajectory met the constraint and holding was riskier than
             moving (``PlanResult.evasive``: the least risky trajectory, no wait).
+        emergencies: cycles whose new forecast put the plans already committed above the
+            confidence limit, so that the new plan took over after ``emergency_lead_s``.
         solve_ms: wall-clock milliseconds of each solve.
     """
 
@@ -204,6 +227,7 @@ class ReplannerStats:
     waits: int = 0
     wait_s: float = 0.0
     evasions: int = 0
+    emergencies: int = 0
     solve_ms: list[float] = field(default_factory=list)
 
     @property
@@ -415,6 +439,9 @@ class Replanner:
             if filtered and self._ref is not None:  # re-anchor where the robot is, same speed
                 self._ref = (float(t), q_now.clone(), self._ref[2])
         lead = self._lead(self._goal_changed)
+        if forecast is not None and self._committed_unsafe(t, lead, plan, forecast, forecast_t0):
+            lead = float(self.cfg.emergency_lead_s)  # type: ignore[arg-type]
+            self.stats.emergencies += 1
         t_plan = t + lead
         if filtered and self.cfg.plan_from_reference:
             _, q_s, qd_s = self._reference_at(t_plan, plan, None, predict=True)
@@ -470,6 +497,32 @@ class Replanner:
         if self._next_cycle <= t:
             self._next_cycle = t + m
         return result
+
+    def _committed_unsafe(
+        self,
+        t: float,
+        lead: float,
+        plan: Trajectory,
+        forecast: Forecast,
+        forecast_t0: float | None,
+    ) -> bool:
+        """Whether the plans that run from ``t + emergency_lead_s`` until ``t + lead`` break
+        the confidence limit under ``forecast`` (see ``ReplannerCfg.emergency_lead_s``)."""
+        early = self.cfg.emergency_lead_s
+        if early is None or lead <= early + TIME_EPS:
+            return False
+        n = max(2, int(round((lead - early) * self.cfg.emergency_check_hz)) + 1)
+        opt = self.optimizer
+        ts = torch.linspace(t + early, t + lead, n, dtype=opt.dtype, device=opt.device)
+        nxt = self._next_plan
+        qs = []
+        for tau in ts.tolist():
+            p = nxt if nxt is not None and tau > nxt.t_start + TIME_EPS else plan
+            qs.append(p.sample(tau)[0])
+        bound = opt.collision_bound(
+            torch.stack(qs), ts, forecast, t if forecast_t0 is None else forecast_t0
+        )
+        return bool(float(bound.max()) > 1.0 - opt.cfg.confidence)
 
     def _warm_start(
         self, q_s: torch.Tensor, t_plan: float, duration: float

@@ -11,6 +11,7 @@ import torch
 from planning_fakes import PointRobot, one_sphere_map, static_forecast
 
 from iplanner_torch.errors import ConfigError
+from iplanner_torch.planning import costs as C
 from iplanner_torch.planning.itomp import ITOMP
 from iplanner_torch.planning.optimizer import OptimizerCfg, PlanResult, TrajectoryOptimizer
 from iplanner_torch.planning.replanner import (
@@ -276,3 +277,36 @@ def test_planner_option_files_instantiate(name: str) -> None:
     assert isinstance(cfg.optimizer, OptimizerCfg) and isinstance(cfg.replanner, ReplannerCfg)
     if name != "itomp":
         assert cfg.predictor_variant == name.removeprefix("iplanner_")
+
+
+def test_a_committed_plan_the_new_forecast_rules_out_is_replaced_early(point_robot) -> None:
+    # The plan committed until t + m runs into a person the new forecast puts on its path:
+    # the new plan takes over after emergency_lead_s instead of m; a harmless forecast keeps
+    # the regular cadence.
+    opt = TrajectoryOptimizer(
+        point_robot,
+        OptimizerCfg(iterations=5, warm_iterations=2),
+        human_spheres=one_sphere_map(0.1),
+    )
+    cfg = ReplannerCfg(replan_step_s=0.5, goal_change_lead_s=0.2, emergency_lead_s=0.1)
+    q0, goal = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    for where, emergency in (([5.0, 5.0, 0.0], False), (None, True)):
+        rp = Replanner(opt, cfg)
+        rp.reset(q0, goal, t=0.0)
+        rp.step(0.0, q0, None)  # plan from 0.2 s on, no person
+        t = 0.2
+        q_mid = rp._current(0.55).sample(0.55)[0]  # where the committed plan is at 0.55 s
+        centre = where if where is not None else [float(q_mid[0]), float(q_mid[1]), 0.0]
+        fc = static_forecast(centre, 0.03)
+        # the committed configurations' bound, against a bound computed pair by pair
+        ts = torch.tensor([0.3, 0.55])
+        qs = torch.stack([rp._current(float(x)).sample(float(x))[0] for x in ts])
+        b = opt.collision_bound(qs, ts, fc, forecast_t0=t)
+        d = torch.tensor(centre) - torch.cat([qs, torch.zeros(2, 1)], -1)
+        ref, _ = C.gaussian_ball_bound_diag(d, torch.full((2, 3), 0.03**2), torch.full((2,), 0.15))
+        assert torch.allclose(b, ref.clamp(max=1.0), atol=1e-6)
+        res = rp.step(t, rp.command(t)[0], fc, forecast_t0=t)
+        assert rp.stats.emergencies == int(emergency)
+        assert float(res.times[0]) == pytest.approx(t + (0.1 if emergency else 0.5))
+    with pytest.raises(ConfigError, match="emergency_lead_s"):
+        ReplannerCfg(replan_step_s=0.5, emergency_lead_s=0.7)
