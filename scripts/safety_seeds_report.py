@@ -1,0 +1,96 @@
+#!/usr/bin/env python
+"""Write ``experiments/safety_seeds/README.md``: contacts, distance, smoothness and efficiency
+of ITOMP and I-Planner (NI) over 20 seeds per scenario at confidence 0.95.
+
+Usage::
+
+    iplanner-experiment -m experiment=safety_seeds hydra/launcher=joblib \\
+        hydra.launcher.n_jobs=2 'experiment.seeds=[0,...,9],[10,...,19]'
+    python scripts/safety_seeds_report.py multirun/experiment/<time> --command "<the command>"
+
+Reads every ``results.csv`` under the run folder (one row per episode; the sweep's jobs and
+their scenario sub-folders), and writes the per-scenario table and the episode rows.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+from pathlib import Path
+
+import pandas as pd
+
+from iplanner_torch.eval.report import to_markdown
+
+OUT = Path(__file__).resolve().parents[1] / "experiments" / "safety_seeds"
+
+#: column -> (aggregation, header)
+COLUMNS = {
+    "episodes": ("seed", "size"),
+    "contact_free": ("sim/contacts", lambda x: int((x == 0).sum())),
+    "completed": ("eval/completed", lambda x: int((x > 0).sum())),
+    "min_distance_mean": ("eval/min_distance", "mean"),
+    "min_distance_min": ("eval/min_distance", "min"),
+    "smoothness": ("eval/smoothness", "mean"),
+    "jerkiness": ("eval/jerkiness", "mean"),
+    "efficiency": ("eval/efficiency", "mean"),
+    "waits": ("plan/waits", "mean"),
+    "emergencies": ("plan/emergencies", "mean"),
+    "realtime_factor": ("sim/realtime_factor", "mean"),
+}
+
+
+def gather(run_dir: Path) -> pd.DataFrame:
+    """Every episode row under ``run_dir`` (duplicates of the sweep summary dropped)."""
+    frames = [pd.read_csv(f) for f in sorted(run_dir.rglob("results.csv"))]
+    frames = [f for f in frames if "eval/min_distance" in f.columns]  # raw episode rows only
+    if not frames:
+        raise SystemExit(f"no results.csv with episode rows under {run_dir}")
+    df = pd.concat(frames, ignore_index=True)
+    return df.drop_duplicates(subset=["scenario", "planner", "seed"], keep="last")
+
+
+def summarise(df: pd.DataFrame) -> pd.DataFrame:
+    """One row per scenario and planner (:data:`COLUMNS`)."""
+    cols = {k: v for k, v in COLUMNS.items() if v[0] in df.columns}
+    out = df.groupby(["scenario", "planner"], sort=False).agg(**cols).reset_index()
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("--command", default="iplanner-experiment -m experiment=safety_seeds")
+    parser.add_argument("--note", default="")
+    args = parser.parse_args()
+    df = gather(args.run_dir)
+    table = summarise(df)
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+    ).stdout.strip()
+    OUT.mkdir(parents=True, exist_ok=True)
+    df.to_csv(OUT / "results.csv", index=False)
+    lines = [
+        "# Safety and efficiency over 20 seeds per scenario (confidence 0.95)",
+        "",
+        f"Command: `{args.command}`  ",
+        "Report: `python scripts/safety_seeds_report.py <multirun dir>`  ",
+        f"Commit: {commit}. Machine: the 2-core CPU, no GPU. {len(df)} episodes.",
+        "",
+    ]
+    if args.note:
+        lines += [args.note, ""]
+    lines += [
+        "Distances in metres (sphere models; < 0: overlap), smoothness and jerkiness in",
+        "rad^2/s^4, efficiency = human alone / with the robot; `contact_free` counts episodes",
+        "without a MuJoCo robot-human contact, `completed` episodes that finished in 60 s.",
+        "",
+        to_markdown(table),
+        "",
+    ]
+    (OUT / "README.md").write_text("\n".join(lines))
+    print(f"wrote {OUT / 'README.md'}")
+
+
+if __name__ == "__main__":
+    main()
