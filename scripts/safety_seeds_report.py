@@ -15,10 +15,10 @@ their scenario sub-folders), and writes the per-scenario table and the episode r
 from __future__ import annotations
 
 import argparse
-import subprocess
 from pathlib import Path
 
 import pandas as pd
+from _report import write_readme
 
 from iplanner_torch.eval.report import to_markdown
 
@@ -65,31 +65,23 @@ def main() -> None:
     args = parser.parse_args()
     df = gather(args.run_dir)
     table = summarise(df)
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
-    ).stdout.strip()
-    OUT.mkdir(parents=True, exist_ok=True)
-    df.to_csv(OUT / "results.csv", index=False)
-    lines = [
-        "# Safety and efficiency over 20 seeds per scenario (confidence 0.95)",
-        "",
-        f"Command: `{args.command}`  ",
-        "Report: `python scripts/safety_seeds_report.py <multirun dir>`  ",
-        f"Commit: {commit}. Machine: the 2-core CPU, no GPU. {len(df)} episodes.",
-        "",
-    ]
-    if args.note:
-        lines += [args.note, ""]
-    lines += [
-        "Distances in metres (sphere models; < 0: overlap), smoothness and jerkiness in",
-        "rad^2/s^4, efficiency = human alone / with the robot; `contact_free` counts episodes",
-        "without a MuJoCo robot-human contact, `completed` episodes that finished in 60 s.",
-        "",
-        to_markdown(table),
-        "",
-    ]
-    (OUT / "README.md").write_text("\n".join(lines))
-    print(f"wrote {OUT / 'README.md'}")
+    write_readme(
+        OUT,
+        title="Safety and efficiency over 20 seeds per scenario (confidence 0.95)",
+        command=args.command,
+        report="python scripts/safety_seeds_report.py <multirun dir>",
+        episodes=df,
+        note=args.note,
+        body=[
+            "Distances in metres (sphere models; < 0: overlap), smoothness and jerkiness in",
+            "rad^2/s^4, efficiency = human alone / with the robot; `contact_free` counts",
+            "episodes without a MuJoCo robot-human contact, `completed` episodes that finished",
+            "in 60 s.",
+            "",
+            to_markdown(table),
+            "",
+        ],
+    )
 
 
 if __name__ == "__main__":

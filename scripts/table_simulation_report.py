@@ -14,10 +14,10 @@ confidence level and planner).
 from __future__ import annotations
 
 import argparse
-import subprocess
 from pathlib import Path
 
 import pandas as pd
+from _report import write_readme
 
 from iplanner_torch.eval.report import (
     gather_results,
@@ -46,37 +46,28 @@ def main() -> None:
     scen = df.groupby(KEYS, sort=False)["scenario"].first().reset_index()
     table = scen.merge(table, on=KEYS)
     summary = summary_table(df, ("scenario", "planner"))
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
-    ).stdout.strip()
-    OUT.mkdir(parents=True, exist_ok=True)
-    df.to_csv(OUT / "results.csv", index=False)
-    lines = [
-        "# Paper table performance_simulation, reproduced",
-        "",
-        f"Command: `{args.command}`  ",
-        "Report: `python scripts/table_simulation_report.py <run dir>`  ",
-        f"Commit: {commit}. Machine: the 2-core CPU, no GPU. {len(df)} episodes.",
-        "",
-    ]
-    if args.note:
-        lines += [args.note, ""]
-    lines += [
-        "Units: `mhd` and `min_distance` in metres, smoothness and jerkiness in rad^2/s^4",
-        "(paper eq. smoothness and jerkiness; the paper does not state its units or time",
-        "scaling, so compare the ratios between planners rather than absolute values).",
-        "",
-        "## Ours beside the paper (means over episodes)",
-        "",
-        to_markdown(table),
-        "",
-        "## Ours: means, spread and contact-free episodes",
-        "",
-        to_markdown(summary),
-        "",
-    ]
-    (OUT / "README.md").write_text("\n".join(lines))
-    print(f"wrote {OUT / 'README.md'}")
+    write_readme(
+        OUT,
+        title="Paper table performance_simulation, reproduced",
+        command=args.command,
+        report="python scripts/table_simulation_report.py <run dir>",
+        episodes=df,
+        note=args.note,
+        body=[
+            "Units: `mhd` and `min_distance` in metres, smoothness and jerkiness in rad^2/s^4",
+            "(paper eq. smoothness and jerkiness; the paper does not state its units or time",
+            "scaling, so compare the ratios between planners rather than absolute values).",
+            "",
+            "## Ours beside the paper (means over episodes)",
+            "",
+            to_markdown(table),
+            "",
+            "## Ours: means, spread and contact-free episodes",
+            "",
+            to_markdown(summary),
+            "",
+        ],
+    )
 
 
 if __name__ == "__main__":
