@@ -5,8 +5,9 @@ B = 8 and B = 64 trajectories, 20 waypoints, 7 joints, the 22 spheres of the upp
 A = 10 actions. The forecast is synthetic (the predictor is timed by its own benchmark), so
 ``predict_ms`` counts only turning the forecast into Gaussian spheres at the waypoint times.
 Cycles are warm-started, as in closed loop: each timing is one ``Replanner.step`` after a
-first cold one. Runs single-threaded (``torch.set_num_threads(1)``): these tensors are small
-and intra-op threads only add synchronisation.
+first cold one, with the closed loop's acceleration limit and the check of the committed plans
+against the new forecast. Runs single-threaded (``torch.set_num_threads(1)``): these tensors
+are small and intra-op threads only add synchronisation.
 
 Usage::
 
@@ -70,8 +71,15 @@ def synthetic_forecast(num_actions: int = 10, n_f: int = 30, dt: float = 1 / 15)
 
 
 def _cycle_times(robot, b: int, forecast: Forecast, repeats: int) -> dict[str, float]:
-    cfg = OptimizerCfg(num_trajectories=b, num_waypoints=20, iterations=20, warm_iterations=6)
-    rp = Replanner(TrajectoryOptimizer(robot, cfg), ReplannerCfg(replan_step_s=0.5))
+    rcfg = ReplannerCfg(replan_step_s=0.5)  # filtered tracking, committed-plan check on
+    cfg = OptimizerCfg(
+        num_trajectories=b,
+        num_waypoints=20,
+        iterations=20,
+        warm_iterations=6,
+        acc_max=rcfg.acc_max,  # as in closed loop (PlannerCfg.optimizer_cfg)
+    )
+    rp = Replanner(TrajectoryOptimizer(robot, cfg), rcfg)
     q0 = robot.q_home.clone()
     qg = q0.clone()
     qg[0] += 1.2

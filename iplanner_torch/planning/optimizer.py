@@ -34,7 +34,7 @@ from iplanner_torch.types import check_shape
 
 #: Accepted plans keep every waypoint-to-waypoint velocity within this factor of the limits.
 VEL_TOL = 1.05
-#: Acceptance tolerance on the acceleration limit (``OptimizerCfg.acc_max``).
+#: Tolerance on the acceleration limit (``OptimizerCfg.acc_max``) at acceptance.
 ACC_TOL = 1.1
 #: Slack [m] below the clearance of a plan's pinned ends within which its waypoints still pass
 #: the static check: the start is where the robot is and the goal is what the task asks (a
@@ -108,8 +108,9 @@ class OptimizerCfg:
     # segment ending at each waypoint), so a fast robot cannot pass between two checks
     collision_substeps: int = 2
     # acceleration limit of the robot's trajectory interface [rad/s^2] (the replanner's
-    # filtered tracking): a cost term keeps the plans within it and the acceptance rejects a
-    # plan above ACC_TOL times it, so the executed motion is the one checked; None: no limit
+    # filtered tracking): a cost term keeps the plans within it and the acceptance prefers the
+    # safe plans within ACC_TOL times it, so the executed motion is the one checked; None: no
+    # limit
     acc_max: float | None = None
     # static-obstacle clearance below which the hinge cost starts [m]
     static_margin: float = 0.02
