@@ -16,7 +16,7 @@ MJCF conventions: ``<compiler angle="radian"/>``; body names equal URDF link nam
 names equal URDF joint names; the top body is the robot's base link (``iiwa_base`` or
 ``fetch_base``) at the origin, with no floor or light, ready to be attached into a scene at a
 base pose; every body has ``gravcomp="1"`` (gravity compensated, as the arms' controllers do);
-contacts excluded between parent and child bodies (and the wrist pairs in
+contacts excluded between bodies one or two joints apart (and the pairs in
 ``contact_excludes``); one ``<position>`` actuator per joint, named like the joint, with
 ``forcerange`` equal to the joint's effort limit; a site ``ee_site`` at the tool point. MuJoCo
 carries no velocity limits: the planner enforces :attr:`JointSpec.velocity` itself.
@@ -644,11 +644,20 @@ def mjcf_string(desc: RobotDescription) -> str:
         out.append("  " * depth + "</body>")
     out.append("  </worldbody>")
     # Overlapping primitives at each joint must not collide. MuJoCo filters parent-child
-    # contacts by itself only below the first moving joint, so list every pair explicitly.
-    out.append("  <contact>")
+    # contacts by itself only below the first moving joint, so list every pair explicitly;
+    # links two joints apart are excluded as well: our primitives are fatter than the real
+    # links, and within the joint limits they touched where the real arm does not (the Fetch
+    # shoulder lift and elbow flex links at elbow flex 2.1 rad), which the planner, which has
+    # no self-collision model, cannot foresee.
+    parent_of = {j.child: j.parent for j in desc.joints}
+    pairs: list[tuple[str, str]] = []
     for j in desc.joints:
-        out.append(f'    <exclude body1="{j.parent}" body2="{j.child}"/>')
-    for a, b in desc.contact_excludes:
+        pairs.append((j.parent, j.child))
+        if j.parent in parent_of:
+            pairs.append((parent_of[j.parent], j.child))
+    pairs += [p for p in desc.contact_excludes if p not in pairs and p[::-1] not in pairs]
+    out.append("  <contact>")
+    for a, b in pairs:
         out.append(f'    <exclude body1="{a}" body2="{b}"/>')
     out.append("  </contact>")
     out.append("  <actuator>")
