@@ -28,7 +28,10 @@ near the velocity limits and caused many more waits.
 Every cycle first re-checks, against its new forecast, the plans already committed until its own
 plan takes over; when they break the confidence limit (the person did something the previous
 forecast did not expect) the new plan takes over after ``emergency_lead_s`` instead of ``m``
-(``ReplannerStats.emergencies``).
+(``ReplannerStats.emergencies``). After a cycle that ended in a wait, the next plan takes over
+``wait_lead_s`` after its cycle and cycles follow at that pace while the waits last, so a wait
+ends soon after the way is free instead of up to ``2 m`` later (in arrangement_1x4, seeds 0-4,
+the I-Planner's mean efficiency went from 1.42 to 1.50 with 0.2 s).
 
 A goal change (task event) starts a cycle at once whose plan takes over ``goal_change_lead_s``
 later (its solve budget; overruns are counted against it) instead of ``m`` later, so the robot
@@ -85,6 +88,10 @@ class ReplannerCfg:
     emergency_lead_s: float | None = 0.2
     # configurations checked per second of that span
     emergency_check_hz: float = 20.0
+    # after a cycle that ended in a wait, the next plan takes over this long after its cycle
+    # [s] instead of m (and cycles follow at that pace while the waits last), so a wait ends
+    # soon after the way is free; None: m
+    wait_lead_s: float | None = 0.2
     # "exact": command() samples the plan; "filtered": acceleration-limited tracking (module doc)
     tracking: Literal["exact", "filtered"] = "filtered"
     # per-joint acceleration limit of the filtered reference [rad/s^2]
@@ -126,6 +133,10 @@ class ReplannerCfg:
             raise ConfigError(
                 f"expected emergency_lead_s in (0, replan_step_s] or None, got "
                 f"{self.emergency_lead_s}"
+            )
+        if self.wait_lead_s is not None and not 0.0 < self.wait_lead_s <= self.replan_step_s:
+            raise ConfigError(
+                f"expected wait_lead_s in (0, replan_step_s] or None, got {self.wait_lead_s}"
             )
         if not self.emergency_check_hz > 0.0:
             raise ConfigError(f"expected emergency_check_hz > 0, got {self.emergency_check_hz}")
@@ -439,6 +450,10 @@ class Replanner:
             if filtered and self._ref is not None:  # re-anchor where the robot is, same speed
                 self._ref = (float(t), q_now.clone(), self._ref[2])
         lead = self._lead(self._goal_changed)
+        last = self._last
+        if self.cfg.wait_lead_s is not None and last is not None and not last.feasible:
+            if not last.evasive:
+                lead = min(lead, self.cfg.wait_lead_s)
         if forecast is not None and self._committed_unsafe(t, lead, plan, forecast, forecast_t0):
             lead = float(self.cfg.emergency_lead_s)  # type: ignore[arg-type]
             self.stats.emergencies += 1

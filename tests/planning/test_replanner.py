@@ -310,3 +310,25 @@ def test_a_committed_plan_the_new_forecast_rules_out_is_replaced_early(point_rob
         assert float(res.times[0]) == pytest.approx(t + (0.1 if emergency else 0.5))
     with pytest.raises(ConfigError, match="emergency_lead_s"):
         ReplannerCfg(replan_step_s=0.5, emergency_lead_s=0.7)
+
+
+def test_after_a_wait_the_next_plan_takes_over_after_wait_lead(point_robot) -> None:
+    # a person right in front of the robot: the first cycle waits; with wait_lead_s the next
+    # cycle's plan takes over 0.2 s after it runs (and the next cycle comes then) instead of m
+    cfg = OptimizerCfg(iterations=0, warm_iterations=0, horizon_s=2.0, perturbation_std=0.0)
+    opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.1))
+    blocker = static_forecast([-0.8, 0.0, 0.0], 0.03)
+    q0, goal = torch.tensor([-1.0, 0.0]), torch.tensor([0.3, 0.0])
+    for wait_lead, expected in ((0.2, 0.2), (None, 0.5)):
+        rcfg = ReplannerCfg(replan_step_s=0.5, goal_change_lead_s=None, wait_lead_s=wait_lead)
+        rp = Replanner(opt, rcfg)
+        rp.reset(q0, goal, t=0.0)
+        first = rp.step(0.0, q0, blocker)
+        assert not first.feasible and not first.evasive and rp.stats.waits == 1
+        t = rp.next_cycle
+        assert t == pytest.approx(0.5)
+        res = rp.step(t, rp.command(t)[0], blocker)
+        assert float(res.times[0]) == pytest.approx(t + expected)
+        assert rp.next_cycle == pytest.approx(t + expected)
+    with pytest.raises(ConfigError, match="wait_lead_s"):
+        ReplannerCfg(replan_step_s=0.5, wait_lead_s=0.6)
