@@ -468,10 +468,8 @@ class TrajectoryOptimizer:
         human = None
         if forecast is not None:
             with predict_timer:
-                spheres = self._spheres_for(tuple(forecast.joint_names))
                 t_pts = self._collision_points(times.view(1, -1, 1), win_idx)[0, :, 0]
-                human = C.forecast_to_obstacle(forecast, t_pts, forecast_t0, spheres)
-                human = C.drop_light_actions(human, cfg.drop_action_mass * (1.0 - cfg.confidence))
+                human = self._human_obstacle(forecast, t_pts, forecast_t0)
 
         if q_init is not None:
             check_shape("q_init", q_init, (cfg.num_trajectories, w, j))
@@ -567,18 +565,23 @@ class TrajectoryOptimizer:
         """
         check_shape("q", q, ("N", self.num_joints))
         check_shape("times", times, (q.shape[0],))
-        cfg = self.cfg
         q = q.to(self.device, self.dtype)
         with torch.no_grad():
-            spheres = self._spheres_for(tuple(forecast.joint_names))
-            human = C.forecast_to_obstacle(
-                forecast, times.to(self.device, self.dtype), forecast_t0, spheres
-            )
-            human = C.drop_light_actions(human, cfg.drop_action_mass * (1.0 - cfg.confidence))
+            human = self._human_obstacle(forecast, times.to(self.device, self.dtype), forecast_t0)
             centers = self.robot.sphere_centers(q).unsqueeze(0)  # (1, N, S_r, 3)
             pairs = C.candidate_pairs(centers, self.radii, human, 0.0)
             bound, _ = C.human_collision_bound(centers, self.radii, human, pairs, exact=True)
         return bound[0]
+
+    def _human_obstacle(
+        self, forecast: Forecast, times: torch.Tensor, forecast_t0: float
+    ) -> C.HumanObstacle:
+        """The forecast's human spheres at ``times`` (W_x,) [s], without the actions too light
+        to matter at this confidence (``drop_action_mass``)."""
+        cfg = self.cfg
+        spheres = self._spheres_for(tuple(forecast.joint_names))
+        human = C.forecast_to_obstacle(forecast, times, forecast_t0, spheres)
+        return C.drop_light_actions(human, cfg.drop_action_mass * (1.0 - cfg.confidence))
 
     def _collision_points(self, q: torch.Tensor, win_idx: torch.Tensor) -> torch.Tensor:
         """(B, W_x * n_sub, J) points at k / n_sub along the segment ending at each window

@@ -529,14 +529,13 @@ class Replanner:
         n = max(2, int(round((lead - early) * self.cfg.emergency_check_hz)) + 1)
         opt = self.optimizer
         ts = torch.linspace(t + early, t + lead, n, dtype=opt.dtype, device=opt.device)
+        q = plan.sample(ts)[0]  # (n, J)
         nxt = self._next_plan
-        qs = []
-        for tau in ts.tolist():
-            p = nxt if nxt is not None and tau > nxt.t_start + TIME_EPS else plan
-            qs.append(p.sample(tau)[0])
-        bound = opt.collision_bound(
-            torch.stack(qs), ts, forecast, t if forecast_t0 is None else forecast_t0
-        )
+        if nxt is not None:  # the pending plan runs from its start on
+            later = ts > nxt.t_start + TIME_EPS
+            if bool(later.any()):
+                q = torch.where(later.unsqueeze(-1), nxt.sample(ts)[0], q)
+        bound = opt.collision_bound(q, ts, forecast, t if forecast_t0 is None else forecast_t0)
         return bool(float(bound.max()) > 1.0 - opt.cfg.confidence)
 
     def _warm_start(

@@ -461,24 +461,28 @@ def train_predictor(
             m &= val.progress == p
         return xv_all[m], yv_all[m]
 
-    gps: dict[tuple[int, int], SVGPRegressor] = {}
-    jobs = [(pc, idx) for pc, idx in sorted(groups.items()) if idx.numel() >= cfg.min_group_size]
-    for (p, c), idx in jobs:
+    def fit(idx: torch.Tensor, p: int | None, c: int, name: str) -> SVGPRegressor:
+        """One GP on (a subsample of) the training rows ``idx``, validated on (p, c)."""
         idx = _subsample(idx, cfg.max_gp_points, cfg.seed)
         xv, yv = val_rows(p, c)
-        gps[(p, c)] = train_svgp(
+        return train_svgp(
             x_all[idx],
             y_all[idx],
             cfg=cfg.svgp,
             tcfg=trainer_cfg,
             out_dir=out_dir,
-            name=f"gp_p{p}_c{c}",
+            name=name,
             window=(n_p, d),
             x_val=xv,
             y_val=yv,
             progress=progress,
             resume=resume,
         )
+
+    gps: dict[tuple[int, int], SVGPRegressor] = {}
+    jobs = [(pc, idx) for pc, idx in sorted(groups.items()) if idx.numel() >= cfg.min_group_size]
+    for (p, c), idx in jobs:
+        gps[(p, c)] = fit(idx, p, c, f"gp_p{p}_c{c}")
     pooled: dict[int, SVGPRegressor] = {}
     for c in torch.unique(train.current).tolist():
         own = [pc for pc in groups if pc[1] == c]
@@ -488,21 +492,7 @@ def train_predictor(
         idx = torch.nonzero(train.current == c)[:, 0]
         if idx.numel() < cfg.min_group_size:
             continue
-        idx = _subsample(idx, cfg.max_gp_points, cfg.seed)
-        xv, yv = val_rows(None, c)
-        pooled[c] = train_svgp(
-            x_all[idx],
-            y_all[idx],
-            cfg=cfg.svgp,
-            tcfg=trainer_cfg,
-            out_dir=out_dir,
-            name=f"gp_pooled_c{c}",
-            window=(n_p, d),
-            x_val=xv,
-            y_val=yv,
-            progress=progress,
-            resume=resume,
-        )
+        pooled[c] = fit(idx, None, c, f"gp_pooled_c{c}")
 
     predictor = HumanMotionPredictor(
         cfg=cfg,

@@ -83,12 +83,20 @@ def test_cycles_every_m_and_warm_starts_from_the_shifted_plan(point_robot: Point
     assert rp.stats.overruns == 0
 
 
-def _drive(rp: Replanner, q: torch.Tensor, until: float, dt: float = 0.01, fc=None):
-    """Closed loop at 100 Hz with perfect tracking; returns times and commanded q, qd."""
+def _drive(
+    rp: Replanner,
+    q: torch.Tensor,
+    until: float,
+    dt: float = 0.01,
+    fc=None,
+    t0: float = 0.0,
+):
+    """Closed loop at 100 Hz with perfect tracking from ``t0``; returns times and commanded
+    q, qd."""
     ts, qs, vs = [], [], []
-    t = 0.0
+    t = t0
     while t < until - 1e-9:
-        rp.step(t, q, fc)
+        rp.step(t, q.float(), fc)
         q, qd = rp.command(t)
         ts.append(t)
         qs.append(q)
@@ -134,7 +142,7 @@ def test_filtered_command_limits_acceleration_and_starts_plans_on_its_state(
     # a goal change mid-motion reverses the direction: the plan's velocity jumps
     t, q, qd = _drive(rp, q0, 1.3)
     rp.set_goal(torch.tensor([-1.0, -0.5]), t=1.3)
-    t2, q2, qd2 = _drive_from(rp, q[-1], 1.3, 3.0)
+    t2, q2, qd2 = _drive(rp, q[-1], 3.0, t0=1.3)
     t, q, qd = torch.cat([t, t2]), torch.cat([q, q2]), torch.cat([qd, qd2])
     # finite differences of the commanded positions: continuous velocity, bounded acceleration
     vel = torch.diff(q, dim=0) / 0.01
@@ -154,23 +162,6 @@ def test_filtered_command_limits_acceleration_and_starts_plans_on_its_state(
             assert torch.allclose(call["qd_start"].double(), qd[k], atol=1e-4)
             checked += 1
     assert checked >= 4
-
-
-def _drive_from(rp: Replanner, q: torch.Tensor, t0: float, until: float, dt: float = 0.01):
-    ts, qs, vs = [], [], []
-    t = t0
-    while t < until - 1e-9:
-        rp.step(t, q.float(), None)
-        q, qd = rp.command(t)
-        ts.append(t)
-        qs.append(q)
-        vs.append(qd)
-        t = round(t + dt, 10)
-    return (
-        torch.tensor(ts, dtype=torch.float64),
-        torch.stack(qs).double(),
-        torch.stack(vs).double(),
-    )
 
 
 def test_filtered_command_follows_a_smooth_plan_closely(point_robot: PointRobot) -> None:

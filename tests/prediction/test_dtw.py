@@ -20,14 +20,7 @@ from iplanner_torch.prediction.dtw import (
     median_dtw,
 )
 
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """Small tensors: one intra-op thread avoids oversubscription on shared CPUs."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def _in_band(i: int, j: int, t1: int, t2: int, band: int | None) -> bool:

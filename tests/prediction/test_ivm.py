@@ -14,14 +14,7 @@ from iplanner_torch.errors import CheckpointError, ConfigError, DataError, Shape
 from iplanner_torch.prediction.dtw import DTWKernel, GlobalAlignmentKernel, RBFKernel, median_dtw
 from iplanner_torch.prediction.ivm import ActionClassifier, IVMClassifier, feature_columns
 
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """Small tensors: one intra-op thread avoids oversubscription on shared CPUs."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def sine_windows(n: int, seed: int, classes=(0, 1, 2), t: int = 12, d: int = 3):

@@ -11,14 +11,7 @@ import torch
 from iplanner_torch.errors import CheckpointError, ConfigError, ShapeError
 from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
 
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """One intra-op thread: these small problems run fastest (and fairest) that way."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def _toy(n: int, seed: int, dtype: torch.dtype = torch.float32) -> tuple[torch.Tensor, ...]:

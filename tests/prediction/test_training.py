@@ -20,12 +20,7 @@ from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 REPO = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def _windows(joints: tuple[str, ...]):
