@@ -21,7 +21,13 @@ over the predictor's actions (``reach_<i>``: delivery spot ``i`` is reaching tar
 With ``mask_unavailable_actions`` (default) the forecast is also conditioned on the task state
 the robot knows: taking a block that is not on its delivery spot gets weight 0
 (:func:`action_mask`, :meth:`Forecast.mask_actions`); an idle person who waits for block ``i``
-is then not predicted to reach for the empty spot ``i`` the robot must deliver to.
+is then not predicted to reach for the empty spot ``i`` the robot must deliver to. With
+``rest_when_nothing_available`` (default), when no block is available to the person at all, the
+``idle`` action's forecast is held at its first frame (:meth:`Forecast.hold_actions`): the spread
+that the idle forecast learns from demonstrations is the chance that a reach starts within the
+horizon, and no reach can start then. Without it the robot waited at the first deliveries for a
+person resting with nothing to take (arrangement_1x4, seeds 0 and 1: 8 and 9 waits per episode;
+with it 3 and 4).
 ITOMP plans against ``static_human_forecast`` of the latest tracked pose; both forecasts start
 at the time of the last tracker frame (``forecast_t0``), and the optimiser samples them at the
 waypoint times of the plan's execution window ``[t + m, t + 2m]``.
@@ -146,6 +152,9 @@ class EpisodeCfg:
     # task-state conditioning of the forecast: the weight of taking a block that is not on its
     # delivery spot (not delivered yet, or already taken) is set to 0 (:func:`action_mask`)
     mask_unavailable_actions: bool = True
+    # with the mask on and no block available to the person, hold the idle action's forecast
+    # at its first frame: a person with nothing to take is predicted to stay at rest
+    rest_when_nothing_available: bool = True
 
     def __post_init__(self) -> None:
         if self.max_duration_s <= 0:
@@ -248,10 +257,23 @@ def action_mask(action_names: tuple[str, ...], available: set[int]) -> torch.Ten
     """
     keep = []
     for name in action_names:
-        head, _, tail = name.lower().rpartition("_")
-        is_take = head in ("take", "reach") and tail.isdigit()
-        keep.append(not is_take or int(tail) in available)
+        low = name.lower()
+        keep.append(not _is_take(low) or int(low.rpartition("_")[2]) in available)
     return torch.tensor(keep, dtype=torch.bool)
+
+
+def rest_hold(action_names: tuple[str, ...], keep: torch.Tensor) -> torch.Tensor:
+    """(A,) bool: the ``idle`` action when ``keep`` (from :func:`action_mask`) rules out every
+    ``take_<i>`` / ``reach_<i>`` action, else all False (see ``rest_when_nothing_available``)."""
+    names = [n.lower() for n in action_names]
+    takes = [_is_take(n) for n in names]
+    nothing = any(takes) and not any(bool(k) for k, t in zip(keep.tolist(), takes) if t)
+    return torch.tensor([nothing and n == "idle" for n in names], dtype=torch.bool)
+
+
+def _is_take(name: str) -> bool:
+    head, _, tail = name.rpartition("_")
+    return head in ("take", "reach") and tail.isdigit()
 
 
 def planner_cfg_for(base: PlannerCfg, kind: str, confidence: float) -> PlannerCfg:
@@ -532,7 +554,12 @@ def _run_episode(
                         available = set(env.delivered) | {
                             i for i, st in env.block_state.items() if st == "human"
                         }
-                        forecast = forecast.mask_actions(action_mask(action_names, available))
+                        keep = action_mask(action_names, available)
+                        forecast = forecast.mask_actions(keep)
+                        if cfg.rest_when_nothing_available:
+                            hold = rest_hold(action_names, keep)
+                            if bool(hold.any()):
+                                forecast = forecast.hold_actions(hold)
                     mean = forecast.expected_mean()[0][:, hands]  # (n_f, 2, 3)
                     forecasts.append(
                         (

@@ -100,6 +100,31 @@ class Forecast:
         w = torch.where(ok, w / torch.where(ok, total, 1.0), self.weights)
         return replace(self, weights=w)
 
+    def hold_actions(self, hold: torch.Tensor) -> Forecast:
+        """The forecast with some actions' motion held at their first predicted frame.
+
+        Task-state conditioning of a rest: the spread of an ``idle`` forecast learned from
+        demonstrations is mostly the chance that a reach starts within the horizon. When no
+        reach is possible (nothing lies within the person's task), the idle person is
+        predicted to stay where the first frame puts them, with that frame's variance, over
+        the whole horizon.
+
+        Args:
+            hold: (A,) bool, True for the actions to hold.
+
+        Returns:
+            A forecast with the same weights; for the held actions, mean and var of every
+            frame equal those of frame 0.
+
+        Raises:
+            ShapeError: when ``hold`` is not (A,).
+        """
+        check_shape("hold", hold, (int(self.weights.shape[1]),))
+        h = hold.to(self.mean.device).view(1, -1, 1, 1, 1)
+        mean = torch.where(h, self.mean[:, :, :1].expand_as(self.mean), self.mean)
+        var = torch.where(h, self.var[:, :, :1].expand_as(self.var), self.var)
+        return replace(self, mean=mean, var=var)
+
     def select(self, index: int | slice) -> Forecast:
         """The forecast for a subset of the batch (keeps the batch dimension)."""
         idx = slice(index, index + 1) if isinstance(index, int) else index

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from iplanner_torch.errors import ShapeError
-from iplanner_torch.eval.episode import action_mask
+from iplanner_torch.eval.episode import action_mask, rest_hold
 from iplanner_torch.prediction.forecast import Forecast
 
 
@@ -46,3 +46,27 @@ def test_action_mask_rules_out_takes_of_blocks_not_on_their_spot() -> None:
     keep = action_mask(names, available={1, 2})
     assert keep.tolist() == [True, False, True, False, True]
     assert action_mask(names, available=set()).tolist() == [True, False, False, False, False]
+
+
+def test_hold_actions_freezes_only_the_held_actions_at_frame_zero() -> None:
+    f = _forecast([[0.5, 0.3, 0.2]])
+    f.var = torch.rand_like(f.mean) + 0.1
+    g = f.hold_actions(torch.tensor([True, False, False]))
+    for k in range(f.horizon):
+        assert torch.equal(g.mean[:, 0, k], f.mean[:, 0, 0])
+        assert torch.equal(g.var[:, 0, k], f.var[:, 0, 0])
+    assert torch.equal(g.mean[:, 1:], f.mean[:, 1:])
+    assert torch.equal(g.var[:, 1:], f.var[:, 1:])
+    assert torch.equal(g.weights, f.weights)
+    with pytest.raises(ShapeError):
+        f.hold_actions(torch.tensor([True, False]))
+
+
+def test_rest_hold_only_when_no_take_is_possible() -> None:
+    names = ("idle", "reach_0", "reach_1", "return")
+    none_left = action_mask(names, available=set())
+    assert rest_hold(names, none_left).tolist() == [True, False, False, False]
+    one_left = action_mask(names, available={1})
+    assert not rest_hold(names, one_left).any()
+    # a predictor without take actions: nothing is known about availability, nothing is held
+    assert not rest_hold(("idle", "wave"), torch.tensor([True, True])).any()
