@@ -105,7 +105,7 @@ class Forecast:
 
         Task-state conditioning of a rest: the spread of an ``idle`` forecast learned from
         demonstrations is mostly the chance that a reach starts within the horizon. When no
-        reach is possible (nothing lies within the person's task), the idle person is
+        reach is possible (no block is there to take), the idle person is
         predicted to stay where the first frame puts them, with that frame's variance, over
         the whole horizon.
 
