@@ -22,12 +22,13 @@ With ``mask_unavailable_actions`` (default) the forecast is also conditioned on 
 the robot knows: taking a block that is not on its delivery spot gets weight 0
 (:func:`action_mask`, :meth:`Forecast.mask_actions`); an idle person who waits for block ``i``
 is then not predicted to reach for the empty spot ``i`` the robot must deliver to. With
-``rest_when_nothing_available`` (default), when no block is available to the person at all, the
-``idle`` action's forecast is held at its first frame (:meth:`Forecast.hold_actions`): the spread
-that the idle forecast learns from demonstrations is the chance that a reach starts within the
-horizon, and no reach can start then. Without it the robot waited at the first deliveries for a
-person resting with nothing to take (arrangement_1x4, seeds 0 and 1: 8 and 9 waits per episode;
-with it 3 and 4).
+``rest_when_nothing_available`` (off by default), when no block is available to the person at
+all, the ``idle`` action's forecast is held at its first frame (:meth:`Forecast.hold_actions`):
+the spread that the idle forecast learns from demonstrations is the chance that a reach starts
+within the horizon, and no reach can start then. It cut the I-Planner's waits (iiwa, 20 seeds
+of 7 scenarios: fewer in 5 of 7, still no contact) without a gain in efficiency, and it made
+the Fetch arm less safe (contact-free in 60 instead of 66 of 70 episodes), so it is an option
+(``experiments/safety_seeds/README.md``).
 ITOMP plans against ``static_human_forecast`` of the latest tracked pose; both forecasts start
 at the time of the last tracker frame (``forecast_t0``), and the optimiser samples them at the
 waypoint times of the plan's execution window ``[t + m, t + 2m]``.
@@ -153,8 +154,9 @@ class EpisodeCfg:
     # delivery spot (not delivered yet, or already taken) is set to 0 (:func:`action_mask`)
     mask_unavailable_actions: bool = True
     # with the mask on and no block available to the person, hold the idle action's forecast
-    # at its first frame: a person with nothing to take is predicted to stay at rest
-    rest_when_nothing_available: bool = True
+    # at its first frame: a person with nothing to take is predicted to stay at rest (off: it
+    # made the Fetch arm less safe, see the module docstring)
+    rest_when_nothing_available: bool = False
 
     def __post_init__(self) -> None:
         if self.max_duration_s <= 0:
