@@ -690,9 +690,11 @@ class TrajectoryOptimizer:
             terms2, bound2, _ = self._accept_terms(
                 q_soft, dt, qd_start, q_goal, human, win_idx, timer
             )
-            if bound2 is None or bound1 is None:
-                q_hold, terms1, bound1 = q_soft[0], terms2, bound2
-            elif float(bound2.amax()) <= max(limit, float(bound1.amax())):
+            if (
+                bound2 is None
+                or bound1 is None
+                or float(bound2.amax()) <= max(limit, float(bound1.amax()))
+            ):
                 q_hold, terms1, bound1 = q_soft[0], terms2, bound2
         t_end = float(times[-1]) if window is None else min(float(window[1]), float(times[-1]))
         wait_s = max(t_end - float(times[hold]), 0.0)
