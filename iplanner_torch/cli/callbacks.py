@@ -18,13 +18,13 @@ def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
     Returns:
         The written files (``results.csv``, ``results.md``, PNGs), or [] when no logs exist.
     """
-    from iplanner_torch.eval.report import gather_results, write_sweep_report
+    from iplanner_torch.eval.report import gather_results, report_groups, write_sweep_report
 
     logs = sorted(root.glob("**/episodes/*.mcap"))
     if not logs:
         return []
     df = gather_results(logs)
-    group_by = tuple(c for c in ("scenario", "planner") if c in df.columns) or ("planner",)
+    group_by = report_groups(df)
     sweep = next(
         (
             c

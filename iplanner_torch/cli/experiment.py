@@ -177,10 +177,17 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
 
 
 def comparison_table(df: Any) -> Any:
-    """Per planner (and scenario), the paper's columns: means over episodes."""
+    """Per scenario, swept setting and planner, the paper's columns: means over episodes.
+
+    ``speed``, ``noise`` and ``confidence`` become columns of their own when they take more
+    than one value (:func:`~iplanner_torch.eval.report.report_groups`), so a speed response
+    or a sweep is never averaged over its settings.
+    """
     import pandas as pd
 
-    groups = [c for c in ("scenario", "planner") if c in df.columns]
+    from iplanner_torch.eval.report import report_groups
+
+    groups = list(report_groups(df))
     rows = []
     for key, g in df.groupby(groups, sort=False):
         key = key if isinstance(key, tuple) else (key,)
@@ -203,7 +210,12 @@ def _app(cfg: DictConfig) -> None:
 
     from iplanner_torch.eval.episode import PLANNER_KINDS
     from iplanner_torch.eval.experiment import run_experiment
-    from iplanner_torch.eval.report import gather_results, print_table, write_sweep_report
+    from iplanner_torch.eval.report import (
+        gather_results,
+        print_table,
+        report_groups,
+        write_sweep_report,
+    )
     from iplanner_torch.planning.replanner import PlanningOverrunWarning
 
     # overruns are counted per episode (plan/overruns in results.csv); one line each would
@@ -242,7 +254,7 @@ def _app(cfg: DictConfig) -> None:
         sweep = None  # categorical; the bar charts show it
     if len(experiment.noises) > 1:
         sweep = "noise"
-    written = write_sweep_report(df, out_dir, group_by=("scenario", "planner"), sweep=sweep)
+    written = write_sweep_report(df, out_dir, group_by=report_groups(df), sweep=sweep)
     table = comparison_table(df)
     (out_dir / "comparison.json").write_text(
         json.dumps(table.to_dict("records"), indent=2, default=float)

@@ -36,6 +36,7 @@ __all__ = [
     "plot_comparison",
     "plot_sweep",
     "write_sweep_report",
+    "report_groups",
     "paper_table_simulation",
     "side_by_side",
 ]
@@ -226,6 +227,19 @@ def _contact_free(g: pd.DataFrame) -> int:
     if "min_distance" in g.columns:
         return int((pd.to_numeric(g["min_distance"], errors="coerce") > 0).sum())
     return 0
+
+
+#: episode settings a run or sweep may vary; summaries keep their values apart
+SWEPT_SETTINGS = ("speed", "noise", "confidence")
+
+
+def report_groups(df: pd.DataFrame) -> tuple[str, ...]:
+    """Grouping columns for a summary of ``df``: ``scenario``, each of
+    :data:`SWEPT_SETTINGS` that takes more than one value (so a speed response or a sweep is
+    never averaged over its settings), then ``planner``; only the columns present."""
+    swept = [c for c in SWEPT_SETTINGS if c in df.columns and df[c].nunique(dropna=True) > 1]
+    groups = tuple(c for c in ("scenario", *swept, "planner") if c in df.columns)
+    return groups or ("planner",)
 
 
 def summary_table(
@@ -461,7 +475,7 @@ def write_sweep_report(
     Args:
         df: per-episode results.
         out_dir: output folder (created).
-        group_by: summary groups; the first two also lay out the bar charts.
+        group_by: summary groups; the last two also lay out the bar charts (x, bars).
         sweep: a swept numeric column: adds ``sweep_<metric>.png`` for each metric, one line
             per ``group_by[-1]`` value.
 
@@ -476,7 +490,7 @@ def write_sweep_report(
     md = ["# Results", "", f"{len(df)} episodes.", "", to_markdown(summary)]
     written[1].write_text("\n".join(md))
     if len(group_by) >= 2:
-        written += plot_comparison(df, out_dir, group_by=(group_by[0], group_by[1]))
+        written += plot_comparison(df, out_dir, group_by=(group_by[-2], group_by[-1]))
     if sweep is not None:
         for m in _default_metrics(df, list(group_by) + [sweep]):
             written.append(plot_sweep(df, sweep, m, group_by[-1], out_dir / f"sweep_{m}.png"))

@@ -65,6 +65,10 @@ class CostWeights:
     human_confidence_penalty: float = 10.0
     # squared penetration of robot spheres into the mean human spheres [m^2]
     human_mean_penetration: float = 1000.0
+    # look-ahead: the confidence penalty on the waypoints after the execution window (a soft
+    # cost, never a constraint: the plan bends around where the person is predicted to be
+    # before that part of it is executed); 0 leaves the later waypoints free, as in the paper
+    human_lookahead_penalty: float = 0.0
     # squared distance of the last waypoint to the goal (only when the goal is not pinned)
     goal_distance: float = 0.0
 

@@ -343,12 +343,16 @@ class TrajectoryOptimizer:
         timer: _Timer,
         exact: bool = False,
         prune: float | None = None,
+        look_idx: torch.Tensor | None = None,
     ) -> tuple[
         dict[str, torch.Tensor], torch.Tensor | None, torch.Tensor | None, torch.Tensor | None
     ]:
         """Unweighted (B,) cost terms, the window bound (B, W_x), the min clearance (B, W) and
         the sphere pairs used; ``prune`` (a margin [m]) first refreshes the pairs from this
-        trajectory's own sphere centres (:func:`costs.candidate_pairs`)."""
+        trajectory's own sphere centres (:func:`costs.candidate_pairs`). With ``look_idx``
+        (waypoints after the window, :meth:`_lookahead_indices`) the human obstacle also covers
+        those waypoints, after the window's points, and they add ``human_lookahead_penalty``;
+        the returned bound stays the window's."""
         terms = {
             "joint_acc_l2": C.joint_acc_l2(q, dt, qd_start),
             "joint_limit_violation": C.joint_limit_violation(q, self.q_min, self.q_max),
@@ -366,15 +370,22 @@ class TrajectoryOptimizer:
                 centers, self.radii, self.static_scene, self.cfg.static_margin
             )
         if human is not None:
+            n_x = centers_x.shape[1]
+            if look_idx is not None:
+                centers_x = torch.cat([centers_x, centers[:, look_idx]], dim=1)
             with timer:
                 if prune is not None:
                     pairs = C.candidate_pairs(centers_x.detach(), self.radii, human, prune)
                 bound, pen = C.human_collision_bound(
                     centers_x, self.radii, human, pairs, exact=exact
                 )
+            target = math.log(self.cfg.penalty_target * (1.0 - self.cfg.confidence))
+            if look_idx is not None:
+                excess = torch.relu(torch.log(bound[:, n_x:].clamp_min(1e-30)) - target)
+                terms["human_lookahead_penalty"] = excess.square().sum(-1)
+                bound = bound[:, :n_x]
             bound = bound.view(q.shape[0], -1, self.cfg.collision_substeps).amax(-1)  # (B, W_x)
-            target = self.cfg.penalty_target * (1.0 - self.cfg.confidence)
-            excess = torch.relu(torch.log(bound.clamp_min(1e-30)) - math.log(target))
+            excess = torch.relu(torch.log(bound.clamp_min(1e-30)) - target)
             terms["human_collision_bound"] = bound.sum(-1)
             terms["human_confidence_penalty"] = excess.square().sum(-1)
             terms["human_mean_penetration"] = pen
@@ -462,6 +473,7 @@ class TrajectoryOptimizer:
         times = uniform_times(t0, duration, w, q_start)
         dt = duration / (w - 1)
         win_idx = self._window_indices(times, window)
+        look_idx = self._lookahead_indices(win_idx, w) if forecast is not None else None
 
         collision_timer = _Timer(self.device)
         predict_timer = _Timer(self.device)
@@ -469,6 +481,8 @@ class TrajectoryOptimizer:
         if forecast is not None:
             with predict_timer:
                 t_pts = self._collision_points(times.view(1, -1, 1), win_idx)[0, :, 0]
+                if look_idx is not None:
+                    t_pts = torch.cat([t_pts, times[look_idx]])
                 human = self._human_obstacle(forecast, t_pts, forecast_t0)
 
         if q_init is not None:
@@ -507,7 +521,16 @@ class TrajectoryOptimizer:
             q = torch.cat([head, x, tail], dim=1)  # (B, W, J)
             prune = cfg.prune_margin if it % cfg.prune_every == 0 else None
             terms, _, _, pairs = self._terms(
-                q, dt, qd_start, q_goal, human, win_idx, pairs, collision_timer, prune=prune
+                q,
+                dt,
+                qd_start,
+                q_goal,
+                human,
+                win_idx,
+                pairs,
+                collision_timer,
+                prune=prune,
+                look_idx=look_idx,
             )
             loss = self._weighted(terms).sum()
             (grad,) = torch.autograd.grad(loss, z)
@@ -530,7 +553,16 @@ class TrajectoryOptimizer:
             if not bool(torch.isfinite(q_all).all()):
                 raise PlanningError("the optimisation produced non-finite waypoints")
             result = self._accept(
-                q_all, times, dt, qd_start, q_goal, human, win_idx, window, collision_timer
+                q_all,
+                times,
+                dt,
+                qd_start,
+                q_goal,
+                human,
+                win_idx,
+                window,
+                collision_timer,
+                look_idx,
             )
         total = 1e3 * (time.perf_counter() - t_begin)
         result.timings = {
@@ -625,6 +657,16 @@ class TrajectoryOptimizer:
             idx = torch.searchsorted(times, times.new_tensor([t_a])).clamp(1, w - 1)
         return idx
 
+    def _lookahead_indices(self, win_idx: torch.Tensor, w: int) -> torch.Tensor | None:
+        """(W_l,) waypoints after the execution window that carry the look-ahead penalty, or
+        None when its weight is 0 or no waypoint follows the window."""
+        if self.cfg.weights.human_lookahead_penalty <= 0.0:
+            return None
+        last = int(win_idx.max())
+        if last >= w - 1:
+            return None
+        return torch.arange(last + 1, w, device=win_idx.device)
+
     def _accept(
         self,
         q_all: torch.Tensor,
@@ -636,13 +678,15 @@ class TrajectoryOptimizer:
         win_idx: torch.Tensor,
         window: tuple[float, float] | None,
         timer: _Timer,
+        look_idx: torch.Tensor | None = None,
     ) -> PlanResult:
-        """Exact check of all B trajectories, then the best feasible one or a wait."""
+        """Exact check of all B trajectories, then the best feasible one or a wait (the
+        look-ahead penalty, when on, ranks the safe ones; it never rules one out)."""
         cfg = self.cfg
         b, w, _ = q_all.shape
         limit = 1.0 - cfg.confidence
         terms, bound, clearance = self._accept_terms(
-            q_all, dt, qd_start, q_goal, human, win_idx, timer
+            q_all, dt, qd_start, q_goal, human, win_idx, timer, look_idx
         )
         rank = self._weighted(
             {k: v for k, v in terms.items() if not k.startswith("human_confidence")}
@@ -681,14 +725,16 @@ class TrajectoryOptimizer:
         q_hold = q_all[best].clone()
         q_hold[hold + 1 :] = q_hold[hold]
         q_one = q_hold.unsqueeze(0)
-        terms1, bound1, _ = self._accept_terms(q_one, dt, qd_start, q_goal, human, win_idx, timer)
+        terms1, bound1, _ = self._accept_terms(
+            q_one, dt, qd_start, q_goal, human, win_idx, timer, look_idx
+        )
         if cfg.acc_max is not None and hold >= 1:
             # the stop the acceleration-limited tracking can follow: the same path, slowed
             # down at a constant rate until it stops at or before the held waypoint; kept
             # when its bound is no higher than the abrupt stop's (or within the limit)
             q_soft = smooth_stop(q_all[best], hold).unsqueeze(0)
             terms2, bound2, _ = self._accept_terms(
-                q_soft, dt, qd_start, q_goal, human, win_idx, timer
+                q_soft, dt, qd_start, q_goal, human, win_idx, timer, look_idx
             )
             if (
                 bound2 is None
@@ -727,10 +773,21 @@ class TrajectoryOptimizer:
         human: C.HumanObstacle | None,
         win_idx: torch.Tensor,
         timer: _Timer,
+        look_idx: torch.Tensor | None = None,
     ) -> tuple[dict[str, torch.Tensor], torch.Tensor | None, torch.Tensor | None]:
         """Cost terms with sphere pairs pruned at exactly PRUNE_SIGMAS (no margin)."""
         terms, bound, clearance, _ = self._terms(
-            q, dt, qd_start, q_goal, human, win_idx, None, timer, exact=True, prune=0.0
+            q,
+            dt,
+            qd_start,
+            q_goal,
+            human,
+            win_idx,
+            None,
+            timer,
+            exact=True,
+            prune=0.0,
+            look_idx=look_idx,
         )
         return terms, bound, clearance
 

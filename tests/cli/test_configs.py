@@ -94,3 +94,30 @@ def test_sweep_aliases_reach_the_simulation() -> None:
     assert sim.tracker_noise == 0.05
     assert sim.tracker_dropout == 0.01
     assert sim.human.speed == "fast"
+
+
+def test_comparison_table_keeps_swept_settings_apart() -> None:
+    """Rows of different speeds are separate rows; a setting with one value adds no column."""
+    import pandas as pd
+
+    from iplanner_torch.cli.experiment import comparison_table
+
+    df = pd.DataFrame(
+        {
+            "scenario": ["s"] * 6,
+            "planner": ["a", "a", "a", "b", "b", "b"],
+            "speed": ["slow", "fast", "fast", "slow", "fast", "fast"],
+            "noise": [0.01] * 6,
+            "smoothness": [1.0, 2.0, 4.0, 10.0, 20.0, 40.0],
+        }
+    )
+    table = comparison_table(df)
+    assert list(table.columns[:3]) == ["scenario", "speed", "planner"]
+    assert "noise" not in table.columns
+    got = {(r.speed, r.planner): (r.episodes, r.smoothness) for r in table.itertuples()}
+    assert got == {
+        ("slow", "a"): (1, 1.0),
+        ("fast", "a"): (2, 3.0),
+        ("slow", "b"): (1, 10.0),
+        ("fast", "b"): (2, 30.0),
+    }

@@ -132,6 +132,36 @@ def test_window_restricts_the_constraint(point_robot: PointRobot) -> None:
     assert res.feasible  # the straight line meets the human only after the window
 
 
+def test_lookahead_bends_the_plan_after_the_window_and_never_constrains_it(
+    point_robot: PointRobot,
+) -> None:
+    """The look-ahead penalty moves the waypoints after the window off the predicted human
+    (independent Monte Carlo probability), while feasibility still depends on the window only."""
+    std, r_h = 0.05, 0.1
+    fc = static_forecast([0.0, 0.0, 0.0], std)
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    worst = []
+    for weight in (0.0, 10.0):
+        cfg = OptimizerCfg(
+            iterations=60, confidence=0.95, weights=CostWeights(human_lookahead_penalty=weight)
+        )
+        opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(r_h))
+        res = opt.solve(q_s, q_g, forecast=fc, duration=1.9, window=(0.0, 0.5))
+        assert res.feasible
+        after = res.times > 0.5 + 1e-6
+        assert float(res.bound[after].abs().max()) == 0.0  # the bound reported is the window's
+        assert ("human_lookahead_penalty" in res.cost_terms) == (weight > 0)
+        probs = [
+            mc_ball_probability(
+                -torch.cat([q, torch.zeros(1)]), torch.full((3,), std**2), r_h + 0.05, n=20_000
+            )
+            for q in res.q[after]
+        ]
+        worst.append(max(probs))
+    assert worst[0] > 0.5  # without it the path runs through the predicted human
+    assert worst[1] <= 0.05  # with it the later waypoints keep to the confidence level
+
+
 def test_inputs_and_config_are_validated(point_robot: PointRobot) -> None:
     assert isinstance(point_robot, KinematicModel)
     with pytest.raises(ConfigError, match="confidence"):
