@@ -84,7 +84,7 @@ def test_full_rank_svgp_equals_exact_gp(noisy_input: str) -> None:
     mean, var = reg.predict(xs)
     kern = reg.model.covar_module
     ls, os_ = float(kern.base_kernel.lengthscale.detach()), float(kern.outputscale.detach())
-    floor = float(reg.likelihood.floor)
+    floor = float(torch.as_tensor(reg.likelihood.floor).detach())
     # the paper's term over the mean output variance, shared by the channels (normalised)
     extra = cfg.simple_extra_var / float(reg.y_std.pow(2).mean()) if noisy_input == "simple" else 0
     noise = torch.full((x.shape[0],), floor + extra, dtype=torch.float64)
