@@ -67,7 +67,8 @@ class CostWeights:
     human_mean_penetration: float = 1000.0
     # look-ahead: the confidence penalty on the waypoints after the execution window (a soft
     # cost, never a constraint: the plan bends around where the person is predicted to be
-    # before that part of it is executed); 0 leaves the later waypoints free, as in the paper
+    # before that part of it is executed; those waypoints then also count in
+    # human_mean_penetration); 0 leaves the later waypoints free, as in the paper
     human_lookahead_penalty: float = 0.0
     # squared distance of the last waypoint to the goal (only when the goal is not pinned)
     goal_distance: float = 0.0

@@ -13,7 +13,9 @@ the execution window enters as a quadratic penalty on ``log(bound / target)`` ab
 ``target`` a fraction of ``1 - delta`` so that solutions land inside the feasible set; the
 constraint is then checked exactly (all sphere pairs) when a trajectory is accepted. When no
 trajectory meets it, the plan follows the best one up to its last safe waypoint and waits there
-(sec. 5), reporting the delay.
+(sec. 5), reporting the delay. Beyond the paper, ``CostWeights.human_lookahead_penalty`` puts
+the same penalty, as a soft cost only, on the waypoints after the window, so a plan bends
+around where the person is predicted to be before that part of it is executed.
 """
 
 from __future__ import annotations
