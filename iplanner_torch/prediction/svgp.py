@@ -755,7 +755,7 @@ class SVGPRegressor(nn.Module):
             raw = math.log(math.expm1(max(new - self.likelihood.floor_min, 1e-12)))
             self.likelihood.raw_floor.fill_(raw)
             self.finalise(x, y, extra)
-        return float(self.likelihood.floor)
+        return float(self.likelihood.floor.detach())
 
     # ---------------------------------------------------------------------------- prediction
     @torch.no_grad()

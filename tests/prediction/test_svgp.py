@@ -84,7 +84,7 @@ def test_full_rank_svgp_equals_exact_gp(noisy_input: str) -> None:
     mean, var = reg.predict(xs)
     kern = reg.model.covar_module
     ls, os_ = float(kern.base_kernel.lengthscale.detach()), float(kern.outputscale.detach())
-    floor = float(torch.as_tensor(reg.likelihood.floor).detach())
+    floor = float(reg.likelihood.floor.detach())
     # the paper's term over the mean output variance, shared by the channels (normalised)
     extra = cfg.simple_extra_var / float(reg.y_std.pow(2).mean()) if noisy_input == "simple" else 0
     noise = torch.full((x.shape[0],), floor + extra, dtype=torch.float64)
@@ -191,14 +191,14 @@ def test_calibration_raises_floor_to_the_validation_noise() -> None:
     yv = torch.sin(1.5 * xv) + 0.1 * torch.randn(400, 1, generator=g)  # 10x noisier
     reg = SVGPRegressor.from_data(SVGPCfg(num_inducing=30, noisy_input="none"), x, y)
     reg.fit(x, y)
-    before = float(reg.likelihood.floor)
+    before = float(reg.likelihood.floor.detach())
     reg.calibrate(xv, yv, x, y, reg.extra_train_noise(x))
     _, var = reg.predict(xv)
-    assert float(reg.likelihood.floor) > 5 * before
+    assert float(reg.likelihood.floor.detach()) > 5 * before
     # the predictive variance now matches the validation noise (0.1^2)
     assert 0.7 * 0.01 < float(var.mean()) < 1.4 * 0.01
     again = reg.calibrate(x, y, x, y, reg.extra_train_noise(x))  # never lowered
-    assert again == pytest.approx(float(reg.likelihood.floor))
+    assert again == pytest.approx(float(reg.likelihood.floor.detach()))
 
 
 def test_bank_equals_each_regressor() -> None:
