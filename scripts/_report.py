@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import subprocess
 from pathlib import Path
 
@@ -13,6 +14,16 @@ def commit_short() -> str:
     return subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
     ).stdout.strip()
+
+
+def parse_report_args(description: str, default_command: str) -> argparse.Namespace:
+    """The arguments every report script takes: the run folder (``run_dir``), the command that
+    made the run (``--command``) and a note placed above the tables (``--note``)."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("--command", default=default_command)
+    parser.add_argument("--note", default="")
+    return parser.parse_args()
 
 
 def write_readme(

@@ -14,11 +14,10 @@ their scenario sub-folders), and writes the per-scenario table and the episode r
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import pandas as pd
-from _report import write_readme
+from _report import parse_report_args, write_readme
 
 from iplanner_torch.eval.report import to_markdown
 
@@ -58,11 +57,9 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run_dir", type=Path)
-    parser.add_argument("--command", default="iplanner-experiment -m experiment=safety_seeds")
-    parser.add_argument("--note", default="")
-    args = parser.parse_args()
+    args = parse_report_args(
+        __doc__.splitlines()[0], "iplanner-experiment -m experiment=safety_seeds"
+    )
     df = gather(args.run_dir)
     table = summarise(df)
     write_readme(

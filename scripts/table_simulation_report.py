@@ -13,11 +13,10 @@ confidence level and planner).
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import pandas as pd
-from _report import write_readme
+from _report import parse_report_args, write_readme
 
 from iplanner_torch.eval.report import (
     gather_results,
@@ -32,11 +31,9 @@ KEYS = ["arrangement", "task_order", "confidence", "planner"]
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run_dir", type=Path)
-    parser.add_argument("--command", default="iplanner-experiment experiment=table_simulation")
-    parser.add_argument("--note", default="")
-    args = parser.parse_args()
+    args = parse_report_args(
+        __doc__.splitlines()[0], "iplanner-experiment experiment=table_simulation"
+    )
     raw = pd.read_csv(args.run_dir / "results.csv")
     df = gather_results(raw.to_dict("records"))
     df["confidence"] = df["confidence"].astype(float).round(2)
