@@ -1,8 +1,9 @@
 """Batched probabilistic trajectory optimisation (paper sec. 5, ITOMP with a prediction).
 
 B trajectories of W space-time waypoints are optimised at once from diverse initial
-trajectories (the straight line in joint space plus random smooth perturbations: the paper's
-parallel threads, theorem threads). The optimiser is Adam on the free waypoints with a decaying
+trajectories (the path of least squared acceleration to the goal, a cubic in joint space from
+the start velocity to rest, plus random smooth perturbations: the paper's parallel threads,
+theorem threads). The optimiser is Adam on the free waypoints with a decaying
 step and projection onto the joint limits, on the second differences of the waypoints (so
 smoothness is a well-conditioned sum of squares and every step moves waypoints smoothly, as the
 covariant updates of CHOMP / ITOMP do): every term is cheap to differentiate, the
@@ -289,6 +290,16 @@ class TrajectoryOptimizer:
         ratio = ((q_goal - q_start).abs() / self.v_max).max()
         return float(1.5 * ratio)
 
+    def arrival_index(self, duration: float, travel: float | None) -> int:
+        """Index of the first waypoint pinned to the goal for a plan of ``duration`` seconds
+        that arrives ``travel`` seconds after its start (None: at its end), in [2, W - 1]."""
+        w = self.cfg.num_waypoints
+        if travel is None:
+            return w - 1
+        rel = torch.linspace(0.0, duration, w, dtype=torch.float64)
+        n = int(torch.searchsorted(rel, rel.new_tensor([travel - 1e-6]))[0])
+        return min(max(n, 2), w - 1)
+
     def initial_trajectories(
         self,
         q_start: torch.Tensor,
@@ -296,40 +307,63 @@ class TrajectoryOptimizer:
         num: int,
         seed: int,
         duration: float | None = None,
+        *,
+        qd_start: torch.Tensor | None = None,
+        arrival: int | None = None,
     ) -> torch.Tensor:
-        """Straight line plus smooth random perturbations (the first one unperturbed).
+        """The minimum-acceleration path to the goal plus smooth random perturbations (the
+        first one unperturbed).
+
+        The base is the cubic from ``(q_start, qd_start)`` to ``(q_goal, rest)`` reaching the
+        goal at waypoint ``arrival`` and holding it after: of all motions with these end
+        conditions it has the least integral of squared acceleration (the smoothness cost),
+        so the optimiser starts from the smoothest path and the random perturbations (sine
+        modes over the same span) only add the diversity of the paper's parallel threads.
+        A straight line at constant speed instead starts and stops with a velocity jump, which
+        the iterations of a replanning cycle do not fully smooth out.
 
         Args:
             q_start: (J,) start [rad].
             q_goal: (J,) goal [rad].
             num: how many trajectories.
             seed: seed of the perturbations.
-            duration: seconds from start to goal; when given, each trajectory's perturbation
-                is scaled down per joint so that its waypoint velocities stay within
-                ``INIT_VEL_FRACTION`` of the limits (the line itself is not changed).
+            duration: seconds from the first to the last waypoint; when given, each
+                trajectory's perturbation is scaled down per joint so that its waypoint
+                velocities stay within ``INIT_VEL_FRACTION`` of the limits (the base is not
+                changed), and ``qd_start`` is used.
+            qd_start: (J,) start velocity [rad/s]; None (or no ``duration``) means rest.
+            arrival: first waypoint at the goal (:meth:`arrival_index`); None: the last.
 
         Returns:
             (num, W, J) [rad], clamped to the joint limits, start and goal pinned.
         """
         w, j = self.cfg.num_waypoints, self.num_joints
-        s = torch.linspace(0.0, 1.0, w, device=self.device, dtype=self.dtype)
-        line = q_start + s[:, None] * (q_goal - q_start)  # (W, J)
+        n_a = w - 1 if arrival is None else min(max(int(arrival), 1), w - 1)
+        k = torch.arange(w, device=self.device, dtype=self.dtype)
+        s = (k / n_a).clamp(max=1.0)  # (W,) progress to the arrival
+        h00 = 2 * s**3 - 3 * s**2 + 1
+        h01 = 3 * s**2 - 2 * s**3
+        h10 = s**3 - 2 * s**2 + s
+        base = h00[:, None] * q_start + h01[:, None] * q_goal  # (W, J)
+        if qd_start is not None and duration is not None and duration > 0.0:
+            span = n_a * duration / (w - 1)  # seconds to the arrival
+            base = base + h10[:, None] * span * qd_start.to(base)
         gen = torch.Generator().manual_seed(seed)
         amp = torch.randn(num, 3, j, generator=gen, dtype=torch.float64)  # (num, 3 modes, J)
         amp = (amp * self.cfg.perturbation_std / torch.arange(1, 4).view(1, 3, 1)).to(
             self.device, self.dtype
         )
         amp[0] = 0.0
-        modes = torch.stack([torch.sin(math.pi * k * s) for k in (1, 2, 3)])  # (3, W)
+        modes = torch.stack([torch.sin(math.pi * m * s) for m in (1, 2, 3)])  # (3, W)
         pert = torch.einsum("nkj,kw->nwj", amp, modes)  # (num, W, J)
         if duration is not None and duration > 0.0:
             dt = duration / (w - 1)
-            v_line = (q_goal - q_start).abs() / duration  # (J,)
+            v_base = (base[1:] - base[:-1]).abs().amax(0) / dt  # (J,)
             v_pert = (pert[:, 1:] - pert[:, :-1]).abs().amax(1) / dt  # (num, J)
-            room = (INIT_VEL_FRACTION * self.v_max - v_line).clamp_min(0.0)  # (J,)
+            room = (INIT_VEL_FRACTION * self.v_max - v_base).clamp_min(0.0)  # (J,)
             scale = (room / v_pert.clamp_min(1e-12)).clamp(max=1.0)  # (num, J)
             pert = pert * scale.unsqueeze(1)
-        q = line + pert  # (num, W, J)
+        q = base + pert  # (num, W, J)
         return torch.maximum(torch.minimum(q, self.q_max), self.q_min)
 
     # ----------------------------------------------------------------- costs
@@ -487,13 +521,23 @@ class TrajectoryOptimizer:
                     t_pts = torch.cat([t_pts, times[look_idx]])
                 human = self._human_obstacle(forecast, t_pts, forecast_t0)
 
+        n_goal = w - 1  # first waypoint pinned to the goal
+        if arrive is not None:
+            n_goal = int(torch.searchsorted(times, times.new_tensor([arrive - 1e-6]))[0])
+            n_goal = min(max(n_goal, 2), w - 1)
         if q_init is not None:
             check_shape("q_init", q_init, (cfg.num_trajectories, w, j))
             q0 = q_init.to(self.device, self.dtype).clone()
             iterations = cfg.warm_iterations
         else:
             q0 = self.initial_trajectories(
-                q_start, q_goal, cfg.num_trajectories, cfg.seed, duration
+                q_start,
+                q_goal,
+                cfg.num_trajectories,
+                cfg.seed,
+                duration,
+                qd_start=qd_start,
+                arrival=n_goal,
             )
             iterations = cfg.iterations
         q0 = torch.maximum(torch.minimum(q0, self.q_max), self.q_min)
@@ -501,10 +545,6 @@ class TrajectoryOptimizer:
         # Optimise the second differences z = D x + b of the free waypoints x (b carries the
         # pinned ends): smoothness is then a well-conditioned sum of squares, and a step in z
         # moves the waypoints smoothly (the covariant update of CHOMP / ITOMP).
-        n_goal = w - 1  # first waypoint pinned to the goal
-        if arrive is not None:
-            n_goal = int(torch.searchsorted(times, times.new_tensor([arrive - 1e-6]))[0])
-            n_goal = min(max(n_goal, 2), w - 1)
         n_free = n_goal - 1
         d_mat, d_inv = self._difference_operators(n_free)
         b_vec = torch.zeros(cfg.num_trajectories, n_free, j, device=self.device, dtype=self.dtype)

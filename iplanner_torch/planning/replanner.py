@@ -471,7 +471,7 @@ class Replanner:
             ramp = float(((speed + qd_s.abs()) / self.cfg.acc_max).max())
         travel = max(self._t_goal - t_plan, opt.min_duration(q_s, self._goal) + ramp)
         duration = max(travel, self.cfg.min_duration_s)
-        q_init = self._warm_start(q_s, t_plan, duration)
+        q_init = self._warm_start(q_s, qd_s, t_plan, duration, travel)
         t_wall = time.perf_counter()
         result = opt.solve(
             q_s,
@@ -539,7 +539,12 @@ class Replanner:
         return bool(float(bound.max()) > 1.0 - opt.cfg.confidence)
 
     def _warm_start(
-        self, q_s: torch.Tensor, t_plan: float, duration: float
+        self,
+        q_s: torch.Tensor,
+        qd_s: torch.Tensor,
+        t_plan: float,
+        duration: float,
+        travel: float,
     ) -> torch.Tensor | None:
         """(B, W, J) previous trajectories shifted to the new times, the rest fresh."""
         last = self._last
@@ -558,9 +563,17 @@ class Replanner:
         fade = torch.linspace(1.0, 0.0, w, device=q_init.device, dtype=q_init.dtype)
         q_init = q_init + fade.view(1, w, 1) * (q_s.to(q_init) - q_init[:, :1])
         n_fresh = int(round(self.cfg.fresh_fraction * b))
-        if n_fresh > 0:  # the straight line and smooth perturbations of it
+        if n_fresh > 0:  # the least-acceleration path and smooth perturbations of it
             seed = opt.cfg.seed + self.stats.cycles + 1
-            fresh = opt.initial_trajectories(q_s, self._goal, n_fresh, seed, duration)
+            fresh = opt.initial_trajectories(
+                q_s,
+                self._goal,
+                n_fresh,
+                seed,
+                duration,
+                qd_start=qd_s,
+                arrival=opt.arrival_index(duration, travel),
+            )
             q_init[b - n_fresh :] = fresh.to(q_init)
         return q_init
 
