@@ -336,8 +336,15 @@ class TrajectoryOptimizer:
 
         Returns:
             (num, W, J) [rad], clamped to the joint limits, start and goal pinned.
+
+        Raises:
+            ShapeError: when ``q_start``, ``q_goal`` or ``qd_start`` is not (J,).
         """
         w, j = self.cfg.num_waypoints, self.num_joints
+        check_shape("q_start", q_start, (j,))
+        check_shape("q_goal", q_goal, (j,))
+        if qd_start is not None:
+            check_shape("qd_start", qd_start, (j,))
         n_a = w - 1 if arrival is None else min(max(int(arrival), 1), w - 1)
         k = torch.arange(w, device=self.device, dtype=self.dtype)
         s = (k / n_a).clamp(max=1.0)  # (W,) progress to the arrival

@@ -334,6 +334,8 @@ def test_initial_path_is_the_clamped_cubic_to_the_arrival() -> None:
     acc_cubic = float(joint_acc_l2(q[:1], dt, qd_s))
     acc_line = float(joint_acc_l2(line[None], dt, qd_s))
     assert acc_cubic < 0.5 * acc_line
+    with pytest.raises(ShapeError, match="qd_start"):
+        opt.initial_trajectories(q_s, q_g, 4, seed=0, duration=duration, qd_start=qd_s[:2])
 
 
 def test_one_kinematics_call_gives_the_collision_point_spheres() -> None:
