@@ -528,10 +528,8 @@ class TrajectoryOptimizer:
                     t_pts = torch.cat([t_pts, times[look_idx]])
                 human = self._human_obstacle(forecast, t_pts, forecast_t0)
 
-        n_goal = w - 1  # first waypoint pinned to the goal
-        if arrive is not None:
-            n_goal = int(torch.searchsorted(times, times.new_tensor([arrive - 1e-6]))[0])
-            n_goal = min(max(n_goal, 2), w - 1)
+        # first waypoint pinned to the goal (the replanner's fresh trajectories use the same)
+        n_goal = self.arrival_index(duration, None if arrive is None else arrive - t0)
         if q_init is not None:
             check_shape("q_init", q_init, (cfg.num_trajectories, w, j))
             q0 = q_init.to(self.device, self.dtype).clone()
