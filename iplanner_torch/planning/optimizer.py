@@ -48,6 +48,9 @@ END_CLEARANCE_SLACK = 0.01
 #: trajectory that starts too fast is rarely repaired by the few iterations of a cycle, and the
 #: acceptance check rejects it).
 INIT_VEL_FRACTION = 0.9
+#: Relative step and number of the durations :meth:`TrajectoryOptimizer.min_duration` tries.
+DURATION_GRID = 1.02
+DURATION_STEPS = 400
 #: Adam's first-moment decay.
 BETA1 = 0.9
 #: Adam's second-moment decay: short memory, so steps do not stall once the large early
@@ -285,10 +288,55 @@ class TrajectoryOptimizer:
             self._sphere_cache[joint_names] = HumanSphereMap.from_segments(joint_names)
         return self._sphere_cache[joint_names]
 
-    def min_duration(self, q_start: torch.Tensor, q_goal: torch.Tensor) -> float:
-        """Shortest start-to-goal time of a straight line at 2/3 of the velocity limits [s]."""
-        ratio = ((q_goal - q_start).abs() / self.v_max).max()
-        return float(1.5 * ratio)
+    def min_duration(
+        self,
+        q_start: torch.Tensor,
+        q_goal: torch.Tensor,
+        qd_start: torch.Tensor | None = None,
+    ) -> float:
+        """Shortest start-to-goal time [s] whose least-acceleration path (the cubic of
+        :meth:`initial_trajectories`) keeps within the limits.
+
+        From rest this is a straight line at 2/3 of the velocity limits (the cubic's peak speed
+        is then the limit). With a start velocity, the cubic from ``(q_start, qd_start)`` to
+        ``(q_goal, rest)`` must also keep its speed within the limits, and with
+        ``cfg.acc_max`` its accelerations (largest at its ends, ``(6 D - 4 v0 T) / T^2`` and
+        ``(2 v0 T - 6 D) / T^2``) within that limit: a plan that must stop sooner than that
+        either leaves the limits, which the tracking then cuts and the executed motion leaves
+        the checked path, or is rejected.
+
+        Args:
+            q_start: (J,) start [rad].
+            q_goal: (J,) goal [rad].
+            qd_start: (J,) start velocity [rad/s]; None means rest.
+
+        Returns:
+            The shortest such time on a grid of ``DURATION_GRID`` relative steps [s].
+        """
+        q_start = q_start.to(self.device, self.dtype)
+        d = q_goal.to(q_start) - q_start  # (J,)
+        t_line = float(1.5 * (d.abs() / self.v_max).max())
+        if qd_start is None and self.cfg.acc_max is None:
+            return t_line
+        v0 = torch.zeros_like(d) if qd_start is None else qd_start.to(d)
+        lo = max(t_line, 1e-3)
+        grid = lo * DURATION_GRID ** torch.arange(
+            DURATION_STEPS, device=d.device, dtype=d.dtype
+        )  # (N,) candidate durations [s]
+        t = grid.unsqueeze(-1)  # (N, 1)
+        # the cubic's velocity v(s) = 6 s (1 - s) D / T + (3 s^2 - 4 s + 1) v0, on a grid of s
+        s = torch.linspace(0.0, 1.0, 33, device=d.device, dtype=d.dtype).view(-1, 1, 1)
+        vel = 6 * s * (1 - s) * d / t + (3 * s * s - 4 * s + 1) * v0  # (S, N, J)
+        v_lim = torch.maximum(self.v_max, v0.abs())
+        ok = (vel.abs() <= v_lim * (1.0 + 1e-9)).all(0).all(-1)  # (N,)
+        if self.cfg.acc_max is not None:
+            a0 = (6 * d - 4 * v0 * t) / (t * t)
+            a1 = (2 * v0 * t - 6 * d) / (t * t)
+            acc = torch.maximum(a0.abs(), a1.abs())  # (N, J)
+            ok &= (acc <= self.cfg.acc_max).all(-1)
+        if not bool(ok.any()):
+            return float(grid[-1])
+        return float(grid[int(ok.to(torch.int64).argmax())])
 
     def arrival_index(self, duration: float, travel: float | None) -> int:
         """Index of the first waypoint pinned to the goal for a plan of ``duration`` seconds
@@ -510,7 +558,7 @@ class TrajectoryOptimizer:
             check_shape("qd_start", qd_start, (j,))
             qd_start = qd_start.to(self.device, self.dtype)
         if duration is None:
-            duration = max(cfg.horizon_s, self.min_duration(q_start, q_goal))
+            duration = max(cfg.horizon_s, self.min_duration(q_start, q_goal, qd_start))
         if not duration > 0.0:
             raise ConfigError(f"expected duration > 0, got {duration}")
         times = uniform_times(t0, duration, w, q_start)

@@ -469,7 +469,7 @@ class Replanner:
         if filtered and self.cfg.plan_from_reference:
             speed = (2.0 / 3.0) * opt.v_max
             ramp = float(((speed + qd_s.abs()) / self.cfg.acc_max).max())
-        travel = max(self._t_goal - t_plan, opt.min_duration(q_s, self._goal) + ramp)
+        travel = max(self._t_goal - t_plan, opt.min_duration(q_s, self._goal, qd_s) + ramp)
         duration = max(travel, self.cfg.min_duration_s)
         q_init = self._warm_start(q_s, qd_s, t_plan, duration, travel)
         t_wall = time.perf_counter()

@@ -338,6 +338,57 @@ def test_initial_path_is_the_clamped_cubic_to_the_arrival() -> None:
         opt.initial_trajectories(q_s, q_g, 4, seed=0, duration=duration, qd_start=qd_s[:2])
 
 
+def _cubic_peaks(q_s, q_g, qd_s, t_total):
+    """Peak |velocity| and |acceleration| per joint of scipy's clamped cubic (reference)."""
+    from scipy.interpolate import CubicSpline
+
+    cs = CubicSpline(
+        [0.0, t_total],
+        np.stack([q_s.numpy(), q_g.numpy()]),
+        bc_type=((1, qd_s.numpy()), (1, np.zeros(q_s.shape[0]))),
+    )
+    t = np.linspace(0.0, t_total, 2001)
+    return np.abs(cs(t, 1)).max(0), np.abs(cs(t, 2)).max(0)
+
+
+def test_min_duration_from_rest_is_the_line_at_two_thirds_of_the_limits() -> None:
+    arm = PlanarArm(dtype=torch.float64)
+    opt = TrajectoryOptimizer(arm, OptimizerCfg())
+    q_s = torch.tensor([0.0, -0.2, 0.1], dtype=torch.float64)
+    q_g = torch.tensor([0.5, 0.9, -0.4], dtype=torch.float64)
+    expected = float(1.5 * ((q_g - q_s).abs() / opt.v_max).max())
+    assert opt.min_duration(q_s, q_g) == pytest.approx(expected, rel=1e-12)
+    v_peak, _ = _cubic_peaks(q_s, q_g, torch.zeros(3, dtype=torch.float64), expected)
+    assert np.all(v_peak <= opt.v_max.numpy() * (1 + 1e-6))
+
+
+@pytest.mark.parametrize(
+    "qd_s",
+    [[1.5, 0.0, 0.0], [-1.0, 0.8, 0.3], [0.0, 0.0, 0.0]],
+)
+def test_min_duration_keeps_the_cubic_within_velocity_and_acceleration_limits(qd_s) -> None:
+    """With a start velocity and an acceleration limit, the cubic of the returned duration
+    stays within both limits (scipy's clamped CubicSpline, sampled densely, as reference) and
+    one grid step shorter it does not: the shortest such duration."""
+    from iplanner_torch.planning.optimizer import DURATION_GRID
+
+    arm = PlanarArm(dtype=torch.float64)
+    acc_max = 6.0
+    opt = TrajectoryOptimizer(arm, OptimizerCfg(acc_max=acc_max))
+    q_s = torch.tensor([0.0, -0.2, 0.1], dtype=torch.float64)
+    q_g = torch.tensor([0.05, 0.1, -0.1], dtype=torch.float64)  # short moves: acc-bound
+    qd = torch.tensor(qd_s, dtype=torch.float64)
+    t_min = opt.min_duration(q_s, q_g, qd)
+    v_lim = np.maximum(opt.v_max.numpy(), np.abs(qd.numpy()))
+    v_peak, a_peak = _cubic_peaks(q_s, q_g, qd, t_min)
+    assert np.all(v_peak <= v_lim * (1 + 1e-6))
+    assert np.all(a_peak <= acc_max * (1 + 1e-6))
+    v_short, a_short = _cubic_peaks(q_s, q_g, qd, t_min / DURATION_GRID)
+    assert np.any(v_short > v_lim * (1 + 1e-6)) or np.any(a_short > acc_max * (1 + 1e-6))
+    # the line's time ignores both the start velocity and the acceleration limit
+    assert t_min > float(1.5 * ((q_g - q_s).abs() / opt.v_max).max())
+
+
 def test_one_kinematics_call_gives_the_collision_point_spheres() -> None:
     """The merged forward kinematics equals sphere_centers of _collision_points (reference)."""
     arm = PlanarArm(dtype=torch.float64)
