@@ -312,7 +312,15 @@ class TrajectoryOptimizer:
 
         Returns:
             The shortest such time on a grid of ``DURATION_GRID`` relative steps [s].
+
+        Raises:
+            ShapeError: when ``q_start``, ``q_goal`` or ``qd_start`` is not (J,).
         """
+        j = self.num_joints
+        check_shape("q_start", q_start, (j,))
+        check_shape("q_goal", q_goal, (j,))
+        if qd_start is not None:
+            check_shape("qd_start", qd_start, (j,))
         q_start = q_start.to(self.device, self.dtype)
         d = q_goal.to(q_start) - q_start  # (J,)
         t_line = float(1.5 * (d.abs() / self.v_max).max())

@@ -387,6 +387,8 @@ def test_min_duration_keeps_the_cubic_within_velocity_and_acceleration_limits(qd
     assert np.any(v_short > v_lim * (1 + 1e-6)) or np.any(a_short > acc_max * (1 + 1e-6))
     # the line's time ignores both the start velocity and the acceleration limit
     assert t_min > float(1.5 * ((q_g - q_s).abs() / opt.v_max).max())
+    with pytest.raises(ShapeError, match="qd_start"):
+        opt.min_duration(q_s, q_g, qd[:2])
 
 
 def test_one_kinematics_call_gives_the_collision_point_spheres() -> None:
