@@ -67,7 +67,8 @@ def test_real_robots_track_motion_at_the_planners_acceleration_limit(name: str) 
     w = 2 * np.pi  # 1 Hz
     lo, hi = robot.q_min.numpy(), robot.q_max.numpy()
     bounded = np.isfinite(lo) & np.isfinite(hi)
-    mid = np.where(bounded, 0.5 * (np.where(bounded, lo, 0.0) + np.where(bounded, hi, 0.0)), 0.0)
+    mid = np.zeros_like(q0)  # continuous joints: any direction
+    mid[bounded] = 0.5 * (lo[bounded] + hi[bounded])
     amp = ReplannerCfg().acc_max / w**2 * np.where(q0 > mid, -1.0, 1.0)  # towards mid-range
     worst = 0.0
     while env.time < 2.0:  # q0 + amp (1 - cos w t): starts at rest
