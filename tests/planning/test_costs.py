@@ -160,6 +160,34 @@ def test_human_bound_with_gradient_equals_plain_evaluation(exact: bool) -> None:
     )
 
 
+def test_isotropic_screen_of_far_pairs_stays_an_upper_bound_in_float32() -> None:
+    # the screen clamps the normalised gap at GAP_CLAMP (no subnormal erfc): far pairs must
+    # keep a positive bound at least the Gaussian tail of their true gap
+    gaps = torch.tensor([0.5, 3.0, 8.0, 11.9, 12.0, 20.0, 40.0, 300.0], dtype=torch.float64)
+    sigma, rad = 0.05, 0.1
+    c = torch.zeros(len(gaps), 3, dtype=torch.float32)
+    mu = torch.zeros(len(gaps), 1, 3, dtype=torch.float32)
+    mu[:, 0, 0] = (rad + sigma * gaps).float()
+    var = torch.full((len(gaps), 1, 3), sigma**2, dtype=torch.float32)
+    inv_s = var.amax(-1).rsqrt()
+    radius = torch.full((len(gaps), 1), rad, dtype=torch.float32)
+    with torch.no_grad():
+        bound, dist = C._pair_bounds(c, mu, var, inv_s, radius, exact=False)
+    tail = torch.special.erfc(gaps / math.sqrt(2.0)) / 2
+    assert torch.allclose(dist[:, 0].double(), rad + sigma * gaps, rtol=1e-6)
+    assert bool((bound[:, 0] > 0).all())
+    assert bool((bound[:, 0].double() >= tail * (1 - 1e-4)).all()), (bound, tail)
+    floor = math.erfc(C.GAP_CLAMP / math.sqrt(2)) / 2
+    assert float(bound[-1, 0]) == pytest.approx(floor, rel=1e-4)
+
+
+def test_screen_distance_matches_norm_of_difference() -> None:
+    gen = torch.Generator().manual_seed(3)
+    a = torch.randn(4, 1, 6, 3, generator=gen, dtype=torch.float64)
+    b = torch.randn(1, 5, 6, 3, generator=gen, dtype=torch.float64)
+    assert torch.allclose(C._distance3(a, b), (a - b).norm(dim=-1), rtol=1e-12, atol=0.0)
+
+
 def test_human_bound_is_max_over_pairs_of_weighted_sum_and_pruning_is_safe() -> None:
     human = _obstacle()
     gen = torch.Generator().manual_seed(7)
