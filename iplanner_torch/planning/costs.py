@@ -444,7 +444,8 @@ def human_collision_bound(
     Two pair bounds are available. The *isotropic* one, ``Phi(-(||mu - c|| - R) / s_max)``
     with ``s_max`` the largest standard deviation, is cheap (no secular equation) and never
     below the exact one (the Mahalanobis distance to the ball is at least the Euclidean gap
-    over ``s_max``); the optimiser's iterations use it. With ``exact=True`` the pairs whose
+    over ``s_max``; its gap is taken at most ``GAP_CLAMP``, which only raises it); the
+    optimiser's iterations use it. With ``exact=True`` the pairs whose
     isotropic bound exceeds ``EXACT_FROM`` get :func:`gaussian_ball_bound_diag`, the rest keep
     the isotropic value (still an upper bound, below ``EXACT_FROM``).
 
