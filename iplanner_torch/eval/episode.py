@@ -259,23 +259,23 @@ def action_mask(action_names: tuple[str, ...], available: set[int]) -> torch.Ten
     """
     keep = []
     for name in action_names:
-        low = name.lower()
-        keep.append(not _is_take(low) or int(low.rpartition("_")[2]) in available)
+        block = _take_block(name)
+        keep.append(block is None or block in available)
     return torch.tensor(keep, dtype=torch.bool)
 
 
 def rest_hold(action_names: tuple[str, ...], keep: torch.Tensor) -> torch.Tensor:
     """(A,) bool: the ``idle`` action when ``keep`` (from :func:`action_mask`) rules out every
     ``take_<i>`` / ``reach_<i>`` action, else all False (see ``rest_when_nothing_available``)."""
-    names = [n.lower() for n in action_names]
-    takes = [_is_take(n) for n in names]
+    takes = [_take_block(n) is not None for n in action_names]
     nothing = any(takes) and not any(bool(k) for k, t in zip(keep.tolist(), takes) if t)
-    return torch.tensor([nothing and n == "idle" for n in names], dtype=torch.bool)
+    return torch.tensor([nothing and n.lower() == "idle" for n in action_names], dtype=torch.bool)
 
 
-def _is_take(name: str) -> bool:
-    head, _, tail = name.rpartition("_")
-    return head in ("take", "reach") and tail.isdigit()
+def _take_block(name: str) -> int | None:
+    """The block id ``i`` of a ``take_<i>`` / ``reach_<i>`` action (any case), else None."""
+    head, _, tail = name.lower().rpartition("_")
+    return int(tail) if head in ("take", "reach") and tail.isdigit() else None
 
 
 def planner_cfg_for(base: PlannerCfg, kind: str, confidence: float) -> PlannerCfg:

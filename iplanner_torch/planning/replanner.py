@@ -451,9 +451,9 @@ class Replanner:
                 self._ref = (float(t), q_now.clone(), self._ref[2])
         lead = self._lead(self._goal_changed)
         last = self._last
-        if self.cfg.wait_lead_s is not None and last is not None:
-            if not (last.feasible or last.evasive):  # the last cycle ended in a wait
-                lead = min(lead, self.cfg.wait_lead_s)
+        waited = last is not None and not (last.feasible or last.evasive)
+        if self.cfg.wait_lead_s is not None and waited:  # the last cycle ended in a wait
+            lead = min(lead, self.cfg.wait_lead_s)
         if forecast is not None and self._committed_unsafe(t, lead, plan, forecast, forecast_t0):
             lead = float(self.cfg.emergency_lead_s)  # type: ignore[arg-type]
             self.stats.emergencies += 1

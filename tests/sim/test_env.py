@@ -28,9 +28,9 @@ def _env(robot, human_cfg: HumanCfg | None = None, order=(0, 1, 2, 3)) -> SimEnv
     return SimEnv(scene, robot, human, Tracker(TrackerCfg(), seed=0), seed=0)
 
 
-def _track(env: SimEnv, q0: np.ndarray, amp: float, seconds: float, hz: float = 0.5) -> float:
+def _track(env: SimEnv, q0: np.ndarray, amp: float, seconds: float) -> float:
     worst = 0.0
-    w = 2 * np.pi * hz
+    w = 2 * np.pi * 0.5
     while env.time < seconds:
         t = env.time
         q_des = q0 + amp * np.sin(w * t)
