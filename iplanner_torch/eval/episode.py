@@ -33,6 +33,12 @@ ITOMP plans against ``static_human_forecast`` of the latest tracked pose; both f
 at the time of the last tracker frame (``forecast_t0``), and the optimiser samples them at the
 waypoint times of the plan's execution window ``[t + m, t + 2m]``.
 
+The ``oracle`` planner is the I-Planner's optimiser given the person's true future
+(:func:`oracle_forecast`: the script run ahead on a copy, no tracker, no noise) and the
+person's own task order: an upper bound on what better prediction could give, for comparing
+planners rather than a planner a robot could run. Its ``eval/mhd`` measures how far that
+future was off (only a block delivered within the span changes it).
+
 Torch runs with ``torch_threads`` threads during the episode (restored afterwards): the
 planner's tensors are small, so one thread avoids the thread-pool overhead that dominates them
 on a few cores.
@@ -79,12 +85,13 @@ from iplanner_torch.sim.scene import SceneCfg
 from iplanner_torch.sim.tasks import ScenarioCfg, next_feasible, parse_order
 from iplanner_torch.sim.tracker import Tracker
 
-PlannerKind = Literal["itomp", "iplanner_no_ni", "iplanner_ni"]
-#: Planner kinds and the predictor variant each one reads.
+PlannerKind = Literal["itomp", "iplanner_no_ni", "iplanner_ni", "oracle"]
+#: Planner kinds and the predictor variant each one reads (None: no predictor).
 PLANNER_KINDS: dict[str, str | None] = {
     "itomp": None,
     "iplanner_no_ni": "no_ni",
     "iplanner_ni": "ni",
+    "oracle": None,
 }
 
 
@@ -128,9 +135,11 @@ class EpisodeCfg:
     planner: PlannerCfg = field(default_factory=PlannerCfg)
     # simulated seconds after which the episode stops unfinished
     max_duration_s: float = 90.0
-    # ITOMP's static forecast: frames and spacing [s]
+    # ITOMP's static forecast and the oracle's true one: frames and spacing [s]
     static_forecast_frames: int = 30
     static_forecast_dt: float = 0.1
+    # per-coordinate standard deviation of the oracle's forecast [m]
+    oracle_std: float = 0.01
     # MHD horizon [s] and the hand motion below which a forecast is not scored [m]
     mhd_horizon_s: float = 1.0
     mhd_min_motion: float = 0.05
@@ -163,6 +172,8 @@ class EpisodeCfg:
             raise ConfigError(f"expected max_duration_s > 0, got {self.max_duration_s}")
         if self.static_forecast_frames < 1 or self.static_forecast_dt <= 0:
             raise ConfigError("expected static_forecast_frames >= 1 and static_forecast_dt > 0")
+        if not self.oracle_std > 0:
+            raise ConfigError(f"expected oracle_std > 0, got {self.oracle_std}")
         if self.mhd_horizon_s <= 0 or self.mhd_min_motion < 0:
             raise ConfigError("expected mhd_horizon_s > 0 and mhd_min_motion >= 0")
         if self.metrics_hz <= 0 or self.log_hz <= 0:
@@ -278,6 +289,47 @@ def _take_block(name: str) -> int | None:
     return int(tail) if head in ("take", "reach") and tail.isdigit() else None
 
 
+def oracle_forecast(
+    human: ScriptedHuman,
+    delivered: set[int],
+    t0: float,
+    n_f: int,
+    dt: float,
+    *,
+    step_s: float,
+    std: float,
+    like: torch.Tensor,
+) -> Forecast:
+    """The person's true future as a forecast: one action of weight 1 whose mean is
+    :meth:`ScriptedHuman.preview` at ``t0 + dt, ..., t0 + n_f dt`` (exact unless a block
+    lands on its spot within the span), with a tiny variance.
+
+    Args:
+        human: the scripted human, at time ``t0``.
+        delivered: ids of the blocks lying on their delivery spots now.
+        t0: now [s] (the forecast's last observed frame).
+        n_f: frames.
+        dt: seconds between frames.
+        step_s: the simulation's control period [s].
+        std: per-coordinate standard deviation [m].
+        like: a tensor whose dtype and device the forecast takes.
+
+    Returns:
+        Forecast with weights (1, 1), mean and var (1, 1, n_f, K, 3), action ``oracle``.
+    """
+    times = t0 + dt * np.arange(1, n_f + 1)
+    pos = torch.as_tensor(human.preview(times, delivered, step_s), dtype=like.dtype)
+    mean = pos.to(like.device).reshape(1, 1, *pos.shape)
+    return Forecast(
+        weights=torch.ones(1, 1, dtype=like.dtype, device=like.device),
+        mean=mean,
+        var=torch.full_like(mean, std * std),
+        dt=dt,
+        joint_names=tuple(JOINT_NAMES),
+        action_names=("oracle",),
+    )
+
+
 def planner_cfg_for(base: PlannerCfg, kind: str, confidence: float) -> PlannerCfg:
     """``base`` with the kind, predictor variant and confidence of one episode.
 
@@ -289,7 +341,7 @@ def planner_cfg_for(base: PlannerCfg, kind: str, confidence: float) -> PlannerCf
     variant = PLANNER_KINDS[kind]
     return replace(
         base,
-        kind="itomp" if variant is None else "iplanner",
+        kind=kind if kind in ("itomp", "oracle") else "iplanner",
         predictor_variant=variant,  # type: ignore[arg-type]
         confidence=confidence,
     )
@@ -312,13 +364,15 @@ def run_episode(
     Args:
         cfg: the episode.
         robot: a :class:`iplanner_torch.robot.model.RobotModel`.
-        predictor: the human motion predictor (required unless ``planner_kind`` is itomp).
-        planner_kind: ``itomp`` (observed pose only), ``iplanner_no_ni`` or ``iplanner_ni``.
+        predictor: the human motion predictor (required for ``iplanner_*``).
+        planner_kind: ``itomp`` (observed pose only), ``iplanner_no_ni``, ``iplanner_ni`` or
+            ``oracle`` (the person's true future, :func:`oracle_forecast`).
         writer_path: MCAP file to write, or None.
         seed: episode seed (human order, idles and motions, tracker noise, planner seed).
         replanner: a ready replanner; None builds one from ``cfg.planner``.
         motion: the human's motion source; None uses the reaching generator.
-        task_policy: the robot's task planner (module docstring); None: next feasible.
+        task_policy: the robot's task planner (module docstring); None: next feasible (the
+            oracle: the person's own order).
 
     Returns:
         The metrics, the log path and the task events.
@@ -426,6 +480,7 @@ def _run_episode(
 ) -> EpisodeResult:
     pcfg = planner_cfg_for(cfg.planner, planner_kind, cfg.scenario.confidence)
     use_prediction = PLANNER_KINDS[planner_kind] is not None
+    oracle = planner_kind == "oracle"
     if use_prediction and predictor is None:
         raise ConfigError(f"planner_kind {planner_kind!r} needs a predictor, got None")
     scenario = cfg.scenario
@@ -466,6 +521,11 @@ def _run_episode(
         task_policy = predictor_task_policy(
             predictor, scene.block_ids, order, episodes=cfg.task_planner_episodes, seed=seed
         )
+    if task_policy is None and oracle and not blocking:
+
+        def task_policy(taken: set[int], fetched: set[int]) -> int | None:
+            return next((i for i in human.order if i not in fetched), None)
+
     events: list[tuple[float, str, int]] = []
     writer = None
     if writer_path is not None:
@@ -570,6 +630,22 @@ def _run_episode(
                             mean.detach().cpu().numpy(),
                         )
                     )
+                elif oracle:
+                    t_obs = t
+                    forecast = oracle_forecast(
+                        human,
+                        set(env.delivered),
+                        t,
+                        cfg.static_forecast_frames,
+                        cfg.static_forecast_dt,
+                        step_s=env.control_dt,
+                        std=cfg.oracle_std,
+                        like=ref,
+                    )
+                    mean = forecast.mean[0, 0][:, hands]  # (n_f, 2, 3)
+                    forecasts.append(
+                        (t_obs, forecast.times.cpu().numpy(), mean.detach().cpu().numpy())
+                    )
                 else:
                     forecast = static_human_forecast(
                         tens(tracker.latest_pose()),
@@ -582,7 +658,7 @@ def _run_episode(
                 if isinstance(due, float) and due > t:  # the replanner keeps its own cadence
                     next_cycle = due
                 if writer is not None:
-                    if use_prediction:
+                    if use_prediction or oracle:
                         writer.log_forecast(t_obs, forecast)
                     if result is not None:
                         stats = replanner.stats

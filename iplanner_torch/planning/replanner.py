@@ -162,9 +162,10 @@ class PlannerCfg:
     set them in one place.
     """
 
-    # "itomp": the observed pose only; "iplanner": the predicted human
-    kind: Literal["itomp", "iplanner"] = "iplanner"
-    # predictor variant the planner reads ("no_ni" or "ni"); None for itomp
+    # "itomp": the observed pose only; "iplanner": the predicted human; "oracle": the person's
+    # true future (an upper bound on what prediction can give; no predictor)
+    kind: Literal["itomp", "iplanner", "oracle"] = "iplanner"
+    # predictor variant the planner reads ("no_ni" or "ni"); None for itomp and oracle
     predictor_variant: Literal["no_ni", "ni"] | None = "ni"
     # delta_CL, the confidence level of the collision constraint
     confidence: float = 0.95
@@ -176,8 +177,8 @@ class PlannerCfg:
     replanner: ReplannerCfg = field(default_factory=ReplannerCfg)
 
     def __post_init__(self) -> None:
-        if self.kind not in ("itomp", "iplanner"):
-            raise ConfigError(f"expected kind 'itomp' or 'iplanner', got {self.kind!r}")
+        if self.kind not in ("itomp", "iplanner", "oracle"):
+            raise ConfigError(f"expected kind 'itomp', 'iplanner' or 'oracle', got {self.kind!r}")
         if self.kind == "iplanner" and self.predictor_variant not in ("no_ni", "ni"):
             raise ConfigError(
                 f"expected predictor_variant 'no_ni' or 'ni' for iplanner, "

@@ -21,14 +21,15 @@ index ``i`` is used if it exists, else the action is left out of the bitmask. Se
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal, Protocol
 
 import numpy as np
 
 from iplanner_torch.data.skeleton import JOINT_INDEX
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, ShapeError
 
 Speed = Literal["slow", "medium", "fast"]
 Arm = Literal["left", "right"]
@@ -381,6 +382,47 @@ class ScriptedHuman:
         j = min(i + 1, m.frames.shape[0] - 1)
         w = f - i
         return (1.0 - w) * m.frames[i] + w * m.frames[j]
+
+    def preview(self, times: np.ndarray, delivered: set[int], step_s: float) -> np.ndarray:
+        """The true future: joint positions at ``times`` if the delivered set stays as it is.
+
+        A copy of the script (its random stream included) is advanced with :meth:`update`
+        every ``step_s`` from :attr:`time`, as the simulation does, so a reach that starts
+        within the span is the one the person will make; this human is left unchanged. Only
+        deliveries after now can make the preview differ from what happens (and rounding: the
+        copy's clock adds ``step_s`` up, so where a motion ends exactly on a step the two may
+        differ by that one step).
+
+        Args:
+            times: (n,) increasing times [s], none before :attr:`time`.
+            delivered: ids of the blocks lying on their delivery spots now.
+            step_s: the simulation's update period [s] (its control period).
+
+        Returns:
+            (n, K, 3) joint positions [m].
+
+        Raises:
+            ShapeError: when ``times`` is not 1-D.
+            ConfigError: when ``step_s <= 0`` or ``times`` decrease or lie before now.
+        """
+        ts = np.asarray(times, dtype=np.float64)
+        if ts.ndim != 1:
+            raise ShapeError(f"expected times (n,), got {ts.shape}")
+        if not step_s > 0.0:
+            raise ConfigError(f"expected step_s > 0, got {step_s}")
+        if ts.size and (ts[0] < self.time - 1e-9 or bool(np.any(np.diff(ts) < 0.0))):
+            raise ConfigError(f"expected increasing times from t = {self.time}, got {ts}")
+        twin = copy.copy(self)
+        twin._rng = copy.deepcopy(self._rng)
+        twin.completed = list(self.completed)
+        twin._landed = dict(self._landed)
+        twin._motion = None if self._motion is None else replace(self._motion)
+        out = np.empty((ts.size, *self._pose.shape), dtype=np.float64)
+        for k, t in enumerate(ts):
+            while twin.time + step_s <= t + 1e-9:
+                twin.update(twin.time + step_s, delivered)
+            out[k] = twin.joint_positions(float(t))
+        return out
 
     def progress_bitmask(self, action_names: Sequence[str]) -> int:
         """The completed-action bitmask over the predictor's action set (module docstring)."""

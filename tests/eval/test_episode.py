@@ -104,6 +104,45 @@ def test_itomp_sees_the_observed_pose_only(tmp_path: Path) -> None:
     assert math.isnan(res.metrics["eval/mhd"]) and res.mcap_path is None
 
 
+def test_oracle_plans_on_the_true_future(tmp_path: Path) -> None:
+    """The oracle's forecasts are the poses the simulated person then goes through (read back
+    from the episode log), and it fetches in the person's own order."""
+    from iplanner_torch.recording.reader import read_episode
+
+    replanner = fakes.LinearReplanner(speed=1.5)
+    path = tmp_path / "oracle.mcap"
+    res = run_episode(
+        EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=12.0),
+        robot=fakes.FakeArm(tmp_path),
+        predictor=None,
+        planner_kind="oracle",
+        writer_path=path,
+        seed=1,
+        replanner=replanner,
+        motion=fakes.FakeMotion(),
+    )
+    ep = read_episode(path)
+    fetched = [b for _, k, b in res.events if k == "fetch_started"]
+    assert len(fetched) >= 2 and fetched == ep.metadata["human_order"][: len(fetched)]
+    landed = [t for t, k, _ in res.events if k == "delivered"]
+    t_true, true = ep.human_true()
+    t_true, true = t_true.numpy(), true.numpy()
+    compared = moving = 0
+    for t0, forecast in replanner.forecasts:
+        assert forecast.action_names == ("oracle",)
+        times = t0 + forecast.times.numpy()
+        if any(t0 < t_l <= times[-1] for t_l in landed):
+            continue  # a delivery within the span changes what the person does
+        moving += float(np.ptp(forecast.mean[0, 0].numpy(), axis=0).max()) > 0.05
+        for k, tk in enumerate(times):
+            i = np.searchsorted(t_true, tk - 1e-6)
+            if i < len(t_true) and abs(t_true[i] - tk) < 1e-6:
+                np.testing.assert_allclose(forecast.mean[0, 0, k].numpy(), true[i], atol=1e-6)
+                compared += 1
+    assert compared >= 20 and moving >= 3
+    assert res.metrics["eval/mhd"] < 0.005
+
+
 def test_errors(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="needs a predictor"):
         run_episode(
@@ -153,7 +192,7 @@ def test_full_episode_completes_all_tasks(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["itomp", "iplanner_no_ni", "iplanner_ni"])
+@pytest.mark.parametrize("kind", ["itomp", "iplanner_no_ni", "iplanner_ni", "oracle"])
 def test_real_kuka_episode_delivers_every_block(tmp_path: Path, kind: str) -> None:
     """The real ITOMP / I-Planner optimiser on the KUKA iiwa in MuJoCo (stand-in predictor)."""
     from iplanner_torch.recording.reader import read_episode
@@ -164,7 +203,7 @@ def test_real_kuka_episode_delivers_every_block(tmp_path: Path, kind: str) -> No
     res = run_episode(
         EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=60.0),
         robot=robot,
-        predictor=None if kind == "itomp" else fakes.ConstantPredictor(),
+        predictor=None if kind in ("itomp", "oracle") else fakes.ConstantPredictor(),
         planner_kind=kind,  # type: ignore[arg-type]
         writer_path=path,
         seed=0,

@@ -256,6 +256,10 @@ def test_planner_cfg_validates_and_builds() -> None:
     assert isinstance(rp.optimizer, ITOMP)
     assert rp.optimizer.cfg.confidence == 0.99 and rp.cfg.replan_step_s == 0.25
     assert replace(cfg, kind="iplanner", predictor_variant="ni").kind == "iplanner"
+    oracle = build_replanner(replace(cfg, kind="oracle"), PointRobot())
+    assert type(oracle.optimizer) is TrajectoryOptimizer  # no ITOMP: it plans on a forecast
+    with pytest.raises(ConfigError, match="oracle"):
+        PlannerCfg(kind="psychic", predictor_variant=None)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("name", ["itomp", "iplanner_no_ni", "iplanner_ni"])

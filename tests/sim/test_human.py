@@ -109,3 +109,61 @@ def test_errors() -> None:
         ScriptedHuman(HumanCfg(), FakeMotion(), task_order=None, targets=TARGETS, seed=0)
     with pytest.raises(ConfigError, match="absent"):
         ScriptedHuman(HumanCfg(), FakeMotion(), task_order=FakeOrder([9]), targets=TARGETS, seed=0)
+
+
+def _reaching_human(seed: int = 3) -> ScriptedHuman:
+    from iplanner_torch.sim.human import ReachingMotionSource
+
+    return ScriptedHuman(
+        HumanCfg(),
+        ReachingMotionSource(seed, seat_x=SCENE.human_seat_x),
+        task_order=FakeOrder((1, 0, 2, 3)),
+        targets=TARGETS,
+        seed=seed,
+    )
+
+
+@pytest.mark.parametrize("t_start", [0.2, 1.5, 4.0])
+def test_preview_is_the_motion_the_script_then_plays(t_start: float) -> None:
+    """The preview made at t_start equals the poses the human goes through afterwards (the
+    reaching generator draws its motions from the script's random stream)."""
+    delivered = set(TARGETS)
+    human = _reaching_human()
+    _run(human, delivered, t_start)
+    t0 = human.time
+    played_t, played = [], []
+    t = t0
+    while t < t0 + 3.0:
+        t += 0.01
+        human.update(t, delivered)
+        played_t.append(t)
+        played.append(human.joint_positions(t))
+    twin = _reaching_human()
+    _run(twin, delivered, t_start)
+    preview = twin.preview(np.asarray(played_t), delivered, 0.01)
+    np.testing.assert_allclose(preview, np.asarray(played), atol=1e-6)
+    hand = JOINT_INDEX["left_hand"]  # block 1 lies at y > 0
+    assert np.ptp(preview[:, hand], axis=0).max() > 0.1  # a reach happens in the span
+
+
+def test_preview_leaves_the_human_unchanged() -> None:
+    delivered = set(TARGETS)
+    a, b = _reaching_human(), _reaching_human()
+    _run(a, delivered, 0.5)
+    _run(b, delivered, 0.5)
+    b.preview(b.time + 0.1 * np.arange(1, 31), delivered, 0.01)
+    assert _run(a, delivered, 12.0) == _run(b, delivered, 12.0)
+    np.testing.assert_array_equal(a.joint_positions(), b.joint_positions())
+
+
+def test_preview_errors() -> None:
+    from iplanner_torch.errors import ShapeError
+
+    human = _human()
+    _run(human, set(), 1.0)
+    with pytest.raises(ShapeError, match="times"):
+        human.preview(np.ones((2, 2)), set(), 0.01)
+    with pytest.raises(ConfigError, match="step_s"):
+        human.preview(np.array([1.5]), set(), 0.0)
+    with pytest.raises(ConfigError, match="increasing"):
+        human.preview(np.array([0.5]), set(), 0.01)
