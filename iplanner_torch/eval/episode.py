@@ -76,7 +76,7 @@ from iplanner_torch.data.skeleton import JOINT_INDEX, JOINT_NAMES
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.eval import metrics as M
 from iplanner_torch.planning.human_model import HumanSphereMap
-from iplanner_torch.planning.itomp import static_human_forecast
+from iplanner_torch.planning.itomp import path_forecast, static_human_forecast
 from iplanner_torch.planning.replanner import PlannerCfg, build_replanner
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.sim.env import SimCfg, SimEnv
@@ -319,15 +319,7 @@ def oracle_forecast(
     """
     times = t0 + dt * np.arange(1, n_f + 1)
     pos = torch.as_tensor(human.preview(times, delivered, step_s), dtype=like.dtype)
-    mean = pos.to(like.device).reshape(1, 1, *pos.shape)
-    return Forecast(
-        weights=torch.ones(1, 1, dtype=like.dtype, device=like.device),
-        mean=mean,
-        var=torch.full_like(mean, std * std),
-        dt=dt,
-        joint_names=tuple(JOINT_NAMES),
-        action_names=("oracle",),
-    )
+    return path_forecast(pos.to(like.device), dt, JOINT_NAMES, std=std, action="oracle")
 
 
 def planner_cfg_for(base: PlannerCfg, kind: str, confidence: float) -> PlannerCfg:

@@ -42,16 +42,49 @@ def static_human_forecast(
         ConfigError: when n_f < 1, dt <= 0 or std <= 0.
     """
     check_shape("pose", pose, (len(joint_names), 3))
-    if n_f < 1 or not dt > 0.0 or not std > 0.0:
-        raise ConfigError(f"expected n_f >= 1, dt > 0, std > 0, got {n_f}, {dt}, {std}")
-    mean = pose.reshape(1, 1, 1, *pose.shape).expand(1, 1, n_f, *pose.shape).clone()
+    if n_f < 1:
+        raise ConfigError(f"expected n_f >= 1, got {n_f}")
+    path = pose.unsqueeze(0).expand(n_f, *pose.shape)
+    return path_forecast(path, dt, joint_names, std=std, action="observed")
+
+
+def path_forecast(
+    path: torch.Tensor,
+    dt: float,
+    joint_names: Sequence[str],
+    *,
+    std: float,
+    action: str,
+) -> Forecast:
+    """A forecast in which the human follows ``path`` (one action of weight 1, isotropic
+    ``std`` on every joint and frame).
+
+    Args:
+        path: (n_f, K, 3) joint positions [m] at dt, 2 dt, ..., n_f dt after the forecast's
+            start, world frame.
+        dt: seconds between frames.
+        joint_names: the K joint names.
+        std: per-coordinate standard deviation [m].
+        action: the one action's name.
+
+    Returns:
+        Forecast with weights (1, 1), mean and var (1, 1, n_f, K, 3).
+
+    Raises:
+        ShapeError: when ``path`` is not (n_f, K, 3) with K = len(joint_names).
+        ConfigError: when n_f < 1, dt <= 0 or std <= 0.
+    """
+    check_shape("path", path, ("n_f", len(joint_names), 3))
+    if path.shape[0] < 1 or not dt > 0.0 or not std > 0.0:
+        raise ConfigError(f"expected n_f >= 1, dt > 0, std > 0, got {path.shape[0]}, {dt}, {std}")
+    mean = path.unsqueeze(0).unsqueeze(0).clone()
     return Forecast(
-        weights=torch.ones(1, 1, dtype=pose.dtype, device=pose.device),
+        weights=torch.ones(1, 1, dtype=path.dtype, device=path.device),
         mean=mean,
         var=torch.full_like(mean, std * std),
         dt=dt,
         joint_names=tuple(joint_names),
-        action_names=("observed",),
+        action_names=(action,),
     )
 
 

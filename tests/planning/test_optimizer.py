@@ -16,7 +16,7 @@ from planning_fakes import (
 
 from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.planning.costs import CostWeights
-from iplanner_torch.planning.itomp import ITOMP, static_human_forecast
+from iplanner_torch.planning.itomp import ITOMP, path_forecast, static_human_forecast
 from iplanner_torch.planning.optimizer import (
     ACC_TOL,
     KinematicModel,
@@ -115,6 +115,16 @@ def test_itomp_avoids_the_observed_pose(point_robot: PointRobot) -> None:
     assert float(dist.min()) > 0.15  # r_robot + r_human
     with pytest.raises(ShapeError, match=r"expected pose \(1, 3\)"):
         static_human_forecast(torch.zeros(2, 3), 5, 0.1, ("j",))
+    path = torch.rand(4, 1, 3, dtype=torch.float64)
+    fc = path_forecast(path, 0.2, ("j",), std=0.03, action="walk")
+    assert fc.action_names == ("walk",) and fc.weights.tolist() == [[1.0]]
+    assert torch.equal(fc.mean[0, 0], path) and float(fc.var.max()) == pytest.approx(9e-4)
+    with pytest.raises(ShapeError, match="path"):
+        path_forecast(torch.zeros(4, 2, 3), 0.1, ("j",), std=0.01, action="a")
+    with pytest.raises(ConfigError, match="std"):
+        path_forecast(path, 0.1, ("j",), std=0.0, action="a")
+    with pytest.raises(ConfigError, match="n_f"):
+        static_human_forecast(pose, 0, 0.1, ("j",))
 
 
 def test_window_restricts_the_constraint(point_robot: PointRobot) -> None:
