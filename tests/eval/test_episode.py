@@ -141,6 +141,8 @@ def test_oracle_plans_on_the_true_future(tmp_path: Path) -> None:
                 compared += 1
     assert compared >= 20 and moving >= 3
     assert res.metrics["eval/mhd"] < 0.005
+    t_fc, logged = ep.forecasts()  # the log keeps every forecast the oracle planned on
+    assert logged.action_names == ("oracle",) and len(t_fc) == len(replanner.forecasts)
 
 
 def test_errors(tmp_path: Path) -> None:
