@@ -473,6 +473,8 @@ def _run_episode(
     pcfg = planner_cfg_for(cfg.planner, planner_kind, cfg.scenario.confidence)
     use_prediction = PLANNER_KINDS[planner_kind] is not None
     oracle = planner_kind == "oracle"
+    # the planner's forecast predicts motion (ITOMP's holds the observed pose still)
+    forecasts_motion = use_prediction or oracle
     if use_prediction and predictor is None:
         raise ConfigError(f"planner_kind {planner_kind!r} needs a predictor, got None")
     scenario = cfg.scenario
@@ -614,14 +616,6 @@ def _run_episode(
                             hold = rest_hold(action_names, keep)
                             if bool(hold.any()):
                                 forecast = forecast.hold_actions(hold)
-                    mean = forecast.expected_mean()[0][:, hands]  # (n_f, 2, 3)
-                    forecasts.append(
-                        (
-                            t_obs,
-                            forecast.times.detach().cpu().numpy(),
-                            mean.detach().cpu().numpy(),
-                        )
-                    )
                 elif oracle:
                     t_obs = t
                     forecast = oracle_forecast(
@@ -634,10 +628,6 @@ def _run_episode(
                         std=cfg.oracle_std,
                         like=ref,
                     )
-                    mean = forecast.mean[0, 0][:, hands]  # (n_f, 2, 3)
-                    forecasts.append(
-                        (t_obs, forecast.times.cpu().numpy(), mean.detach().cpu().numpy())
-                    )
                 else:
                     forecast = static_human_forecast(
                         tens(tracker.latest_pose()),
@@ -645,12 +635,21 @@ def _run_episode(
                         cfg.static_forecast_dt,
                         JOINT_NAMES,
                     )
+                if forecasts_motion:  # scored by eval/mhd and logged
+                    mean = forecast.expected_mean()[0][:, hands]  # (n_f, 2, 3)
+                    forecasts.append(
+                        (
+                            t_obs,
+                            forecast.times.detach().cpu().numpy(),
+                            mean.detach().cpu().numpy(),
+                        )
+                    )
                 result = replanner.step(t, tens(q_now_np), forecast, forecast_t0=t_obs)
                 due = getattr(replanner, "next_cycle", None)
                 if isinstance(due, float) and due > t:  # the replanner keeps its own cadence
                     next_cycle = due
                 if writer is not None:
-                    if use_prediction or oracle:
+                    if forecasts_motion:
                         writer.log_forecast(t_obs, forecast)
                     if result is not None:
                         stats = replanner.stats
