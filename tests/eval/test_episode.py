@@ -158,6 +158,8 @@ def test_errors(tmp_path: Path) -> None:
         )  # fmt: skip
     with pytest.raises(ConfigError, match="max_duration_s"):
         EpisodeCfg(max_duration_s=0.0)
+    with pytest.raises(ConfigError, match="oracle_std"):
+        EpisodeCfg(oracle_std=0.0)
 
 
 def test_table_clearance_against_brute_force() -> None:
