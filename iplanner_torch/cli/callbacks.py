@@ -8,23 +8,24 @@ from typing import Any
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
-#: columns a sweep may vary, in the order they are preferred for the sweep plots
-SWEEP_COLUMNS = ("noise", "confidence", "speed", "seed")
+#: numeric columns a sweep may vary, in the order they are preferred as the x axis of the
+#: sweep plots (the other swept settings lay out their panels; seeds are repeats, not a
+#: setting, and are never plotted against)
+SWEEP_COLUMNS = ("noise", "confidence")
 
 
-def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
-    """Read every ``*.mcap`` below ``root`` and write the combined report into ``out_dir``.
+def episode_report(df: Any, out_dir: Path) -> list[Path]:
+    """Write the report of per-episode results ``df`` into ``out_dir``.
+
+    The summary keeps every setting that takes several values apart
+    (:func:`~iplanner_torch.eval.report.report_groups`); the sweep plots put the first of
+    :data:`SWEEP_COLUMNS` that varies on their x axis.
 
     Returns:
-        The written files (``results.csv``, ``results.md``, PNGs), or [] when no logs exist.
+        The written files (``results.csv``, ``results.md``, PNGs).
     """
-    from iplanner_torch.eval.report import gather_results, report_groups, write_sweep_report
+    from iplanner_torch.eval.report import report_groups, write_sweep_report
 
-    logs = sorted(root.glob("**/episodes/*.mcap"))
-    if not logs:
-        return []
-    df = gather_results(logs)
-    group_by = report_groups(df)
     sweep = next(
         (
             c
@@ -33,7 +34,22 @@ def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
         ),
         None,
     )
-    return write_sweep_report(df, out_dir, group_by=group_by, sweep=sweep)
+    return write_sweep_report(df, out_dir, group_by=report_groups(df), sweep=sweep)
+
+
+def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
+    """Read every ``*.mcap`` below ``root`` (in numbered order) and report them into
+    ``out_dir`` (:func:`episode_report`).
+
+    Returns:
+        The written files, or [] when no logs exist.
+    """
+    from iplanner_torch.eval.report import gather_results, natural_key
+
+    logs = sorted(root.rglob("*.mcap"), key=natural_key)
+    if not logs:
+        return []
+    return episode_report(gather_results(logs), out_dir)
 
 
 class GatherSweepResults(Callback):

@@ -107,25 +107,25 @@ def _noise_sweep(cfg: DictConfig) -> None:
 
 
 def _episode(cfg: DictConfig) -> None:
-    from iplanner_torch.cli.callbacks import gather_episode_logs
-    from iplanner_torch.eval.report import gather_results, print_table, summary_table
+    from iplanner_torch.cli.callbacks import episode_report
+    from iplanner_torch.eval.report import (
+        gather_results,
+        natural_key,
+        print_table,
+        report_groups,
+        summary_table,
+    )
 
     if not cfg.evaluate.logs:
         raise ConfigError("evaluate.mode=episode needs evaluate.logs=<an .mcap file or a folder>")
     path = repo_path(cfg.evaluate.logs)
-    items = sorted(path.glob("**/*.mcap")) if path.is_dir() else [path]
+    items = sorted(path.rglob("*.mcap"), key=natural_key) if path.is_dir() else [path]
     if not items:
         raise ConfigError(f"{path}: no .mcap episode logs found")
     out_dir = _out_dir(cfg)
-    if path.is_dir():
-        written = gather_episode_logs(path, out_dir)
-    else:
-        from iplanner_torch.eval.report import write_sweep_report
-
-        written = write_sweep_report(gather_results(items), out_dir, group_by=("planner",))
     df = gather_results(items)
-    group_by = [c for c in ("scenario", "planner") if c in df.columns] or ["planner"]
-    print_table(summary_table(df, group_by))
+    written = episode_report(df, out_dir)
+    print_table(summary_table(df, report_groups(df)))
     print(f"{len(df)} episode(s); wrote " + ", ".join(str(p) for p in written))
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -37,6 +38,10 @@ __all__ = [
     "plot_sweep",
     "write_sweep_report",
     "report_groups",
+    "ordered_values",
+    "natural_key",
+    "PLANNER_ORDER",
+    "SPEED_ORDER",
     "paper_table_simulation",
     "side_by_side",
 ]
@@ -57,6 +62,11 @@ PLANNERS: dict[str, str] = {
     "iplanner_no_ni": "I-Planner, no NI",
     "iplanner_ni": "I-Planner, NI",
 }
+
+#: Display order of the planners (the paper's three, then the oracle bound).
+PLANNER_ORDER: tuple[str, ...] = (*PLANNERS, "oracle")
+#: The human speeds in their natural order; summary rows and plots follow it.
+SPEED_ORDER: tuple[str, ...] = ("slow", "medium", "fast")
 
 #: Paper table performance: scenario key -> (label, arrangement, task order, confidence).
 PAPER_SCENARIOS: dict[str, tuple[str, str, str, float]] = {
@@ -170,6 +180,12 @@ def _row_of_path(p: Path) -> dict[str, Any]:
     return row
 
 
+def natural_key(path: str | Path) -> tuple[Any, ...]:
+    """Sort key that orders numbered names by number (``multirun/2`` before ``multirun/10``)."""
+    parts = re.split(r"(\d+)", str(path))
+    return tuple((0, int(t), "") if t.isdigit() else (1, 0, t) for t in parts)
+
+
 def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path) -> pd.DataFrame:
     """One row per episode: metadata (scenario keys) and metrics.
 
@@ -194,7 +210,7 @@ def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path)
             continue
         p = Path(item)
         if p.is_dir():
-            rows.extend(_row_of_path(f) for f in sorted(p.rglob("*.mcap")))
+            rows.extend(_row_of_path(f) for f in sorted(p.rglob("*.mcap"), key=natural_key))
         elif p.is_file():
             rows.append(_row_of_path(p))
         else:
@@ -218,6 +234,45 @@ def _default_metrics(df: pd.DataFrame, exclude: Sequence[str]) -> list[str]:
         return known
     skip = set(exclude) | {"contact", "seed", "complete"}
     return [c for c in df.columns if c not in skip and pd.api.types.is_numeric_dtype(df[c])]
+
+
+def ordered_values(column: str, values: Iterable[Any]) -> list[Any]:
+    """The distinct ``values`` of a group column in display order.
+
+    Speeds run slow, medium, fast; planners follow :data:`PLANNER_ORDER`; numbers ascend;
+    anything else keeps its order of first appearance (e.g. the paper's scenario order).
+    Values outside a known order follow it, in order of first appearance.
+    """
+    distinct = list({_hashable(v): v for v in values}.values())
+    known = {"speed": SPEED_ORDER, "human_speed": SPEED_ORDER, "planner": PLANNER_ORDER}.get(
+        column
+    )
+    if known is not None:
+        rank = {v: i for i, v in enumerate(known)}
+        return sorted(distinct, key=lambda v: rank.get(v, len(rank)))
+    if distinct and all(
+        isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool)
+        for v in distinct
+    ):
+        return sorted(distinct, key=lambda v: (math.isnan(float(v)), float(v)))
+    return distinct
+
+
+def _sort_groups(df: pd.DataFrame, group_by: Sequence[str]) -> pd.DataFrame:
+    """Rows of ``df`` sorted by ``group_by`` in the display order of :func:`ordered_values`."""
+    if df.empty:
+        return df
+    keys = {}
+    for c in group_by:
+        rank = {_hashable(v): i for i, v in enumerate(ordered_values(c, df[c]))}
+        keys[f"__rank_{c}"] = [rank[_hashable(v)] for v in df[c]]
+    ranked = df.assign(**keys)
+    return ranked.sort_values(list(keys), kind="stable").drop(columns=list(keys))
+
+
+def _hashable(v: Any) -> Any:
+    # NaN != NaN: one key for every missing value
+    return "__nan__" if isinstance(v, float) and math.isnan(v) else v
 
 
 def _contact_free(g: pd.DataFrame) -> int:
@@ -256,7 +311,9 @@ def summary_table(
             numeric column).
 
     Returns:
-        One row per group (in order of first appearance): the group keys, ``episodes``,
+        One row per group, in display order (:func:`ordered_values`: speeds slow to fast,
+        numbers ascending, planners in :data:`PLANNER_ORDER`, other keys in order of first
+        appearance): the group keys, ``episodes``,
         ``contact_free`` (episodes with ``contact == 0``, or ``min_distance > 0`` without a
         contact column) and ``<metric>_mean``, ``<metric>_std`` (sample std; NaN for a single
         episode). NaN values are left out of means.
@@ -279,7 +336,7 @@ def summary_table(
             row[f"{m}_mean"] = float(v.mean())
             row[f"{m}_std"] = float(v.std(ddof=1)) if v.notna().sum() > 1 else math.nan
         rows.append(row)
-    return pd.DataFrame.from_records(rows)
+    return _sort_groups(pd.DataFrame.from_records(rows), group_by).reset_index(drop=True)
 
 
 def _fmt(v: Any, digits: int) -> str:
@@ -388,8 +445,8 @@ def plot_comparison(
     _check_columns(df, [x_col, bar_col], "group columns")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    xs = list(dict.fromkeys(df[x_col]))
-    bars = list(dict.fromkeys(df[bar_col]))
+    xs = ordered_values(x_col, df[x_col])
+    bars = ordered_values(bar_col, df[bar_col])
     paths = []
     for m in metrics:
         if m not in df.columns:
@@ -429,8 +486,22 @@ def plot_comparison(
     return paths
 
 
-def plot_sweep(df: pd.DataFrame, x: str, y: str, hue: str, out_path: str | Path) -> Path:
+def plot_sweep(
+    df: pd.DataFrame,
+    x: str,
+    y: str,
+    hue: str,
+    out_path: str | Path,
+    *,
+    facet_col: str | None = None,
+    facet_row: str | None = None,
+) -> Path:
     """Line plot of ``y`` (mean, ± std band) against a swept parameter ``x``, one line per hue.
+
+    With ``facet_col`` (and ``facet_row``) the figure holds one panel per value (pair of
+    values) of those columns, sharing both axes, so a sweep over several settings is shown
+    without averaging over them (e.g. ``x="noise"``, ``facet_col="speed"``,
+    ``facet_row="confidence"``). Every planner keeps one colour across the panels.
 
     Args:
         df: per-episode results.
@@ -438,27 +509,56 @@ def plot_sweep(df: pd.DataFrame, x: str, y: str, hue: str, out_path: str | Path)
         y: metric column.
         hue: column naming the lines (e.g. ``"planner"``).
         out_path: PNG to write (parent created).
+        facet_col: column whose values lay out the panels left to right, or None.
+        facet_row: column whose values lay out the panels top to bottom, or None.
 
     Returns:
         ``out_path``.
+
+    Raises:
+        ConfigError: when a named column is missing.
     """
-    _check_columns(df, [x, y, hue], "columns")
+    facets = [c for c in (facet_row, facet_col) if c is not None]
+    _check_columns(df, [x, y, hue, *facets], "columns")
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     v = df.assign(_y=pd.to_numeric(df[y], errors="coerce"))
-    fig = Figure(figsize=(6.4, 4.2))
-    ax = fig.add_subplot()
-    for j, (h, g) in enumerate(v.groupby(hue, sort=False)):
-        s = g.groupby(x)["_y"].agg(["mean", "std"]).sort_index()
-        xs = s.index.to_numpy(dtype=float)
-        mean, std = s["mean"].to_numpy(), np.nan_to_num(s["std"].to_numpy())
-        ax.plot(xs, mean, marker="o", color=f"C{j}", label=PLANNERS.get(str(h), str(h)))
-        ax.fill_between(xs, mean - std, mean + std, color=f"C{j}", alpha=0.2, linewidth=0)
-    ax.set_xlabel(x)
-    ax.set_ylabel(_label(y))
-    ax.set_title(f"{_label(y).split(' [')[0]} against {x}")
-    ax.grid(alpha=0.3)
-    ax.legend(title=hue, fontsize="small")
+    rows = ordered_values(facet_row, v[facet_row]) if facet_row else [None]
+    cols = ordered_values(facet_col, v[facet_col]) if facet_col else [None]
+    hues = ordered_values(hue, v[hue])
+    fig = Figure(figsize=(max(6.4, 3.6 * len(cols) + 1.0), max(4.2, 2.9 * len(rows) + 0.8)))
+    axes = fig.subplots(len(rows), len(cols), sharex=True, sharey=True, squeeze=False)
+    name = _label(y).split(" [")[0]
+    for i, rv in enumerate(rows):
+        for k, cv in enumerate(cols):
+            ax = axes[i][k]
+            panel = v
+            if facet_row:
+                panel = panel[panel[facet_row].map(_hashable) == _hashable(rv)]
+            if facet_col:
+                panel = panel[panel[facet_col].map(_hashable) == _hashable(cv)]
+            for j, h in enumerate(hues):
+                g = panel[panel[hue] == h]
+                if g.empty:
+                    continue
+                s = g.groupby(x)["_y"].agg(["mean", "std"]).sort_index()
+                xs = s.index.to_numpy(dtype=float)
+                mean, std = s["mean"].to_numpy(), np.nan_to_num(s["std"].to_numpy())
+                label = PLANNERS.get(str(h), str(h))
+                ax.plot(xs, mean, marker="o", color=f"C{j}", label=label)
+                ax.fill_between(xs, mean - std, mean + std, color=f"C{j}", alpha=0.2, lw=0)
+            title = ", ".join(
+                f"{c} {val}" for c, val in ((facet_row, rv), (facet_col, cv)) if c is not None
+            )
+            if title:
+                ax.set_title(title, fontsize="medium")
+            ax.grid(alpha=0.3)
+            if i == len(rows) - 1:
+                ax.set_xlabel(x)
+            if k == 0:
+                ax.set_ylabel(_label(y))
+    axes[0][0].legend(title=hue, fontsize="small")
+    fig.suptitle(f"{name} against {x}" + (f" by {' and '.join(facets)}" if facets else ""))
     fig.tight_layout()
     fig.savefig(out_path, dpi=110)
     return out_path
@@ -477,7 +577,10 @@ def write_sweep_report(
         out_dir: output folder (created).
         group_by: summary groups; the last two also lay out the bar charts (x, bars).
         sweep: a swept numeric column: adds ``sweep_<metric>.png`` for each metric, one line
-            per ``group_by[-1]`` value.
+            per ``group_by[-1]`` value; the other group columns that take several values
+            (up to two; the last two of them when there are more) lay out its panels
+            (:func:`plot_sweep`). No sweep plot is written when ``sweep`` takes one value
+            in every panel.
 
     Returns:
         Every written path.
@@ -492,8 +595,29 @@ def write_sweep_report(
     if len(group_by) >= 2:
         written += plot_comparison(df, out_dir, group_by=(group_by[-2], group_by[-1]))
     if sweep is not None:
+        facets = [
+            c
+            for c in group_by[:-1]
+            if c != sweep and c in df.columns and df[c].nunique(dropna=True) > 1
+        ][-2:]
+        row, col = ([None, *facets])[-2:] if facets else (None, None)
+        panels = df.groupby(facets, dropna=False)[sweep] if facets else [(None, df[sweep])]
+        if max(x.nunique() for _, x in panels) < 2:
+            # the x values only ever change with the panel (e.g. one confidence per
+            # scenario): no line to draw
+            return written
         for m in _default_metrics(df, list(group_by) + [sweep]):
-            written.append(plot_sweep(df, sweep, m, group_by[-1], out_dir / f"sweep_{m}.png"))
+            written.append(
+                plot_sweep(
+                    df,
+                    sweep,
+                    m,
+                    group_by[-1],
+                    out_dir / f"sweep_{m}.png",
+                    facet_col=col,
+                    facet_row=row,
+                )
+            )
     return written
 
 

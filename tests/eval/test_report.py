@@ -17,9 +17,12 @@ from iplanner_torch.eval.report import (
     PLANNERS,
     format_table,
     gather_results,
+    natural_key,
+    ordered_values,
     paper_table_simulation,
     plot_comparison,
     plot_sweep,
+    report_groups,
     side_by_side,
     summary_table,
     to_markdown,
@@ -195,3 +198,107 @@ def test_write_sweep_report(results: pd.DataFrame, tmp_path: Path) -> None:
     back = pd.read_csv(tmp_path / "report" / "results.csv")
     assert len(back) == len(results)
     assert "| scenario |" in (tmp_path / "report" / "results.md").read_text()
+
+
+def _sweep_rows() -> pd.DataFrame:
+    """A noise x speed x confidence sweep, rows in a scrambled order, two seeds each."""
+    g = np.random.default_rng(3)
+    rows = []
+    for planner in ("iplanner_ni", "oracle", "itomp", "iplanner_no_ni"):
+        for speed in ("fast", "slow", "medium"):
+            for noise in (0.05, 0.0, 0.02):
+                for conf in (0.99, 0.9):
+                    for seed in (1, 0):
+                        rows.append(
+                            {
+                                "scenario": "arrangement_1x4",
+                                "planner": planner,
+                                "speed": speed,
+                                "noise": noise,
+                                "confidence": conf,
+                                "seed": seed,
+                                "eval/smoothness": 10 * noise + g.normal(),
+                                "eval/min_distance": 0.1,
+                                "eval/contact": 0.0,
+                            }
+                        )
+    return gather_results(rows)
+
+
+def test_summary_rows_follow_the_settings_natural_order() -> None:
+    df = _sweep_rows()
+    groups = report_groups(df)
+    assert groups == ("scenario", "speed", "noise", "confidence", "planner")
+    s = summary_table(df, groups)
+    assert len(s) == 3 * 3 * 2 * 4 and (s["episodes"] == 2).all()
+    first = s.iloc[:4]
+    assert list(first["planner"]) == ["itomp", "iplanner_no_ni", "iplanner_ni", "oracle"]
+    assert (first["speed"] == "slow").all() and (first["noise"] == 0.0).all()
+    assert (first["confidence"] == 0.9).all()
+    assert list(dict.fromkeys(s["speed"])) == ["slow", "medium", "fast"]
+    assert list(s["noise"].iloc[:24:8]) == [0.0, 0.02, 0.05]
+    # a value outside the known order follows it; other columns keep first appearance
+    assert ordered_values("speed", ["fast", "sprint", "slow"]) == ["slow", "fast", "sprint"]
+    assert ordered_values("scenario", ["b", "a", "b"]) == ["b", "a"]
+    with_nan = ordered_values("noise", [0.05, math.nan, 0.0, math.nan])
+    assert with_nan[:2] == [0.0, 0.05] and len(with_nan) == 3 and math.isnan(with_nan[2])
+
+
+def test_natural_key_orders_numbered_folders_by_number() -> None:
+    paths = ["m/10/e/a.mcap", "m/2/e/b.mcap", "m/1/e/c.mcap", "m/2/e/a.mcap"]
+    assert sorted(paths, key=natural_key) == [
+        "m/1/e/c.mcap",
+        "m/2/e/a.mcap",
+        "m/2/e/b.mcap",
+        "m/10/e/a.mcap",
+    ]
+
+
+def test_sweep_plot_has_a_panel_per_setting(tmp_path: Path) -> None:
+    df = _sweep_rows()
+    single = plot_sweep(df, "noise", "smoothness", "planner", tmp_path / "one.png")
+    grid = plot_sweep(
+        df,
+        "noise",
+        "smoothness",
+        "planner",
+        tmp_path / "grid.png",
+        facet_col="speed",
+        facet_row="confidence",
+    )
+    h1, w1 = matplotlib.image.imread(single).shape[:2]
+    h3, w3 = matplotlib.image.imread(grid).shape[:2]
+    assert w3 > 1.5 * w1 and h3 > 1.3 * h1  # 3 columns (speeds) x 2 rows (confidences)
+    with pytest.raises(ConfigError, match="not in the results"):
+        plot_sweep(df, "noise", "smoothness", "planner", tmp_path / "x.png", facet_col="robot")
+
+
+def test_sweep_report_lays_out_the_other_settings_and_skips_flat_sweeps(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import iplanner_torch.eval.report as report
+
+    calls = []
+    real = report.plot_sweep
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(report, "plot_sweep", spy)
+    df = _sweep_rows()
+    written = write_sweep_report(df, tmp_path / "a", report_groups(df), sweep="noise")
+    assert "sweep_smoothness.png" in {p.name for p in written}
+    assert calls and calls[0] == {"facet_col": "confidence", "facet_row": "speed"}
+    # one confidence per scenario (the table_simulation layout): no line to draw over it
+    calls.clear()
+    flat = gather_results(
+        [
+            {"scenario": s, "planner": p, "confidence": c, "eval/smoothness": 1.0}
+            for s, c in (("a", 0.9), ("b", 0.95), ("c", 0.99))
+            for p in ("itomp", "iplanner_ni")
+        ]
+    )
+    written = write_sweep_report(flat, tmp_path / "b", report_groups(flat), sweep="confidence")
+    assert not calls and not any(p.name.startswith("sweep_") for p in written)
+    assert "compare_smoothness.png" in {p.name for p in written}
