@@ -145,6 +145,7 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
             "sim": OmegaConf.to_container(cfg.sim, resolve=True),
             "planner": OmegaConf.to_container(cfg.planner, resolve=True),
             "max_duration_s": float(cfg.run.max_duration_s),
+            "stall_fallback_s": cfg.run.stall_fallback_s,
             "progress_bar": bool(cfg.progress),
         }
     )

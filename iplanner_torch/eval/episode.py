@@ -29,6 +29,13 @@ within the horizon, and no reach can start then. It cut the I-Planner's waits (i
 of 7 scenarios: fewer in 5 of 7, still no contact) without a gain in efficiency, and it made
 the Fetch arm less safe (contact-free in 60 instead of 66 of 70 episodes), so it is an option
 (``experiments/safety_seeds/README.md``).
+A predicting planner can wait for a reach the person never starts, e.g. for a delivered
+block the person leaves on its spot while waiting for another one; the person then waits for
+the robot. When ``stall_fallback_s`` (5 s) pass without task progress while the person's
+tracked hands stay still and the robot waits, :class:`StallWatch` reports a stall (task event
+``stall_fallback``) and the planner plans against the observed pose held still, as ITOMP
+does, until the hands move or the task progresses (``plan/stall_cycles`` counts those cycles;
+their forecasts are neither scored by ``eval/mhd`` nor logged as forecasts).
 ITOMP plans against ``static_human_forecast`` of the latest tracked pose; both forecasts start
 at the time of the last tracker frame (``forecast_t0``), and the optimiser samples them at the
 waypoint times of the plan's execution window ``[t + m, t + 2m]``.
@@ -166,6 +173,14 @@ class EpisodeCfg:
     # at its first frame: a person with nothing to take is predicted to stay at rest (off: it
     # made the Fetch arm less safe, see the module docstring)
     rest_when_nothing_available: bool = False
+    # stall fallback of the predicting planners (:class:`StallWatch`): after this many seconds
+    # without task progress, with waits, during which the person's tracked hands stayed
+    # still, plan against the observed pose held still (ITOMP's forecast) until the hands
+    # move or the task progresses; None: never
+    stall_fallback_s: float | None = 5.0
+    # hands whose tracked position (mean of the last 0.5 s) stays within this distance, per
+    # coordinate, of where it was count as still [m]
+    still_radius: float = 0.08
 
     def __post_init__(self) -> None:
         if self.max_duration_s <= 0:
@@ -184,6 +199,12 @@ class EpisodeCfg:
             raise ConfigError(
                 f"expected task_planner_episodes >= 0, got {self.task_planner_episodes}"
             )
+        if self.stall_fallback_s is not None and not self.stall_fallback_s > 0:
+            raise ConfigError(
+                f"expected stall_fallback_s > 0 or None, got {self.stall_fallback_s}"
+            )
+        if not self.still_radius > 0:
+            raise ConfigError(f"expected still_radius > 0, got {self.still_radius}")
 
     def scene_cfg(self) -> SceneCfg:
         """The workspace of the scenario."""
@@ -207,6 +228,75 @@ class EpisodeResult:
     events: list[tuple[float, str, int]]
     planner_kind: str
     seed: int
+
+
+class StallWatch:
+    """Tells when a predicting planner waits for a person who stays still: a stall.
+
+    Forecasts can keep giving weight to a reach the person never starts: for a block the
+    person leaves on its spot while waiting for another one, the classifier sees a person at
+    rest, like the start of every reach, and the forecast knows nothing of how long the
+    person has sat still. The robot then waits (and creeps between waits) for the reach, and
+    the person waits for the robot. When ``after_s`` seconds have passed without task progress
+    (a pick, delivery or take) while the person's hands stayed within ``radius`` (per
+    coordinate) of where they were, and the robot waited at least once in that time, the watch
+    reports a stall, and keeps reporting it until the hands move or the task progresses; the
+    episode then plans against the observed pose held still, as ITOMP does
+    (``EpisodeCfg.stall_fallback_s``).
+
+    Args:
+        after_s: seconds of stillness without progress before a stall [s].
+        radius: per-coordinate distance the hands may drift and still count as still [m].
+    """
+
+    def __init__(self, after_s: float, radius: float) -> None:
+        if not (after_s > 0 and radius > 0):
+            raise ConfigError(f"expected after_s > 0 and radius > 0, got {after_s}, {radius}")
+        self.after_s = float(after_s)
+        self.radius = float(radius)
+        self._ref: np.ndarray | None = None
+        self._still_since = 0.0
+        self._progress_at = 0.0
+        self._waited_at = -math.inf
+        self.active = False
+
+    def observe_person(self, t: float, hands: np.ndarray) -> None:
+        """The person's tracked hands at ``t``: (H, 3) [m]; NaN (not tracked) ends stillness."""
+        hands = np.asarray(hands, dtype=np.float64)
+        lost = not np.isfinite(hands).all()
+        moved = self._ref is None or bool(np.abs(hands - self._ref).max() > self.radius)
+        if lost or moved:
+            self._ref = None if lost else hands.copy()
+            self._still_since = float(t)
+            self.active = False
+
+    def observe_progress(self, t: float) -> None:
+        """A task event at ``t`` (pick, delivery, take): the robot is not stuck."""
+        self._progress_at = float(t)
+        self.active = False
+
+    def observe_plan(self, t: float, waited: bool) -> None:
+        """Whether the cycle at ``t`` ended in a wait (no trajectory met the constraint)."""
+        if waited:
+            self._waited_at = float(t)
+
+    def stalled(self, t: float) -> bool:
+        """Whether the planner at ``t`` should plan against the held pose."""
+        if not self.active and self._ref is not None:
+            since = max(self._still_since, self._progress_at)
+            self.active = t - since >= self.after_s - 1e-9 and self._waited_at >= since
+        return self.active
+
+
+def tracked_hands(window: np.ndarray, frames: int) -> np.ndarray:
+    """(2, 3) mean of the last ``frames`` tracked positions of both hands (NaN frames left
+    out; NaN when a hand has no frame) from a tracker window (T, K, 3)."""
+    hands = np.asarray(window)[-frames:, [JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]]]
+    ok = np.isfinite(hands).all(-1)  # (frames, 2)
+    total = np.where(ok[..., None], hands, 0.0).sum(0)
+    count = ok.sum(0)[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, total / np.maximum(count, 1), np.nan)
 
 
 class TableClearance:
@@ -586,6 +676,13 @@ def _run_episode(
     predict_ms: list[float] = []
     action_names = _action_names(predictor) if use_prediction else ()
     hands = [JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]]
+    watch = (
+        StallWatch(cfg.stall_fallback_s, cfg.still_radius)
+        if use_prediction and not blocking and cfg.stall_fallback_s is not None
+        else None
+    )
+    still_frames = max(1, round(0.5 * sim_cfg.tracker_fps))
+    stall_cycles = 0
     t_done: float | None = None
     t_goal: float | None = None
     step = 0
@@ -598,7 +695,22 @@ def _run_episode(
             if t >= next_cycle - 1e-9:
                 next_cycle += m
                 t_obs = float(tracker.times()[-1])
-                if use_prediction:
+                stalled = False
+                if watch is not None:
+                    watch.observe_person(t, tracked_hands(tracker.window(), still_frames))
+                    was_active = watch.active
+                    stalled = watch.stalled(t)
+                    if stalled and not was_active:
+                        record(t, "stall_fallback", -1)
+                if stalled:  # the person waits for the robot: plan on the held pose
+                    stall_cycles += 1
+                    forecast = static_human_forecast(
+                        tens(tracker.latest_pose()),
+                        cfg.static_forecast_frames,
+                        cfg.static_forecast_dt,
+                        JOINT_NAMES,
+                    )
+                elif use_prediction:
                     pos = torch.as_tensor(tracker.window(), device=dev).unsqueeze(0)
                     progress = torch.tensor(
                         [human.progress_bitmask(action_names)], dtype=torch.int64, device=dev
@@ -635,7 +747,7 @@ def _run_episode(
                         cfg.static_forecast_dt,
                         JOINT_NAMES,
                     )
-                if forecasts_motion:  # scored by eval/mhd and logged
+                if forecasts_motion and not stalled:  # scored by eval/mhd and logged
                     mean = forecast.expected_mean()[0][:, hands]  # (n_f, 2, 3)
                     forecasts.append(
                         (
@@ -648,8 +760,10 @@ def _run_episode(
                 due = getattr(replanner, "next_cycle", None)
                 if isinstance(due, float) and due > t:  # the replanner keeps its own cadence
                     next_cycle = due
+                if watch is not None and result is not None:
+                    watch.observe_plan(t, not (result.feasible or result.evasive))
                 if writer is not None:
-                    if forecasts_motion:
+                    if forecasts_motion and not stalled:
                         writer.log_forecast(t_obs, forecast)
                     if result is not None:
                         stats = replanner.stats
@@ -674,6 +788,8 @@ def _run_episode(
             goal_changed = False
             for ev in info.events:
                 record(ev.time, ev.kind, ev.block)
+                if watch is not None:
+                    watch.observe_progress(ev.time)
                 q_now = tens(env.robot_q())
                 if ev.kind == "picked":
                     replanner.set_goal(ik(env.fetch.target_point(), q_now), t)  # type: ignore[union-attr]
@@ -731,6 +847,7 @@ def _run_episode(
             "plan/wait_s": float(getattr(stats, "wait_s", 0.0)),
             "plan/evasions": float(getattr(stats, "evasions", 0)),
             "plan/emergencies": float(getattr(stats, "emergencies", 0)),
+            "plan/stall_cycles": float(stall_cycles),
             "plan/mean_solve_ms": float(getattr(stats, "mean_solve_ms", 0.0)),
             "eval/completed": float(t_done is not None or (blocking and t_goal is not None)),
         }

@@ -5,13 +5,22 @@ from __future__ import annotations
 import importlib.util
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import torch
 
 from iplanner_torch.errors import ConfigError
-from iplanner_torch.eval.episode import EpisodeCfg, TableClearance, run_episode
+from iplanner_torch.eval.episode import (
+    EpisodeCfg,
+    StallWatch,
+    TableClearance,
+    run_episode,
+    tracked_hands,
+)
 from iplanner_torch.sim.scene import SceneCfg
 from iplanner_torch.sim.tasks import ScenarioCfg
 
@@ -160,6 +169,10 @@ def test_errors(tmp_path: Path) -> None:
         EpisodeCfg(max_duration_s=0.0)
     with pytest.raises(ConfigError, match="oracle_std"):
         EpisodeCfg(oracle_std=0.0)
+    with pytest.raises(ConfigError, match="stall_fallback_s"):
+        EpisodeCfg(stall_fallback_s=0.0)
+    with pytest.raises(ConfigError, match="still_radius"):
+        EpisodeCfg(still_radius=-0.1)
 
 
 def test_table_clearance_against_brute_force() -> None:
@@ -247,3 +260,100 @@ def test_task_policy_follows_the_predicted_next_action() -> None:
     assert policy({0, 1}, {0, 1}) == 3
     assert policy({0, 1, 2, 3}, {0, 1, 2, 3}) is None
     assert predictor_task_policy(fakes.ConstantPredictor(), (0, 1, 2, 3), order) is None
+
+
+def test_stall_watch() -> None:
+    still = np.array([[0.1, 0.2, 0.3], [0.1, -0.2, 0.3]])
+    w = StallWatch(after_s=2.0, radius=0.05)
+    for t in np.arange(0.0, 1.95, 0.5):  # still and waiting, but not for 2 s yet
+        w.observe_person(t, still + 0.04 * (t % 1.0))  # drift within the radius
+        w.observe_plan(t, waited=True)
+        assert not w.stalled(t)
+    w.observe_person(2.0, still)
+    assert w.stalled(2.0) and w.stalled(2.5)  # and it stays so ...
+    w.observe_person(2.6, still + np.array([0.0, 0.0, 0.06]))  # ... until a hand moves
+    assert not w.stalled(2.6)
+    w.observe_plan(3.0, waited=True)
+    assert not w.stalled(4.5) and w.stalled(4.6)  # 2 s of stillness since 2.6 s
+    w.observe_progress(4.7)  # a task event: the robot is not stuck
+    assert not w.stalled(4.7) and not w.stalled(6.6)  # no wait since the progress
+    w.observe_plan(6.0, waited=True)
+    assert w.stalled(6.7)
+    # no wait at all: the robot is on its way, whatever the person does
+    free = StallWatch(after_s=1.0, radius=0.05)
+    for t in (0.0, 0.5, 1.0, 1.5, 3.0):
+        free.observe_person(t, still)
+        free.observe_plan(t, waited=False)
+    assert not free.stalled(3.0)
+    # an untracked hand is not a still hand
+    lost = StallWatch(after_s=1.0, radius=0.05)
+    lost.observe_person(0.0, still)
+    lost.observe_plan(0.0, waited=True)
+    lost.observe_person(0.5, np.full((2, 3), np.nan))
+    assert not lost.stalled(3.0)
+    with pytest.raises(ConfigError, match="after_s"):
+        StallWatch(after_s=0.0, radius=0.05)
+
+
+def test_tracked_hands_average_the_last_frames() -> None:
+    from iplanner_torch.data.skeleton import JOINT_INDEX
+
+    window = np.zeros((15, 10, 3))
+    lh, rh = JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]
+    window[:, lh] = np.arange(15)[:, None]
+    window[:, rh] = 1.0
+    window[-1, lh] = np.nan  # a lost frame is left out
+    window[-4:, rh] = np.nan
+    got = tracked_hands(window, 4)
+    np.testing.assert_allclose(got[0], [12.0, 12.0, 12.0])  # mean of frames 11, 12, 13
+    assert np.isnan(got[1]).all()  # no frame of the right hand
+    np.testing.assert_allclose(tracked_hands(window, 5)[1], 1.0)
+
+
+class _StallingReplanner(fakes.LinearReplanner):
+    """Waits (no safe plan) under the predictor's forecasts; moves under the held pose."""
+
+    def __init__(self) -> None:
+        super().__init__(speed=1.5)
+        self.moving = False
+
+    def step(self, t, q_now, forecast, *, forecast_t0):
+        super().step(t, q_now, forecast, forecast_t0=forecast_t0)
+        self.moving = forecast.action_names == ("observed",)
+        return SimpleNamespace(feasible=self.moving, evasive=False)
+
+    def command(self, t):
+        if not self.moving:
+            self.t = t
+            return self.q.clone(), torch.zeros_like(self.q)
+        return super().command(t)
+
+
+def test_a_stall_falls_back_to_the_held_pose(tmp_path: Path) -> None:
+    """A forecast that always blocks the robot, for a person who waits for the robot: the
+    robot never starts without the fallback, and fetches after ``stall_fallback_s`` with it."""
+
+    def run(fallback):
+        replanner = _StallingReplanner()
+        res = run_episode(
+            replace(_cfg(4.0), stall_fallback_s=fallback),
+            robot=fakes.FakeArm(tmp_path),
+            predictor=fakes.ConstantPredictor(),
+            planner_kind="iplanner_ni",
+            writer_path=None,
+            seed=0,
+            replanner=replanner,
+            motion=fakes.FakeMotion(),
+        )
+        return res, replanner
+
+    stuck, _ = run(None)
+    assert [k for _, k, _ in stuck.events] == ["fetch_started"]
+    assert stuck.metrics["plan/stall_cycles"] == 0
+    res, replanner = run(1.0)
+    times = {k: t for t, k, _ in reversed(res.events)}  # the first time of each kind
+    assert times["stall_fallback"] == pytest.approx(1.0, abs=0.01)
+    assert times["picked"] > times["stall_fallback"]
+    held = [t for t, f in replanner.forecasts if f.action_names == ("observed",)]
+    assert held and held[0] == pytest.approx(times["stall_fallback"])
+    assert res.metrics["plan/stall_cycles"] == len(held)
