@@ -702,15 +702,9 @@ def _run_episode(
                     stalled = watch.stalled(t)
                     if stalled and not was_active:
                         record(t, "stall_fallback", -1)
-                if stalled:  # the person waits for the robot: plan on the held pose
-                    stall_cycles += 1
-                    forecast = static_human_forecast(
-                        tens(tracker.latest_pose()),
-                        cfg.static_forecast_frames,
-                        cfg.static_forecast_dt,
-                        JOINT_NAMES,
-                    )
-                elif use_prediction:
+                # a stalled person waits for the robot: plan on the held pose, as ITOMP
+                stall_cycles += int(stalled)
+                if use_prediction and not stalled:
                     pos = torch.as_tensor(tracker.window(), device=dev).unsqueeze(0)
                     progress = torch.tensor(
                         [human.progress_bitmask(action_names)], dtype=torch.int64, device=dev
@@ -740,7 +734,7 @@ def _run_episode(
                         std=cfg.oracle_std,
                         like=ref,
                     )
-                else:
+                else:  # ITOMP, or a stalled I-Planner
                     forecast = static_human_forecast(
                         tens(tracker.latest_pose()),
                         cfg.static_forecast_frames,
