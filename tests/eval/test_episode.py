@@ -37,22 +37,28 @@ def _cfg(seconds: float, **scenario) -> EpisodeCfg:
     )
 
 
+def _fake_episode(tmp_path, cfg, kind, replanner, *, predictor=None, path=None, seed=0):
+    """``run_episode`` with the stand-in arm and human motion (no MuJoCo robot model)."""
+    return run_episode(
+        cfg,
+        robot=fakes.FakeArm(tmp_path),
+        predictor=predictor,
+        planner_kind=kind,
+        writer_path=path,
+        seed=seed,
+        replanner=replanner,
+        motion=fakes.FakeMotion(),
+    )
+
+
 def test_short_iplanner_episode_writes_mcap(tmp_path: Path) -> None:
     from iplanner_torch.recording.reader import read_episode
 
-    arm = fakes.FakeArm(tmp_path)
     predictor = fakes.ConstantPredictor()
     replanner = fakes.LinearReplanner(speed=1.5)
     path = tmp_path / "ep.mcap"
-    res = run_episode(
-        _cfg(5.0),
-        robot=arm,
-        predictor=predictor,
-        planner_kind="iplanner_ni",
-        writer_path=path,
-        seed=3,
-        replanner=replanner,
-        motion=fakes.FakeMotion(),
+    res = _fake_episode(
+        tmp_path, _cfg(5.0), "iplanner_ni", replanner, predictor=predictor, path=path, seed=3
     )
     kinds = [k for _, k, _ in res.events]
     assert kinds[:3] == ["fetch_started", "picked", "delivered"]
@@ -95,16 +101,7 @@ def test_short_iplanner_episode_writes_mcap(tmp_path: Path) -> None:
 
 def test_itomp_sees_the_observed_pose_only(tmp_path: Path) -> None:
     replanner = fakes.LinearReplanner()
-    res = run_episode(
-        _cfg(1.2),
-        robot=fakes.FakeArm(tmp_path),
-        predictor=None,
-        planner_kind="itomp",
-        writer_path=None,
-        seed=0,
-        replanner=replanner,
-        motion=fakes.FakeMotion(),
-    )
+    res = _fake_episode(tmp_path, _cfg(1.2), "itomp", replanner)
     forecast = replanner.forecasts[0][1]
     assert forecast.action_names == ("observed",)
     # the static forecast holds the tracked rest pose (1 cm tracker noise)
@@ -120,16 +117,8 @@ def test_oracle_plans_on_the_true_future(tmp_path: Path) -> None:
 
     replanner = fakes.LinearReplanner(speed=1.5)
     path = tmp_path / "oracle.mcap"
-    res = run_episode(
-        EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=12.0),
-        robot=fakes.FakeArm(tmp_path),
-        predictor=None,
-        planner_kind="oracle",
-        writer_path=path,
-        seed=1,
-        replanner=replanner,
-        motion=fakes.FakeMotion(),
-    )
+    cfg = EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=12.0)
+    res = _fake_episode(tmp_path, cfg, "oracle", replanner, path=path, seed=1)
     ep = read_episode(path)
     fetched = [b for _, k, b in res.events if k == "fetch_started"]
     assert len(fetched) >= 2 and fetched == ep.metadata["human_order"][: len(fetched)]
@@ -191,15 +180,14 @@ def test_table_clearance_against_brute_force() -> None:
 
 @pytest.mark.slow
 def test_full_episode_completes_all_tasks(tmp_path: Path) -> None:
-    res = run_episode(
+    res = _fake_episode(
+        tmp_path,
         EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=90.0),
-        robot=fakes.FakeArm(tmp_path),
+        "iplanner_no_ni",
+        fakes.LinearReplanner(speed=1.5),
         predictor=fakes.ConstantPredictor(),
-        planner_kind="iplanner_no_ni",
-        writer_path=tmp_path / "full.mcap",
+        path=tmp_path / "full.mcap",
         seed=1,
-        replanner=fakes.LinearReplanner(speed=1.5),
-        motion=fakes.FakeMotion(),
     )
     kinds = [k for _, k, _ in res.events]
     assert kinds.count("delivered") == 4 and kinds.count("human_took") == 4
@@ -335,15 +323,9 @@ def test_a_stall_falls_back_to_the_held_pose(tmp_path: Path) -> None:
 
     def run(fallback):
         replanner = _StallingReplanner()
-        res = run_episode(
-            replace(_cfg(4.0), stall_fallback_s=fallback),
-            robot=fakes.FakeArm(tmp_path),
-            predictor=fakes.ConstantPredictor(),
-            planner_kind="iplanner_ni",
-            writer_path=None,
-            seed=0,
-            replanner=replanner,
-            motion=fakes.FakeMotion(),
+        cfg = replace(_cfg(4.0), stall_fallback_s=fallback)
+        res = _fake_episode(
+            tmp_path, cfg, "iplanner_ni", replanner, predictor=fakes.ConstantPredictor()
         )
         return res, replanner
 
