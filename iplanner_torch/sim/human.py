@@ -1,9 +1,15 @@
 """A scripted, kinematic human for the closed loop (paper sec. 7).
 
-The human sits at the table and follows a personal task order (sampled from the scenario's
-:class:`TaskOrder`). For each object ``i`` in turn it waits until the robot has delivered block
-``i`` to its delivery spot, idles for a random while, then performs ``Take_i``: a reaching
-motion to the block, a hold, and the return with the block in its hand. Motions come from the
+The human sits at the table with a personal task order (sampled from the scenario's
+:class:`TaskOrder`, uniformly over the orders it allows). It waits until the robot has
+delivered a block it may take next, idles for a random while, then performs ``Take_i``: a
+reaching motion to the block, a hold, and the return with the block in its hand. By default
+(``HumanCfg.flexible_order``) it takes any delivered block that the task order allows next,
+preferring its personal order: the paper's ``(0, 1) -> (2, 3)`` means 0 and 1 "can be
+performed in any order", and its person "waits till the robot delivers the object". With
+``flexible_order=False`` it waits for exactly the next block of its personal order, even while
+another allowed block lies there (a person with a fixed private plan: the robot can only guess
+it, so every planner loses time; see ``experiments/safety_seeds/``). Motions come from the
 synthetic reaching generator (:mod:`iplanner_torch.data.reaching`) with a seed stream that the
 training set never uses (``numpy.random.default_rng([seed, HUMAN_SEED_SALT])``), so the
 predictor is evaluated on motions it was not trained on.
@@ -139,9 +145,10 @@ class HumanCfg:
     # (people do not grab the instant an object lands: seeing it placed and the gripper
     # open is a choice reaction, about 0.3-0.5 s)
     reaction_s: float = 0.4
-    # True: take the first delivered block of the personal order that the order allows next;
-    # False: wait for exactly the next block of the personal order
-    flexible_order: bool = False
+    # True: take the first delivered block of the personal order that the task order allows
+    # next (the paper's "any order" within parentheses); False: wait for exactly the next
+    # block of the personal order, even while another allowed block lies there
+    flexible_order: bool = True
     # blocking mode: start time of the motion [s]
     blocking_start_s: float = 0.5
     # blocking mode: where the hand goes, table frame [m]

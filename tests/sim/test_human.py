@@ -69,6 +69,35 @@ def test_hand_reaches_the_block_when_it_grasps() -> None:
     assert human.action_label == "take_1"
 
 
+def _grouped_human(flexible: bool) -> ScriptedHuman:
+    """A human under ``(0,1)->(2,3)`` whose personal order starts with block 1."""
+    from iplanner_torch.sim.tasks import parse_order
+
+    order = parse_order("(0,1)->(2,3)", SCENE.block_ids)
+    for seed in range(100):
+        cfg = HumanCfg(flexible_order=flexible, idle_s=(0.0, 0.0))
+        human = ScriptedHuman(cfg, FakeMotion(), task_order=order, targets=TARGETS, seed=seed)
+        if human.order[:2] == [1, 0]:
+            return human
+    raise AssertionError("no seed gives a personal order starting 1, 0")
+
+
+@pytest.mark.parametrize("flexible", [False, True])
+def test_flexible_order_takes_any_delivered_block_the_order_allows(flexible: bool) -> None:
+    human = _grouped_human(flexible)
+    # block 2 lies there first: the order forbids it before 0 and 1, in both modes
+    assert _run(human, {2}, 2.0) == []
+    events = _run(human, {0, 2}, 6.0)  # block 0 arrives; the person wanted 1 first
+    took = [e.block for e in events if e.kind == "human_took"]
+    # flexible: 0 is allowed now, so it is taken (and 2 is not: 1 is still to come)
+    assert took == ([0] if flexible else [])
+    events = _run(human, {0, 1, 2, 3}, 40.0)
+    took += [e.block for e in events if e.kind == "human_took"]
+    # with everything there, a flexible person keeps to the personal order where it can
+    assert took == ([0, 1] if flexible else [1, 0]) + human.order[2:]
+    assert human.done
+
+
 def test_progress_bitmask_maps_take_to_predictor_actions() -> None:
     human = _human(order=(0, 1, 2, 3))
     _run(human, {0, 1}, 40.0)
