@@ -44,12 +44,11 @@ def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
     Returns:
         The written files, or [] when no logs exist.
     """
-    from iplanner_torch.eval.report import gather_results, natural_key
+    from iplanner_torch.eval.report import gather_results
 
-    logs = sorted(root.rglob("*.mcap"), key=natural_key)
-    if not logs:
+    if not any(root.rglob("*.mcap")):
         return []
-    return episode_report(gather_results(logs), out_dir)
+    return episode_report(gather_results(root), out_dir)  # gather_results keeps numbered order
 
 
 class GatherSweepResults(Callback):

@@ -110,7 +110,6 @@ def _episode(cfg: DictConfig) -> None:
     from iplanner_torch.cli.callbacks import episode_report
     from iplanner_torch.eval.report import (
         gather_results,
-        natural_key,
         print_table,
         report_groups,
         summary_table,
@@ -119,11 +118,10 @@ def _episode(cfg: DictConfig) -> None:
     if not cfg.evaluate.logs:
         raise ConfigError("evaluate.mode=episode needs evaluate.logs=<an .mcap file or a folder>")
     path = repo_path(cfg.evaluate.logs)
-    items = sorted(path.rglob("*.mcap"), key=natural_key) if path.is_dir() else [path]
-    if not items:
+    if path.is_dir() and not any(path.rglob("*.mcap")):
         raise ConfigError(f"{path}: no .mcap episode logs found")
     out_dir = _out_dir(cfg)
-    df = gather_results(items)
+    df = gather_results(path)  # a folder: every log below it, in numbered order
     written = episode_report(df, out_dir)
     print_table(summary_table(df, report_groups(df)))
     print(f"{len(df)} episode(s); wrote " + ", ".join(str(p) for p in written))

@@ -92,6 +92,9 @@ from iplanner_torch.sim.scene import SceneCfg
 from iplanner_torch.sim.tasks import ScenarioCfg, next_feasible, parse_order
 from iplanner_torch.sim.tracker import Tracker
 
+#: Joint indices of the hands: the joints the forecasts are scored and logged on.
+HAND_JOINTS: list[int] = [JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]]
+
 PlannerKind = Literal["itomp", "iplanner_no_ni", "iplanner_ni", "oracle"]
 #: Planner kinds and the predictor variant each one reads (None: no predictor).
 PLANNER_KINDS: dict[str, str | None] = {
@@ -291,7 +294,7 @@ class StallWatch:
 def tracked_hands(window: np.ndarray, frames: int) -> np.ndarray:
     """(2, 3) mean of the last ``frames`` tracked positions of both hands (NaN frames left
     out; NaN when a hand has no frame) from a tracker window (T, K, 3)."""
-    hands = np.asarray(window)[-frames:, [JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]]]
+    hands = np.asarray(window)[-frames:, HAND_JOINTS]
     ok = np.isfinite(hands).all(-1)  # (frames, 2)
     total = np.where(ok[..., None], hands, 0.0).sum(0)
     count = ok.sum(0)[:, None]
@@ -675,7 +678,6 @@ def _run_episode(
     forecasts: list[tuple[float, np.ndarray, np.ndarray]] = []  # (t0, times, hands (n, 2, 3))
     predict_ms: list[float] = []
     action_names = _action_names(predictor) if use_prediction else ()
-    hands = [JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]]
     watch = (
         StallWatch(cfg.stall_fallback_s, cfg.still_radius)
         if use_prediction and not blocking and cfg.stall_fallback_s is not None
@@ -742,7 +744,7 @@ def _run_episode(
                         JOINT_NAMES,
                     )
                 if forecasts_motion and not stalled:  # scored by eval/mhd and logged
-                    mean = forecast.expected_mean()[0][:, hands]  # (n_f, 2, 3)
+                    mean = forecast.expected_mean()[0][:, HAND_JOINTS]  # (n_f, 2, 3)
                     forecasts.append(
                         (
                             t_obs,
@@ -916,7 +918,6 @@ def _mean_mhd(
     of scored forecasts; the mean is None when none was scored."""
     if not forecasts or true_t.size < 2:
         return None, 0
-    hands = [JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]]
     values = []
     for t0, times, pred in forecasts:
         keep = times <= cfg.mhd_horizon_s + 1e-9
@@ -926,12 +927,12 @@ def _mean_mhd(
         true = np.stack(
             [
                 np.stack([np.interp(tq, true_t, true_h[:, k, c]) for c in range(3)], -1)
-                for k in hands
+                for k in HAND_JOINTS
             ],
             1,
         )  # (n, 2, 3)
         start = np.array(
-            [[np.interp(t0, true_t, true_h[:, k, c]) for c in range(3)] for k in hands]
+            [[np.interp(t0, true_t, true_h[:, k, c]) for c in range(3)] for k in HAND_JOINTS]
         )
         motion = np.linalg.norm(true - start[None], axis=-1).max(0)  # (2,)
         side = int(np.argmax(motion))
