@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import numpy as np
@@ -419,17 +419,20 @@ class ScriptedHuman:
             raise ConfigError(f"expected step_s > 0, got {step_s}")
         if ts.size and (ts[0] < self.time - 1e-9 or bool(np.any(np.diff(ts) < 0.0))):
             raise ConfigError(f"expected increasing times from t = {self.time}, got {ts}")
-        twin = copy.copy(self)
-        twin._rng = copy.deepcopy(self._rng)
-        twin.completed = list(self.completed)
-        twin._landed = dict(self._landed)
-        twin._motion = None if self._motion is None else replace(self._motion)
+        twin = self._twin()
         out = np.empty((ts.size, *self._pose.shape), dtype=np.float64)
         for k, t in enumerate(ts):
             while twin.time + step_s <= t + 1e-9:
                 twin.update(twin.time + step_s, delivered)
             out[k] = twin.joint_positions(float(t))
         return out
+
+    def _twin(self) -> ScriptedHuman:
+        """An independent copy of the script: every piece of state is deep-copied (a field
+        added later is copied too), only the read-only collaborators (settings, motion
+        source, task order, targets) are shared."""
+        shared = (self.cfg, self.motion, self.task_order, self.targets)
+        return copy.deepcopy(self, {id(obj): obj for obj in shared})
 
     def progress_bitmask(self, action_names: Sequence[str]) -> int:
         """The completed-action bitmask over the predictor's action set (module docstring)."""

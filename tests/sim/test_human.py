@@ -175,11 +175,17 @@ def test_preview_is_the_motion_the_script_then_plays(t_start: float) -> None:
     assert np.ptp(preview[:, hand], axis=0).max() > 0.1  # a reach happens in the span
 
 
-def test_preview_leaves_the_human_unchanged() -> None:
+@pytest.mark.parametrize("t_start", [0.5, 1.5, 4.0])
+def test_preview_leaves_the_human_unchanged(t_start: float) -> None:
+    """Previewing (idle, or in the middle of a reach) changes nothing of the script, its
+    random stream included; the copy shares only the read-only collaborators."""
     delivered = set(TARGETS)
     a, b = _reaching_human(), _reaching_human()
-    _run(a, delivered, 0.5)
-    _run(b, delivered, 0.5)
+    _run(a, delivered, t_start)
+    _run(b, delivered, t_start)
+    twin = b._twin()
+    assert twin.motion is b.motion and twin.cfg is b.cfg and twin.targets is b.targets
+    assert twin._rng is not b._rng and twin.completed is not b.completed
     b.preview(b.time + 0.1 * np.arange(1, 31), delivered, 0.01)
     assert _run(a, delivered, 12.0) == _run(b, delivered, 12.0)
     np.testing.assert_array_equal(a.joint_positions(), b.joint_positions())
