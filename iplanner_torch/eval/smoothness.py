@@ -1,0 +1,175 @@
+"""Where a trajectory's roughness comes from: waits, and the plans themselves.
+
+The paper's smoothness (eq. smoothness, :func:`~iplanner_torch.eval.metrics.smoothness`) is one
+number per episode. To tell why one planner is rougher than another, it is split here in two
+ways:
+
+- by time: the share of ``int sum_i qdd_i^2 dt`` that falls in *wait windows* (from the
+  take-over of a plan that waits, ``wait_s > 0``, to ``settle_s`` after the take-over of the
+  next plan that does not: the stop and the start again), and the smoothness of the rest;
+- by plan: the mean ``sum_i qdd_i^2`` of each plan's own waypoints over the part that runs
+  before the next plan takes over, i.e. how rough the plans are that the robot executes (the
+  filtered tracking follows them up to its acceleration limit).
+
+:func:`episode_breakdown` reads both from an episode log (``/robot/joint_state`` and
+``/planner/plan``); the log's robot state is sampled more sparsely than the metrics'
+trajectory, so its smoothness is lower than ``eval/smoothness`` and only ratios between
+planners measured the same way should be compared. ``scripts/smoothness_breakdown.py`` prints
+the breakdown of every log of a run.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.eval.metrics import joint_accelerations
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlanRecord:
+    """One plan as the replanner logged it.
+
+    Attributes:
+        times: (W,) waypoint times [s], increasing; ``times[0]`` is when the plan takes over.
+        q: (W, J) waypoints [rad].
+        wait_s: the delay the plan reports (> 0: the plan stops and waits) [s].
+    """
+
+    times: np.ndarray
+    q: np.ndarray
+    wait_s: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class SmoothnessBreakdown:
+    """The split of :func:`smoothness_breakdown` (module docstring).
+
+    Attributes:
+        smoothness: ``(1/T) int sum_i qdd_i^2 dt`` of the whole trajectory [rad^2/s^4].
+        waits: plans that wait.
+        wait_time_share: share of the duration inside wait windows.
+        wait_share: share of the integral inside wait windows.
+        smoothness_outside: the smoothness of the time outside wait windows [rad^2/s^4]
+            (NaN when there is none).
+        plan_executed: mean over plans of the mean ``sum_i qdd_i^2`` of the plan's interior
+            waypoints before the next take-over [rad^2/s^4] (NaN without such waypoints).
+    """
+
+    smoothness: float
+    waits: int
+    wait_time_share: float
+    wait_share: float
+    smoothness_outside: float
+    plan_executed: float
+
+
+def wait_windows(plans: Sequence[PlanRecord], settle_s: float = 1.0) -> list[tuple[float, float]]:
+    """The wait windows of a plan sequence [s]: from the take-over of each waiting plan to
+    ``settle_s`` after the take-over of the next plan that does not wait (to the end of the
+    waiting plan's own waypoints plus ``settle_s`` when none follows).
+
+    Args:
+        plans: the plans in take-over order.
+        settle_s: time after the wait within which the robot is taken to start again [s].
+
+    Raises:
+        ConfigError: when ``settle_s < 0``.
+    """
+    if not settle_s >= 0.0:
+        raise ConfigError(f"expected settle_s >= 0, got {settle_s}")
+    out: list[tuple[float, float]] = []
+    for k, plan in enumerate(plans):
+        if not plan.wait_s > 0.0:
+            continue
+        start = float(plan.times[0])
+        end = float(plan.times[-1]) + settle_s
+        for later in plans[k + 1 :]:
+            if not later.wait_s > 0.0:
+                end = float(later.times[0]) + settle_s
+                break
+        out.append((start, end))
+    return out
+
+
+def _plan_executed(plans: Sequence[PlanRecord]) -> float:
+    values = []
+    for k, plan in enumerate(plans):
+        if plan.times.shape[0] < 3:
+            continue
+        qdd, _ = joint_accelerations(plan.times, plan.q)  # (W - 2, J)
+        until = float(plans[k + 1].times[0]) if k + 1 < len(plans) else math.inf
+        run = torch.as_tensor(plan.times[1:-1]) < until
+        if bool(run.any()):
+            values.append(float(qdd.square().sum(-1)[run].mean()))
+    return float(np.mean(values)) if values else math.nan
+
+
+def smoothness_breakdown(
+    t: Any, q: Any, plans: Sequence[PlanRecord], *, settle_s: float = 1.0
+) -> SmoothnessBreakdown:
+    """Split the smoothness of an executed trajectory (module docstring).
+
+    Args:
+        t: (T,) sample times [s], strictly increasing, T >= 3.
+        q: (T, J) executed joint positions [rad].
+        plans: the plans in take-over order (each ``times`` (W,), ``q`` (W, J)).
+        settle_s: see :func:`wait_windows` [s].
+
+    Raises:
+        ShapeError: when a plan's ``q`` is not (W, J) with its ``times`` (W,).
+        ConfigError: when ``settle_s < 0``.
+    """
+    qdd, w = joint_accelerations(t, q)  # (T - 2, J), (T - 2,)
+    n_j = qdd.shape[1]
+    for i, plan in enumerate(plans):
+        if plan.times.ndim != 1 or plan.q.shape != (plan.times.shape[0], n_j):
+            raise ShapeError(
+                f"plan {i}: expected times (W,) and q (W, {n_j}), got {plan.times.shape} "
+                f"and {plan.q.shape}"
+            )
+    a2 = qdd.square().sum(-1) * w  # (T - 2,) integral per sample
+    t_in = torch.as_tensor(np.asarray(t, dtype=np.float64))[1:-1]
+    inside = torch.zeros_like(t_in, dtype=torch.bool)
+    for start, end in wait_windows(plans, settle_s):
+        inside |= (t_in >= start) & (t_in <= end)
+    total_w, total_a = float(w.sum()), float(a2.sum())
+    out_w = float(w[~inside].sum())
+    return SmoothnessBreakdown(
+        smoothness=total_a / total_w,
+        waits=sum(int(p.wait_s > 0.0) for p in plans),
+        wait_time_share=float(w[inside].sum()) / total_w,
+        wait_share=float(a2[inside].sum()) / total_a if total_a > 0.0 else 0.0,
+        smoothness_outside=float(a2[~inside].sum()) / out_w if out_w > 0.0 else math.nan,
+        plan_executed=_plan_executed(plans),
+    )
+
+
+def episode_breakdown(episode: Any, *, settle_s: float = 1.0) -> SmoothnessBreakdown:
+    """:func:`smoothness_breakdown` of an episode read by
+    :func:`~iplanner_torch.recording.read_episode`.
+
+    Raises:
+        DataError: when the log has no plans or fewer than 3 robot states.
+    """
+    t, q = episode.robot_q()
+    if t.shape[0] < 3:
+        raise DataError(f"expected at least 3 robot states in the log, got {t.shape[0]}")
+    frame = episode.frames.get("/planner/plan")
+    if frame is None or frame.empty:
+        raise DataError("the log has no /planner/plan messages")
+    plans = [
+        PlanRecord(
+            times=np.asarray(row.times, dtype=np.float64),
+            q=np.asarray(row.q, dtype=np.float64),
+            wait_s=float(row.wait_s),
+        )
+        for row in frame.itertuples()
+    ]
+    return smoothness_breakdown(t, q, plans, settle_s=settle_s)

@@ -1,0 +1,75 @@
+#!/usr/bin/env python
+"""Where the roughness of a run's episodes comes from: waits, and the executed plans.
+
+Usage::
+
+    python scripts/smoothness_breakdown.py <run dir> [--settle 1.0] [--episodes]
+
+Reads every ``*.mcap`` episode log under the run folder and prints, per scenario and planner,
+the means of :func:`iplanner_torch.eval.smoothness.episode_breakdown`:
+
+- ``smoothness_log``: the paper's smoothness of the logged robot states (sampled more sparsely
+  than ``eval/smoothness``, so lower; compare planners, not absolute values);
+- ``waits``: plans that stopped to wait;
+- ``wait_time`` / ``wait_share``: the share of the time, and of ``int sum_i qdd_i^2 dt``, in
+  the wait windows (a wait's stop and the start after it, ``--settle`` seconds);
+- ``outside_waits``: the smoothness of the time outside them;
+- ``plan_executed``: the mean ``sum_i qdd_i^2`` of the plans' own waypoints over the parts
+  that ran before the next plan took over.
+
+``--episodes`` prints one row per episode as well.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pandas as pd
+
+from iplanner_torch.eval.report import to_markdown
+from iplanner_torch.eval.smoothness import episode_breakdown
+from iplanner_torch.recording import read_episode
+
+COLUMNS = {
+    "smoothness_log": "smoothness",
+    "waits": "waits",
+    "wait_time": "wait_time_share",
+    "wait_share": "wait_share",
+    "outside_waits": "smoothness_outside",
+    "plan_executed": "plan_executed",
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("--settle", type=float, default=1.0, help="seconds after a wait")
+    parser.add_argument("--episodes", action="store_true", help="one row per episode too")
+    args = parser.parse_args()
+    paths = sorted(args.run_dir.rglob("*.mcap"))
+    if not paths:
+        raise SystemExit(f"no *.mcap episode logs under {args.run_dir}")
+    rows = []
+    for path in paths:
+        ep = read_episode(path)
+        b = episode_breakdown(ep, settle_s=args.settle)
+        meta = ep.metadata
+        row = {
+            "scenario": meta.get("scenario", "?"),
+            "planner": meta.get("planner", "?"),
+            "seed": meta.get("seed", -1),
+        }
+        row.update({col: getattr(b, attr) for col, attr in COLUMNS.items()})
+        rows.append(row)
+    df = pd.DataFrame(rows)
+    if args.episodes:
+        print(to_markdown(df))
+        print()
+    means = df.groupby(["scenario", "planner"], sort=False)[list(COLUMNS)].mean().reset_index()
+    means.insert(2, "episodes", df.groupby(["scenario", "planner"], sort=False).size().values)
+    print(to_markdown(means))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,108 @@
+"""The smoothness breakdown against a trajectory whose accelerations are known in closed form."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.eval.smoothness import (
+    PlanRecord,
+    episode_breakdown,
+    smoothness_breakdown,
+    wait_windows,
+)
+
+H = 0.04  # sample period [s]
+A = 2.0  # acceleration of joint 0 on [2, 3] s [rad/s^2]
+
+
+def _executed() -> tuple[np.ndarray, np.ndarray]:
+    """(T,), (T, 2): joint 0 accelerates at A on [2, 3] s and moves at constant speed or rests
+    elsewhere (C1), joint 1 rests; 10 s in all."""
+    t = np.round(np.arange(0.0, 10.0 + H / 2, H), 10)
+    q0 = np.where(
+        t < 2.0, 0.0, np.where(t <= 3.0, 0.5 * A * (t - 2.0) ** 2, 0.5 * A + A * (t - 3.0))
+    )
+    return t, np.stack([q0, np.zeros_like(t)], axis=1)
+
+
+def _plan(t0: float, t1: float, acc: float, wait_s: float) -> PlanRecord:
+    times = np.linspace(t0, t1, 16)
+    q0 = 0.5 * acc * (times - t0) ** 2  # the three-point formula is exact on a quadratic
+    return PlanRecord(times=times, q=np.stack([q0, np.zeros_like(q0)], 1), wait_s=wait_s)
+
+
+PLANS = [_plan(0.0, 3.0, 1.0, 0.0), _plan(2.0, 4.0, 0.0, 0.5), _plan(2.5, 5.0, 3.0, 0.0)]
+
+
+def test_wait_windows() -> None:
+    assert wait_windows(PLANS, 1.0) == [(2.0, 3.5)]
+    assert wait_windows(PLANS, 0.0) == [(2.0, 2.5)]
+    # a wait with no plan after it lasts to its own end
+    assert wait_windows(PLANS[:2], 0.5) == [(2.0, 4.5)]
+    assert wait_windows([PLANS[0]]) == []
+    with pytest.raises(ConfigError, match="settle_s"):
+        wait_windows(PLANS, -1.0)
+
+
+def test_breakdown_against_closed_form() -> None:
+    t, q = _executed()
+    b = smoothness_breakdown(t, q, PLANS, settle_s=1.0)
+    # int qdd^2 = A^2 * 1 s over the interior samples' 10 - H seconds; the two kink samples
+    # (t = 2, 3) see A / 2 from the three-point formula, each standing for H seconds
+    # (the interior samples stand for the whole 10 s, the end ones for half a period more)
+    exact = (A * A * (1.0 - H) + 2 * (A / 2) ** 2 * H) / 10.0
+    assert b.smoothness == pytest.approx(exact, rel=1e-9)
+    assert b.waits == 1
+    # the acceleration lies inside the wait window [2, 3.5] s: all of it is the wait's
+    assert b.wait_share == pytest.approx(1.0)
+    assert b.smoothness_outside == pytest.approx(0.0, abs=1e-9)
+    # the 38 samples 2.00, 2.04, ..., 3.48 s lie in the window [2, 3.5] s
+    assert b.wait_time_share == pytest.approx(38 * H / 10.0, rel=1e-9)
+    # plans: A's waypoints before 2.0 s (acc 1), B's before 2.5 s (0), all of C's (acc 3)
+    assert b.plan_executed == pytest.approx((1.0 + 0.0 + 9.0) / 3, rel=1e-9)
+
+
+def test_breakdown_outside_waits() -> None:
+    t, q = _executed()
+    late = [PlanRecord(times=p.times + 5.0, q=p.q, wait_s=p.wait_s) for p in PLANS]
+    b = smoothness_breakdown(t, q, late, settle_s=1.0)  # window [7, 8.5] s: no acceleration
+    assert b.wait_share == pytest.approx(0.0)
+    assert b.smoothness_outside == pytest.approx(b.smoothness / (1.0 - b.wait_time_share))
+
+
+def test_breakdown_errors() -> None:
+    t, q = _executed()
+    bad = PlanRecord(times=np.linspace(0, 1, 5), q=np.zeros((5, 3)), wait_s=0.0)
+    with pytest.raises(ShapeError, match="plan 0"):
+        smoothness_breakdown(t, q, [bad])
+
+
+def test_episode_breakdown_reads_a_log(tmp_path: Path) -> None:
+    from iplanner_torch.recording import EpisodeWriter, read_episode
+
+    t, q = _executed()
+    path = tmp_path / "ep.mcap"
+    with EpisodeWriter(path, metadata={"planner": "test"}) as log:
+        k = 0
+        for i in range(t.shape[0]):
+            while k < len(PLANS) and PLANS[k].times[0] <= t[i] + 1e-9:
+                p = PLANS[k]
+                log.plan(float(t[i]), p.times, p.q, True, p.wait_s, 1.0)
+                k += 1
+            log.robot_state(float(t[i]), q[i], np.zeros(2), ["a", "b"])
+    b = episode_breakdown(read_episode(path))
+    assert b == smoothness_breakdown(t, q, PLANS)
+
+    class NoPlans:
+        frames: dict = {}
+
+        def robot_q(self):
+            return torch.as_tensor(t), torch.as_tensor(q)
+
+    with pytest.raises(DataError, match="plan"):
+        episode_breakdown(NoPlans())
