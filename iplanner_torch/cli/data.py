@@ -1,11 +1,40 @@
-"""``iplanner-data``: make, inspect and convert human motion datasets.
+"""``iplanner-data``: generate synthetic human motion datasets and check dataset folders.
 
-Subcommands (the first argument), followed by Hydra overrides::
+Usage: ``iplanner-data COMMAND [overrides...]`` (Hydra overrides of ``conf/``; ``-h`` or
+``--help`` anywhere prints this help).
+
+Commands:
+
+    generate   write a synthetic dataset (one file per demonstration and a dataset card,
+               README.md) into data.path; refuses when data.path already holds
+               demonstration files unless data.overwrite=true
+    info       load and check every file of data.path (as training does) and summarise it:
+               counts, joints, actions, fps, NaN values, joints lost in every frame
+
+Config group and main options:
+
+    data=reaching|tasks|lego       the dataset (conf/data/<option>.yaml; default reaching):
+                                   reaching = synthetic reaches -> datasets/reaching,
+                                   tasks = synthetic task demonstrations -> datasets/tasks,
+                                   lego = the recorded LEGO assembly set (info only) at
+                                   ../shared/data/lego_assembly_3d
+    data.path=<folder>             the dataset folder (relative to the current directory)
+    data.overwrite=true            generate: first delete the demonstration files (.npz, .csv)
+                                   and dataset card already in data.path, nothing else
+    data.generator.<field>=<value> generate: a generator setting; the main fields are
+        reaching: reaches_per_target, n_targets, n_subjects, fps, noise_sigma, speeds, seed
+        tasks: order, arrangement, n_demos, n_subjects, fps, noise_sigma, seed, file_format
+    data.windows.joints=[a,b]      info: check only these joints, as training selects them
+    progress=false                 generate: no progress bar
+
+Examples:
 
     iplanner-data generate              # synthetic reaching set -> datasets/reaching
     iplanner-data generate data.generator.reaches_per_target=5 data.path=datasets/small
-    iplanner-data generate data=tasks   # task demonstrations (Take_i in a task order)
+    iplanner-data generate data.path=datasets/small data.overwrite=true   # replace it
+    iplanner-data generate data=tasks   # task demonstrations (take objects in a task order)
     iplanner-data info data=lego        # check and summarise a dataset folder
+    iplanner-data info data.path=my_recordings
 """
 
 from __future__ import annotations
@@ -14,16 +43,33 @@ import sys
 import time
 
 import hydra
+import numpy as np
 from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import CONF_DIR, friendly_errors, generate_dataset, repo_path
+from iplanner_torch.errors import ConfigError, DataError
 
 COMMANDS = ("generate", "info")
+HELP_FLAGS = ("-h", "--help")
+#: Files listed by name in ``info``'s report before the rest are counted.
+_MAX_LISTED = 10
 _command = "generate"
 
 
 def _generate(cfg: DictConfig) -> None:
+    from iplanner_torch.data.dataset_card import CARD_NAME, prepare_dataset_folder
+
     out_dir = repo_path(cfg.data.path)
+    overwrite = cfg.data.get("overwrite", False)
+    if not isinstance(overwrite, bool):
+        raise ConfigError(f"data.overwrite: expected true or false, got {overwrite!r}")
+    if cfg.data.get("generator") is not None:  # else generate_dataset says there is none
+        removed = prepare_dataset_folder(out_dir, overwrite=overwrite)
+        if removed:
+            had_card = out_dir / CARD_NAME in removed
+            card = " and its dataset card" if had_card else ""
+            n_demos = len(removed) - had_card
+            print(f"deleted {n_demos} earlier demonstration files{card} in {out_dir}")
     t0 = time.perf_counter()
     command = ("iplanner-data generate " + " ".join(sys.argv[1:])).strip()
     summary = generate_dataset(cfg.data, out_dir, progress=bool(cfg.progress), command=command)
@@ -35,22 +81,48 @@ def _generate(cfg: DictConfig) -> None:
 
 
 def _info(cfg: DictConfig) -> None:
-    from iplanner_torch.data.io import load_demonstrations, load_lego_assembly
+    from iplanner_torch.data.io import (
+        demonstration_files,
+        load_demonstrations,
+        load_lego_assembly,
+        lost_joints,
+    )
 
     path = repo_path(cfg.data.path)
     fps = cfg.data.get("fps", None)
     if cfg.data.get("format", "native") == "lego_assembly":
         demos = load_lego_assembly(path, fps=float(fps or 30.0))
+        root = path if path.is_dir() else path.parent
+        files = [root / f"{d.name}.txt" for d in demos]
     else:
-        demos = load_demonstrations(path, fps=fps)
+        if not path.exists():
+            hint = "set data.path=<folder>"
+            if cfg.data.get("generator") is not None:
+                gen = f"iplanner-data generate data.path={cfg.data.path}"
+                hint = f"generate it with `{gen}` or {hint}"
+            raise DataError(f"{path}: no such file or folder; {hint}")
+        # the joints training selects (data.windows.joints), so info accepts what it accepts
+        selected = cfg.data.windows.get("joints", None) if "windows" in cfg.data else None
+        demos = load_demonstrations(path, fps=fps, joints=list(selected) if selected else None)
+        files = demonstration_files(path)
     frames = sum(d.num_frames for d in demos)
     joints = demos[0].joint_names if demos else ()
     actions = demos[0].action_names if demos else ()
-    nan = sum(int(d.positions.size - (d.positions == d.positions).sum()) for d in demos)
+    nan = sum(int(np.isnan(d.positions).sum()) for d in demos)
     print(f"{path}: {len(demos)} demonstrations, {frames} frames")
     print(f"  joints ({len(joints)}): {', '.join(joints)}")
     print(f"  actions ({len(actions)}): {', '.join(actions)}")
     print(f"  fps: {sorted({d.fps for d in demos})}; NaN values: {nan}")
+    lost = [(f, names) for f, d in zip(files, demos, strict=True) if (names := lost_joints(d))]
+    if lost:
+        print(
+            f"  joints NaN in every frame in {len(lost)} file(s) (windows fill them from a "
+            "neighbouring joint):"
+        )
+        for f, names in lost[:_MAX_LISTED]:
+            print(f"    {f}: {', '.join(names)}")
+        if len(lost) > _MAX_LISTED:
+            print(f"    ... and {len(lost) - _MAX_LISTED} more")
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
@@ -63,8 +135,8 @@ def main() -> None:
     """Console entry point: ``iplanner-data {generate,info} [overrides...]``."""
     global _command
     args = sys.argv[1:]
-    if args and args[0] in ("-h", "--help") and len(args) == 1:
-        print(__doc__)
+    if any(a in HELP_FLAGS for a in args):
+        print((__doc__ or "").replace("``", "").strip())
         return
     if args and not args[0].startswith("-") and "=" not in args[0]:
         if args[0] not in COMMANDS:

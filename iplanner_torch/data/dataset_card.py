@@ -1,10 +1,19 @@
-"""What a dataset generator returns, and the README (dataset card) it writes beside the files."""
+"""What a dataset generator returns, the README (dataset card) it writes beside the files, and
+clearing a folder of an earlier generated dataset before writing a new one."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+from iplanner_torch.data.io import demonstration_files
+from iplanner_torch.errors import ConfigError
+
+#: The dataset card's file name, in the dataset folder.
+CARD_NAME = "README.md"
+#: The line under the card's heading that marks a README as a generated dataset card.
+CARD_MARK = "Generated; do not edit by hand."
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -56,7 +65,7 @@ def write_dataset_card(
     lines = [
         f"# {title}",
         "",
-        "Generated; do not edit by hand. File format: see `datasets/README.md` of the project.",
+        f"{CARD_MARK} File format: see `datasets/README.md` of the project.",
         "",
         "| field | value |",
         "|---|---|",
@@ -69,6 +78,60 @@ def write_dataset_card(
         "```",
         "",
     ]
-    path = summary.out_dir / "README.md"
+    path = summary.out_dir / CARD_NAME
     path.write_text("\n".join(lines))
     return path
+
+
+def is_dataset_card(path: str | Path) -> bool:
+    """Whether ``path`` is a file written by :func:`write_dataset_card`."""
+    path = Path(path)
+    try:
+        head = path.read_text(errors="replace")[:4096]
+    except OSError:
+        return False
+    return path.is_file() and CARD_MARK in head
+
+
+def prepare_dataset_folder(out_dir: str | Path, *, overwrite: bool) -> tuple[Path, ...]:
+    """Make ``out_dir`` ready for a generator: refuse, or clear an earlier generated dataset.
+
+    An earlier dataset is the demonstration files the loader would read from the folder
+    (``.npz`` / ``.csv``, sub-folders included) and its dataset card (``README.md``); writing
+    a new one over it would mix old and new files. Nothing else in the folder is touched.
+
+    Args:
+        out_dir: the folder a generator is about to write (need not exist).
+        overwrite: delete the earlier demonstration files and dataset card instead of refusing.
+
+    Returns:
+        The files deleted (empty when there was nothing to clear).
+
+    Raises:
+        ConfigError: when the folder holds demonstration files and ``overwrite`` is false, or
+            holds a ``README.md`` that is not a dataset card (it would be overwritten).
+    """
+    out_dir = Path(out_dir)
+    if not out_dir.exists():
+        return ()
+    if not out_dir.is_dir():
+        raise ConfigError(f"{out_dir}: not a folder; choose another data.path")
+    files = demonstration_files(out_dir)
+    card = out_dir / CARD_NAME
+    if card.exists() and not is_dataset_card(card):
+        raise ConfigError(
+            f"{card} is not a dataset card and generating would overwrite it; choose another "
+            "data.path"
+        )
+    if files and not overwrite:
+        raise ConfigError(
+            f"{out_dir} already holds {len(files)} demonstration file(s) from an earlier run; "
+            "pass data.overwrite=true to replace them (only demonstration files and the dataset "
+            "card are deleted) or choose another data.path"
+        )
+    if not files:
+        return ()
+    removed = [*files, card] if card.exists() else files
+    for f in removed:
+        f.unlink()
+    return tuple(removed)

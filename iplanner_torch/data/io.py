@@ -31,6 +31,8 @@ from iplanner_torch.errors import DataError
 SUFFIXES: tuple[str, ...] = (".npz", ".csv")
 _REQUIRED_NPZ = ("positions", "labels", "joint_names", "action_names")
 _AXES = ("x", "y", "z")
+#: The first bytes of a zip archive (an NPZ file is one): a local file header or an empty one.
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
 
 
 def _jsonable(obj: Any) -> Any:
@@ -105,11 +107,26 @@ def save_demonstration(demo: Demonstration, path: str | Path) -> Path:
 def _read_npz(path: Path) -> dict[str, Any]:
     if path.stat().st_size == 0:
         raise DataError(f"{path}: empty file")
+    with open(path, "rb") as fh:
+        magic = fh.read(4)
+    if magic not in _ZIP_MAGIC:
+        # np.load would fall back to unpickling and suggest allow_pickle: never load pickles
+        raise DataError(f"{path}: not a valid NPZ demonstration file: not a zip archive")
     try:
         with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
+            data = {}
+            for k in z.files:
+                try:
+                    data[k] = z[k]
+                except ValueError as exc:
+                    if "allow_pickle" not in str(exc):
+                        raise
+                    raise DataError(
+                        f"{path}: not a valid NPZ demonstration file: field {k!r} holds pickled "
+                        "Python objects (store strings as numpy unicode arrays)"
+                    ) from None
     except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
-        raise DataError(f"{path}: unreadable or corrupt NPZ file ({exc})") from exc
+        raise DataError(f"{path}: not a valid NPZ demonstration file: corrupt ({exc})") from exc
     for key in _REQUIRED_NPZ:
         if key not in data:
             raise DataError(f"{path}: missing key {key!r} (has {sorted(data)})")
@@ -138,7 +155,7 @@ def _read_csv(path: Path) -> dict[str, Any]:
         raise DataError(f"{path}: unreadable CSV file ({exc})") from exc
     lines = text.splitlines()
     comment = [ln[1:] for ln in lines if ln.startswith("#")]
-    body = [ln for ln in lines if ln.strip() and not ln.startswith("#")]
+    body = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip() and not ln.startswith("#")]
     if not body:
         raise DataError(f"{path}: empty file (no header row, no frames)")
     header: dict[str, Any] = {}
@@ -147,22 +164,23 @@ def _read_csv(path: Path) -> dict[str, Any]:
             header = json.loads("".join(comment))
         except json.JSONDecodeError as exc:
             raise DataError(f"{path}: field 'header' (# JSON comment) is invalid ({exc})") from exc
-    cols = [c.strip() for c in body[0].split(",")]
+    header_line, header_row = body[0]
+    cols = [c.strip() for c in header_row.split(",")]
     rows = body[1:]
     if not rows:
         raise DataError(f"{path}: empty file (a header row but no frames)")
-    try:
-        table = np.array(
-            [[float(c) if c.strip() else np.nan for c in r.split(",")] for r in rows],
-            dtype=np.float64,
-        )
-    except ValueError as exc:
-        raise DataError(f"{path}: unreadable or corrupt CSV row ({exc})") from exc
-    if table.ndim != 2 or table.shape[1] != len(cols):
-        raise DataError(
-            f"{path}: field 'positions' has wrong shape: rows must have {len(cols)} cells "
-            f"like the header row"
-        )
+    table = np.empty((len(rows), len(cols)), dtype=np.float64)
+    for i, (n, row) in enumerate(rows):
+        cells = row.split(",")
+        if len(cells) != len(cols):
+            raise DataError(
+                f"{path}: line {n}: {len(cells)} cells, but the header row (line {header_line}) "
+                f"has {len(cols)} columns"
+            )
+        try:
+            table[i] = [float(c) if c.strip() else np.nan for c in cells]
+        except ValueError as exc:
+            raise DataError(f"{path}: line {n}: unreadable or corrupt CSV row ({exc})") from exc
     col = {c: i for i, c in enumerate(cols)}
     joints: list[str] = []
     for c in cols:
@@ -202,6 +220,23 @@ def _read_csv(path: Path) -> dict[str, Any]:
         "clean_positions": clean,
         "metadata": dict(header.get("metadata", {})),
     }
+
+
+def _check_no_inf(path: Path, field: str, pos: np.ndarray, joints: Sequence[str]) -> None:
+    """Raise when ``pos`` ((T, K, 3) [m]) holds +-Inf: a lost joint is NaN, never Inf."""
+    inf = np.isinf(pos)
+    if inf.any():
+        t, k, _ = np.argwhere(inf)[0]
+        raise DataError(
+            f"{path}: field {field!r} has {int(inf.sum())} Inf value(s), the first at frame {t}, "
+            f"joint {joints[k]!r}; mark a lost joint with NaN (an empty CSV cell)"
+        )
+
+
+def lost_joints(demo: Demonstration) -> tuple[str, ...]:
+    """The joints of ``demo`` that are lost (NaN in a coordinate) in every frame."""
+    lost = np.isnan(demo.positions).any(axis=-1).all(axis=0)  # (K,)
+    return tuple(j for j, gone in zip(demo.joint_names, lost, strict=True) if gone)
 
 
 def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstration:
@@ -253,6 +288,12 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
         raise DataError(
             f"{path}: field 'clean_positions' must be {pos.shape}, got {np.shape(clean)}"
         )
+    with np.errstate(over="ignore"):  # values beyond float32's range become Inf: rejected
+        pos = pos.astype(np.float32)
+        clean = None if clean is None else np.asarray(clean).astype(np.float32)
+    _check_no_inf(path, "positions", pos, joints)
+    if clean is not None:
+        _check_no_inf(path, "clean_positions", clean, joints)
     return Demonstration(
         positions=pos,
         labels=labels,
@@ -288,7 +329,33 @@ def load_demonstration(
                 f"the file has {list(demo.joint_names)}"
             )
         demo = demo.select_joints(list(joints))
+    if len(lost_joints(demo)) == demo.num_joints:
+        raise DataError(
+            f"{path}: field 'positions' is NaN in every frame for every joint "
+            f"{list(demo.joint_names)}: nothing observed to learn from"
+        )
     return demo
+
+
+def demonstration_files(path: str | Path) -> list[Path]:
+    """The demonstration files :func:`load_demonstrations` reads from ``path``, in its order.
+
+    Args:
+        path: one ``.npz`` / ``.csv`` file, or a folder searched recursively for them.
+
+    Returns:
+        ``[path]`` for a file; a folder's ``.npz`` and ``.csv`` files in sorted path order
+        (empty when it has none).
+
+    Raises:
+        DataError: when ``path`` does not exist.
+    """
+    path = Path(path)
+    if path.is_dir():
+        return sorted(p for p in path.rglob("*") if p.suffix in SUFFIXES and p.is_file())
+    if path.exists():
+        return [path]
+    raise DataError(f"{path}: no such file or folder")
 
 
 def load_demonstrations(
@@ -301,26 +368,32 @@ def load_demonstrations(
             files, e.g. a README, are ignored); files are taken in sorted path order.
         fps: frame rate for files that do not state one; a file stating another rate is an
             error.
-        joints: keep only these joints, in this order (e.g. ``["right_hand"]``).
+        joints: keep only these joints, in this order (e.g. ``["right_hand"]``); without it
+            every file must have the same joint names in the same order.
 
     Returns:
         The demonstrations; NaN joints are kept as NaN.
 
     Raises:
         DataError: naming the file and the field: no files, unreadable or corrupt file, empty
-            file, missing key, wrong shape, label out of range, non-increasing timestamps,
-            unknown joint name in ``joints``, fps missing or contradicting ``fps``.
+            file, missing key, wrong shape, a ragged CSV row (with its line number), Inf
+            positions, every joint NaN in every frame, label out of range, non-increasing
+            timestamps, unknown joint name in ``joints``, joint names differing between files,
+            fps missing or contradicting ``fps``.
     """
     path = Path(path)
-    if path.is_dir():
-        files = sorted(p for p in path.rglob("*") if p.suffix in SUFFIXES and p.is_file())
-        if not files:
-            raise DataError(f"{path}: no .npz or .csv demonstration files in this folder")
-    elif path.exists():
-        files = [path]
-    else:
-        raise DataError(f"{path}: no such file or folder")
-    return [load_demonstration(f, fps=fps, joints=joints) for f in files]
+    files = demonstration_files(path)
+    if not files:
+        raise DataError(f"{path}: no .npz or .csv demonstration files in this folder")
+    demos = [load_demonstration(f, fps=fps, joints=joints) for f in files]
+    for f, d in zip(files, demos, strict=True):
+        if d.joint_names != demos[0].joint_names:
+            raise DataError(
+                f"{f}: field 'joint_names' {list(d.joint_names)} differ from "
+                f"{list(demos[0].joint_names)} of {files[0]}; every file needs the same joints "
+                "in the same order (or select common ones: joints=, data.windows.joints=[...])"
+            )
+    return demos
 
 
 #: Column order of the LEGO assembly recording (18 numbers per row).
@@ -360,7 +433,8 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
         One demonstration per trial, named ``Task1/Human1/trial1`` etc., in sorted order.
 
     Raises:
-        DataError: when nothing is found or a file is not a (T, 18) table of numbers.
+        DataError: when nothing is found or a file is not a (T, 18) table of finite numbers or
+            NaN.
     """
     path = Path(path)
     if path.is_dir():
@@ -369,9 +443,16 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
     elif path.is_file():
         files, root = [path], path.parent
     else:
-        raise DataError(f"{path}: no such file or folder")
+        raise DataError(
+            f"{path}: no such file or folder (the LEGO assembly recording; a relative path is "
+            "taken from the current directory: run from the project root or set "
+            "data.path=<folder holding Task*/Human*/trial*.txt>)"
+        )
     if not files:
-        raise DataError(f"{path}: no trial .txt files found")
+        raise DataError(
+            f"{path}: no trial .txt files found (expected Task*/Human*/trial*.txt; set "
+            "data.path=<folder> to the recording)"
+        )
     if not fps > 0:
         raise DataError(f"{path}: fps must be > 0, got {fps}")
     order = [LEGO_JOINTS.index(j) for j in LEGO_OUTPUT_JOINTS]
@@ -386,6 +467,7 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
         if table.shape[1] != 18:
             raise DataError(f"{f}: field 'positions' must have 18 columns, got {table.shape[1]}")
         pos = table.reshape(-1, 6, 3)[:, order]  # (T, 6, 3)
+        _check_no_inf(f, "positions", pos, LEGO_OUTPUT_JOINTS)
         rel = f.relative_to(root).with_suffix("")
         parts = rel.parts
         demos.append(

@@ -436,7 +436,10 @@ def build_windows(demos: Sequence[Demonstration], cfg: WindowCfg) -> WindowSet:
         win_pos.append(d.positions[s[:, None] + np.arange(-n_p + 1, 1)])  # (N_i, n_p, K, 3)
         source = d.clean_positions
         if source is None:
-            source = impute_nan(torch.from_numpy(d.positions), d.joint_names).numpy()
+            try:
+                source = impute_nan(torch.from_numpy(d.positions), d.joint_names).numpy()
+            except DataError as exc:
+                raise DataError(f"demonstration {d.name!r}: {exc}") from exc
         fut.append(source[s[:, None] + np.arange(1, n_f + 1)])  # (N_i, n_f, K, 3)
         prog.append(progress_bitmask(d.labels, prog_idx).numpy()[s])
         cur.append(d.labels[s])

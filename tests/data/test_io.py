@@ -10,9 +10,11 @@ import pytest
 
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.io import (
+    demonstration_files,
     load_demonstration,
     load_demonstrations,
     load_lego_assembly,
+    lost_joints,
     save_demonstration,
 )
 from iplanner_torch.data.skeleton import JOINT_NAMES
@@ -151,11 +153,130 @@ def test_error_empty_files(tmp_path):
 
 def test_error_corrupt_file(tmp_path):
     (tmp_path / "c.npz").write_bytes(b"PK\x03\x04 this is not a zip archive")
-    with pytest.raises(DataError, match="c.npz: unreadable or corrupt"):
+    with pytest.raises(DataError, match="c.npz: not a valid NPZ demonstration file: corrupt"):
         load_demonstrations(tmp_path / "c.npz")
     (tmp_path / "c.csv").write_text("t,label,a_x,a_y,a_z\n0,0,1,2,abc\n")
-    with pytest.raises(DataError, match="c.csv: unreadable or corrupt CSV row"):
+    with pytest.raises(DataError, match="c.csv: line 2: unreadable or corrupt CSV row"):
         load_demonstrations(tmp_path / "c.csv", fps=10)
+
+
+def test_error_garbage_npz_never_suggests_unpickling(tmp_path):
+    rng = np.random.default_rng(3)
+    (tmp_path / "g.npz").write_bytes(rng.integers(0, 256, 200, dtype=np.uint8).tobytes())
+    np.save(tmp_path / "single.npy", np.zeros(3))
+    (tmp_path / "single.npy").rename(tmp_path / "n.npz")  # an .npy array, not an archive
+    _npz(tmp_path / "o.npz", metadata=np.array([{"subject": 1}], dtype=object))
+    cases = [
+        ("g.npz", "g.npz: not a valid NPZ demonstration file: not a zip archive"),
+        ("n.npz", "n.npz: not a valid NPZ demonstration file: not a zip archive"),
+        ("o.npz", "o.npz: not a valid NPZ demonstration file: field 'metadata' holds pickled"),
+    ]
+    for name, message in cases:
+        with pytest.raises(DataError, match=message) as info:
+            load_demonstrations(tmp_path / name)
+        assert "allow_pickle" not in str(info.value) and "pickle.load" not in str(info.value)
+
+
+def test_error_ragged_csv_row_names_its_line(tmp_path):
+    p = tmp_path / "r.csv"
+    # line 1 JSON header, 2 column header, 3 a frame, 4 blank, 5 a frame missing a cell
+    p.write_text('# {"fps": 10}\nt,label,a_x,a_y,a_z\n0,0,1,2,3\n\n0.1,0,1,2\n0.2,0,1,2,3\n')
+    with pytest.raises(DataError, match=r"r\.csv: line 5: 4 cells, but the header row \(line 2\)"):
+        load_demonstrations(p)
+    p.write_text("a_x,a_y,a_z\n1,2,3\n1,2,3,4\n")
+    with pytest.raises(DataError, match=r"r\.csv: line 3: 4 cells, .* has 3 columns"):
+        load_demonstrations(p, fps=10)
+
+
+def test_error_inf_positions(tmp_path):
+    pos = _demo().positions.copy()
+    pos[7, 3, 1] = np.inf
+    pos[9, 0, 0] = -np.inf
+    p = _npz(tmp_path / "x.npz", positions=pos)
+    with pytest.raises(
+        DataError,
+        match=r"x\.npz: field 'positions' has 2 Inf value\(s\), the first at frame 7, "
+        r"joint 'waist'",
+    ):
+        load_demonstrations(p)
+    clean = _demo().clean_positions.copy()
+    clean[2, 9, 2] = np.inf
+    p = _npz(tmp_path / "y.npz", clean_positions=clean)
+    with pytest.raises(DataError, match=r"y\.npz: field 'clean_positions' has 1 Inf .*frame 2, "
+                       r"joint 'right_hand'"):  # fmt: skip
+        load_demonstrations(p)
+    c = tmp_path / "z.csv"
+    c.write_text("a_x,a_y,a_z\n1,2,3\n1,inf,3\n1,2,1e39\n")  # 1e39 overflows float32
+    with pytest.raises(
+        DataError, match=r"z\.csv: field 'positions' has 2 Inf .*frame 1, joint 'a'"
+    ):
+        load_demonstrations(c, fps=10)
+
+
+def test_joint_lost_in_every_frame_is_kept_and_reported(tmp_path):
+    pos = _demo().positions.copy()
+    pos[:, 0, 1] = np.nan  # head lost in every frame (one coordinate is enough)
+    pos[:5, 9] = np.nan  # right hand lost only in some frames
+    (d,) = load_demonstrations(_npz(tmp_path / "x.npz", positions=pos))
+    assert lost_joints(d) == ("head",)
+    assert lost_joints(_demo()) == ()
+
+
+def test_error_nothing_observed(tmp_path):
+    pos = np.full((12, len(JOINT_NAMES), 3), np.nan, np.float32)
+    p = _npz(tmp_path / "x.npz", positions=pos, clean_positions=None)
+    with pytest.raises(DataError, match=r"x\.npz: field 'positions' is NaN in every frame for "
+                       r"every joint \['head', 'neck'"):  # fmt: skip
+        load_demonstrations(p)
+    pos = _demo().positions.copy()
+    pos[:, 9] = np.nan  # right hand lost in every frame: fine, until it is the only joint
+    p = _npz(tmp_path / "y.npz", positions=pos)
+    assert len(load_demonstrations(p)) == 1
+    with pytest.raises(DataError, match=r"y\.npz: .* every joint \['right_hand'\]"):
+        load_demonstrations(p, joints=["right_hand"])
+
+
+def test_error_joint_names_differ_between_files(tmp_path):
+    save_demonstration(_demo(), tmp_path / "a.npz")
+    save_demonstration(_demo(), tmp_path / "b.npz")
+    other = _demo().select_joints(["right_hand", "head", "neck"])
+    save_demonstration(other, tmp_path / "c.csv")
+    save_demonstration(_demo(), tmp_path / "d.npz")
+    with pytest.raises(DataError) as info:
+        load_demonstrations(tmp_path)
+    msg = str(info.value)
+    assert msg.startswith(f"{tmp_path / 'c.csv'}: field 'joint_names' ['right_hand', 'head', ")
+    assert str(list(JOINT_NAMES)) in msg and f"of {tmp_path / 'a.npz'}" in msg
+    demos = load_demonstrations(tmp_path, joints=["head", "right_hand"])
+    assert [d.joint_names for d in demos] == [("head", "right_hand")] * 4
+
+
+def test_demonstration_files_match_the_loader(tmp_path):
+    for name in ("b.npz", "a.csv", "sub/c.npz"):
+        save_demonstration(_demo(), tmp_path / name)
+    (tmp_path / "README.md").write_text("hello")
+    files = demonstration_files(tmp_path)
+    assert files == [tmp_path / "a.csv", tmp_path / "b.npz", tmp_path / "sub" / "c.npz"]
+    assert [d.name for d in load_demonstrations(tmp_path)] == [f.stem for f in files]
+    assert demonstration_files(tmp_path / "b.npz") == [tmp_path / "b.npz"]
+    (tmp_path / "none").mkdir()
+    assert demonstration_files(tmp_path / "none") == []
+    with pytest.raises(DataError, match="no such file or folder"):
+        demonstration_files(tmp_path / "missing")
+
+
+def test_lego_loader_errors_give_a_hint(tmp_path):
+    with pytest.raises(DataError, match=r"missing: no such file or folder .*set data\.path="):
+        load_lego_assembly(tmp_path / "missing")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(DataError, match=r"no trial \.txt files found .*data\.path="):
+        load_lego_assembly(tmp_path / "empty")
+    row = " ".join(["0.1"] * 17 + ["inf"])
+    (tmp_path / "trial1.txt").write_text(f"{' '.join(['0.1'] * 18)}\n{row}\n")
+    with pytest.raises(
+        DataError, match=r"trial1\.txt: .* 1 Inf .*frame 1, joint 'right_shoulder'"
+    ):
+        load_lego_assembly(tmp_path / "trial1.txt")
 
 
 def test_error_missing_key(tmp_path):

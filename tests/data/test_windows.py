@@ -189,6 +189,19 @@ def test_unlabelled_frames_skipped_and_joint_selection():
         build_windows([d], WindowCfg(joints=("tail",)))
 
 
+def test_a_demonstration_with_nothing_observed_is_named():
+    d = Demonstration(
+        positions=np.full((30, 10, 3), np.nan),
+        labels=np.zeros(30, dtype=int),
+        fps=FPS,
+        joint_names=JOINT_NAMES,
+        action_names=("idle",),
+        name="trial_7",
+    )
+    with pytest.raises(DataError, match="demonstration 'trial_7': .*every frame"):
+        build_windows([d], WindowCfg(n_prev=5, n_future=3))
+
+
 def test_split_no_leakage_and_stratified(reach_demos):
     tr, va, te = split_by_demonstration(reach_demos, (0.5, 0.25, 0.25), seed=3)
     names = [{d.name for d in s} for s in (tr, va, te)]

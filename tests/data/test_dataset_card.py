@@ -1,0 +1,79 @@
+"""Dataset folders: a generator refuses to write over an earlier dataset unless told to clear it,
+and clearing deletes only the demonstration files and the dataset card."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from iplanner_torch.data.dataset_card import (
+    DatasetSummary,
+    is_dataset_card,
+    prepare_dataset_folder,
+    write_dataset_card,
+)
+from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
+from iplanner_torch.errors import ConfigError
+
+SMALL = ReachingCfg(n_targets=2, reaches_per_target=2)
+
+
+def _files(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file()}
+
+
+def test_new_or_empty_folder_is_ready(tmp_path):
+    assert prepare_dataset_folder(tmp_path / "new", overwrite=False) == ()
+    assert not (tmp_path / "new").exists()
+    (tmp_path / "notes.txt").write_text("mine")
+    assert prepare_dataset_folder(tmp_path, overwrite=False) == ()
+    assert _files(tmp_path) == {"notes.txt"}
+
+
+def test_refuses_a_folder_with_demonstrations(tmp_path):
+    generate_reaching_dataset(SMALL, tmp_path, progress=False)
+    before = _files(tmp_path)
+    assert len(before) == 5  # 4 demonstrations and the card
+    with pytest.raises(ConfigError, match=rf"{tmp_path} already holds 4 demonstration file\(s\)"
+                       r".*data\.overwrite=true"):  # fmt: skip
+        prepare_dataset_folder(tmp_path, overwrite=False)
+    assert _files(tmp_path) == before
+
+
+def test_overwrite_deletes_only_demonstrations_and_card(tmp_path):
+    generate_reaching_dataset(SMALL, tmp_path, progress=False)
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "old.csv").write_text("a_x,a_y,a_z\n1,2,3\n")
+    keep = {"notes.txt", "sub/plot.png", "labels.json", "sub/README.md"}
+    for name in keep:
+        (tmp_path / name).write_text("keep")
+    demos = {p.name for p in tmp_path.glob("*.npz")}
+    removed = prepare_dataset_folder(tmp_path, overwrite=True)
+    assert {p.name for p in removed} == demos | {"old.csv", "README.md"}
+    assert (tmp_path / "sub" / "README.md") not in removed
+    assert _files(tmp_path) == keep
+    # a new, smaller dataset is then all the loader sees
+    generate_reaching_dataset(ReachingCfg(n_targets=2, reaches_per_target=1), tmp_path,
+                              progress=False)  # fmt: skip
+    assert len(list(tmp_path.rglob("*.npz"))) + len(list(tmp_path.rglob("*.csv"))) == 2
+
+
+def test_refuses_to_overwrite_a_readme_that_is_not_a_card(tmp_path):
+    (tmp_path / "a.npz").write_bytes(b"")
+    (tmp_path / "README.md").write_text("# my recordings\n")
+    for overwrite in (False, True):
+        with pytest.raises(ConfigError, match="README.md is not a dataset card"):
+            prepare_dataset_folder(tmp_path, overwrite=overwrite)
+    assert _files(tmp_path) == {"a.npz", "README.md"}
+
+
+def test_is_dataset_card(tmp_path):
+    summary = DatasetSummary(out_dir=tmp_path, files=(), n_demonstrations=0, n_frames=0,
+                             seconds=0.0, bytes_on_disk=0)  # fmt: skip
+    card = write_dataset_card(summary, title="t", facts=[], command="c")
+    assert is_dataset_card(card)
+    (tmp_path / "other.md").write_text("# t\n\nhand written\n")
+    assert not is_dataset_card(tmp_path / "other.md")
+    assert not is_dataset_card(tmp_path / "missing.md")
+    assert not is_dataset_card(tmp_path)
