@@ -29,6 +29,11 @@ F = TypeVar("F", bound=Callable[..., Any])
 def instantiate(node: Any) -> Any:
     """Build the dataclass described by a config node (``_target_`` plus keyword arguments).
 
+    A value whose type does not fit its dataclass field (``bool``, ``int``, ``float`` or
+    ``str``, possibly ``| None``; an int is a float) is refused before anything is built,
+    with its full key, so ``planner.optimizer.iterations=1.5`` fails at start-up, not in the
+    middle of a run.
+
     Raises:
         ConfigError: when the node cannot be built (unknown key, wrong type, bad value), with
             the underlying reason.
@@ -36,6 +41,9 @@ def instantiate(node: Any) -> Any:
     from hydra.errors import InstantiationException
     from hydra.utils import instantiate as hydra_instantiate
 
+    wrong = _wrong_type(node) if isinstance(node, DictConfig) else None
+    if wrong:
+        raise ConfigError(wrong)
     try:
         return hydra_instantiate(node, _convert_="all")
     except InstantiationException as exc:
@@ -43,6 +51,107 @@ def instantiate(node: Any) -> Any:
         if isinstance(cause, IPlannerError):
             raise ConfigError(str(cause)) from exc
         raise ConfigError(f"cannot build config node: {cause}") from exc
+
+
+def _full_key(node: DictConfig, key: str) -> str:
+    try:
+        return str(node._get_full_key(key)) or key
+    except Exception:  # a detached node
+        return key
+
+
+def _fits(value: Any, expected: type) -> bool:
+    if expected is bool:
+        return isinstance(value, bool)
+    if expected is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if expected is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return isinstance(value, expected)
+
+
+def _wrong_type(node: DictConfig) -> str | None:
+    """The first value under ``node`` whose type does not fit its dataclass field's default
+    (``"trainer.max_steps: expected int, got 'abc'"``), or None."""
+    import dataclasses
+
+    from hydra.utils import get_class
+
+    fields: dict[str, Any] = {}
+    target = node.get("_target_") if "_target_" in node else None
+    if isinstance(target, str):
+        try:
+            cls = get_class(target)
+        except Exception:
+            cls = None
+        if cls is not None and dataclasses.is_dataclass(cls):
+            fields = {f.name: _scalar_type(cls, f) for f in dataclasses.fields(cls)}
+    for key in node:
+        try:
+            value = node[key]
+        except Exception:  # an interpolation that does not resolve: Hydra says so itself
+            continue
+        if isinstance(value, DictConfig):
+            found = _wrong_type(value)
+            if found:
+                return found
+            continue
+        expected = fields.get(str(key))
+        if expected is not None and value is not None and not _fits(value, expected):
+            return f"{_full_key(node, str(key))}: expected {expected.__name__}, got {value!r}"
+    return None
+
+
+def _scalar_type(cls: type, field: Any) -> type | None:
+    """bool, int, float or str when a dataclass field holds one (``X`` or ``X | None``)."""
+    import dataclasses
+    import typing
+
+    try:
+        hint = typing.get_type_hints(cls).get(field.name)
+    except Exception:  # an annotation that does not resolve: fall back to the default
+        hint = None
+    if hint is not None:
+        import types
+
+        union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+        args = [a for a in typing.get_args(hint) if a is not type(None)] if union else [hint]
+        if len(args) == 1 and args[0] in (bool, int, float, str):
+            return args[0]
+        return None
+    default = field.default
+    if default is not dataclasses.MISSING and type(default) in (bool, int, float, str):
+        return type(default)
+    return None
+
+
+def cfg_scalar(node: DictConfig, key: str, kind: type) -> Any:
+    """``node[key]`` checked to be a ``kind`` (bool, int, float or str; an int is a float).
+
+    Raises:
+        ConfigError: naming the key, the expected type and the value given.
+    """
+    value = node[key]
+    if not _fits(value, kind):
+        raise ConfigError(f"{_full_key(node, key)}: expected {kind.__name__}, got {value!r}")
+    return kind(value)
+
+
+def cfg_list(node: DictConfig, key: str, kind: type) -> list[Any]:
+    """``node[key]`` checked to be a list of ``kind`` (see :func:`cfg_scalar`).
+
+    Raises:
+        ConfigError: naming the key when it is not a list or an item is not a ``kind``.
+    """
+    from omegaconf import ListConfig
+
+    value = node[key]
+    if not isinstance(value, (list, tuple, ListConfig)) or not all(_fits(v, kind) for v in value):
+        raise ConfigError(
+            f"{_full_key(node, key)}: expected a list of {kind.__name__}, got {value!r} "
+            f"(e.g. {key}=[0,1,2])"
+        )
+    return [kind(v) for v in value]
 
 
 def resolve_device(name: str) -> torch.device:
@@ -63,12 +172,70 @@ def repo_path(path: str | Path) -> Path:
     return Path(path).expanduser().resolve()
 
 
+def command_help(doc: str, *, groups: tuple[str, ...] | None = None) -> str:
+    """The ``--help`` text of a command: its docstring, then the config groups and their
+    options (read from ``conf/``), the main root keys and Hydra's own flags.
+
+    Args:
+        doc: the command module's docstring.
+        groups: the groups the command reads (all of ``conf/`` but ``hydra`` when None).
+    """
+    import textwrap
+
+    conf = Path(CONF_DIR)
+    names = groups or tuple(
+        sorted(d.name for d in conf.iterdir() if d.is_dir() and d.name != "hydra")
+    )
+    root = OmegaConf.load(conf / "config.yaml")
+    defaults = {}
+    for item in root.get("defaults", []):
+        if isinstance(item, DictConfig):
+            defaults.update({str(k): v for k, v in item.items()})
+    lines = [textwrap.dedent(doc).strip(), "", "Config groups (group=option; * the default):"]
+    for name in names:
+        options = sorted(f.stem for f in (conf / name).glob("*.yaml"))
+        shown = [f"{o}*" if o == defaults.get(name) else o for o in options]
+        if name == "experiment":
+            shown.insert(0, "null*")
+        lines.append(f"  {name:15s} " + ", ".join(shown))
+    launchers = sorted(f.stem for f in (conf / "hydra" / "launcher").glob("*.yaml"))
+    lines += [
+        f"  {'hydra/launcher':15s} basic*, joblib, " + ", ".join(launchers),
+        "",
+        "Root keys: seed=<int>, device=auto|cpu|cuda, progress=true|false.",
+        "Any key of the composed config can be overridden as key=value; print it with",
+        "`--cfg job` (add `--resolve` to resolve interpolations).",
+        "",
+        "Hydra flags: -m (sweep over comma-separated values), --cfg job|hydra|all,",
+        "--hydra-help (Hydra's own help), -cd/-cn (another config folder or name).",
+    ]
+    return "\n".join(lines)
+
+
+def print_help_if_asked(doc: str, argv: list[str], **kwargs: Any) -> None:
+    """Print :func:`command_help` and exit 0 when ``-h`` or ``--help`` is among ``argv``."""
+    if "-h" in argv or "--help" in argv:
+        print(command_help(doc, **kwargs))
+        raise SystemExit(0)
+
+
+#: Root keys every command reads, with their types (checked before the command runs).
+ROOT_KEYS: dict[str, type] = {"seed": int, "progress": bool, "device": str}
+
+
 def friendly_errors(fn: F) -> F:
-    """Turn library errors into a one-line message and exit code 2 instead of a traceback."""
+    """Turn library errors into a one-line message and exit code 2 instead of a traceback.
+
+    The root keys of :data:`ROOT_KEYS` are type-checked first, so ``seed=abc`` is named as
+    such rather than where it is interpolated."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
+            if args and isinstance(args[0], DictConfig):
+                for key, kind in ROOT_KEYS.items():
+                    if key in args[0]:
+                        cfg_scalar(args[0], key, kind)
             return fn(*args, **kwargs)
         except IPlannerError as exc:
             print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)

@@ -12,12 +12,16 @@ split by demonstration as training); ``noise_sweep`` re-noises the held-out clea
 each ``evaluate.noises`` level and replays it at each ``evaluate.speeds`` speed, for each
 predictor in ``evaluate.compare`` (trained when missing), and writes CSV, PNG plots and a
 README; ``episode`` summarises MCAP episode logs (one row per episode, a summary table and
-plots).
+plots) and prints the table ``iplanner-experiment`` prints
+(:func:`~iplanner_torch.eval.report.comparison_table`: episode counts, then the paper's metrics
+in cm and ms); an episode whose log was cut before its metrics counts in ``contact_unknown``,
+not as contact-free nor as a contact.
 """
 
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import hydra
@@ -26,8 +30,11 @@ from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
+    cfg_list,
+    cfg_scalar,
     friendly_errors,
     load_dataset,
+    print_help_if_asked,
     repo_path,
 )
 from iplanner_torch.errors import CheckpointError, ConfigError
@@ -47,9 +54,11 @@ def _out_dir(cfg: DictConfig) -> Path:
 def _held_out(cfg: DictConfig) -> list:
     from iplanner_torch.data.windows import split_by_demonstration
 
-    demos = load_dataset(cfg.data, generate_if_missing=False, progress=bool(cfg.progress))
+    demos = load_dataset(
+        cfg.data, generate_if_missing=False, progress=cfg_scalar(cfg, "progress", bool)
+    )
     fractions = tuple(float(f) for f in cfg.data.get("split", (0.8, 0.1, 0.1)))
-    _, _, test = split_by_demonstration(demos, fractions, int(cfg.seed))
+    _, _, test = split_by_demonstration(demos, fractions, cfg_scalar(cfg, "seed", int))
     if not test:
         raise ConfigError(f"data.split={list(fractions)} leaves no held-out demonstrations")
     return test
@@ -94,10 +103,10 @@ def _noise_sweep(cfg: DictConfig) -> None:
     df = prediction_vs_noise(
         predictors,
         _held_out(cfg),
-        noises=[float(n) for n in cfg.evaluate.noises],
+        noises=cfg_list(cfg.evaluate, "noises", float),
         speeds=[str(s) for s in cfg.evaluate.speeds],
-        seed=int(cfg.seed),
-        progress=bool(cfg.progress),
+        seed=cfg_scalar(cfg, "seed", int),
+        progress=cfg_scalar(cfg, "progress", bool),
     )
     out_dir = _out_dir(cfg)
     command = "iplanner-evaluate " + " ".join(HydraConfig.get().overrides.task)
@@ -109,10 +118,10 @@ def _noise_sweep(cfg: DictConfig) -> None:
 def _episode(cfg: DictConfig) -> None:
     from iplanner_torch.cli.callbacks import episode_report
     from iplanner_torch.eval.report import (
+        comparison_table,
         gather_results,
+        incomplete_logs_note,
         print_table,
-        report_groups,
-        summary_table,
     )
 
     if not cfg.evaluate.logs:
@@ -123,7 +132,10 @@ def _episode(cfg: DictConfig) -> None:
     out_dir = _out_dir(cfg)
     df = gather_results(path)  # a folder: every log below it, in numbered order
     written = episode_report(df, out_dir)
-    print_table(summary_table(df, report_groups(df)))
+    print_table(comparison_table(df))  # the columns and units of iplanner-experiment's table
+    note = incomplete_logs_note(df)
+    if note:
+        print(note)
     print(f"{len(df)} episode(s); wrote " + ", ".join(str(p) for p in written))
 
 
@@ -138,6 +150,7 @@ def _app(cfg: DictConfig) -> None:
 
 def main() -> None:
     """Console entry point."""
+    print_help_if_asked(__doc__ or "", sys.argv[1:])
     _app()
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -36,27 +37,18 @@ from omegaconf import DictConfig, OmegaConf
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
+    cfg_list,
+    cfg_scalar,
     dump_config,
     friendly_errors,
     instantiate,
+    print_help_if_asked,
     repo_path,
     resolve_device,
 )
 
 #: predictor variant of a planner (see eval.episode.PLANNER_KINDS) -> conf/predictor option
 VARIANT_OPTION = {"no_ni": "iplanner_no_ni", "ni": "iplanner_ni"}
-
-#: columns of the console comparison table: metric -> (header, scale)
-TABLE_COLUMNS = {
-    "prediction_ms": ("pred. ms", 1.0),
-    "mhd": ("MHD cm", 100.0),
-    "smoothness": ("smoothness", 1.0),
-    "jerkiness": ("jerkiness", 1.0),
-    "min_distance": ("distance cm", 100.0),
-    "efficiency": ("efficiency", 1.0),
-    "contact": ("contact", 1.0),
-    "waits": ("waits", 1.0),
-}
 
 
 def option_node(group: str, option: str, cfg: DictConfig) -> DictConfig:
@@ -66,7 +58,7 @@ def option_node(group: str, option: str, cfg: DictConfig) -> DictConfig:
     path = Path(CONF_DIR) / group / f"{option}.yaml"
     if not path.exists():
         raise ConfigError(f"no config option {group}={option} ({path})")
-    root = OmegaConf.create({"seed": int(cfg.seed), "node": OmegaConf.load(path)})
+    root = OmegaConf.create({"seed": cfg_scalar(cfg, "seed", int), "node": OmegaConf.load(path)})
     return root.node
 
 
@@ -144,9 +136,9 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
             "scenario": OmegaConf.to_container(cfg.scenario, resolve=True),
             "sim": OmegaConf.to_container(cfg.sim, resolve=True),
             "planner": OmegaConf.to_container(cfg.planner, resolve=True),
-            "max_duration_s": float(cfg.run.max_duration_s),
+            "max_duration_s": cfg_scalar(cfg.run, "max_duration_s", float),
             "stall_fallback_s": cfg.run.stall_fallback_s,
-            "progress_bar": bool(cfg.progress),
+            "progress_bar": cfg_scalar(cfg, "progress", bool),
         }
     )
     exp_node = cfg.get("experiment")
@@ -155,17 +147,19 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     episode = instantiate(episode_node)
     device = str(resolve_device(str(cfg.device)))
     if exp_node is None:
-        scenario = replace(episode.scenario, confidence=float(cfg.planner.confidence))
+        scenario = replace(
+            episode.scenario, confidence=cfg_scalar(cfg.planner, "confidence", float)
+        )
         return ExperimentCfg(
             name="main",
             robot=str(cfg.robot.name),
             device=device,
             scenarios=[scenario],
-            planners=list(cfg.run.planners),
-            seeds=[int(s) for s in cfg.run.seeds],
+            planners=cfg_list(cfg.run, "planners", str),
+            seeds=cfg_list(cfg.run, "seeds", int),
             predictor_paths=predictor_paths,
             episode=replace(episode, scenario=scenario),
-            write_mcap=bool(cfg.run.write_mcap),
+            write_mcap=cfg_scalar(cfg.run, "write_mcap", bool),
         )
     node = OmegaConf.to_container(exp_node, resolve=True)
     assert isinstance(node, dict)
@@ -178,27 +172,12 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
 
 
 def comparison_table(df: Any) -> Any:
-    """Per scenario, swept setting and planner, the paper's columns: means over episodes.
+    """The console table: :func:`iplanner_torch.eval.report.comparison_table` (per scenario,
+    swept setting and planner, the episode counts and the paper's metrics in cm and ms), the
+    table ``iplanner-evaluate evaluate.mode=episode`` prints too."""
+    from iplanner_torch.eval.report import comparison_table as table
 
-    ``speed``, ``noise`` and ``confidence`` become columns of their own when they take more
-    than one value (:func:`~iplanner_torch.eval.report.report_groups`), so a speed response
-    or a sweep is never averaged over its settings.
-    """
-    import pandas as pd
-
-    from iplanner_torch.eval.report import report_groups
-
-    groups = list(report_groups(df))
-    rows = []
-    for key, g in df.groupby(groups, sort=False):
-        key = key if isinstance(key, tuple) else (key,)
-        row: dict[str, Any] = dict(zip(groups, key))
-        row["episodes"] = len(g)
-        for metric, (header, scale) in TABLE_COLUMNS.items():
-            col = next((c for c in g.columns if c == metric or c.endswith("/" + metric)), None)
-            row[header] = float(g[col].mean()) * scale if col is not None else float("nan")
-        rows.append(row)
-    return pd.DataFrame(rows)
+    return table(df)
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
@@ -226,7 +205,11 @@ def _app(cfg: DictConfig) -> None:
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
     exp_node = cfg.get("experiment")
-    planners = list(exp_node.planners) if exp_node is not None else list(cfg.run.planners)
+    planners = (
+        cfg_list(exp_node, "planners", str)
+        if exp_node is not None
+        else cfg_list(cfg.run, "planners", str)
+    )
     unknown = [p for p in planners if p not in PLANNER_KINDS]
     if unknown:
         from iplanner_torch.errors import ConfigError
@@ -282,6 +265,7 @@ def dump_config_safe(cfg: DictConfig) -> str:
 
 def main() -> None:
     """Console entry point."""
+    print_help_if_asked(__doc__ or "", sys.argv[1:])
     _app()
 
 

@@ -14,6 +14,7 @@ sub-models' Lightning checkpoints and CSV / TensorBoard logs, then prints held-o
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -22,9 +23,11 @@ from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
+    cfg_scalar,
     friendly_errors,
     instantiate,
     load_dataset,
+    print_help_if_asked,
     repo_path,
 )
 
@@ -55,9 +58,11 @@ def train_from_config(
     predictor_cfg = instantiate(predictor_node)
     trainer_cfg = instantiate(trainer_node)
     window_cfg = instantiate(data_node.windows)
-    demos = load_dataset(data_node, generate_if_missing=True, progress=bool(cfg.progress))
+    demos = load_dataset(
+        data_node, generate_if_missing=True, progress=cfg_scalar(cfg, "progress", bool)
+    )
     fractions = tuple(float(f) for f in data_node.get("split", (0.8, 0.1, 0.1)))
-    train, val, test = split_by_demonstration(demos, fractions, int(cfg.seed))
+    train, val, test = split_by_demonstration(demos, fractions, cfg_scalar(cfg, "seed", int))
     train_w = build_windows(train, window_cfg)
     val_w = build_windows(val, window_cfg) if val else None
     t0 = time.perf_counter()
@@ -66,8 +71,8 @@ def train_from_config(
         predictor_cfg=predictor_cfg,
         trainer_cfg=trainer_cfg,
         out_dir=out_dir,
-        progress=bool(cfg.progress),
-        resume=bool(cfg.train.resume),
+        progress=cfg_scalar(cfg, "progress", bool),
+        resume=cfg_scalar(cfg.train, "resume", bool),
     )
     seconds = time.perf_counter() - t0
     metrics: dict = {"train_seconds": seconds, "train_windows": len(train_w)}
@@ -94,6 +99,7 @@ def _app(cfg: DictConfig) -> None:
 
 def main() -> None:
     """Console entry point."""
+    print_help_if_asked(__doc__ or "", sys.argv[1:])
     _app()
 
 

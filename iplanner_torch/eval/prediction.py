@@ -19,6 +19,8 @@ Metrics, per held-out window (averaged over windows unless stated):
 
 from __future__ import annotations
 
+import math
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -27,7 +29,7 @@ from scipy.stats import chi2
 
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.windows import WindowCfg, WindowSet, build_windows
-from iplanner_torch.errors import DataError
+from iplanner_torch.errors import DataError, DataWarning
 from iplanner_torch.eval.metrics import modified_hausdorff_batch as modified_hausdorff
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import check_shape
@@ -82,6 +84,49 @@ def window_metrics(fc: Forecast, xi_true: torch.Tensor, current: torch.Tensor) -
     return out
 
 
+def _names(names: Sequence[str], shown: int = 4) -> str:
+    head = ", ".join(names[:shown]) + (", ..." if len(names) > shown else "")
+    return f"{len(names)} action{'' if len(names) == 1 else 's'} ({head})"
+
+
+def check_data_matches(predictor: Any, fps: float, action_names: Sequence[str]) -> None:
+    """Warn when data differs in frame rate or actions from what ``predictor`` was trained on.
+
+    Args:
+        predictor: a :class:`HumanMotionPredictor` (its ``fps`` and ``action_names``, stored
+            in the checkpoint).
+        fps: the data's frame rate [Hz].
+        action_names: the data's A action names.
+
+    Warns:
+        DataWarning: when the frame rates differ (the predicted frames are ``1 / fps`` of the
+            checkpoint apart, the true ones ``1 / fps`` of the data, so the position metrics
+            compare different instants), or when the action names differ (the class metrics
+            then compare labels of unrelated action sets and the progress states stand for
+            other actions).
+    """
+    p_fps = getattr(predictor, "fps", None)
+    if p_fps is not None and not math.isclose(float(p_fps), float(fps), rel_tol=1e-6):
+        warnings.warn(
+            f"the data is at {float(fps):g} fps but the predictor was trained at "
+            f"{float(p_fps):g} fps: its frames are 1/{float(p_fps):g} s apart and the data's "
+            f"1/{float(fps):g} s, so predicted and true positions are compared at different "
+            "times",
+            DataWarning,
+            stacklevel=3,
+        )
+    p_actions = tuple(getattr(predictor, "action_names", ()) or ())
+    if p_actions and p_actions != tuple(action_names):
+        warnings.warn(
+            f"the data has {_names(tuple(action_names))} but the predictor was trained on "
+            f"{_names(p_actions)}: the class_* metrics compare unrelated labels and the "
+            "progress states stand for other actions; only the position metrics compare "
+            "like with like",
+            DataWarning,
+            stacklevel=3,
+        )
+
+
 def evaluate_prediction(
     predictor: Any,
     data: WindowSet | Sequence[Demonstration],
@@ -105,10 +150,20 @@ def evaluate_prediction(
 
     Raises:
         DataError: when there are no windows.
+
+    Warns:
+        DataWarning: when the data's frame rate or action names differ from the predictor's
+            (:func:`check_data_matches`). A mismatch warns rather than raises: the positions
+            can still be compared (e.g. to see how a predictor carries over to other motion),
+            but the numbers are not the predictor's held-out accuracy.
     """
     if isinstance(data, WindowSet):
+        check_data_matches(predictor, data.fps, data.action_names)
         windows = data
     else:
+        demos = list(data)
+        if demos:  # build_windows checks that the demonstrations agree with the first one
+            check_data_matches(predictor, demos[0].fps, demos[0].action_names)
         wc = dict(predictor.window_cfg) if predictor.window_cfg else {}
         wc.update(
             n_prev=predictor.n_prev,
@@ -116,7 +171,7 @@ def evaluate_prediction(
             joints=predictor.joint_names,
             feature_kinds=predictor.feature_kinds,
         )
-        windows = build_windows(list(data), WindowCfg(**wc))
+        windows = build_windows(demos, WindowCfg(**wc))
     if len(windows) == 0:
         raise DataError("no held-out windows to evaluate")
     parts: dict[str, list[torch.Tensor]] = {}

@@ -6,7 +6,15 @@ episode holds the episode's metadata (flattened with ``.``) and its metrics, who
 prefix is dropped (``eval/smoothness`` -> ``smoothness``). Group keys default to the metadata
 keys ``scenario`` and ``planner``.
 
-Units are SI throughout, including the paper's table (its centimetres are stored as metres).
+Every table counts its episodes the same way: ``episodes`` (all of them), ``contact_free``
+(episodes whose contact is known and none occurred), ``contact_unknown`` (episodes whose
+contact is unknown, e.g. read from a log truncated before its metrics; counted neither as
+contact-free nor as contact) and, when the results have a ``completed`` column,
+``completed`` (episodes known to have finished their tasks before their time ran out; an
+unfinished episode has no efficiency).
+
+Units are SI throughout, including the paper's table (its centimetres are stored as metres),
+except in :func:`comparison_table`, which shows the paper's units (cm, ms).
 """
 
 from __future__ import annotations
@@ -31,6 +39,10 @@ __all__ = [
     "PAPER_SCENARIOS",
     "gather_results",
     "summary_table",
+    "comparison_table",
+    "TABLE_COLUMNS",
+    "episode_contact",
+    "incomplete_logs_note",
     "to_markdown",
     "format_table",
     "print_table",
@@ -54,6 +66,17 @@ DEFAULT_METRICS: dict[str, str] = {
     "efficiency": "efficiency (alone / with robot)",
     "mhd": "prediction MHD [m]",
     "prediction_ms": "prediction time [ms]",
+}
+
+#: Columns of :func:`comparison_table` in the paper's units: metric -> (header, scale from SI).
+TABLE_COLUMNS: dict[str, tuple[str, float]] = {
+    "prediction_ms": ("pred. ms", 1.0),
+    "mhd": ("MHD cm", 100.0),
+    "smoothness": ("smoothness", 1.0),
+    "jerkiness": ("jerkiness", 1.0),
+    "min_distance": ("distance cm", 100.0),
+    "efficiency": ("efficiency", 1.0),
+    "waits": ("waits", 1.0),
 }
 
 #: Planner keys and the paper's names for them.
@@ -232,7 +255,7 @@ def _default_metrics(df: pd.DataFrame, exclude: Sequence[str]) -> list[str]:
     known = [m for m in DEFAULT_METRICS if m in df.columns]
     if known:
         return known
-    skip = set(exclude) | {"contact", "seed", "complete"}
+    skip = set(exclude) | {"contact", "seed", "complete", "completed"}
     return [c for c in df.columns if c not in skip and pd.api.types.is_numeric_dtype(df[c])]
 
 
@@ -275,13 +298,53 @@ def _hashable(v: Any) -> Any:
     return "__nan__" if isinstance(v, float) and math.isnan(v) else v
 
 
-def _contact_free(g: pd.DataFrame) -> int:
-    if "contact" in g.columns:
-        c = pd.to_numeric(g["contact"], errors="coerce")
-        return int((c == 0).sum())
-    if "min_distance" in g.columns:
-        return int((pd.to_numeric(g["min_distance"], errors="coerce") > 0).sum())
-    return 0
+def episode_contact(df: pd.DataFrame) -> pd.Series:
+    """Per episode, whether the robot touched the person: 1.0 contact, 0.0 none, NaN unknown.
+
+    The ``contact`` column decides where it holds a value; otherwise ``min_distance`` does
+    (``<= 0``: contact). An episode with neither (a log truncated before its metrics, a NaN
+    distance) is unknown, never a contact.
+    """
+    state = pd.Series(math.nan, index=df.index, dtype=float)
+    if "min_distance" in df.columns:
+        d = pd.to_numeric(df["min_distance"], errors="coerce")
+        state = state.mask(d.notna(), (d <= 0).astype(float))
+    if "contact" in df.columns:
+        c = pd.to_numeric(df["contact"], errors="coerce")
+        state = state.mask(c.notna(), (c > 0).astype(float))
+    return state
+
+
+def _episode_counts(g: pd.DataFrame, with_completed: bool) -> dict[str, int]:
+    """``episodes``, ``contact_free``, ``contact_unknown`` (and ``completed``) of one group."""
+    contact = episode_contact(g)
+    counts = {
+        "episodes": len(g),
+        "contact_free": int((contact == 0).sum()),
+        "contact_unknown": int(contact.isna().sum()),
+    }
+    if with_completed:
+        counts["completed"] = int((pd.to_numeric(g["completed"], errors="coerce") > 0).sum())
+    return counts
+
+
+def incomplete_logs_note(df: pd.DataFrame) -> str:
+    """A sentence naming how many episodes came from truncated or damaged logs ('' if none).
+
+    Args:
+        df: per-episode results (:func:`gather_results`; its ``complete`` column is False for
+            a log read only up to its last complete chunk).
+    """
+    if "complete" not in df.columns:
+        return ""
+    bad = int(df["complete"].eq(False).sum())
+    if bad == 0:
+        return ""
+    unknown = int(episode_contact(df[df["complete"].eq(False)]).isna().sum())
+    return (
+        f"truncated or damaged episode logs: {bad} of {len(df)}; the contact of {unknown} of "
+        "them is unknown (counted in contact_unknown, not in contact_free)."
+    )
 
 
 #: episode settings a run or sweep may vary; summaries keep their values apart
@@ -313,9 +376,10 @@ def summary_table(
     Returns:
         One row per group, in display order (:func:`ordered_values`: speeds slow to fast,
         numbers ascending, planners in :data:`PLANNER_ORDER`, other keys in order of first
-        appearance): the group keys, ``episodes``,
-        ``contact_free`` (episodes with ``contact == 0``, or ``min_distance > 0`` without a
-        contact column) and ``<metric>_mean``, ``<metric>_std`` (sample std; NaN for a single
+        appearance): the group keys, ``episodes``, ``contact_free`` and ``contact_unknown``
+        (:func:`episode_contact` 0 and NaN: an episode of unknown contact is not
+        contact-free), ``completed`` (episodes with ``completed > 0``; only when ``df`` has
+        that column) and ``<metric>_mean``, ``<metric>_std`` (sample std; NaN for a single
         episode). NaN values are left out of means.
 
     Raises:
@@ -329,12 +393,53 @@ def summary_table(
     for keys, g in df.groupby(group_by, sort=False, dropna=False):
         keys = keys if isinstance(keys, tuple) else (keys,)
         row: dict[str, Any] = dict(zip(group_by, keys))
-        row["episodes"] = len(g)
-        row["contact_free"] = _contact_free(g)
+        row.update(_episode_counts(g, "completed" in df.columns))
         for m in metrics:
             v = pd.to_numeric(g[m], errors="coerce")
             row[f"{m}_mean"] = float(v.mean())
             row[f"{m}_std"] = float(v.std(ddof=1)) if v.notna().sum() > 1 else math.nan
+        rows.append(row)
+    return _sort_groups(pd.DataFrame.from_records(rows), group_by).reset_index(drop=True)
+
+
+def _metric_column(df: pd.DataFrame, metric: str) -> str | None:
+    """The column of ``metric``: itself, or a ``stage/metric`` column (``plan/waits``)."""
+    if metric in df.columns:
+        return metric
+    return next((str(c) for c in df.columns if str(c).endswith("/" + metric)), None)
+
+
+def comparison_table(df: pd.DataFrame, group_by: Sequence[str] | None = None) -> pd.DataFrame:
+    """The console table of a run: per group, the episode counts and the paper's metrics.
+
+    Shared by ``iplanner-experiment`` and ``iplanner-evaluate evaluate.mode=episode`` so that
+    both print the same columns in the same units.
+
+    Args:
+        df: per-episode results (:func:`gather_results`).
+        group_by: grouping columns (default :func:`report_groups`: settings that take several
+            values are kept apart, never averaged over).
+
+    Returns:
+        One row per group in display order: the group keys, ``episodes``, ``contact_free``,
+        ``contact_unknown``, ``completed`` (as in :func:`summary_table`), then the mean over
+        episodes of each :data:`TABLE_COLUMNS` metric under its header, in the paper's units
+        (``MHD cm``, ``distance cm``, ``pred. ms``; NaN where no episode has it).
+
+    Raises:
+        ConfigError: when a group column is missing.
+    """
+    group_by = list(report_groups(df) if group_by is None else group_by)
+    _check_columns(df, group_by, "group columns")
+    rows = []
+    for keys, g in df.groupby(group_by, sort=False, dropna=False):
+        keys = keys if isinstance(keys, tuple) else (keys,)
+        row: dict[str, Any] = dict(zip(group_by, keys))
+        row.update(_episode_counts(g, "completed" in df.columns))
+        for metric, (header, scale) in TABLE_COLUMNS.items():
+            col = _metric_column(g, metric)
+            mean = pd.to_numeric(g[col], errors="coerce").mean() if col else math.nan
+            row[header] = float(mean) * scale
         rows.append(row)
     return _sort_groups(pd.DataFrame.from_records(rows), group_by).reset_index(drop=True)
 
@@ -590,7 +695,15 @@ def write_sweep_report(
     summary = summary_table(df, group_by)
     written = [out_dir / "results.csv", out_dir / "results.md"]
     df.to_csv(written[0], index=False)
-    md = ["# Results", "", f"{len(df)} episodes.", "", to_markdown(summary)]
+    note = incomplete_logs_note(df)
+    md = ["# Results", "", f"{len(df)} episodes.", ""] + ([note, ""] if note else [])
+    legend = [
+        "`contact_free`: episodes whose contact is known and none occurred",
+        "`contact_unknown`: episodes whose contact is unknown",
+    ]
+    if "completed" in summary.columns:
+        legend.append("`completed`: episodes known to have finished their tasks")
+    md += ["; ".join(legend) + ".", "", to_markdown(summary)]
     written[1].write_text("\n".join(md))
     if len(group_by) >= 2:
         written += plot_comparison(df, out_dir, group_by=(group_by[-2], group_by[-1]))

@@ -281,6 +281,19 @@ def _quiet() -> None:
         logging.getLogger(name).setLevel(logging.ERROR)
 
 
+def _resume(ckpt: Path, build: Any) -> Any:
+    """``build(torch.load(ckpt))``; a file that cannot be read or built is a CheckpointError
+    naming it and the way out (the sub-model is retrained without it)."""
+    try:
+        d = torch.load(ckpt, map_location="cpu", weights_only=False)
+        return build(d)
+    except Exception as err:  # noqa: BLE001 - a broken file is an error the user must see
+        raise CheckpointError(
+            f"cannot resume from {ckpt}: {type(err).__name__}: {err}; delete the file to "
+            "retrain that sub-model, or run with train.resume=false"
+        ) from err
+
+
 def train_svgp(
     x: torch.Tensor,
     y: torch.Tensor,
@@ -315,11 +328,7 @@ def train_svgp(
     """
     ckpt = out_dir / f"{name}.ckpt"
     if resume and ckpt.is_file():
-        try:
-            d = torch.load(ckpt, map_location="cpu", weights_only=False)
-            return SVGPRegressor.from_checkpoint(d["svgp"])
-        except Exception as err:  # noqa: BLE001 - a broken file is an error the user must see
-            raise CheckpointError(f"cannot resume from {ckpt}: {err}") from err
+        return _resume(ckpt, lambda d: SVGPRegressor.from_checkpoint(d["svgp"]))
     L.seed_everything(tcfg.seed, verbose=False)
     reg = SVGPRegressor.from_data(cfg, x, y, window=window)
     n = x.shape[0]
@@ -533,8 +542,7 @@ def _train_classifier(
         return None
     ckpt = out_dir / "classifier.ckpt"
     if resume and ckpt.is_file():
-        d = torch.load(ckpt, map_location="cpu", weights_only=False)
-        return ActionClassifier.from_state_dict(d["classifier"])
+        return _resume(ckpt, lambda d: ActionClassifier.from_state_dict(d["classifier"]))
     L.seed_everything(tcfg.seed, verbose=False)
     idx = _subsample(torch.arange(len(train)), cfg.classifier_max_train, cfg.seed)
     x = (train.f_prev[idx] - feat_mean) / feat_std

@@ -62,6 +62,102 @@ def test_data_errors_are_one_line_with_exit_code_2(tmp_path: Path) -> None:
     assert res.returncode != 0 and "pth" in res.stderr
 
 
+def test_data_generate_refuses_existing_dataset_then_overwrites(tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    gen = ["iplanner-data", "generate", f"data.path={out}", "progress=false"]
+    res = _run([*gen, "data.generator.reaches_per_target=2"], tmp_path)
+    assert res.returncode == 0, res.stderr
+    (out / "notes.txt").write_text("mine")
+    res = _run([*gen, "data.generator.reaches_per_target=1"], tmp_path)
+    assert res.returncode == 2 and "wrote" not in res.stdout
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: ConfigError: {out} already holds 16")
+    assert "data.overwrite=true" in lines[0]
+    assert len(load_demonstrations(out)) == 16
+    res = _run([*gen, "data.generator.reaches_per_target=1", "data.overwrite=true"], tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "deleted 16 earlier demonstration files and its dataset card" in res.stdout
+    assert "wrote 8 demonstrations" in res.stdout
+    assert len(load_demonstrations(out)) == 8 and (out / "notes.txt").read_text() == "mine"
+    assert "| demonstrations | 8 |" in (out / "README.md").read_text()
+    res = _run(["iplanner-data", "info", f"data.path={out}"], tmp_path)
+    assert res.returncode == 0 and f"{out}: 8 demonstrations" in res.stdout
+    res = _run([*gen, "data.overwrite=yes"], tmp_path)
+    assert res.returncode == 2 and "data.overwrite: expected true or false" in res.stderr
+
+
+def test_data_help_anywhere_lists_commands_and_options(tmp_path: Path) -> None:
+    import dataclasses
+
+    from iplanner_torch.data.reaching import ReachingCfg
+    from iplanner_torch.data.tasks import TaskDatasetCfg
+
+    conf = Path(__file__).resolve().parents[2] / "conf" / "data"
+    for args in (["-h"], ["--help"], ["-h", "generate"], ["generate", "--help"],
+                 ["info", "data.path=x", "-h"]):  # fmt: skip
+        res = _run(["iplanner-data", *args], tmp_path)
+        assert res.returncode == 0, (args, res.stderr)
+        assert res.stderr == "" and "Traceback" not in res.stdout
+        assert "generate" in res.stdout and "info" in res.stdout
+    text = res.stdout
+    assert "convert" not in text and "``" not in text
+    options = sorted(p.stem for p in conf.glob("*.yaml"))
+    assert f"data={'|'.join(sorted(options, key=text.index))}" in text
+    for key in ("data.path=", "data.overwrite=true", "data.generator.", "data.windows.joints"):
+        assert key in text
+    for kind, cfg in (("reaching", ReachingCfg), ("tasks", TaskDatasetCfg)):
+        line = next(ln for ln in text.splitlines() if ln.strip().startswith(f"{kind}: "))
+        named = [n.strip() for n in line.split(":", 1)[1].split(",") if n.strip()]
+        fields = {f.name for f in dataclasses.fields(cfg)}
+        assert named and set(named) <= fields, (kind, set(named) - fields)
+
+
+def test_data_info_names_the_files_training_would_reject(tmp_path: Path) -> None:
+    import numpy as np
+
+    from iplanner_torch.data.io import save_demonstration
+
+    out = tmp_path / "ds"
+    res = _run(["iplanner-data", "generate", f"data.path={out}",
+                "data.generator.reaches_per_target=1", "progress=false"], tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    files = sorted(out.glob("*.npz"))
+    demos = load_demonstrations(out)
+    demos[2].positions[:, 0] = np.nan  # head lost in every frame: reported, not rejected
+    save_demonstration(demos[2], files[2])
+    res = _run(["iplanner-data", "info", f"data.path={out}"], tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "joints NaN in every frame in 1 file(s)" in res.stdout
+    assert f"    {files[2]}: head\n" in res.stdout
+    demos[5].positions[:] = np.nan  # nothing observed: training cannot use it
+    save_demonstration(demos[5], files[5])
+    res = _run(["iplanner-data", "info", f"data.path={out}"], tmp_path)
+    assert res.returncode == 2
+    assert res.stderr.startswith(f"error: DataError: {files[5]}: field 'positions' is NaN in")
+    files[5].unlink()
+    save_demonstration(demos[6].select_joints(["right_hand", "head"]), files[6])
+    res = _run(["iplanner-data", "info", f"data.path={out}"], tmp_path)
+    assert res.returncode == 2
+    assert res.stderr.startswith(f"error: DataError: {files[6]}: field 'joint_names' ")
+    assert "['right_hand', 'head']" in res.stderr and f"of {files[0]}" in res.stderr
+    # training selects joints with data.windows.joints; info then checks those alone
+    res = _run(["iplanner-data", "info", f"data.path={out}",
+                "data.windows.joints=[head,right_hand]"], tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "7 demonstrations" in res.stdout and "joints (2): head, right_hand" in res.stdout
+
+
+def test_data_missing_folder_errors_say_how_to_fix(tmp_path: Path) -> None:
+    res = _run(["iplanner-data", "info", "data=lego"], tmp_path)
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "no such file or folder" in lines[0]
+    assert "set data.path=" in lines[0]
+    res = _run(["iplanner-data", "info", "data.path=nope"], tmp_path)
+    assert res.returncode == 2
+    assert "`iplanner-data generate data.path=nope`" in res.stderr
+
+
 def test_experiment_itomp_short_episode(tmp_path: Path) -> None:
     res = _run(
         [
@@ -91,3 +187,39 @@ def test_main_job_default(tmp_path: Path) -> None:
     assert res.returncode == 0, res.stderr[-3000:]
     for planner in ("itomp", "iplanner_no_ni", "iplanner_ni"):
         assert planner in res.stdout
+
+
+def test_evaluate_episode_table_counts_a_truncated_log_as_unknown(tmp_path: Path) -> None:
+    """``iplanner-evaluate evaluate.mode=episode`` on one good and one truncated log prints the
+    experiment's columns (cm) and counts the cut episode neither as contact-free nor contact."""
+    import numpy as np
+
+    from iplanner_torch.recording import EpisodeWriter
+
+    g = np.random.default_rng(0)
+    logs = tmp_path / "logs"
+    for name in ("good", "cut"):
+        path = logs / f"{name}.mcap"
+        with EpisodeWriter(path, metadata={"scenario": "s1", "planner": "itomp"},
+                           chunk_size=8 * 1024) as log:  # fmt: skip
+            for i in range(2000):
+                log.robot_state(i / 15, g.normal(size=7), g.normal(size=7), list("abcdefg"))
+            log.metrics(
+                2000 / 15,
+                {"eval/contact": 0.0, "eval/min_distance": 0.0604, "eval/mhd": 0.0458,
+                 "eval/completed": 1.0},
+            )  # fmt: skip
+    os.truncate(logs / "cut.mcap", int(0.9 * (logs / "cut.mcap").stat().st_size))
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode", f"evaluate.logs={logs}",
+                f"evaluate.out_dir={tmp_path / 'out'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "DataWarning" in res.stderr and "cut.mcap: episode log is truncated" in res.stderr
+    lines = res.stdout.splitlines()
+    at = next(i for i, ln in enumerate(lines) if ln.startswith("scenario"))
+    names = [h for h in lines[at].split("  ") if h.strip()]  # headers hold single spaces
+    cells = dict(zip((h.strip() for h in names), lines[at + 2].split()))
+    assert cells["scenario"] == "s1" and cells["planner"] == "itomp"
+    assert (cells["episodes"], cells["contact_free"], cells["contact_unknown"]) == ("2", "1", "1")
+    assert cells["completed"] == "1"
+    assert cells["distance cm"] == "6.04" and cells["MHD cm"] == "4.58"
+    assert "truncated or damaged episode logs: 1 of 2" in res.stdout

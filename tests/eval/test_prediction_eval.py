@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import math
+import warnings
 
+import numpy as np
 import pytest
 import torch
 from scipy.stats import chi2
 
+from iplanner_torch.data.demonstration import Demonstration
+from iplanner_torch.data.windows import WindowCfg, build_windows
+from iplanner_torch.errors import DataWarning
 from iplanner_torch.eval.prediction import evaluate_prediction, modified_hausdorff, window_metrics
 from iplanner_torch.prediction.forecast import Forecast
 
@@ -109,3 +114,75 @@ def test_evaluate_prediction_on_held_out_demos(tmp_path) -> None:
     assert res["mhd_1s"] < 0.1
     assert 0.7 < res["coverage95"] <= 1.0
     assert len(frame) == res["n_windows"]
+
+
+class _HoldPredictor:
+    """Predicts the last observed pose, held still, for the first of its actions; carries the
+    frame rate and action names a checkpoint stores."""
+
+    n_prev, n_future = 4, 3
+    joint_names = JOINTS
+    feature_kinds = ("position",)
+    window_cfg: dict = {}
+
+    def __init__(self, fps: float, action_names: tuple[str, ...]) -> None:
+        self.fps = fps
+        self.action_names = action_names
+
+    def predict(self, f_prev: torch.Tensor, progress: torch.Tensor) -> Forecast:
+        b, k, a = f_prev.shape[0], len(JOINTS), len(self.action_names)
+        pose = f_prev[:, -1, : 3 * k].reshape(b, 1, 1, k, 3)  # (B, 1, 1, K, 3)
+        mean = pose.expand(b, a, self.n_future, k, 3).clone()  # (B, A, n_f, K, 3)
+        weights = torch.zeros(b, a)
+        weights[:, 0] = 1.0
+        return Forecast(
+            weights=weights,
+            mean=mean,
+            var=torch.full_like(mean, 1e-4),
+            dt=1.0 / self.fps,
+            joint_names=JOINTS,
+            action_names=self.action_names,
+        )
+
+
+def _still_demo(fps: float = 15.0, actions: tuple[str, ...] = ("reach_0", "reach_1")):
+    """A person standing still for 20 frames while doing action 0."""
+    pose = np.array([[0.0, 0.0, 1.0], [0.3, 0.2, 1.0], [0.3, -0.2, 1.0]])
+    return Demonstration(
+        positions=np.repeat(pose[None], 20, axis=0),
+        labels=np.zeros(20),
+        fps=fps,
+        joint_names=JOINTS,
+        action_names=actions,
+    )
+
+
+def test_matching_data_evaluates_without_warning() -> None:
+    predictor = _HoldPredictor(15.0, ("reach_0", "reach_1"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = evaluate_prediction(predictor, [_still_demo()])
+    assert res["n_windows"] == 20 - 4 - 3 + 1
+    assert res["class_accuracy"] == 1.0 and res["reg_precision"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_frame_rate_mismatch_warns_and_still_evaluates() -> None:
+    """A 30 fps checkpoint on 15 fps data: a DataWarning naming both rates."""
+    predictor = _HoldPredictor(30.0, ("reach_0", "reach_1"))
+    with pytest.warns(DataWarning, match="data is at 15 fps but the predictor was trained at 30"):
+        res = evaluate_prediction(predictor, [_still_demo()])
+    assert res["n_windows"] == 14 and res["reg_precision"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_action_name_mismatch_warns_on_demonstrations_and_windows() -> None:
+    """A checkpoint of unlabelled motion on the reaching set: the class metrics mean nothing."""
+    predictor = _HoldPredictor(15.0, ("unlabelled",))
+    demo = _still_demo()
+    match = r"data has 2 actions \(reach_0, reach_1\) but the predictor was trained on 1 action"
+    with pytest.warns(DataWarning, match=match) as rec:
+        evaluate_prediction(predictor, [demo])
+    assert not any("fps" in str(r.message) for r in rec)  # the frame rates agree
+    windows = build_windows([demo], WindowCfg(n_prev=4, n_future=3, feature_kinds=("position",)))
+    with pytest.warns(DataWarning, match="class_\\* metrics compare unrelated labels"):
+        res = evaluate_prediction(predictor, windows)
+    assert res["n_windows"] == len(windows)

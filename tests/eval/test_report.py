@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import re
 from pathlib import Path
 
@@ -11,12 +12,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.eval.report import (
     PAPER_SCENARIOS,
     PLANNERS,
+    comparison_table,
+    episode_contact,
     format_table,
     gather_results,
+    incomplete_logs_note,
     natural_key,
     ordered_values,
     paper_table_simulation,
@@ -28,7 +32,7 @@ from iplanner_torch.eval.report import (
     to_markdown,
     write_sweep_report,
 )
-from iplanner_torch.recording import EpisodeWriter
+from iplanner_torch.recording import EpisodeWriter, read_episode
 
 PAPER = Path(__file__).resolve().parents[2].parent / "shared" / "paper"
 PAPER_TEX = PAPER / "000_21911837daab3a29.txt"
@@ -95,6 +99,7 @@ def test_summary_table_means_stds_and_counts(results: pd.DataFrame) -> None:
         g = results[(results.scenario == row.scenario) & (results.planner == row.planner)]
         assert row.episodes == len(g) == 3
         assert row.contact_free == int((g.min_distance > 0).sum())
+        assert row.contact_unknown == 0
         vals = g.smoothness.to_numpy()
         assert row.smoothness_mean == pytest.approx(vals.mean())
         assert row.smoothness_std == pytest.approx(vals.std(ddof=1))
@@ -113,6 +118,7 @@ def test_markdown_and_console_tables(results: pd.DataFrame) -> None:
         "planner",
         "episodes",
         "contact_free",
+        "contact_unknown",
         "smoothness",
         "min_distance",
     ]
@@ -302,3 +308,122 @@ def test_sweep_report_lays_out_the_other_settings_and_skips_flat_sweeps(
     written = write_sweep_report(flat, tmp_path / "b", report_groups(flat), sweep="confidence")
     assert not calls and not any(p.name.startswith("sweep_") for p in written)
     assert "compare_smoothness.png" in {p.name for p in written}
+
+
+def _episode_log(path: Path, metrics: dict, planner: str = "itomp", steps: int = 2000) -> Path:
+    """A real episode log: ``steps`` robot states in 8 KiB chunks, then the metrics."""
+    g = np.random.default_rng(0)
+    joints = [f"j{i}" for i in range(7)]
+    meta = {"scenario": "s1", "planner": planner, "seed": 0}
+    with EpisodeWriter(path, metadata=meta, chunk_size=8 * 1024) as log:
+        for i in range(steps):
+            log.robot_state(i / 15, g.normal(size=7), g.normal(size=7), joints)
+        log.metrics(steps / 15, metrics)
+    return path
+
+
+def _cut(path: Path, fraction: float = 0.9) -> Path:
+    """Truncate a log to ``fraction`` of its size, as a killed episode leaves it."""
+    os.truncate(path, int(fraction * path.stat().st_size))
+    return path
+
+
+FREE = {"eval/contact": 0.0, "eval/min_distance": 0.0604, "eval/completed": 1.0}
+TOUCH = {"eval/contact": 1.0, "eval/min_distance": -0.01, "eval/completed": 1.0}
+
+
+def test_episode_contact_is_unknown_without_a_value_not_a_contact() -> None:
+    df = pd.DataFrame(
+        {
+            "contact": [0.0, 1.0, math.nan, math.nan, math.nan],
+            "min_distance": [0.1, -0.01, -0.02, 0.03, math.nan],
+        }
+    )
+    np.testing.assert_array_equal(episode_contact(df), [0.0, 1.0, 1.0, 0.0, math.nan])
+    assert episode_contact(pd.DataFrame({"smoothness": [1.0, 2.0]})).isna().all()
+
+
+def test_a_truncated_log_counts_as_unknown_contact_in_every_table(tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    _episode_log(logs / "0.mcap", FREE)
+    _episode_log(logs / "1.mcap", TOUCH)
+    cut = _cut(_episode_log(logs / "2.mcap", FREE))
+    with pytest.warns(DataWarning, match="truncated or damaged"):
+        assert read_episode(cut).metrics() == {}  # the cut took the metrics with it
+
+    with pytest.warns(DataWarning, match="truncated or damaged"):
+        alone = gather_results(cut)
+    assert not alone.loc[0, "complete"] and alone.loc[0, "planner"] == "itomp"
+    for table in (summary_table(alone, ["planner"]), comparison_table(alone)):
+        row = table.iloc[0]
+        assert (row.episodes, row.contact_free, row.contact_unknown) == (1, 0, 1)
+
+    with pytest.warns(DataWarning, match="truncated or damaged"):
+        df = gather_results(logs)
+    assert list(df["complete"]) == [True, True, False]
+    for table in (summary_table(df, ["planner"]), comparison_table(df)):
+        row = table.iloc[0]
+        # one contact-free, one contact, one unknown: the cut log is neither
+        assert (row.episodes, row.contact_free, row.contact_unknown) == (3, 1, 1)
+        assert row.completed == 2
+    note = incomplete_logs_note(df)
+    assert note.startswith("truncated or damaged episode logs: 1 of 3; the contact of 1 ")
+    assert incomplete_logs_note(df[df["complete"]]) == ""
+    write_sweep_report(df, tmp_path / "report", ["planner"])
+    md = (tmp_path / "report" / "results.md").read_text()
+    assert note in md and "| itomp | 3 | 1 | 1 | 2 |" in md
+
+
+def test_a_log_cut_after_its_metrics_keeps_its_contact(tmp_path: Path) -> None:
+    """Only the footer lost: the metrics were read, so the episode counts as contact-free."""
+    cut = _cut(_episode_log(tmp_path / "0.mcap", FREE, steps=20), 0.98)
+    with pytest.warns(DataWarning, match="truncated or damaged"):
+        df = gather_results(cut)
+    assert not df.loc[0, "complete"] and df.loc[0, "contact"] == 0.0
+    row = comparison_table(df).iloc[0]
+    assert (row.contact_free, row.contact_unknown) == (1, 0)
+    assert "the contact of 0 of them is unknown" in incomplete_logs_note(df)
+
+
+def test_comparison_table_shows_the_paper_units_and_completed_episodes() -> None:
+    rows = [
+        {
+            "scenario": "s1",
+            "planner": "iplanner_ni",
+            "seed": seed,
+            "eval/min_distance": d,
+            "eval/mhd": mhd,
+            "eval/contact": 0.0,
+            "eval/completed": done,
+            "eval/efficiency": eff,
+            "eval/prediction_ms": 2.0,
+            "plan/waits": waits,
+        }
+        for seed, d, mhd, done, eff, waits in (
+            (0, 0.0504, 0.0358, 1.0, 1.5, 3.0),
+            (1, 0.0704, 0.0558, 1.0, 1.7, 5.0),
+            (2, 0.0604, 0.0458, 0.0, math.nan, 10.0),  # time ran out: no efficiency
+        )
+    ]
+    df = gather_results(rows)
+    table = comparison_table(df)
+    assert list(table.columns[:6]) == [
+        "scenario",
+        "planner",
+        "episodes",
+        "contact_free",
+        "contact_unknown",
+        "completed",
+    ]
+    row = table.iloc[0]
+    assert (row.episodes, row.completed, row.contact_free) == (3, 2, 3)
+    assert row["distance cm"] == pytest.approx(6.04) and row["MHD cm"] == pytest.approx(4.58)
+    assert row["efficiency"] == pytest.approx(1.6)  # the two finished episodes
+    assert row["waits"] == pytest.approx(6.0) and row["pred. ms"] == pytest.approx(2.0)
+    text = format_table(table).splitlines()
+    assert "distance cm" in text[0] and "MHD cm" in text[0] and "completed" in text[0]
+    assert "6.04" in text[2] and "4.58" in text[2] and "0.0604" not in text[2]
+    # the summary counts completed episodes the same way
+    assert summary_table(df).iloc[0]["completed"] == 2
+    # without a completed column there is nothing to count
+    assert "completed" not in comparison_table(gather_results([{"planner": "a", "x": 1.0}]))

@@ -12,7 +12,7 @@ from omegaconf import OmegaConf
 
 from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
 from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
-from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError
 from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
 from iplanner_torch.prediction.svgp import SVGPCfg
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
@@ -64,17 +64,29 @@ def test_writes_checkpoints_logs_and_resumes(tmp_path: Path) -> None:
     pred = HumanMotionPredictor.load(path)
     fc = pred.predict(va.f_prev[:3], va.progress[:3])
     before = {p: p.stat().st_mtime_ns for p in gp_ckpts}
-    path2 = train_predictor(
-        (tr, va),
-        predictor_cfg=_cfg(),
-        trainer_cfg=tcfg,
-        out_dir=tmp_path,
-        progress=False,
-        resume=True,
-    )
+
+    def resume() -> Path:
+        return train_predictor(
+            (tr, va),
+            predictor_cfg=_cfg(),
+            trainer_cfg=tcfg,
+            out_dir=tmp_path,
+            progress=False,
+            resume=True,
+        )
+
+    path2 = resume()
     assert {p: p.stat().st_mtime_ns for p in gp_ckpts} == before
     fc2 = HumanMotionPredictor.load(path2).predict(va.f_prev[:3], va.progress[:3])
     torch.testing.assert_close(fc.mean, fc2.mean)
+    # a damaged sub-model checkpoint is named, with the way out, instead of unpickling noise
+    for broken in (gp_ckpts[0], tmp_path / "classifier.ckpt"):
+        good = broken.read_bytes()
+        broken.write_bytes(b"\xef" + good[1:200])
+        with pytest.raises(CheckpointError, match="cannot resume from .*train.resume=false") as e:
+            resume()
+        assert str(broken) in str(e.value)
+        broken.write_bytes(good)
 
 
 def test_single_wrist_dataset_with_nigp(tmp_path: Path) -> None:

@@ -1,0 +1,122 @@
+"""Command-line input: values of the wrong type are refused up front with their key; --help."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+
+from iplanner_torch.cli._common import cfg_list, cfg_scalar, instantiate
+from iplanner_torch.errors import ConfigError
+from iplanner_torch.prediction.training import TrainerCfg
+from iplanner_torch.sim.human import HumanCfg
+
+
+def _root(**trainer: object):
+    node = {"_target_": "iplanner_torch.prediction.training.TrainerCfg", **trainer}
+    return OmegaConf.create({"seed": 0, "trainer": node})
+
+
+def test_instantiate_accepts_fitting_types() -> None:
+    cfg = instantiate(_root(max_steps=5, seed=3, tensorboard=False).trainer)
+    assert isinstance(cfg, TrainerCfg) and cfg.max_steps == 5 and cfg.tensorboard is False
+    assert instantiate(_root(max_steps=None).trainer).max_steps is None  # int | None
+    # an int where a float is expected is fine; lists and literals are left to the dataclass
+    human = instantiate(
+        OmegaConf.create({"_target_": "iplanner_torch.sim.human.HumanCfg", "hold_s": 1})
+    )
+    assert isinstance(human, HumanCfg) and human.hold_s == 1
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("max_steps", "abc", "trainer.max_steps: expected int, got 'abc'"),
+        ("max_steps", 1.5, "trainer.max_steps: expected int, got 1.5"),
+        ("tensorboard", 1, "trainer.tensorboard: expected bool, got 1"),
+        ("seed", True, "trainer.seed: expected int, got True"),
+    ],
+)
+def test_instantiate_names_the_wrong_key(key: str, value: object, message: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        instantiate(_root(**{key: value}).trainer)
+    assert str(err.value) == message
+
+
+def test_nested_nodes_are_checked() -> None:
+    node = OmegaConf.create(
+        {
+            "episode": {
+                "_target_": "iplanner_torch.eval.episode.EpisodeCfg",
+                "sim": {
+                    "_target_": "iplanner_torch.sim.env.SimCfg",
+                    "human": {"_target_": "iplanner_torch.sim.human.HumanCfg", "hold_s": "x"},
+                },
+            }
+        }
+    )
+    with pytest.raises(ConfigError, match=r"episode\.sim\.human\.hold_s: expected float"):
+        instantiate(node.episode)
+
+
+def test_cfg_scalar_and_list() -> None:
+    cfg = OmegaConf.create({"seed": 3, "run": {"seeds": [0, 1], "bad": "zero", "x": 0.5}})
+    assert cfg_scalar(cfg, "seed", int) == 3
+    assert cfg_scalar(cfg.run, "x", float) == 0.5
+    assert cfg_list(cfg.run, "seeds", int) == [0, 1]
+    with pytest.raises(ConfigError, match=r"run\.bad: expected a list of int, got 'zero'"):
+        cfg_list(cfg.run, "bad", int)
+    with pytest.raises(ConfigError, match=r"run\.x: expected int, got 0\.5"):
+        cfg_scalar(cfg.run, "x", int)
+
+
+def test_console_script_reports_a_wrong_type_in_one_line(tmp_path: Path) -> None:
+    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+    res = subprocess.run(
+        [sys.executable, "-m", "iplanner_torch.cli.experiment", "seed=abc"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip() == "error: ConfigError: seed: expected int, got 'abc'"
+
+
+def test_help_lists_groups_options_and_defaults() -> None:
+    from iplanner_torch.cli._common import command_help
+
+    text = command_help("``x``: a command.\n\nExamples::\n\n    x a=1\n")
+    lines = text.splitlines()
+    assert lines[0] == "``x``: a command."
+    groups = {
+        ln.split()[0]: ln.split(None, 1)[1]
+        for ln in lines
+        if ln.startswith("  ") and not ln.startswith("    ")
+    }
+    conf = Path(__file__).resolve().parents[2] / "conf"
+    assert set(groups) == {d.name for d in conf.iterdir() if d.is_dir() and d.name != "hydra"} | {
+        "hydra/launcher"
+    }
+    assert groups["trainer"] == "default*, fast"
+    assert (
+        groups["experiment"].startswith("null*, ") and "table_simulation" in groups["experiment"]
+    )
+    assert "slurm" in groups["hydra/launcher"] and "joblib" in groups["hydra/launcher"]
+
+
+def test_console_help_exits_zero(tmp_path: Path) -> None:
+    res = subprocess.run(
+        [sys.executable, "-m", "iplanner_torch.cli.evaluate", "evaluate.mode=episode", "-h"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.startswith("``iplanner-evaluate``") and "Config groups" in res.stdout
