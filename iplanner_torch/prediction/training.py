@@ -24,6 +24,7 @@ from typing import Any, Literal
 import lightning as L
 import torch
 from torch.utils.data import DataLoader, TensorDataset
+from tqdm.auto import tqdm
 
 from iplanner_torch.data.windows import WindowSet
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError
@@ -449,18 +450,39 @@ def train_predictor(
     feat_std = train.f_prev.reshape(-1, d).std(0).clamp_min(1e-6)
     progress_actions = train.cfg.progress_indices(train.action_names)
 
-    classifier = _train_classifier(
-        train, cfg, trainer_cfg, out_dir, feat_mean, feat_std, progress, resume
-    )
-    next_model = _train_next_action(train, cfg)
-
-    x_all, y_all = _gp_xy(train, cfg.gp_input)
-    xv_all, yv_all = _gp_xy(val, cfg.gp_input) if val is not None and len(val) else (None, None)
     groups: dict[tuple[int, int], torch.Tensor] = {}
     for p in torch.unique(train.progress).tolist():
         for c in torch.unique(train.current[train.progress == p]).tolist():
             idx = torch.nonzero((train.progress == p) & (train.current == c))[:, 0]
             groups[(int(p), int(c))] = idx
+    jobs = [(pc, idx) for pc, idx in sorted(groups.items()) if idx.numel() >= cfg.min_group_size]
+    fitted = {pc for pc, _ in jobs}
+    pooled_jobs: list[tuple[int, torch.Tensor]] = []
+    aliases: dict[int, tuple[int, int]] = {}  # action -> its one group's GP, reused as pooled
+    for c in torch.unique(train.current).tolist():
+        own = [pc for pc in groups if pc[1] == c]
+        if len(own) == 1 and own[0] in fitted:
+            aliases[c] = own[0]
+            continue
+        idx = torch.nonzero(train.current == c)[:, 0]
+        if idx.numel() >= cfg.min_group_size:
+            pooled_jobs.append((c, idx))
+    # one bar over the sub-models (the classifier and every GP) instead of one per model
+    bar = tqdm(
+        total=1 + len(jobs) + len(pooled_jobs),
+        desc=f"training {out_dir.name}",
+        unit="model",
+        disable=not progress,
+    )
+    bar.set_postfix_str("classifier")
+    classifier = _train_classifier(
+        train, cfg, trainer_cfg, out_dir, feat_mean, feat_std, False, resume
+    )
+    bar.update()
+    next_model = _train_next_action(train, cfg)
+
+    x_all, y_all = _gp_xy(train, cfg.gp_input)
+    xv_all, yv_all = _gp_xy(val, cfg.gp_input) if val is not None and len(val) else (None, None)
 
     def val_rows(p: int | None, c: int) -> tuple[torch.Tensor | None, torch.Tensor | None]:
         if xv_all is None:
@@ -474,7 +496,8 @@ def train_predictor(
         """One GP on (a subsample of) the training rows ``idx``, validated on (p, c)."""
         idx = _subsample(idx, cfg.max_gp_points, cfg.seed)
         xv, yv = val_rows(p, c)
-        return train_svgp(
+        bar.set_postfix_str(name)
+        reg = train_svgp(
             x_all[idx],
             y_all[idx],
             cfg=cfg.svgp,
@@ -484,24 +507,23 @@ def train_predictor(
             window=(n_p, d),
             x_val=xv,
             y_val=yv,
-            progress=progress,
+            progress=False,
             resume=resume,
         )
+        bar.update()
+        return reg
 
     gps: dict[tuple[int, int], SVGPRegressor] = {}
-    jobs = [(pc, idx) for pc, idx in sorted(groups.items()) if idx.numel() >= cfg.min_group_size]
     for (p, c), idx in jobs:
         gps[(p, c)] = fit(idx, p, c, f"gp_p{p}_c{c}")
+    own_pooled = {c: fit(idx, None, c, f"gp_pooled_c{c}") for c, idx in pooled_jobs}
+    bar.close()
     pooled: dict[int, SVGPRegressor] = {}
-    for c in torch.unique(train.current).tolist():
-        own = [pc for pc in groups if pc[1] == c]
-        if len(own) == 1 and own[0] in gps:
-            pooled[c] = gps[own[0]]
-            continue
-        idx = torch.nonzero(train.current == c)[:, 0]
-        if idx.numel() < cfg.min_group_size:
-            continue
-        pooled[c] = fit(idx, None, c, f"gp_pooled_c{c}")
+    for c in torch.unique(train.current).tolist():  # in action order, as the predictor keeps it
+        if c in aliases:
+            pooled[c] = gps[aliases[c]]
+        elif c in own_pooled:
+            pooled[c] = own_pooled[c]
 
     predictor = HumanMotionPredictor(
         cfg=cfg,
