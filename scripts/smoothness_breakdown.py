@@ -5,8 +5,9 @@ Usage::
 
     python scripts/smoothness_breakdown.py <run dir> [--settle 1.0] [--episodes]
 
-Reads every ``*.mcap`` episode log under the run folder and prints, per scenario and planner,
-the means of :func:`iplanner_torch.eval.smoothness.episode_breakdown`:
+Reads every ``*.mcap`` episode log under the run folder and prints, per scenario, swept
+setting (speed, noise, confidence, when they vary) and planner, the means of
+:func:`iplanner_torch.eval.smoothness.episode_breakdown`:
 
 - ``smoothness_log``: the paper's smoothness of the logged robot states (sampled more sparsely
   than ``eval/smoothness``, so lower; compare planners, not absolute values);
@@ -27,7 +28,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from iplanner_torch.eval.report import to_markdown
+from iplanner_torch.eval.report import SWEPT_SETTINGS, report_groups, to_markdown
 from iplanner_torch.eval.smoothness import episode_breakdown
 from iplanner_torch.recording import read_episode
 
@@ -55,19 +56,17 @@ def main() -> None:
         ep = read_episode(path)
         b = episode_breakdown(ep, settle_s=args.settle)
         meta = ep.metadata
-        row = {
-            "scenario": meta.get("scenario", "?"),
-            "planner": meta.get("planner", "?"),
-            "seed": meta.get("seed", -1),
-        }
+        row = {key: meta.get(key) for key in ("scenario", *SWEPT_SETTINGS, "planner", "seed")}
         row.update({col: getattr(b, attr) for col, attr in COLUMNS.items()})
         rows.append(row)
     df = pd.DataFrame(rows)
     if args.episodes:
         print(to_markdown(df))
         print()
-    means = df.groupby(["scenario", "planner"], sort=False)[list(COLUMNS)].mean().reset_index()
-    means.insert(2, "episodes", df.groupby(["scenario", "planner"], sort=False).size().values)
+    df = df.dropna(axis=1, how="all")
+    groups = list(report_groups(df))  # swept speeds, noises, confidences are kept apart
+    means = df.groupby(groups, sort=False)[list(COLUMNS)].mean().reset_index()
+    means.insert(len(groups), "episodes", df.groupby(groups, sort=False).size().values)
     print(to_markdown(means))
 
 
