@@ -689,7 +689,15 @@ def _run_episode(
     t_goal: float | None = None
     step = 0
     wall0 = time.perf_counter()
-    bar = tqdm(total=cfg.max_duration_s, unit="sim s", disable=not cfg.progress_bar, leave=False)
+    bar = tqdm(
+        total=cfg.max_duration_s,
+        desc=f"{cfg.scenario.name} {planner_kind} seed {seed}",
+        unit="sim s",
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.0f} sim s "
+        "[{elapsed}<{remaining}, {rate_fmt}]",
+        disable=not cfg.progress_bar,
+        leave=False,
+    )
     try:
         while env.time < cfg.max_duration_s - 0.5 * env.control_dt:
             t = env.time
