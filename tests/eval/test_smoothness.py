@@ -106,3 +106,36 @@ def test_episode_breakdown_reads_a_log(tmp_path: Path) -> None:
 
     with pytest.raises(DataError, match="plan"):
         episode_breakdown(NoPlans())
+
+
+def test_breakdown_script_groups_by_swept_speed(tmp_path: Path) -> None:
+    """scripts/smoothness_breakdown.py: one row per scenario, speed (it varies) and planner,
+    the means of the episodes' breakdowns."""
+    import subprocess
+    import sys
+
+    from iplanner_torch.recording import EpisodeWriter
+
+    t, q = _executed()
+    expected = {}
+    for speed, scale in (("slow", 1.0), ("fast", 2.0)):
+        for seed in (0, 1):
+            meta = {"scenario": "s1", "planner": "itomp", "speed": speed, "seed": seed}
+            with EpisodeWriter(tmp_path / f"{speed}_{seed}.mcap", metadata=meta) as log:
+                for p in PLANS:
+                    log.plan(float(p.times[0]), p.times, p.q, True, p.wait_s, 1.0)
+                for i in range(t.shape[0]):
+                    log.robot_state(float(t[i]), scale * q[i], np.zeros(2), ["a", "b"])
+            expected[speed] = smoothness_breakdown(t, scale * q, PLANS).smoothness
+    script = Path(__file__).resolve().parents[2] / "scripts" / "smoothness_breakdown.py"
+    res = subprocess.run(
+        [sys.executable, str(script), str(tmp_path)], capture_output=True, text=True, timeout=300
+    )
+    assert res.returncode == 0, res.stderr
+    rows = [ln.split("|")[1:-1] for ln in res.stdout.splitlines() if ln.startswith("| s1")]
+    got = {r[1].strip(): (r[2].strip(), int(r[3]), float(r[4])) for r in rows}
+    assert set(got) == {"slow", "fast"}
+    for speed, (planner, episodes, smooth) in got.items():
+        assert planner == "itomp" and episodes == 2
+        assert smooth == pytest.approx(expected[speed], rel=2e-3)  # 3 significant digits
+    assert expected["fast"] == pytest.approx(4 * expected["slow"])
