@@ -71,8 +71,8 @@ def _fits(value: Any, expected: type) -> bool:
 
 
 def _wrong_type(node: DictConfig) -> str | None:
-    """The first value under ``node`` whose type does not fit its dataclass field's default
-    (``"trainer.max_steps: expected int, got 'abc'"``), or None."""
+    """The first value under ``node`` whose type does not fit its dataclass field
+    (:func:`_scalar_type`; ``"trainer.max_steps: expected int, got 'abc'"``), or None."""
     import dataclasses
 
     from hydra.utils import get_class
@@ -105,6 +105,7 @@ def _wrong_type(node: DictConfig) -> str | None:
 def _scalar_type(cls: type, field: Any) -> type | None:
     """bool, int, float or str when a dataclass field holds one (``X`` or ``X | None``)."""
     import dataclasses
+    import types
     import typing
 
     try:
@@ -112,8 +113,6 @@ def _scalar_type(cls: type, field: Any) -> type | None:
     except Exception:  # an annotation that does not resolve: fall back to the default
         hint = None
     if hint is not None:
-        import types
-
         union = typing.get_origin(hint) in (typing.Union, types.UnionType)
         args = [a for a in typing.get_args(hint) if a is not type(None)] if union else [hint]
         if len(args) == 1 and args[0] in (bool, int, float, str):
@@ -172,20 +171,13 @@ def repo_path(path: str | Path) -> Path:
     return Path(path).expanduser().resolve()
 
 
-def command_help(doc: str, *, groups: tuple[str, ...] | None = None) -> str:
-    """The ``--help`` text of a command: its docstring, then the config groups and their
-    options (read from ``conf/``), the main root keys and Hydra's own flags.
-
-    Args:
-        doc: the command module's docstring.
-        groups: the groups the command reads (all of ``conf/`` but ``hydra`` when None).
-    """
+def command_help(doc: str) -> str:
+    """The ``--help`` text of a command: its docstring (``doc``), then the config groups of
+    ``conf/`` and their options, the main root keys and Hydra's own flags."""
     import textwrap
 
     conf = Path(CONF_DIR)
-    names = groups or tuple(
-        sorted(d.name for d in conf.iterdir() if d.is_dir() and d.name != "hydra")
-    )
+    names = sorted(d.name for d in conf.iterdir() if d.is_dir() and d.name != "hydra")
     root = OmegaConf.load(conf / "config.yaml")
     defaults = {}
     for item in root.get("defaults", []):
@@ -212,10 +204,10 @@ def command_help(doc: str, *, groups: tuple[str, ...] | None = None) -> str:
     return "\n".join(lines)
 
 
-def print_help_if_asked(doc: str, argv: list[str], **kwargs: Any) -> None:
+def print_help_if_asked(doc: str, argv: list[str]) -> None:
     """Print :func:`command_help` and exit 0 when ``-h`` or ``--help`` is among ``argv``."""
     if "-h" in argv or "--help" in argv:
-        print(command_help(doc, **kwargs))
+        print(command_help(doc))
         raise SystemExit(0)
 
 

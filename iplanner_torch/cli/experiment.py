@@ -171,15 +171,6 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     return replace(exp, episode=episode)
 
 
-def comparison_table(df: Any) -> Any:
-    """The console table: :func:`iplanner_torch.eval.report.comparison_table` (per scenario,
-    swept setting and planner, the episode counts and the paper's metrics in cm and ms), the
-    table ``iplanner-evaluate evaluate.mode=episode`` prints too."""
-    from iplanner_torch.eval.report import comparison_table as table
-
-    return table(df)
-
-
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 @friendly_errors
 def _app(cfg: DictConfig) -> None:
@@ -191,6 +182,7 @@ def _app(cfg: DictConfig) -> None:
     from iplanner_torch.eval.episode import PLANNER_KINDS
     from iplanner_torch.eval.experiment import run_experiment
     from iplanner_torch.eval.report import (
+        comparison_table,  # the table iplanner-evaluate evaluate.mode=episode prints too
         gather_results,
         print_table,
         report_groups,

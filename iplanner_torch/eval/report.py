@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -389,15 +389,29 @@ def summary_table(
     _check_columns(df, group_by, "group columns")
     metrics = list(metrics) if metrics is not None else _default_metrics(df, group_by)
     _check_columns(df, metrics, "metric columns")
+
+    def stats(g: pd.DataFrame) -> dict[str, float]:
+        row = {}
+        for m in metrics:
+            v = pd.to_numeric(g[m], errors="coerce")
+            row[f"{m}_mean"] = float(v.mean())
+            row[f"{m}_std"] = float(v.std(ddof=1)) if v.notna().sum() > 1 else math.nan
+        return row
+
+    return _per_group(df, group_by, stats)
+
+
+def _per_group(
+    df: pd.DataFrame, group_by: list[str], columns: Callable[[pd.DataFrame], dict[str, float]]
+) -> pd.DataFrame:
+    """One row per group of ``df``, in display order: the group keys, the episode counts
+    (:func:`_episode_counts`) and ``columns(group)``."""
     rows = []
     for keys, g in df.groupby(group_by, sort=False, dropna=False):
         keys = keys if isinstance(keys, tuple) else (keys,)
         row: dict[str, Any] = dict(zip(group_by, keys))
         row.update(_episode_counts(g, "completed" in df.columns))
-        for m in metrics:
-            v = pd.to_numeric(g[m], errors="coerce")
-            row[f"{m}_mean"] = float(v.mean())
-            row[f"{m}_std"] = float(v.std(ddof=1)) if v.notna().sum() > 1 else math.nan
+        row.update(columns(g))
         rows.append(row)
     return _sort_groups(pd.DataFrame.from_records(rows), group_by).reset_index(drop=True)
 
@@ -431,17 +445,16 @@ def comparison_table(df: pd.DataFrame, group_by: Sequence[str] | None = None) ->
     """
     group_by = list(report_groups(df) if group_by is None else group_by)
     _check_columns(df, group_by, "group columns")
-    rows = []
-    for keys, g in df.groupby(group_by, sort=False, dropna=False):
-        keys = keys if isinstance(keys, tuple) else (keys,)
-        row: dict[str, Any] = dict(zip(group_by, keys))
-        row.update(_episode_counts(g, "completed" in df.columns))
+
+    def means(g: pd.DataFrame) -> dict[str, float]:
+        row = {}
         for metric, (header, scale) in TABLE_COLUMNS.items():
             col = _metric_column(g, metric)
             mean = pd.to_numeric(g[col], errors="coerce").mean() if col else math.nan
             row[header] = float(mean) * scale
-        rows.append(row)
-    return _sort_groups(pd.DataFrame.from_records(rows), group_by).reset_index(drop=True)
+        return row
+
+    return _per_group(df, group_by, means)
 
 
 def _fmt(v: Any, digits: int) -> str:

@@ -100,7 +100,7 @@ def test_comparison_table_keeps_swept_settings_apart() -> None:
     """Rows of different speeds are separate rows; a setting with one value adds no column."""
     import pandas as pd
 
-    from iplanner_torch.cli.experiment import comparison_table
+    from iplanner_torch.eval.report import comparison_table
 
     df = pd.DataFrame(
         {
