@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -215,23 +216,94 @@ def print_help_if_asked(doc: str, argv: list[str]) -> None:
 ROOT_KEYS: dict[str, type] = {"seed": int, "progress": bool, "device": str}
 
 
+class _Tee:
+    """A text stream that writes to ``stream`` and copies finished lines to ``log``.
+
+    A carriage return starts its line over (a progress bar redrawing itself), so the log gets
+    each bar's last state once rather than every redraw."""
+
+    def __init__(self, stream: Any, log_file: Any) -> None:
+        self._stream = stream
+        self._log = log_file
+        self._line = ""
+
+    def write(self, text: str) -> int:
+        self._stream.write(text)
+        *done, self._line = (self._line + text).split("\n")
+        for line in done:
+            self._log.write(line.rsplit("\r", 1)[-1] + "\n")
+        if done:
+            self._log.flush()
+        return len(text)
+
+    def flush(self) -> None:
+        self._stream.flush()
+        self._log.flush()
+
+    def close_line(self) -> None:
+        """Copy an unfinished last line (the state of a bar still open) to the log."""
+        if self._line.rsplit("\r", 1)[-1].strip():
+            self._log.write(self._line.rsplit("\r", 1)[-1] + "\n")
+        self._line = ""
+        self._log.flush()
+
+    def __getattr__(self, name: str) -> Any:  # isatty, encoding, fileno, ...
+        return getattr(self._stream, name)
+
+
+def job_log_path() -> Path | None:
+    """The log file Hydra gives this job (``<run folder>/<command>.log``), or None outside a
+    Hydra job."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        hc = HydraConfig.get()
+        return Path(hc.runtime.output_dir) / f"{hc.job.name}.log"
+    except Exception:  # noqa: BLE001 - not in a Hydra job
+        return None
+
+
+@contextlib.contextmanager
+def copy_output_to(path: Path | None) -> Iterator[None]:
+    """Copy what the command prints (standard output and error) into ``path`` as well.
+
+    Progress bars keep their final state only. The file is appended to, so what Hydra's own
+    logging writes there stays. ``None``: nothing is copied."""
+    if path is None:
+        yield
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("a", encoding="utf-8") as fh:
+        out, err = _Tee(sys.stdout, fh), _Tee(sys.stderr, fh)
+        old = sys.stdout, sys.stderr
+        sys.stdout, sys.stderr = out, err  # type: ignore[assignment]
+        try:
+            yield
+        finally:
+            sys.stdout, sys.stderr = old
+            out.close_line()
+            err.close_line()
+
+
 def friendly_errors(fn: F) -> F:
     """Turn library errors into a one-line message and exit code 2 instead of a traceback.
 
     The root keys of :data:`ROOT_KEYS` are type-checked first, so ``seed=abc`` is named as
-    such rather than where it is interpolated."""
+    such rather than where it is interpolated. Inside a Hydra job, what the command prints,
+    the error line included, is also written to the job's log file (:func:`copy_output_to`)."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            if args and isinstance(args[0], DictConfig):
-                for key, kind in ROOT_KEYS.items():
-                    if key in args[0]:
-                        cfg_scalar(args[0], key, kind)
-            return fn(*args, **kwargs)
-        except IPlannerError as exc:
-            print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
-            raise SystemExit(2) from None
+        with copy_output_to(job_log_path()):
+            try:
+                if args and isinstance(args[0], DictConfig):
+                    for key, kind in ROOT_KEYS.items():
+                        if key in args[0]:
+                            cfg_scalar(args[0], key, kind)
+                return fn(*args, **kwargs)
+            except IPlannerError as exc:
+                print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
+                raise SystemExit(2) from None
 
     return wrapper  # type: ignore[return-value]
 

@@ -225,11 +225,9 @@ def _app(cfg: DictConfig) -> None:
                 mcap.replace(out_dir / "episodes" / mcap.name)
     df = pd.concat(frames, ignore_index=True)
     df = gather_results(df.to_dict("records"))
-    sweep = None
-    if len(experiment.speeds) > 1:
-        sweep = None  # categorical; the bar charts show it
-    if len(experiment.noises) > 1:
-        sweep = "noise"
+    # noise is plotted as a line over its values; swept speeds are categories the bar charts
+    # already show
+    sweep = "noise" if len(experiment.noises) > 1 else None
     written = write_sweep_report(df, out_dir, group_by=report_groups(df), sweep=sweep)
     table = comparison_table(df)
     (out_dir / "comparison.json").write_text(

@@ -178,6 +178,18 @@ def test_experiment_itomp_short_episode(tmp_path: Path) -> None:
     t, q = episode.robot_q()
     assert q.shape[-1] == 7 and len(t) > 10
     assert (tmp_path / "run" / "results.md").exists()
+    log = (tmp_path / "run" / "experiment.log").read_text()
+    assert "experiment 'main': 1 episode(s)" in log and "smoothness" in log
+    assert f"results: {tmp_path / 'run' / 'results.md'}" in log and "done in" in log
+
+
+def test_error_line_reaches_the_job_log(tmp_path: Path) -> None:
+    res = _run(["iplanner-experiment", "run.planners=[nope]", "progress=false",
+                f"hydra.run.dir={tmp_path / 'run'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 2
+    line = "error: ConfigError: unknown planners ['nope']"
+    assert line in res.stderr
+    assert line in (tmp_path / "run" / "experiment.log").read_text()
 
 
 @pytest.mark.slow

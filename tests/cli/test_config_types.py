@@ -120,3 +120,29 @@ def test_console_help_exits_zero(tmp_path: Path) -> None:
     )
     assert res.returncode == 0, res.stderr
     assert res.stdout.startswith("``iplanner-evaluate``") and "Config groups" in res.stdout
+
+
+def test_copy_output_to_keeps_printed_lines_and_last_bar_state(tmp_path: Path) -> None:
+    """What a command prints reaches the job log too; a redrawn bar leaves its last state."""
+    import sys
+
+    from iplanner_torch.cli._common import copy_output_to
+
+    log = tmp_path / "job.log"
+    log.write_text("[hydra] first record\n")
+    with copy_output_to(log):
+        print("table row 1")
+        sys.stderr.write("bar  10%\rbar  50%\rbar 100%\n")
+        print("done")
+        sys.stderr.write("open bar 3%\ropen bar 7%")
+    assert log.read_text().splitlines() == [
+        "[hydra] first record",
+        "table row 1",
+        "bar 100%",
+        "done",
+        "open bar 7%",
+    ]
+    before = log.read_text()
+    with copy_output_to(None):
+        print("not copied")
+    assert log.read_text() == before
