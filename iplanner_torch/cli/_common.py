@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import logging
+import math
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -215,6 +216,32 @@ def print_help_if_asked(doc: str, argv: list[str]) -> None:
 #: Root keys every command reads, with their types (checked before the command runs).
 ROOT_KEYS: dict[str, type] = {"seed": int, "progress": bool, "device": str}
 
+#: The sweep aliases of conf/config.yaml with the range each allows (checked before the
+#: command runs, so the message names the key that was typed rather than the field it feeds).
+ALIAS_RANGES: dict[str, tuple[float, float, str]] = {
+    "tracker.noise": (0.0, math.inf, ">= 0 [m]"),
+    "tracker.dropout": (0.0, 1.0, "in [0, 1)"),
+}
+
+
+def check_root_keys(cfg: DictConfig) -> None:
+    """Type-check :data:`ROOT_KEYS` and range-check :data:`ALIAS_RANGES` where ``cfg`` has them.
+
+    Raises:
+        ConfigError: naming the key, what it expects and what it got.
+    """
+    for key, kind in ROOT_KEYS.items():
+        if key in cfg:
+            cfg_scalar(cfg, key, kind)
+    for dotted, (lo, hi, text) in ALIAS_RANGES.items():
+        group, key = dotted.split(".")
+        node = cfg.get(group)
+        if not isinstance(node, DictConfig) or key not in node:
+            continue
+        value = cfg_scalar(node, key, float)
+        if not lo <= value < hi:  # NaN and inf fail too
+            raise ConfigError(f"{dotted}: expected {text}, got {value}")
+
 
 class _Tee:
     """A text stream that writes to ``stream`` and copies finished lines to ``log``.
@@ -288,18 +315,17 @@ def copy_output_to(path: Path | None) -> Iterator[None]:
 def friendly_errors(fn: F) -> F:
     """Turn library errors into a one-line message and exit code 2 instead of a traceback.
 
-    The root keys of :data:`ROOT_KEYS` are type-checked first, so ``seed=abc`` is named as
-    such rather than where it is interpolated. Inside a Hydra job, what the command prints,
-    the error line included, is also written to the job's log file (:func:`copy_output_to`)."""
+    The root keys are checked first (:func:`check_root_keys`), so ``seed=abc`` or
+    ``tracker.noise=-1`` is named as such rather than where it is interpolated. Inside a Hydra
+    job, what the command prints, the error line included, is also written to the job's log
+    file (:func:`copy_output_to`)."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         with copy_output_to(job_log_path()):
             try:
                 if args and isinstance(args[0], DictConfig):
-                    for key, kind in ROOT_KEYS.items():
-                        if key in args[0]:
-                            cfg_scalar(args[0], key, kind)
+                    check_root_keys(args[0])
                 return fn(*args, **kwargs)
             except IPlannerError as exc:
                 print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)

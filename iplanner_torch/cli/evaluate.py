@@ -37,17 +37,33 @@ from iplanner_torch.cli._common import (
     print_help_if_asked,
     repo_path,
 )
-from iplanner_torch.errors import CheckpointError, ConfigError
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError
 
 MODES = ("prediction", "noise_sweep", "episode")
 
 
 def _out_dir(cfg: DictConfig) -> Path:
+    """The folder the tables and plots go to, created now so that a bad path fails before the
+    evaluation runs rather than after it."""
     if cfg.evaluate.out_dir:
         path = repo_path(cfg.evaluate.out_dir)
     else:
         path = Path(HydraConfig.get().runtime.output_dir)
-    path.mkdir(parents=True, exist_ok=True)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"evaluate.out_dir={path} is a file; give a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"evaluate.out_dir={path}: cannot create it ({exc})") from None
+    return path
+
+
+def _checkpoint(path: Path) -> Path:
+    """``path`` when it is a file; otherwise a CheckpointError that says what it is."""
+    if path.is_dir():
+        raise CheckpointError(f"{path}: is a folder, not a checkpoint file (predictor.ckpt)")
+    if not path.exists():
+        raise CheckpointError(f"{path}: no checkpoint; train one with `iplanner-train`")
     return path
 
 
@@ -68,12 +84,10 @@ def _prediction(cfg: DictConfig) -> None:
     from iplanner_torch.eval.prediction import evaluate_prediction
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
-    ckpt = repo_path(cfg.evaluate.checkpoint)
-    if not ckpt.exists():
-        raise CheckpointError(f"{ckpt}: no checkpoint; train one with `iplanner-train`")
+    ckpt = _checkpoint(repo_path(cfg.evaluate.checkpoint))
+    out = _out_dir(cfg) / "prediction_metrics.json"
     predictor = HumanMotionPredictor.load(ckpt)
     metrics = evaluate_prediction(predictor, _held_out(cfg))
-    out = _out_dir(cfg) / "prediction_metrics.json"
     out.write_text(json.dumps(metrics, indent=2, default=float))
     print(f"{ckpt} on held-out demonstrations of {cfg.data.path}:")
     for key, value in metrics.items():
@@ -87,10 +101,13 @@ def _noise_sweep(cfg: DictConfig) -> None:
     from iplanner_torch.eval.prediction_sweep import prediction_vs_noise, write_noise_report
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
+    report_dir = _out_dir(cfg)
     predictors = {}
     for option in cfg.evaluate.compare:
         out_dir = repo_path(Path(cfg.paths.checkpoints) / Path(cfg.data.path).name / str(option))
         ckpt = out_dir / "predictor.ckpt"
+        if ckpt.is_dir():
+            _checkpoint(ckpt)
         if not ckpt.exists():
             print(f"training missing predictor {option} ...", flush=True)
             train_from_config(
@@ -108,9 +125,8 @@ def _noise_sweep(cfg: DictConfig) -> None:
         seed=cfg_scalar(cfg, "seed", int),
         progress=cfg_scalar(cfg, "progress", bool),
     )
-    out_dir = _out_dir(cfg)
     command = "iplanner-evaluate " + " ".join(HydraConfig.get().overrides.task)
-    written = write_noise_report(df, out_dir, command=command)
+    written = write_noise_report(df, report_dir, command=command)
     print(df.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     print("wrote " + ", ".join(str(p) for p in written))
 
@@ -131,6 +147,11 @@ def _episode(cfg: DictConfig) -> None:
         raise ConfigError(f"{path}: no .mcap episode logs found")
     out_dir = _out_dir(cfg)
     df = gather_results(path)  # a folder: every log below it, in numbered order
+    if "planner" not in df.columns or df["planner"].isna().all():
+        raise DataError(
+            f"{path}: none of the {len(df)} episode log(s) could be read as far as its "
+            "metadata (each is truncated or damaged near its start); nothing to report"
+        )
     written = episode_report(df, out_dir)
     print_table(comparison_table(df))  # the columns and units of iplanner-experiment's table
     note = incomplete_logs_note(df)

@@ -51,6 +51,10 @@ from iplanner_torch.cli._common import (
 VARIANT_OPTION = {"no_ni": "iplanner_no_ni", "ni": "iplanner_ni"}
 
 
+#: Values of ``run.train_data``: each scenario's task demonstrations, or the ``data`` group.
+TRAIN_DATA = ("tasks", "data")
+
+
 def option_node(group: str, option: str, cfg: DictConfig) -> DictConfig:
     """The ``conf/<group>/<option>.yaml`` node, with ``${seed}`` resolved against ``cfg``."""
     from iplanner_torch.errors import ConfigError
@@ -70,7 +74,12 @@ def scenario_data_node(cfg: DictConfig, scenario: Any) -> DictConfig:
     are those of the task (paper sec. 4.1); a blocking scenario (fig. speed_response) learns
     from the reaching set; ``run.train_data=data``: the ``data`` group.
     """
-    if str(cfg.run.train_data) == "data":
+    source = str(cfg.run.train_data)
+    if source not in TRAIN_DATA:
+        from iplanner_torch.errors import ConfigError
+
+        raise ConfigError(f"run.train_data must be one of {TRAIN_DATA}, got {source!r}")
+    if source == "data":
         return cfg.data
     if str(getattr(scenario, "kind", "delivery")) == "blocking":
         # the blocking arm movement is a reach: learn from the reaching set
@@ -100,6 +109,8 @@ def ensure_predictors(
         option = VARIANT_OPTION[variant]
         out_dir = repo_path(Path(cfg.paths.checkpoints) / Path(data_node.path).name / option)
         ckpt = out_dir / "predictor.ckpt"
+        if ckpt.is_dir():
+            raise CheckpointError(f"{ckpt}: is a folder, not a checkpoint file")
         if not ckpt.exists():
             if not cfg.run.train_if_missing:
                 raise CheckpointError(

@@ -357,6 +357,11 @@ def read_episode(path: str | Path) -> Episode:
             of every chunk before the damage (a prefix of what was written).
     """
     path = Path(path)
+    if path.is_dir():
+        raise DataError(
+            f"{path}: is a folder; read_episode reads one .mcap file "
+            "(eval.report.gather_results reads every log below a folder)"
+        )
     if not path.is_file():
         raise DataError(f"{path}: no such episode log")
     size = path.stat().st_size

@@ -235,3 +235,30 @@ def test_evaluate_episode_table_counts_a_truncated_log_as_unknown(tmp_path: Path
     assert cells["completed"] == "1"
     assert cells["distance cm"] == "6.04" and cells["MHD cm"] == "4.58"
     assert "truncated or damaged episode logs: 1 of 2" in res.stdout
+
+
+def test_evaluate_refuses_bad_paths_before_it_computes(tmp_path: Path) -> None:
+    """A file as the output folder, a folder as the checkpoint, logs cut before their
+    metadata: one-line errors with exit code 2, and nothing computed first."""
+    from iplanner_torch.recording import EpisodeWriter
+
+    (tmp_path / "a_file").write_text("keep me")
+    ckpt_dir = tmp_path / "ckpt"
+    ckpt_dir.mkdir()
+    res = _run(["iplanner-evaluate", f"evaluate.checkpoint={ckpt_dir}"], tmp_path)
+    assert res.returncode == 2
+    assert f"error: CheckpointError: {ckpt_dir}: is a folder, not a checkpoint file" in res.stderr
+    logs = tmp_path / "logs"
+    with EpisodeWriter(logs / "a.mcap", metadata={"scenario": "s", "planner": "itomp"}) as log:
+        log.robot_state(0.0, [0.0] * 7, [0.0] * 7, list("abcdefg"))
+        log.metrics(0.1, {"eval/contact": 0.0})
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode", f"evaluate.logs={logs}",
+                f"evaluate.out_dir={tmp_path / 'a_file'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 2
+    assert f"error: ConfigError: evaluate.out_dir={tmp_path / 'a_file'} is a file" in res.stderr
+    assert (tmp_path / "a_file").read_text() == "keep me"
+    os.truncate(logs / "a.mcap", 20)
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode", f"evaluate.logs={logs}",
+                f"evaluate.out_dir={tmp_path / 'out'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 2
+    assert "none of the 1 episode log(s) could be read as far as its metadata" in res.stderr

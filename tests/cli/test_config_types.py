@@ -88,6 +88,39 @@ def test_console_script_reports_a_wrong_type_in_one_line(tmp_path: Path) -> None
     assert res.stderr.strip() == "error: ConfigError: seed: expected int, got 'abc'"
 
 
+@pytest.mark.parametrize(
+    ("root", "message"),
+    [
+        ({"tracker": {"noise": -1}}, "tracker.noise: expected >= 0 [m], got -1.0"),
+        ({"tracker": {"noise": float("nan")}}, "tracker.noise: expected >= 0 [m], got nan"),
+        ({"tracker": {"noise": float("inf")}}, "tracker.noise: expected >= 0 [m], got inf"),
+        ({"tracker": {"dropout": 1.0}}, "tracker.dropout: expected in [0, 1), got 1.0"),
+        ({"tracker": {"dropout": "x"}}, "tracker.dropout: expected float, got 'x'"),
+        ({"progress": "yes"}, "progress: expected bool, got 'yes'"),
+    ],
+)
+def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
+    root: dict, message: str
+) -> None:
+    from iplanner_torch.cli._common import check_root_keys
+
+    check_root_keys(OmegaConf.create({"seed": 0, "tracker": {"noise": 0.0, "dropout": 0.5}}))
+    with pytest.raises(ConfigError) as err:
+        check_root_keys(OmegaConf.create(root))
+    assert str(err.value) == message
+
+
+def test_unknown_training_data_source_is_refused(tmp_path: Path) -> None:
+    res = subprocess.run(
+        [sys.executable, "-m", "iplanner_torch.cli.experiment", "run.train_data=bogus",
+         "progress=false", f"hydra.run.dir={tmp_path / 'run'}"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert res.returncode == 2, res.stderr
+    assert "run.train_data must be one of ('tasks', 'data'), got 'bogus'" in res.stderr
+    assert not (tmp_path / "datasets").exists()  # refused before generating anything
+
+
 def test_help_lists_groups_options_and_defaults() -> None:
     from iplanner_torch.cli._common import command_help
 

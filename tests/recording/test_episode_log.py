@@ -304,6 +304,8 @@ def test_not_an_mcap_file_raises_naming_it(tmp_path: Path) -> None:
         read_episode(bad)
     with pytest.raises(DataError, match="missing.mcap: no such episode log"):
         read_episode(tmp_path / "missing.mcap")
+    with pytest.raises(DataError, match="is a folder; read_episode reads one .mcap file"):
+        read_episode(tmp_path)
 
 
 def test_writer_rejects_bad_input(tmp_path: Path) -> None:
