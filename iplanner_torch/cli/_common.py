@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import logging
 import math
+import re
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -19,7 +19,6 @@ from iplanner_torch.errors import ConfigError, IPlannerError
 #: conf/ at the repository root (the package is installed editable from the clone).
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
-log = logging.getLogger("iplanner_torch")
 
 # ${basename:some/path} -> "path" (checkpoint folders are named after their dataset folder)
 if not OmegaConf.has_resolver("basename"):
@@ -173,6 +172,14 @@ def repo_path(path: str | Path) -> Path:
     return Path(path).expanduser().resolve()
 
 
+def _plain_text(rst: str) -> str:
+    """A docstring's reStructuredText markup made terminal text: ``x`` -> x, ``Examples::``
+    -> ``Examples:``, :role:`~a.b.c` -> c."""
+    text = re.sub(r":[a-z]+:`~?(?:[\w.]+\.)?([^`]+)`", r"\1", rst)
+    text = re.sub(r"``([^`]+)``", r"\1", text)
+    return re.sub(r"::$", ":", text, flags=re.MULTILINE)
+
+
 def command_help(doc: str) -> str:
     """The ``--help`` text of a command: its docstring (``doc``), then the config groups of
     ``conf/`` and their options, the main root keys and Hydra's own flags."""
@@ -185,7 +192,11 @@ def command_help(doc: str) -> str:
     for item in root.get("defaults", []):
         if isinstance(item, DictConfig):
             defaults.update({str(k): v for k, v in item.items()})
-    lines = [textwrap.dedent(doc).strip(), "", "Config groups (group=option; * the default):"]
+    lines = [
+        _plain_text(textwrap.dedent(doc).strip()),
+        "",
+        "Config groups (group=option; * the default):",
+    ]
     for name in names:
         options = sorted(f.stem for f in (conf / name).glob("*.yaml"))
         shown = [f"{o}*" if o == defaults.get(name) else o for o in options]
@@ -369,7 +380,6 @@ def load_dataset(
                 f"{path}: dataset not found; generate it with `iplanner-data generate "
                 f"data.path={data_cfg.path}`"
             )
-        log.info("generating dataset into %s", path)
         print(f"dataset {path} missing: generating it", flush=True)
         generate_dataset(data_cfg, path, progress=progress)
     joints = data_cfg.windows.get("joints", None) if "windows" in data_cfg else None

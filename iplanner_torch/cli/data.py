@@ -1,7 +1,7 @@
 """``iplanner-data``: generate synthetic human motion datasets and check dataset folders.
 
-Usage: ``iplanner-data COMMAND [overrides...]`` (Hydra overrides of ``conf/``; ``-h`` or
-``--help`` anywhere prints this help).
+Usage: ``iplanner-data COMMAND [overrides...]`` (Hydra overrides of ``conf/``; no COMMAND
+runs ``generate``; ``-h`` or ``--help`` anywhere prints this help).
 
 Commands:
 

@@ -58,12 +58,17 @@ def _out_dir(cfg: DictConfig) -> Path:
     return path
 
 
-def _checkpoint(path: Path) -> Path:
-    """``path`` when it is a file; otherwise a CheckpointError that says what it is."""
+def _checkpoint(path: Path, cfg: DictConfig) -> Path:
+    """``path`` when it is a file; otherwise a CheckpointError that says what it is and, when
+    missing, the training command for this dataset and predictor."""
     if path.is_dir():
         raise CheckpointError(f"{path}: is a folder, not a checkpoint file (predictor.ckpt)")
     if not path.exists():
-        raise CheckpointError(f"{path}: no checkpoint; train one with `iplanner-train`")
+        predictor = HydraConfig.get().runtime.choices.get("predictor", "iplanner_ni")
+        raise CheckpointError(
+            f"{path}: no checkpoint; train one with `iplanner-train data.path={cfg.data.path} "
+            f"predictor={predictor} train.out_dir={path.parent}`"
+        )
     return path
 
 
@@ -84,7 +89,7 @@ def _prediction(cfg: DictConfig) -> None:
     from iplanner_torch.eval.prediction import evaluate_prediction
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
-    ckpt = _checkpoint(repo_path(cfg.evaluate.checkpoint))
+    ckpt = _checkpoint(repo_path(cfg.evaluate.checkpoint), cfg)
     out = _out_dir(cfg) / "prediction_metrics.json"
     predictor = HumanMotionPredictor.load(ckpt)
     metrics = evaluate_prediction(predictor, _held_out(cfg))
@@ -107,7 +112,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
         out_dir = repo_path(Path(cfg.paths.checkpoints) / Path(cfg.data.path).name / str(option))
         ckpt = out_dir / "predictor.ckpt"
         if ckpt.is_dir():
-            _checkpoint(ckpt)
+            _checkpoint(ckpt, cfg)
         if not ckpt.exists():
             print(f"training missing predictor {option} ...", flush=True)
             train_from_config(

@@ -10,16 +10,17 @@ Examples::
         planner.confidence=0.9,0.95,0.99              # a sweep (one job per combination)
     iplanner-experiment -m hydra/launcher=joblib tracker.noise=0,0.02   # local processes
 
-Without ``experiment=...`` the run uses the ``scenario`` group (its confidence replaced by
-``planner.confidence``), the planners in ``run.planners`` and the seeds in ``run.seeds``. With
-it, the experiment file lists its own scenarios, planners, seeds, speeds and noises; the
-``sim`` and ``planner`` groups give the episode settings it does not override. The I-Planner
-variants need predictors: by default (``run.train_data=tasks``) each scenario's predictors learn
-from task demonstrations of its arrangement and task order (``datasets/tasks_<...>``, generated
-when absent), kept in ``checkpoints/<dataset>/iplanner_{ni,no_ni}/``; missing ones are trained
-first on a small budget (``run.train_trainer``) when ``run.train_if_missing`` is true.
-Results: ``results.csv``, ``results.md``, plots and ``episodes/*.mcap``
-in the run folder.
+Without ``experiment=...`` the run uses the ``scenario`` group at the confidence
+``planner.confidence`` (which follows ``scenario.confidence`` unless set), the planners in
+``run.planners`` and the seeds in ``run.seeds``. With it, the experiment file lists its own
+scenarios, planners, seeds, speeds and noises; the ``sim`` and ``planner`` groups give the
+episode settings it does not override. The I-Planner variants need predictors: by default
+(``run.train_data=tasks``) each scenario's predictors learn from task demonstrations of its
+arrangement and task order (``datasets/tasks_<...>``, generated when absent; a blocking
+scenario's from the reaching set), kept in ``checkpoints/<dataset>/iplanner_{ni,no_ni}/``;
+missing ones are trained first on a small budget (``run.train_trainer``) when
+``run.train_if_missing`` is true. Results: ``results.csv``, ``results.md``, plots and
+``episodes/*.mcap`` in the run folder.
 """
 
 from __future__ import annotations

@@ -716,7 +716,10 @@ def write_sweep_report(
     ]
     if "completed" in summary.columns:
         legend.append("`completed`: episodes known to have finished their tasks")
-    md += ["; ".join(legend) + ".", "", to_markdown(summary)]
+    units = [DEFAULT_METRICS[m] for m in DEFAULT_METRICS if f"{m}_mean" in summary.columns]
+    md += ["; ".join(legend) + ".", ""]
+    md += ["Means over episodes: " + "; ".join(units) + ".", ""] if units else []
+    md += [to_markdown(summary)]
     written[1].write_text("\n".join(md))
     if len(group_by) >= 2:
         written += plot_comparison(df, out_dir, group_by=(group_by[-2], group_by[-1]))

@@ -96,6 +96,25 @@ def test_sweep_aliases_reach_the_simulation() -> None:
     assert sim.human.speed == "fast"
 
 
+@pytest.mark.parametrize(
+    ("overrides", "expected"),
+    [
+        ([], 0.95),
+        (["scenario.confidence=0.99"], 0.99),
+        (["planner.confidence=0.9"], 0.9),
+        (["planner=itomp", "scenario=confidence", "scenario.confidence=0.9"], 0.9),
+    ],
+)
+def test_main_job_confidence_follows_either_key(overrides: list[str], expected: float) -> None:
+    """``scenario.confidence`` and ``planner.confidence`` both set the main job's level."""
+    from iplanner_torch.cli.experiment import build_experiment
+
+    cfg = compose(config_name="config", overrides=overrides)
+    exp = build_experiment(cfg, {})
+    assert exp.scenarios[0].confidence == expected
+    assert exp.episode.scenario.confidence == expected
+
+
 def test_comparison_table_keeps_swept_settings_apart() -> None:
     """Rows of different speeds are separate rows; a setting with one value adds no column."""
     import pandas as pd

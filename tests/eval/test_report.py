@@ -203,7 +203,9 @@ def test_write_sweep_report(results: pd.DataFrame, tmp_path: Path) -> None:
     assert all(p.is_file() and p.stat().st_size > 0 for p in written)
     back = pd.read_csv(tmp_path / "report" / "results.csv")
     assert len(back) == len(results)
-    assert "| scenario |" in (tmp_path / "report" / "results.md").read_text()
+    md = (tmp_path / "report" / "results.md").read_text()
+    assert "| scenario |" in md
+    assert "smoothness [rad²/s⁴]" in md and "closest distance [m]" in md  # the units
 
 
 def _sweep_rows() -> pd.DataFrame:
