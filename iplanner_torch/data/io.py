@@ -13,12 +13,21 @@ The formats are documented in ``datasets/README.md``. In short:
   frame. An empty cell is NaN (a lost joint). Without the JSON header, ``fps`` must be given
   to the loader and actions are named ``action_0 ...``; without a ``label`` column every
   frame is labelled 0 with the action name ``unlabelled``; ``t`` is optional too.
+
+Field types are checked on loading: ``fps`` is one real number (not a string or a boolean),
+finite and > 0; ``metadata`` is a JSON object; names are strings; ``timestamps`` are numbers;
+``clean_positions`` are floats. In the CSV header comment ``fps``, ``action_names`` (a JSON array
+of strings) and ``metadata`` are each optional, and a ``null`` value counts as absent; the clean
+columns, when present, cover every joint's three axes. Without ``action_names`` the CSV labels
+name ``action_0 .. action_<largest label>``, at most :data:`MAX_IMPLICIT_ACTIONS` actions.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import zipfile
+import zlib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -33,6 +42,70 @@ _REQUIRED_NPZ = ("positions", "labels", "joint_names", "action_names")
 _AXES = ("x", "y", "z")
 #: The first bytes of a zip archive (an NPZ file is one): a local file header or an empty one.
 _ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
+#: A CSV without ``action_names`` names actions ``action_0 .. action_<largest label>``; a larger
+#: largest label is an error (a stray huge label would otherwise allocate that many names).
+MAX_IMPLICIT_ACTIONS = 10_000
+_JSON_TYPES = {dict: "object", list: "array", str: "string", bool: "boolean", type(None): "null"}
+
+
+def _show(value: Any, limit: int = 60) -> str:
+    """``repr(value)``, shortened to ``limit`` characters for error messages."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _json_type(value: Any) -> str:
+    """The JSON type name of a value ``json.loads`` returned (``number`` for int and float)."""
+    return _JSON_TYPES.get(type(value), "number")
+
+
+def _fps_field(path: Path, value: Any) -> float:
+    """The frame rate [Hz] a file states: one real number, finite and > 0.
+
+    Args:
+        path: the file (for the message).
+        value: the NPZ array or the JSON value.
+
+    Raises:
+        DataError: for an array that is not a scalar, a non-number (string, boolean, list ...),
+            or a value that is not finite or not > 0.
+    """
+    if isinstance(value, np.ndarray):
+        if value.ndim != 0:
+            raise DataError(
+                f"{path}: field 'fps' must be a scalar, got an array of shape {value.shape}"
+            )
+        value = value.item()
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DataError(f"{path}: field 'fps' must be a real number, got {_show(value)}")
+    try:
+        fps = float(value)
+    except OverflowError:  # a JSON integer beyond float range
+        fps = math.inf
+    if not (math.isfinite(fps) and fps > 0):
+        raise DataError(f"{path}: field 'fps' must be finite and > 0, got {_show(value)}")
+    return fps
+
+
+def _metadata_field(path: Path, value: Any) -> dict[str, Any]:
+    """``value`` (parsed JSON) when it is a JSON object; a DataError otherwise."""
+    if not isinstance(value, dict):
+        raise DataError(
+            f"{path}: field 'metadata' must be a JSON object, got {_json_type(value)} "
+            f"{_show(value)}"
+        )
+    return value
+
+
+def _names_field(path: Path, key: str, value: np.ndarray) -> tuple[str, ...]:
+    """The names an NPZ string array holds: (N,) unicode (a 0-d one is one name)."""
+    arr = np.asarray(value)
+    if arr.ndim > 1 or arr.dtype.kind != "U":
+        raise DataError(
+            f"{path}: field {key!r} must be a 1-D array of strings, got shape {arr.shape} "
+            f"and dtype {arr.dtype}"
+        )
+    return tuple(str(s) for s in np.atleast_1d(arr))
 
 
 def _jsonable(obj: Any) -> Any:
@@ -107,8 +180,11 @@ def save_demonstration(demo: Demonstration, path: str | Path) -> Path:
 def _read_npz(path: Path) -> dict[str, Any]:
     if path.stat().st_size == 0:
         raise DataError(f"{path}: empty file")
-    with open(path, "rb") as fh:
-        magic = fh.read(4)
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as exc:
+        raise DataError(f"{path}: unreadable NPZ file ({exc})") from exc
     if magic not in _ZIP_MAGIC:
         # np.load would fall back to unpickling and suggest allow_pickle: never load pickles
         raise DataError(f"{path}: not a valid NPZ demonstration file: not a zip archive")
@@ -125,7 +201,17 @@ def _read_npz(path: Path) -> dict[str, Any]:
                         f"{path}: not a valid NPZ demonstration file: field {k!r} holds pickled "
                         "Python objects (store strings as numpy unicode arrays)"
                     ) from None
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+    except DataError:
+        raise
+    except (
+        zipfile.BadZipFile,
+        zlib.error,  # a compressed member whose data is damaged
+        ValueError,
+        OSError,
+        EOFError,
+        NotImplementedError,  # an unsupported compression method
+        RuntimeError,  # an encrypted member
+    ) as exc:
         raise DataError(f"{path}: not a valid NPZ demonstration file: corrupt ({exc})") from exc
     for key in _REQUIRED_NPZ:
         if key not in data:
@@ -133,19 +219,57 @@ def _read_npz(path: Path) -> dict[str, Any]:
     out: dict[str, Any] = {
         "positions": data["positions"],
         "labels": data["labels"],
-        "joint_names": tuple(str(s) for s in np.atleast_1d(data["joint_names"])),
-        "action_names": tuple(str(s) for s in np.atleast_1d(data["action_names"])),
-        "fps": float(data["fps"]) if "fps" in data else None,
+        "joint_names": _names_field(path, "joint_names", data["joint_names"]),
+        "action_names": _names_field(path, "action_names", data["action_names"]),
+        "fps": _fps_field(path, data["fps"]) if "fps" in data else None,
         "timestamps": data.get("timestamps"),
         "clean_positions": data.get("clean_positions"),
         "metadata": {},
     }
     if "metadata" in data:
+        meta = np.asarray(data["metadata"])
+        if meta.ndim != 0 or meta.dtype.kind != "U":
+            raise DataError(
+                f"{path}: field 'metadata' must be a JSON object stored as one string, got "
+                f"shape {meta.shape} and dtype {meta.dtype}"
+            )
         try:
-            out["metadata"] = json.loads(str(data["metadata"]))
+            parsed = json.loads(str(meta))
         except json.JSONDecodeError as exc:
             raise DataError(f"{path}: field 'metadata' is not valid JSON ({exc})") from exc
+        out["metadata"] = _metadata_field(path, parsed)
     return out
+
+
+def _read_csv_header(path: Path, comment: list[str]) -> dict[str, Any]:
+    """The CSV header comment as a dict with ``fps`` (float or None), ``action_names`` (a list
+    of str or None) and ``metadata`` (a dict); ``null`` values count as absent."""
+    header: Any = {}
+    if comment:
+        try:
+            header = json.loads("".join(comment))
+        except json.JSONDecodeError as exc:
+            raise DataError(f"{path}: field 'header' (# JSON comment) is invalid ({exc})") from exc
+    if not isinstance(header, dict):
+        raise DataError(
+            f"{path}: field 'header' (# JSON comment) is invalid: the header comment must be "
+            f"a JSON object, got {_json_type(header)} {_show(header)}"
+        )
+    fps = header.get("fps")
+    names = header.get("action_names")
+    meta = header.get("metadata")
+    if names is not None and not (
+        isinstance(names, list) and all(isinstance(n, str) for n in names)
+    ):
+        raise DataError(
+            f"{path}: field 'action_names' in the header comment must be a JSON array of "
+            f"strings, got {_show(names)}"
+        )
+    return {
+        "fps": None if fps is None else _fps_field(path, fps),
+        "action_names": names,
+        "metadata": {} if meta is None else _metadata_field(path, meta),
+    }
 
 
 def _read_csv(path: Path) -> dict[str, Any]:
@@ -158,12 +282,7 @@ def _read_csv(path: Path) -> dict[str, Any]:
     body = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip() and not ln.startswith("#")]
     if not body:
         raise DataError(f"{path}: empty file (no header row, no frames)")
-    header: dict[str, Any] = {}
-    if comment:
-        try:
-            header = json.loads("".join(comment))
-        except json.JSONDecodeError as exc:
-            raise DataError(f"{path}: field 'header' (# JSON comment) is invalid ({exc})") from exc
+    header = _read_csv_header(path, comment)
     header_line, header_row = body[0]
     cols = [c.strip() for c in header_row.split(",")]
     rows = body[1:]
@@ -181,11 +300,26 @@ def _read_csv(path: Path) -> dict[str, Any]:
             table[i] = [float(c) if c.strip() else np.nan for c in cells]
         except ValueError as exc:
             raise DataError(f"{path}: line {n}: unreadable or corrupt CSV row ({exc})") from exc
-    col = {c: i for i, c in enumerate(cols)}
+    col: dict[str, int] = {}
+    for i, c in enumerate(cols):
+        used = c in ("t", "label") or c[-2:] in ("_x", "_y", "_z")
+        if used and c in col:
+            raise DataError(
+                f"{path}: column {c!r} appears twice in the header row (line {header_line})"
+            )
+        col[c] = i
+
+    def cell(i: int, name: str) -> str:
+        """The text of column ``name`` in frame row ``i`` (as written in the file)."""
+        return rows[i][1].split(",")[col[name]].strip()
+
     joints: list[str] = []
     for c in cols:
         if c.endswith("_x") and not c.startswith("clean_"):
             joints.append(c[:-2])
+    for c in cols:
+        if c[-2:] in ("_y", "_z") and not c.startswith("clean_") and c[:-2] not in joints:
+            raise DataError(f"{path}: missing column '{c[:-2]}_x'")
     for j in joints:
         for a in _AXES:
             if f"{j}_{a}" not in col:
@@ -195,30 +329,68 @@ def _read_csv(path: Path) -> dict[str, Any]:
     t = table.shape[0]
     pos = np.stack([table[:, [col[f"{j}_{a}"] for a in _AXES]] for j in joints], axis=1)
     clean = None
-    if f"clean_{joints[0]}_x" in col:
+    clean_cols = [c for c in cols if c.startswith("clean_")]
+    if clean_cols:
+        want = [f"clean_{j}_{a}" for j in joints for a in _AXES]
+        missing = [c for c in want if c not in col]
+        if missing:
+            raise DataError(
+                f"{path}: missing column(s) {missing} of field 'clean_positions': the header "
+                f"row (line {header_line}) has clean columns for some joints only; give "
+                "clean_<joint>_x,_y,_z for every joint or for none"
+            )
+        extra = [c for c in clean_cols if c not in set(want)]
+        if extra:
+            raise DataError(
+                f"{path}: column(s) {extra} of field 'clean_positions' (header row, line "
+                f"{header_line}) match no joint of the position columns {joints}"
+            )
         clean = np.stack(
             [table[:, [col[f"clean_{j}_{a}"] for a in _AXES]] for j in joints], axis=1
         )
+    names = header["action_names"]
     if "label" in col:
         lab = table[:, col["label"]]
-        if np.isnan(lab).any() or (lab != np.round(lab)).any():
-            raise DataError(f"{path}: field 'labels' must be integers in every row")
-        labels = lab.astype(np.int64)
-        names = header.get("action_names")
+        bad = ~np.isfinite(lab) | (lab != np.round(lab))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise DataError(
+                f"{path}: line {rows[i][0]}: field 'labels' must be integers in every row, "
+                f"got {cell(i, 'label')!r}"
+            )
         if names is None:
-            names = [f"action_{i}" for i in range(max(int(labels.max()) + 1, 1))]
+            if lab.max() >= MAX_IMPLICIT_ACTIONS:
+                i = int(np.argmax(lab))
+                raise DataError(
+                    f"{path}: line {rows[i][0]}: field 'labels' is {cell(i, 'label')}, but "
+                    "without 'action_names' in the header comment the actions are action_0 .. "
+                    f"action_<largest label>, at most {MAX_IMPLICIT_ACTIONS}; name the actions "
+                    "in the header comment"
+                )
+            names = [f"action_{i}" for i in range(max(int(lab.max()) + 1, 1))]
+        if not names:
+            raise DataError(f"{path}: field 'action_names' is empty")
+        bad = (lab < -1) | (lab >= len(names))
+        if bad.any():  # checked as floats: a huge label must not wrap around in int64
+            i = int(np.argmax(bad))
+            raise DataError(
+                f"{path}: line {rows[i][0]}: field 'labels' out of range: {cell(i, 'label')}, "
+                f"expected -1 (unlabelled) or 0..{len(names) - 1}"
+            )
+        labels = lab.astype(np.int64)
     else:
         labels = np.zeros(t, dtype=np.int64)
-        names = header.get("action_names", ["unlabelled"])
+        if names is None:
+            names = ["unlabelled"]
     return {
         "positions": pos,
         "labels": labels,
         "joint_names": tuple(joints),
-        "action_names": tuple(str(n) for n in names),
-        "fps": float(header["fps"]) if "fps" in header else None,
+        "action_names": tuple(names),
+        "fps": header["fps"],
         "timestamps": table[:, col["t"]] if "t" in col else None,
         "clean_positions": clean,
-        "metadata": dict(header.get("metadata", {})),
+        "metadata": header["metadata"],
     }
 
 
@@ -274,10 +446,15 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
     if file_fps is not None and fps is not None and not np.isclose(file_fps, fps):
         raise DataError(f"{path}: field 'fps' is {file_fps}, but fps={fps} was requested")
     the_fps = float(file_fps if file_fps is not None else fps)
-    if not the_fps > 0:
-        raise DataError(f"{path}: field 'fps' must be > 0, got {the_fps}")
+    if not (math.isfinite(the_fps) and the_fps > 0):
+        raise DataError(f"{path}: field 'fps' must be finite and > 0, got {the_fps}")
     ts = raw["timestamps"]
     if ts is not None:
+        if np.asarray(ts).dtype.kind not in "iuf":
+            raise DataError(
+                f"{path}: field 'timestamps' must be real numbers [s], got dtype "
+                f"{np.asarray(ts).dtype}"
+            )
         ts = np.asarray(ts, dtype=np.float64)
         if ts.shape != (t,):
             raise DataError(f"{path}: field 'timestamps' must be ({t},), got {ts.shape}")
@@ -287,6 +464,10 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
     if clean is not None and np.shape(clean) != pos.shape:
         raise DataError(
             f"{path}: field 'clean_positions' must be {pos.shape}, got {np.shape(clean)}"
+        )
+    if clean is not None and not np.issubdtype(np.asarray(clean).dtype, np.floating):
+        raise DataError(
+            f"{path}: field 'clean_positions' must be float, got {np.asarray(clean).dtype}"
         )
     with np.errstate(over="ignore"):  # values beyond float32's range become Inf: rejected
         pos = pos.astype(np.float32)
@@ -453,8 +634,8 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
             f"{path}: no trial .txt files found (expected Task*/Human*/trial*.txt; set "
             "data.path=<folder> to the recording)"
         )
-    if not fps > 0:
-        raise DataError(f"{path}: fps must be > 0, got {fps}")
+    if not (math.isfinite(fps) and fps > 0):
+        raise DataError(f"{path}: fps must be finite and > 0, got {fps}")
     order = [LEGO_JOINTS.index(j) for j in LEGO_OUTPUT_JOINTS]
     demos = []
     for f in files:

@@ -320,3 +320,197 @@ def test_lego_assembly_loader():
     assert np.isnan(nan_demo.positions).sum() == 12
     upper = np.linalg.norm(d.positions[:, 1] - d.positions[:, 0], axis=1)
     assert upper.std() < 1e-4  # fixed-length arm model upstream
+
+
+def _csv(path: Path, header: str, columns: str = "a_x,a_y,a_z", row: str = "1,2,3") -> Path:
+    path.write_text(f"{header}\n{columns}\n{row}\n{row}\n")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("columns", "message"),
+    [
+        (  # clean columns for joint a only
+            "a_x,a_y,a_z,b_x,b_y,b_z,clean_a_x,clean_a_y,clean_a_z",
+            r"x\.csv: missing column\(s\) \['clean_b_x', 'clean_b_y', 'clean_b_z'\] of field "
+            r"'clean_positions': the header row \(line 2\)",
+        ),
+        (  # clean columns for joint b only (were ignored without a word)
+            "a_x,a_y,a_z,b_x,b_y,b_z,clean_b_x,clean_b_y,clean_b_z",
+            r"x\.csv: missing column\(s\) \['clean_a_x', 'clean_a_y', 'clean_a_z'\]",
+        ),
+        (  # clean columns of a joint that has no position columns (were ignored)
+            "a_x,a_y,a_z,clean_a_x,clean_a_y,clean_a_z,clean_c_x",
+            r"x\.csv: column\(s\) \['clean_c_x'\] of field 'clean_positions' \(header row, "
+            r"line 2\) match no joint of the position columns \['a'\]",
+        ),
+        ("a_x,a_y,a_z,b_y,b_z", r"x\.csv: missing column 'b_x'"),  # b was dropped silently
+        ("t,a_x,a_y,a_z,t", r"x\.csv: column 't' appears twice in the header row \(line 2\)"),
+    ],
+)
+def test_error_csv_columns(tmp_path, columns, message):
+    row = ",".join(["1"] * len(columns.split(",")))
+    p = _csv(tmp_path / "x.csv", '# {"fps": 15}', columns, row)
+    with pytest.raises(DataError, match=message):
+        load_demonstrations(p)
+
+
+def test_error_csv_header_comment_must_be_an_object(tmp_path):
+    p = _csv(tmp_path / "x.csv", "# [1,2]")
+    with pytest.raises(
+        DataError,
+        match=r"x\.csv: field 'header' .* the header comment must be a JSON object, got array",
+    ):
+        load_demonstrations(p)
+
+
+@pytest.mark.parametrize(
+    ("header", "message"),
+    [
+        ('{"fps": "fast"}', "field 'fps' must be a real number, got 'fast'"),
+        ('{"fps": "15"}', "field 'fps' must be a real number, got '15'"),
+        ('{"fps": true}', "field 'fps' must be a real number, got True"),
+        ('{"fps": [15]}', r"field 'fps' must be a real number, got \[15\]"),
+        ('{"fps": 15, "metadata": [1,2]}', r"field 'metadata' must be a JSON object, got array"),
+        ('{"fps": 15, "metadata": "ab"}', "field 'metadata' must be a JSON object, got string"),
+        ('{"fps": 15, "action_names": "ab"}', "field 'action_names' .* JSON array of strings"),
+        ('{"fps": 15, "action_names": 5}', "field 'action_names' .* JSON array of strings"),
+        ('{"fps": 15, "action_names": ["a", 1]}', "field 'action_names' .* array of strings"),
+    ],
+)
+def test_error_csv_header_field_types(tmp_path, header, message):
+    p = _csv(tmp_path / "x.csv", f"# {header}")
+    with pytest.raises(DataError, match=rf"x\.csv: {message}"):
+        load_demonstrations(p)
+
+
+def test_csv_header_null_counts_as_absent(tmp_path):
+    p = _csv(tmp_path / "x.csv", '# {"fps": null, "action_names": null, "metadata": null}')
+    (d,) = load_demonstrations(p, fps=20.0)
+    assert d.fps == 20.0 and d.action_names == ("unlabelled",) and d.metadata == {}
+    with pytest.raises(DataError, match=r"x\.csv: field 'fps' missing"):
+        load_demonstrations(p)
+
+
+@pytest.mark.parametrize(
+    ("fps", "message"),
+    [
+        (np.array([15.0, 15.0]), r"must be a scalar, got an array of shape \(2,\)"),
+        (np.array("abc"), "must be a real number, got 'abc'"),
+        (np.array(True), "must be a real number, got True"),
+        (np.array(15 + 1j), r"must be a real number, got \(15\+1j\)"),
+    ],
+)
+def test_error_npz_fps_not_a_number(tmp_path, fps, message):
+    p = _npz(tmp_path / "x.npz", fps=fps)
+    with pytest.raises(DataError, match=rf"x\.npz: field 'fps' {message}"):
+        load_demonstrations(p)
+
+
+@pytest.mark.parametrize("value", [0, -5, "NaN", "Infinity", "-Infinity", "1e400"])
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_error_fps_must_be_finite_and_positive(tmp_path, suffix, value):
+    if suffix == ".npz":
+        p = _npz(tmp_path / "x.npz", fps=np.array(float(value)))
+    else:
+        p = _csv(tmp_path / "x.csv", f'# {{"fps": {value}}}')
+    with pytest.raises(DataError, match=rf"x\{suffix}: field 'fps' must be finite and > 0, got"):
+        load_demonstrations(p)
+
+
+def test_error_loader_fps_must_be_finite(tmp_path):
+    p = _csv(tmp_path / "x.csv", "")
+    with pytest.raises(DataError, match=r"x\.csv: field 'fps' must be finite and > 0, got inf"):
+        load_demonstrations(p, fps=float("inf"))
+    (tmp_path / "trial1.txt").write_text(" ".join(["0.1"] * 18) + "\n")
+    with pytest.raises(DataError, match="fps must be finite and > 0, got inf"):
+        load_lego_assembly(tmp_path / "trial1.txt", fps=float("inf"))
+
+
+@pytest.mark.parametrize(
+    ("metadata", "message"),
+    [
+        (np.array("[1,2]"), r"field 'metadata' must be a JSON object, got array \[1, 2\]"),
+        (np.array("5"), "field 'metadata' must be a JSON object, got number 5"),
+        (np.array(5), r"field 'metadata' must be a JSON object stored as one string, got shape"),
+        (np.array(["{}", "{}"]), r"field 'metadata' must be .* one string, got shape \(2,\)"),
+    ],
+)
+def test_error_npz_metadata_must_be_an_object(tmp_path, metadata, message):
+    p = _npz(tmp_path / "x.npz", metadata=metadata)
+    with pytest.raises(DataError, match=rf"x\.npz: {message}"):
+        load_demonstrations(p)
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ({"joint_names": np.arange(10)}, r"field 'joint_names' must be a 1-D array of strings"),
+        ({"joint_names": np.array([JOINT_NAMES])}, r"field 'joint_names' .* got shape \(1, 10\)"),
+        ({"action_names": np.array([0, 1, 2])}, r"field 'action_names' must be a 1-D array of"),
+        ({"timestamps": np.array(["a"] * 12)}, r"field 'timestamps' must be real numbers"),
+        ({"timestamps": np.arange(12) + 0j}, r"field 'timestamps' .* got dtype complex128"),
+        ({"clean_positions": np.full((12, 10, 3), "a")}, r"field 'clean_positions' must be float"),
+    ],
+)
+def test_error_npz_field_types(tmp_path, override, message):
+    p = _npz(tmp_path / "x.npz", **override)
+    with pytest.raises(DataError, match=rf"x\.npz: {message}"):
+        load_demonstrations(p)
+
+
+@pytest.mark.parametrize(
+    ("header", "label", "message"),
+    [
+        (
+            '{"fps": 15, "action_names": ["a", "b"]}',
+            "1e30",
+            r"line 4: field 'labels' out of range: 1e30, expected -1 \(unlabelled\) or 0\.\.1",
+        ),
+        ('{"fps": 15}', "-5", r"line 4: field 'labels' out of range: -5, expected -1"),
+        ('{"fps": 15}', "inf", "line 4: field 'labels' must be integers in every row, got 'inf'"),
+        ('{"fps": 15}', "", "line 4: field 'labels' must be integers in every row, got ''"),
+        # without action_names a label names action_0 .. action_<label>: a bound, not 20001
+        ('{"fps": 15}', "20000", "line 4: field 'labels' is 20000, but without 'action_names'"),
+    ],
+)
+def test_error_csv_label_shows_the_value_and_line(tmp_path, header, label, message):
+    p = tmp_path / "x.csv"
+    p.write_text(f"# {header}\nlabel,a_x,a_y,a_z\n0,1,2,3\n{label},1,2,3\n")
+    with pytest.raises(DataError, match=rf"x\.csv: {message}") as info:
+        load_demonstrations(p)
+    assert "9223372036854775808" not in str(info.value)
+
+
+def test_error_npz_damaged_compressed_data(tmp_path):
+    d = _demo()
+    p = tmp_path / "x.npz"
+    np.savez_compressed(p, positions=d.positions, labels=d.labels, fps=np.array(15.0))
+    raw = bytearray(p.read_bytes())
+    raw[60:90] = bytes(b ^ 0xFF for b in raw[60:90])  # inside the first member's deflate data
+    p.write_bytes(bytes(raw))
+    with pytest.raises(DataError, match=r"x\.npz: not a valid NPZ demonstration file: corrupt"):
+        load_demonstrations(p)
+
+
+def test_error_pickled_npz_field_is_not_reported_as_corrupt(tmp_path):
+    p = _npz(tmp_path / "o.npz", metadata=np.array([{"subject": 1}], dtype=object))
+    with pytest.raises(DataError) as info:
+        load_demonstrations(p)
+    assert str(info.value).startswith(
+        f"{p}: not a valid NPZ demonstration file: field 'metadata' holds pickled"
+    )
+
+
+def test_error_unreadable_npz(tmp_path, monkeypatch):
+    p = _npz(tmp_path / "x.npz")
+    real_open = open
+
+    def no_access(file, *args, **kwargs):
+        if Path(file) == p:
+            raise PermissionError(13, "Permission denied", str(file))
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr("builtins.open", no_access)
+    with pytest.raises(DataError, match=r"x\.npz: unreadable NPZ file \(.*Permission denied"):
+        load_demonstrations(p)
