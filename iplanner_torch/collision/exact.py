@@ -18,6 +18,7 @@ normal variables, so ``P(||X - c|| <= R)`` is its CDF at ``R^2``. Three independ
 from __future__ import annotations
 
 import math
+import numbers
 import warnings
 from typing import Literal
 
@@ -25,7 +26,7 @@ import numpy as np
 import torch
 from scipy import integrate, special
 
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_shape
 
 #: Ruben's series stops when the truncation bound is below ``RUBEN_RTOL * p + RUBEN_ATOL``.
@@ -33,20 +34,57 @@ RUBEN_RTOL = 1e-12
 RUBEN_ATOL = 1e-300
 
 
+def _check_positive_int(name: str, value: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value <= 0:
+        raise ConfigError(f"expected {name} > 0 (an int), got {value!r}")
+
+
+def _check_finite(name: str, x: np.ndarray) -> None:
+    if not np.isfinite(x).all():
+        raise DataError(
+            f"expected finite {name}, got {int(np.isnan(x).sum())} NaN and "
+            f"{int(np.isinf(x).sum())} Inf among {x.size} values"
+        )
+
+
 def _canonical(
-    center: torch.Tensor, radius: torch.Tensor, mean: torch.Tensor, cov: torch.Tensor
+    center: torch.Tensor, radius: torch.Tensor | float, mean: torch.Tensor, cov: torch.Tensor
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[int, ...]]:
-    """Flatten to numpy float64: ``s (N, 3)`` eigenvalues, ``d2 (N, 3)``, ``x (N,) = R^2``."""
+    """Flatten to numpy float64: ``s (N, 3)`` eigenvalues, ``d2 (N, 3)``, ``x (N,) = R^2``.
+
+    Validates the arguments of the public functions (see :func:`exact_ball_probability`).
+    """
     check_shape("center", center, ("...", 3))
     check_shape("mean", mean, ("...", 3))
     check_shape("cov", cov, ("...", 3, 3))
-    batch = torch.broadcast_shapes(center.shape[:-1], mean.shape[:-1], cov.shape[:-2])
-    batch = torch.broadcast_shapes(batch, torch.as_tensor(radius).shape)
+    if not isinstance(radius, (torch.Tensor, numbers.Real)) or isinstance(radius, bool):
+        kind = type(radius).__name__
+        raise ShapeError(f"expected radius to be a torch.Tensor or a float, got {kind}")
+    if not isinstance(radius, torch.Tensor):
+        radius = torch.tensor(float(radius), dtype=torch.float64)  # not float32 rounded
+    try:
+        batch = torch.broadcast_shapes(
+            center.shape[:-1], radius.shape, mean.shape[:-1], cov.shape[:-2]
+        )
+    except RuntimeError:
+        got = ", ".join(
+            f"{n} {tuple(t.shape)}"
+            for n, t in (("center", center), ("radius", radius), ("mean", mean), ("cov", cov))
+        )
+        raise ShapeError(f"expected broadcastable leading dimensions, got {got}") from None
     c = center.detach().double().cpu().expand(batch + (3,)).reshape(-1, 3).numpy()
     m = mean.detach().double().cpu().expand(batch + (3,)).reshape(-1, 3).numpy()
     S = cov.detach().double().cpu().expand(batch + (3, 3)).reshape(-1, 3, 3).numpy()
-    r = torch.as_tensor(radius).detach().double().cpu().expand(batch).reshape(-1).numpy()
+    r = radius.detach().double().cpu().expand(batch).reshape(-1).numpy()
+    for name, x in (("center", c), ("radius", r), ("mean", m), ("cov", S)):
+        _check_finite(name, x)
+    if not (r > 0).all():
+        raise ShapeError(f"expected radius > 0 everywhere, got min {r.min()}")
     s, U = np.linalg.eigh(0.5 * (S + np.swapaxes(S, -1, -2)))
+    # Negative eigenvalues beyond the rounding of the input's dtype: not a covariance.
+    eps = torch.finfo(cov.dtype if cov.is_floating_point() else torch.float64).eps
+    if s.size and not (s[:, 0] >= -(eps**0.5) * np.abs(s).max(1)).all():
+        raise DataError(f"expected cov positive semidefinite, got eigenvalue {s[:, 0].min()}")
     s = np.maximum(s, 1e-300)
     d = np.einsum("nji,nj->ni", U, m - c)
     return s, d * d, r * r, tuple(batch)
@@ -66,7 +104,36 @@ def ruben_series(
     Returns:
         ``(lower, upper)``, each (N,): the partial sum and the partial sum plus the rigorous
         truncation bound (up to float64 rounding).
+
+    Raises:
+        ShapeError: on inconsistent shapes.
+        DataError: on NaN or Inf, non-positive ``s``, or negative ``d2`` or ``x``.
+        ConfigError: when ``max_terms`` is not a positive int.
     """
+    _check_positive_int("max_terms", max_terms)
+    s, d2, x = np.asarray(s), np.asarray(d2), np.asarray(x)
+    if s.ndim != 2 or d2.shape != s.shape or x.shape != s.shape[:1]:
+        raise ShapeError(
+            f"expected s (N, n), d2 (N, n), x (N,), got {s.shape}, {d2.shape}, {x.shape}"
+        )
+    _check_series_args(s, d2, x)
+    return _ruben_series(s, d2, x, max_terms)
+
+
+def _check_series_args(s: np.ndarray, d2: np.ndarray, x: np.ndarray) -> None:
+    for name, a in (("s", s), ("d2", d2), ("x", x)):
+        _check_finite(name, a)
+    if not (s > 0).all():
+        raise DataError(f"expected s > 0, got min {s.min()}")
+    for name, a in (("d2", d2), ("x", x)):
+        if not (a >= 0).all():
+            raise DataError(f"expected {name} >= 0, got min {a.min()}")
+
+
+def _ruben_series(
+    s: np.ndarray, d2: np.ndarray, x: np.ndarray, max_terms: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`ruben_series` without the argument checks."""
     n_dim = s.shape[1]
     beta = s.min(axis=1, keepdims=True)  # (N, 1)
     gamma = 1.0 - beta / s  # (N, 3) in [0, 1)
@@ -102,7 +169,7 @@ def ruben_series(
 
 def ruben_ball_probability(
     center: torch.Tensor,
-    radius: torch.Tensor,
+    radius: torch.Tensor | float,
     mean: torch.Tensor,
     cov: torch.Tensor,
     *,
@@ -112,19 +179,22 @@ def ruben_ball_probability(
 
     Args:
         center: (..., 3) ball centre [m].
-        radius: (...) ball radius [m].
+        radius: (...) ball radius [m], > 0, or a float.
         mean: (..., 3) Gaussian mean [m].
-        cov: (..., 3, 3) Gaussian covariance [m^2].
+        cov: (..., 3, 3) Gaussian covariance [m^2], symmetric positive (semi)definite.
         max_terms: series terms.
 
     Returns:
         ``(lower (...), upper (...))`` float64 CPU tensors; the exact value lies between them.
 
     Raises:
-        ShapeError: on wrong trailing dimensions.
+        ShapeError: as :func:`exact_ball_probability`.
+        DataError: as :func:`exact_ball_probability`.
+        ConfigError: when ``max_terms`` is not a positive int.
     """
+    _check_positive_int("max_terms", max_terms)
     s, d2, x, batch = _canonical(center, radius, mean, cov)
-    lower, upper = ruben_series(s, d2, x, max_terms=max_terms)
+    lower, upper = _ruben_series(s, d2, x, max_terms)
     return torch.from_numpy(lower).view(batch), torch.from_numpy(upper).view(batch)
 
 
@@ -138,7 +208,23 @@ def imhof_cdf(s: np.ndarray, d2: np.ndarray, x: float) -> float:
 
     Returns:
         The probability (absolute accuracy about 1e-8).
+
+    Raises:
+        ShapeError: when ``s`` and ``d2`` are not 1-D of one length.
+        DataError: on NaN or Inf, non-positive ``s`` or ``x``, or negative ``d2``.
     """
+    s = np.asarray(s, dtype=np.float64)
+    d2 = np.asarray(d2, dtype=np.float64)
+    if s.ndim != 1 or d2.shape != s.shape:
+        raise ShapeError(f"expected s (n,) and d2 (n,), got {s.shape} and {d2.shape}")
+    _check_series_args(s, d2, np.asarray(x, dtype=np.float64))
+    if not x > 0:
+        raise DataError(f"expected x > 0, got {x}")
+    return _imhof_cdf(s, d2, float(x))
+
+
+def _imhof_cdf(s: np.ndarray, d2: np.ndarray, x: float) -> float:
+    """:func:`imhof_cdf` without the argument checks."""
     lam = np.asarray(s, dtype=np.float64) / x  # scale so the threshold is 1
     nc = np.asarray(d2, dtype=np.float64) / np.asarray(s, dtype=np.float64)
 
@@ -161,7 +247,7 @@ def imhof_cdf(s: np.ndarray, d2: np.ndarray, x: float) -> float:
 
 def mc_ball_probability(
     center: torch.Tensor,
-    radius: torch.Tensor,
+    radius: torch.Tensor | float,
     mean: torch.Tensor,
     cov: torch.Tensor,
     *,
@@ -173,9 +259,9 @@ def mc_ball_probability(
 
     Args:
         center: (..., 3) ball centre [m].
-        radius: (...) ball radius [m].
+        radius: (...) ball radius [m], > 0, or a float.
         mean: (..., 3) Gaussian mean [m].
-        cov: (..., 3, 3) Gaussian covariance [m^2].
+        cov: (..., 3, 3) Gaussian covariance [m^2], symmetric positive (semi)definite.
         n: samples per case.
         seed: random seed (same seed, same numbers).
         chunk: samples drawn at once per case.
@@ -184,10 +270,12 @@ def mc_ball_probability(
         ``(p (...), stderr (...))`` float64 CPU tensors, ``stderr = sqrt(p (1 - p) / n)``.
 
     Raises:
-        ConfigError: when ``n`` is not positive.
+        ShapeError: as :func:`exact_ball_probability`.
+        DataError: as :func:`exact_ball_probability`.
+        ConfigError: when ``n`` or ``chunk`` is not a positive int.
     """
-    if n <= 0:
-        raise ConfigError(f"expected n > 0, got {n}")
+    _check_positive_int("n", n)
+    _check_positive_int("chunk", chunk)
     s, d2, x, batch = _canonical(center, radius, mean, cov)
     rng = np.random.default_rng(seed)
     d = np.sqrt(d2)  # signs do not matter: the ball is symmetric in each eigen-direction
@@ -206,7 +294,7 @@ def mc_ball_probability(
 
 def exact_ball_probability(
     center: torch.Tensor,
-    radius: torch.Tensor,
+    radius: torch.Tensor | float,
     mean: torch.Tensor,
     cov: torch.Tensor,
     *,
@@ -219,9 +307,9 @@ def exact_ball_probability(
 
     Args:
         center: (..., 3) ball centre [m].
-        radius: (...) ball radius [m].
+        radius: (...) ball radius [m], > 0, or a float.
         mean: (..., 3) Gaussian mean [m].
-        cov: (..., 3, 3) Gaussian covariance [m^2].
+        cov: (..., 3, 3) Gaussian covariance [m^2], symmetric positive (semi)definite.
         method: ``"imhof"`` (quad per case), ``"ruben"`` (upper end of the series bracket)
             or ``"mc"`` (estimate only; see :func:`mc_ball_probability` for its error).
         max_terms: Ruben's series terms.
@@ -232,14 +320,17 @@ def exact_ball_probability(
         (...) float64 CPU tensor of probabilities.
 
     Raises:
-        ConfigError: on an unknown method.
+        ShapeError: on wrong trailing dimensions, leading dimensions that do not broadcast,
+            or a non-positive radius.
+        DataError: on NaN or Inf in any argument, or a covariance with a negative eigenvalue.
+        ConfigError: on an unknown method, or ``max_terms`` / ``n_mc`` not a positive int.
     """
+    if method not in ("imhof", "ruben", "mc"):
+        raise ConfigError(f"expected method in ('imhof', 'ruben', 'mc'), got {method!r}")
     if method == "ruben":
         return ruben_ball_probability(center, radius, mean, cov, max_terms=max_terms)[1]
     if method == "mc":
         return mc_ball_probability(center, radius, mean, cov, n=n_mc, seed=seed)[0]
-    if method != "imhof":
-        raise ConfigError(f"expected method in ('imhof', 'ruben', 'mc'), got {method!r}")
     s, d2, x, batch = _canonical(center, radius, mean, cov)
-    out = np.array([imhof_cdf(s[i], d2[i], x[i]) for i in range(s.shape[0])])
+    out = np.array([_imhof_cdf(s[i], d2[i], x[i]) for i in range(s.shape[0])])
     return torch.from_numpy(out).view(batch)

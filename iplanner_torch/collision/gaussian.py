@@ -53,12 +53,20 @@ of a pruned pair to at most ``Phi(-prune_sigma)`` (about 1e-9 for 6).
 from __future__ import annotations
 
 import math
+import numbers
 import warnings
+from collections.abc import Callable
 from typing import Literal
 
 import torch
 
-from iplanner_torch.errors import ConfigError, NumericalWarning, ShapeError
+from iplanner_torch.errors import (
+    ConfigError,
+    DataError,
+    IPlannerError,
+    NumericalWarning,
+    ShapeError,
+)
 from iplanner_torch.types import check_shape
 
 Method = Literal["min", "volume", "halfspace"]
@@ -273,32 +281,114 @@ def _pair_bounds(
     return out.view(shape)
 
 
-def _check_entry(
-    robot_center: torch.Tensor,
-    robot_radius: torch.Tensor,
-    mean: torch.Tensor,
-    human_radius: torch.Tensor,
-) -> None:
-    check_shape("robot_center", robot_center, ("...", 3))
-    check_shape("mean", mean, ("...", 3))
-    for name, t in (("robot_radius", robot_radius), ("human_radius", human_radius)):
+# Input validation. Every public entry validates once, before any work, with at most one host
+# sync for the finiteness and range checks (two for full covariances: the positive
+# semidefiniteness check needs the eigenvalues); the solver internals assume valid input.
+
+_Check = tuple[torch.Tensor, Callable[[], IPlannerError]]
+
+
+def _check_prune_sigma(prune_sigma: float | None) -> None:
+    """``prune_sigma`` must be None or > 0: at 0 or below every outside pair would get the
+    useless halfspace bound ``Phi(-prune_sigma) >= 0.5``."""
+    if prune_sigma is None:
+        return
+    if (
+        isinstance(prune_sigma, bool)
+        or not isinstance(prune_sigma, numbers.Real)
+        or not prune_sigma > 0
+    ):
+        raise ConfigError(f"expected prune_sigma > 0 or None, got {prune_sigma!r}")
+
+
+def _as_radius(name: str, radius: torch.Tensor | float, like: torch.Tensor) -> torch.Tensor:
+    """A radius argument as a tensor; a Python real becomes a 0-dim tensor like ``like``."""
+    if isinstance(radius, torch.Tensor):
+        return radius
+    if isinstance(radius, numbers.Real) and not isinstance(radius, bool):
+        return torch.as_tensor(float(radius), dtype=like.dtype, device=like.device)
+    kind = type(radius).__name__
+    raise ShapeError(f"expected {name} to be a torch.Tensor or a float, got {kind}")
+
+
+def _check_tensors(tensors: dict[str, torch.Tensor], same_dtype: tuple[str, ...]) -> None:
+    """Every tensor floating point on the first one's device; those named in ``same_dtype``
+    also of the first one's dtype (the others are promoted or converted)."""
+    ref_name, ref = next(iter(tensors.items()))
+    for name, t in tensors.items():
         if not isinstance(t, torch.Tensor):
             raise ShapeError(f"expected {name} to be a torch.Tensor, got {type(t).__name__}")
+        if not t.is_floating_point():
+            raise ShapeError(f"expected {name} of a floating dtype, got {t.dtype}")
+        if t.device != ref.device:
+            raise ShapeError(f"expected {name} on {ref.device} (as {ref_name}), got {t.device}")
+        if name in same_dtype and t.dtype != ref.dtype:
+            raise ShapeError(f"expected {name} {ref.dtype} (as {ref_name}), got {t.dtype}")
 
 
-def _radius_sum(robot_radius: torch.Tensor, human_radius: torch.Tensor) -> torch.Tensor:
-    R = robot_radius + human_radius
-    if bool((R <= 0).any()):
-        raise ShapeError("expected robot_radius + human_radius > 0 everywhere")
-    return R
+def _broadcast_batch(args: dict[str, tuple[torch.Tensor, int]]) -> torch.Size:
+    """Broadcast shape of the leading dimensions; ``args`` maps name to (tensor, trailing
+    event dimensions)."""
+    try:
+        return torch.broadcast_shapes(*(t.shape[: t.dim() - k] for t, k in args.values()))
+    except RuntimeError:
+        got = ", ".join(f"{name} {tuple(t.shape)}" for name, (t, _) in args.items())
+        raise ShapeError(f"expected broadcastable leading dimensions, got {got}") from None
+
+
+def _finite(name: str, x: torch.Tensor) -> _Check:
+    def error() -> DataError:
+        n_nan = int(torch.isnan(x).sum())
+        n_inf = int(torch.isinf(x).sum())
+        return DataError(
+            f"expected finite {name}, got {n_nan} NaN and {n_inf} Inf among {x.numel()} values"
+        )
+
+    return torch.isfinite(x).all(), error
+
+
+def _nonnegative(name: str, x: torch.Tensor) -> _Check:
+    return (x >= 0).all(), lambda: DataError(f"expected {name} >= 0, got min {float(x.min())}")
+
+
+def _radius_sum_positive(R: torch.Tensor, name: str = "robot_radius + human_radius") -> _Check:
+    return (R > 0).all(), lambda: ShapeError(f"expected {name} > 0 everywhere")
+
+
+def _run_checks(checks: list[_Check]) -> None:
+    """Raise the first failing check's error; one host sync for all of them."""
+    ok = torch.stack([flag for flag, _ in checks]).tolist()
+    for passed, (_, error) in zip(ok, checks):
+        if not passed:
+            raise error()
+
+
+def _component_first(x: torch.Tensor, rank: int) -> torch.Tensor:
+    """(..., 3) -> (3, ...), with singleton dimensions prepended to the batch so that it has
+    ``rank`` dimensions (component-first tensors broadcast only when their ranks agree)."""
+    x = x.movedim(-1, 0)  # (3, ...)
+    return x.reshape((3,) + (1,) * (rank - x.dim() + 1) + x.shape[1:])  # (3, 1.., ...)
+
+
+def _eigh_psd(cov: torch.Tensor, name: str) -> tuple[torch.Tensor, torch.Tensor]:
+    """Eigen-decomposition of the symmetrised ``cov`` (finite); :class:`DataError` when an
+    eigenvalue is negative beyond rounding (``sqrt(eps)`` of the largest magnitude)."""
+    s, U = torch.linalg.eigh(0.5 * (cov + cov.transpose(-1, -2)))  # (..., 3), (..., 3, 3)
+    tol = torch.finfo(s.dtype).eps ** 0.5
+    ok = (s[..., 0] >= -tol * s.abs().amax(-1)).all()  # eigenvalues ascend
+    if not bool(ok):
+        raise DataError(
+            f"expected {name} positive semidefinite, got eigenvalue {float(s[..., 0].min())}"
+        )
+    return s, U
 
 
 def sphere_collision_bound(
     robot_center: torch.Tensor,
-    robot_radius: torch.Tensor,
+    robot_radius: torch.Tensor | float,
     mean: torch.Tensor,
     cov: torch.Tensor,
-    human_radius: torch.Tensor,
+    human_radius: torch.Tensor | float,
     *,
     method: Method = "min",
     solver: Solver = "newton",
@@ -313,44 +403,62 @@ def sphere_collision_bound(
 
     Args:
         robot_center: (..., 3) robot sphere centres [m].
-        robot_radius: (...) robot sphere radii [m].
-        mean: (..., 3) mean of the human sphere centre [m].
+        robot_radius: (...) robot sphere radii [m], or a float.
+        mean: (..., 3) mean of the human sphere centre [m], dtype and device of
+            ``robot_center``.
         cov: (..., 3, 3) covariance of the human sphere centre [m^2], symmetric positive
-            (semi)definite; eigenvalues below ``VAR_FLOOR`` are raised to it.
-        human_radius: (...) human sphere radii [m].
+            (semi)definite, dtype and device of ``robot_center``; eigenvalues below
+            ``VAR_FLOOR`` are raised to it.
+        human_radius: (...) human sphere radii [m], or a float.
         method: ``"min"`` (default), ``"volume"`` or ``"halfspace"``.
         solver: ``"newton"`` (default) or the paper's ``"bisection"`` (reference, no exact
             gradient through the multiplier).
         prune_sigma: skip the solver for pairs farther than this many standard deviations
-            (cheap, never lower bound; None: never prune).
+            (> 0; cheap, never lower bound; None: never prune).
 
     Returns:
         (...) bound in [0, 1], dtype of the inputs.
 
     Raises:
-        ShapeError: on wrong trailing dimensions or non-positive radius sums.
-        ConfigError: on an unknown method or solver.
+        ShapeError: on wrong trailing dimensions, leading dimensions that do not broadcast,
+            a non-floating dtype, mixed devices or dtypes, or non-positive radius sums.
+        DataError: on NaN or Inf in any argument, or a covariance with a negative eigenvalue.
+        ConfigError: on an unknown method or solver, or ``prune_sigma <= 0``.
     """
     _check_choices(method, solver)
-    _check_entry(robot_center, robot_radius, mean, human_radius)
+    _check_prune_sigma(prune_sigma)
+    check_shape("robot_center", robot_center, ("...", 3))
+    check_shape("mean", mean, ("...", 3))
     check_shape("cov", cov, ("...", 3, 3))
-    R = _radius_sum(robot_radius, human_radius)
-    s, U = torch.linalg.eigh(0.5 * (cov + cov.transpose(-1, -2)))  # (..., 3), (..., 3, 3)
+    robot_radius = _as_radius("robot_radius", robot_radius, robot_center)
+    human_radius = _as_radius("human_radius", human_radius, robot_center)
+    args = {
+        "robot_center": (robot_center, 1),
+        "robot_radius": (robot_radius, 0),
+        "mean": (mean, 1),
+        "cov": (cov, 2),
+        "human_radius": (human_radius, 0),
+    }
+    _check_tensors({n: t for n, (t, _) in args.items()}, same_dtype=("mean", "cov"))
+    rank = len(_broadcast_batch(args))
+    R = robot_radius + human_radius
+    _run_checks([_finite(n, t) for n, (t, _) in args.items()] + [_radius_sum_positive(R)])
+    s, U = _eigh_psd(cov, "cov")  # (..., 3), (..., 3, 3)
     diff = mean - robot_center  # (..., 3)
     batch = torch.broadcast_shapes(U.shape[:-2], diff.shape[:-1])
     d = torch.einsum("...ji,...j->...i", U.expand(batch + (3, 3)), diff.expand(batch + (3,)))
-    d2 = (d * d).movedim(-1, 0)  # (3, ...)
+    d2 = _component_first(d * d, rank)  # (3, ...)
     return _pair_bounds(
-        d2, s.movedim(-1, 0), R, method=method, solver=solver, prune_sigma=prune_sigma
+        d2, _component_first(s, rank), R, method=method, solver=solver, prune_sigma=prune_sigma
     )
 
 
 def sphere_collision_bound_diag(
     robot_center: torch.Tensor,
-    robot_radius: torch.Tensor,
+    robot_radius: torch.Tensor | float,
     mean: torch.Tensor,
     var: torch.Tensor,
-    human_radius: torch.Tensor,
+    human_radius: torch.Tensor | float,
     *,
     method: Method = "min",
     solver: Solver = "newton",
@@ -360,10 +468,12 @@ def sphere_collision_bound_diag(
 
     Args:
         robot_center: (..., 3) robot sphere centres [m].
-        robot_radius: (...) robot sphere radii [m].
-        mean: (..., 3) mean of the human sphere centre [m].
-        var: (..., 3) per-axis variances of the human sphere centre [m^2].
-        human_radius: (...) human sphere radii [m].
+        robot_radius: (...) robot sphere radii [m], or a float.
+        mean: (..., 3) mean of the human sphere centre [m], dtype and device of
+            ``robot_center``.
+        var: (..., 3) per-axis variances of the human sphere centre [m^2], >= 0, dtype and
+            device of ``robot_center``.
+        human_radius: (...) human sphere radii [m], or a float.
         method: ``"min"`` (default), ``"volume"`` or ``"halfspace"``.
         solver: ``"newton"`` (default) or ``"bisection"`` (reference).
         prune_sigma: see :func:`sphere_collision_bound`.
@@ -372,23 +482,39 @@ def sphere_collision_bound_diag(
         (...) bound in [0, 1].
 
     Raises:
-        ShapeError: on wrong trailing dimensions or non-positive radius sums.
-        ConfigError: on an unknown method or solver.
+        ShapeError: as :func:`sphere_collision_bound`.
+        DataError: on NaN or Inf in any argument, or a negative variance.
+        ConfigError: on an unknown method or solver, or ``prune_sigma <= 0``.
     """
     _check_choices(method, solver)
-    _check_entry(robot_center, robot_radius, mean, human_radius)
+    _check_prune_sigma(prune_sigma)
+    check_shape("robot_center", robot_center, ("...", 3))
+    check_shape("mean", mean, ("...", 3))
     check_shape("var", var, ("...", 3))
-    R = _radius_sum(robot_radius, human_radius)
+    robot_radius = _as_radius("robot_radius", robot_radius, robot_center)
+    human_radius = _as_radius("human_radius", human_radius, robot_center)
+    args = {
+        "robot_center": (robot_center, 1),
+        "robot_radius": (robot_radius, 0),
+        "mean": (mean, 1),
+        "var": (var, 1),
+        "human_radius": (human_radius, 0),
+    }
+    _check_tensors({n: t for n, (t, _) in args.items()}, same_dtype=("mean", "var"))
+    rank = len(_broadcast_batch(args))
+    R = robot_radius + human_radius
+    checks = [_finite(n, t) for n, (t, _) in args.items()]
+    _run_checks(checks + [_nonnegative("var", var), _radius_sum_positive(R)])
     diff = mean - robot_center
-    d2 = (diff * diff).movedim(-1, 0)  # (3, ...)
+    d2 = _component_first(diff * diff, rank)  # (3, ...)
     return _pair_bounds(
-        d2, var.movedim(-1, 0), R, method=method, solver=solver, prune_sigma=prune_sigma
+        d2, _component_first(var, rank), R, method=method, solver=solver, prune_sigma=prune_sigma
     )
 
 
 def max_density_point(
     robot_center: torch.Tensor,
-    radius: torch.Tensor,
+    radius: torch.Tensor | float,
     mean: torch.Tensor,
     cov: torch.Tensor,
     *,
@@ -398,9 +524,10 @@ def max_density_point(
 
     Args:
         robot_center: (..., 3) ball centre ``c`` [m].
-        radius: (...) ball radius ``R = r1 + r2`` [m].
-        mean: (..., 3) Gaussian mean [m].
-        cov: (..., 3, 3) Gaussian covariance [m^2].
+        radius: (...) ball radius ``R = r1 + r2`` [m], > 0, or a float.
+        mean: (..., 3) Gaussian mean [m], dtype and device of ``robot_center``.
+        cov: (..., 3, 3) Gaussian covariance [m^2], symmetric positive (semi)definite, dtype
+            and device of ``robot_center``.
         solver: ``"newton"`` or ``"bisection"``.
 
     Returns:
@@ -408,14 +535,27 @@ def max_density_point(
         the mean lies inside the ball.
 
     Raises:
-        ShapeError: on wrong trailing dimensions.
+        ShapeError: on wrong trailing dimensions, leading dimensions that do not broadcast,
+            a non-floating dtype, mixed devices or dtypes, or a non-positive radius.
+        DataError: on NaN or Inf in any argument, or a covariance with a negative eigenvalue.
         ConfigError: on an unknown solver.
     """
     _check_choices("min", solver)
     check_shape("robot_center", robot_center, ("...", 3))
     check_shape("mean", mean, ("...", 3))
     check_shape("cov", cov, ("...", 3, 3))
-    s, U = torch.linalg.eigh(0.5 * (cov + cov.transpose(-1, -2)))
+    radius = _as_radius("radius", radius, robot_center)
+    args = {
+        "robot_center": (robot_center, 1),
+        "radius": (radius, 0),
+        "mean": (mean, 1),
+        "cov": (cov, 2),
+    }
+    _check_tensors({n: t for n, (t, _) in args.items()}, same_dtype=("mean", "cov"))
+    _broadcast_batch(args)
+    checks = [_finite(n, t) for n, (t, _) in args.items()]
+    _run_checks(checks + [_radius_sum_positive(radius, "radius")])
+    s, U = _eigh_psd(cov, "cov")
     s = s.clamp_min(VAR_FLOOR)
     diff = mean - robot_center
     batch = torch.broadcast_shapes(U.shape[:-2], diff.shape[:-1], radius.shape)
@@ -466,7 +606,8 @@ def pairwise_bound_matrix(
         human_cov: (W, A, S_h, 3, 3) covariances [m^2], or (W, A, S_h, 3) per-axis variances
             [m^2] (diagonal covariances: no eigendecomposition).
         human_radii: (S_h,) human sphere radii [m].
-        weights: (A,) or (W, A) action probabilities p(c | F, p).
+        weights: (A,) or (W, A) action probabilities p(c | F, p): >= 0, summing to at most
+            1 over A (up to rounding).
         method: ``"min"``, ``"volume"`` or ``"halfspace"``.
         prune_sigma: see :func:`sphere_collision_bound` (None: never prune).
         max_pairs_per_chunk: the batch is processed in chunks of at most this many pairs.
@@ -475,32 +616,62 @@ def pairwise_bound_matrix(
         (B, W, S_r, S_h) mixture bounds (may exceed 1 only by rounding; each term is <= 1).
 
     Raises:
-        ShapeError: on inconsistent shapes.
-        ConfigError: on an unknown method or a non-positive chunk size.
+        ShapeError: on inconsistent shapes, a non-floating dtype, mixed devices, human
+            tensors of another dtype than ``robot_centers``, or non-positive radius sums.
+        DataError: on NaN or Inf in any argument, negative variances, a covariance with a
+            negative eigenvalue, or weights that are negative or sum to more than 1.
+        ConfigError: on an unknown method, ``prune_sigma <= 0`` or a non-positive chunk size.
     """
     _check_choices(method, "newton")
-    if max_pairs_per_chunk <= 0:
-        raise ConfigError(f"expected max_pairs_per_chunk > 0, got {max_pairs_per_chunk}")
+    _check_prune_sigma(prune_sigma)
+    if (
+        isinstance(max_pairs_per_chunk, bool)
+        or not isinstance(max_pairs_per_chunk, numbers.Integral)
+        or max_pairs_per_chunk <= 0
+    ):
+        raise ConfigError(f"expected max_pairs_per_chunk > 0, got {max_pairs_per_chunk!r}")
     check_shape("robot_centers", robot_centers, ("B", "W", "S_r", 3))
     B, W, S_r, _ = robot_centers.shape
     check_shape("robot_radii", robot_radii, (S_r,))
     check_shape("human_mean", human_mean, (W, "A", "S_h", 3))
     _, A, S_h, _ = human_mean.shape
     check_shape("human_radii", human_radii, (S_h,))
-    diagonal = human_cov.dim() == 4
+    diagonal = isinstance(human_cov, torch.Tensor) and human_cov.dim() == 4
     if diagonal:
         check_shape("human_cov", human_cov, (W, A, S_h, 3))
     else:
         check_shape("human_cov", human_cov, (W, A, S_h, 3, 3))
+    tensors = {
+        "robot_centers": robot_centers,
+        "robot_radii": robot_radii,
+        "human_mean": human_mean,
+        "human_cov": human_cov,
+        "human_radii": human_radii,
+        "weights": weights,
+    }
+    _check_tensors(tensors, same_dtype=("human_mean", "human_cov"))
     w = _weights_per_waypoint(weights, W, A).to(robot_centers.dtype)  # (W, A)
-    R = _radius_sum(robot_radii[:, None, None], human_radii[None, None, :])  # (S_r, 1, S_h)
+    R = robot_radii[:, None, None] + human_radii[None, None, :]  # (S_r, 1, S_h)
+    w_tol = 1.0 + torch.finfo(w.dtype).eps ** 0.5
+    w_sum = w.sum(-1)  # (W,)
+    checks = [_finite(n, t) for n, t in tensors.items()] + [
+        _radius_sum_positive(R, "robot_radii + human_radii"),
+        _nonnegative("weights", weights),
+        (
+            (w_sum <= w_tol).all(),
+            lambda: DataError(f"expected weights summing to <= 1, got {float(w_sum.max())}"),
+        ),
+    ]
+    if diagonal:
+        checks.append(_nonnegative("human_cov", human_cov))
+    _run_checks(checks)
 
     if diagonal:
         s = human_cov.movedim(-1, 0)  # (3, W, A, S_h)
         mu_e = human_mean.movedim(-1, 0)  # (3, W, A, S_h)
         U = None
     else:
-        s, U = torch.linalg.eigh(0.5 * (human_cov + human_cov.transpose(-1, -2)))
+        s, U = _eigh_psd(human_cov, "human_cov")
         s = s.movedim(-1, 0)  # (3, W, A, S_h) eigenvalues
         mu_e = torch.einsum("walji,walj->iwal", U, human_mean)  # (3, W, A, S_h) eigen-coords
 
@@ -550,7 +721,7 @@ def trajectory_collision_bound(
         human_mean: (W, A, S_h, 3) mean human sphere centres per action [m].
         human_cov: (W, A, S_h, 3, 3) covariances [m^2] or (W, A, S_h, 3) variances [m^2].
         human_radii: (S_h,) human sphere radii [m].
-        weights: (A,) or (W, A) action probabilities.
+        weights: (A,) or (W, A) action probabilities (>= 0, summing to at most 1).
         method: ``"min"``, ``"volume"`` or ``"halfspace"``.
         reduce: ``"max"`` -> (B, W); ``"none"`` -> (B, W, S_r, S_h) as
             :func:`pairwise_bound_matrix`.
@@ -561,8 +732,11 @@ def trajectory_collision_bound(
         (B, W) bounds in [0, 1] (or the pair matrix for ``reduce="none"``).
 
     Raises:
-        ShapeError: on inconsistent shapes.
-        ConfigError: on an unknown method or reduce.
+        ShapeError: on inconsistent shapes, dtypes or devices (see
+            :func:`pairwise_bound_matrix`, which validates the inputs once).
+        DataError: on non-finite or out-of-range inputs (see :func:`pairwise_bound_matrix`).
+        ConfigError: on an unknown method or reduce, ``prune_sigma <= 0`` or a non-positive
+            chunk size.
     """
     if reduce not in ("max", "none"):
         raise ConfigError(f"expected reduce in ('max', 'none'), got {reduce!r}")

@@ -7,12 +7,14 @@ A sphere at fraction ``u`` of the segment from joint ``a`` to joint ``b`` has th
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Sequence
 
 import torch
 
 from iplanner_torch.data.skeleton import SEGMENTS, Segment
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_shape
 
 
@@ -30,7 +32,9 @@ class HumanSphereModel:
         scale: body size relative to the reference body; radii are multiplied by it.
 
     Raises:
-        ConfigError: on a non-positive scale, duplicate joint names, or no usable segment.
+        ConfigError: on a non-positive or non-finite scale, duplicate joint names, a used
+            segment with a non-positive or non-finite radius or fewer than one sphere, or no
+            usable segment.
     """
 
     def __init__(
@@ -39,8 +43,12 @@ class HumanSphereModel:
         segments: Sequence[Segment] = SEGMENTS,
         scale: float = 1.0,
     ) -> None:
-        if not scale > 0:
-            raise ConfigError(f"expected scale > 0, got {scale}")
+        if (
+            isinstance(scale, bool)
+            or not isinstance(scale, numbers.Real)
+            or not 0 < scale < math.inf
+        ):
+            raise ConfigError(f"expected scale > 0 and finite, got {scale!r}")
         names = tuple(joint_names)
         if len(set(names)) != len(names):
             raise ConfigError(f"expected distinct joint names, got {names}")
@@ -51,6 +59,10 @@ class HumanSphereModel:
                 continue
             if seg.n_spheres < 1:
                 raise ConfigError(f"expected n_spheres >= 1 in segment {seg.name!r}")
+            if not 0 < seg.radius < math.inf:
+                raise ConfigError(
+                    f"expected radius > 0 and finite in segment {seg.name!r}, got {seg.radius}"
+                )
             if seg.joint_a == seg.joint_b:
                 # One joint: u = 1 keeps the joint's own covariance (z_a and z_b are the same
                 # variable, so the independent-joints formula would halve it at u = 0.5).
@@ -95,8 +107,32 @@ class HumanSphereModel:
         ib = self._ib.to(x.device)
         return x.index_select(axis, ia), x.index_select(axis, ib)
 
-    def _check(self, mean: torch.Tensor) -> None:
+    def _check(
+        self, mean: torch.Tensor, name: str, spread: torch.Tensor, event: tuple[int, ...]
+    ) -> None:
+        """Shapes, dtypes, devices and finiteness of ``mean`` and its covariance or variance
+        ``spread`` (named ``name``), with one host sync; a variance must also be >= 0."""
         check_shape("mean", mean, ("...", len(self.joint_names), 3))
+        check_shape(name, spread, tuple(mean.shape) + event)
+        if not mean.is_floating_point():
+            raise ShapeError(f"expected mean of a floating dtype, got {mean.dtype}")
+        if spread.dtype != mean.dtype or spread.device != mean.device:
+            raise ShapeError(
+                f"expected {name} {mean.dtype} on {mean.device} (as mean), "
+                f"got {spread.dtype} on {spread.device}"
+            )
+        mean_ok, spread_ok, spread_nonneg = torch.stack(
+            [torch.isfinite(mean).all(), torch.isfinite(spread).all(), (spread >= 0).all()]
+        ).tolist()
+        for arg_name, arg, ok in (("mean", mean, mean_ok), (name, spread, spread_ok)):
+            if not ok:
+                n_nan, n_inf = int(torch.isnan(arg).sum()), int(torch.isinf(arg).sum())
+                raise DataError(
+                    f"expected finite {arg_name}, got {n_nan} NaN and {n_inf} Inf among "
+                    f"{arg.numel()} values"
+                )
+        if name == "var" and not spread_nonneg:
+            raise DataError(f"expected var >= 0, got min {float(spread.min())}")
 
     def centers(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Gaussian sphere centres from Gaussian joints with full covariances.
@@ -109,10 +145,11 @@ class HumanSphereModel:
             ``(mean (..., S_h, 3) [m], cov (..., S_h, 3, 3) [m^2])``.
 
         Raises:
-            ShapeError: on wrong shapes.
+            ShapeError: on wrong shapes, a non-floating dtype, or ``cov`` of another dtype
+                or device than ``mean``.
+            DataError: on NaN or Inf in ``mean`` or ``cov``.
         """
-        self._check(mean)
-        check_shape("cov", cov, tuple(mean.shape) + (3,))
+        self._check(mean, "cov", cov, (3,))
         k_axis = mean.dim() - 2
         u = self._u.to(mean)[:, None]  # (S_h, 1)
         ma, mb = self._gather(mean, k_axis)  # (..., S_h, 3)
@@ -135,10 +172,11 @@ class HumanSphereModel:
             ``(mean (..., S_h, 3) [m], var (..., S_h, 3) [m^2])``.
 
         Raises:
-            ShapeError: on wrong shapes.
+            ShapeError: on wrong shapes, a non-floating dtype, or ``var`` of another dtype
+                or device than ``mean``.
+            DataError: on NaN or Inf in ``mean`` or ``var``, or a negative variance.
         """
-        self._check(mean)
-        check_shape("var", var, tuple(mean.shape))
+        self._check(mean, "var", var, ())
         k_axis = mean.dim() - 2
         u = self._u.to(mean)[:, None]  # (S_h, 1)
         ma, mb = self._gather(mean, k_axis)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -9,10 +11,12 @@ from scipy import stats
 
 from iplanner_torch.collision.exact import (
     exact_ball_probability,
+    imhof_cdf,
     mc_ball_probability,
     ruben_ball_probability,
+    ruben_series,
 )
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 
 F64 = torch.float64
 
@@ -72,3 +76,67 @@ def test_errors() -> None:
         exact_ball_probability(c, R, mu, cov, method="quad")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="expected n > 0"):
         mc_ball_probability(c, R, mu, cov, n=0, seed=0)
+
+
+@pytest.mark.parametrize("method", ["imhof", "ruben", "mc"])
+@pytest.mark.parametrize("name", ["center", "radius", "mean", "cov"])
+def test_non_finite_input_raises_data_error(name: str, method: str) -> None:
+    c, R, mu, cov, _ = _isotropic(2, 7)
+    args = {"center": c, "radius": R, "mean": mu, "cov": cov}
+    args[name] = args[name].clone()
+    args[name][1] = math.nan
+    with pytest.raises(DataError, match=f"expected finite {name}, got"):
+        exact_ball_probability(**args, method=method, n_mc=100)
+
+
+def test_bad_shapes_and_ranges() -> None:
+    c, R, mu, cov, _ = _isotropic(4, 8)
+    with pytest.raises(ShapeError, match=r"center \(4, 3\).*mean \(5, 3\)"):
+        ruben_ball_probability(c, R, torch.zeros(5, 3, dtype=F64), cov)
+    with pytest.raises(ShapeError, match="expected radius > 0"):
+        exact_ball_probability(c, -R, mu, cov, method="ruben")
+    with pytest.raises(ShapeError, match="expected radius > 0"):
+        exact_ball_probability(c, 0.0 * R, mu, cov)  # Imhof returned NaN at radius 0
+    with pytest.raises(DataError, match="expected cov positive semidefinite"):
+        exact_ball_probability(c, R, mu, -cov, method="ruben")
+    # a float radius is accepted and equals the tensor one
+    one = exact_ball_probability(c[0], 0.2, mu[0], cov[0], method="ruben")
+    assert one == exact_ball_probability(
+        c[0], torch.tensor(0.2, dtype=F64), mu[0], cov[0], method="ruben"
+    )
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "pattern"),
+    [
+        ({"max_terms": 0}, "expected max_terms > 0"),
+        ({"n": 1.5}, "expected n > 0"),
+        ({"chunk": -1}, "expected chunk > 0"),
+        ({"chunk": 0}, "expected chunk > 0"),  # used to loop forever
+    ],
+)
+def test_non_positive_counts_raise_config_error(kwargs: dict, pattern: str) -> None:
+    c, R, mu, cov, _ = _isotropic(2, 9)
+    if "max_terms" in kwargs:
+        with pytest.raises(ConfigError, match=pattern):
+            ruben_ball_probability(c, R, mu, cov, **kwargs)
+        with pytest.raises(ConfigError, match=pattern):
+            ruben_series(np.ones((2, 3)), np.ones((2, 3)), np.ones(2), **kwargs)
+    else:
+        with pytest.raises(ConfigError, match=pattern):
+            mc_ball_probability(c, R, mu, cov, **{"n": 100, "seed": 0, **kwargs})
+
+
+def test_series_and_imhof_arguments_are_checked() -> None:
+    s, d2, x = np.full((2, 3), 0.01), np.full((2, 3), 0.04), np.full(2, 0.09)
+    with pytest.raises(ShapeError, match=r"expected s \(N, n\), d2 \(N, n\), x \(N,\)"):
+        ruben_series(s, d2[:1], x)
+    with pytest.raises(DataError, match="expected s > 0"):
+        ruben_series(0.0 * s, d2, x)
+    with pytest.raises(DataError, match="expected finite d2"):
+        ruben_series(s, np.full((2, 3), np.nan), x)
+    with pytest.raises(DataError, match="expected x > 0"):
+        imhof_cdf(s[0], d2[0], 0.0)
+    with pytest.raises(ShapeError, match=r"expected s \(n,\) and d2 \(n,\)"):
+        imhof_cdf(s, d2, 0.09)
+    assert imhof_cdf(s[0], d2[0], 0.09) == pytest.approx(float(ruben_series(s, d2, x)[1][0]))

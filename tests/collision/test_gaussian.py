@@ -12,7 +12,7 @@ from scipy import special
 
 from iplanner_torch.collision import gaussian as G
 from iplanner_torch.collision.exact import ruben_series
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 
 F64 = torch.float64
 
@@ -286,3 +286,180 @@ def test_errors() -> None:
         G.sphere_collision_bound(rc, rr[0], rc, rc, rr[0])
     with pytest.raises(ShapeError, match="radius"):
         G.sphere_collision_bound_diag(rc[0, 0, 0], -rr[0], rc[0, 0, 0], hv[0, 0, 0], rr[0] * 0)
+
+
+def _pair(n: int = 4) -> dict[str, torch.Tensor]:
+    """Valid arguments of sphere_collision_bound for n pairs (float64)."""
+    gen = torch.Generator().manual_seed(15)
+    return {
+        "robot_center": torch.rand(n, 3, generator=gen, dtype=F64) * 0.1,
+        "robot_radius": torch.full((n,), 0.06, dtype=F64),
+        "mean": torch.tensor([0.3, 0.0, 0.0], dtype=F64).expand(n, 3).clone(),
+        "cov": torch.eye(3, dtype=F64).expand(n, 3, 3) * 0.05**2,
+        "human_radius": torch.full((n,), 0.05, dtype=F64),
+    }
+
+
+def _diag(args: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """The same pairs as arguments of sphere_collision_bound_diag (cov -> its diagonal)."""
+    out = {k: v for k, v in args.items() if k != "cov"}
+    out["var"] = torch.diagonal(args["cov"], dim1=-2, dim2=-1)
+    return out
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+@pytest.mark.parametrize("name", ["robot_center", "robot_radius", "mean", "cov", "human_radius"])
+def test_non_finite_input_raises_data_error(name: str, bad: float) -> None:
+    args = _pair()
+    args[name] = args[name].clone()
+    args[name][1] = bad
+    with pytest.raises(DataError, match=f"expected finite {name}, got"):
+        G.sphere_collision_bound(**args)
+    diag_name = "var" if name == "cov" else name
+    with pytest.raises(DataError, match=f"expected finite {diag_name}, got"):
+        G.sphere_collision_bound_diag(**_diag(args))
+    if name in ("robot_center", "mean", "cov"):
+        R = args["robot_radius"] + args["human_radius"]
+        with pytest.raises(DataError, match=f"expected finite {name}, got"):
+            G.max_density_point(args["robot_center"], R, args["mean"], args["cov"])
+
+
+def test_audit_covariances_nan_and_inf_identity() -> None:
+    """The audit's cases: eigh used to fail with an untyped LinAlgError."""
+    args = _pair(1)
+    for cov in (torch.full((3, 3), math.nan, dtype=F64), math.inf * torch.eye(3, dtype=F64)):
+        with pytest.raises(DataError, match="expected finite cov, got"):
+            G.sphere_collision_bound(**{**args, "cov": cov})
+
+
+def test_indefinite_covariance_or_negative_variance_raises_data_error() -> None:
+    args = _pair()
+    with pytest.raises(DataError, match="expected cov positive semidefinite"):
+        G.sphere_collision_bound(**{**args, "cov": -args["cov"]})
+    with pytest.raises(DataError, match="expected cov positive semidefinite"):
+        G.max_density_point(args["robot_center"], 0.1, args["mean"], -args["cov"])
+    with pytest.raises(DataError, match="expected var >= 0"):
+        G.sphere_collision_bound_diag(**{**_diag(args), "var": -_diag(args)["var"]})
+    # rounding-level negative eigenvalues of a singular covariance are accepted
+    flat = torch.diag(torch.tensor([0.01, 0.01, 0.0], dtype=F64))
+    Q = torch.linalg.qr(torch.randn(3, 3, dtype=F64))[0]
+    b = G.sphere_collision_bound(**{**args, "cov": Q @ flat @ Q.T})
+    assert bool(((b >= 0) & (b <= 1)).all())
+
+
+def test_mismatched_leading_dimensions_raise_shape_error() -> None:
+    args = _pair(4)
+    args["mean"] = torch.zeros(5, 3, dtype=F64)
+    pattern = (
+        r"expected broadcastable leading dimensions, got robot_center \(4, 3\).*mean \(5, 3\)"
+    )
+    with pytest.raises(ShapeError, match=pattern):
+        G.sphere_collision_bound(**args)
+    with pytest.raises(ShapeError, match=pattern):
+        G.sphere_collision_bound_diag(**_diag(args))
+    with pytest.raises(ShapeError, match=r"robot_center \(4, 3\).*mean \(5, 3\)"):
+        G.max_density_point(args["robot_center"], 0.1, args["mean"], args["cov"][0])
+    ok = _pair(4)
+    with pytest.raises(ShapeError, match=r"radius \(2,\)"):
+        G.max_density_point(ok["robot_center"], torch.ones(2, dtype=F64), ok["mean"], ok["cov"])
+
+
+def test_dtype_and_device_are_checked() -> None:
+    args = _pair()
+    with pytest.raises(ShapeError, match="expected mean torch.float64 \\(as robot_center\\)"):
+        G.sphere_collision_bound(**{**args, "mean": args["mean"].float()})
+    with pytest.raises(ShapeError, match="expected robot_center of a floating dtype"):
+        G.sphere_collision_bound(**{**args, "robot_center": torch.zeros(4, 3, dtype=torch.long)})
+    with pytest.raises(ShapeError, match="expected cov on cpu"):
+        G.sphere_collision_bound(**{**args, "cov": args["cov"].to("meta")})
+
+
+def test_float_radius_is_accepted() -> None:
+    args = _pair()
+    c, m, cov = args["robot_center"], args["mean"], args["cov"]
+    x_f, lam_f = G.max_density_point(c, 0.2, m, cov)
+    x_t, lam_t = G.max_density_point(c, torch.tensor(0.2, dtype=F64), m, cov)
+    assert torch.equal(x_f, x_t) and torch.equal(lam_f, lam_t)
+    b_f = G.sphere_collision_bound(c, 0.06, m, cov, 0.05)
+    b_t = G.sphere_collision_bound(
+        c, torch.tensor(0.06, dtype=F64), m, cov, torch.tensor(0.05, dtype=F64)
+    )
+    assert torch.equal(b_f, b_t)
+    b_d = G.sphere_collision_bound_diag(c, 0.06, m, torch.full((3,), 0.05**2, dtype=F64), 0.05)
+    torch.testing.assert_close(b_d, b_f)
+    with pytest.raises(ShapeError, match="expected radius > 0"):
+        G.max_density_point(c, 0.0, m, cov)
+    with pytest.raises(ShapeError, match="expected radius to be a torch.Tensor or a float"):
+        G.max_density_point(c, "0.2", m, cov)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("prune_sigma", [-1.0, 0.0, math.nan])
+def test_non_positive_prune_sigma_raises_config_error(prune_sigma: float) -> None:
+    args = _pair()
+    with pytest.raises(ConfigError, match="expected prune_sigma > 0 or None"):
+        G.sphere_collision_bound(**args, prune_sigma=prune_sigma)
+    with pytest.raises(ConfigError, match="expected prune_sigma > 0 or None"):
+        G.sphere_collision_bound_diag(**_diag(args), prune_sigma=prune_sigma)
+    rc, rr, hm, hv, hr, w = _problem(torch.Generator().manual_seed(16))
+    with pytest.raises(ConfigError, match="expected prune_sigma > 0 or None"):
+        G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, prune_sigma=prune_sigma)
+
+
+@pytest.mark.parametrize("diag", [True, False])
+@pytest.mark.parametrize(
+    "name", ["robot_centers", "robot_radii", "human_mean", "human_cov", "human_radii", "weights"]
+)
+def test_trajectory_bound_non_finite_input_raises_data_error(name: str, diag: bool) -> None:
+    rc, rr, hm, hv, hr, w = _problem(torch.Generator().manual_seed(17))
+    cov = hv if diag else torch.diag_embed(hv)
+    args = dict(
+        robot_centers=rc, robot_radii=rr, human_mean=hm, human_cov=cov, human_radii=hr, weights=w
+    )
+    args[name] = args[name].clone()
+    args[name].view(-1)[0] = math.nan
+    with pytest.raises(DataError, match=f"expected finite {name}, got 1 NaN"):
+        G.trajectory_collision_bound(**args)
+    with pytest.raises(DataError, match=f"expected finite {name}, got 1 NaN"):
+        G.pairwise_bound_matrix(**args)
+
+
+def test_trajectory_bound_out_of_range_inputs() -> None:
+    rc, rr, hm, hv, hr, w = _problem(torch.Generator().manual_seed(18))
+    with pytest.raises(DataError, match="expected weights >= 0"):
+        G.trajectory_collision_bound(rc, rr, hm, hv, hr, w - 0.5)
+    with pytest.raises(DataError, match="expected weights summing to <= 1"):
+        G.trajectory_collision_bound(rc, rr, hm, hv, hr, 2.0 * w)
+    with pytest.raises(DataError, match="expected human_cov >= 0"):
+        G.trajectory_collision_bound(rc, rr, hm, -hv, hr, w)
+    with pytest.raises(DataError, match="expected human_cov positive semidefinite"):
+        G.trajectory_collision_bound(rc, rr, hm, -torch.diag_embed(hv), hr, w)
+    with pytest.raises(ShapeError, match=r"expected robot_radii \+ human_radii > 0"):
+        G.trajectory_collision_bound(rc, -rr, hm, hv, 0.0 * hr, w)
+    with pytest.raises(ShapeError, match="expected human_mean torch.float64"):
+        G.trajectory_collision_bound(rc, rr, hm.float(), hv, hr, w)
+    with pytest.raises(ConfigError, match="expected max_pairs_per_chunk > 0"):
+        G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, max_pairs_per_chunk=1.5)  # type: ignore[arg-type]
+    with pytest.raises(ShapeError, match="expected human_cov to be a torch.Tensor"):
+        G.trajectory_collision_bound(rc, rr, hm, hv.tolist(), hr, w)  # type: ignore[arg-type]
+    # weights of dropped actions (sum < 1) are fine
+    b = G.trajectory_collision_bound(rc, rr, hm, hv, hr, 0.5 * w)
+    assert bool(((b >= 0) & (b <= 1)).all())
+
+
+def test_shared_covariance_and_radius_broadcast() -> None:
+    """A (3, 3) covariance, (3,) variances or (S,) radii broadcast against batched centres
+    (the component-first solver used to fail on arguments of lower rank)."""
+    args = _pair(4)
+    want = G.sphere_collision_bound(**args)
+    got = G.sphere_collision_bound(**{**args, "cov": args["cov"][0]})
+    torch.testing.assert_close(got, want, rtol=0, atol=0)
+    got_d = G.sphere_collision_bound_diag(**{**_diag(args), "var": _diag(args)["var"][0]})
+    torch.testing.assert_close(got_d, want, rtol=1e-12, atol=0)
+    # one centre and mean against four radii
+    radii = torch.tensor([0.02, 0.05, 0.1, 0.2], dtype=F64)
+    c, m, cov = args["robot_center"][0], args["mean"][0], args["cov"][0]
+    loop = torch.stack([G.sphere_collision_bound(c, r, m, cov, 0.05) for r in radii])
+    torch.testing.assert_close(G.sphere_collision_bound(c, radii, m, cov, 0.05), loop)
+    torch.testing.assert_close(
+        G.sphere_collision_bound_diag(c, radii, m, torch.diagonal(cov), 0.05), loop
+    )

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 
 from iplanner_torch.collision.human_spheres import HumanSphereModel
-from iplanner_torch.data.skeleton import JOINT_NAMES, SEGMENTS
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.data.skeleton import JOINT_NAMES, SEGMENTS, Segment
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 
 F64 = torch.float64
 
@@ -79,3 +81,44 @@ def test_errors() -> None:
     model = HumanSphereModel(JOINT_NAMES)
     with pytest.raises(ShapeError, match="expected mean"):
         model.centers_diag(torch.zeros(3, 3), torch.zeros(3, 3))
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+@pytest.mark.parametrize("name", ["mean", "cov", "var"])
+def test_non_finite_input_raises_data_error(name: str, bad: float) -> None:
+    model = HumanSphereModel(JOINT_NAMES)
+    K = len(JOINT_NAMES)
+    args = {
+        "mean": torch.zeros(2, K, 3, dtype=F64),
+        "cov": torch.eye(3, dtype=F64).expand(2, K, 3, 3).clone() * 0.01,
+        "var": torch.full((2, K, 3), 0.01, dtype=F64),
+    }
+    args[name][1, 0, 0] = bad
+    with pytest.raises(DataError, match=f"expected finite {name}, got"):
+        if name in ("mean", "cov"):
+            model.centers(args["mean"], args["cov"])
+        else:
+            model.centers_diag(args["mean"], args["var"])
+    if name == "mean":
+        with pytest.raises(DataError, match="expected finite mean, got"):
+            model.centers_diag(args["mean"], args["var"])
+
+
+def test_bad_dtypes_ranges_and_config() -> None:
+    model = HumanSphereModel(JOINT_NAMES)
+    K = len(JOINT_NAMES)
+    mean, var = torch.zeros(K, 3), torch.full((K, 3), 0.01)
+    with pytest.raises(DataError, match="expected var >= 0"):
+        model.centers_diag(mean, -var)
+    with pytest.raises(ShapeError, match="expected var torch.float32 on cpu \\(as mean\\)"):
+        model.centers_diag(mean, var.double())
+    with pytest.raises(ShapeError, match="expected mean of a floating dtype"):
+        # integer means used to truncate the fractions u to 0 silently
+        model.centers_diag(mean.long(), var.long())
+    with pytest.raises(ShapeError, match="expected cov"):
+        model.centers(mean, var)
+    with pytest.raises(ConfigError, match="expected scale > 0 and finite"):
+        HumanSphereModel(JOINT_NAMES, scale=math.inf)
+    seg = Segment(name="head", joint_a="head", joint_b="head", radius=-0.1, n_spheres=1)
+    with pytest.raises(ConfigError, match="expected radius > 0 and finite in segment 'head'"):
+        HumanSphereModel(JOINT_NAMES, segments=(seg,))
