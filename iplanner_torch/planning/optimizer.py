@@ -245,6 +245,43 @@ def smooth_stop(q: torch.Tensor, hold: int) -> torch.Tensor:
     return (1.0 - frac) * q[lo] + frac * q[lo + 1]
 
 
+def _finite_time(name: str, value: object) -> float:
+    """``value`` as a float [s]; :class:`ConfigError` when it is not a finite number."""
+    try:
+        t = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"expected {name} a finite time [s], got {value!r}") from err
+    if not math.isfinite(t):
+        raise ConfigError(f"expected {name} a finite time [s], got {value!r}")
+    return t
+
+
+def unsafe_if_not_finite(bound: torch.Tensor, human: C.HumanObstacle) -> torch.Tensor:
+    """The collision bound with every value that cannot be trusted set to 1 (unsafe).
+
+    A NaN or inf in the predicted human does not show up as a NaN bound: the sphere-pair
+    pruning (:func:`costs.candidate_pairs`) drops every pair it cannot compare (for all
+    times, as it reduces over them), and the bound without pairs is the dropped actions'
+    weight, usually 0 ("no human"). So the bound counts as 1 everywhere when any mean,
+    variance or weight of the human obstacle is not finite, and so does a non-finite bound
+    itself. Otherwise the values and their gradients are unchanged. (:class:`Forecast`
+    rejects non-finite values when built; this is the planner's own second line of defence.)
+
+    Args:
+        bound: (..., W_x) collision bounds in [0, 1].
+        human: the obstacle the bound was computed for.
+
+    Returns:
+        (..., W_x) bounds, equal to ``bound`` where it is finite and the human is finite.
+    """
+    human_ok = (
+        torch.isfinite(human.mean).all()
+        & torch.isfinite(human.var).all()
+        & torch.isfinite(human.weights).all()
+    ).to(bound.device)
+    return torch.where(human_ok & torch.isfinite(bound), bound, torch.ones_like(bound))
+
+
 class TrajectoryOptimizer:
     """Optimises B space-time trajectories against the probabilistic human-collision bound.
 
@@ -478,6 +515,7 @@ class TrajectoryOptimizer:
                 bound, pen = C.human_collision_bound(
                     centers_x, self.radii, human, pairs, exact=exact
                 )
+                bound = unsafe_if_not_finite(bound, human)
             target = math.log(self.cfg.penalty_target * (1.0 - self.cfg.confidence))
             if look_idx is not None:
                 excess = torch.relu(torch.log(bound[:, n_x:].clamp_min(1e-30)) - target)
@@ -554,12 +592,28 @@ class TrajectoryOptimizer:
 
         Raises:
             ShapeError: on inputs of the wrong shape.
+            ConfigError: when ``t0``, ``forecast_t0``, ``duration``, ``arrive`` or a bound of
+                ``window`` is not a finite number, when ``window`` ends before it starts, or
+                when ``duration <= 0``.
             PlanningError: when the optimisation produces non-finite waypoints.
         """
         t_begin = time.perf_counter()
         cfg, j, w = self.cfg, self.num_joints, self.cfg.num_waypoints
         check_shape("q_start", q_start, (j,))
         check_shape("q_goal", q_goal, (j,))
+        _finite_time("t0", t0)
+        _finite_time("forecast_t0", forecast_t0)
+        if duration is not None:
+            _finite_time("duration", duration)
+        if arrive is not None:
+            _finite_time("arrive", arrive)
+        if window is not None:
+            try:
+                t_a, t_b = window
+            except (TypeError, ValueError) as err:
+                raise ConfigError(f"expected window (t_a, t_b) [s], got {window!r}") from err
+            if _finite_time("window end", t_b) < _finite_time("window start", t_a):
+                raise ConfigError(f"expected window (t_a, t_b) with t_a <= t_b, got {window}")
         q_start = q_start.to(self.device, self.dtype)
         q_goal = q_goal.to(self.device, self.dtype)
         if qd_start is not None:
@@ -693,19 +747,23 @@ class TrajectoryOptimizer:
             forecast_t0: time of the forecast's last observed frame [s].
 
         Returns:
-            (N,) upper bounds of the collision probability (exact pair bounds).
+            (N,) upper bounds of the collision probability (exact pair bounds); 1 (unsafe)
+            everywhere when the human is not finite (:func:`unsafe_if_not_finite`).
 
         Raises:
             ShapeError: on inputs of the wrong shape.
+            ConfigError: when ``forecast_t0`` is not finite.
         """
         check_shape("q", q, ("N", self.num_joints))
         check_shape("times", times, (q.shape[0],))
+        _finite_time("forecast_t0", forecast_t0)
         q = q.to(self.device, self.dtype)
         with torch.no_grad():
             human = self._human_obstacle(forecast, times.to(self.device, self.dtype), forecast_t0)
             centers = self.robot.sphere_centers(q).unsqueeze(0)  # (1, N, S_r, 3)
             pairs = C.candidate_pairs(centers, self.radii, human, 0.0)
             bound, _ = C.human_collision_bound(centers, self.radii, human, pairs, exact=True)
+            bound = unsafe_if_not_finite(bound, human)
         return bound[0]
 
     def _human_obstacle(

@@ -42,13 +42,14 @@ from __future__ import annotations
 
 import inspect
 import math
+import numbers
 from collections.abc import Callable
 from typing import Any, Literal, Protocol
 
 import torch
 from torch import Tensor
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_shape
 
 __all__ = [
@@ -345,6 +346,19 @@ def _paired(
     return _finish(_wavefront(cells, lay, _mode(kind)), kind)
 
 
+def _check_finite(name: str, x: Tensor) -> None:
+    """Raise :class:`DataError` naming the first window and frame of ``x`` (B, T, D) that holds
+    NaN or inf: one such frame would spoil every distance (the frames are centred on a mean
+    over all windows)."""
+    bad = ~torch.isfinite(x).all(-1)  # (B, T)
+    if bool(bad.any()):
+        b, t = (int(i) for i in bad.nonzero()[0])
+        raise DataError(
+            f"{name} is NaN/Inf in window {b}, frame {t} (of {tuple(x.shape)}): impute lost "
+            "frames first"
+        )
+
+
 def _check_pair(x: Tensor, y: Tensor) -> None:
     check_shape("x", x, ("B1", "T", "D"))
     check_shape("y", y, ("B2", "T2", x.shape[2]))
@@ -359,6 +373,9 @@ def _check_pair(x: Tensor, y: Tensor) -> None:
         )
     if not x.is_floating_point():
         raise ShapeError(f"expected floating point windows, got {x.dtype}")
+    _check_finite("x", x)
+    if y is not x:
+        _check_finite("y", y)
 
 
 def _check_band(band: int | None) -> None:
@@ -467,6 +484,7 @@ def dtw_distance(
     Raises:
         ShapeError: on wrong ranks, different D, dtypes or devices.
         ConfigError: on a negative band.
+        DataError: when a window of ``x`` or ``y`` holds NaN or inf (naming window and frame).
     """
     _check_pair(x, y)
     _check_band(band)
@@ -496,6 +514,7 @@ def dtw_paired(
 
     Raises:
         ShapeError: on wrong ranks or different batch sizes.
+        DataError: as :func:`dtw_distance`.
     """
     _check_pair(x, y)
     _check_band(band)
@@ -532,6 +551,7 @@ def gak_log(
     Raises:
         ShapeError: on wrong shapes.
         ConfigError: on ``sigma <= 0`` or a negative band.
+        DataError: as :func:`dtw_distance`.
     """
     _check_pair(x, y)
     _check_band(band)
@@ -563,6 +583,7 @@ def gak_log_paired(
     Raises:
         ShapeError: on wrong shapes.
         ConfigError: on ``sigma <= 0``.
+        DataError: as :func:`dtw_distance`.
     """
     _check_pair(x, y)
     _check_band(band)
@@ -577,8 +598,8 @@ def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None
     """Median DTW distance over random pairs of distinct windows (the ``gamma`` heuristic).
 
     Args:
-        x: (B, T, D) windows, B >= 2.
-        n_pairs: number of random pairs.
+        x: (B, T, D) windows, B >= 2, finite.
+        n_pairs: number of random pairs, >= 1.
         seed: seed of the pair sampler.
         band: as in :func:`dtw_distance`.
 
@@ -587,10 +608,15 @@ def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None
 
     Raises:
         ShapeError: when fewer than two windows are given.
+        ConfigError: when ``n_pairs < 1``.
+        DataError: when a window holds NaN or inf (naming window and frame).
     """
     check_shape("x", x, ("B", "T", "D"))
     if x.shape[0] < 2:
         raise ShapeError(f"expected x (B >= 2, T, D), got {tuple(x.shape)}")
+    if not (isinstance(n_pairs, numbers.Integral) and n_pairs >= 1):
+        raise ConfigError(f"expected n_pairs an integer >= 1, got {n_pairs!r}")
+    _check_finite("x", x)
     g = torch.Generator().manual_seed(int(seed))
     i = torch.randint(0, x.shape[0], (n_pairs,), generator=g)
     j = (i + torch.randint(1, x.shape[0], (n_pairs,), generator=g)) % x.shape[0]
@@ -730,9 +756,17 @@ class RBFKernel:
         return {"lengthscale": self.lengthscale}
 
     def __call__(self, x1: Tensor, x2: Tensor) -> Tensor:
-        """(B1, T, D), (B2, T, D) -> (B1, B2) kernel values in (0, 1]."""
+        """(B1, T, D), (B2, T, D) -> (B1, B2) kernel values in (0, 1].
+
+        Raises:
+            ShapeError: on wrong shapes.
+            DataError: when a window holds NaN or inf (naming window and frame).
+        """
         check_shape("x1", x1, ("B1", "T", "D"))
         check_shape("x2", x2, ("B2", x1.shape[1], x1.shape[2]))
+        _check_finite("x1", x1)
+        if x2 is not x1:
+            _check_finite("x2", x2)
         sq = _sqdist_rows(x1.flatten(1), x2.flatten(1))  # (B1, B2)
         return torch.exp(-0.5 * sq / self.lengthscale**2)
 

@@ -5,10 +5,12 @@ Paper eq. motion_prediction: p(xi_next | F, p) = sum_c p(c | F, p) p(xi_next | F
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import torch
 
+from iplanner_torch.errors import DataError
 from iplanner_torch.types import check_shape
 
 
@@ -20,9 +22,19 @@ class Forecast:
         weights: (B, A) p(c = a | F_prev, p), rows sum to 1.
         mean: (B, A, n_f, K, 3) predicted joint positions [m], world (table) frame.
         var: (B, A, n_f, K, 3) per-coordinate variances [m^2] (independent output channels).
-        dt: seconds between consecutive predicted frames (1 / fps).
+            Negative entries (rounding in a GP's predictive variance) are not rejected here:
+            the planner floors them (:func:`~iplanner_torch.planning.costs.forecast_to_obstacle`
+            keeps sphere-centre variances >= 1e-10).
+        dt: seconds between consecutive predicted frames (1 / fps), finite and > 0.
         joint_names: the K joint names.
         action_names: the A action names.
+
+    Raises:
+        ShapeError: when ``weights``, ``mean`` or ``var`` has the wrong shape.
+        DataError: when ``weights``, ``mean`` or ``var`` holds NaN or inf (naming the field
+            and, for ``mean`` and ``var``, the joint), or ``dt`` is not a finite number > 0.
+            A non-finite forecast must never reach the planner, whose collision bound would
+            read it as "no human".
     """
 
     weights: torch.Tensor
@@ -37,6 +49,36 @@ class Forecast:
         b, a = self.weights.shape
         check_shape("mean", self.mean, (b, a, "n_f", len(self.joint_names), 3))
         check_shape("var", self.var, tuple(self.mean.shape))
+        try:
+            dt = float(self.dt)
+        except (TypeError, ValueError) as err:
+            raise DataError(f"expected forecast dt a number > 0 [s], got {self.dt!r}") from err
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise DataError(f"expected forecast dt a finite number > 0 [s], got {self.dt!r}")
+        finite = [torch.isfinite(x).all() for x in (self.weights, self.mean, self.var)]
+        if not bool(torch.stack([f.to(self.weights.device) for f in finite]).all()):
+            self._raise_non_finite()
+
+    def _raise_non_finite(self) -> None:
+        """Raise :class:`DataError` naming the first field and entry that is NaN or inf."""
+        bad_w = ~torch.isfinite(self.weights)
+        if bool(bad_w.any()):
+            b, a = (int(i) for i in bad_w.nonzero()[0])
+            raise DataError(
+                f"forecast weights is NaN/Inf for action {self._action(a)!r} (batch {b})"
+            )
+        for name in ("mean", "var"):
+            bad = ~torch.isfinite(getattr(self, name))
+            if bool(bad.any()):
+                b, a, f, k, _ = (int(i) for i in bad.nonzero()[0])
+                raise DataError(
+                    f"forecast {name} is NaN/Inf for joint {self.joint_names[k]!r} "
+                    f"(batch {b}, action {self._action(a)!r}, frame {f})"
+                )
+
+    def _action(self, a: int) -> str:
+        """The name of action ``a`` (its index when the names do not cover it)."""
+        return self.action_names[a] if a < len(self.action_names) else str(a)
 
     @property
     def batch_size(self) -> int:

@@ -23,13 +23,15 @@ Fallbacks for a (p, c) without its own GP, in order:
 from __future__ import annotations
 
 import hashlib
+import importlib
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 import torch
 
-from iplanner_torch.errors import CheckpointError, ConfigError, DataError
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
 from iplanner_torch.types import check_shape
@@ -220,6 +222,17 @@ class HumanMotionPredictor:
         return 3 * self.num_joints * len(self.feature_kinds)
 
     @property
+    def feature_names(self) -> tuple[str, ...]:
+        """The D feature columns' names, ``"<joint> <kind> <x|y|z>"`` (the layout of
+        :func:`data.windows.compute_features`: kind-major, then joint, then coordinate)."""
+        return tuple(
+            f"{joint} {kind} {axis}"
+            for kind in self.feature_kinds
+            for joint in self.joint_names
+            for axis in "xyz"
+        )
+
+    @property
     def device(self) -> torch.device:
         """Where the model's tensors live."""
         return self.feat_mean.device
@@ -308,19 +321,37 @@ class HumanMotionPredictor:
 
         Args:
             f_prev: (B, n_p, D) features of the observed frames (positions [m], velocities
-                [m/s], accelerations [m/s^2], as :func:`data.windows.compute_features`).
-            progress: (B,) int64 progress-state bitmasks.
+                [m/s], accelerations [m/s^2], as :func:`data.windows.compute_features`), B >= 1,
+                finite (lost joints imputed: :meth:`predict_positions` does that).
+            progress: (B,) integer (int64) progress-state bitmasks, >= 0 (a state without its
+                own GP uses the fallbacks of the module docstring).
 
         Returns:
             The Forecast: weights (B, A), mean/var (B, A, n_f, K, 3) in the world frame.
 
         Raises:
-            ShapeError: for wrong shapes.
+            ShapeError: for wrong shapes, no window (B = 0), or a ``progress`` that is not of
+                an integer dtype.
+            ConfigError: for a negative ``progress``.
+            DataError: when ``f_prev`` holds NaN or inf (naming window, frame and feature).
         """
         check_shape("f_prev", f_prev, ("B", self.n_prev, self.num_features))
+        if f_prev.shape[0] == 0:
+            raise ShapeError(
+                f"expected at least one window in f_prev (B >= 1, {self.n_prev}, "
+                f"{self.num_features}), got {tuple(f_prev.shape)}"
+            )
         check_shape("progress", progress, (f_prev.shape[0],))
+        if progress.is_floating_point() or progress.is_complex() or progress.dtype == torch.bool:
+            raise ShapeError(f"expected progress of an integer dtype, got {progress.dtype}")
         f_prev = f_prev.to(self.device, torch.float32)
         progress = progress.to(self.device, torch.int64)
+        if bool((progress < 0).any()):
+            raise ConfigError(
+                f"expected progress bitmasks >= 0, got {int(progress.min())} "
+                f"(window {int((progress < 0).nonzero()[0, 0])})"
+            )
+        check_finite("f_prev", f_prev, ("window", "frame", self.feature_names))
         b, k, a_n = f_prev.shape[0], self.num_joints, self.num_actions
         pose = f_prev[:, -1, : 3 * k].reshape(b, k, 3)  # (B, K, 3) current pose
         x = gp_inputs(f_prev, k, self.cfg.gp_input)  # (B, n_p * D)
@@ -381,12 +412,18 @@ class HumanMotionPredictor:
             As :meth:`predict`.
 
         Raises:
-            ShapeError: for wrong shapes.
+            ShapeError: for wrong shapes (as :meth:`predict`).
+            ConfigError: as :meth:`predict`.
             DataError: when a joint is NaN in every frame of a window.
         """
         from iplanner_torch.data.windows import compute_features
 
         check_shape("positions", positions, ("B", self.n_prev, self.num_joints, 3))
+        if positions.shape[0] == 0:
+            raise ShapeError(
+                f"expected at least one window in positions (B >= 1, {self.n_prev}, "
+                f"{self.num_joints}, 3), got {tuple(positions.shape)}"
+            )
         lost = ~torch.isfinite(positions).all(-1).any(1)  # (B, K) joint never observed
         if bool(lost.any()):
             bi, ki = (int(v) for v in lost.nonzero()[0])
@@ -477,10 +514,26 @@ class HumanMotionPredictor:
             expect_joints: when given, the joint names the caller needs.
 
         Raises:
-            CheckpointError: for a missing, corrupt or truncated file (naming it), or a
-                checkpoint of another joint set than ``expect_joints``.
+            CheckpointError: for a missing, corrupt or truncated file (naming it), a directory,
+                a checkpoint of another format version than ``CHECKPOINT_VERSION``, a
+                sub-model class that cannot be imported, or a checkpoint of another joint set
+                than ``expect_joints``.
+            ConfigError: when ``map_location`` is not a device, or one this machine lacks.
         """
         path = Path(path)
+        if map_location is not None:
+            try:
+                torch.device(map_location)
+            except (RuntimeError, TypeError, ValueError) as err:
+                raise ConfigError(
+                    f"expected map_location a torch device (e.g. 'cpu', 'cuda:0'), got "
+                    f"{map_location!r}"
+                ) from err
+        if path.is_dir():
+            raise CheckpointError(
+                f"predictor checkpoint {path} is a directory, not a checkpoint file (a training "
+                "run writes <out_dir>/predictor.ckpt)"
+            )
         if not path.is_file():
             raise CheckpointError(f"predictor checkpoint {path} does not exist")
         try:
@@ -489,6 +542,12 @@ class HumanMotionPredictor:
             raise CheckpointError(f"cannot read predictor checkpoint {path}: {err}") from err
         if not isinstance(d, dict) or d.get("kind") != "HumanMotionPredictor":
             raise CheckpointError(f"{path} is not a HumanMotionPredictor checkpoint")
+        version = d.get("version")
+        if version != CHECKPOINT_VERSION:
+            raise CheckpointError(
+                f"predictor checkpoint {path} has format version {version!r}; this code reads "
+                f"version {CHECKPOINT_VERSION} (retrain, or load it with the matching code)"
+            )
         if expect_joints is not None and tuple(expect_joints) != tuple(d["joint_names"]):
             raise CheckpointError(
                 f"{path} was trained on joints {tuple(d['joint_names'])}, expected "
@@ -496,10 +555,18 @@ class HumanMotionPredictor:
             )
         try:
             pred = cls._from_dict(d)
+        except CheckpointError as err:
+            raise CheckpointError(f"predictor checkpoint {path}: {err}") from err
         except (KeyError, TypeError, ValueError, RuntimeError) as err:
             raise CheckpointError(f"predictor checkpoint {path} is incomplete: {err}") from err
         if map_location is not None:
-            pred.to(map_location)
+            try:
+                pred.to(map_location)
+            except (RuntimeError, AssertionError) as err:  # e.g. CUDA not available
+                raise ConfigError(
+                    f"cannot move predictor checkpoint {path} to map_location "
+                    f"{map_location!r}: {err}"
+                ) from err
         return pred.prepare()
 
     @classmethod
@@ -529,8 +596,8 @@ class HumanMotionPredictor:
             progress_actions=tuple(d["progress_actions"]),
             feat_mean=d["feat_mean"],
             feat_std=d["feat_std"],
-            classifier=_rebuild(d.get("classifier_class"), d.get("classifier")),
-            next_model=_rebuild(d.get("next_model_class"), d.get("next_model")),
+            classifier=_rebuild(d, "classifier"),
+            next_model=_rebuild(d, "next_model"),
             gps=gps,
             pooled=pooled,
             fingerprint=d.get("fingerprint", ""),
@@ -538,18 +605,57 @@ class HumanMotionPredictor:
         )
 
 
-def _rebuild(qualname: str | None, state: Any) -> Any:
-    """Rebuild a sub-model from ``module:Class`` and its ``state_dict`` via ``from_state_dict``."""
+def _rebuild(d: dict[str, Any], name: str) -> Any:
+    """Rebuild the sub-model ``name`` of checkpoint dict ``d`` from its ``<name>_class``
+    (``module:Class``) and its ``state_dict`` (``d[name]``) via ``from_state_dict``.
+
+    Raises:
+        CheckpointError: when ``<name>_class`` is not ``module:Class`` of an importable class
+            with a ``from_state_dict`` (naming the field; the caller adds the file).
+    """
+    field_name = f"{name}_class"
+    qualname, state = d.get(field_name), d.get(name)
     if qualname is None or state is None:
         return None
-    import importlib
+    mod_name, sep, cls_name = str(qualname).partition(":")
+    try:
+        if not sep or not mod_name or not cls_name:
+            raise ValueError("expected 'module:Class'")
+        obj_cls: Any = importlib.import_module(mod_name)
+        for part in cls_name.split("."):
+            obj_cls = getattr(obj_cls, part)
+        from_state_dict = obj_cls.from_state_dict
+    except (ImportError, AttributeError, ValueError) as err:
+        raise CheckpointError(
+            f"{field_name} {qualname!r} names no loadable class ({type(err).__name__}: {err})"
+        ) from err
+    return from_state_dict(state)
 
-    mod_name, cls_name = qualname.split(":")
-    obj_cls = getattr(importlib.import_module(mod_name), cls_name)
-    return obj_cls.from_state_dict(state)
 
+def check_finite(
+    name: str, x: torch.Tensor, dims: Sequence[str | Sequence[str]] | None = None
+) -> None:
+    """Raise :class:`DataError` when ``x`` holds NaN or inf, naming the first such entry.
 
-def check_finite(name: str, x: torch.Tensor) -> None:
-    """Raise :class:`DataError` when ``x`` has NaN or inf."""
-    if not bool(torch.isfinite(x).all()):
-        raise DataError(f"{name} contains NaN or inf")
+    Args:
+        name: the argument's name, used in the message.
+        x: the tensor to check.
+        dims: how to name the index along each dimension of ``x``: a str names the dimension
+            (``"window"`` gives ``window 3``), a sequence of str names each of its entries
+            (e.g. the D feature columns); None gives the raw index.
+
+    Raises:
+        DataError: when an entry of ``x`` is NaN or inf.
+    """
+    bad = ~torch.isfinite(x)
+    if not bool(bad.any()):
+        return
+    idx = [int(i) for i in bad.nonzero()[0]]
+    if dims is None:
+        where = f"index {tuple(idx)}"
+    else:
+        parts = []
+        for i, dim in zip(idx, dims):
+            parts.append(f"{dim} {i}" if isinstance(dim, str) else repr(dim[i]))
+        where = ", ".join(parts)
+    raise DataError(f"{name} is NaN/Inf at {where}")

@@ -14,8 +14,8 @@ from planning_fakes import (
     static_forecast,
 )
 
-from iplanner_torch.errors import ConfigError, ShapeError
-from iplanner_torch.planning.costs import CostWeights
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.planning.costs import CostWeights, HumanObstacle
 from iplanner_torch.planning.itomp import ITOMP, path_forecast, static_human_forecast
 from iplanner_torch.planning.optimizer import (
     ACC_TOL,
@@ -23,6 +23,7 @@ from iplanner_torch.planning.optimizer import (
     OptimizerCfg,
     TrajectoryOptimizer,
     smooth_stop,
+    unsafe_if_not_finite,
 )
 from iplanner_torch.planning.trajectory import accelerations
 from iplanner_torch.prediction.forecast import Forecast
@@ -184,6 +185,73 @@ def test_inputs_and_config_are_validated(point_robot: PointRobot) -> None:
         opt.solve(torch.zeros(3), torch.zeros(2))
     with pytest.raises(ShapeError, match=r"expected q_init \(8, 20, 2\)"):
         opt.solve(torch.zeros(2), torch.ones(2), q_init=torch.zeros(8, 10, 2))
+
+
+@pytest.mark.parametrize("field", ["mean", "var"])
+def test_person_on_the_robot_with_a_nan_joint_is_never_a_safe_plan(
+    point_robot: PointRobot, field: str
+) -> None:
+    """A person standing on the robot whose forecast holds one NaN: the Forecast refuses to be
+    built, and one that was corrupted after it was built makes the bound 1 (unsafe), never 0."""
+    with pytest.raises(DataError, match=f"forecast {field} is NaN/Inf for joint 'j'"):
+        fc = static_forecast([0.0, 0.0, 0.0], 0.05)
+        tensors = {"mean": fc.mean.clone(), "var": fc.var.clone()}
+        tensors[field][0, 0, 3, 0, 1] = float("nan")
+        Forecast(
+            weights=fc.weights, dt=fc.dt, joint_names=("j",), action_names=("rest",), **tensors
+        )
+    fc = static_forecast([0.0, 0.0, 0.0], 0.05)
+    getattr(fc, field)[0, 0, 3, 0, 1] = float("nan")  # bypasses the check on purpose
+    cfg = OptimizerCfg(iterations=10)
+    opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.2))
+    q_s, q_g = torch.tensor([0.0, 0.0]), torch.tensor([0.05, 0.0])
+    res = opt.solve(q_s, q_g, forecast=fc, duration=1.0)
+    assert not res.feasible and not res.evasive
+    assert res.hold_index == 0 and res.wait_s == pytest.approx(1.0)
+    assert float(res.bound[1:].min()) == 1.0
+    q = torch.zeros(3, 2)
+    assert opt.collision_bound(q, torch.tensor([0.0, 0.5, 1.0]), fc, 0.0).tolist() == [1.0] * 3
+    # independent check that the robot is in danger there: Monte Carlo collision probability
+    assert mc_ball_probability(torch.zeros(3), torch.full((3,), 0.05**2), 0.25, n=20_000) > 0.99
+
+
+def test_unsafe_if_not_finite_keeps_finite_bounds_and_their_gradients() -> None:
+    mean = torch.zeros(4, 1, 2, 3)
+    human = HumanObstacle(
+        mean=mean, var=torch.ones_like(mean), radii=torch.ones(2), weights=torch.ones(1)
+    )
+    raw = torch.tensor([[0.1, 0.0, float("nan"), 0.7]], requires_grad=True)
+    out = unsafe_if_not_finite(raw, human)
+    assert out.tolist() == [[pytest.approx(0.1), 0.0, 1.0, pytest.approx(0.7)]]
+    (out * torch.tensor([1.0, 2.0, 3.0, 4.0])).sum().backward()
+    assert raw.grad.tolist() == [[1.0, 2.0, 0.0, 4.0]]
+    for name in ("mean", "var", "weights"):
+        t = getattr(human, name).clone()
+        t.view(-1)[-1] = float("inf")
+        bad = HumanObstacle(**{**vars(human), name: t, "_pair_cache": None})
+        assert unsafe_if_not_finite(raw.detach()[:, :2], bad).tolist() == [[1.0, 1.0]]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"window": (float("nan"), float("nan"))}, "window end a finite time"),
+        ({"window": (0.0, float("inf"))}, "window end a finite time"),
+        ({"window": (float("-inf"), 0.5)}, "window start a finite time"),
+        ({"window": (0.6, 0.5)}, r"t_a <= t_b"),
+        ({"window": (0.5,)}, r"expected window \(t_a, t_b\)"),
+        ({"arrive": float("nan")}, "arrive a finite time"),
+        ({"t0": float("inf")}, "t0 a finite time"),
+        ({"forecast_t0": float("nan")}, "forecast_t0 a finite time"),
+        ({"duration": float("nan")}, "duration a finite time"),
+    ],
+)
+def test_non_finite_times_are_config_errors(
+    point_robot: PointRobot, kwargs: dict, match: str
+) -> None:
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg(iterations=1))
+    with pytest.raises(ConfigError, match=match):
+        opt.solve(torch.zeros(2), torch.ones(2), **kwargs)
 
 
 def test_runs_on_the_device(device: torch.device) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.dtw import (
     DTWKernel,
     GlobalAlignmentKernel,
@@ -16,6 +16,7 @@ from iplanner_torch.prediction.dtw import (
     dtw_distance,
     dtw_paired,
     gak_log,
+    gak_log_paired,
     kernel_from_state,
     median_dtw,
 )
@@ -178,6 +179,40 @@ def test_errors():
         kernel_from_state("nope", {})
     with pytest.raises(ShapeError, match="B >= 2"):
         median_dtw(x[:1])
+    with pytest.raises(ConfigError, match="n_pairs an integer >= 1, got 0"):
+        median_dtw(x, n_pairs=0)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_non_finite_windows_are_named_not_spread(bad: float):
+    """One NaN/inf frame would make every distance NaN (the frames are centred on a mean over
+    all windows), and the median rule would quietly fall back to 1: it raises instead, naming
+    the window and frame; the finite windows are unaffected."""
+    g = torch.Generator().manual_seed(3)
+    x = torch.rand(4, 10, 6, generator=g)
+    y = torch.rand(3, 10, 6, generator=g)
+    finite = dtw_distance(x, y)
+    x_bad = x.clone()
+    x_bad[2, 7, 1] = bad
+    where = "window 2, frame 7"
+    with pytest.raises(DataError, match=f"x is NaN/Inf in {where}"):
+        dtw_distance(x_bad, y)
+    with pytest.raises(DataError, match=f"y is NaN/Inf in {where}"):
+        dtw_distance(y, x_bad)
+    with pytest.raises(DataError, match=f"x is NaN/Inf in {where}"):
+        dtw_distance(x_bad, x_bad)
+    with pytest.raises(DataError, match=f"y is NaN/Inf in {where}"):
+        dtw_paired(x, x_bad)
+    with pytest.raises(DataError, match=f"x is NaN/Inf in {where}"):
+        gak_log(x_bad, y, sigma=1.0)
+    with pytest.raises(DataError, match=f"y is NaN/Inf in {where}"):
+        gak_log_paired(x, x_bad, sigma=1.0)
+    with pytest.raises(DataError, match=f"x is NaN/Inf in {where}"):
+        median_dtw(x_bad, n_pairs=50)
+    for kernel in (DTWKernel(1.0), GlobalAlignmentKernel(1.0), RBFKernel(1.0)):
+        with pytest.raises(DataError, match=f"is NaN/Inf in {where}"):
+            kernel(y, x_bad)
+    torch.testing.assert_close(dtw_distance(x, y), finite, atol=0, rtol=0)
 
 
 @pytest.mark.gpu

@@ -1,11 +1,15 @@
-"""Task-state conditioning of forecasts: Forecast.mask_actions and the episode's action_mask."""
+"""Task-state conditioning of forecasts (Forecast.mask_actions, the episode's action_mask) and
+the validation of a Forecast's values."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import numpy as np
 import pytest
 import torch
 
-from iplanner_torch.errors import ShapeError
+from iplanner_torch.errors import DataError, ShapeError
 from iplanner_torch.eval.episode import action_mask, rest_hold
 from iplanner_torch.prediction.forecast import Forecast
 
@@ -70,3 +74,44 @@ def test_rest_hold_only_when_no_take_is_possible() -> None:
     assert not rest_hold(names, one_left).any()
     # a predictor without take actions: nothing is known about availability, nothing is held
     assert not rest_hold(("idle", "wave"), torch.tensor([True, True])).any()
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf")])
+def test_non_finite_forecast_is_rejected_naming_field_and_joint(bad: float) -> None:
+    """A NaN forecast must never reach the planner: its collision bound reads it as no human."""
+    f = _forecast([[0.5, 0.3, 0.2]])
+    var = f.var.clone()
+    var[0, 1, 2, 1, 0] = bad
+    with pytest.raises(DataError, match=r"forecast var is NaN/Inf for joint 'b' .*'x1'.*frame 2"):
+        replace(f, var=var)
+    mean = f.mean.clone()
+    mean[0, 2, 3, 0, 2] = bad
+    with pytest.raises(DataError, match="forecast mean is NaN/Inf for joint 'a'"):
+        replace(f, mean=mean)
+    weights = f.weights.clone()
+    weights[0, 0] = bad
+    with pytest.raises(DataError, match="forecast weights is NaN/Inf for action 'x0'"):
+        replace(f, weights=weights)
+    with pytest.raises(DataError, match="dt"):
+        replace(f, dt=bad)
+    # shapes are still checked first
+    with pytest.raises(ShapeError, match="expected var"):
+        replace(f, var=var[:, :, :2])
+
+
+@pytest.mark.parametrize("dt", [0.0, -0.1, "fast", None])
+def test_forecast_dt_must_be_a_positive_number(dt: object) -> None:
+    f = _forecast([[1.0]])
+    with pytest.raises(DataError, match="expected forecast dt a"):
+        replace(f, dt=dt)
+
+
+def test_negative_variances_are_kept_and_every_derived_forecast_still_builds() -> None:
+    f = _forecast([[0.5, 0.3, 0.2], [0.2, 0.2, 0.6]])
+    f.var = -0.01 * torch.ones_like(f.mean)  # documented: floored by the planner, not rejected
+    g = replace(f, var=f.var.clone())
+    assert float(g.var.max()) < 0.0
+    assert replace(g, dt=np.float64(1 / 15)).horizon == 4
+    assert g.mask_actions(torch.tensor([True, False, True])).batch_size == 2
+    assert g.hold_actions(torch.tensor([True, False, False])).horizon == 4
+    assert g.select(1).batch_size == 1 and g.to("cpu").batch_size == 2

@@ -9,8 +9,13 @@ import torch
 
 from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
 from iplanner_torch.data.windows import WindowCfg, build_windows, compute_features
-from iplanner_torch.errors import CheckpointError, DataError, ShapeError
-from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg, gp_inputs
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
+from iplanner_torch.prediction.predictor import (
+    CHECKPOINT_VERSION,
+    HumanMotionPredictor,
+    PredictorCfg,
+    gp_inputs,
+)
 from iplanner_torch.prediction.svgp import SVGPCfg
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
@@ -143,6 +148,81 @@ def test_wrong_shapes_raise(trained) -> None:
         pred.predict(w.f_prev[:2], w.progress[:3])
     with pytest.raises(ShapeError, match="expected positions"):
         pred.predict_positions(torch.zeros(1, 6, 4, 3), w.progress[:1])
+
+
+def test_non_finite_windows_raise_naming_window_frame_and_feature(trained) -> None:
+    """NaN in F_prev would give a NaN forecast (and a planner that sees no human)."""
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    assert pred.feature_names[:4] == (
+        "torso position x",
+        "torso position y",
+        "torso position z",
+        "left_hand position x",
+    )
+    assert pred.feature_names[9 + 7] == "right_hand velocity y"
+    for bad in (float("nan"), float("inf")):
+        f = w.f_prev[:3].clone()
+        f[1, 4, 9 + 7] = bad
+        with pytest.raises(
+            DataError, match=r"f_prev is NaN/Inf at window 1, frame 4, 'right_hand velocity y'"
+        ):
+            pred.predict(f, w.progress[:3])
+    # the raw-position entry point still imputes a lost joint-frame
+    pos = w.f_prev[:1, :, :9].reshape(1, pred.n_prev, 3, 3).clone()
+    pos[0, 4, 2] = float("nan")
+    assert bool(torch.isfinite(pred.predict_positions(pos, w.progress[:1]).mean).all())
+
+
+def test_empty_batch_and_bad_progress_raise(trained) -> None:
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    with pytest.raises(ShapeError, match="expected at least one window in f_prev"):
+        pred.predict(w.f_prev[:0], w.progress[:0])
+    with pytest.raises(ShapeError, match="expected at least one window in positions"):
+        pred.predict_positions(torch.zeros(0, pred.n_prev, 3, 3), w.progress[:0])
+    with pytest.raises(ShapeError, match="expected progress of an integer dtype"):
+        pred.predict(w.f_prev[:2], w.progress[:2].float() + 0.5)
+    with pytest.raises(ConfigError, match=r"expected progress bitmasks >= 0, got -1 \(window 1\)"):
+        pred.predict(w.f_prev[:2], torch.tensor([0, -1]))
+    # any integer dtype is taken as before
+    fc = pred.predict(w.f_prev[:2], w.progress[:2].int())
+    torch.testing.assert_close(fc.mean, pred.predict(w.f_prev[:2], w.progress[:2]).mean)
+
+
+def _rewrite(src: Path, dst: Path, **changes: object) -> Path:
+    d = torch.load(src, map_location="cpu", weights_only=False)
+    d.update(changes)
+    torch.save(d, dst)
+    return dst
+
+
+def test_damaged_or_foreign_checkpoints_raise_checkpoint_errors(trained, tmp_path: Path) -> None:
+    path, _ = trained
+    assert torch.load(path, weights_only=False)["version"] == CHECKPOINT_VERSION
+    old = _rewrite(path, tmp_path / "old.ckpt", version=CHECKPOINT_VERSION + 1)
+    with pytest.raises(
+        CheckpointError,
+        match=rf"old.ckpt has format version {CHECKPOINT_VERSION + 1}; "
+        rf"this code reads version {CHECKPOINT_VERSION}",
+    ):
+        HumanMotionPredictor.load(old)
+    none = _rewrite(path, tmp_path / "none.ckpt", version=None)
+    with pytest.raises(CheckpointError, match="format version None"):
+        HumanMotionPredictor.load(none)
+    for i, qualname in enumerate(
+        ("nonexistent.mod:X", "iplanner_torch.prediction.ivm:Nope", "no_colon")
+    ):
+        bad = _rewrite(path, tmp_path / f"cls{i}.ckpt", classifier_class=qualname)
+        with pytest.raises(CheckpointError, match=rf"cls{i}.ckpt: classifier_class '{qualname}'"):
+            HumanMotionPredictor.load(bad)
+    bad = _rewrite(path, tmp_path / "next.ckpt", next_model_class="math:pi")
+    with pytest.raises(CheckpointError, match="next.ckpt: next_model_class 'math:pi'"):
+        HumanMotionPredictor.load(bad)
+    with pytest.raises(CheckpointError, match="is a directory, not a checkpoint file"):
+        HumanMotionPredictor.load(tmp_path)
+    with pytest.raises(ConfigError, match="expected map_location a torch device.*'bogus'"):
+        HumanMotionPredictor.load(path, map_location="bogus")
 
 
 def test_checkpoint_roundtrip_and_errors(trained, tmp_path: Path) -> None:
