@@ -336,6 +336,22 @@ class TableClearance:
         return torch.where(near_base, torch.full_like(dist, 10.0), dist)
 
 
+def held_window(tracker: Any) -> np.ndarray:
+    """The tracker's window (n_p, K, 3) [m] with every joint lost in all of its frames held at
+    its last observation (``tracker.latest_pose()``); joints lost in some frames stay NaN for
+    the predictor's interpolation.
+
+    A joint the tracker lost for the whole window (a run of dropouts, or the first frames of an
+    episode) would otherwise borrow a neighbouring joint's trajectory; held where it was last
+    seen, it keeps the person's arm where it was.
+    """
+    win = np.array(tracker.window(), copy=True)
+    lost = ~np.isfinite(win).all(-1).any(0)  # (K,)
+    if lost.any():
+        win[:, lost] = np.asarray(tracker.latest_pose(), dtype=win.dtype)[lost]
+    return win
+
+
 def _predictor_window(predictor: object, default: int) -> int:
     for owner in (predictor, getattr(predictor, "cfg", None)):
         n = getattr(owner, "n_p", None)
@@ -715,7 +731,7 @@ def _run_episode(
                 # a stalled person waits for the robot: plan on the held pose, as ITOMP
                 stall_cycles += int(stalled)
                 if use_prediction and not stalled:
-                    pos = torch.as_tensor(tracker.window(), device=dev).unsqueeze(0)
+                    pos = torch.as_tensor(held_window(tracker), device=dev).unsqueeze(0)
                     progress = torch.tensor(
                         [human.progress_bitmask(action_names)], dtype=torch.int64, device=dev
                     )

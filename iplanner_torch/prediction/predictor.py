@@ -414,7 +414,7 @@ class HumanMotionPredictor:
         Raises:
             ShapeError: for wrong shapes (as :meth:`predict`).
             ConfigError: as :meth:`predict`.
-            DataError: when a joint is NaN in every frame of a window.
+            DataError: when every joint is NaN in every frame of a window.
         """
         from iplanner_torch.data.windows import compute_features
 
@@ -424,13 +424,10 @@ class HumanMotionPredictor:
                 f"expected at least one window in positions (B >= 1, {self.n_prev}, "
                 f"{self.num_joints}, 3), got {tuple(positions.shape)}"
             )
-        lost = ~torch.isfinite(positions).all(-1).any(1)  # (B, K) joint never observed
-        if bool(lost.any()):
-            bi, ki = (int(v) for v in lost.nonzero()[0])
-            raise DataError(
-                f"joint {self.joint_names[ki]!r} is NaN in every frame of window {bi}: "
-                "cannot forecast"
-            )
+        seen = torch.isfinite(positions).all(-1).any(1).any(1)  # (B,) any joint observed
+        if not bool(seen.all()):
+            bi = int((~seen).nonzero()[0])
+            raise DataError(f"no joint is observed in any frame of window {bi}: cannot forecast")
         f = compute_features(
             positions.to(self.device, torch.float32),
             self.fps,

@@ -339,3 +339,46 @@ def test_a_stall_falls_back_to_the_held_pose(tmp_path: Path) -> None:
     held = [t for t, f in replanner.forecasts if f.action_names == ("observed",)]
     assert held and held[0] == pytest.approx(times["stall_fallback"])
     assert res.metrics["plan/stall_cycles"] == len(held)
+
+
+def test_held_window_holds_joints_lost_in_every_frame() -> None:
+    """A joint the tracker lost for the whole window sits at its last observation; joints lost
+    in some frames stay NaN for the predictor's interpolation; the tracker is untouched."""
+    from iplanner_torch.eval.episode import held_window
+    from iplanner_torch.sim.tracker import Tracker, TrackerCfg
+
+    tracker = Tracker(TrackerCfg(window=4, noise_sigma=0.0), seed=0)
+    truth = np.arange(3 * 3, dtype=np.float64).reshape(3, 3)
+    tracker.observe(0.0, truth)  # every joint seen once
+    tracker.cfg = TrackerCfg(window=4, noise_sigma=0.0, dropout_rate=0.999)
+    for i in range(1, 5):  # then lost in four frames, so in the whole window
+        tracker.observe(i / 15, truth + i)
+    raw = tracker.window()
+    assert np.isnan(raw).all()  # every joint lost in every frame of the window
+    win = held_window(tracker)
+    np.testing.assert_allclose(win, np.broadcast_to(truth, (4, 3, 3)))  # held where last seen
+    assert np.isnan(tracker.window()).all()
+    # one joint seen in one frame of the window: it keeps its NaN frames, the others are held
+    tracker.cfg = TrackerCfg(window=4, noise_sigma=0.0)
+    tracker.observe(5 / 15, truth + 5)
+    win = held_window(tracker)
+    np.testing.assert_allclose(win[-1], truth + 5)
+    assert np.isnan(win[:-1]).all()
+
+
+def test_dropouts_never_give_the_predictor_a_joint_lost_in_the_whole_window(
+    tmp_path: Path,
+) -> None:
+    cfg = _cfg(4.0)
+    cfg = replace(cfg, sim=replace(cfg.sim, tracker_dropout=0.8))
+    predictor = fakes.ConstantPredictor()
+    _fake_episode(
+        tmp_path, cfg, "iplanner_ni", fakes.LinearReplanner(speed=1.5), predictor=predictor
+    )
+    assert len(predictor.calls) > 5
+    partly = 0
+    for pos, _ in predictor.calls:
+        seen = torch.isfinite(pos).all(-1)  # (1, n_p, K)
+        assert bool(seen.any(1).all())  # every joint has a value in some frame
+        partly += int((~seen).any())
+    assert partly > 0  # dropouts did reach the predictor, as NaN frames

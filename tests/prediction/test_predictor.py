@@ -134,8 +134,18 @@ def test_predict_positions_with_nan(trained) -> None:
     )
     assert bool(torch.isfinite(fc.mean).all())
     torch.testing.assert_close(fc.mean, ref.mean)
+    # a joint lost in every frame takes the nearest observed joint along the bones
     pos[1, :, 2] = float("nan")
-    with pytest.raises(DataError, match="'right_hand' is NaN in every frame"):
+    fc = pred.predict_positions(pos, w.progress[:3])
+    filled = pos.clone()
+    filled[1, :, 2] = pos[1, :, pred.joint_names.index("torso")]  # the hand's nearest here
+    ref = pred.predict(
+        compute_features(filled, pred.fps, pred.feature_kinds, joint_names=pred.joint_names),
+        w.progress[:3],
+    )
+    torch.testing.assert_close(fc.mean, ref.mean)
+    pos[2] = float("nan")
+    with pytest.raises(DataError, match="no joint is observed in any frame of window 2"):
         pred.predict_positions(pos, w.progress[:3])
 
 
