@@ -11,7 +11,7 @@ from omegaconf import DictConfig
 #: numeric columns a sweep may vary, in the order they are preferred as the x axis of the
 #: sweep plots (the other swept settings lay out their panels; seeds are repeats, not a
 #: setting, and are never plotted against)
-SWEEP_COLUMNS = ("noise", "confidence")
+SWEEP_COLUMNS = ("noise", "dropout", "confidence")
 
 
 def episode_report(df: Any, out_dir: Path) -> list[Path]:

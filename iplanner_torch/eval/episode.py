@@ -646,6 +646,7 @@ def _run_episode(
                 "seed": int(seed),
                 "speed": human_cfg.speed,
                 "noise": sim_cfg.tracker_noise,
+                "dropout": sim_cfg.tracker_dropout,
                 "human_speed": human_cfg.speed,
                 "tracker_noise": sim_cfg.tracker_noise,
                 "human_order": list(human.order),

@@ -73,7 +73,7 @@ def run_experiment(cfg: ExperimentCfg, out_dir: Path) -> pd.DataFrame:
 
     Returns:
         One row per episode: planner, scenario, arrangement, task_order, confidence, noise,
-        speed, seed, then the episode's metrics.
+        dropout, speed, seed, then the episode's metrics.
 
     Raises:
         ConfigError: when an I-Planner variant has no predictor checkpoint.
@@ -124,6 +124,7 @@ def run_experiment(cfg: ExperimentCfg, out_dir: Path) -> pd.DataFrame:
                                 "task_order": scenario.task_order,
                                 "confidence": scenario.confidence,
                                 "noise": noise,
+                                "dropout": sim.tracker_dropout,
                                 "speed": speed,
                                 "seed": seed,
                                 **res.metrics,

@@ -348,7 +348,7 @@ def incomplete_logs_note(df: pd.DataFrame) -> str:
 
 
 #: episode settings a run or sweep may vary; summaries keep their values apart
-SWEPT_SETTINGS = ("speed", "noise", "confidence")
+SWEPT_SETTINGS = ("speed", "noise", "dropout", "confidence")
 
 
 def report_groups(df: pd.DataFrame) -> tuple[str, ...]:

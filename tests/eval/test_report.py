@@ -252,6 +252,22 @@ def test_summary_rows_follow_the_settings_natural_order() -> None:
     assert with_nan[:2] == [0.0, 0.05] and len(with_nan) == 3 and math.isnan(with_nan[2])
 
 
+def test_a_dropout_sweep_keeps_its_rows_apart(tmp_path: Path) -> None:
+    from iplanner_torch.cli.callbacks import episode_report
+
+    rows = [
+        {"scenario": "s", "planner": p, "noise": 0.01, "dropout": d, "seed": seed,
+         "eval/smoothness": 1.0 + d, "eval/min_distance": 0.1, "eval/contact": 0.0}
+        for d in (0.3, 0.0, 0.1) for p in ("itomp", "iplanner_ni") for seed in (0, 1)
+    ]  # fmt: skip
+    df = gather_results(rows)
+    assert report_groups(df) == ("scenario", "dropout", "planner")
+    s = summary_table(df, report_groups(df))
+    assert list(s["dropout"]) == [0.0, 0.0, 0.1, 0.1, 0.3, 0.3] and (s["episodes"] == 2).all()
+    names = {p.name for p in episode_report(df, tmp_path)}
+    assert "sweep_smoothness.png" in names  # plotted against the swept dropout
+
+
 def test_natural_key_orders_numbered_folders_by_number() -> None:
     paths = ["m/10/e/a.mcap", "m/2/e/b.mcap", "m/1/e/c.mcap", "m/2/e/a.mcap"]
     assert sorted(paths, key=natural_key) == [
