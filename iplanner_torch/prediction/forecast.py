@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from iplanner_torch.errors import DataError
+from iplanner_torch.errors import DataError, ShapeError
 from iplanner_torch.types import check_shape
 
 
@@ -30,7 +30,8 @@ class Forecast:
         action_names: the A action names.
 
     Raises:
-        ShapeError: when ``weights``, ``mean`` or ``var`` has the wrong shape.
+        ShapeError: when ``weights``, ``mean`` or ``var`` has the wrong shape, or
+            ``action_names`` does not name A actions.
         DataError: when ``weights``, ``mean`` or ``var`` holds NaN or inf (naming the field
             and, for ``mean`` and ``var``, the joint), or ``dt`` is not a finite number > 0.
             A non-finite forecast must never reach the planner, whose collision bound would
@@ -49,6 +50,11 @@ class Forecast:
         b, a = self.weights.shape
         check_shape("mean", self.mean, (b, a, "n_f", len(self.joint_names), 3))
         check_shape("var", self.var, tuple(self.mean.shape))
+        if len(self.action_names) != a:
+            raise ShapeError(
+                f"expected {a} action names (weights (B, A) = {tuple(self.weights.shape)}), "
+                f"got {len(self.action_names)}: {tuple(self.action_names)}"
+            )
         try:
             dt = float(self.dt)
         except (TypeError, ValueError) as err:

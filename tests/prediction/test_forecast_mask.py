@@ -106,6 +106,12 @@ def test_forecast_dt_must_be_a_positive_number(dt: object) -> None:
         replace(f, dt=dt)
 
 
+def test_action_names_must_name_every_action() -> None:
+    f = _forecast([[0.5, 0.5]])
+    with pytest.raises(ShapeError, match=r"expected 2 action names .* got 1: \('x0',\)"):
+        replace(f, action_names=("x0",))
+
+
 def test_negative_variances_are_kept_and_every_derived_forecast_still_builds() -> None:
     f = _forecast([[0.5, 0.3, 0.2], [0.2, 0.2, 0.6]])
     f.var = -0.01 * torch.ones_like(f.mean)  # documented: floored by the planner, not rejected
