@@ -217,11 +217,26 @@ def command_help(doc: str) -> str:
     return "\n".join(lines)
 
 
+def refuse_conflicting_flags(argv: list[str]) -> None:
+    """Exit 2 with one line when ``argv`` asks for a sweep and a config print at once (Hydra
+    would end in a traceback)."""
+    sweep = any(a in ("-m", "--multirun") for a in argv)
+    cfg = any(a in ("-c", "--cfg") or a.startswith("--cfg=") for a in argv)
+    if sweep and cfg:
+        print(
+            "error: --cfg prints the config of a single run; drop -m (--multirun) to see it",
+            file=sys.stderr,
+        )
+        raise SystemExit(2)
+
+
 def print_help_if_asked(doc: str, argv: list[str]) -> None:
-    """Print :func:`command_help` and exit 0 when ``-h`` or ``--help`` is among ``argv``."""
+    """Print :func:`command_help` and exit 0 when ``-h`` or ``--help`` is among ``argv``;
+    refuse flags that cannot go together (:func:`refuse_conflicting_flags`)."""
     if "-h" in argv or "--help" in argv:
         print(command_help(doc))
         raise SystemExit(0)
+    refuse_conflicting_flags(argv)
 
 
 #: Root keys every command reads, with their types (checked before the command runs).

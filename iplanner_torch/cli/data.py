@@ -46,7 +46,13 @@ import hydra
 import numpy as np
 from omegaconf import DictConfig
 
-from iplanner_torch.cli._common import CONF_DIR, friendly_errors, generate_dataset, repo_path
+from iplanner_torch.cli._common import (
+    CONF_DIR,
+    friendly_errors,
+    generate_dataset,
+    refuse_conflicting_flags,
+    repo_path,
+)
 from iplanner_torch.errors import ConfigError, DataError
 
 COMMANDS = ("generate", "info")
@@ -138,6 +144,7 @@ def main() -> None:
     if any(a in HELP_FLAGS for a in args):
         print((__doc__ or "").replace("``", "").strip())
         return
+    refuse_conflicting_flags(args)
     if args and not args[0].startswith("-") and "=" not in args[0]:
         if args[0] not in COMMANDS:
             msg = f"error: unknown command {args[0]!r}; expected one of {COMMANDS}"

@@ -121,6 +121,18 @@ def test_unknown_training_data_source_is_refused(tmp_path: Path) -> None:
     assert not (tmp_path / "datasets").exists()  # refused before generating anything
 
 
+@pytest.mark.parametrize("module", ["experiment", "data"])
+def test_sweep_with_cfg_print_is_one_line(module: str, tmp_path: Path) -> None:
+    res = subprocess.run(
+        [sys.executable, "-m", f"iplanner_torch.cli.{module}", "-m", "--cfg", "job"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert res.returncode == 2
+    assert res.stderr.strip() == (
+        "error: --cfg prints the config of a single run; drop -m (--multirun) to see it"
+    )
+
+
 def test_help_lists_groups_options_and_defaults() -> None:
     from iplanner_torch.cli._common import command_help
 
