@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
-from _report import parse_report_args, write_readme
+from _report import complete_rows, fail, parse_report_args, write_readme
 
 from iplanner_torch.eval.report import to_markdown
 
@@ -40,13 +40,24 @@ COLUMNS = {
 
 
 def gather(run_dir: Path) -> pd.DataFrame:
-    """Every episode row under ``run_dir`` (duplicates of the sweep summary dropped)."""
-    frames = [pd.read_csv(f) for f in sorted(run_dir.rglob("results.csv"))]
-    frames = [f for f in frames if "eval/min_distance" in f.columns]  # raw episode rows only
+    """Every episode row under ``run_dir`` (duplicates of the sweep summary dropped).
+
+    Raw rows name metrics ``eval/<name>``; a summary's ``results.csv`` (a finished
+    single-scenario run keeps only that one) names them ``<name>``: both are read."""
+    frames = []
+    for f in sorted(run_dir.rglob("results.csv")):
+        df = pd.read_csv(f)
+        df = df.rename(columns={c[5:]: c for c in SOURCES if c.startswith("eval/")})
+        if "eval/min_distance" in df.columns:  # episode rows
+            frames.append(complete_rows(df, f, "eval/min_distance"))
     if not frames:
-        raise SystemExit(f"no results.csv with episode rows under {run_dir}")
+        fail(f"no results.csv with episode rows under {run_dir}")
     df = pd.concat(frames, ignore_index=True)
     return df.drop_duplicates(subset=["scenario", "planner", "seed"], keep="last")
+
+
+#: the metric columns :data:`COLUMNS` reads
+SOURCES = tuple(source for source, _ in COLUMNS.values())
 
 
 def summarise(df: pd.DataFrame) -> pd.DataFrame:
@@ -58,17 +69,18 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
 
 def main() -> None:
     args = parse_report_args(
-        __doc__.splitlines()[0], "iplanner-experiment -m experiment=safety_seeds"
+        __doc__.splitlines()[0], "iplanner-experiment -m experiment=safety_seeds", OUT
     )
     df = gather(args.run_dir)
     table = summarise(df)
     write_readme(
-        OUT,
+        args.out,
         title="Safety and efficiency over 20 seeds per scenario (confidence 0.95)",
         command=args.command,
         report="python scripts/safety_seeds_report.py <multirun dir>",
         episodes=df,
         note=args.note,
+        force=args.force,
         body=[
             "Distances in metres (sphere models; < 0: overlap), smoothness and jerkiness in",
             "rad^2/s^4, efficiency = human alone / with the robot; `contact_free` counts",

@@ -24,10 +24,12 @@ setting (speed, noise, confidence, when they vary) and planner, the means of
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import pandas as pd
 
+from iplanner_torch.errors import DataError
 from iplanner_torch.eval.report import SWEPT_SETTINGS, report_groups, to_markdown
 from iplanner_torch.eval.smoothness import episode_breakdown
 from iplanner_torch.recording import read_episode
@@ -50,15 +52,29 @@ def main() -> None:
     args = parser.parse_args()
     paths = sorted(args.run_dir.rglob("*.mcap"))
     if not paths:
-        raise SystemExit(f"no *.mcap episode logs under {args.run_dir}")
+        print(f"error: no *.mcap episode logs under {args.run_dir}", file=sys.stderr)
+        raise SystemExit(2)
     rows = []
+    skipped = []
     for path in paths:
-        ep = read_episode(path)
-        b = episode_breakdown(ep, settle_s=args.settle)
+        try:
+            ep = read_episode(path)
+            b = episode_breakdown(ep, settle_s=args.settle)
+        except DataError as exc:  # a log cut short (an interrupted run): left out, named
+            skipped.append(f"{path}: {exc}")
+            continue
         meta = ep.metadata
         row = {key: meta.get(key) for key in ("scenario", *SWEPT_SETTINGS, "planner", "seed")}
         row.update({col: getattr(b, attr) for col, attr in COLUMNS.items()})
         rows.append(row)
+    for line in skipped:
+        print(f"skipped {line}", file=sys.stderr)
+    if not rows:
+        print(
+            f"error: none of the {len(paths)} logs under {args.run_dir} could be split",
+            file=sys.stderr,
+        )
+        raise SystemExit(2)
     df = pd.DataFrame(rows)
     if args.episodes:
         print(to_markdown(df))

@@ -16,7 +16,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
-from _report import parse_report_args, write_readme
+from _report import complete_rows, fail, parse_report_args, write_readme
 
 from iplanner_torch.eval.report import (
     gather_results,
@@ -32,10 +32,14 @@ KEYS = ["arrangement", "task_order", "confidence", "planner"]
 
 def main() -> None:
     args = parse_report_args(
-        __doc__.splitlines()[0], "iplanner-experiment experiment=table_simulation"
+        __doc__.splitlines()[0], "iplanner-experiment experiment=table_simulation", OUT
     )
-    raw = pd.read_csv(args.run_dir / "results.csv")
-    df = gather_results(raw.to_dict("records"))
+    path = args.run_dir / "results.csv"
+    if not path.is_file():
+        fail(f"{path}: not found (give the folder of an `experiment=table_simulation` run)")
+    raw = pd.read_csv(path)
+    metric = "eval/smoothness" if "eval/smoothness" in raw.columns else "smoothness"
+    df = gather_results(complete_rows(raw, path, metric).to_dict("records"))
     df["confidence"] = df["confidence"].astype(float).round(2)
     paper = paper_table_simulation()
     paper["confidence"] = paper["confidence"].astype(float).round(2)
@@ -44,12 +48,13 @@ def main() -> None:
     table = scen.merge(table, on=KEYS)
     summary = summary_table(df, ("scenario", "planner"))
     write_readme(
-        OUT,
+        args.out,
         title="Paper table performance_simulation, reproduced",
         command=args.command,
         report="python scripts/table_simulation_report.py <run dir>",
         episodes=df,
         note=args.note,
+        force=args.force,
         body=[
             "Units: `mhd` and `min_distance` in metres, smoothness and jerkiness in rad^2/s^4",
             "(paper eq. smoothness and jerkiness; the paper does not state its units or time",

@@ -348,7 +348,8 @@ def friendly_errors(fn: F) -> F:
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        with copy_output_to(job_log_path()):
+        log_path = job_log_path()
+        with copy_output_to(log_path), _terminate_as_interrupt():
             try:
                 if args and isinstance(args[0], DictConfig):
                     check_root_keys(args[0])
@@ -356,8 +357,36 @@ def friendly_errors(fn: F) -> F:
             except IPlannerError as exc:
                 print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
                 raise SystemExit(2) from None
+            except KeyboardInterrupt:
+                where = f" in {log_path.parent}" if log_path is not None else ""
+                print(
+                    f"interrupted: what was written before is kept{where} (finished episodes "
+                    "in results.csv, the interrupted episode's log up to where it stopped)",
+                    file=sys.stderr,
+                )
+                raise SystemExit(130) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """Handle SIGTERM (a cluster's stop, ``kill``) like Ctrl-C while the command runs, so
+    open logs are closed with what they hold; nothing changes outside the main thread."""
+    import signal
+
+    def _raise(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, _raise)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def dump_config(cfg: DictConfig) -> str:

@@ -68,6 +68,7 @@ measured joint trajectory and on sphere models of the robot and the true human, 
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from collections.abc import Callable
@@ -837,6 +838,12 @@ def _run_episode(
                     t_goal = t
                 if t_goal is not None and t > max(t_goal, end_block) + cfg.blocking_tail_s:
                     break
+    except BaseException as exc:  # interrupted or failed: the log keeps what was simulated
+        if writer is not None:
+            with contextlib.suppress(Exception):
+                writer.task_event(env.time, "interrupted", {"error": type(exc).__name__})
+                writer.close()
+        raise
     finally:
         bar.close()
     wall = time.perf_counter() - wall0

@@ -4,6 +4,7 @@ and fig. speed_response): planners x scenarios x human speeds x tracker noises x
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -52,8 +53,10 @@ class ExperimentCfg:
             raise ConfigError(f"expected speeds from {sorted(SPEED_FACTORS)}, got {bad}")
         if not self.seeds or not self.scenarios:
             raise ConfigError("expected at least one seed and one scenario")
-        if any(n < 0 for n in self.noises):
-            raise ConfigError(f"expected noises >= 0, got {self.noises}")
+        if not all(isinstance(n, (int, float)) and 0 <= n < math.inf for n in self.noises):
+            raise ConfigError(f"expected noises finite and >= 0, got {self.noises}")
+        if not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in self.seeds):
+            raise ConfigError(f"expected seeds as integers >= 0, got {self.seeds}")
 
 
 def _load_predictor(path: str, device: str) -> Any:

@@ -262,3 +262,43 @@ def test_evaluate_refuses_bad_paths_before_it_computes(tmp_path: Path) -> None:
                 f"evaluate.out_dir={tmp_path / 'out'}"], tmp_path)  # fmt: skip
     assert res.returncode == 2
     assert "none of the 1 episode log(s) could be read as far as its metadata" in res.stderr
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_an_interrupted_experiment_keeps_what_it_wrote(tmp_path: Path, sig: str) -> None:
+    """Stopped during its second episode: one line, exit 130, the first episode's row and log
+    kept, and the second log closed with what it holds and an ``interrupted`` event."""
+    import signal
+    import time
+
+    run = tmp_path / "run"
+    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "iplanner_torch.cli.experiment", "run.planners=[itomp]",
+         "run.seeds=[0,1]", "progress=false", f"hydra.run.dir={run}"],
+        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    second = run / "episodes" / "arrangement_1x4_medium_n0.01_itomp_s1.mcap"
+    deadline = time.monotonic() + 300
+    while not (second.exists() and second.stat().st_size > 0) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.5)  # into the second episode
+    proc.send_signal(getattr(signal, sig))
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-3000:]
+    assert (
+        err.strip()
+        .splitlines()[-1]
+        .startswith(f"interrupted: what was written before is kept in {run}")
+    )
+    import pandas as pd
+
+    rows = pd.read_csv(run / "results.csv")
+    assert list(rows["seed"]) == [0]
+    first = read_episode(run / "episodes" / "arrangement_1x4_medium_n0.01_itomp_s0.mcap")
+    assert first.complete and "eval/smoothness" in first.metrics()
+    cut = read_episode(second)
+    assert cut.complete  # closed with a footer, nothing lost to an open chunk
+    t, q = cut.robot_q()
+    assert len(t) > 5 and [e["kind"] for e in cut.events()][-1] == "interrupted"
+    assert "interrupted: what was written before is kept" in (run / "experiment.log").read_text()

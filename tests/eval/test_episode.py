@@ -382,3 +382,20 @@ def test_dropouts_never_give_the_predictor_a_joint_lost_in_the_whole_window(
         assert bool(seen.any(1).all())  # every joint has a value in some frame
         partly += int((~seen).any())
     assert partly > 0  # dropouts did reach the predictor, as NaN frames
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        ("seeds", [0, -1], "expected seeds as integers >= 0"),
+        ("seeds", [0.5], "expected seeds as integers >= 0"),
+        ("noises", [float("nan")], "expected noises finite and >= 0"),
+        ("noises", [-0.01], "expected noises finite and >= 0"),
+        ("planners", [], "expected planners"),
+    ],
+)
+def test_experiment_grid_is_checked_before_it_runs(field: str, value: list, match: str) -> None:
+    from iplanner_torch.eval.experiment import ExperimentCfg
+
+    with pytest.raises(ConfigError, match=match):
+        ExperimentCfg(**{field: value})

@@ -59,3 +59,38 @@ def test_gather_reads_every_job_and_skips_summaries(tmp_path: Path) -> None:
     row = ssr.summarise(df).iloc[0]
     assert row["episodes"] == 5 and row["contact_free"] == 4 and row["completed"] == 5
     assert abs(row["min_distance_min"] - 0.05) < 1e-12
+
+
+def test_gather_reads_a_finished_single_scenario_run(tmp_path: Path) -> None:
+    """A single-scenario run keeps only the summary-style results.csv (eval/ prefix dropped)."""
+    ssr = _load()
+    rows = _rows("itomp", range(3), [0, 0, 1])
+    rows.columns = [c[5:] if c.startswith("eval/") else c for c in rows.columns]
+    rows.to_csv(tmp_path / "results.csv", index=False)
+    row = ssr.summarise(ssr.gather(tmp_path)).iloc[0]
+    assert row["episodes"] == 3 and row["contact_free"] == 2
+    assert abs(row["min_distance_mean"] - 0.06) < 1e-12
+
+
+def test_reports_refuse_cut_rows_and_existing_records(tmp_path: Path) -> None:
+    import subprocess
+
+    run = tmp_path / "run"
+    run.mkdir()
+    text = _rows("itomp", range(3), [0, 0, 0]).to_csv(index=False)
+    (run / "results.csv").write_text(text[: text.rindex(",0.07")])  # cut in the last row
+    out = tmp_path / "record"
+    script = [sys.executable, str(SCRIPTS / "safety_seeds_report.py")]
+    res = subprocess.run([*script, str(run), "--out", str(out)], capture_output=True, text=True)
+    assert res.returncode == 2
+    assert "1 of 3 episode row(s) lack 'eval/min_distance'" in res.stderr
+    assert not out.exists()  # nothing written from a cut file
+    _rows("itomp", range(3), [0, 0, 0]).to_csv(run / "results.csv", index=False)
+    res = subprocess.run([*script, str(run), "--out", str(out)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    (out / "README.md").write_text("hand-written")
+    res = subprocess.run([*script, str(run), "--out", str(out)], capture_output=True, text=True)
+    assert res.returncode == 2 and "pass --force" in res.stderr
+    assert (out / "README.md").read_text() == "hand-written"
+    res = subprocess.run([*script, str(tmp_path / "nope")], capture_output=True, text=True)
+    assert res.returncode == 2 and "not a folder" in res.stderr

@@ -139,3 +139,16 @@ def test_breakdown_script_groups_by_swept_speed(tmp_path: Path) -> None:
         assert planner == "itomp" and episodes == 2
         assert smooth == pytest.approx(expected[speed], rel=2e-3)  # 3 significant digits
     assert expected["fast"] == pytest.approx(4 * expected["slow"])
+    # a log with its robot states lost (cut before them) is left out and named; the rest stay
+    with EpisodeWriter(tmp_path / "cut.mcap", metadata={"scenario": "s1", "planner": "itomp"}):
+        pass
+    res = subprocess.run(
+        [sys.executable, str(script), str(tmp_path)], capture_output=True, text=True, timeout=300
+    )
+    assert res.returncode == 0, res.stderr
+    assert "skipped " in res.stderr and "cut.mcap" in res.stderr
+    assert sum(ln.startswith("| s1") for ln in res.stdout.splitlines()) == 2
+    res = subprocess.run(
+        [sys.executable, str(script), str(tmp_path / "none")], capture_output=True, text=True
+    )
+    assert res.returncode == 2 and res.stderr.startswith("error: no *.mcap episode logs")
