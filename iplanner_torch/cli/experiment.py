@@ -207,6 +207,14 @@ def _app(cfg: DictConfig) -> None:
     warnings.simplefilter("ignore", PlanningOverrunWarning)
     t0 = time.perf_counter()
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    earlier = [p for p in ("results.csv", "episodes") if (out_dir / p).exists()]
+    if earlier:
+        from iplanner_torch.errors import ConfigError
+
+        raise ConfigError(
+            f"{out_dir} already holds {' and '.join(earlier)} of an earlier run, which this "
+            "run would replace; choose another hydra.run.dir (or delete them)"
+        )
     (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
     exp_node = cfg.get("experiment")
     planners = (

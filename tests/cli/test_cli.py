@@ -181,6 +181,16 @@ def test_experiment_itomp_short_episode(tmp_path: Path) -> None:
     log = (tmp_path / "run" / "experiment.log").read_text()
     assert "experiment 'main': 1 episode(s)" in log and "smoothness" in log
     assert f"results: {tmp_path / 'run' / 'results.md'}" in log and "done in" in log
+    # the same folder again: refused before anything is replaced
+    before = {p: p.stat().st_mtime_ns for p in (tmp_path / "run").rglob("*") if p.is_file()}
+    res = _run(["iplanner-experiment", "run.planners=[itomp]", "run.max_duration_s=3",
+                "progress=false", f"hydra.run.dir={tmp_path / 'run'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 2
+    assert "already holds results.csv and episodes of an earlier run" in res.stderr
+    after = {p: p.stat().st_mtime_ns for p in (tmp_path / "run").rglob("*") if p.is_file()}
+    assert {p: after[p] for p in before if p.suffix in (".csv", ".mcap", ".md")} == {
+        p: t for p, t in before.items() if p.suffix in (".csv", ".mcap", ".md")
+    }
 
 
 def test_error_line_reaches_the_job_log(tmp_path: Path) -> None:
