@@ -76,16 +76,29 @@ def joint_accelerations(t: Any, q: Any) -> tuple[torch.Tensor, torch.Tensor]:
 
     Args:
         t: (T,) sample times [s], strictly increasing, T >= 3.
-        q: (T, J) joint positions [rad].
+        q: (T, J) joint positions [rad], finite (the robot's measured or planned joints have
+            no NaN rows, unlike tracked human joints).
 
     Returns:
         ``(qdd (T-2, J) [rad/s^2], weights (T-2,) [s])``: accelerations at the interior samples
         and the length of time each one stands for (its half-intervals on both sides; the first
         and last also cover the end intervals), summing to ``t[-1] - t[0]``.
+
+    Raises:
+        ShapeError: for mismatched shapes or T < 3.
+        DataError: for times that are not strictly increasing (or NaN), or a NaN or infinite
+            joint position (naming the rows).
     """
     tt = _f64("t", t, ("T",))
     qq = _f64("q", q, (tt.shape[0], "J")).to(tt.device)
     _check_time(tt, 3)
+    bad = ~torch.isfinite(qq).all(dim=-1)  # (T,)
+    if bool(bad.any()):
+        rows = bad.nonzero().flatten().tolist()
+        raise DataError(
+            f"expected finite joint positions q, got NaN or inf in {len(rows)} rows, first "
+            f"{rows[:5]} (t = {tt[rows[0]].item():.3f} s)"
+        )
     h = torch.diff(tt)  # (T-1,)
     slope = torch.diff(qq, dim=0) / h[:, None]  # (T-1, J)
     qdd = 2.0 * (slope[1:] - slope[:-1]) / (h[1:] + h[:-1])[:, None]  # (T-2, J)
@@ -104,7 +117,10 @@ def smoothness(t: Any, q: Any) -> float:
 
     Args:
         t: (T,) sample times [s], strictly increasing, T >= 3.
-        q: (T, J) joint positions [rad].
+        q: (T, J) joint positions [rad], finite.
+
+    Raises:
+        DataError: as :func:`joint_accelerations` (a NaN row is an error, not a NaN result).
     """
     qdd, w = joint_accelerations(t, q)
     total = float(w.sum())
@@ -116,7 +132,10 @@ def jerkiness(t: Any, q: Any) -> float:
 
     Args:
         t: (T,) sample times [s], strictly increasing, T >= 3.
-        q: (T, J) joint positions [rad].
+        q: (T, J) joint positions [rad], finite.
+
+    Raises:
+        DataError: as :func:`joint_accelerations`.
     """
     qdd, _ = joint_accelerations(t, q)
     return float(qdd.square().sum(-1).max())

@@ -40,6 +40,8 @@ does not dwell at a pick or place point; the regular cadence resumes from the ta
 
 from __future__ import annotations
 
+import math
+import numbers
 import time
 import warnings
 from dataclasses import dataclass, field, replace
@@ -47,7 +49,7 @@ from typing import Literal
 
 import torch
 
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.planning.optimizer import OptimizerCfg, PlanResult, TrajectoryOptimizer
 from iplanner_torch.planning.trajectory import Trajectory, resample_linear
 from iplanner_torch.prediction.forecast import Forecast
@@ -59,6 +61,34 @@ TIME_EPS = 1e-6
 
 class PlanningOverrunWarning(UserWarning):
     """A replanning cycle took longer than its wall-clock budget."""
+
+
+def _check_finite(cfg: object, names: tuple[str, ...]) -> None:
+    """ConfigError unless each named field of ``cfg`` is a finite number (or None)."""
+    for name in names:
+        value = getattr(cfg, name)
+        if value is None:
+            continue
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, numbers.Real)
+            or not math.isfinite(value)
+        ):
+            raise ConfigError(f"expected {name} a finite number, got {value!r}")
+
+
+def _check_time(name: str, t: float) -> None:
+    """DataError unless the time ``t`` [s] is finite."""
+    if not math.isfinite(t):
+        raise DataError(f"expected a finite time {name}, got {t}")
+
+
+def _check_q(name: str, q: torch.Tensor) -> None:
+    """DataError unless every joint of ``q`` (J,) is finite, naming the bad joints."""
+    finite = torch.isfinite(q)
+    if not bool(finite.all()):
+        bad = (~finite).nonzero().flatten().tolist()
+        raise DataError(f"expected finite {name}, got NaN or inf in joints {bad}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -110,6 +140,24 @@ class ReplannerCfg:
     tracking_max_gap_s: float = 0.1
 
     def __post_init__(self) -> None:
+        _check_finite(
+            self,
+            (
+                "replan_step_s",
+                "budget_s",
+                "min_duration_s",
+                "fresh_fraction",
+                "resync_tol",
+                "goal_change_lead_s",
+                "emergency_lead_s",
+                "emergency_check_hz",
+                "wait_lead_s",
+                "acc_max",
+                "tracking_bandwidth",
+                "tracking_dt",
+                "tracking_max_gap_s",
+            ),
+        )
         if not self.replan_step_s > 0.0:
             raise ConfigError(f"expected replan_step_s > 0, got {self.replan_step_s}")
         if self.budget_s is not None and not self.budget_s > 0.0:
@@ -177,6 +225,7 @@ class PlannerCfg:
     replanner: ReplannerCfg = field(default_factory=ReplannerCfg)
 
     def __post_init__(self) -> None:
+        _check_finite(self, ("confidence", "replan_step_s"))
         if self.kind not in ("itomp", "iplanner", "oracle"):
             raise ConfigError(f"expected kind 'itomp', 'iplanner' or 'oracle', got {self.kind!r}")
         if self.kind == "iplanner" and self.predictor_variant not in ("no_ni", "ni"):
@@ -307,10 +356,16 @@ class Replanner:
             q_start: (J,) current configuration [rad].
             q_goal: (J,) goal [rad].
             t: current time [s]; the first cycle is due now.
+
+        Raises:
+            ShapeError: when ``q_start`` or ``q_goal`` is not (J,).
+            DataError: when one of them or ``t`` is NaN or infinite.
         """
         j = self.optimizer.num_joints
         check_shape("q_start", q_start, (j,))
         check_shape("q_goal", q_goal, (j,))
+        _check_time("t", t)
+        _check_q("q_start", q_start)
         self.stats = ReplannerStats()
         self._plan = self._hold(self._to(q_start), t)
         self._next_plan = None
@@ -328,8 +383,15 @@ class Replanner:
             t: current time [s] (the goal time is set from it, and with
                 ``cfg.replan_on_goal_change`` a cycle is due from it); None uses the next
                 cycle's.
+
+        Raises:
+            ShapeError: when ``q_goal`` is not (J,).
+            DataError: when ``q_goal`` or ``t`` is NaN or infinite.
         """
         check_shape("q_goal", q_goal, (self.optimizer.num_joints,))
+        if t is not None:
+            _check_time("t", t)
+        _check_q("q_goal", q_goal)
         self._goal = self._to(q_goal)
         if t is not None and self.cfg.replan_on_goal_change:
             self._next_cycle = min(self._next_cycle, t)
@@ -360,7 +422,11 @@ class Replanner:
 
         Returns:
             q_des (J,) [rad] and qd_des (J,) [rad/s].
+
+        Raises:
+            DataError: when ``t`` is NaN or infinite.
         """
+        _check_time("t", t)
         if self.cfg.tracking == "exact":
             return self._current(t).sample(t)
         if self._plan is None:
@@ -432,10 +498,20 @@ class Replanner:
 
         Returns:
             The new plan (it takes over at ``t + m``), or None when no cycle is due.
+
+        Raises:
+            ConfigError: before :meth:`reset`.
+            ShapeError: when ``q_now`` is not (J,).
+            DataError: when ``t``, ``forecast_t0`` or ``q_now`` is NaN or infinite (a NaN
+                measurement would never re-anchor the plan).
         """
         if self._goal is None or self._plan is None:
             raise ConfigError("call reset(q_start, q_goal, t) before step")
         check_shape("q_now", q_now, (self.optimizer.num_joints,))
+        _check_time("t", t)
+        if forecast_t0 is not None:
+            _check_time("forecast_t0", forecast_t0)
+        _check_q("q_now", q_now)
         if t < self._next_cycle - TIME_EPS:
             return None
         m = self.cfg.replan_step_s

@@ -19,14 +19,15 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
-from iplanner_torch.errors import CheckpointError, ConfigError
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError
 
 
 class TaskOrderLike(Protocol):
@@ -67,6 +68,18 @@ class TaskMDPCfg:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        for name in ("num_objects", "episodes", "seed"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+                raise ConfigError(f"expected {name} an int, got {value!r}")
+        for name in ("alpha", "gamma", "epsilon", "w_prep", "w_delay", "idle_delay_s"):
+            value = getattr(self, name)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, numbers.Real)
+                or not math.isfinite(value)
+            ):
+                raise ConfigError(f"expected {name} a finite number, got {value!r}")
         if not 1 <= self.num_objects <= 16:
             raise ConfigError(f"expected num_objects in [1, 16], got {self.num_objects}")
         if not 0.0 < self.alpha <= 1.0:
@@ -77,6 +90,8 @@ class TaskMDPCfg:
             raise ConfigError(f"expected epsilon in [0, 1], got {self.epsilon}")
         if self.episodes < 0:
             raise ConfigError(f"expected episodes >= 0, got {self.episodes}")
+        if self.seed < 0:
+            raise ConfigError(f"expected seed >= 0, got {self.seed}")
         if self.w_prep < 0.0 or self.w_delay < 0.0 or self.idle_delay_s < 0.0:
             raise ConfigError("expected w_prep, w_delay and idle_delay_s >= 0")
 
@@ -141,6 +156,10 @@ class TaskPlanner:
 
         Args:
             taken: bitmask of the objects the human has taken.
+
+        Raises:
+            ConfigError: when ``next_action_probs`` gives a shape other than (n,).
+            DataError: when it gives a NaN or infinite probability.
         """
         n = self.cfg.num_objects
         allowed = self._allowed_takes(taken)
@@ -152,6 +171,11 @@ class TaskPlanner:
         p = np.zeros(n) if raw is None else np.asarray(raw, dtype=np.float64).copy()
         if p.shape != (n,):
             raise ConfigError(f"expected next-action probabilities of shape ({n},), got {p.shape}")
+        if not np.isfinite(p).all():
+            raise DataError(
+                f"expected finite next-action probabilities for taken mask {taken}, got "
+                f"{p.tolist()}"
+            )
         mask = np.array([i in allowed for i in range(n)])
         p = np.where(mask, np.clip(p, 0.0, None), 0.0)
         if p.sum() <= 0.0 and mask.any():
@@ -247,8 +271,27 @@ class TaskPlanner:
         return int(np.argmax(q))
 
     def policy(self, taken: set[int] | int, fetched: set[int] | int) -> int | None:
-        """pi(p): the object to fetch next, or None when all are fetched."""
-        state = encode_state(taken, fetched, self.cfg.num_objects)
+        """pi(p): the object to fetch next, or None when all are fetched.
+
+        Args:
+            taken: the objects the human has taken, as a set of indices in [0, n) or a bitmask.
+            fetched: the objects the robot has fetched, likewise.
+
+        Raises:
+            ConfigError: for an object index (or bitmask) out of range.
+        """
+        n = self.cfg.num_objects
+        for name, objs in (("taken", taken), ("fetched", fetched)):
+            if isinstance(objs, int):
+                if not 0 <= objs < 1 << n:
+                    raise ConfigError(f"expected {name} a bitmask of {n} objects, got {objs}")
+                continue
+            for i in objs:
+                if isinstance(i, bool) or not isinstance(i, numbers.Integral) or not 0 <= i < n:
+                    raise ConfigError(
+                        f"unknown object {i!r} in {name}: expected indices in [0, {n})"
+                    )
+        state = encode_state(taken, fetched, n)
         return self._greedy(state) if self.available(state) else None
 
     # ------------------------------------------------------------ persistence
@@ -273,22 +316,85 @@ class TaskPlanner:
         """Read a planner written by :meth:`save`.
 
         Raises:
-            CheckpointError: when the file is missing or not a task-planner file.
+            CheckpointError: when the file is missing, not a task-planner file, or malformed
+                (unknown or invalid settings, an H or a Q table that does not fit them).
         """
         try:
             data = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise CheckpointError(f"cannot read task planner {path}: {exc}") from exc
+        if not isinstance(data, dict):
+            raise CheckpointError(
+                f"{path} is not a task planner file (expected a JSON object, got "
+                f"{type(data).__name__})"
+            )
         if data.get("format") != "iplanner_torch.task_mdp/1":
             raise CheckpointError(
                 f"{path} is not a task planner file (format {data.get('format')!r})"
             )
-        planner = cls(
-            TaskMDPCfg(**data["cfg"]),
-            task_order,
-            next_action_probs,
-            np.asarray(data["h_table"]),
-            delay_fn,
-        )
-        planner.q = {int(k): np.asarray(v, dtype=np.float64) for k, v in data["q"].items()}
+        missing = [k for k in ("cfg", "h_table", "q") if k not in data]
+        if missing:
+            raise CheckpointError(f"task planner {path}: missing {', '.join(map(repr, missing))}")
+        cfg = _load_cfg(path, data["cfg"])
+        n = cfg.num_objects
+        try:
+            h_table = np.asarray(data["h_table"], dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise CheckpointError(f"task planner {path}: h_table is not numeric: {exc}") from exc
+        if h_table.shape != (n, n) or not np.isfinite(h_table).all():
+            raise CheckpointError(
+                f"task planner {path}: expected a finite h_table ({n}, {n}), got shape "
+                f"{h_table.shape}"
+            )
+        q = _load_q(path, data["q"], n)
+        planner = cls(cfg, task_order, next_action_probs, h_table, delay_fn)
+        planner.q = q
         return planner
+
+
+def _load_cfg(path: str | Path, raw: object) -> TaskMDPCfg:
+    """The :class:`TaskMDPCfg` of a task-planner file, or :class:`CheckpointError`."""
+    if not isinstance(raw, dict):
+        raise CheckpointError(f"task planner {path}: expected cfg an object, got {raw!r}")
+    known = {f.name for f in fields(TaskMDPCfg)}
+    unknown = sorted(set(raw) - known)
+    if unknown:
+        raise CheckpointError(f"task planner {path}: unknown cfg keys {unknown}")
+    if "num_objects" not in raw:
+        raise CheckpointError(f"task planner {path}: cfg is missing 'num_objects'")
+    try:
+        return TaskMDPCfg(**raw)
+    except ConfigError as exc:
+        raise CheckpointError(f"task planner {path}: invalid cfg: {exc}") from exc
+
+
+def _load_q(path: str | Path, raw: object, n: int) -> dict[int, np.ndarray]:
+    """The Q table of a task-planner file: progress state (in [0, 4^n)) -> (n,) finite values."""
+    if not isinstance(raw, dict):
+        raise CheckpointError(
+            f"task planner {path}: expected q an object, got {type(raw).__name__}"
+        )
+    q: dict[int, np.ndarray] = {}
+    for key, row in raw.items():
+        try:
+            state = int(key)
+        except ValueError:
+            state = -1
+        if not 0 <= state < 1 << (2 * n):
+            raise CheckpointError(
+                f"task planner {path}: q key {key!r} is not a progress state of {n} objects "
+                f"(an int in [0, {1 << (2 * n)}))"
+            )
+        try:
+            values = np.asarray(row, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise CheckpointError(f"task planner {path}: q[{key}] is not numeric: {exc}") from exc
+        if values.shape != (n,):
+            raise CheckpointError(
+                f"task planner {path}: expected q[{key}] of shape ({n},) for num_objects={n}, "
+                f"got {values.shape}"
+            )
+        if not np.isfinite(values).all():
+            raise CheckpointError(f"task planner {path}: q[{key}] has non-finite values")
+        q[state] = values
+    return q

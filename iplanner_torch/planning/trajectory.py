@@ -5,16 +5,29 @@ Hermite spline whose tangents are central differences (Catmull-Rom), with a give
 the start (continuity with the previous plan), rest at the end and where a joint holds or
 turns (so a hold does not overshoot); before the first and after
 the last waypoint the trajectory holds its end pose.
+
+Inputs are checked where it is cheap: a :class:`Trajectory` checks its waypoints and times once,
+at construction; :meth:`Trajectory.sample` checks a Python-number time, and the finite-difference
+helpers check a Python-number ``dt``. Tensors given to ``sample``, ``velocities`` and
+``accelerations`` are not checked (the optimiser calls them every iteration): a NaN there gives
+NaN in the result.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import torch
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_shape
+
+
+def _check_dt(dt: float) -> None:
+    """ConfigError unless a Python-number ``dt`` is finite and > 0 (a tensor is not checked)."""
+    if not isinstance(dt, torch.Tensor) and not 0.0 < dt < math.inf:
+        raise ConfigError(f"expected dt > 0 and finite, got {dt}")
 
 
 def velocities(q: torch.Tensor, dt: float) -> torch.Tensor:
@@ -22,11 +35,15 @@ def velocities(q: torch.Tensor, dt: float) -> torch.Tensor:
 
     Args:
         q: (..., W, J) joint positions [rad].
-        dt: seconds between waypoints.
+        dt: seconds between waypoints, finite and > 0.
 
     Returns:
         (..., W - 1, J) velocities [rad/s]; entry i is (q_{i+1} - q_i) / dt.
+
+    Raises:
+        ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
+    _check_dt(dt)
     return (q[..., 1:, :] - q[..., :-1, :]) / dt
 
 
@@ -37,14 +54,18 @@ def accelerations(
 
     Args:
         q: (..., W, J) joint positions [rad].
-        dt: seconds between waypoints.
+        dt: seconds between waypoints, finite and > 0.
         qd_start: (..., J) or (J,) velocity at the first waypoint [rad/s]; when given, the
             acceleration at the first waypoint ``((q_1 - q_0) / dt - qd_start) / dt`` is
             prepended.
 
     Returns:
         (..., W - 2, J) accelerations [rad/s^2] (``W - 1`` rows when ``qd_start`` is given).
+
+    Raises:
+        ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
+    _check_dt(dt)
     acc = (q[..., 2:, :] - 2.0 * q[..., 1:-1, :] + q[..., :-2, :]) / (dt * dt)
     if qd_start is None:
         return acc
@@ -55,7 +76,16 @@ def accelerations(
 def uniform_times(
     t0: float, duration: float, num_waypoints: int, like: torch.Tensor
 ) -> torch.Tensor:
-    """(W,) waypoint times [s] from ``t0`` to ``t0 + duration``, on ``like``'s device/dtype."""
+    """(W,) waypoint times [s] from ``t0`` to ``t0 + duration``, on ``like``'s device/dtype.
+
+    Raises:
+        ConfigError: when ``t0`` is not finite or ``duration`` not finite and > 0 (Python
+            numbers; tensors are not checked).
+    """
+    if not isinstance(t0, torch.Tensor) and not math.isfinite(t0):
+        raise ConfigError(f"expected a finite t0, got {t0}")
+    if not isinstance(duration, torch.Tensor) and not 0.0 < duration < math.inf:
+        raise ConfigError(f"expected duration > 0 and finite, got {duration}")
     return t0 + torch.linspace(0.0, duration, num_waypoints, device=like.device, dtype=like.dtype)
 
 
@@ -64,10 +94,15 @@ class Trajectory:
     """One space-time trajectory.
 
     Attributes:
-        q: (W, J) waypoint joint positions [rad].
-        times: (W,) waypoint times [s], strictly increasing (uniform from the optimiser; a
-            hold segment may make the last interval longer).
-        qd_start: (J,) velocity at the first waypoint [rad/s]; None means rest.
+        q: (W, J) waypoint joint positions [rad], finite.
+        times: (W,) waypoint times [s], finite and strictly increasing (uniform from the
+            optimiser; a hold segment may make the last interval longer).
+        qd_start: (J,) velocity at the first waypoint [rad/s], finite; None means rest.
+
+    Raises:
+        ShapeError: for mismatched shapes or fewer than 2 waypoints.
+        DataError: for a NaN or infinite waypoint, time or start velocity.
+        ConfigError: for times that are not strictly increasing.
     """
 
     q: torch.Tensor
@@ -83,10 +118,27 @@ class Trajectory:
         check_shape("times", self.times, (self.q.shape[0],))
         if self.q.shape[0] < 2:
             raise ShapeError(f"expected at least 2 waypoints, got q {tuple(self.q.shape)}")
-        if bool((self.times[1:] <= self.times[:-1]).any()):
-            raise ConfigError("expected strictly increasing waypoint times")
         if self.qd_start is not None:
             check_shape("qd_start", self.qd_start, (self.q.shape[1],))
+        # one host synchronisation for all checks (a trajectory is built once per cycle)
+        checks = [
+            torch.isfinite(self.times).all(),
+            torch.isfinite(self.q).all(),
+            (self.times[1:] > self.times[:-1]).all(),
+        ]
+        if self.qd_start is not None:
+            checks.append(torch.isfinite(self.qd_start).all())
+        ok = torch.stack(checks).tolist()
+        if not ok[0]:
+            bad = (~torch.isfinite(self.times)).nonzero().flatten().tolist()
+            raise DataError(f"expected finite waypoint times, got NaN or inf at indices {bad}")
+        if not ok[1]:
+            bad = (~torch.isfinite(self.q)).any(-1).nonzero().flatten().tolist()
+            raise DataError(f"expected finite waypoints q, got NaN or inf in rows {bad}")
+        if not ok[2]:
+            raise ConfigError("expected strictly increasing waypoint times")
+        if len(ok) > 3 and not ok[3]:
+            raise DataError("expected a finite qd_start, got NaN or inf")
 
     @property
     def t_start(self) -> float:
@@ -117,12 +169,21 @@ class Trajectory:
 
         Args:
             t: scalar or (N,) query times [s]; outside [t_start, t_end] the end pose is held
-                with zero velocity.
+                with zero velocity. A Python number must be finite; a tensor is not checked
+                (a NaN time gives NaN rows).
 
         Returns:
             q (J,) or (N, J) [rad] and qd of the same shape [rad/s].
+
+        Raises:
+            DataError: when ``t`` is a NaN or infinite Python number.
         """
-        scalar = not isinstance(t, torch.Tensor) or t.dim() == 0
+        if not isinstance(t, torch.Tensor):
+            if not math.isfinite(t):
+                raise DataError(f"expected a finite sample time, got {t}")
+            scalar = True
+        else:
+            scalar = t.dim() == 0
         tq = torch.as_tensor(t, dtype=self.times.dtype, device=self.times.device).reshape(-1)
         times, q = self.times, self.q
         if self._tangent_cache is None:
@@ -174,10 +235,12 @@ class Trajectory:
             until: time [s] to hold the pose to; later than ``times[index]``.
 
         Raises:
-            ConfigError: when ``index`` is out of range.
+            ConfigError: when ``index`` is out of range or ``until`` is not finite.
         """
         if not 0 <= index < self.q.shape[0]:
             raise ConfigError(f"expected hold index in [0, {self.q.shape[0]}), got {index}")
+        if not math.isfinite(float(until)):
+            raise ConfigError(f"expected a finite hold time until, got {until}")
         q = self.q[: index + 1]
         times = self.times[: index + 1]
         t_hold = max(float(until), float(times[-1]) + 1e-3)

@@ -119,7 +119,8 @@ class SerialChainKinematics:
         """World rotation and position of every link, and optionally the sphere centres.
 
         Args:
-            q: (N, J) joint positions [rad or m], flat batch; not shape-checked (hot path).
+            q: (N, J) joint positions [rad or m], flat batch (N may be 0); not shape- or
+                NaN-checked (hot path): a non-finite row gives non-finite frames in that row.
             with_spheres: also return the sphere centres.
 
         Returns:
@@ -146,7 +147,7 @@ class SerialChainKinematics:
             else:
                 block = blocks[i] if want else joint_blocks[i]
             m = x.shape[1]
-            y = (block @ x.reshape(3, m * 3)).view(-1, m, 3)  # (cols, m, 3)
+            y = (block @ x.reshape(3, m * 3)).view(block.shape[0], m, 3)  # (cols, m, 3)
             if kind is None:
                 parts.append(y + pos)  # (S_l, m, 3)
                 break
@@ -201,7 +202,8 @@ class SerialChainKinematics:
         """Sphere centres with an analytic backward pass (no second derivatives).
 
         Args:
-            q: (N, J) joint positions [rad or m], flat batch; not shape-checked (hot path).
+            q: (N, J) joint positions [rad or m], flat batch (N may be 0); not shape- or
+                NaN-checked (hot path): a non-finite row gives non-finite centres in that row.
 
         Returns:
             (N, S, 3) sphere centres in the world frame [m].

@@ -29,7 +29,7 @@ from typing import Literal
 
 import torch
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.robot.description import (
     ROBOT_NAMES,
     RobotDescription,
@@ -43,6 +43,39 @@ from iplanner_torch.robot.spheres import fit_link_spheres
 from iplanner_torch.types import check_shape
 
 RobotName = Literal["kuka_iiwa14", "fetch"]
+
+
+def _check_device_dtype(device: torch.device | str, dtype: torch.dtype) -> torch.device:
+    """The model's device, or ConfigError for an unknown or unavailable device or a
+    non-floating dtype."""
+    if not isinstance(dtype, torch.dtype) or not dtype.is_floating_point:
+        raise ConfigError(f"expected a floating dtype (floating dtypes only), got {dtype}")
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError) as exc:
+        raise ConfigError(f"unknown device {device!r}: {exc}") from exc
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ConfigError(f"device {str(dev)!r} requested but CUDA is not available")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ConfigError(
+                f"device {str(dev)!r} requested but only {torch.cuda.device_count()} CUDA "
+                f"device(s) exist"
+            )
+    return dev
+
+
+def _check_finite(name: str, x: torch.Tensor) -> None:
+    """DataError unless every entry of ``x`` (..., D) is finite, naming the first bad rows."""
+    finite = torch.isfinite(x)
+    if not bool(finite.all()):
+        if x.dim() < 2:
+            raise DataError(f"expected a finite {name}, got {x.tolist()}")
+        bad = (~finite).reshape(-1, x.shape[-1]).any(-1).nonzero().flatten()[:5].tolist()
+        raise DataError(
+            f"expected a finite {name}, got NaN or inf in (flat) rows {bad} of leading shape "
+            f"{tuple(x.shape[:-1])}"
+        )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,6 +110,15 @@ class RobotModel:
     Build it with :meth:`load` or :meth:`from_cfg`. Tensors returned by the attributes live on
     ``device`` with ``dtype``; the kinematic functions follow the device and dtype of ``q``.
 
+    The forward kinematics (:meth:`sphere_centers`, :meth:`ee_position`, :meth:`link_positions`,
+    ...) check shapes but not values: the trajectory optimiser calls :meth:`sphere_centers` every
+    iteration, so a NaN or infinite joint gives NaN in that configuration's outputs (no error).
+    :meth:`clamp` and :meth:`ik` reject non-finite input (:class:`DataError`).
+
+    Raises:
+        ConfigError: for a non-floating ``dtype``, or a CUDA ``device`` where CUDA is not
+            available.
+
     Attributes:
         name: robot name.
         joint_names: (J,) names of the moving joints, equal in the URDF and the MJCF.
@@ -105,9 +147,9 @@ class RobotModel:
         base_yaw: float | None = None,
         max_sphere_excess: float = 0.02,
     ) -> None:
+        self.device = _check_device_dtype(device, dtype)
         self.description = desc
         self.name = desc.name
-        self.device = torch.device(device)
         self.dtype = dtype
         pos = desc.default_base_position if base_position is None else base_position
         self.base_position = torch.tensor([float(x) for x in pos], device=self.device, dtype=dtype)
@@ -173,8 +215,10 @@ class RobotModel:
             max_sphere_excess: bound on how far spheres reach beyond the links [m].
 
         Raises:
-            ConfigError: unknown name, torso height out of range or given for the iiwa.
+            ConfigError: unknown name, torso height out of range or given for the iiwa, a
+                non-floating ``dtype``, or a CUDA ``device`` where CUDA is not available.
         """
+        _check_device_dtype(device, dtype)
         cfg = RobotCfg(
             name=name,  # type: ignore[arg-type]
             base_position=None if base_position is None else tuple(base_position),
@@ -188,7 +232,8 @@ class RobotModel:
     def from_cfg(
         cls, cfg: RobotCfg, device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32
     ) -> RobotModel:
-        """Build the robot a :class:`RobotCfg` names."""
+        """Build the robot a :class:`RobotCfg` names (errors as :meth:`load`)."""
+        _check_device_dtype(device, dtype)
         desc = robot_description(cfg.name, torso_height=cfg.torso_height)
         return cls(
             desc,
@@ -230,13 +275,14 @@ class RobotModel:
         """Bounding sphere centres in the world (table) frame, differentiable in ``q``.
 
         Args:
-            q: (..., J) joint positions [rad].
+            q: (..., J) joint positions [rad]; leading dimensions may be empty. Not checked for
+                NaN (the optimiser's hot path): a non-finite configuration gives NaN centres.
 
         Returns:
             (..., S_r, 3) sphere centres [m], ordered like :attr:`sphere_radii`.
 
         Raises:
-            ShapeError: when the last dimension of ``q`` is not J.
+            ShapeError: when the last dimension of ``q`` is not J or ``q`` is not floating.
         """
         qf, lead = self._flat(q)
         spheres = self._fk.sphere_centers(qf)
@@ -279,7 +325,8 @@ class RobotModel:
         """The tool point (iiwa flange / Fetch gripper_link origin) in the world frame.
 
         Args:
-            q: (..., J) joint positions [rad].
+            q: (..., J) joint positions [rad]. Not checked for NaN (called every IK iteration):
+                a non-finite configuration gives a NaN tool point.
 
         Returns:
             (..., 3) tool point [m].
@@ -305,7 +352,18 @@ class RobotModel:
         return torch.stack(cols, dim=-1).reshape(*lead, 3, self.num_joints)
 
     def clamp(self, q: torch.Tensor) -> torch.Tensor:
-        """``q`` (..., J) [rad] clamped into [q_min, q_max] (continuous joints untouched)."""
+        """``q`` (..., J) [rad] clamped into [q_min, q_max] (continuous joints untouched).
+
+        Raises:
+            ShapeError: when the last dimension of ``q`` is not J or ``q`` is not floating.
+            DataError: when ``q`` has a NaN or infinite entry (it has no place in the limits).
+        """
+        self._flat(q)
+        _check_finite("q", q)
+        return self._clamp(q)
+
+    def _clamp(self, q: torch.Tensor) -> torch.Tensor:
+        """:meth:`clamp` without checks (inside the IK loop)."""
         lo = self.q_min.to(device=q.device, dtype=q.dtype)
         hi = self.q_max.to(device=q.device, dtype=q.dtype)
         return torch.maximum(torch.minimum(q, hi), lo)
@@ -324,11 +382,12 @@ class RobotModel:
 
         Iterates ``dq = J^T (J J^T + damping^2 I)^-1 (target - p_ee(q))``, the step scaled to
         at most ``max_step`` [rad] and ``q`` clamped into the limits after every step. Batched:
-        leading dimensions of ``target`` and ``q_init`` must agree.
+        leading dimensions of ``target`` and ``q_init`` must agree. Computed in ``q_init``'s
+        dtype and on its device (``target`` is converted).
 
         Args:
-            target: (..., 3) tool point target in the world frame [m].
-            q_init: (..., J) start configuration [rad].
+            target: (..., 3) tool point target in the world frame [m], finite.
+            q_init: (..., J) start configuration [rad], finite, of a floating dtype.
             iters: maximum number of iterations.
             damping: ``lambda`` of the damped pseudo-inverse [m].
             tol: stop when every position error is below this [m].
@@ -339,8 +398,9 @@ class RobotModel:
             configuration closest found; check ``ee_position`` against the target.
 
         Raises:
-            ShapeError: for mismatched shapes.
+            ShapeError: for mismatched shapes or a non-floating ``q_init``.
             ConfigError: for non-positive ``iters``, ``damping`` or ``max_step``.
+            DataError: for a NaN or infinite entry in ``target`` or ``q_init``.
         """
         if iters < 1 or not damping > 0 or not max_step > 0:
             raise ConfigError(
@@ -354,8 +414,13 @@ class RobotModel:
                 f"expected target (..., 3) and q_init (..., J) with equal leading dimensions, "
                 f"got {tuple(target.shape)} and {tuple(q_init.shape)}"
             )
+        if not q_init.is_floating_point():
+            raise ShapeError(f"expected q_init of a floating dtype, got {q_init.dtype}")
+        _check_finite("target", target)
+        _check_finite("q_init", q_init)
+        target = target.to(device=q_init.device, dtype=q_init.dtype)
         with torch.no_grad():
-            q = self.clamp(q_init.detach().clone())
+            q = self._clamp(q_init.detach().clone())
             eye = torch.eye(3, device=q.device, dtype=q.dtype)
             for _ in range(iters):
                 err = target - self.ee_position(q)  # (..., 3)
@@ -367,7 +432,7 @@ class RobotModel:
                     -1
                 )  # (..., J)
                 scale = (max_step / dq.norm(dim=-1, keepdim=True).clamp_min(1e-12)).clamp(max=1.0)
-                q = self.clamp(q + scale * dq)
+                q = self._clamp(q + scale * dq)
         return q
 
     def __repr__(self) -> str:

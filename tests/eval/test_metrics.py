@@ -82,6 +82,18 @@ def test_trajectory_metrics_reject_bad_input() -> None:
         smoothness(np.array([0.0, 1.0, 1.0, 2.0]), np.zeros((4, 1)))
 
 
+@pytest.mark.parametrize("metric", [smoothness, jerkiness, joint_accelerations])
+def test_trajectory_metrics_reject_a_nan_row_naming_it(metric) -> None:
+    t = np.linspace(0.0, 1.0, 12)
+    q = np.zeros((12, 3))
+    q[7, 1] = np.nan
+    q[9, 0] = np.inf
+    with pytest.raises(DataError, match=r"NaN or inf in 2 rows, first \[7, 9\] \(t = 0\.636 s\)"):
+        metric(t, q)
+    with pytest.raises(DataError, match="strictly increasing"):
+        metric(np.array([0.0, np.nan, 1.0, 2.0]), np.zeros((4, 1)))
+
+
 def test_closest_distance_matches_a_brute_force_loop() -> None:
     g = np.random.default_rng(3)
     n_t, s_r, s_h = 12, 5, 7

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -10,7 +11,7 @@ import pytest
 import torch
 from planning_fakes import PointRobot, one_sphere_map, static_forecast
 
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.planning import costs as C
 from iplanner_torch.planning.itomp import ITOMP
 from iplanner_torch.planning.optimizer import OptimizerCfg, PlanResult, TrajectoryOptimizer
@@ -327,3 +328,57 @@ def test_after_a_wait_the_next_plan_takes_over_after_wait_lead(point_robot) -> N
         assert rp.next_cycle == pytest.approx(t + expected)
     with pytest.raises(ConfigError, match="wait_lead_s"):
         ReplannerCfg(replan_step_s=0.5, wait_lead_s=0.6)
+
+
+def test_non_finite_measurements_and_times_are_data_errors(point_robot: PointRobot) -> None:
+    opt = _spy(point_robot)
+    rp = Replanner(opt, ReplannerCfg(tracking="filtered"))
+    q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    nan_q = torch.tensor([math.nan, 0.0])
+    with pytest.raises(DataError, match=r"finite q_start, got NaN or inf in joints \[0\]"):
+        rp.reset(nan_q, qg, t=0.0)
+    with pytest.raises(DataError, match=r"finite q_goal, got NaN or inf in joints \[1\]"):
+        rp.reset(q0, torch.tensor([1.0, math.inf]), t=0.0)
+    with pytest.raises(DataError, match="finite time t, got nan"):
+        rp.reset(q0, qg, t=math.nan)
+    rp.reset(q0, qg, t=0.0)
+    # a NaN measurement never exceeds resync_tol: it must not yield a plan
+    with pytest.raises(DataError, match=r"finite q_now, got NaN or inf in joints \[0\]"):
+        rp.step(0.0, nan_q, None)
+    with pytest.raises(DataError, match="finite time t, got nan"):
+        rp.step(math.nan, q0, None)
+    with pytest.raises(DataError, match="finite time forecast_t0, got inf"):
+        rp.step(0.0, q0, None, forecast_t0=math.inf)
+    with pytest.raises(DataError, match="finite time t, got nan"):
+        rp.command(math.nan)
+    with pytest.raises(DataError, match="finite q_goal"):
+        rp.set_goal(nan_q, t=0.0)
+    assert not opt.calls  # nothing was planned from the bad inputs
+    assert rp.step(0.0, q0, None) is not None  # the replanner is still usable
+
+
+@pytest.mark.parametrize(
+    "field",
+    [
+        "replan_step_s",
+        "budget_s",
+        "min_duration_s",
+        "resync_tol",
+        "emergency_check_hz",
+        "acc_max",
+        "tracking_bandwidth",
+        "tracking_max_gap_s",
+    ],
+)
+def test_replanner_cfg_rejects_non_finite_values(field: str) -> None:
+    with pytest.raises(ConfigError, match=f"expected {field} a finite number, got inf"):
+        ReplannerCfg(**{field: math.inf})
+    with pytest.raises(ConfigError, match=field):
+        ReplannerCfg(**{field: math.nan})
+
+
+def test_planner_cfg_rejects_non_finite_values() -> None:
+    with pytest.raises(ConfigError, match="expected replan_step_s a finite number, got inf"):
+        PlannerCfg(replan_step_s=math.inf)
+    with pytest.raises(ConfigError, match="confidence"):
+        PlannerCfg(confidence=math.nan)

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import json
+import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from iplanner_torch.errors import CheckpointError, ConfigError
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError
 from iplanner_torch.planning.task_mdp import TaskMDPCfg, TaskPlanner, decode_state, encode_state
 
 
@@ -103,3 +106,109 @@ def test_config_is_validated() -> None:
         TaskMDPCfg(num_objects=2, alpha=0.0)
     with pytest.raises(ConfigError, match=r"h_table \(2, 2\)"):
         TaskPlanner(TaskMDPCfg(num_objects=2), h_table=np.eye(3))
+
+
+def _saved(tmp_path: Path) -> dict:
+    """The JSON of a small trained planner (2 objects)."""
+    planner = TaskPlanner(TaskMDPCfg(num_objects=2, episodes=20), StrictOrder([0, 1]))
+    planner.train()
+    path = tmp_path / "good.json"
+    planner.save(path)
+    return json.loads(path.read_text())
+
+
+def _drop(key: str) -> Callable[[dict], dict]:
+    return lambda d: {k: v for k, v in d.items() if k != key}
+
+
+def _with_cfg(**changes: object) -> Callable[[dict], dict]:
+    return lambda d: {**d, "cfg": {**d["cfg"], **changes}}
+
+
+def _with_q(q: object) -> Callable[[dict], dict]:
+    return lambda d: {**d, "q": q}
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        (lambda d: [d], "expected a JSON object, got list"),
+        (_drop("cfg"), "missing 'cfg'"),
+        (_drop("q"), "missing 'q'"),
+        (_with_cfg(bogus=1), r"unknown cfg keys \['bogus'\]"),
+        (_with_cfg(num_objects=0), "invalid cfg: expected num_objects in"),
+        (_with_cfg(episodes=1.5), "invalid cfg: expected episodes an int"),
+        (lambda d: {**d, "h_table": [[1.0]]}, r"h_table \(2, 2\), got shape \(1, 1\)"),
+        (_with_q({"x": [0.0, 0.0]}), "q key 'x' is not a progress state"),
+        (_with_q({"16": [0.0, 0.0]}), "q key '16' is not a progress state"),
+        (_with_q({"0": [0.5]}), r"expected q\[0\] of shape \(2,\).*got \(1,\)"),
+        (_with_q({"0": [[0.5, 1.0]]}), r"expected q\[0\] of shape \(2,\)"),
+        (_with_q({"0": ["a", 1.0]}), r"q\[0\] is not numeric"),
+        (_with_q({"0": [math.nan, 1.0]}), r"q\[0\] has non-finite values"),
+        (_with_q([[0.0, 0.0]]), "expected q an object"),
+    ],
+)
+def test_load_rejects_malformed_files_naming_the_file(
+    tmp_path: Path, edit: Callable[[dict], object], match: str
+) -> None:
+    path = tmp_path / "broken.json"
+    path.write_text(json.dumps(edit(_saved(tmp_path))))
+    with pytest.raises(CheckpointError, match=match) as info:
+        TaskPlanner.load(path)
+    assert str(path) in str(info.value)
+
+
+def test_load_rejects_a_binary_file(tmp_path: Path) -> None:
+    path = tmp_path / "binary.json"
+    path.write_bytes(b"\xff\xfe\x00\x81\x9c")
+    with pytest.raises(CheckpointError, match="cannot read task planner .*binary.json"):
+        TaskPlanner.load(path)
+
+
+def test_load_keeps_a_valid_q_table_policy_usable(tmp_path: Path) -> None:
+    data = _saved(tmp_path)
+    path = tmp_path / "valid.json"
+    path.write_text(json.dumps(data))
+    loaded = TaskPlanner.load(path)
+    assert all(v.shape == (2,) for v in loaded.q.values())
+    assert loaded.policy(set(), set()) in (0, 1)
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"episodes": 1.5}, "expected episodes an int, got 1.5"),
+        ({"num_objects": 2.0}, "expected num_objects an int"),
+        ({"seed": True}, "expected seed an int"),
+        ({"seed": -1}, "expected seed >= 0"),
+        ({"w_prep": math.nan}, "expected w_prep a finite number, got nan"),
+        ({"w_delay": math.inf}, "expected w_delay a finite number"),
+        ({"idle_delay_s": "2"}, "expected idle_delay_s a finite number"),
+        ({"gamma": math.nan}, "expected gamma a finite number"),
+    ],
+)
+def test_config_rejects_wrong_types_and_non_finite_values(changes: dict, match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        TaskMDPCfg(**{"num_objects": 2, **changes})
+
+
+def test_policy_rejects_unknown_objects() -> None:
+    planner = TaskPlanner(TaskMDPCfg(num_objects=4))
+    with pytest.raises(
+        ConfigError, match=r"unknown object 9 in taken: expected indices in \[0, 4\)"
+    ):
+        planner.policy(taken={9}, fetched=set())
+    with pytest.raises(ConfigError, match="unknown object -1 in fetched"):
+        planner.policy(taken=set(), fetched={-1})
+    with pytest.raises(ConfigError, match="expected fetched a bitmask of 4 objects, got 16"):
+        planner.policy(taken=0, fetched=16)
+    assert planner.policy(taken={0}, fetched={0, 1}) in (2, 3)
+
+
+def test_nan_next_action_probabilities_are_a_data_error() -> None:
+    table = TaskPlanner(TaskMDPCfg(num_objects=2), next_action_probs={0: [math.nan, 1.0]})
+    with pytest.raises(DataError, match="finite next-action probabilities for taken mask 0"):
+        table.human_next_probs(0)
+    fn = TaskPlanner(TaskMDPCfg(num_objects=2), next_action_probs=lambda taken: [0.5, math.inf])
+    with pytest.raises(DataError, match="finite next-action probabilities"):
+        fn.r_prep(0, 1)

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.planning.trajectory import (
     Trajectory,
     accelerations,
@@ -88,3 +90,49 @@ def test_trajectory_validates_inputs() -> None:
         Trajectory(q=torch.zeros(3, 2), times=torch.zeros(4))
     with pytest.raises(ConfigError, match="strictly increasing"):
         Trajectory(q=torch.zeros(3, 2), times=torch.tensor([0.0, 0.0, 1.0]))
+
+
+def test_non_finite_times_and_waypoints_are_rejected_at_construction() -> None:
+    q = torch.zeros(4, 2)
+    with pytest.raises(DataError, match=r"finite waypoint times, got NaN or inf at indices \[1\]"):
+        Trajectory(q=q, times=torch.tensor([0.0, math.nan, 2.0, 3.0]))
+    with pytest.raises(DataError, match="finite waypoint times"):
+        Trajectory(q=q, times=torch.tensor([0.0, 1.0, 2.0, math.inf]))
+    bad_q = q.clone()
+    bad_q[2, 1] = math.nan
+    with pytest.raises(DataError, match=r"finite waypoints q, got NaN or inf in rows \[2\]"):
+        Trajectory(q=bad_q, times=torch.arange(4.0))
+    with pytest.raises(DataError, match="finite qd_start"):
+        Trajectory(q=q, times=torch.arange(4.0), qd_start=torch.tensor([0.0, math.inf]))
+    with pytest.raises(ConfigError, match="finite hold time"):
+        Trajectory(q=q, times=torch.arange(4.0)).with_hold(1, until=math.nan)
+
+
+def test_sample_rejects_a_non_finite_python_time() -> None:
+    traj = Trajectory(q=torch.zeros(3, 2), times=torch.arange(3.0))
+    for t in (math.nan, math.inf, -math.inf):
+        with pytest.raises(DataError, match="expected a finite sample time"):
+            traj.sample(t)
+    # far outside the span but finite: the end pose is held
+    assert torch.equal(traj.sample(1e9)[0], traj.q[-1])
+
+
+@pytest.mark.parametrize("dt", [0.0, -0.1, math.nan, math.inf])
+def test_differences_reject_a_bad_dt(dt: float) -> None:
+    q = torch.zeros(1, 5, 2)
+    with pytest.raises(ConfigError, match="expected dt > 0 and finite"):
+        velocities(q, dt)
+    with pytest.raises(ConfigError, match="expected dt > 0 and finite"):
+        accelerations(q, dt, qd_start=torch.zeros(2))
+
+
+def test_uniform_times_rejects_non_finite_or_empty_spans() -> None:
+    like = torch.zeros(())
+    with pytest.raises(ConfigError, match="finite t0"):
+        uniform_times(math.nan, 1.0, 5, like)
+    with pytest.raises(ConfigError, match="duration > 0 and finite"):
+        uniform_times(0.0, math.inf, 5, like)
+    with pytest.raises(ConfigError, match="duration > 0 and finite"):
+        uniform_times(0.0, 0.0, 5, like)
+    with pytest.raises(ConfigError, match="duration > 0 and finite"):
+        Trajectory(q=torch.zeros(3, 2), times=torch.arange(3.0)).resample(0.0, math.nan, 4)

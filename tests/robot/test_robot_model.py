@@ -9,7 +9,7 @@ import pytest
 import pytorch_kinematics as pk
 import torch
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.robot.model import RobotCfg, RobotModel
 
 ROBOTS = ("kuka_iiwa14", "fetch")
@@ -239,3 +239,68 @@ def test_device_follows_input(device: torch.device) -> None:
     assert out.device.type == device.type
     ref = RobotModel.load("kuka_iiwa14").sphere_centers(q.cpu())
     assert (out.cpu() - ref).abs().max() < 1e-5
+
+
+def test_ik_and_clamp_reject_non_finite_input() -> None:
+    model = RobotModel.load("kuka_iiwa14")
+    with pytest.raises(DataError, match=r"expected a finite target, got \[nan, 0.0, 0.5\]"):
+        model.ik(torch.tensor([math.nan, 0.0, 0.5]), model.q_home)
+    q_init = model.q_home.expand(3, -1).clone()
+    q_init[1, 4] = math.inf
+    with pytest.raises(DataError, match=r"finite q_init, got NaN or inf in \(flat\) rows \[1\]"):
+        model.ik(torch.zeros(3, 3), q_init)
+    q = model.q_home.clone()
+    q[2] = math.nan
+    with pytest.raises(DataError, match="expected a finite q"):
+        model.clamp(q)
+    assert torch.equal(model.clamp(model.q_max + 1.0), model.q_max)
+
+
+def test_ik_converts_the_target_to_the_configuration_dtype() -> None:
+    model = RobotModel.load("kuka_iiwa14", dtype=torch.float64)
+    q_goal = model.q_home + 0.2
+    target = model.ee_position(q_goal)  # float64
+    q32 = model.ik(target, model.q_home.float(), iters=200)
+    assert q32.dtype == torch.float32
+    assert (model.ee_position(q32.double()) - target).norm() < 1e-3
+    # a float32 target with float64 q gives exactly the float64 answer of the upcast target
+    t32 = target.float()
+    assert torch.equal(model.ik(t32, model.q_home), model.ik(t32.double(), model.q_home))
+    with pytest.raises(ShapeError, match="q_init of a floating dtype"):
+        model.ik(target, torch.zeros(7, dtype=torch.long))
+
+
+def test_empty_batches_give_empty_results() -> None:
+    model = RobotModel.load("kuka_iiwa14")
+    assert model.sphere_centers(torch.zeros(0, 7)).shape == (0, model.num_spheres, 3)
+    assert model.sphere_centers(torch.zeros(4, 0, 7)).shape == (4, 0, model.num_spheres, 3)
+    assert model.ee_position(torch.zeros(0, 7)).shape == (0, 3)
+    assert model.position_jacobian(torch.zeros(0, 7)).shape == (0, 3, 7)
+    q = torch.zeros(0, 7, requires_grad=True)
+    model.sphere_centers(q).sum().backward()
+    assert q.grad is not None and q.grad.shape == (0, 7)
+
+
+def test_nan_configurations_propagate_through_forward_kinematics() -> None:
+    # documented: no NaN check on the optimiser's hot path; other rows are unaffected
+    model = RobotModel.load("kuka_iiwa14")
+    q = model.q_home.expand(2, -1).clone()
+    q[0, 3] = math.nan
+    centers = model.sphere_centers(q)
+    assert bool(torch.isnan(centers[0]).any())
+    assert torch.allclose(centers[1], model.sphere_centers(model.q_home), atol=1e-6)
+
+
+def test_load_rejects_unusable_devices_and_dtypes() -> None:
+    with pytest.raises(ConfigError, match="floating dtypes only"):
+        RobotModel.load("kuka_iiwa14", dtype=torch.int64)
+    with pytest.raises(ConfigError, match="floating dtypes only"):
+        RobotModel.from_cfg(RobotCfg(name="fetch"), dtype=torch.bool)
+    with pytest.raises(ConfigError, match="unknown device 'tpu9'"):
+        RobotModel.load("kuka_iiwa14", device="tpu9")
+    if not torch.cuda.is_available():
+        with pytest.raises(ConfigError, match="CUDA is not available"):
+            RobotModel.load("kuka_iiwa14", device="cuda")
+    else:
+        with pytest.raises(ConfigError, match="CUDA device"):
+            RobotModel.load("kuka_iiwa14", device=f"cuda:{torch.cuda.device_count()}")
