@@ -20,12 +20,14 @@ Task events (``TaskEvent.kind``): ``fetch_started``, ``picked``, ``delivered``,
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.sim import _checks
 from iplanner_torch.sim.human import HumanCfg, ScriptedHuman
 from iplanner_torch.sim.scene import (
     RobotLike,
@@ -60,14 +62,31 @@ class SimCfg:
     fetch: FetchCfg = field(default_factory=FetchCfg)
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.physics_dt <= 0.01:
-            raise ConfigError(f"expected physics_dt in (0, 0.01] s, got {self.physics_dt}")
-        if self.control_hz <= 0 or self.control_hz * self.physics_dt > 1.0 + 1e-9:
+        if not 0.0 < _checks.finite("physics_dt", self.physics_dt) <= 0.01:
+            raise ConfigError(f"expected physics_dt in (0, 0.01] s, got {self.physics_dt!r}")
+        _checks.positive("control_hz", self.control_hz)
+        ratio = self.control_hz * self.physics_dt  # control periods per physics step
+        if ratio > 1.0 + 1e-9:
             raise ConfigError(
                 f"expected 0 < control_hz <= 1 / physics_dt, got {self.control_hz} Hz with "
                 f"physics_dt {self.physics_dt} s"
             )
-        self.tracker_cfg()  # validates the tracker fields
+        if not (ratio > 0.0 and math.isfinite(1.0 / ratio)):  # substeps must be a number
+            raise ConfigError(
+                f"expected a finite number of physics steps per control period, got "
+                f"control_hz {self.control_hz} Hz with physics_dt {self.physics_dt} s"
+            )
+        # the tracker fields under their names here (TrackerCfg checks them again)
+        _checks.positive("tracker_fps", self.tracker_fps)
+        _checks.non_negative("tracker_noise", self.tracker_noise)
+        if not 0.0 <= _checks.finite("tracker_dropout", self.tracker_dropout) < 1.0:
+            raise ConfigError(f"expected tracker_dropout in [0, 1), got {self.tracker_dropout!r}")
+        _checks.integer("tracker_window", self.tracker_window, minimum=1)
+        self.tracker_cfg()
+        if not isinstance(self.human, HumanCfg):
+            raise ConfigError(f"expected human a HumanCfg, got {self.human!r}")
+        if not isinstance(self.fetch, FetchCfg):
+            raise ConfigError(f"expected fetch a FetchCfg, got {self.fetch!r}")
 
     @property
     def substeps(self) -> int:
@@ -158,11 +177,17 @@ class SimEnv:
 
         Args:
             q_init: (J,) initial joint positions [rad].
+
+        Raises:
+            ShapeError: when ``q_init`` is not (J,).
+            DataError: when ``q_init`` holds NaN or infinity.
         """
-        mujoco.mj_resetData(self.model, self.data)
         q0 = _numpy(self.robot.q_home) if q_init is None else np.asarray(q_init, np.float64)
         if q0.shape != (self.num_joints,):
             raise ShapeError(f"expected q_init ({self.num_joints},), got {q0.shape}")
+        if not np.isfinite(q0).all():
+            raise DataError(f"expected finite q_init, got {q0}")
+        mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[self.handles.qpos_adr] = q0
         self.data.ctrl[self.handles.actuator_ids] = q0
         self.human.reset()
@@ -241,6 +266,11 @@ class SimEnv:
 
         Returns:
             Events and contacts of the period.
+
+        Raises:
+            ShapeError: when ``q_des`` or ``qd_des`` is not (J,).
+            DataError: when ``q_des`` or ``qd_des`` holds NaN or infinity (nothing is
+                simulated then).
         """
         q_des = _numpy(q_des)
         qd_des = _numpy(qd_des)
@@ -249,6 +279,8 @@ class SimEnv:
                 f"expected q_des and qd_des ({self.num_joints},), got {q_des.shape}, "
                 f"{qd_des.shape}"
             )
+        if not (np.isfinite(q_des).all() and np.isfinite(qd_des).all()):
+            raise DataError(f"expected finite q_des and qd_des, got {q_des}, {qd_des}")
         m, d, h = self.model, self.data, self.handles
         dt = m.opt.timestep
         contact = False

@@ -35,7 +35,8 @@ from typing import Literal, Protocol
 import numpy as np
 
 from iplanner_torch.data.skeleton import JOINT_INDEX
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.sim import _checks
 
 Speed = Literal["slow", "medium", "fast"]
 Arm = Literal["left", "right"]
@@ -85,14 +86,22 @@ class ReachingMotionSource:
     """:class:`MotionSource` backed by :mod:`iplanner_torch.data.reaching` (one sampled body).
 
     Args:
-        seed: seed of the body sample (the body is fixed for an episode).
+        seed: seed of the body sample (the body is fixed for an episode), >= 0.
         fps: frame rate of the generated motions [Hz].
         seat_x: where the body's torso is placed along x [m]; ``None`` keeps the generator's.
+
+    Raises:
+        ConfigError: for a negative seed, or a non-finite or non-positive ``fps`` or
+            non-finite ``seat_x``.
     """
 
     def __init__(self, seed: int, *, fps: float = 30.0, seat_x: float | None = None) -> None:
         from iplanner_torch.data import reaching
 
+        _checks.seed(seed)
+        _checks.positive("fps", fps)
+        if seat_x is not None:
+            _checks.finite("seat_x", seat_x)
         self._reaching = reaching
         self.fps = float(fps)
         self.body = reaching.sample_body(np.random.default_rng([seed, HUMAN_SEED_SALT, 1]))
@@ -163,13 +172,13 @@ class HumanCfg:
             raise ConfigError(f"expected speed in {sorted(SPEED_FACTORS)}, got {self.speed!r}")
         if self.mode not in ("tasks", "blocking"):
             raise ConfigError(f"expected mode 'tasks' or 'blocking', got {self.mode!r}")
-        if self.reaction_s < 0:
-            raise ConfigError(f"expected reaction_s >= 0, got {self.reaction_s}")
-        if self.hold_s < 0 or self.blocking_hold_s < 0 or self.blocking_start_s < 0:
-            raise ConfigError("expected non-negative hold and start times")
-        lo, hi = self.idle_s
+        for name in ("hold_s", "reaction_s", "blocking_start_s", "blocking_hold_s"):
+            _checks.non_negative(name, getattr(self, name))
+        lo, hi = _checks.finite_tuple("idle_s", self.idle_s, 2)
         if not 0.0 <= lo <= hi:
-            raise ConfigError(f"expected 0 <= idle_s[0] <= idle_s[1], got {self.idle_s}")
+            raise ConfigError(f"expected 0 <= idle_s[0] <= idle_s[1], got {self.idle_s!r}")
+        _checks.flag("flexible_order", self.flexible_order)
+        _checks.finite_tuple("blocking_target", self.blocking_target, 3)
         if self.blocking_arm not in ("left", "right"):
             raise ConfigError(
                 f"expected blocking_arm 'left' or 'right', got {self.blocking_arm!r}"
@@ -219,7 +228,10 @@ class ScriptedHuman:
         motion: where reaching motions come from.
         task_order: the scenario's task order (tasks mode).
         targets: block id -> (3,) grasp point of the block on its delivery spot [m].
-        seed: episode seed (same seed -> same order, idles and motions).
+        seed: episode seed (same seed -> same order, idles and motions), >= 0.
+
+    Raises:
+        ConfigError: without a task order in tasks mode, or for a negative seed.
     """
 
     def __init__(
@@ -237,7 +249,7 @@ class ScriptedHuman:
         self.motion = motion
         self.task_order = task_order
         self.targets = {int(k): np.asarray(v, dtype=np.float64) for k, v in targets.items()}
-        self.seed = int(seed)
+        self.seed = _checks.seed(seed)
         self.reset()
 
     def reset(self) -> None:
@@ -398,10 +410,11 @@ class ScriptedHuman:
         within the span is the one the person will make; this human is left unchanged. Only
         deliveries after now can make the preview differ from what happens (and rounding: the
         copy's clock adds ``step_s`` up, so where a motion ends exactly on a step the two may
-        differ by that one step).
+        differ by that one step). The copy stops stepping once nothing can happen any more
+        (see :meth:`_settled`), so far-off times cost no more than near ones.
 
         Args:
-            times: (n,) increasing times [s], none before :attr:`time`.
+            times: (n,) increasing finite times [s], none before :attr:`time`.
             delivered: ids of the blocks lying on their delivery spots now.
             step_s: the simulation's update period [s] (its control period).
 
@@ -410,22 +423,43 @@ class ScriptedHuman:
 
         Raises:
             ShapeError: when ``times`` is not 1-D.
-            ConfigError: when ``step_s <= 0`` or ``times`` decrease or lie before now.
+            DataError: when ``times`` holds NaN or infinity.
+            ConfigError: when ``step_s`` is not finite and > 0, or ``times`` decrease or lie
+                before now.
         """
         ts = np.asarray(times, dtype=np.float64)
         if ts.ndim != 1:
             raise ShapeError(f"expected times (n,), got {ts.shape}")
-        if not step_s > 0.0:
-            raise ConfigError(f"expected step_s > 0, got {step_s}")
+        if not 0.0 < step_s < np.inf:
+            raise ConfigError(f"expected step_s > 0 and finite, got {step_s}")
+        if not np.isfinite(ts).all():
+            raise DataError(f"expected finite times, got {ts}")
         if ts.size and (ts[0] < self.time - 1e-9 or bool(np.any(np.diff(ts) < 0.0))):
             raise ConfigError(f"expected increasing times from t = {self.time}, got {ts}")
         twin = self._twin()
         out = np.empty((ts.size, *self._pose.shape), dtype=np.float64)
         for k, t in enumerate(ts):
-            while twin.time + step_s <= t + 1e-9:
+            while twin.time + step_s <= t + 1e-9 and not twin._settled(delivered):
                 twin.update(twin.time + step_s, delivered)
             out[k] = twin.joint_positions(float(t))
         return out
+
+    def _settled(self, delivered: set[int]) -> bool:
+        """Whether :meth:`update` with this ``delivered`` set can change nothing but
+        :attr:`time` from now on, so that the pose stays :attr:`_pose` for ever.
+
+        True when no motion runs and either the blocking motion is over (blocking mode) or,
+        in tasks mode, every delivered block has its landing time recorded and none of them
+        may be taken next (:meth:`_next_block` can only return fewer blocks once the
+        reaction time filters some out, and without a motion the completed set is fixed).
+        """
+        if self._motion is not None:
+            return False
+        if self.cfg.mode == "blocking":
+            return self._blocking_done
+        if any(int(i) not in self._landed for i in delivered):
+            return False
+        return self._next_block(set(delivered)) is None
 
     def _twin(self) -> ScriptedHuman:
         """An independent copy of the script: every piece of state is deep-copied (a field

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal, Protocol
 
 import mujoco
@@ -52,6 +53,7 @@ import numpy as np
 
 from iplanner_torch.data.skeleton import JOINT_INDEX, SEGMENTS
 from iplanner_torch.errors import ConfigError
+from iplanner_torch.sim import _checks
 
 Arrangement = Literal["1x4", "2x2", "2x4"]
 
@@ -70,10 +72,16 @@ HUMAN_CONTACT_BIT = 2
 
 
 class RobotLike(Protocol):
-    """The part of :class:`iplanner_torch.robot.model.RobotModel` that the scene needs."""
+    """The part of :class:`iplanner_torch.robot.model.RobotModel` that the scene needs.
+
+    The scene is built from ``robot.mjcf_xml()`` when the robot has that method (the MJCF of
+    its own description: a Fetch at a non-default torso height differs from the committed
+    file), else from the file at ``robot.mjcf_path``.
+    """
 
     name: str
     joint_names: tuple[str, ...]
+    mjcf_path: Path
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -109,19 +117,21 @@ class SceneCfg:
             raise ConfigError(
                 f"expected arrangement in {sorted(ARRANGEMENT_IDS)}, got {self.arrangement!r}"
             )
-        if min(self.table_size) <= 0 or self.table_height <= 0:
-            raise ConfigError(
-                f"expected positive table_size and table_height, got {self.table_size}, "
-                f"{self.table_height}"
-            )
-        if not 0.0 < self.block_size < 0.3:
-            raise ConfigError(f"expected block_size in (0, 0.3) m, got {self.block_size}")
-        if self.column_pitch <= self.block_size:
+        size = _checks.finite_tuple("table_size", self.table_size, 2)
+        if min(size) <= 0:
+            raise ConfigError(f"expected positive table_size, got {self.table_size!r}")
+        _checks.positive("table_height", self.table_height)
+        if not 0.0 < _checks.finite("block_size", self.block_size) < 0.3:
+            raise ConfigError(f"expected block_size in (0, 0.3) m, got {self.block_size!r}")
+        if _checks.finite("column_pitch", self.column_pitch) <= self.block_size:
             raise ConfigError(
                 f"expected column_pitch > block_size, got {self.column_pitch} <= {self.block_size}"
             )
-        if len(self.block_rows_x) != 2 or len(self.delivery_rows_x) != 2:
-            raise ConfigError("expected two x values in block_rows_x and delivery_rows_x")
+        for name in ("block_rows_x", "delivery_rows_x"):
+            _checks.finite_tuple(name, getattr(self, name), 2)
+        for name in ("table_center_x", "human_seat_x"):
+            _checks.finite(name, getattr(self, name))
+        _checks.flag("robot_gravcomp", self.robot_gravcomp)
 
     @property
     def block_ids(self) -> tuple[int, ...]:
@@ -178,8 +188,9 @@ def build_scene(cfg: SceneCfg, robot: RobotLike, *, physics_dt: float = 0.002) -
 
     Args:
         cfg: workspace geometry.
-        robot: the robot (its ``mjcf_path`` holds a top body, ``<name>_base`` or else the first
-            body of its worldbody, and position actuators on its joints).
+        robot: the robot; its MJCF (``robot.mjcf_xml()`` where the robot has that method,
+            else the file ``robot.mjcf_path``) holds a top body, ``<name>_base`` or else the
+            first body of its worldbody, and position actuators on its joints.
         physics_dt: MuJoCo timestep [s].
 
     Returns:
@@ -266,11 +277,24 @@ def build_scene(cfg: SceneCfg, robot: RobotLike, *, physics_dt: float = 0.002) -
     return spec.compile()
 
 
+def _robot_spec(robot: RobotLike) -> tuple[mujoco.MjSpec, str]:
+    """The robot's own MJCF as a spec, and where it came from (for messages).
+
+    ``robot.mjcf_xml()`` is preferred over the committed file ``robot.mjcf_path``: the file
+    holds the default description only (the Fetch at its default torso height), while the
+    method writes this model's description, the one its kinematics use.
+    """
+    mjcf_xml = getattr(robot, "mjcf_xml", None)
+    if callable(mjcf_xml):
+        return mujoco.MjSpec.from_string(mjcf_xml()), f"the MJCF of {robot!r}"
+    return mujoco.MjSpec.from_file(str(robot.mjcf_path)), str(robot.mjcf_path)
+
+
 def _attach_robot(spec: mujoco.MjSpec, cfg: SceneCfg, robot: RobotLike) -> None:
-    child = mujoco.MjSpec.from_file(str(robot.mjcf_path))
+    child, source = _robot_spec(robot)
     base = child.body(f"{robot.name}_base") or child.worldbody.first_body()
     if base is None:
-        raise ConfigError(f"expected a top body in {robot.mjcf_path}, found none")
+        raise ConfigError(f"expected a top body in {source}, found none")
     base_name = base.name
     pos, yaw = robot_base_pose(robot)
     frame = spec.worldbody.add_frame(pos=pos, quat=yaw_quat(yaw))
@@ -278,7 +302,7 @@ def _attach_robot(spec: mujoco.MjSpec, cfg: SceneCfg, robot: RobotLike) -> None:
     joint_names = {j.name for j in spec.joints}
     missing = [n for n in robot.joint_names if ROBOT_PREFIX + n not in joint_names]
     if missing:
-        raise ConfigError(f"expected joints {missing} in {robot.mjcf_path}, found none")
+        raise ConfigError(f"expected joints {missing} in {source}, found none")
     base_full = ROBOT_PREFIX + base_name
     for body in spec.bodies:
         if cfg.robot_gravcomp and body.name.startswith(ROBOT_PREFIX):

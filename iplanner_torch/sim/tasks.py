@@ -23,7 +23,8 @@ from typing import Literal
 
 import numpy as np
 
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, IPlannerError
+from iplanner_torch.sim import _checks
 from iplanner_torch.sim.human import TaskOrderLike
 from iplanner_torch.sim.scene import ARRANGEMENT_IDS, Arrangement, SceneCfg
 
@@ -47,16 +48,28 @@ class ScenarioCfg:
     crossing_goal: tuple[float, float, float] = (0.15, -0.35, 0.2)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ConfigError(f"expected name a non-empty string, got {self.name!r}")
         if self.kind not in ("delivery", "blocking"):
             raise ConfigError(f"expected kind 'delivery' or 'blocking', got {self.kind!r}")
         if self.arrangement not in ARRANGEMENT_IDS:
             raise ConfigError(
                 f"expected arrangement in {sorted(ARRANGEMENT_IDS)}, got {self.arrangement!r}"
             )
-        if not 0.0 < self.confidence < 1.0:
-            raise ConfigError(f"expected confidence in (0, 1), got {self.confidence}")
+        if not 0.0 < _checks.finite("confidence", self.confidence) < 1.0:
+            raise ConfigError(f"expected confidence in (0, 1), got {self.confidence!r}")
+        if not isinstance(self.task_order, str):
+            raise ConfigError(
+                f"expected task_order a string such as '(0,1)->(2,3)', got {self.task_order!r}"
+            )
         if not self.task_order.strip():
             raise ConfigError("expected a task order expression, got an empty string")
+        # parsed now, so a malformed order fails here and not when an episode starts; blocking
+        # runs do not use it (only its syntax is checked, against every block id)
+        ids = ARRANGEMENT_IDS["2x4" if self.kind == "blocking" else self.arrangement]
+        parse_order(self.task_order, ids)
+        _checks.finite_tuple("crossing_start", self.crossing_start, 3)
+        _checks.finite_tuple("crossing_goal", self.crossing_goal, 3)
 
     def scene(self, **overrides: object) -> SceneCfg:
         """The :class:`SceneCfg` of this scenario's arrangement (other fields by keyword)."""
@@ -71,13 +84,28 @@ def parse_order(expr: str, block_ids: tuple[int, ...]) -> TaskOrderLike:
         block_ids: the blocks present in the scene.
 
     Raises:
-        ConfigError: on a syntax error or when the order names blocks absent from the scene.
+        ConfigError: on a syntax error (naming its position) or when the order names blocks
+            absent from the scene.
     """
     from iplanner_torch.data.tasks import parse_task_order
 
+    if not isinstance(expr, str):
+        raise ConfigError(f"expected a task order string, got {expr!r}")
     if expr.strip().lower() == "random":  # any order of the blocks present
         expr = "(" + ",".join(str(i) for i in block_ids) + ")"
-    order = parse_task_order(expr)
+    # the parser reads ids with str.isdigit, which also accepts digits int() refuses ("²")
+    for pos, ch in enumerate(expr.replace("→", "->")):
+        if ch.isdigit() and not ch.isdecimal():
+            raise ConfigError(
+                f"task order {expr!r}: expected an object id, got {ch!r} (not a decimal digit) "
+                f"at position {pos}"
+            )
+    try:
+        order = parse_task_order(expr)
+    except ValueError as err:
+        if isinstance(err, IPlannerError):
+            raise
+        raise ConfigError(f"task order {expr!r}: {err}") from err
     sample = order.sample(np.random.default_rng(0))
     unknown = sorted(set(int(i) for i in sample) - set(block_ids))
     if unknown:
@@ -124,10 +152,8 @@ class FetchCfg:
 
     def __post_init__(self) -> None:
         for name in ("pick_radius", "place_radius", "home_tolerance"):
-            if getattr(self, name) <= 0:
-                raise ConfigError(f"expected {name} > 0, got {getattr(self, name)}")
-        if self.grasp_clearance < 0:
-            raise ConfigError(f"expected grasp_clearance >= 0, got {self.grasp_clearance}")
+            _checks.positive(name, getattr(self, name))
+        _checks.non_negative("grasp_clearance", self.grasp_clearance)
 
 
 @dataclass(kw_only=True)

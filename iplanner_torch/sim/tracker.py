@@ -8,12 +8,19 @@ and frame, and keeps the last ``window`` frames.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.sim import _checks
+
+#: Observe catches up on missed samples one period at a time (as it always has, so the sample
+#: times keep their floating-point sums) for gaps of up to this many periods; longer gaps jump
+#: to the first sample after ``t`` arithmetically, so a far-off ``t`` cannot stall it.
+_MAX_CATCH_UP = 1024
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -30,14 +37,11 @@ class TrackerCfg:
     window: int = 15
 
     def __post_init__(self) -> None:
-        if self.fps <= 0:
-            raise ConfigError(f"expected fps > 0, got {self.fps}")
-        if self.noise_sigma < 0:
-            raise ConfigError(f"expected noise_sigma >= 0, got {self.noise_sigma}")
-        if not 0.0 <= self.dropout_rate < 1.0:
-            raise ConfigError(f"expected dropout_rate in [0, 1), got {self.dropout_rate}")
-        if self.window < 1:
-            raise ConfigError(f"expected window >= 1, got {self.window}")
+        _checks.positive("fps", self.fps)
+        _checks.non_negative("noise_sigma", self.noise_sigma)
+        if not 0.0 <= _checks.finite("dropout_rate", self.dropout_rate) < 1.0:
+            raise ConfigError(f"expected dropout_rate in [0, 1), got {self.dropout_rate!r}")
+        _checks.integer("window", self.window, minimum=1)
 
 
 class Tracker:
@@ -45,12 +49,15 @@ class Tracker:
 
     Args:
         cfg: sampling and corruption.
-        seed: seed of the noise and dropouts (same seed -> same observations).
+        seed: seed of the noise and dropouts (same seed -> same observations), >= 0.
+
+    Raises:
+        ConfigError: when ``seed`` is not a non-negative integer.
     """
 
     def __init__(self, cfg: TrackerCfg, *, seed: int) -> None:
         self.cfg = cfg
-        self.seed = int(seed)
+        self.seed = _checks.seed(seed)
         self.reset()
 
     def reset(self) -> None:
@@ -65,23 +72,50 @@ class Tracker:
     def observe(self, t: float, joints: np.ndarray) -> bool:
         """Take a frame of ``joints`` if a sample is due at time ``t``.
 
+        Samples are due at ``0, 1/fps, 2/fps, ...``; after a gap the next one is due at the first
+        multiple of the period after ``t``.
+
         Args:
-            t: simulated time [s].
-            joints: (K, 3) true joint positions [m] at ``t``.
+            t: simulated time [s], finite.
+            joints: (K, 3) true joint positions [m] at ``t`` (any array-like); K must stay
+                the same between frames.
 
         Returns:
             Whether a frame was taken.
 
         Raises:
-            ShapeError: when ``joints`` is not (K, 3).
+            DataError: when ``t`` is NaN or infinite.
+            ShapeError: when ``joints`` is not (K, 3) of numbers, or K differs from the
+                stored frames'.
         """
+        try:
+            joints = np.asarray(joints)
+        except ValueError as err:  # ragged nested lists
+            raise ShapeError(f"expected joints (K, 3), got a ragged sequence: {err}") from err
         if joints.ndim != 2 or joints.shape[1] != 3:
             raise ShapeError(f"expected joints (K, 3), got {tuple(joints.shape)}")
-        if t + 1e-9 < self._next_t:
+        if not np.issubdtype(joints.dtype, np.number):
+            raise ShapeError(f"expected joints of a numeric dtype, got {joints.dtype}")
+        if self._frames and joints.shape[0] != self._frames[-1].shape[0]:
+            raise ShapeError(
+                f"expected joints ({self._frames[-1].shape[0]}, 3) like the stored frames, got "
+                f"K = {joints.shape[0]}"
+            )
+        if not math.isfinite(t):
+            raise DataError(f"expected a finite time t, got {t}")
+        due = t + 1e-9
+        if due < self._next_t:
             return False
         period = 1.0 / self.cfg.fps
-        while self._next_t <= t + 1e-9:
-            self._next_t += period
+        if (due - self._next_t) < _MAX_CATCH_UP * period:
+            while self._next_t <= due:
+                self._next_t += period
+        else:
+            periods = (due - self._next_t) / period
+            if math.isfinite(periods):
+                self._next_t += (math.floor(periods) + 1) * period
+            if self._next_t <= due:  # rounding, or a t so large that a period vanishes in it
+                self._next_t = max(self._next_t + period, math.nextafter(due, math.inf))
         frame = joints + self._rng.normal(0.0, self.cfg.noise_sigma, size=joints.shape)
         lost = self._rng.random(joints.shape[0]) < self.cfg.dropout_rate
         frame[lost] = np.nan

@@ -6,7 +6,11 @@ with MuJoCo's own kinematics of the same MJCF (so planner model and simulation a
 
 from __future__ import annotations
 
+import contextlib
 import math
+import signal
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 import mujoco
@@ -235,3 +239,26 @@ class ConstantPredictor:
             joint_names=tuple(JOINT_NAMES),
             action_names=self.action_names,
         )
+
+
+@contextlib.contextmanager
+def deadline(seconds: float) -> Iterator[None]:
+    """Raise ``TimeoutError`` inside the block once it has run ``seconds`` (a hang becomes a
+    test failure). Needs SIGALRM and the main thread; elsewhere the block just runs."""
+    if (
+        not hasattr(signal, "setitimer")
+        or threading.current_thread() is not threading.main_thread()
+    ):
+        yield
+        return
+
+    def _expire(signum: int, frame: object) -> None:
+        raise TimeoutError(f"still running after {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, _expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous)

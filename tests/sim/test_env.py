@@ -7,7 +7,7 @@ import pytest
 import torch
 from sim_fakes import FakeMotion, FakeOrder
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.sim.env import SimCfg, SimEnv
 from iplanner_torch.sim.human import HumanCfg, ScriptedHuman
 from iplanner_torch.sim.scene import SceneCfg
@@ -142,3 +142,43 @@ def test_step_rejects_bad_commands(arm) -> None:
         env.step(np.zeros(4), np.zeros(4))
     with pytest.raises(ConfigError, match="control_hz"):
         SimCfg(control_hz=1000.0, physics_dt=0.002)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_step_and_reset_reject_non_finite_commands(arm, bad: float) -> None:
+    env = _env(arm)
+    q = arm.q_home.numpy().copy()
+    qpos = env.data.qpos.copy()
+    with pytest.raises(DataError, match="finite q_des and qd_des"):
+        env.step(np.array([q[0], bad, q[2]]), np.zeros(3))
+    with pytest.raises(DataError, match="finite q_des and qd_des"):
+        env.step(q, np.array([0.0, 0.0, bad]))
+    assert env.time == 0.0  # nothing was simulated
+    np.testing.assert_array_equal(env.data.qpos, qpos)
+    with pytest.raises(DataError, match="finite q_init"):
+        env.reset(q_init=np.array([bad, 0.0, 0.0]))
+    env.step(q, np.zeros(3))
+    assert np.isfinite(env.robot_q()).all()
+
+
+@pytest.mark.parametrize(
+    ("kw", "field"),
+    [
+        (dict(control_hz=float("nan")), "control_hz"),
+        (dict(control_hz=float("inf")), "control_hz"),
+        (dict(control_hz=0.0), "control_hz"),
+        (dict(physics_dt=float("nan")), "physics_dt"),
+        (dict(tracker_window=2.5), "tracker_window"),
+        (dict(tracker_window=0), "tracker_window"),
+        (dict(tracker_fps=float("inf")), "tracker_fps"),
+        (dict(tracker_fps=float("nan")), "tracker_fps"),
+        (dict(tracker_noise=float("nan")), "tracker_noise"),
+        (dict(tracker_noise=float("inf")), "tracker_noise"),
+        (dict(tracker_dropout=float("nan")), "tracker_dropout"),
+        (dict(human={"speed": "fast"}), "human"),
+        (dict(fetch=None), "fetch"),
+    ],
+)
+def test_sim_cfg_rejects_meaningless_values(kw: dict, field: str) -> None:
+    with pytest.raises(ConfigError, match=field):
+        SimCfg(**kw)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sim_fakes import FakeMotion, FakeOrder
+from sim_fakes import FakeMotion, FakeOrder, deadline
 
 from iplanner_torch.data.skeleton import JOINT_INDEX
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.sim.human import HumanCfg, ScriptedHuman
 from iplanner_torch.sim.scene import SceneCfg
 
@@ -202,3 +202,72 @@ def test_preview_errors() -> None:
         human.preview(np.array([1.5]), set(), 0.0)
     with pytest.raises(ConfigError, match="increasing"):
         human.preview(np.array([0.5]), set(), 0.01)
+
+
+@pytest.mark.parametrize(
+    ("kw", "field"),
+    [
+        (dict(hold_s=float("nan")), "hold_s"),
+        (dict(reaction_s=float("nan")), "reaction_s"),
+        (dict(reaction_s=float("inf")), "reaction_s"),
+        (dict(blocking_start_s=float("nan")), "blocking_start_s"),
+        (dict(blocking_hold_s=-1.0), "blocking_hold_s"),
+        (dict(idle_s=(0.3,)), "idle_s"),
+        (dict(idle_s=(0.3, float("nan"))), "idle_s"),
+        (dict(idle_s=(1.0, 0.3)), "idle_s"),
+        (dict(idle_s="0.3"), "idle_s"),
+        (dict(blocking_target=(0.1, 0.0)), "blocking_target"),
+        (dict(blocking_target=(0.1, 0.0, float("inf"))), "blocking_target"),
+        (dict(flexible_order="yes"), "flexible_order"),
+    ],
+)
+def test_cfg_rejects_meaningless_values(kw: dict, field: str) -> None:
+    with pytest.raises(ConfigError, match=field):
+        HumanCfg(**kw)
+
+
+def test_cfg_accepts_lists_and_negative_seeds_are_refused() -> None:
+    assert HumanCfg(idle_s=[0.2, 0.5]).idle_s == [0.2, 0.5]  # as Hydra passes sequences
+    with pytest.raises(ConfigError, match="seed"):
+        ScriptedHuman(
+            HumanCfg(), FakeMotion(), task_order=FakeOrder([0]), targets=TARGETS, seed=-1
+        )
+
+
+def test_preview_rejects_non_finite_times() -> None:
+    human = _human()
+    _run(human, set(), 1.0)
+    for bad in (np.inf, np.nan):
+        with deadline(10.0), pytest.raises(DataError, match="finite times"):
+            human.preview(np.array([human.time + 0.5, bad]), set(), 0.01)
+    with pytest.raises(ConfigError, match="step_s"):
+        human.preview(np.array([1.5]), set(), float("inf"))
+
+
+@pytest.mark.parametrize("delivered", [set(TARGETS), {2}, set()])
+def test_preview_of_far_times_is_quick_and_exact(delivered: set[int]) -> None:
+    """Once nothing can happen any more (every allowed block taken, or the human waits for
+    a block that never comes) the preview stops stepping: far times cost nothing, and the
+    poses equal those the script plays step by step."""
+    human = _human()
+    _run(human, delivered, 0.5)
+    times = human.time + np.array([0.3, 2.0, 9.0, 25.0, 40.0])
+    preview = human.preview(times, delivered, 0.01)
+    twin = _human()
+    _run(twin, delivered, 0.5)
+    played = []
+    for t in times:
+        _run(twin, delivered, t - 1e-9)
+        played.append(twin.joint_positions(t))
+    np.testing.assert_array_equal(preview, np.asarray(played))
+    with deadline(10.0):
+        far = human.preview(np.array([human.time + 40.0, 1e7, 1e300]), delivered, 0.01)
+    np.testing.assert_array_equal(far, np.repeat(preview[-1:], 3, axis=0))
+
+
+def test_preview_of_far_times_in_blocking_mode() -> None:
+    cfg = HumanCfg(mode="blocking", blocking_start_s=0.3)
+    human = ScriptedHuman(cfg, FakeMotion(), task_order=None, targets={}, seed=0)
+    with deadline(10.0):
+        far = human.preview(np.array([30.0, 1e7]), set(), 0.01)
+    np.testing.assert_array_equal(far[0], far[1])

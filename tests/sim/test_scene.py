@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 import pytest
+import torch
 from sim_fakes import rest_pose
 
 from iplanner_torch.data.skeleton import SEGMENTS
@@ -115,3 +118,78 @@ def test_scene_cfg_rejects_bad_values() -> None:
         SceneCfg(arrangement="3x3")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="column_pitch"):
         SceneCfg(column_pitch=0.01)
+
+
+@pytest.mark.parametrize(
+    ("kw", "field"),
+    [
+        (dict(table_size=(1.0,)), "table_size"),
+        (dict(table_size=(1.0, float("nan"))), "table_size"),
+        (dict(table_size=(1.0, -1.4)), "table_size"),
+        (dict(table_height=float("nan")), "table_height"),
+        (dict(table_height=float("inf")), "table_height"),
+        (dict(table_center_x=float("nan")), "table_center_x"),
+        (dict(block_size=float("nan")), "block_size"),
+        (dict(column_pitch=float("nan")), "column_pitch"),
+        (dict(column_pitch=float("inf")), "column_pitch"),
+        (dict(block_rows_x=(0.32, float("nan"))), "block_rows_x"),
+        (dict(delivery_rows_x=(0.04,)), "delivery_rows_x"),
+        (dict(human_seat_x=float("inf")), "human_seat_x"),
+        (dict(robot_gravcomp="no"), "robot_gravcomp"),
+    ],
+)
+def test_scene_cfg_rejects_meaningless_geometry(kw: dict, field: str) -> None:
+    with pytest.raises(ConfigError, match=field):
+        SceneCfg(**kw)
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [
+        dict(name="fetch", torso_height=0.0),
+        dict(name="fetch", torso_height=0.38),
+        dict(name="kuka_iiwa14", base_position=(0.7, 0.1, 0.05), base_yaw=2.8),
+    ],
+    ids=["fetch_torso_0", "fetch_torso_0.38", "kuka_moved"],
+)
+def test_non_default_robot_scene_is_the_models_own(kw: dict) -> None:
+    """The scene holds the model's own description (not the committed default MJCF): MuJoCo's
+    kinematics of the tool point equals the model's ``ee_position`` everywhere."""
+    from iplanner_torch.robot.model import RobotModel
+
+    robot = RobotModel.load(**kw, dtype=torch.float64)
+    cfg = SceneCfg()
+    model = build_scene(cfg, robot)
+    data = mujoco.MjData(model)
+    h = SceneHandles.resolve(model, cfg, robot)
+    lo = np.nan_to_num(robot.q_min.numpy(), neginf=-math.pi)
+    hi = np.nan_to_num(robot.q_max.numpy(), posinf=math.pi)
+    rng = np.random.default_rng(0)
+    for q in [robot.q_home.numpy(), *rng.uniform(lo, hi, size=(5, robot.num_joints))]:
+        data.qpos[h.qpos_adr] = q
+        mujoco.mj_kinematics(model, data)
+        expected = robot.ee_position(torch.as_tensor(q)).numpy()
+        np.testing.assert_allclose(data.site_xpos[h.ee_site], expected, atol=1e-9)
+
+
+def test_default_robot_scene_equals_the_committed_mjcf() -> None:
+    """For the default robots the scene built from the model's MJCF text is the one built
+    from the committed file (every compiled number equal)."""
+    from iplanner_torch.robot.model import RobotModel
+
+    class FromFile:
+        def __init__(self, robot: RobotModel) -> None:
+            self._robot = robot
+            self.name, self.joint_names = robot.name, robot.joint_names
+            self.mjcf_path = robot.mjcf_path
+            self.base_position, self.base_yaw = robot.base_position, robot.base_yaw
+
+    def saved(model: mujoco.MjModel) -> bytes:
+        buf = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)
+        mujoco.mj_saveModel(model, None, buf)
+        return buf.tobytes()
+
+    for name in ("kuka_iiwa14", "fetch"):
+        robot = RobotModel.load(name)
+        cfg = SceneCfg(arrangement="2x4")
+        assert saved(build_scene(cfg, robot)) == saved(build_scene(cfg, FromFile(robot)))

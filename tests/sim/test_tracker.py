@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sim_fakes import rest_pose
+from sim_fakes import deadline, rest_pose
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.sim.tracker import Tracker, TrackerCfg
 
 
@@ -66,3 +66,80 @@ def test_errors() -> None:
         tracker.window()
     with pytest.raises(ShapeError, match=r"expected joints \(K, 3\)"):
         tracker.observe(0.0, np.zeros(10))
+
+
+def _loop_schedule(fps: float, times: list[float]) -> list[bool]:
+    """Which of ``times`` take a frame, by the catch-up loop (an independent reference)."""
+    next_t, period, taken = 0.0, 1.0 / fps, []
+    for t in times:
+        due = not t + 1e-9 < next_t
+        if due:
+            while next_t <= t + 1e-9:
+                next_t += period
+        taken.append(due)
+    return taken
+
+
+def test_schedule_equals_the_catch_up_loop() -> None:
+    """Control ticks and gaps (short ones are caught up one period at a time, long ones
+    arithmetically) sample exactly where the one period at a time catch-up does (the closed
+    loop's numbers depend on it)."""
+    rng = np.random.default_rng(0)
+    ticks = np.cumsum(np.full(3000, 0.01)).tolist()  # 30 s of 100 Hz control, summed up
+    gaps = np.cumsum(rng.choice([0.01, 0.02, 0.5, 7.3, 40.0, 100.0, 1234.5], size=400)).tolist()
+    for times in (ticks, gaps):
+        tracker = Tracker(TrackerCfg(noise_sigma=0.0), seed=0)
+        taken = [tracker.observe(t, rest_pose()) for t in times]
+        assert taken == _loop_schedule(15.0, times)
+
+
+@pytest.mark.parametrize("t_far", [1e4, 1e9, 1e300])
+def test_far_times_do_not_stall(t_far: float) -> None:
+    tracker = Tracker(TrackerCfg(noise_sigma=0.0), seed=0)
+    with deadline(5.0):
+        assert tracker.observe(0.0, rest_pose())
+        assert tracker.observe(t_far, rest_pose())
+        assert not tracker.observe(t_far, rest_pose())  # the next sample lies after t_far
+    assert tracker.times()[-1] == t_far
+    if t_far < 1e12:  # the next sample is the first multiple of the period after t_far
+        assert not tracker.observe(t_far + 0.5 / 15.0, rest_pose())
+        assert tracker.observe(t_far + 1.0 / 15.0 + 1e-6, rest_pose())
+
+
+def test_rejects_bad_times_joints_and_settings() -> None:
+    tracker = Tracker(TrackerCfg(), seed=0)
+    tracker.observe(0.0, rest_pose())
+    for t in (float("nan"), float("inf"), -float("inf")):
+        with deadline(5.0), pytest.raises(DataError, match="finite time"):
+            tracker.observe(t, rest_pose())
+    assert np.isfinite(tracker.times()).all() and tracker.num_frames == 1
+    with pytest.raises(ShapeError, match=r"\(10, 3\) like the stored frames, got K = 12"):
+        tracker.observe(1.0, np.zeros((12, 3)))
+    with pytest.raises(ShapeError, match="numeric dtype"):
+        tracker.observe(1.0, np.full((10, 3), "a"))
+    with pytest.raises(ShapeError, match="ragged"):
+        tracker.observe(1.0, [[0.0, 0.0, 0.0], [0.0, 0.0]])
+    for kw, field in [
+        (dict(fps=float("inf")), "fps"),
+        (dict(fps=float("nan")), "fps"),
+        (dict(fps=0.0), "fps"),
+        (dict(noise_sigma=float("nan")), "noise_sigma"),
+        (dict(noise_sigma=float("inf")), "noise_sigma"),
+        (dict(dropout_rate=float("nan")), "dropout_rate"),
+        (dict(window=2.5), "window"),
+        (dict(window=0), "window"),
+    ]:
+        with pytest.raises(ConfigError, match=field):
+            TrackerCfg(**kw)
+    with pytest.raises(ConfigError, match="seed"):
+        Tracker(TrackerCfg(), seed=-1)
+
+
+def test_list_joints_equal_array_joints() -> None:
+    a = Tracker(TrackerCfg(dropout_rate=0.3), seed=3)
+    b = Tracker(TrackerCfg(dropout_rate=0.3), seed=3)
+    for k in range(20):
+        truth = rest_pose() + 0.01 * k
+        assert a.observe(k / 15.0, truth) == b.observe(k / 15.0, truth.tolist())
+    np.testing.assert_array_equal(a.window(), b.window())
+    np.testing.assert_array_equal(a.latest_pose(), b.latest_pose())
