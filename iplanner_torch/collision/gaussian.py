@@ -383,6 +383,49 @@ def _eigh_psd(cov: torch.Tensor, name: str) -> tuple[torch.Tensor, torch.Tensor]
     return s, U
 
 
+def _checked_pair_args(
+    method: str,
+    solver: str,
+    prune_sigma: float | None,
+    robot_center: torch.Tensor,
+    robot_radius: torch.Tensor | float,
+    mean: torch.Tensor,
+    spread: tuple[str, torch.Tensor],
+    human_radius: torch.Tensor | float,
+) -> tuple[torch.Tensor, torch.Tensor, int, torch.Tensor]:
+    """The input checks shared by the full (``("cov", (..., 3, 3))``) and diagonal
+    (``("var", (..., 3))``, also >= 0) pair bounds: choices, ``prune_sigma``, shapes, dtypes,
+    devices, broadcasting, finiteness and a positive radius sum.
+
+    Returns:
+        The radii as tensors, the broadcast batch rank and the radius sum ``R``.
+    """
+    name, value = spread
+    full = name == "cov"
+    _check_choices(method, solver)
+    _check_prune_sigma(prune_sigma)
+    check_shape("robot_center", robot_center, ("...", 3))
+    check_shape("mean", mean, ("...", 3))
+    check_shape(name, value, ("...", 3, 3) if full else ("...", 3))
+    robot_r = _as_radius("robot_radius", robot_radius, robot_center)
+    human_r = _as_radius("human_radius", human_radius, robot_center)
+    args = {
+        "robot_center": (robot_center, 1),
+        "robot_radius": (robot_r, 0),
+        "mean": (mean, 1),
+        name: (value, 2 if full else 1),
+        "human_radius": (human_r, 0),
+    }
+    _check_tensors({n: t for n, (t, _) in args.items()}, same_dtype=("mean", name))
+    rank = len(_broadcast_batch(args))
+    R = robot_r + human_r
+    checks = [_finite(n, t) for n, (t, _) in args.items()]
+    if not full:
+        checks.append(_nonnegative(name, value))
+    _run_checks(checks + [_radius_sum_positive(R)])
+    return robot_r, human_r, rank, R
+
+
 def sphere_collision_bound(
     robot_center: torch.Tensor,
     robot_radius: torch.Tensor | float,
@@ -425,24 +468,9 @@ def sphere_collision_bound(
         DataError: on NaN or Inf in any argument, or a covariance with a negative eigenvalue.
         ConfigError: on an unknown method or solver, or ``prune_sigma <= 0``.
     """
-    _check_choices(method, solver)
-    _check_prune_sigma(prune_sigma)
-    check_shape("robot_center", robot_center, ("...", 3))
-    check_shape("mean", mean, ("...", 3))
-    check_shape("cov", cov, ("...", 3, 3))
-    robot_radius = _as_radius("robot_radius", robot_radius, robot_center)
-    human_radius = _as_radius("human_radius", human_radius, robot_center)
-    args = {
-        "robot_center": (robot_center, 1),
-        "robot_radius": (robot_radius, 0),
-        "mean": (mean, 1),
-        "cov": (cov, 2),
-        "human_radius": (human_radius, 0),
-    }
-    _check_tensors({n: t for n, (t, _) in args.items()}, same_dtype=("mean", "cov"))
-    rank = len(_broadcast_batch(args))
-    R = robot_radius + human_radius
-    _run_checks([_finite(n, t) for n, (t, _) in args.items()] + [_radius_sum_positive(R)])
+    robot_radius, human_radius, rank, R = _checked_pair_args(
+        method, solver, prune_sigma, robot_center, robot_radius, mean, ("cov", cov), human_radius
+    )
     s, U = _eigh_psd(cov, "cov")  # (..., 3), (..., 3, 3)
     diff = mean - robot_center  # (..., 3)
     batch = torch.broadcast_shapes(U.shape[:-2], diff.shape[:-1])
@@ -486,25 +514,9 @@ def sphere_collision_bound_diag(
         DataError: on NaN or Inf in any argument, or a negative variance.
         ConfigError: on an unknown method or solver, or ``prune_sigma <= 0``.
     """
-    _check_choices(method, solver)
-    _check_prune_sigma(prune_sigma)
-    check_shape("robot_center", robot_center, ("...", 3))
-    check_shape("mean", mean, ("...", 3))
-    check_shape("var", var, ("...", 3))
-    robot_radius = _as_radius("robot_radius", robot_radius, robot_center)
-    human_radius = _as_radius("human_radius", human_radius, robot_center)
-    args = {
-        "robot_center": (robot_center, 1),
-        "robot_radius": (robot_radius, 0),
-        "mean": (mean, 1),
-        "var": (var, 1),
-        "human_radius": (human_radius, 0),
-    }
-    _check_tensors({n: t for n, (t, _) in args.items()}, same_dtype=("mean", "var"))
-    rank = len(_broadcast_batch(args))
-    R = robot_radius + human_radius
-    checks = [_finite(n, t) for n, (t, _) in args.items()]
-    _run_checks(checks + [_nonnegative("var", var), _radius_sum_positive(R)])
+    robot_radius, human_radius, rank, R = _checked_pair_args(
+        method, solver, prune_sigma, robot_center, robot_radius, mean, ("var", var), human_radius
+    )
     diff = mean - robot_center
     d2 = _component_first(diff * diff, rank)  # (3, ...)
     return _pair_bounds(
