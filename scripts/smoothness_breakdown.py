@@ -28,6 +28,7 @@ import sys
 from pathlib import Path
 
 import pandas as pd
+from _report import fail
 
 from iplanner_torch.errors import DataError
 from iplanner_torch.eval.report import SWEPT_SETTINGS, report_groups, to_markdown
@@ -52,8 +53,7 @@ def main() -> None:
     args = parser.parse_args()
     paths = sorted(args.run_dir.rglob("*.mcap"))
     if not paths:
-        print(f"error: no *.mcap episode logs under {args.run_dir}", file=sys.stderr)
-        raise SystemExit(2)
+        fail(f"no *.mcap episode logs under {args.run_dir}")
     rows = []
     skipped = []
     for path in paths:
@@ -70,11 +70,7 @@ def main() -> None:
     for line in skipped:
         print(f"skipped {line}", file=sys.stderr)
     if not rows:
-        print(
-            f"error: none of the {len(paths)} logs under {args.run_dir} could be split",
-            file=sys.stderr,
-        )
-        raise SystemExit(2)
+        fail(f"none of the {len(paths)} logs under {args.run_dir} could be split")
     df = pd.DataFrame(rows)
     if args.episodes:
         print(to_markdown(df))

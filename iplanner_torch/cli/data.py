@@ -48,6 +48,7 @@ from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
+    _plain_text,
     friendly_errors,
     generate_dataset,
     refuse_conflicting_flags,
@@ -142,7 +143,7 @@ def main() -> None:
     global _command
     args = sys.argv[1:]
     if any(a in HELP_FLAGS for a in args):
-        print((__doc__ or "").replace("``", "").strip())
+        print(_plain_text(__doc__ or "").strip())
         return
     refuse_conflicting_flags(args)
     if args and not args[0].startswith("-") and "=" not in args[0]:

@@ -111,8 +111,6 @@ def _noise_sweep(cfg: DictConfig) -> None:
     for option in cfg.evaluate.compare:
         out_dir = repo_path(Path(cfg.paths.checkpoints) / Path(cfg.data.path).name / str(option))
         ckpt = out_dir / "predictor.ckpt"
-        if ckpt.is_dir():
-            _checkpoint(ckpt, cfg)
         if not ckpt.exists():
             print(f"training missing predictor {option} ...", flush=True)
             train_from_config(

@@ -346,7 +346,7 @@ def held_window(tracker: Any) -> np.ndarray:
     episode) would otherwise borrow a neighbouring joint's trajectory; held where it was last
     seen, it keeps the person's arm where it was.
     """
-    win = np.array(tracker.window(), copy=True)
+    win = tracker.window()  # a new array (np.stack)
     lost = ~np.isfinite(win).all(-1).any(0)  # (K,)
     if lost.any():
         win[:, lost] = np.asarray(tracker.latest_pose(), dtype=win.dtype)[lost]

@@ -268,6 +268,19 @@ class HumanObstacle:
     # the per-pair tensors of the last ``pairs`` seen (the optimiser reuses one pair set for
     # several iterations): key, then (mean, var, 1 / s_max, radius sums)
     _pair_cache: tuple[tuple, tuple] | None = field(default=None, repr=False, compare=False)
+    # () bool tensor: whether mean, var and weights are all finite (computed once)
+    _finite: torch.Tensor | None = field(default=None, repr=False, compare=False)
+
+    def all_finite(self) -> torch.Tensor:
+        """() bool tensor: every mean, variance and weight is finite (computed on the first
+        call only: the obstacle is fixed during a solve, whose every iteration asks)."""
+        if self._finite is None:
+            self._finite = (
+                torch.isfinite(self.mean).all()
+                & torch.isfinite(self.var).all()
+                & torch.isfinite(self.weights).all()
+            )
+        return self._finite
 
     def pair_tensors(
         self, pairs: torch.Tensor, robot_radii: torch.Tensor

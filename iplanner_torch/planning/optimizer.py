@@ -274,11 +274,7 @@ def unsafe_if_not_finite(bound: torch.Tensor, human: C.HumanObstacle) -> torch.T
     Returns:
         (..., W_x) bounds, equal to ``bound`` where it is finite and the human is finite.
     """
-    human_ok = (
-        torch.isfinite(human.mean).all()
-        & torch.isfinite(human.var).all()
-        & torch.isfinite(human.weights).all()
-    ).to(bound.device)
+    human_ok = human.all_finite().to(bound.device)
     return torch.where(human_ok & torch.isfinite(bound), bound, torch.ones_like(bound))
 
 
@@ -612,8 +608,8 @@ class TrajectoryOptimizer:
                 t_a, t_b = window
             except (TypeError, ValueError) as err:
                 raise ConfigError(f"expected window (t_a, t_b) [s], got {window!r}") from err
-            if _finite_time("window end", t_b) < _finite_time("window start", t_a):
-                raise ConfigError(f"expected window (t_a, t_b) with t_a <= t_b, got {window}")
+            _finite_time("window end", t_b)  # the order: _window_indices
+            _finite_time("window start", t_a)
         q_start = q_start.to(self.device, self.dtype)
         q_goal = q_goal.to(self.device, self.dtype)
         if qd_start is not None:

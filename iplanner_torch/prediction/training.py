@@ -475,9 +475,7 @@ def train_predictor(
         disable=not progress,
     )
     bar.set_postfix_str("classifier")
-    classifier = _train_classifier(
-        train, cfg, trainer_cfg, out_dir, feat_mean, feat_std, False, resume
-    )
+    classifier = _train_classifier(train, cfg, trainer_cfg, out_dir, feat_mean, feat_std, resume)
     bar.update()
     next_model = _train_next_action(train, cfg)
 
@@ -553,10 +551,10 @@ def _train_classifier(
     out_dir: Path,
     feat_mean: torch.Tensor,
     feat_std: torch.Tensor,
-    progress: bool,
     resume: bool,
 ) -> Any:
-    """Fit the action classifier with Lightning (None when the IVM module is unavailable)."""
+    """Fit the action classifier with Lightning (None when the IVM module is unavailable);
+    its own progress bar is off (the caller's bar counts it as one sub-model)."""
     try:
         from iplanner_torch.prediction.ivm import ActionClassifier
     except ImportError:
@@ -594,7 +592,7 @@ def _train_classifier(
     clf = ActionClassifier(feature_index=index)
     module = IVMModule(clf, x, train.progress[idx], train.current[idx], fit_kwargs)
     # manual optimisation never steps an optimiser, so the budget is one epoch, not one step
-    trainer = _trainer(tcfg, out_dir, "classifier", -1, progress, max_epochs=1)
+    trainer = _trainer(tcfg, out_dir, "classifier", -1, False, max_epochs=1)
     trainer.fit(module)
     trainer.save_checkpoint(ckpt)
     return clf

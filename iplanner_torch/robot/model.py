@@ -218,7 +218,6 @@ class RobotModel:
             ConfigError: unknown name, torso height out of range or given for the iiwa, a
                 non-floating ``dtype``, or a CUDA ``device`` where CUDA is not available.
         """
-        _check_device_dtype(device, dtype)
         cfg = RobotCfg(
             name=name,  # type: ignore[arg-type]
             base_position=None if base_position is None else tuple(base_position),

@@ -228,7 +228,7 @@ def test_unsafe_if_not_finite_keeps_finite_bounds_and_their_gradients() -> None:
     for name in ("mean", "var", "weights"):
         t = getattr(human, name).clone()
         t.view(-1)[-1] = float("inf")
-        bad = HumanObstacle(**{**vars(human), name: t, "_pair_cache": None})
+        bad = HumanObstacle(**{**vars(human), name: t, "_pair_cache": None, "_finite": None})
         assert unsafe_if_not_finite(raw.detach()[:, :2], bad).tolist() == [[1.0, 1.0]]
 
 
