@@ -68,7 +68,6 @@ measured joint trajectory and on sphere models of the robot and the true human, 
 
 from __future__ import annotations
 
-import contextlib
 import math
 import time
 from collections.abc import Callable
@@ -840,9 +839,7 @@ def _run_episode(
                     break
     except BaseException as exc:  # interrupted or failed: the log keeps what was simulated
         if writer is not None:
-            with contextlib.suppress(Exception):
-                writer.task_event(env.time, "interrupted", {"error": type(exc).__name__})
-                writer.close()
+            writer.close(exc)
         raise
     finally:
         bar.close()

@@ -29,6 +29,7 @@ chunk is complete, so an episode killed midway leaves a file whose complete chun
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -239,6 +240,7 @@ class EpisodeWriter:
             self._file, chunk_size=chunk_size, compression=_COMPRESSION[compression]
         )
         self._closed = False
+        self._last_t = 0.0  # the last logged time [s] (an interruption is logged there)
         self._writer.start(profile="", library="iplanner_torch")
         self._writer.add_metadata(
             EPISODE_METADATA_NAME,
@@ -271,12 +273,22 @@ class EpisodeWriter:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.close()
+        self.close(exc)
 
-    def close(self) -> None:
-        """Write the summary and footer and close the file (idempotent)."""
+    def close(self, error: BaseException | None = None) -> None:
+        """Write the summary and footer and close the file (idempotent).
+
+        Args:
+            error: what stopped the episode early (an exception, Ctrl-C), or None. It is
+                logged first as an ``interrupted`` task event at the last logged time, so a
+                replay shows where and why the log ends; leaving a ``with`` block on an
+                exception passes it.
+        """
         if self._closed:
             return
+        if error is not None:
+            with contextlib.suppress(Exception):  # the log as it is still closes properly
+                self.task_event(self._last_t, "interrupted", {"error": type(error).__name__})
         self._closed = True
         try:
             self._writer.finish()
@@ -298,6 +310,7 @@ class EpisodeWriter:
         t = float(t)
         if not math.isfinite(t) or t < 0.0:
             raise DataError(f"{self.path}: expected a finite time t >= 0 s, got {t}")
+        self._last_t = t
         return int(round(t * 1e9)) + self._offset_ns
 
     def _write(self, topic: str, log_time: int, message: Mapping[str, Any]) -> None:

@@ -373,3 +373,19 @@ def test_unserialisable_values_raise_data_error(tmp_path: Path) -> None:
     with EpisodeWriter(tmp_path / "e.mcap", metadata={}) as log:
         with pytest.raises(DataError, match="/task/events message is not JSON-serialisable"):
             log.task_event(0.0, "bad", {"x": object()})
+
+
+def test_leaving_the_writer_on_an_exception_logs_where_and_why(tmp_path: Path) -> None:
+    path = tmp_path / "stopped.mcap"
+    with pytest.raises(KeyboardInterrupt):
+        with EpisodeWriter(path, metadata={"planner": "itomp"}) as log:
+            log.robot_state(0.5, [0.0] * 7, [0.0] * 7, list("abcdefg"))
+            log.robot_state(1.25, [0.0] * 7, [0.0] * 7, list("abcdefg"))
+            raise KeyboardInterrupt
+    ep = read_episode(path)
+    assert ep.complete
+    assert ep.events()[-1]["kind"] == "interrupted" and ep.events()[-1]["t"] == 1.25
+    assert ep.events()[-1]["detail"] == {"error": "KeyboardInterrupt"}
+    with EpisodeWriter(tmp_path / "fine.mcap", metadata={"planner": "itomp"}) as log:
+        log.robot_state(0.5, [0.0] * 7, [0.0] * 7, list("abcdefg"))
+    assert read_episode(tmp_path / "fine.mcap").events() == []
