@@ -41,6 +41,8 @@ from iplanner_torch.data.skeleton import JOINT_NAMES
 from iplanner_torch.errors import ConfigError
 
 _MAX_ORDERS = 1_000_000
+# the characters of an object id (str.isdigit would also take "²", which int() refuses)
+_DIGITS = frozenset("0123456789")
 
 
 @dataclass(frozen=True)
@@ -138,10 +140,11 @@ def parse_task_order(expr: str, n_objects: int | None = None) -> TaskOrder:
         nonlocal pos
         skip()
         start = pos
-        while pos < len(s) and s[pos].isdigit():
+        while pos < len(s) and s[pos] in _DIGITS:
             pos += 1
         if start == pos:
-            raise err("expected an object id")
+            got = f", got {s[pos]!r}" if pos < len(s) else ", got the end"
+            raise err(f"expected an object id (digits 0-9){got}")
         return int(s[start:pos])
 
     groups: list[tuple[int, ...]] = []

@@ -73,7 +73,7 @@ def test_allowed_next_and_sample():
 @pytest.mark.parametrize(
     "expr, pos",
     [("(0,1", 4), ("0->", 3), ("0->>1", 3), ("(0,,1)", 3), ("a", 0), ("0 1", 2),
-     ("(0,1)-(2,3)", 5), ("", 0)],
+     ("(0,1)-(2,3)", 5), ("", 0), ("0->\u00b2", 3), ("(0,\u2460)", 3)],
 )  # fmt: skip
 def test_syntax_errors_name_the_position(expr, pos):
     with pytest.raises(ConfigError, match=f"at position {pos}$"):

@@ -86,9 +86,9 @@ def test_scenario_cfg_accepts_valid_orders() -> None:
 
 
 def test_parse_order_names_the_position_of_odd_digits() -> None:
-    with pytest.raises(ConfigError, match=r"'²' \(not a decimal digit\) at position 3"):
+    with pytest.raises(ConfigError, match=r"object id \(digits 0-9\), got '²' at position 3"):
         parse_order("0->²", (0, 1, 2, 3))
-    with pytest.raises(ConfigError, match=r"'①' \(not a decimal digit\) at position 4"):
+    with pytest.raises(ConfigError, match=r"object id \(digits 0-9\), got '①' at position 4"):
         parse_order("(0, ①)", (0, 1, 2, 3))
     with pytest.raises(ConfigError, match="task order"):
         parse_order(None, (0, 1, 2, 3))  # type: ignore[arg-type]
