@@ -5,8 +5,9 @@ Paper eq. motion_prediction: p(xi_next | F, p) = sum_c p(c | F, p) p(xi_next | F
 
 from __future__ import annotations
 
+import copy
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import torch
 
@@ -82,6 +83,19 @@ class Forecast:
                     f"(batch {b}, action {self._action(a)!r}, frame {f})"
                 )
 
+    def _derive(self, **fields: torch.Tensor) -> Forecast:
+        """A copy with some tensors replaced, without the checks of ``__post_init__``.
+
+        Only for the methods below, whose new tensors are built from this (checked)
+        forecast's own: subsets, a move to another device, held frames, or weights
+        renormalised by a positive sum. They keep the shapes and stay finite, so checking
+        them again would cost a host sync per copy and planning cycle for nothing.
+        """
+        new = copy.copy(self)
+        for name, value in fields.items():
+            object.__setattr__(new, name, value)
+        return new
+
     def _action(self, a: int) -> str:
         """The name of action ``a`` (its index when the names do not cover it)."""
         return self.action_names[a] if a < len(self.action_names) else str(a)
@@ -113,8 +127,7 @@ class Forecast:
 
     def to(self, device: torch.device | str) -> Forecast:
         """A copy on ``device``."""
-        return replace(
-            self,
+        return self._derive(
             weights=self.weights.to(device),
             mean=self.mean.to(device),
             var=self.var.to(device),
@@ -146,7 +159,7 @@ class Forecast:
         total = w.sum(-1, keepdim=True)  # (B, 1)
         ok = total > 0.0
         w = torch.where(ok, w / torch.where(ok, total, 1.0), self.weights)
-        return replace(self, weights=w)
+        return self._derive(weights=w)
 
     def hold_actions(self, hold: torch.Tensor) -> Forecast:
         """The forecast with some actions' motion held at their first predicted frame.
@@ -171,9 +184,9 @@ class Forecast:
         h = hold.to(self.mean.device).view(1, -1, 1, 1, 1)
         mean = torch.where(h, self.mean[:, :, :1].expand_as(self.mean), self.mean)
         var = torch.where(h, self.var[:, :, :1].expand_as(self.var), self.var)
-        return replace(self, mean=mean, var=var)
+        return self._derive(mean=mean, var=var)
 
     def select(self, index: int | slice) -> Forecast:
         """The forecast for a subset of the batch (keeps the batch dimension)."""
         idx = slice(index, index + 1) if isinstance(index, int) else index
-        return replace(self, weights=self.weights[idx], mean=self.mean[idx], var=self.var[idx])
+        return self._derive(weights=self.weights[idx], mean=self.mean[idx], var=self.var[idx])

@@ -118,6 +118,19 @@ def test_negative_variances_are_kept_and_every_derived_forecast_still_builds() -
     g = replace(f, var=f.var.clone())
     assert float(g.var.max()) < 0.0
     assert replace(g, dt=np.float64(1 / 15)).horizon == 4
-    assert g.mask_actions(torch.tensor([True, False, True])).batch_size == 2
-    assert g.hold_actions(torch.tensor([True, False, False])).horizon == 4
-    assert g.select(1).batch_size == 1 and g.to("cpu").batch_size == 2
+    derived = [
+        g.mask_actions(torch.tensor([True, False, True])),
+        g.mask_actions(torch.tensor([[False, False, False], [True, True, False]])),
+        g.hold_actions(torch.tensor([True, False, False])),
+        g.select(1),
+        g.select(slice(0, 2)),
+        g.to("cpu"),
+    ]
+    # derived copies skip __post_init__; building each anew runs every check on it
+    for d in derived:
+        assert isinstance(d, Forecast) and d is not g
+        rebuilt = replace(d)
+        for name in ("weights", "mean", "var"):
+            assert torch.equal(getattr(rebuilt, name), getattr(d, name))
+    assert [d.batch_size for d in derived] == [2, 2, 2, 1, 2, 2]
+    assert torch.equal(g.weights, replace(f, var=f.var).weights)  # g itself is unchanged
