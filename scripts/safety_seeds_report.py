@@ -19,7 +19,8 @@ from pathlib import Path
 import pandas as pd
 from _report import complete_rows, fail, parse_report_args, write_readme
 
-from iplanner_torch.eval.report import to_markdown
+from iplanner_torch.errors import DataError
+from iplanner_torch.eval.report import gather_results, to_markdown
 
 OUT = Path(__file__).resolve().parents[1] / "experiments" / "safety_seeds"
 
@@ -27,12 +28,12 @@ OUT = Path(__file__).resolve().parents[1] / "experiments" / "safety_seeds"
 COLUMNS = {
     "episodes": ("seed", "size"),
     "contact_free": ("sim/contacts", lambda x: int((x == 0).sum())),
-    "completed": ("eval/completed", lambda x: int((x > 0).sum())),
-    "min_distance_mean": ("eval/min_distance", "mean"),
-    "min_distance_min": ("eval/min_distance", "min"),
-    "smoothness": ("eval/smoothness", "mean"),
-    "jerkiness": ("eval/jerkiness", "mean"),
-    "efficiency": ("eval/efficiency", "mean"),
+    "completed": ("completed", lambda x: int((x > 0).sum())),
+    "min_distance_mean": ("min_distance", "mean"),
+    "min_distance_min": ("min_distance", "min"),
+    "smoothness": ("smoothness", "mean"),
+    "jerkiness": ("jerkiness", "mean"),
+    "efficiency": ("efficiency", "mean"),
     "waits": ("plan/waits", "mean"),
     "emergencies": ("plan/emergencies", "mean"),
     "realtime_factor": ("sim/realtime_factor", "mean"),
@@ -43,21 +44,20 @@ def gather(run_dir: Path) -> pd.DataFrame:
     """Every episode row under ``run_dir`` (duplicates of the sweep summary dropped).
 
     Raw rows name metrics ``eval/<name>``; a summary's ``results.csv`` (a finished
-    single-scenario run keeps only that one) names them ``<name>``: both are read."""
+    single-scenario run keeps only that one) names them ``<name>``: :func:`gather_results`
+    reads both alike."""
     frames = []
     for f in sorted(run_dir.rglob("results.csv")):
-        df = pd.read_csv(f)
-        df = df.rename(columns={c[5:]: c for c in SOURCES if c.startswith("eval/")})
-        if "eval/min_distance" in df.columns:  # episode rows
-            frames.append(complete_rows(df, f, "eval/min_distance"))
+        try:
+            df = gather_results(f)
+        except DataError as err:
+            fail(str(err))
+        if "min_distance" in df.columns:  # episode rows
+            frames.append(complete_rows(df, f, "min_distance"))
     if not frames:
         fail(f"no results.csv with episode rows under {run_dir}")
     df = pd.concat(frames, ignore_index=True)
     return df.drop_duplicates(subset=["scenario", "planner", "seed"], keep="last")
-
-
-#: the metric columns :data:`COLUMNS` reads
-SOURCES = tuple(source for source, _ in COLUMNS.values())
 
 
 def summarise(df: pd.DataFrame) -> pd.DataFrame:

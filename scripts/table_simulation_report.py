@@ -15,9 +15,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pandas as pd
 from _report import complete_rows, fail, parse_report_args, write_readme
 
+from iplanner_torch.errors import DataError
 from iplanner_torch.eval.report import (
     gather_results,
     paper_table_simulation,
@@ -37,9 +37,10 @@ def main() -> None:
     path = args.run_dir / "results.csv"
     if not path.is_file():
         fail(f"{path}: not found (give the folder of an `experiment=table_simulation` run)")
-    raw = pd.read_csv(path)
-    metric = "eval/smoothness" if "eval/smoothness" in raw.columns else "smoothness"
-    df = gather_results(complete_rows(raw, path, metric).to_dict("records"))
+    try:
+        df = complete_rows(gather_results(path), path, "smoothness")
+    except DataError as err:
+        fail(str(err))
     df["confidence"] = df["confidence"].astype(float).round(2)
     paper = paper_table_simulation()
     paper["confidence"] = paper["confidence"].astype(float).round(2)

@@ -198,9 +198,23 @@ def _row_of_path(p: Path) -> dict[str, Any]:
         except json.JSONDecodeError as err:
             raise DataError(f"{p}: not valid JSON: {err}") from err
     else:
-        raise DataError(f"{p}: expected a .mcap episode log or a .json result file")
+        raise DataError(
+            f"{p}: expected a .mcap episode log, a .json result file or a results .csv"
+        )
     row["path"] = str(p)
     return row
+
+
+def _rows_of_csv(p: Path) -> list[dict[str, Any]]:
+    """The rows of a results CSV (an experiment's episode rows, ``eval/<name>`` columns, or a
+    gathered table, ``<name>`` columns), in file order, named as :func:`gather_results`
+    names them; an empty cell is NaN. No ``path`` column is added (a row is not the CSV's
+    episode; the CSV's own ``path`` column, if any, is kept)."""
+    try:
+        df = pd.read_csv(p)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
+        raise DataError(f"{p}: not a readable results CSV: {err}") from err
+    return [_row_of_dict(r) for r in df.to_dict("records")]
 
 
 def natural_key(path: str | Path) -> tuple[Any, ...]:
@@ -214,12 +228,14 @@ def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path)
 
     Args:
         items: result dicts (flat, or ``{"metadata": ..., "metrics": ...}``), paths of
-            ``.mcap`` episode logs or ``.json`` result files, or folders (searched recursively
-            for ``*.mcap``), or one such path.
+            ``.mcap`` episode logs, ``.json`` result files or results ``.csv`` files (every
+            row; an empty cell is NaN), or folders (searched recursively for ``*.mcap``), or
+            one such path.
 
     Returns:
-        DataFrame, one row per episode, metric columns without the ``eval/`` prefix; rows read
-        from files have a ``path`` column.
+        DataFrame, one row per episode, metric columns without the ``eval/`` prefix (so an
+        experiment's ``results.csv`` and a table gathered from it read alike); rows read from
+        episode logs and JSON files have a ``path`` column.
 
     Raises:
         DataError: on a missing or unreadable file.
@@ -234,6 +250,8 @@ def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path)
         p = Path(item)
         if p.is_dir():
             rows.extend(_row_of_path(f) for f in sorted(p.rglob("*.mcap"), key=natural_key))
+        elif p.is_file() and p.suffix == ".csv":
+            rows.extend(_rows_of_csv(p))
         elif p.is_file():
             rows.append(_row_of_path(p))
         else:

@@ -87,6 +87,34 @@ def test_gather_results_reads_episode_logs_and_folders(tmp_path: Path) -> None:
         gather_results([tmp_path / "nope.mcap"])
 
 
+def test_gather_results_reads_results_csv_with_or_without_the_prefix(tmp_path: Path) -> None:
+    raw = pd.DataFrame(
+        {
+            "planner": ["itomp", "iplanner_ni", "itomp"],
+            "seed": [0, 0, 1],
+            "eval/smoothness": [40.0, 50.0, math.nan],  # the last row was cut
+            "sim/contacts": [0, 0, 1],
+        }
+    )
+    raw.to_csv(tmp_path / "raw.csv", index=False)
+    raw.rename(columns={"eval/smoothness": "smoothness"}).to_csv(
+        tmp_path / "table.csv", index=False
+    )
+    a = gather_results(tmp_path / "raw.csv")
+    b = gather_results([tmp_path / "table.csv"])
+    for df in (a, b):
+        assert list(df.columns) == ["planner", "seed", "smoothness", "sim/contacts"]
+        assert list(df["planner"]) == ["itomp", "iplanner_ni", "itomp"]
+        assert df["smoothness"].iloc[:2].tolist() == [40.0, 50.0]
+        assert math.isnan(df["smoothness"].iloc[2]) and df["sim/contacts"].tolist() == [0, 0, 1]
+    (tmp_path / "bad.csv").write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(DataError, match="bad.csv: not a readable results CSV"):
+        gather_results(tmp_path / "bad.csv")
+    (tmp_path / "empty.csv").write_text("")
+    with pytest.raises(DataError, match="empty.csv: not a readable results CSV"):
+        gather_results(tmp_path / "empty.csv")
+
+
 def test_summary_table_means_stds_and_counts(results: pd.DataFrame) -> None:
     s = summary_table(results)
     assert len(s) == 6 and list(s.columns[:4]) == [

@@ -83,7 +83,7 @@ def test_reports_refuse_cut_rows_and_existing_records(tmp_path: Path) -> None:
     script = [sys.executable, str(SCRIPTS / "safety_seeds_report.py")]
     res = subprocess.run([*script, str(run), "--out", str(out)], capture_output=True, text=True)
     assert res.returncode == 2
-    assert "1 of 3 episode row(s) lack 'eval/min_distance'" in res.stderr
+    assert "1 of 3 episode row(s) lack 'min_distance'" in res.stderr
     assert not out.exists()  # nothing written from a cut file
     _rows("itomp", range(3), [0, 0, 0]).to_csv(run / "results.csv", index=False)
     res = subprocess.run([*script, str(run), "--out", str(out)], capture_output=True, text=True)
