@@ -1,4 +1,4 @@
-"""Dimension glossary and small shape-checking helpers shared by the whole package.
+"""Dimension glossary and the tensor checks shared by the whole package.
 
 Dimension letters used in every docstring:
 
@@ -18,15 +18,19 @@ n_f   frames in the predicted future xi_next
 ====  ==========================================================================
 
 Units are SI: metres, seconds, radians. Tensors are float32 unless a docstring says otherwise.
+
+The tensor checks: :func:`check_shape` (ShapeError), :func:`check_finite` and
+:func:`non_finite_error` (DataError). Scalar checks live in :mod:`iplanner_torch.checks`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
 import torch
 
-from iplanner_torch.errors import ShapeError
+from iplanner_torch.errors import DataError, ShapeError
 
 
 def check_shape(name: str, x: torch.Tensor, expected: Sequence[int | str | None]) -> None:
@@ -61,6 +65,61 @@ def check_shape(name: str, x: torch.Tensor, expected: Sequence[int | str | None]
     for got, want in zip(shape_tail, exp_cmp):
         if isinstance(want, int) and got != want:
             raise ShapeError(f"expected {name} {pretty}, got {shape}")
+
+
+def check_finite(
+    name: str,
+    x: torch.Tensor,
+    dims: Sequence[str | Sequence[str]] | None = None,
+    *,
+    hint: str | None = None,
+) -> None:
+    """Raise :class:`DataError` when ``x`` holds NaN or inf, naming the first such entry.
+
+    One host synchronisation when ``x`` is finite; the message is built only on failure.
+
+    Args:
+        name: the argument's name, used in the message.
+        x: (...) the tensor to check.
+        dims: how to name the index along each leading dimension of ``x``: a str names the
+            dimension (``"window"`` gives ``window 3``), a sequence of str names each of its
+            entries (e.g. the D feature columns); dimensions beyond ``dims`` are left out
+            (``("window", "frame")`` for (B, T, D) names the frame). None gives the raw index.
+        hint: appended to the message (what to do about it), e.g.
+            ``"impute lost frames first"``.
+
+    Raises:
+        DataError: when an entry of ``x`` is NaN or inf.
+    """
+    bad = ~torch.isfinite(x)
+    if not bool(bad.any()):
+        return
+    idx = [int(i) for i in bad.nonzero()[0]]
+    if dims is None:
+        where = f"index {tuple(idx)}"
+    else:
+        parts = []
+        for i, dim in zip(idx, dims):
+            parts.append(f"{dim} {i}" if isinstance(dim, str) else repr(dim[i]))
+        where = ", ".join(parts)
+    raise DataError(f"{name} is NaN/Inf at {where}" + (f": {hint}" if hint else ""))
+
+
+def non_finite_error(name: str, x: torch.Tensor | np.ndarray) -> DataError:
+    """The :class:`DataError` for an ``x`` found to hold NaN or inf, counting them.
+
+    For checks that test finiteness together with other conditions in one host
+    synchronisation and build the message only when one fails.
+
+    Args:
+        name: the argument's name, used in the message.
+        x: (...) the tensor (or numpy array) that failed the check.
+    """
+    t = torch.as_tensor(x)
+    n_nan, n_inf = int(torch.isnan(t).sum()), int(torch.isinf(t).sum())
+    return DataError(
+        f"expected finite {name}, got {n_nan} NaN and {n_inf} Inf among {t.numel()} values"
+    )
 
 
 def default_device() -> torch.device:

@@ -26,25 +26,18 @@ import numpy as np
 import torch
 from scipy import integrate, special
 
+from iplanner_torch.checks import integer
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_shape, non_finite_error
 
 #: Ruben's series stops when the truncation bound is below ``RUBEN_RTOL * p + RUBEN_ATOL``.
 RUBEN_RTOL = 1e-12
 RUBEN_ATOL = 1e-300
 
 
-def _check_positive_int(name: str, value: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value <= 0:
-        raise ConfigError(f"expected {name} > 0 (an int), got {value!r}")
-
-
 def _check_finite(name: str, x: np.ndarray) -> None:
     if not np.isfinite(x).all():
-        raise DataError(
-            f"expected finite {name}, got {int(np.isnan(x).sum())} NaN and "
-            f"{int(np.isinf(x).sum())} Inf among {x.size} values"
-        )
+        raise non_finite_error(name, x)
 
 
 def _canonical(
@@ -110,7 +103,7 @@ def ruben_series(
         DataError: on NaN or Inf, non-positive ``s``, or negative ``d2`` or ``x``.
         ConfigError: when ``max_terms`` is not a positive int.
     """
-    _check_positive_int("max_terms", max_terms)
+    integer("max_terms", max_terms, minimum=1)
     s, d2, x = np.asarray(s), np.asarray(d2), np.asarray(x)
     if s.ndim != 2 or d2.shape != s.shape or x.shape != s.shape[:1]:
         raise ShapeError(
@@ -192,7 +185,7 @@ def ruben_ball_probability(
         DataError: as :func:`exact_ball_probability`.
         ConfigError: when ``max_terms`` is not a positive int.
     """
-    _check_positive_int("max_terms", max_terms)
+    integer("max_terms", max_terms, minimum=1)
     s, d2, x, batch = _canonical(center, radius, mean, cov)
     lower, upper = _ruben_series(s, d2, x, max_terms)
     return torch.from_numpy(lower).view(batch), torch.from_numpy(upper).view(batch)
@@ -274,8 +267,8 @@ def mc_ball_probability(
         DataError: as :func:`exact_ball_probability`.
         ConfigError: when ``n`` or ``chunk`` is not a positive int.
     """
-    _check_positive_int("n", n)
-    _check_positive_int("chunk", chunk)
+    integer("n", n, minimum=1)
+    integer("chunk", chunk, minimum=1)
     s, d2, x, batch = _canonical(center, radius, mean, cov)
     rng = np.random.default_rng(seed)
     d = np.sqrt(d2)  # signs do not matter: the ball is symmetric in each eigen-direction

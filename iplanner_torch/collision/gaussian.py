@@ -60,6 +60,7 @@ from typing import Literal
 
 import torch
 
+from iplanner_torch.checks import integer
 from iplanner_torch.errors import (
     ConfigError,
     DataError,
@@ -67,7 +68,7 @@ from iplanner_torch.errors import (
     NumericalWarning,
     ShapeError,
 )
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_shape, non_finite_error
 
 Method = Literal["min", "volume", "halfspace"]
 Solver = Literal["newton", "bisection"]
@@ -337,14 +338,7 @@ def _broadcast_batch(args: dict[str, tuple[torch.Tensor, int]]) -> torch.Size:
 
 
 def _finite(name: str, x: torch.Tensor) -> _Check:
-    def error() -> DataError:
-        n_nan = int(torch.isnan(x).sum())
-        n_inf = int(torch.isinf(x).sum())
-        return DataError(
-            f"expected finite {name}, got {n_nan} NaN and {n_inf} Inf among {x.numel()} values"
-        )
-
-    return torch.isfinite(x).all(), error
+    return torch.isfinite(x).all(), lambda: non_finite_error(name, x)
 
 
 def _nonnegative(name: str, x: torch.Tensor) -> _Check:
@@ -636,12 +630,7 @@ def pairwise_bound_matrix(
     """
     _check_choices(method, "newton")
     _check_prune_sigma(prune_sigma)
-    if (
-        isinstance(max_pairs_per_chunk, bool)
-        or not isinstance(max_pairs_per_chunk, numbers.Integral)
-        or max_pairs_per_chunk <= 0
-    ):
-        raise ConfigError(f"expected max_pairs_per_chunk > 0, got {max_pairs_per_chunk!r}")
+    integer("max_pairs_per_chunk", max_pairs_per_chunk, minimum=1)
     check_shape("robot_centers", robot_centers, ("B", "W", "S_r", 3))
     B, W, S_r, _ = robot_centers.shape
     check_shape("robot_radii", robot_radii, (S_r,))

@@ -8,14 +8,14 @@ A sphere at fraction ``u`` of the segment from joint ``a`` to joint ``b`` has th
 from __future__ import annotations
 
 import math
-import numbers
 from collections.abc import Sequence
 
 import torch
 
+from iplanner_torch.checks import positive
 from iplanner_torch.data.skeleton import SEGMENTS, Segment
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_shape, non_finite_error
 
 
 class HumanSphereModel:
@@ -43,12 +43,7 @@ class HumanSphereModel:
         segments: Sequence[Segment] = SEGMENTS,
         scale: float = 1.0,
     ) -> None:
-        if (
-            isinstance(scale, bool)
-            or not isinstance(scale, numbers.Real)
-            or not 0 < scale < math.inf
-        ):
-            raise ConfigError(f"expected scale > 0 and finite, got {scale!r}")
+        positive("scale", scale)
         names = tuple(joint_names)
         if len(set(names)) != len(names):
             raise ConfigError(f"expected distinct joint names, got {names}")
@@ -126,11 +121,7 @@ class HumanSphereModel:
         ).tolist()
         for arg_name, arg, ok in (("mean", mean, mean_ok), (name, spread, spread_ok)):
             if not ok:
-                n_nan, n_inf = int(torch.isnan(arg).sum()), int(torch.isinf(arg).sum())
-                raise DataError(
-                    f"expected finite {arg_name}, got {n_nan} NaN and {n_inf} Inf among "
-                    f"{arg.numel()} values"
-                )
+                raise non_finite_error(arg_name, arg)
         if name == "var" and not spread_nonneg:
             raise DataError(f"expected var >= 0, got min {float(spread.min())}")
 

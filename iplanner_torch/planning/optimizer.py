@@ -28,6 +28,7 @@ from typing import Protocol, runtime_checkable
 
 import torch
 
+from iplanner_torch.checks import finite_time
 from iplanner_torch.errors import ConfigError, PlanningError
 from iplanner_torch.planning import costs as C
 from iplanner_torch.planning.human_model import HumanSphereMap
@@ -246,14 +247,14 @@ def smooth_stop(q: torch.Tensor, hold: int) -> torch.Tensor:
 
 
 def _finite_time(name: str, value: object) -> float:
-    """``value`` as a float [s]; :class:`ConfigError` when it is not a finite number."""
+    """``value`` as a float [s] (:func:`~iplanner_torch.checks.finite_time`); anything
+    ``float()`` converts is accepted, and a value it cannot convert is a :class:`ConfigError`
+    too (not a TypeError)."""
     try:
         t = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError) as err:
         raise ConfigError(f"expected {name} a finite time [s], got {value!r}") from err
-    if not math.isfinite(t):
-        raise ConfigError(f"expected {name} a finite time [s], got {value!r}")
-    return t
+    return finite_time(name, t)
 
 
 def unsafe_if_not_finite(bound: torch.Tensor, human: C.HumanObstacle) -> torch.Tensor:

@@ -40,8 +40,6 @@ does not dwell at a pick or place point; the regular cadence resumes from the ta
 
 from __future__ import annotations
 
-import math
-import numbers
 import time
 import warnings
 from dataclasses import dataclass, field, replace
@@ -49,11 +47,12 @@ from typing import Literal
 
 import torch
 
+from iplanner_torch.checks import finite, finite_time, optional
 from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.planning.optimizer import OptimizerCfg, PlanResult, TrajectoryOptimizer
 from iplanner_torch.planning.trajectory import Trajectory, resample_linear
 from iplanner_torch.prediction.forecast import Forecast
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_finite, check_shape
 
 #: Tolerance on times [s] (cycle times accumulate rounding errors).
 TIME_EPS = 1e-6
@@ -61,34 +60,6 @@ TIME_EPS = 1e-6
 
 class PlanningOverrunWarning(UserWarning):
     """A replanning cycle took longer than its wall-clock budget."""
-
-
-def _check_finite(cfg: object, names: tuple[str, ...]) -> None:
-    """ConfigError unless each named field of ``cfg`` is a finite number (or None)."""
-    for name in names:
-        value = getattr(cfg, name)
-        if value is None:
-            continue
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, numbers.Real)
-            or not math.isfinite(value)
-        ):
-            raise ConfigError(f"expected {name} a finite number, got {value!r}")
-
-
-def _check_time(name: str, t: float) -> None:
-    """DataError unless the time ``t`` [s] is finite."""
-    if not math.isfinite(t):
-        raise DataError(f"expected a finite time {name}, got {t}")
-
-
-def _check_q(name: str, q: torch.Tensor) -> None:
-    """DataError unless every joint of ``q`` (J,) is finite, naming the bad joints."""
-    finite = torch.isfinite(q)
-    if not bool(finite.all()):
-        bad = (~finite).nonzero().flatten().tolist()
-        raise DataError(f"expected finite {name}, got NaN or inf in joints {bad}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -140,24 +111,22 @@ class ReplannerCfg:
     tracking_max_gap_s: float = 0.1
 
     def __post_init__(self) -> None:
-        _check_finite(
-            self,
-            (
-                "replan_step_s",
-                "budget_s",
-                "min_duration_s",
-                "fresh_fraction",
-                "resync_tol",
-                "goal_change_lead_s",
-                "emergency_lead_s",
-                "emergency_check_hz",
-                "wait_lead_s",
-                "acc_max",
-                "tracking_bandwidth",
-                "tracking_dt",
-                "tracking_max_gap_s",
-            ),
-        )
+        for name in (
+            "replan_step_s",
+            "budget_s",
+            "min_duration_s",
+            "fresh_fraction",
+            "resync_tol",
+            "goal_change_lead_s",
+            "emergency_lead_s",
+            "emergency_check_hz",
+            "wait_lead_s",
+            "acc_max",
+            "tracking_bandwidth",
+            "tracking_dt",
+            "tracking_max_gap_s",
+        ):  # the fields typed float | None may be None
+            optional(finite, name, getattr(self, name))
         if not self.replan_step_s > 0.0:
             raise ConfigError(f"expected replan_step_s > 0, got {self.replan_step_s}")
         if self.budget_s is not None and not self.budget_s > 0.0:
@@ -225,7 +194,8 @@ class PlannerCfg:
     replanner: ReplannerCfg = field(default_factory=ReplannerCfg)
 
     def __post_init__(self) -> None:
-        _check_finite(self, ("confidence", "replan_step_s"))
+        finite("confidence", self.confidence)
+        finite("replan_step_s", self.replan_step_s)
         if self.kind not in ("itomp", "iplanner", "oracle"):
             raise ConfigError(f"expected kind 'itomp', 'iplanner' or 'oracle', got {self.kind!r}")
         if self.kind == "iplanner" and self.predictor_variant not in ("no_ni", "ni"):
@@ -364,8 +334,8 @@ class Replanner:
         j = self.optimizer.num_joints
         check_shape("q_start", q_start, (j,))
         check_shape("q_goal", q_goal, (j,))
-        _check_time("t", t)
-        _check_q("q_start", q_start)
+        finite_time("t", t, error=DataError)
+        check_finite("q_start", q_start, ("joint",))
         self.stats = ReplannerStats()
         self._plan = self._hold(self._to(q_start), t)
         self._next_plan = None
@@ -390,8 +360,8 @@ class Replanner:
         """
         check_shape("q_goal", q_goal, (self.optimizer.num_joints,))
         if t is not None:
-            _check_time("t", t)
-        _check_q("q_goal", q_goal)
+            finite_time("t", t, error=DataError)
+        check_finite("q_goal", q_goal, ("joint",))
         self._goal = self._to(q_goal)
         if t is not None and self.cfg.replan_on_goal_change:
             self._next_cycle = min(self._next_cycle, t)
@@ -426,7 +396,7 @@ class Replanner:
         Raises:
             DataError: when ``t`` is NaN or infinite.
         """
-        _check_time("t", t)
+        finite_time("t", t, error=DataError)
         if self.cfg.tracking == "exact":
             return self._current(t).sample(t)
         if self._plan is None:
@@ -508,10 +478,10 @@ class Replanner:
         if self._goal is None or self._plan is None:
             raise ConfigError("call reset(q_start, q_goal, t) before step")
         check_shape("q_now", q_now, (self.optimizer.num_joints,))
-        _check_time("t", t)
+        finite_time("t", t, error=DataError)
         if forecast_t0 is not None:
-            _check_time("forecast_t0", forecast_t0)
-        _check_q("q_now", q_now)
+            finite_time("forecast_t0", forecast_t0, error=DataError)
+        check_finite("q_now", q_now, ("joint",))
         if t < self._next_cycle - TIME_EPS:
             return None
         m = self.cfg.replan_step_s

@@ -27,6 +27,7 @@ from typing import Protocol
 
 import numpy as np
 
+from iplanner_torch import checks
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError
 
 
@@ -69,17 +70,9 @@ class TaskMDPCfg:
 
     def __post_init__(self) -> None:
         for name in ("num_objects", "episodes", "seed"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-                raise ConfigError(f"expected {name} an int, got {value!r}")
+            checks.integer(name, getattr(self, name))
         for name in ("alpha", "gamma", "epsilon", "w_prep", "w_delay", "idle_delay_s"):
-            value = getattr(self, name)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, numbers.Real)
-                or not math.isfinite(value)
-            ):
-                raise ConfigError(f"expected {name} a finite number, got {value!r}")
+            checks.finite(name, getattr(self, name))
         if not 1 <= self.num_objects <= 16:
             raise ConfigError(f"expected num_objects in [1, 16], got {self.num_objects}")
         if not 0.0 < self.alpha <= 1.0:

@@ -20,8 +20,9 @@ from dataclasses import dataclass, field, replace
 
 import torch
 
+from iplanner_torch.checks import finite_time
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_finite, check_shape
 
 
 def _check_dt(dt: float) -> None:
@@ -82,8 +83,8 @@ def uniform_times(
         ConfigError: when ``t0`` is not finite or ``duration`` not finite and > 0 (Python
             numbers; tensors are not checked).
     """
-    if not isinstance(t0, torch.Tensor) and not math.isfinite(t0):
-        raise ConfigError(f"expected a finite t0, got {t0}")
+    if not isinstance(t0, torch.Tensor):
+        finite_time("t0", t0)
     if not isinstance(duration, torch.Tensor) and not 0.0 < duration < math.inf:
         raise ConfigError(f"expected duration > 0 and finite, got {duration}")
     return t0 + torch.linspace(0.0, duration, num_waypoints, device=like.device, dtype=like.dtype)
@@ -130,15 +131,13 @@ class Trajectory:
             checks.append(torch.isfinite(self.qd_start).all())
         ok = torch.stack(checks).tolist()
         if not ok[0]:
-            bad = (~torch.isfinite(self.times)).nonzero().flatten().tolist()
-            raise DataError(f"expected finite waypoint times, got NaN or inf at indices {bad}")
+            check_finite("times", self.times, ("waypoint",))
         if not ok[1]:
-            bad = (~torch.isfinite(self.q)).any(-1).nonzero().flatten().tolist()
-            raise DataError(f"expected finite waypoints q, got NaN or inf in rows {bad}")
+            check_finite("q", self.q, ("waypoint", "joint"))
         if not ok[2]:
             raise ConfigError("expected strictly increasing waypoint times")
-        if len(ok) > 3 and not ok[3]:
-            raise DataError("expected a finite qd_start, got NaN or inf")
+        if self.qd_start is not None and not ok[3]:
+            check_finite("qd_start", self.qd_start, ("joint",))
 
     @property
     def t_start(self) -> float:
@@ -179,8 +178,7 @@ class Trajectory:
             DataError: when ``t`` is a NaN or infinite Python number.
         """
         if not isinstance(t, torch.Tensor):
-            if not math.isfinite(t):
-                raise DataError(f"expected a finite sample time, got {t}")
+            finite_time("t", t, error=DataError)
             scalar = True
         else:
             scalar = t.dim() == 0
@@ -239,8 +237,7 @@ class Trajectory:
         """
         if not 0 <= index < self.q.shape[0]:
             raise ConfigError(f"expected hold index in [0, {self.q.shape[0]}), got {index}")
-        if not math.isfinite(float(until)):
-            raise ConfigError(f"expected a finite hold time until, got {until}")
+        finite_time("until", float(until))
         q = self.q[: index + 1]
         times = self.times[: index + 1]
         t_hold = max(float(until), float(times[-1]) + 1e-3)

@@ -49,8 +49,8 @@ from typing import Any, Literal, Protocol
 import torch
 from torch import Tensor
 
-from iplanner_torch.errors import ConfigError, DataError, ShapeError
-from iplanner_torch.types import check_shape
+from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.types import check_finite, check_shape
 
 __all__ = [
     "DTWKernel",
@@ -350,13 +350,7 @@ def _check_finite(name: str, x: Tensor) -> None:
     """Raise :class:`DataError` naming the first window and frame of ``x`` (B, T, D) that holds
     NaN or inf: one such frame would spoil every distance (the frames are centred on a mean
     over all windows)."""
-    bad = ~torch.isfinite(x).all(-1)  # (B, T)
-    if bool(bad.any()):
-        b, t = (int(i) for i in bad.nonzero()[0])
-        raise DataError(
-            f"{name} is NaN/Inf in window {b}, frame {t} (of {tuple(x.shape)}): impute lost "
-            "frames first"
-        )
+    check_finite(name, x, ("window", "frame"), hint="impute lost frames first")
 
 
 def _check_pair(x: Tensor, y: Tensor) -> None:

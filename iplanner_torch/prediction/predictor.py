@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import hashlib
 import importlib
-from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -34,7 +33,7 @@ import torch
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_finite, check_shape
 
 CHECKPOINT_VERSION = 1
 
@@ -628,32 +627,3 @@ def _rebuild(d: dict[str, Any], name: str) -> Any:
             f"{field_name} {qualname!r} names no loadable class ({type(err).__name__}: {err})"
         ) from err
     return from_state_dict(state)
-
-
-def check_finite(
-    name: str, x: torch.Tensor, dims: Sequence[str | Sequence[str]] | None = None
-) -> None:
-    """Raise :class:`DataError` when ``x`` holds NaN or inf, naming the first such entry.
-
-    Args:
-        name: the argument's name, used in the message.
-        x: the tensor to check.
-        dims: how to name the index along each dimension of ``x``: a str names the dimension
-            (``"window"`` gives ``window 3``), a sequence of str names each of its entries
-            (e.g. the D feature columns); None gives the raw index.
-
-    Raises:
-        DataError: when an entry of ``x`` is NaN or inf.
-    """
-    bad = ~torch.isfinite(x)
-    if not bool(bad.any()):
-        return
-    idx = [int(i) for i in bad.nonzero()[0]]
-    if dims is None:
-        where = f"index {tuple(idx)}"
-    else:
-        parts = []
-        for i, dim in zip(idx, dims):
-            parts.append(f"{dim} {i}" if isinstance(dim, str) else repr(dim[i]))
-        where = ", ".join(parts)
-    raise DataError(f"{name} is NaN/Inf at {where}")

@@ -29,7 +29,7 @@ from typing import Literal
 
 import torch
 
-from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.robot.description import (
     ROBOT_NAMES,
     RobotDescription,
@@ -40,7 +40,7 @@ from iplanner_torch.robot.description import (
 )
 from iplanner_torch.robot.kinematics import SerialChainKinematics
 from iplanner_torch.robot.spheres import fit_link_spheres
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_finite, check_shape
 
 RobotName = Literal["kuka_iiwa14", "fetch"]
 
@@ -63,19 +63,6 @@ def _check_device_dtype(device: torch.device | str, dtype: torch.dtype) -> torch
                 f"device(s) exist"
             )
     return dev
-
-
-def _check_finite(name: str, x: torch.Tensor) -> None:
-    """DataError unless every entry of ``x`` (..., D) is finite, naming the first bad rows."""
-    finite = torch.isfinite(x)
-    if not bool(finite.all()):
-        if x.dim() < 2:
-            raise DataError(f"expected a finite {name}, got {x.tolist()}")
-        bad = (~finite).reshape(-1, x.shape[-1]).any(-1).nonzero().flatten()[:5].tolist()
-        raise DataError(
-            f"expected a finite {name}, got NaN or inf in (flat) rows {bad} of leading shape "
-            f"{tuple(x.shape[:-1])}"
-        )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -358,7 +345,7 @@ class RobotModel:
             DataError: when ``q`` has a NaN or infinite entry (it has no place in the limits).
         """
         self._flat(q)
-        _check_finite("q", q)
+        check_finite("q", q)
         return self._clamp(q)
 
     def _clamp(self, q: torch.Tensor) -> torch.Tensor:
@@ -415,8 +402,8 @@ class RobotModel:
             )
         if not q_init.is_floating_point():
             raise ShapeError(f"expected q_init of a floating dtype, got {q_init.dtype}")
-        _check_finite("target", target)
-        _check_finite("q_init", q_init)
+        check_finite("target", target)
+        check_finite("q_init", q_init)
         target = target.to(device=q_init.device, dtype=q_init.dtype)
         with torch.no_grad():
             q = self._clamp(q_init.detach().clone())

@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from iplanner_torch import checks
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
-from iplanner_torch.sim import _checks
 from iplanner_torch.sim.human import HumanCfg, ScriptedHuman
 from iplanner_torch.sim.scene import (
     RobotLike,
@@ -62,9 +62,9 @@ class SimCfg:
     fetch: FetchCfg = field(default_factory=FetchCfg)
 
     def __post_init__(self) -> None:
-        if not 0.0 < _checks.finite("physics_dt", self.physics_dt) <= 0.01:
+        if not 0.0 < checks.finite("physics_dt", self.physics_dt) <= 0.01:
             raise ConfigError(f"expected physics_dt in (0, 0.01] s, got {self.physics_dt!r}")
-        _checks.positive("control_hz", self.control_hz)
+        checks.positive("control_hz", self.control_hz)
         ratio = self.control_hz * self.physics_dt  # control periods per physics step
         if ratio > 1.0 + 1e-9:
             raise ConfigError(
@@ -77,11 +77,11 @@ class SimCfg:
                 f"control_hz {self.control_hz} Hz with physics_dt {self.physics_dt} s"
             )
         # the tracker fields under their names here (TrackerCfg checks them again)
-        _checks.positive("tracker_fps", self.tracker_fps)
-        _checks.non_negative("tracker_noise", self.tracker_noise)
-        if not 0.0 <= _checks.finite("tracker_dropout", self.tracker_dropout) < 1.0:
+        checks.positive("tracker_fps", self.tracker_fps)
+        checks.non_negative("tracker_noise", self.tracker_noise)
+        if not 0.0 <= checks.finite("tracker_dropout", self.tracker_dropout) < 1.0:
             raise ConfigError(f"expected tracker_dropout in [0, 1), got {self.tracker_dropout!r}")
-        _checks.integer("tracker_window", self.tracker_window, minimum=1)
+        checks.integer("tracker_window", self.tracker_window, minimum=1)
         self.tracker_cfg()
         if not isinstance(self.human, HumanCfg):
             raise ConfigError(f"expected human a HumanCfg, got {self.human!r}")

@@ -34,9 +34,9 @@ from typing import Literal, Protocol
 
 import numpy as np
 
+from iplanner_torch import checks
 from iplanner_torch.data.skeleton import JOINT_INDEX
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
-from iplanner_torch.sim import _checks
 
 Speed = Literal["slow", "medium", "fast"]
 Arm = Literal["left", "right"]
@@ -98,10 +98,10 @@ class ReachingMotionSource:
     def __init__(self, seed: int, *, fps: float = 30.0, seat_x: float | None = None) -> None:
         from iplanner_torch.data import reaching
 
-        _checks.seed(seed)
-        _checks.positive("fps", fps)
+        checks.seed(seed)
+        checks.positive("fps", fps)
         if seat_x is not None:
-            _checks.finite("seat_x", seat_x)
+            checks.finite("seat_x", seat_x)
         self._reaching = reaching
         self.fps = float(fps)
         self.body = reaching.sample_body(np.random.default_rng([seed, HUMAN_SEED_SALT, 1]))
@@ -173,12 +173,12 @@ class HumanCfg:
         if self.mode not in ("tasks", "blocking"):
             raise ConfigError(f"expected mode 'tasks' or 'blocking', got {self.mode!r}")
         for name in ("hold_s", "reaction_s", "blocking_start_s", "blocking_hold_s"):
-            _checks.non_negative(name, getattr(self, name))
-        lo, hi = _checks.finite_tuple("idle_s", self.idle_s, 2)
+            checks.non_negative(name, getattr(self, name))
+        lo, hi = checks.finite_tuple("idle_s", self.idle_s, 2)
         if not 0.0 <= lo <= hi:
             raise ConfigError(f"expected 0 <= idle_s[0] <= idle_s[1], got {self.idle_s!r}")
-        _checks.flag("flexible_order", self.flexible_order)
-        _checks.finite_tuple("blocking_target", self.blocking_target, 3)
+        checks.flag("flexible_order", self.flexible_order)
+        checks.finite_tuple("blocking_target", self.blocking_target, 3)
         if self.blocking_arm not in ("left", "right"):
             raise ConfigError(
                 f"expected blocking_arm 'left' or 'right', got {self.blocking_arm!r}"
@@ -249,7 +249,7 @@ class ScriptedHuman:
         self.motion = motion
         self.task_order = task_order
         self.targets = {int(k): np.asarray(v, dtype=np.float64) for k, v in targets.items()}
-        self.seed = _checks.seed(seed)
+        self.seed = checks.seed(seed)
         self.reset()
 
     def reset(self) -> None:

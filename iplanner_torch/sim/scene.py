@@ -51,9 +51,9 @@ from typing import Literal, Protocol
 import mujoco
 import numpy as np
 
+from iplanner_torch import checks
 from iplanner_torch.data.skeleton import JOINT_INDEX, SEGMENTS
 from iplanner_torch.errors import ConfigError
-from iplanner_torch.sim import _checks
 
 Arrangement = Literal["1x4", "2x2", "2x4"]
 
@@ -117,21 +117,21 @@ class SceneCfg:
             raise ConfigError(
                 f"expected arrangement in {sorted(ARRANGEMENT_IDS)}, got {self.arrangement!r}"
             )
-        size = _checks.finite_tuple("table_size", self.table_size, 2)
+        size = checks.finite_tuple("table_size", self.table_size, 2)
         if min(size) <= 0:
             raise ConfigError(f"expected positive table_size, got {self.table_size!r}")
-        _checks.positive("table_height", self.table_height)
-        if not 0.0 < _checks.finite("block_size", self.block_size) < 0.3:
+        checks.positive("table_height", self.table_height)
+        if not 0.0 < checks.finite("block_size", self.block_size) < 0.3:
             raise ConfigError(f"expected block_size in (0, 0.3) m, got {self.block_size!r}")
-        if _checks.finite("column_pitch", self.column_pitch) <= self.block_size:
+        if checks.finite("column_pitch", self.column_pitch) <= self.block_size:
             raise ConfigError(
                 f"expected column_pitch > block_size, got {self.column_pitch} <= {self.block_size}"
             )
         for name in ("block_rows_x", "delivery_rows_x"):
-            _checks.finite_tuple(name, getattr(self, name), 2)
+            checks.finite_tuple(name, getattr(self, name), 2)
         for name in ("table_center_x", "human_seat_x"):
-            _checks.finite(name, getattr(self, name))
-        _checks.flag("robot_gravcomp", self.robot_gravcomp)
+            checks.finite(name, getattr(self, name))
+        checks.flag("robot_gravcomp", self.robot_gravcomp)
 
     @property
     def block_ids(self) -> tuple[int, ...]:

@@ -23,8 +23,8 @@ from typing import Literal
 
 import numpy as np
 
+from iplanner_torch import checks
 from iplanner_torch.errors import ConfigError, IPlannerError
-from iplanner_torch.sim import _checks
 from iplanner_torch.sim.human import TaskOrderLike
 from iplanner_torch.sim.scene import ARRANGEMENT_IDS, Arrangement, SceneCfg
 
@@ -56,7 +56,7 @@ class ScenarioCfg:
             raise ConfigError(
                 f"expected arrangement in {sorted(ARRANGEMENT_IDS)}, got {self.arrangement!r}"
             )
-        if not 0.0 < _checks.finite("confidence", self.confidence) < 1.0:
+        if not 0.0 < checks.finite("confidence", self.confidence) < 1.0:
             raise ConfigError(f"expected confidence in (0, 1), got {self.confidence!r}")
         if not isinstance(self.task_order, str):
             raise ConfigError(
@@ -68,8 +68,8 @@ class ScenarioCfg:
         # runs do not use it (only its syntax is checked, against every block id)
         ids = ARRANGEMENT_IDS["2x4" if self.kind == "blocking" else self.arrangement]
         parse_order(self.task_order, ids)
-        _checks.finite_tuple("crossing_start", self.crossing_start, 3)
-        _checks.finite_tuple("crossing_goal", self.crossing_goal, 3)
+        checks.finite_tuple("crossing_start", self.crossing_start, 3)
+        checks.finite_tuple("crossing_goal", self.crossing_goal, 3)
 
     def scene(self, **overrides: object) -> SceneCfg:
         """The :class:`SceneCfg` of this scenario's arrangement (other fields by keyword)."""
@@ -145,8 +145,8 @@ class FetchCfg:
 
     def __post_init__(self) -> None:
         for name in ("pick_radius", "place_radius", "home_tolerance"):
-            _checks.positive(name, getattr(self, name))
-        _checks.non_negative("grasp_clearance", self.grasp_clearance)
+            checks.positive(name, getattr(self, name))
+        checks.non_negative("grasp_clearance", self.grasp_clearance)
 
 
 @dataclass(kw_only=True)

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from iplanner_torch import checks
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
-from iplanner_torch.sim import _checks
 
 #: Observe catches up on missed samples one period at a time (as it always has, so the sample
 #: times keep their floating-point sums) for gaps of up to this many periods; longer gaps jump
@@ -37,11 +37,11 @@ class TrackerCfg:
     window: int = 15
 
     def __post_init__(self) -> None:
-        _checks.positive("fps", self.fps)
-        _checks.non_negative("noise_sigma", self.noise_sigma)
-        if not 0.0 <= _checks.finite("dropout_rate", self.dropout_rate) < 1.0:
+        checks.positive("fps", self.fps)
+        checks.non_negative("noise_sigma", self.noise_sigma)
+        if not 0.0 <= checks.finite("dropout_rate", self.dropout_rate) < 1.0:
             raise ConfigError(f"expected dropout_rate in [0, 1), got {self.dropout_rate!r}")
-        _checks.integer("window", self.window, minimum=1)
+        checks.integer("window", self.window, minimum=1)
 
 
 class Tracker:
@@ -57,7 +57,7 @@ class Tracker:
 
     def __init__(self, cfg: TrackerCfg, *, seed: int) -> None:
         self.cfg = cfg
-        self.seed = _checks.seed(seed)
+        self.seed = checks.seed(seed)
         self.reset()
 
     def reset(self) -> None:
@@ -101,8 +101,7 @@ class Tracker:
                 f"expected joints ({self._frames[-1].shape[0]}, 3) like the stored frames, got "
                 f"K = {joints.shape[0]}"
             )
-        if not math.isfinite(t):
-            raise DataError(f"expected a finite time t, got {t}")
+        checks.finite_time("t", t, error=DataError)
         due = t + 1e-9
         if due < self._next_t:
             return False

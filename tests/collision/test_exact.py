@@ -74,7 +74,7 @@ def test_errors() -> None:
     c, R, mu, cov, _ = _isotropic(2, 6)
     with pytest.raises(ConfigError, match="expected method"):
         exact_ball_probability(c, R, mu, cov, method="quad")  # type: ignore[arg-type]
-    with pytest.raises(ConfigError, match="expected n > 0"):
+    with pytest.raises(ConfigError, match="expected n an integer >= 1"):
         mc_ball_probability(c, R, mu, cov, n=0, seed=0)
 
 
@@ -109,10 +109,10 @@ def test_bad_shapes_and_ranges() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "pattern"),
     [
-        ({"max_terms": 0}, "expected max_terms > 0"),
-        ({"n": 1.5}, "expected n > 0"),
-        ({"chunk": -1}, "expected chunk > 0"),
-        ({"chunk": 0}, "expected chunk > 0"),  # used to loop forever
+        ({"max_terms": 0}, "expected max_terms an integer >= 1"),
+        ({"n": 1.5}, "expected n an integer >= 1"),
+        ({"chunk": -1}, "expected chunk an integer >= 1"),
+        ({"chunk": 0}, "expected chunk an integer >= 1"),  # used to loop forever
     ],
 )
 def test_non_positive_counts_raise_config_error(kwargs: dict, pattern: str) -> None:

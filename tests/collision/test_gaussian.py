@@ -437,7 +437,7 @@ def test_trajectory_bound_out_of_range_inputs() -> None:
         G.trajectory_collision_bound(rc, -rr, hm, hv, 0.0 * hr, w)
     with pytest.raises(ShapeError, match="expected human_mean torch.float64"):
         G.trajectory_collision_bound(rc, rr, hm.float(), hv, hr, w)
-    with pytest.raises(ConfigError, match="expected max_pairs_per_chunk > 0"):
+    with pytest.raises(ConfigError, match="expected max_pairs_per_chunk an integer >= 1"):
         G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, max_pairs_per_chunk=1.5)  # type: ignore[arg-type]
     with pytest.raises(ShapeError, match="expected human_cov to be a torch.Tensor"):
         G.trajectory_collision_bound(rc, rr, hm, hv.tolist(), hr, w)  # type: ignore[arg-type]

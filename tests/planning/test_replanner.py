@@ -335,23 +335,23 @@ def test_non_finite_measurements_and_times_are_data_errors(point_robot: PointRob
     rp = Replanner(opt, ReplannerCfg(tracking="filtered"))
     q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
     nan_q = torch.tensor([math.nan, 0.0])
-    with pytest.raises(DataError, match=r"finite q_start, got NaN or inf in joints \[0\]"):
+    with pytest.raises(DataError, match="q_start is NaN/Inf at joint 0"):
         rp.reset(nan_q, qg, t=0.0)
-    with pytest.raises(DataError, match=r"finite q_goal, got NaN or inf in joints \[1\]"):
+    with pytest.raises(DataError, match="q_goal is NaN/Inf at joint 1"):
         rp.reset(q0, torch.tensor([1.0, math.inf]), t=0.0)
-    with pytest.raises(DataError, match="finite time t, got nan"):
+    with pytest.raises(DataError, match=r"expected t a finite time \[s\], got nan"):
         rp.reset(q0, qg, t=math.nan)
     rp.reset(q0, qg, t=0.0)
     # a NaN measurement never exceeds resync_tol: it must not yield a plan
-    with pytest.raises(DataError, match=r"finite q_now, got NaN or inf in joints \[0\]"):
+    with pytest.raises(DataError, match="q_now is NaN/Inf at joint 0"):
         rp.step(0.0, nan_q, None)
-    with pytest.raises(DataError, match="finite time t, got nan"):
+    with pytest.raises(DataError, match=r"expected t a finite time \[s\], got nan"):
         rp.step(math.nan, q0, None)
-    with pytest.raises(DataError, match="finite time forecast_t0, got inf"):
+    with pytest.raises(DataError, match=r"expected forecast_t0 a finite time \[s\], got inf"):
         rp.step(0.0, q0, None, forecast_t0=math.inf)
-    with pytest.raises(DataError, match="finite time t, got nan"):
+    with pytest.raises(DataError, match=r"expected t a finite time \[s\], got nan"):
         rp.command(math.nan)
-    with pytest.raises(DataError, match="finite q_goal"):
+    with pytest.raises(DataError, match="q_goal is NaN/Inf"):
         rp.set_goal(nan_q, t=0.0)
     assert not opt.calls  # nothing was planned from the bad inputs
     assert rp.step(0.0, q0, None) is not None  # the replanner is still usable

@@ -177,7 +177,7 @@ def test_load_keeps_a_valid_q_table_policy_usable(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("changes", "match"),
     [
-        ({"episodes": 1.5}, "expected episodes an int, got 1.5"),
+        ({"episodes": 1.5}, "expected episodes an integer, got 1.5"),
         ({"num_objects": 2.0}, "expected num_objects an int"),
         ({"seed": True}, "expected seed an int"),
         ({"seed": -1}, "expected seed >= 0"),

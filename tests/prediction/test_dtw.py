@@ -195,22 +195,22 @@ def test_non_finite_windows_are_named_not_spread(bad: float):
     x_bad = x.clone()
     x_bad[2, 7, 1] = bad
     where = "window 2, frame 7"
-    with pytest.raises(DataError, match=f"x is NaN/Inf in {where}"):
+    with pytest.raises(DataError, match=f"x is NaN/Inf at {where}: impute lost frames first"):
         dtw_distance(x_bad, y)
-    with pytest.raises(DataError, match=f"y is NaN/Inf in {where}"):
+    with pytest.raises(DataError, match=f"y is NaN/Inf at {where}"):
         dtw_distance(y, x_bad)
-    with pytest.raises(DataError, match=f"x is NaN/Inf in {where}"):
+    with pytest.raises(DataError, match=f"x is NaN/Inf at {where}"):
         dtw_distance(x_bad, x_bad)
-    with pytest.raises(DataError, match=f"y is NaN/Inf in {where}"):
+    with pytest.raises(DataError, match=f"y is NaN/Inf at {where}"):
         dtw_paired(x, x_bad)
-    with pytest.raises(DataError, match=f"x is NaN/Inf in {where}"):
+    with pytest.raises(DataError, match=f"x is NaN/Inf at {where}"):
         gak_log(x_bad, y, sigma=1.0)
-    with pytest.raises(DataError, match=f"y is NaN/Inf in {where}"):
+    with pytest.raises(DataError, match=f"y is NaN/Inf at {where}"):
         gak_log_paired(x, x_bad, sigma=1.0)
-    with pytest.raises(DataError, match=f"x is NaN/Inf in {where}"):
+    with pytest.raises(DataError, match=f"x is NaN/Inf at {where}"):
         median_dtw(x_bad, n_pairs=50)
     for kernel in (DTWKernel(1.0), GlobalAlignmentKernel(1.0), RBFKernel(1.0)):
-        with pytest.raises(DataError, match=f"is NaN/Inf in {where}"):
+        with pytest.raises(DataError, match=f"is NaN/Inf at {where}"):
             kernel(y, x_bad)
     torch.testing.assert_close(dtw_distance(x, y), finite, atol=0, rtol=0)
 

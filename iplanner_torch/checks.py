@@ -1,0 +1,133 @@
+"""Scalar value checks shared by the whole package.
+
+Configs (``__post_init__``) and public functions check their number arguments with these:
+
+- :func:`finite`, :func:`positive`, :func:`non_negative`: a real number (not a bool);
+- :func:`finite_tuple`: a sequence of a given number of finite reals;
+- :func:`integer`, :func:`seed`: an integer (not a bool), optionally bounded below;
+- :func:`flag`: ``True`` or ``False``;
+- :func:`finite_time`: anything with a float value (also numpy numbers and one-element
+  tensors), as :func:`math.isfinite` takes it;
+- :func:`optional`: any of the above for a field that may also be None.
+
+Each check raises ``error`` (:class:`~iplanner_torch.errors.ConfigError` unless the caller
+passes another exception type, e.g. :class:`~iplanner_torch.errors.DataError` for input data)
+naming the argument and the value, and returns the value converted (a float, an int, ...)
+without changing it: callers may keep what they were given. The tensor checks
+(:func:`~iplanner_torch.types.check_shape`, :func:`~iplanner_torch.types.check_finite`) live
+in :mod:`iplanner_torch.types`.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import numpy as np
+
+from iplanner_torch.errors import ConfigError
+
+_T = TypeVar("_T")
+
+
+def _is_real(value: object) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def finite(name: str, value: object, *, error: type[Exception] = ConfigError) -> float:
+    """``value`` as a float; ``error`` unless it is a finite real number (not a bool)."""
+    if not _is_real(value) or not math.isfinite(float(value)):  # type: ignore[arg-type]
+        raise error(f"expected {name} a finite number, got {value!r}")
+    return float(value)  # type: ignore[arg-type]
+
+
+def positive(name: str, value: object, *, error: type[Exception] = ConfigError) -> float:
+    """``value`` as a float; ``error`` unless it is a real number (not a bool), finite and > 0."""
+    if not _is_real(value) or not 0.0 < float(value) < math.inf:  # type: ignore[arg-type]
+        raise error(f"expected {name} > 0 and finite, got {value!r}")
+    return float(value)  # type: ignore[arg-type]
+
+
+def non_negative(name: str, value: object, *, error: type[Exception] = ConfigError) -> float:
+    """``value`` as a float; ``error`` unless it is a real number (not a bool), finite and
+    >= 0."""
+    if not _is_real(value) or not 0.0 <= float(value) < math.inf:  # type: ignore[arg-type]
+        raise error(f"expected {name} >= 0 and finite, got {value!r}")
+    return float(value)  # type: ignore[arg-type]
+
+
+def finite_tuple(
+    name: str, value: object, n: int, *, error: type[Exception] = ConfigError
+) -> tuple[float, ...]:
+    """``value`` as ``n`` floats; ``error`` unless it is a sequence of ``n`` finite real
+    numbers (not bools).
+
+    Lists and OmegaConf list nodes are accepted as well as tuples.
+    """
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+        raise error(f"expected {name} a sequence of {n} finite numbers, got {value!r}")
+    items = tuple(value)  # type: ignore[arg-type]
+    ok = len(items) == n and all(_is_real(v) and math.isfinite(float(v)) for v in items)
+    if not ok:
+        raise error(f"expected {name} a sequence of {n} finite numbers, got {value!r}")
+    return tuple(float(v) for v in items)  # type: ignore[arg-type]
+
+
+def integer(
+    name: str,
+    value: object,
+    *,
+    minimum: int | None = None,
+    error: type[Exception] = ConfigError,
+) -> int:
+    """``value`` as an int; ``error`` unless it is an integer (not a bool) and, when
+    ``minimum`` is given, >= ``minimum``."""
+    if (
+        isinstance(value, (bool, np.bool_))
+        or not isinstance(value, numbers.Integral)
+        or (minimum is not None and int(value) < minimum)
+    ):
+        bound = "" if minimum is None else f" >= {minimum}"
+        raise error(f"expected {name} an integer{bound}, got {value!r}")
+    return int(value)
+
+
+def flag(name: str, value: object, *, error: type[Exception] = ConfigError) -> bool:
+    """``value`` as a bool; ``error`` unless it is ``True`` or ``False`` (also numpy's)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise error(f"expected {name} True or False, got {value!r}")
+    return bool(value)
+
+
+def seed(value: object, *, error: type[Exception] = ConfigError) -> int:
+    """A random seed as an int; ``error`` unless it is a non-negative integer (numpy's
+    generators refuse negative seeds)."""
+    return integer("seed", value, minimum=0, error=error)
+
+
+def finite_time(name: str, value: Any, *, error: type[Exception] = ConfigError) -> float:
+    """``value`` as a float time [s]; ``error`` when it is NaN or infinite.
+
+    Anything :func:`math.isfinite` takes is accepted: Python and numpy numbers, one-element
+    tensors. Unlike :func:`finite` this does not ask for a :class:`numbers.Real`, since times
+    often come out of tensors.
+
+    Raises:
+        error: when ``value`` is NaN or infinite.
+        TypeError: when ``value`` has no float value (as from :func:`math.isfinite`).
+    """
+    if not math.isfinite(value):
+        raise error(f"expected {name} a finite time [s], got {value!r}")
+    return float(value)
+
+
+def optional(check: Callable[..., _T], name: str, value: object, **kwargs: Any) -> _T | None:
+    """``check(name, value, **kwargs)`` for a field that may also be None (returned as is).
+
+    Example: ``optional(finite, "budget_s", cfg.budget_s)``.
+    """
+    if value is None:
+        return None
+    return check(name, value, **kwargs)

@@ -1,0 +1,83 @@
+"""The shared scalar checks (iplanner_torch.checks) and tensor checks (iplanner_torch.types)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from iplanner_torch import checks
+from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.types import check_finite, non_finite_error
+
+
+@pytest.mark.parametrize(
+    ("check", "good", "bad"),
+    [
+        (checks.finite, [0, -2.5, np.float32(1.5), np.int64(3)], [math.nan, True, "1", None]),
+        (checks.positive, [1e-9, 3, np.float64(2.0)], [0, -1, math.inf, math.nan, True]),
+        (checks.non_negative, [0, 0.0, 7], [-1e-9, math.inf, math.nan, False]),
+    ],
+)  # fmt: skip
+def test_real_checks_accept_and_refuse(check, good, bad) -> None:
+    for value in good:
+        out = check("x", value)
+        assert isinstance(out, float) and out == float(value)
+    for value in bad:
+        with pytest.raises(ConfigError, match=r"expected x .*got"):
+            check("x", value)
+        with pytest.raises(DataError):  # the caller picks the exception type
+            check("x", value, error=DataError)
+
+
+def test_finite_tuple_integer_flag_seed() -> None:
+    assert checks.finite_tuple("p", [1, 2.5], 2) == (1.0, 2.5)
+    for value in ((1.0,), (1.0, math.nan), "ab", 3, (True, 1.0)):
+        with pytest.raises(ConfigError, match="expected p a sequence of 2 finite numbers"):
+            checks.finite_tuple("p", value, 2)
+    assert checks.integer("n", np.int64(4), minimum=1) == 4 and checks.integer("n", -3) == -3
+    for value in (0, 1.0, True, "2"):
+        with pytest.raises(ConfigError, match="expected n an integer >= 1"):
+            checks.integer("n", value, minimum=1)
+    assert checks.flag("f", np.bool_(True)) is True
+    with pytest.raises(ConfigError, match="expected f True or False, got 1"):
+        checks.flag("f", 1)
+    assert checks.seed(0) == 0
+    with pytest.raises(ConfigError, match="expected seed an integer >= 0, got -1"):
+        checks.seed(-1)
+
+
+def test_finite_time_and_optional() -> None:
+    assert checks.finite_time("t", torch.tensor(1.5)) == 1.5
+    assert checks.finite_time("t", np.float32(0.25)) == 0.25
+    with pytest.raises(DataError, match=r"expected t a finite time \[s\], got nan"):
+        checks.finite_time("t", math.nan, error=DataError)
+    with pytest.raises(TypeError):
+        checks.finite_time("t", "soon")
+    assert checks.optional(checks.positive, "b", None) is None
+    assert checks.optional(checks.positive, "b", 2) == 2.0
+    with pytest.raises(ConfigError, match="expected b > 0"):
+        checks.optional(checks.positive, "b", 0)
+
+
+def test_check_finite_names_the_first_bad_entry() -> None:
+    x = torch.zeros(3, 4, 2)
+    check_finite("x", x)  # finite: no error
+    x[1, 2, 1] = math.inf
+    x[2, 0, 0] = math.nan
+    with pytest.raises(DataError, match=r"^x is NaN/Inf at index \(1, 2, 1\)$"):
+        check_finite("x", x)
+    with pytest.raises(DataError, match=r"^x is NaN/Inf at window 1, frame 2: fill gaps$"):
+        check_finite("x", x, ("window", "frame"), hint="fill gaps")
+    with pytest.raises(DataError, match=r"^x is NaN/Inf at window 1, frame 2, 'b'$"):
+        check_finite("x", x, ("window", "frame", ("a", "b")))
+
+
+def test_non_finite_error_counts_for_tensors_and_arrays() -> None:
+    x = np.array([1.0, np.nan, np.inf, -np.inf])
+    for value in (x, torch.from_numpy(x)):
+        err = non_finite_error("cov", value)
+        assert isinstance(err, DataError)
+        assert str(err) == "expected finite cov, got 1 NaN and 2 Inf among 4 values"
