@@ -1,5 +1,8 @@
 """Benchmark: batched DTW Gram versus tslearn's ``cdist_dtw`` on the same windows.
 
+Also times :func:`~iplanner_torch.types.all_finite`, the finiteness check of every kernel
+call, against ``torch.isfinite(x).all()`` (``checks.all_finite_200x15x90_us``).
+
 Run: ``python scripts/bench_dtw.py [--quick]``. Both sides run on one CPU thread (tslearn's
 ``cdist_dtw`` with ``n_jobs=None`` is single-threaded), timings are medians of repeats after a
 warm-up; the values of both Grams are compared (tslearn's DTW is the square root of the sum of
@@ -17,6 +20,7 @@ import torch
 from _timing import median_seconds
 
 from iplanner_torch.prediction.dtw import dtw_distance
+from iplanner_torch.types import all_finite
 
 
 def _median_time(fn: Callable[[], object], repeats: int) -> float:
@@ -44,6 +48,12 @@ def run(quick: bool) -> dict[str, dict]:
         t_ref = _median_time(lambda: cdist_dtw(x_np), repeats)
         x32 = x.float()
         t_ours32 = _median_time(lambda: dtw_distance(x32, x32), repeats)
+        # the finiteness check every DTW/GAK/RBF call makes, on a training-sized batch
+        xc = torch.randn(200, 15, 90, generator=g)
+        assert all_finite(xc) and bool(torch.isfinite(xc).all())
+        reps = 20 if quick else 200
+        t_check = _median_time(lambda: all_finite(xc), reps)
+        t_check_ref = _median_time(lambda: bool(torch.isfinite(xc).all()), reps)
     finally:
         torch.set_num_threads(threads)
     pairs = n * n
@@ -65,6 +75,15 @@ def run(quick: bool) -> dict[str, dict]:
             "seconds": t_ours32,
             "reference_pairs_per_s": pairs / t_ref,
             "windows": [n, t, d],
+            "dtype": "float32",
+            "threads": 1,
+        },
+        "checks.all_finite_200x15x90_us": {
+            "value": 1e6 * t_check,
+            "unit": "us",
+            "reference": "bool(torch.isfinite(x).all())",
+            "reference_us": 1e6 * t_check_ref,
+            "ratio": t_check / t_check_ref,
             "dtype": "float32",
             "threads": 1,
         },

@@ -34,7 +34,7 @@ from iplanner_torch.planning import costs as C
 from iplanner_torch.planning.human_model import HumanSphereMap
 from iplanner_torch.planning.trajectory import Trajectory, accelerations, uniform_times
 from iplanner_torch.prediction.forecast import Forecast
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import all_finite, check_shape
 
 #: Accepted plans keep every waypoint-to-waypoint velocity within this factor of the limits.
 VEL_TOL = 1.05
@@ -704,7 +704,7 @@ class TrajectoryOptimizer:
 
         with torch.no_grad():
             q_all = torch.cat([head, x, tail], dim=1)  # (B, W, J)
-            if not bool(torch.isfinite(q_all).all()):
+            if not all_finite(q_all):
                 raise PlanningError("the optimisation produced non-finite waypoints")
             result = self._accept(
                 q_all,

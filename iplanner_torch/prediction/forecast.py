@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import torch
 
 from iplanner_torch.errors import DataError, ShapeError
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import all_finite, check_shape
 
 
 @dataclass(kw_only=True)
@@ -62,8 +62,7 @@ class Forecast:
             raise DataError(f"expected forecast dt a number > 0 [s], got {self.dt!r}") from err
         if not (math.isfinite(dt) and dt > 0.0):
             raise DataError(f"expected forecast dt a finite number > 0 [s], got {self.dt!r}")
-        finite = [torch.isfinite(x).all() for x in (self.weights, self.mean, self.var)]
-        if not bool(torch.stack([f.to(self.weights.device) for f in finite]).all()):
+        if not all_finite(self.weights, self.mean, self.var):
             self._raise_non_finite()
 
     def _raise_non_finite(self) -> None:

@@ -33,7 +33,7 @@ import torch
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
-from iplanner_torch.types import check_finite, check_shape
+from iplanner_torch.types import all_finite, check_finite, check_shape
 
 CHECKPOINT_VERSION = 1
 
@@ -350,7 +350,7 @@ class HumanMotionPredictor:
                 f"expected progress bitmasks >= 0, got {int(progress.min())} "
                 f"(window {int((progress < 0).nonzero()[0, 0])})"
             )
-        if not bool(torch.isfinite(f_prev).all()):  # the D names are built for the message only
+        if not all_finite(f_prev):  # the D names are built for the message only
             check_finite("f_prev", f_prev, ("window", "frame", self.feature_names))
         b, k, a_n = f_prev.shape[0], self.num_joints, self.num_actions
         pose = f_prev[:, -1, : 3 * k].reshape(b, k, 3)  # (B, K, 3) current pose

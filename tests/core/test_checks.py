@@ -10,7 +10,7 @@ import torch
 
 from iplanner_torch import checks
 from iplanner_torch.errors import ConfigError, DataError
-from iplanner_torch.types import check_finite, non_finite_error
+from iplanner_torch.types import all_finite, check_finite, non_finite_error
 
 
 @pytest.mark.parametrize(
@@ -81,3 +81,32 @@ def test_non_finite_error_counts_for_tensors_and_arrays() -> None:
         err = non_finite_error("cov", value)
         assert isinstance(err, DataError)
         assert str(err) == "expected finite cov, got 1 NaN and 2 Inf among 4 values"
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.float32, torch.float64, torch.complex64])
+@pytest.mark.parametrize("n", [1, 7, 1000, 40_001])
+def test_all_finite_finds_one_bad_entry_anywhere(dtype: torch.dtype, n: int) -> None:
+    g = torch.Generator().manual_seed(n)
+    x = torch.randn(n, generator=g).to(dtype)
+    assert all_finite(x) and all_finite(x, x[: n // 2], torch.zeros(3, dtype=torch.int64))
+    positions = torch.randint(0, n, (5,), generator=g).tolist() + [0, n - 1]
+    for i in positions:
+        for bad in (math.nan, math.inf, -math.inf):
+            y = x.clone()
+            y[i] = bad
+            assert not all_finite(y), (i, bad)
+            assert not all_finite(x, y)  # any tensor of several
+    y = x.clone()
+    y[0], y[-1] = math.inf, -math.inf  # the sum is NaN, not inf
+    assert not all_finite(y)
+
+
+def test_all_finite_is_exact_when_a_sum_overflows() -> None:
+    big = torch.full((4,), 60000.0, dtype=torch.float16)  # finite entries, the sum overflows
+    assert math.isinf(float(big.sum())) and all_finite(big)
+    huge = torch.full((3,), 3e38)  # float32 sums overflow too
+    assert all_finite(huge, big)
+    assert all_finite() and all_finite(torch.empty(0)) and all_finite(torch.ones(2, 2).bool())
+    with pytest.raises(DataError, match=r"^x is NaN/Inf at index \(1,\)$"):
+        check_finite("x", torch.tensor([3e38, math.nan, 3e38]))
+    check_finite("x", huge)  # no false alarm
