@@ -157,7 +157,10 @@ class HumanSphereModel:
 
         Args:
             mean: (..., K, 3) joint means [m].
-            var: (..., K, 3) joint per-axis variances [m^2].
+            var: (..., K, 3) joint per-axis variances [m^2], >= 0. A
+                :class:`~iplanner_torch.prediction.forecast.Forecast` lets rounding
+                negatives through (the planner floors them); pass ``var.clamp_min(0)``
+                of a forecast built elsewhere than the package's predictors.
 
         Returns:
             ``(mean (..., S_h, 3) [m], var (..., S_h, 3) [m^2])``.
