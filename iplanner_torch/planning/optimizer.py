@@ -34,7 +34,7 @@ from iplanner_torch.planning import costs as C
 from iplanner_torch.planning.human_model import HumanSphereMap
 from iplanner_torch.planning.trajectory import Trajectory, accelerations, uniform_times
 from iplanner_torch.prediction.forecast import Forecast
-from iplanner_torch.types import all_finite, check_shape
+from iplanner_torch.types import all_finite, check_finite, check_shape
 
 #: Accepted plans keep every waypoint-to-waypoint velocity within this factor of the limits.
 VEL_TOL = 1.05
@@ -592,12 +592,17 @@ class TrajectoryOptimizer:
             ConfigError: when ``t0``, ``forecast_t0``, ``duration``, ``arrive`` or a bound of
                 ``window`` is not a finite number, when ``window`` ends before it starts, or
                 when ``duration <= 0``.
-            PlanningError: when the optimisation produces non-finite waypoints.
+            DataError: when ``q_start``, ``q_goal``, ``qd_start`` or ``q_init`` holds NaN or
+                inf.
+            PlanningError: when the optimisation produces non-finite waypoints (it cannot
+                from finite inputs: non-finite gradient entries are taken as 0).
         """
         t_begin = time.perf_counter()
         cfg, j, w = self.cfg, self.num_joints, self.cfg.num_waypoints
         check_shape("q_start", q_start, (j,))
         check_shape("q_goal", q_goal, (j,))
+        check_finite("q_start", q_start, ("joint",))
+        check_finite("q_goal", q_goal, ("joint",))
         _finite_time("t0", t0)
         _finite_time("forecast_t0", forecast_t0)
         if duration is not None:
@@ -615,6 +620,7 @@ class TrajectoryOptimizer:
         q_goal = q_goal.to(self.device, self.dtype)
         if qd_start is not None:
             check_shape("qd_start", qd_start, (j,))
+            check_finite("qd_start", qd_start, ("joint",))
             qd_start = qd_start.to(self.device, self.dtype)
         if duration is None:
             duration = max(cfg.horizon_s, self.min_duration(q_start, q_goal, qd_start))
@@ -639,6 +645,7 @@ class TrajectoryOptimizer:
         n_goal = self.arrival_index(duration, None if arrive is None else arrive - t0)
         if q_init is not None:
             check_shape("q_init", q_init, (cfg.num_trajectories, w, j))
+            check_finite("q_init", q_init, ("trajectory", "waypoint", "joint"))
             q0 = q_init.to(self.device, self.dtype).clone()
             iterations = cfg.warm_iterations
         else:
@@ -688,6 +695,11 @@ class TrajectoryOptimizer:
             )
             loss = self._weighted(terms).sum()
             (grad,) = torch.autograd.grad(loss, z)
+            # A NaN or inf gradient entry (e.g. a distance's derivative at exactly zero
+            # distance) would make its trajectory NaN, and the next pair screen, which pools
+            # every trajectory, would spread it to all: such entries count as 0, so the
+            # trajectory does not move there. Finite gradients are unchanged.
+            grad.nan_to_num_(nan=0.0, posinf=0.0, neginf=0.0)
             with torch.no_grad():
                 step = it + 1
                 adam_m.mul_(BETA1).add_(grad, alpha=1 - BETA1)

@@ -576,3 +576,50 @@ def test_acceleration_limit_is_met_by_the_accepted_plan(point_robot: PointRobot)
     assert res.cost_terms["joint_acc_limit_violation"] >= 0.0
     with pytest.raises(ConfigError, match="acc_max"):
         OptimizerCfg(acc_max=0.0)
+
+
+def test_non_finite_gradients_leave_their_trajectories_where_they_are(
+    point_robot: PointRobot, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """NaN or inf gradient entries in some trajectories keep those trajectories at their
+    start; they do not spread to the others through the shared pair screen."""
+    cfg = OptimizerCfg(iterations=20, prune_every=4)
+    opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.1))
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    fc = static_forecast([0.0, 0.3, 0.0], 0.05)
+    clean = opt.solve(q_s, q_g, forecast=fc)
+    grad = torch.autograd.grad
+    poisoned = [1, 4]
+
+    def bad_grad(*args, **kwargs):
+        (g,) = grad(*args, **kwargs)
+        g = g.clone()
+        g[1] = float("nan")
+        g[4, 0] = float("inf")
+        return (g,)
+
+    monkeypatch.setattr(torch.autograd, "grad", bad_grad)
+    res = opt.solve(q_s, q_g, forecast=fc)
+    assert torch.isfinite(res.candidates).all() and torch.isfinite(res.q).all()
+    duration = float(res.times[-1] - res.times[0])
+    q0 = opt.initial_trajectories(q_s, q_g, cfg.num_trajectories, cfg.seed, duration)
+    assert torch.allclose(res.candidates[1], q0[1], atol=1e-6)  # never moved
+    assert not torch.allclose(res.candidates[4], q0[4], atol=1e-4)  # moved by its finite rows
+    for b in range(cfg.num_trajectories):  # the others were optimised as before
+        if b not in poisoned:
+            assert torch.allclose(res.candidates[b], clean.candidates[b], atol=1e-5), b
+
+
+def test_non_finite_start_goal_or_warm_start_is_a_data_error(point_robot: PointRobot) -> None:
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg(iterations=2))
+    q_s, q_g, nan = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0]), float("nan")
+    with pytest.raises(DataError, match="q_start is NaN/Inf at joint 0"):
+        opt.solve(torch.tensor([nan, 0.0]), q_g)
+    with pytest.raises(DataError, match="q_goal is NaN/Inf at joint 1"):
+        opt.solve(q_s, torch.tensor([1.0, float("inf")]))
+    with pytest.raises(DataError, match="qd_start is NaN/Inf at joint 0"):
+        opt.solve(q_s, q_g, qd_start=torch.tensor([nan, 0.0]))
+    q_init = torch.zeros(8, 20, 2)
+    q_init[3, 5, 1] = nan
+    with pytest.raises(DataError, match="q_init is NaN/Inf at trajectory 3, waypoint 5, joint 1"):
+        opt.solve(q_s, q_g, q_init=q_init)
