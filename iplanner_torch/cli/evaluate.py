@@ -6,13 +6,15 @@ Modes (``evaluate.mode``)::
     iplanner-evaluate evaluate.checkpoint=checkpoints/reaching/iplanner_no_ni/predictor.ckpt
     iplanner-evaluate evaluate.mode=noise_sweep         # fig. result_prediction (NI vs no NI)
     iplanner-evaluate evaluate.mode=episode evaluate.logs=outputs/experiment/<run>/episodes
+    iplanner-evaluate evaluate.mode=episode evaluate.logs=outputs/experiment/<run>/results.csv
 
 ``prediction`` evaluates one checkpoint on the held-out demonstrations of ``data`` (the same
 split by demonstration as training); ``noise_sweep`` re-noises the held-out clean motion at
 each ``evaluate.noises`` level and replays it at each ``evaluate.speeds`` speed, for each
 predictor in ``evaluate.compare`` (trained when missing), and writes CSV, PNG plots and a
-README; ``episode`` summarises MCAP episode logs (one row per episode, a summary table and
-plots) and prints the table ``iplanner-experiment`` prints
+README; ``episode`` summarises MCAP episode logs, or the episode rows of a results CSV (an
+experiment's ``results.csv``, or rows gathered from several runs), with one row per episode, a
+summary table and plots, and prints the table ``iplanner-experiment`` prints
 (:func:`~iplanner_torch.eval.report.comparison_table`: episode counts, then the paper's metrics
 in cm and ms); an episode whose log was cut before its metrics counts in ``contact_unknown``,
 not as contact-free nor as a contact.
@@ -144,12 +146,17 @@ def _episode(cfg: DictConfig) -> None:
     )
 
     if not cfg.evaluate.logs:
-        raise ConfigError("evaluate.mode=episode needs evaluate.logs=<an .mcap file or a folder>")
+        raise ConfigError(
+            "evaluate.mode=episode needs evaluate.logs=<an .mcap file, a folder of them or a "
+            "results .csv>"
+        )
     path = repo_path(cfg.evaluate.logs)
     if path.is_dir() and not any(path.rglob("*.mcap")):
         raise ConfigError(f"{path}: no .mcap episode logs found")
     out_dir = _out_dir(cfg)
     df = gather_results(path)  # a folder: every log below it, in numbered order
+    if path.suffix == ".csv" and "planner" not in df.columns:
+        raise DataError(f"{path}: no 'planner' column; is this an episode results file?")
     if "planner" not in df.columns or df["planner"].isna().all():
         raise DataError(
             f"{path}: none of the {len(df)} episode log(s) could be read as far as its "

@@ -247,6 +247,42 @@ def test_evaluate_episode_table_counts_a_truncated_log_as_unknown(tmp_path: Path
     assert "truncated or damaged episode logs: 1 of 2" in res.stdout
 
 
+def test_evaluate_episode_reports_a_results_csv(tmp_path: Path) -> None:
+    """``evaluate.logs=<results.csv>`` re-reports episode rows (``eval/`` columns, as an
+    experiment writes them) with the experiment's table; a CSV without planners is refused."""
+    import pandas as pd
+
+    rows = pd.DataFrame(
+        {
+            "scenario": ["s1"] * 4,
+            "planner": ["itomp", "itomp", "iplanner_ni", "iplanner_ni"],
+            "seed": [0, 1, 0, 1],
+            "eval/smoothness": [40.0, 44.0, 30.0, 34.0],
+            "eval/min_distance": [0.05, 0.07, 0.10, 0.12],
+            "eval/contact": [0.0] * 4,
+            "eval/efficiency": [1.6, 1.7, 1.5, 1.6],
+            "eval/completed": [1.0] * 4,
+        }
+    )
+    rows.to_csv(tmp_path / "results.csv", index=False)
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode",
+                f"evaluate.logs={tmp_path / 'results.csv'}",
+                f"evaluate.out_dir={tmp_path / 'out'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    lines = res.stdout.splitlines()
+    at = next(i for i, ln in enumerate(lines) if ln.startswith("scenario"))
+    names = [h.strip() for h in lines[at].split("  ") if h.strip()]
+    table = {ln.split()[1]: dict(zip(names, ln.split())) for ln in lines[at + 2 : at + 4]}
+    assert table["itomp"]["smoothness"] == "42" and table["iplanner_ni"]["distance cm"] == "11"
+    assert table["itomp"]["episodes"] == "2" and table["iplanner_ni"]["contact_free"] == "2"
+    assert (tmp_path / "out" / "results.md").is_file()
+    rows.drop(columns="planner").to_csv(tmp_path / "bad.csv", index=False)
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode",
+                f"evaluate.logs={tmp_path / 'bad.csv'}",
+                f"evaluate.out_dir={tmp_path / 'out2'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 2 and "bad.csv: no 'planner' column" in res.stderr
+
+
 def test_evaluate_refuses_bad_paths_before_it_computes(tmp_path: Path) -> None:
     """A file as the output folder, a folder as the checkpoint, logs cut before their
     metadata: one-line errors with exit code 2, and nothing computed first."""
