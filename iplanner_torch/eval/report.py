@@ -434,6 +434,83 @@ def _per_group(
     return _sort_groups(pd.DataFrame.from_records(rows), group_by).reset_index(drop=True)
 
 
+def paired_differences(
+    df: pd.DataFrame,
+    metric: str,
+    *,
+    baseline: str = "itomp",
+    group_by: Sequence[str] = ("scenario",),
+    pair_on: Sequence[str] = ("seed",),
+    level: float = 0.95,
+) -> pd.DataFrame:
+    """Each planner against ``baseline`` on ``metric``, episode by episode.
+
+    Episodes of a planner and of the baseline that agree in ``group_by`` and ``pair_on`` (the
+    same scenario and seed: the same person, noise and task order) form a pair, and the
+    differences ``planner - baseline`` are summarised. Pairing removes what the seeds share,
+    so a difference shows up with fewer episodes than when comparing the two means.
+
+    Args:
+        df: per-episode results (:func:`gather_results`), with a ``planner`` column.
+        metric: the metric column (e.g. ``min_distance``).
+        baseline: the planner the others are compared with.
+        group_by: the columns that define a comparison (one row per group and planner).
+        pair_on: the columns that identify an episode within a group.
+        level: confidence level of the interval, in (0, 1).
+
+    Returns:
+        One row per group and planner other than the baseline, in display order: the group
+        keys, ``planner``, ``pairs`` (pairs where both values are known), ``mean_diff``,
+        ``ci_low``, ``ci_high`` (Student-t interval of the mean difference; NaN for fewer than
+        two pairs), ``p_value`` (two-sided paired t-test; NaN for fewer than two pairs, 1 when
+        every difference is 0) and ``wins`` (pairs with a difference > 0).
+
+    Raises:
+        ConfigError: when a column is missing, ``baseline`` has no episodes, ``level`` is not
+            in (0, 1), or an episode appears twice in a group.
+    """
+    from scipy import stats
+
+    group_by, pair_on = list(group_by), list(pair_on)
+    _check_columns(df, [*group_by, *pair_on, "planner", metric], "columns")
+    if not 0.0 < level < 1.0:
+        raise ConfigError(f"expected level in (0, 1), got {level!r}")
+    if not (df["planner"] == baseline).any():
+        raise ConfigError(f"no episodes of the baseline planner {baseline!r}")
+    keys = [*group_by, *pair_on]
+    dup = df.duplicated([*keys, "planner"], keep=False)
+    if bool(dup.any()):
+        first = df.loc[dup, [*keys, "planner"]].iloc[0].to_dict()
+        raise ConfigError(f"episode {first} appears more than once; pairs need one each")
+    values = df.assign(_v=pd.to_numeric(df[metric], errors="coerce"))
+    base = values[values["planner"] == baseline][[*keys, "_v"]]
+    rows = []
+    others = values[values["planner"] != baseline]
+    for group, g in others.groupby([*group_by, "planner"], sort=False, dropna=False):
+        pairs = g[[*keys, "_v"]].merge(base, on=keys, suffixes=("", "_base"))
+        d = (pairs["_v"] - pairs["_v_base"]).dropna().to_numpy(dtype=float)
+        n = len(d)
+        row: dict[str, Any] = dict(zip([*group_by, "planner"], group))
+        row.update(pairs=n, mean_diff=float(d.mean()) if n else math.nan)
+        lo = hi = p = math.nan
+        if n >= 2:
+            se = float(d.std(ddof=1)) / math.sqrt(n)
+            if se > 0.0:
+                half = float(stats.t.ppf(0.5 + level / 2.0, n - 1)) * se
+                lo, hi = row["mean_diff"] - half, row["mean_diff"] + half
+                p = float(2.0 * stats.t.sf(abs(row["mean_diff"]) / se, n - 1))
+            else:  # every difference is the same
+                lo = hi = row["mean_diff"]
+                p = 1.0 if row["mean_diff"] == 0.0 else 0.0
+        row.update(ci_low=lo, ci_high=hi, p_value=p, wins=int((d > 0).sum()))
+        rows.append(row)
+    columns = [*group_by, "planner", "pairs", "mean_diff", "ci_low", "ci_high", "p_value", "wins"]
+    if not rows:
+        return pd.DataFrame(columns=columns)
+    out = pd.DataFrame.from_records(rows, columns=columns)
+    return _sort_groups(out, [*group_by, "planner"]).reset_index(drop=True)
+
+
 def _metric_column(df: pd.DataFrame, metric: str) -> str | None:
     """The column of ``metric``: itself, or a ``stage/metric`` column (``plan/waits``)."""
     if metric in df.columns:

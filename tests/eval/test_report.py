@@ -23,6 +23,7 @@ from iplanner_torch.eval.report import (
     incomplete_logs_note,
     natural_key,
     ordered_values,
+    paired_differences,
     paper_table_simulation,
     plot_comparison,
     plot_sweep,
@@ -473,3 +474,69 @@ def test_comparison_table_shows_the_paper_units_and_completed_episodes() -> None
     assert summary_table(df).iloc[0]["completed"] == 2
     # without a completed column there is nothing to count
     assert "completed" not in comparison_table(gather_results([{"planner": "a", "x": 1.0}]))
+
+
+def test_paired_differences_match_a_paired_t_test() -> None:
+    from scipy import stats
+
+    g = np.random.default_rng(3)
+    rows = []
+    for scen in ("b_scen", "a_scen"):
+        for seed in range(12):
+            shared = g.normal(0.05, 0.03)  # what a seed gives every planner
+            for planner, shift in (("iplanner_ni", 0.02), ("itomp", 0.0), ("iplanner_no_ni", 0.0)):
+                rows.append({"scenario": scen, "seed": seed, "planner": planner,
+                             "min_distance": shared + shift + g.normal(0, 0.01)})  # fmt: skip
+    df = pd.DataFrame(rows)
+    df.loc[
+        (df.planner == "itomp") & (df.seed == 11) & (df.scenario == "a_scen"), "min_distance"
+    ] = math.nan  # a cut episode: its pair is left out
+    df = df[~((df.planner == "iplanner_ni") & (df.seed == 10))]  # an episode that never ran
+    out = paired_differences(df, "min_distance", level=0.9)
+    assert list(out.columns) == ["scenario", "planner", "pairs", "mean_diff", "ci_low",
+                                 "ci_high", "p_value", "wins"]  # fmt: skip
+    assert list(out.scenario) == ["b_scen", "b_scen", "a_scen", "a_scen"]  # first seen first
+    assert list(out.planner) == ["iplanner_no_ni", "iplanner_ni"] * 2  # PLANNER_ORDER
+    for _, row in out.iterrows():
+        a = df[(df.scenario == row.scenario) & (df.planner == row.planner)].set_index("seed")
+        b = df[(df.scenario == row.scenario) & (df.planner == "itomp")].set_index("seed")
+        both = a.min_distance.dropna().index.intersection(b.min_distance.dropna().index)
+        x, y = a.min_distance[both].to_numpy(), b.min_distance[both].to_numpy()
+        d = x - y
+        assert (
+            row.pairs
+            == len(d)
+            == (12 - (row.scenario == "a_scen") - (row.planner == "iplanner_ni"))
+        )
+        ref = stats.ttest_rel(x, y)
+        assert row.mean_diff == pytest.approx(d.mean(), rel=1e-12)
+        assert row.p_value == pytest.approx(ref.pvalue, rel=1e-9)
+        ci = ref.confidence_interval(0.9)
+        assert (row.ci_low, row.ci_high) == (pytest.approx(ci.low), pytest.approx(ci.high))
+        assert row.wins == int((d > 0).sum())
+    ni = out[out.planner == "iplanner_ni"]
+    assert (ni.ci_low > 0).all() and (ni.p_value < 0.01).all()  # the 2 cm shift is found
+
+
+def test_paired_differences_refuse_what_cannot_be_paired() -> None:
+    df = pd.DataFrame(
+        {
+            "scenario": ["s"] * 4,
+            "seed": [0, 0, 1, 1],
+            "planner": ["itomp", "iplanner_ni"] * 2,
+            "x": [1.0, 2.0, 1.0, 2.0],
+        }
+    )
+    out = paired_differences(df, "x")
+    assert out.loc[0, "mean_diff"] == 1.0 and out.loc[0, "p_value"] == 0.0  # no spread
+    assert out.loc[0, "ci_low"] == out.loc[0, "ci_high"] == 1.0 and out.loc[0, "wins"] == 2
+    one = paired_differences(df[df.seed == 0], "x")
+    assert one.loc[0, "pairs"] == 1 and math.isnan(one.loc[0, "ci_low"])
+    with pytest.raises(ConfigError, match="no episodes of the baseline planner 'oracle'"):
+        paired_differences(df, "x", baseline="oracle")
+    with pytest.raises(ConfigError, match="appears more than once"):
+        paired_differences(pd.concat([df, df.iloc[:1]]), "x")
+    with pytest.raises(ConfigError, match=r"columns \['y'\] not in"):
+        paired_differences(df, "y")
+    with pytest.raises(ConfigError, match="expected level in"):
+        paired_differences(df, "x", level=95)
