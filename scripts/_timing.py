@@ -6,6 +6,8 @@ import statistics
 import time
 from collections.abc import Callable
 
+import torch
+
 
 def median_seconds(
     fn: Callable[[], object],
@@ -34,3 +36,23 @@ def median_seconds(
             sync()
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
+
+
+def reference_ms() -> float:
+    """Wall time [ms] of a fixed workload of small-tensor torch operations.
+
+    The machine's speed drifts between runs (and within one) by up to 2x on the development
+    machine; timed right beside a measurement, this workload moves with it, so the ratio of
+    the two compares code across runs better than either time. The work is dispatch-bound,
+    like a replanning cycle: 600 operations on (8, 20, 7) tensors, in the calling thread
+    setting.
+    """
+    g = torch.Generator().manual_seed(0)
+    a = torch.randn(8, 20, 7, generator=g)
+    m = 0.1 * torch.randn(7, 7, generator=g)
+    t0 = time.perf_counter()
+    x = a
+    for _ in range(200):
+        x = torch.tanh(x @ m + a)
+    float(x.sum())
+    return 1e3 * (time.perf_counter() - t0)
