@@ -155,6 +155,8 @@ def _episode(cfg: DictConfig) -> None:
         raise ConfigError(f"{path}: no .mcap episode logs found")
     out_dir = _out_dir(cfg)
     df = gather_results(path)  # a folder: every log below it, in numbered order
+    if path.suffix == ".csv" and df.empty:
+        raise DataError(f"{path}: no episode rows; nothing to report")
     if path.suffix == ".csv" and "planner" not in df.columns:
         raise DataError(f"{path}: no 'planner' column; is this an episode results file?")
     if "planner" not in df.columns or df["planner"].isna().all():

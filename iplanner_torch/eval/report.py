@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.recording.reader import read_episode
 
 __all__ = [
@@ -208,12 +209,29 @@ def _row_of_path(p: Path) -> dict[str, Any]:
 def _rows_of_csv(p: Path) -> list[dict[str, Any]]:
     """The rows of a results CSV (an experiment's episode rows, ``eval/<name>`` columns, or a
     gathered table, ``<name>`` columns), in file order, named as :func:`gather_results`
-    names them; an empty cell is NaN. No ``path`` column is added (a row is not the CSV's
+    names them; an empty cell is NaN, and so is a metric cell (a ``stage/name`` column or one
+    of :data:`DEFAULT_METRICS`) that is not a number, with a :class:`DataWarning` naming the
+    file rows. No ``path`` column is added (a row is not the CSV's
     episode; the CSV's own ``path`` column, if any, is kept)."""
     try:
         df = pd.read_csv(p)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
         raise DataError(f"{p}: not a readable results CSV: {err}") from err
+    for col in df.columns:  # metric columns: a cell that is not a number is read as missing
+        name = _metric_name(str(col))
+        if "/" not in str(col) and name not in DEFAULT_METRICS:
+            continue
+        values = pd.to_numeric(df[col], errors="coerce")
+        bad = values.isna() & df[col].notna()
+        if bool(bad.any()):
+            rows = [int(i) + 2 for i in df.index[bad][:5]]
+            warnings.warn(
+                f"{p}: {int(bad.sum())} value(s) of {col!r} are not numbers (file rows "
+                f"{rows}); read as missing",
+                DataWarning,
+                stacklevel=3,
+            )
+        df[col] = values
     return [_row_of_dict(r) for r in df.to_dict("records")]
 
 

@@ -281,6 +281,11 @@ def test_evaluate_episode_reports_a_results_csv(tmp_path: Path) -> None:
                 f"evaluate.logs={tmp_path / 'bad.csv'}",
                 f"evaluate.out_dir={tmp_path / 'out2'}"], tmp_path)  # fmt: skip
     assert res.returncode == 2 and "bad.csv: no 'planner' column" in res.stderr
+    (tmp_path / "header.csv").write_text(",".join(rows.columns) + "\n")
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode",
+                f"evaluate.logs={tmp_path / 'header.csv'}",
+                f"evaluate.out_dir={tmp_path / 'out3'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 2 and "header.csv: no episode rows; nothing to report" in res.stderr
 
 
 def test_evaluate_refuses_bad_paths_before_it_computes(tmp_path: Path) -> None:

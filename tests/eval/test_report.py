@@ -108,6 +108,19 @@ def test_gather_results_reads_results_csv_with_or_without_the_prefix(tmp_path: P
         assert list(df["planner"]) == ["itomp", "iplanner_ni", "itomp"]
         assert df["smoothness"].iloc[:2].tolist() == [40.0, 50.0]
         assert math.isnan(df["smoothness"].iloc[2]) and df["sim/contacts"].tolist() == [0, 0, 1]
+    (tmp_path / "odd.csv").write_text(
+        "scenario,planner,eval/smoothness,sim/contacts,note\n"
+        "s,itomp,40,0,fine\n"
+        "s,itomp,abc,zero,also fine\n"
+    )
+    with pytest.warns(DataWarning) as caught:
+        odd = gather_results(tmp_path / "odd.csv")
+    messages = sorted(str(w.message) for w in caught)
+    assert len(messages) == 2
+    assert "1 value(s) of 'eval/smoothness' are not numbers (file rows [3])" in messages[0]
+    assert "1 value(s) of 'sim/contacts' are not numbers (file rows [3])" in messages[1]
+    assert odd["smoothness"].tolist()[0] == 40.0 and math.isnan(odd["smoothness"].tolist()[1])
+    assert odd["note"].tolist() == ["fine", "also fine"]  # other columns are left as they are
     (tmp_path / "bad.csv").write_bytes(b"\xff\xfe\x00garbage")
     with pytest.raises(DataError, match="bad.csv: not a readable results CSV"):
         gather_results(tmp_path / "bad.csv")
