@@ -150,6 +150,7 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
             "planner": OmegaConf.to_container(cfg.planner, resolve=True),
             "max_duration_s": cfg_scalar(cfg.run, "max_duration_s", float),
             "stall_fallback_s": cfg.run.stall_fallback_s,
+            "scene_hz": cfg_scalar(cfg.run, "scene_hz", float),
             "progress_bar": cfg_scalar(cfg, "progress", bool),
         }
     )

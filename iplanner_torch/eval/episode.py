@@ -157,6 +157,9 @@ class EpisodeCfg:
     metrics_hz: float = 25.0
     # rate of robot / human messages in the MCAP log [Hz]
     log_hz: float = 15.0
+    # rate of the log's 3D scene (/scene: robot and human spheres, the latest forecast's
+    # joint ellipsoids at SCENE_HORIZONS_S) for Foxglove's 3D panel [Hz]; 0: none
+    scene_hz: float = 5.0
     # blocking scenario: seconds the episode runs after the robot reached its goal
     blocking_tail_s: float = 0.5
     # show a progress bar over simulated time
@@ -196,6 +199,8 @@ class EpisodeCfg:
             raise ConfigError("expected mhd_horizon_s > 0 and mhd_min_motion >= 0")
         if self.metrics_hz <= 0 or self.log_hz <= 0:
             raise ConfigError("expected metrics_hz > 0 and log_hz > 0")
+        if not 0.0 <= self.scene_hz < math.inf:
+            raise ConfigError(f"expected scene_hz >= 0 and finite, got {self.scene_hz!r}")
         if self.torch_threads is not None and self.torch_threads < 1:
             raise ConfigError(f"expected torch_threads >= 1 or None, got {self.torch_threads}")
         if self.task_planner_episodes < 0:
@@ -390,6 +395,66 @@ def rest_hold(action_names: tuple[str, ...], keep: torch.Tensor) -> torch.Tensor
     takes = [_take_block(n) is not None for n in action_names]
     nothing = any(takes) and not any(bool(k) for k, t in zip(keep.tolist(), takes) if t)
     return torch.tensor([nothing and n.lower() == "idle" for n in action_names], dtype=torch.bool)
+
+
+#: Look-ahead times [s] of the predicted joint ellipsoids drawn in the log's ``/scene``.
+SCENE_HORIZONS_S = (0.5, 1.0)
+
+
+def forecast_ellipsoids(
+    forecast: Forecast, horizons_s: tuple[float, ...] = SCENE_HORIZONS_S
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The predicted position of every joint at each look-ahead, as one Gaussian each.
+
+    The action mixture of batch entry 0 is moment-matched per joint: mean ``sum_a w_a mu_a``
+    and covariance ``sum_a w_a (diag(var_a) + (mu_a - mean)(mu_a - mean)^T)``, at the
+    predicted frame nearest to each look-ahead (looks beyond the horizon are left out).
+
+    Args:
+        forecast: the forecast (batch entry 0 is drawn).
+        horizons_s: seconds after the forecast's last observed frame.
+
+    Returns:
+        ``(mean (3,) [m], cov (3, 3) [m^2])`` pairs, joint-major within each look-ahead.
+    """
+    times = forecast.times.detach().cpu().double()  # (n_f,)
+    w = forecast.weights[0].detach().cpu().double()  # (A,)
+    out = []
+    for h in horizons_s:
+        if h > float(times[-1]) + 0.5 * forecast.dt:
+            continue
+        f = int((times - h).abs().argmin())
+        mu = forecast.mean[0, :, f].detach().cpu().double()  # (A, K, 3)
+        var = forecast.var[0, :, f].detach().cpu().double().clamp_min(0.0)
+        mean = torch.einsum("a,akc->kc", w, mu)  # (K, 3)
+        d = mu - mean  # (A, K, 3)
+        cov = torch.einsum("a,akc,akd->kcd", w, d, d) + torch.diag_embed(
+            torch.einsum("a,akc->kc", w, var)
+        )  # (K, 3, 3)
+        out.extend((mean[k].numpy(), cov[k].numpy()) for k in range(mean.shape[0]))
+    return out
+
+
+def _log_scene(
+    writer: Any,
+    t: float,
+    robot: Any,
+    q: np.ndarray,
+    smap: HumanSphereMap,
+    joints: np.ndarray,
+    ellipsoids: list[tuple[np.ndarray, np.ndarray]],
+) -> None:
+    """One ``/scene`` message: the robot's spheres at ``q`` (J,), the person's spheres from
+    the true ``joints`` (K, 3), and the predicted joint ``ellipsoids``."""
+    from iplanner_torch.recording.mcap import SceneEllipsoid
+
+    ref = robot.q_home
+    with torch.no_grad():
+        rc = robot.sphere_centers(torch.as_tensor(q, dtype=ref.dtype, device=ref.device))
+    rs = torch.cat([rc.cpu().double(), robot.sphere_radii.cpu().double().unsqueeze(-1)], -1)
+    hc = smap.matrix.double() @ torch.as_tensor(joints, dtype=torch.float64)  # (S_h, 3)
+    hs = torch.cat([hc, smap.radii.double().unsqueeze(-1)], -1)
+    writer.scene(t, rs, hs, [SceneEllipsoid(mean=m, cov=c) for m, c in ellipsoids])
 
 
 def _take_block(name: str) -> int | None:
@@ -687,6 +752,9 @@ def _run_episode(
     next_cycle = 0.0
     n_sub_metrics = max(1, round(1.0 / (cfg.metrics_hz * env.control_dt)))
     n_sub_log = max(1, round(1.0 / (cfg.log_hz * env.control_dt)))
+    n_sub_scene = max(1, round(1.0 / (cfg.scene_hz * env.control_dt))) if cfg.scene_hz else 0
+    scene_map = HumanSphereMap.from_segments(JOINT_NAMES) if n_sub_scene else None
+    drawn: list[tuple[np.ndarray, np.ndarray]] = []  # the latest forecast's ellipsoids
     t_hist: list[float] = []
     q_hist: list[np.ndarray] = []
     h_hist: list[np.ndarray] = []
@@ -786,6 +854,8 @@ def _run_episode(
                 if writer is not None:
                     if forecasts_motion and not stalled:
                         writer.log_forecast(t_obs, forecast)
+                    if scene_map is not None:
+                        drawn = forecast_ellipsoids(forecast) if forecasts_motion else []
                     if result is not None:
                         stats = replanner.stats
                         solve = stats.solve_ms[-1] if getattr(stats, "solve_ms", None) else 0.0
@@ -806,6 +876,8 @@ def _run_episode(
             if writer is not None and step % n_sub_log == 0:
                 writer.robot_state(t, env.robot_q(), env.robot_qd(), robot.joint_names)
                 writer.human_joints(t, true_h[-1], tracker.window()[-1], JOINT_NAMES)
+            if writer is not None and scene_map is not None and step % n_sub_scene == 0:
+                _log_scene(writer, t, robot, env.robot_q(), scene_map, true_h[-1], drawn)
             goal_changed = False
             for ev in info.events:
                 record(ev.time, ev.kind, ev.block)

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 
+from iplanner_torch.data.skeleton import JOINT_NAMES
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.eval.episode import (
     EpisodeCfg,
@@ -21,6 +22,7 @@ from iplanner_torch.eval.episode import (
     run_episode,
     tracked_hands,
 )
+from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.sim.scene import SceneCfg
 from iplanner_torch.sim.tasks import ScenarioCfg
 
@@ -97,6 +99,61 @@ def test_short_iplanner_episode_writes_mcap(tmp_path: Path) -> None:
     assert [e["kind"] for e in ep.events()][:3] == kinds[:3]
     t, q = ep.robot_q()
     assert q.shape[1] == 3 and len(t) >= 70
+    # the 3D scene at scene_hz (5 Hz): the robot's spheres at the logged q, the person's
+    # spheres on the true joints, and 2 x K predicted joint ellipsoids from the first forecast
+    from iplanner_torch.planning.human_model import HumanSphereMap
+
+    t_s, robot_s, human_s = ep.scene_spheres()
+    assert len(t_s) == pytest.approx(5.0 * 5.0, abs=1)
+    arm = fakes.FakeArm(tmp_path)
+    smap = HumanSphereMap.from_segments(JOINT_NAMES)
+    t_h, true = ep.human_true()
+    same = [(i, int((t - ts).abs().argmin())) for i, ts in enumerate(t_s)]
+    same = [(i, j) for i, j in same if float((t[j] - t_s[i]).abs()) < 1e-6]
+    assert len(same) >= 3  # steps where the 15 Hz robot state and the 5 Hz scene coincide
+    close = dict(atol=1e-6, rtol=0)
+    for i, j in same:
+        centres = arm.sphere_centers(q[j].to(arm.q_home.dtype)).double()
+        torch.testing.assert_close(robot_s[i, :, :3], centres, **close)
+        torch.testing.assert_close(robot_s[i, :, 3], arm.sphere_radii.double(), **close)
+        torch.testing.assert_close(human_s[i, :, :3], smap.matrix.double() @ true[j], **close)
+        torch.testing.assert_close(human_s[i, :, 3], smap.radii.double(), **close)
+    counts = [len(e) for e in ep.frames["/scene"]["ellipsoids"]]
+    assert counts[-1] == 2 * len(JOINT_NAMES) and set(counts) <= {0, 2 * len(JOINT_NAMES)}
+    quiet = tmp_path / "no_scene.mcap"
+    no_scene = replace(_cfg(1.0), scene_hz=0.0)
+    predictor = fakes.ConstantPredictor()
+    _fake_episode(tmp_path, no_scene, "iplanner_ni", fakes.LinearReplanner(),
+                  predictor=predictor, path=quiet)  # fmt: skip
+    assert "/scene" not in read_episode(quiet).frames
+
+
+def test_forecast_ellipsoids_match_samples_of_the_mixture() -> None:
+    """The moment-matched ellipsoids against the sample mean and covariance of the action
+    mixture itself (Monte Carlo)."""
+    import torch
+
+    from iplanner_torch.eval.episode import forecast_ellipsoids
+
+    g = torch.Generator().manual_seed(0)
+    a, n_f, k = 3, 15, 2
+    mean = torch.randn(1, a, n_f, k, 3, generator=g, dtype=torch.float64) * 0.2
+    var = torch.rand(1, a, n_f, k, 3, generator=g, dtype=torch.float64) * 0.01
+    weights = torch.tensor([[0.5, 0.3, 0.2]], dtype=torch.float64)
+    fc = Forecast(weights=weights, mean=mean, var=var, dt=1 / 15,
+                  joint_names=("a", "b"), action_names=("x", "y", "z"))  # fmt: skip
+    out = forecast_ellipsoids(fc, (0.4, 1.0, 3.0))  # 3 s lies beyond the 1 s horizon
+    assert len(out) == 2 * k
+    n = 400_000
+    for i, (h, joint) in enumerate([(0.4, 0), (0.4, 1), (1.0, 0), (1.0, 1)]):
+        f = round(h * 15) - 1  # the frame at h seconds
+        act = torch.multinomial(weights[0], n, replacement=True, generator=g)
+        x = mean[0, act, f, joint] + var[0, act, f, joint].sqrt() * torch.randn(
+            n, 3, generator=g, dtype=torch.float64
+        )
+        m, c = out[i]
+        np.testing.assert_allclose(m, x.mean(0).numpy(), atol=2e-3)
+        np.testing.assert_allclose(c, np.cov(x.numpy().T), atol=2e-3)
 
 
 def test_itomp_sees_the_observed_pose_only(tmp_path: Path) -> None:
