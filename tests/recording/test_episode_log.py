@@ -389,3 +389,21 @@ def test_leaving_the_writer_on_an_exception_logs_where_and_why(tmp_path: Path) -
     with EpisodeWriter(tmp_path / "fine.mcap", metadata={"planner": "itomp"}) as log:
         log.robot_state(0.5, [0.0] * 7, [0.0] * 7, list("abcdefg"))
     assert read_episode(tmp_path / "fine.mcap").events() == []
+
+
+def test_the_readme_example_runs_on_a_log(log_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """The README's example of reading an episode log, run on a log with every channel."""
+    import re
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", readme, flags=re.S)
+    example = next(b for b in blocks if "read_episode(" in b)
+    path = re.search(r'read_episode\("([^"]+)"\)', example)
+    assert path is not None and path.group(1).endswith(".mcap")
+    namespace: dict = {}
+    exec(example.replace(path.group(1), str(log_path)), namespace)  # noqa: S102
+    out = capsys.readouterr().out
+    assert out.startswith("iplanner_ni None") and "handover" in out
+    assert namespace["q"].shape[1] == len(JOINTS) and namespace["joints"].shape[-1] == 3
+    assert namespace["over"].shape == namespace["t_b"].shape
+    assert namespace["forecast"].batch_size == len(namespace["t_f"])
