@@ -41,6 +41,7 @@ __all__ = [
     "gather_results",
     "summary_table",
     "comparison_table",
+    "paired_differences",
     "TABLE_COLUMNS",
     "episode_contact",
     "incomplete_logs_note",
@@ -480,8 +481,9 @@ def paired_differences(
         One row per group and planner other than the baseline, in display order: the group
         keys, ``planner``, ``pairs`` (pairs where both values are known), ``mean_diff``,
         ``ci_low``, ``ci_high`` (Student-t interval of the mean difference; NaN for fewer than
-        two pairs), ``p_value`` (two-sided paired t-test; NaN for fewer than two pairs, 1 when
-        every difference is 0) and ``wins`` (pairs with a difference > 0).
+        two pairs), ``p_value`` (two-sided paired t-test; NaN for fewer than two pairs; when
+        every difference is the same, 1 if it is 0 and 0 otherwise) and ``wins`` (pairs with a
+        difference > 0).
 
     Raises:
         ConfigError: when a column is missing, ``baseline`` has no episodes, ``level`` is not
