@@ -797,6 +797,47 @@ def plot_sweep(
     return out_path
 
 
+#: Metrics compared seed by seed in a report's "Paired by seed" section.
+PAIRED_METRICS = ("min_distance", "smoothness")
+
+
+def _paired_section(df: pd.DataFrame, group_by: Sequence[str]) -> list[str]:
+    """Markdown lines comparing each planner with ITOMP seed by seed
+    (:func:`paired_differences` on :data:`PAIRED_METRICS`), grouped like the summary; none
+    without ITOMP, another planner and two seeds."""
+    if (
+        "planner" not in group_by
+        or "seed" not in df.columns
+        or not (df["planner"] == "itomp").any()
+        or df["planner"].nunique() < 2
+        or df["seed"].nunique() < 2
+    ):
+        return []
+    groups = [c for c in group_by if c != "planner"]
+    lines = ["", "## Paired by seed", ""]
+    try:
+        parts = [
+            paired_differences(df, m, group_by=groups).assign(metric=m)
+            for m in PAIRED_METRICS
+            if m in df.columns
+        ]
+    except ConfigError as err:  # e.g. two episodes of one planner and seed in a group
+        return lines + [f"Not computed: {err}."]
+    if not parts:
+        return []
+    table = pd.concat(parts, ignore_index=True)
+    cols = [*groups, "planner", "metric", "pairs", "mean_diff", "ci_low", "ci_high"]
+    lines += [
+        "Each planner minus ITOMP in the same setting and seed (same person, noise and task "
+        "order), in the units above: mean difference with its 95% Student-t interval, the "
+        "paired t-test's p-value, and `wins`, the seeds where the difference is > 0 (a "
+        "larger distance, or a rougher trajectory).",
+        "",
+        to_markdown(table[[*cols, "p_value", "wins"]]),
+    ]
+    return lines
+
+
 def write_sweep_report(
     df: pd.DataFrame,
     out_dir: str | Path,
@@ -804,6 +845,9 @@ def write_sweep_report(
     sweep: str | None = None,
 ) -> list[Path]:
     """Write ``results.csv`` (per episode), ``results.md`` (summary) and the PNGs.
+
+    ``results.md`` also compares each planner with ITOMP seed by seed ("Paired by seed",
+    :func:`paired_differences`) when the results hold ITOMP, another planner and two seeds.
 
     Args:
         df: per-episode results.
@@ -835,6 +879,7 @@ def write_sweep_report(
     md += ["; ".join(legend) + ".", ""]
     md += ["Means over episodes: " + "; ".join(units) + ".", ""] if units else []
     md += [to_markdown(summary)]
+    md += _paired_section(df, group_by)
     written[1].write_text("\n".join(md))
     if len(group_by) >= 2:
         written += plot_comparison(df, out_dir, group_by=(group_by[-2], group_by[-1]))

@@ -553,3 +553,32 @@ def test_paired_differences_refuse_what_cannot_be_paired() -> None:
         paired_differences(df, "y")
     with pytest.raises(ConfigError, match="expected level in"):
         paired_differences(df, "x", level=95)
+
+
+def test_sweep_report_pairs_planners_with_itomp_by_seed(tmp_path: Path) -> None:
+    g = np.random.default_rng(5)
+    rows = []
+    for seed in range(6):
+        for planner, shift in (("itomp", 0.0), ("iplanner_ni", 0.03)):
+            rows.append({"scenario": "s", "planner": planner, "seed": seed,
+                         "min_distance": 0.05 + shift + g.normal(0, 0.005),
+                         "smoothness": 40.0 + g.normal(0, 1.0)})  # fmt: skip
+    df = pd.DataFrame(rows)
+    write_sweep_report(df, tmp_path / "a", ["scenario", "planner"])
+    md = (tmp_path / "a" / "results.md").read_text()
+    assert "## Paired by seed" in md
+    table = paired_differences(df, "min_distance")
+    section = md.split("## Paired by seed")[1].splitlines()
+    line = next(ln for ln in section if ln.startswith("| s |") and "| min_distance |" in ln)
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert cells[:4] == ["s", "iplanner_ni", "min_distance", "6"]
+    assert float(cells[4]) == pytest.approx(table.loc[0, "mean_diff"], rel=2e-3)
+    assert cells[-1] == "6" and float(cells[5]) > 0  # all six larger, interval above 0
+    # one seed, or no ITOMP: nothing to pair
+    write_sweep_report(df[df.seed == 0], tmp_path / "b", ["scenario", "planner"])
+    assert "Paired by seed" not in (tmp_path / "b" / "results.md").read_text()
+    write_sweep_report(df[df.planner != "itomp"], tmp_path / "c", ["scenario", "planner"])
+    assert "Paired by seed" not in (tmp_path / "c" / "results.md").read_text()
+    # an episode twice in a group (a setting the groups do not keep apart): said, not raised
+    write_sweep_report(pd.concat([df, df.iloc[:1]]), tmp_path / "d", ["scenario", "planner"])
+    assert "Not computed: episode" in (tmp_path / "d" / "results.md").read_text()
