@@ -42,6 +42,7 @@ __all__ = [
     "summary_table",
     "comparison_table",
     "paired_differences",
+    "plot_paired",
     "TABLE_COLUMNS",
     "episode_contact",
     "incomplete_logs_note",
@@ -719,6 +720,50 @@ def plot_comparison(
     return paths
 
 
+def plot_paired(
+    table: pd.DataFrame, metric: str, out_path: str | Path, level: float = 0.95
+) -> Path:
+    """Forest plot of :func:`paired_differences`: one row per group and planner, the mean
+    difference from the baseline with its interval, and a line at 0 (no difference).
+
+    Args:
+        table: the output of :func:`paired_differences` (its group columns are those before
+            ``planner``).
+        metric: the metric it compares (for the axis label).
+        out_path: PNG path (its folder is created).
+        level: the intervals' confidence level (for the axis label).
+
+    Returns:
+        ``out_path``.
+    """
+    _check_columns(table, ["planner", "mean_diff", "ci_low", "ci_high"], "paired columns")
+    groups = list(table.columns[: list(table.columns).index("planner")])
+    labels = [
+        " / ".join([*(str(r[c]) for c in groups), PLANNERS.get(str(r.planner), str(r.planner))])
+        for _, r in table.iterrows()
+    ]
+    y = np.arange(len(table))[::-1]
+    fig = Figure(figsize=(7.0, 1.2 + 0.32 * max(1, len(table))))
+    ax = fig.add_subplot()
+    mean = table["mean_diff"].to_numpy(dtype=float)
+    lo = mean - table["ci_low"].to_numpy(dtype=float)
+    hi = table["ci_high"].to_numpy(dtype=float) - mean
+    colours = [f"C{list(dict.fromkeys(table.planner)).index(p)}" for p in table.planner]
+    for yi, m, a, b, c in zip(y, mean, lo, hi, colours):
+        err = None if np.isnan(a) else [[a], [b]]  # fewer than two pairs: the point only
+        ax.errorbar(m, yi, xerr=err, fmt="o", color=c, capsize=3)
+    ax.axvline(0.0, color="0.4", lw=1, ls="--")
+    ax.set_yticks(y)
+    ax.set_yticklabels(labels, fontsize="small")
+    ax.set_xlabel(f"{_label(metric)}: planner minus baseline, {100 * level:g}% interval")
+    ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_path, dpi=110)
+    return out_path
+
+
 def plot_sweep(
     df: pd.DataFrame,
     x: str,
@@ -801,10 +846,13 @@ def plot_sweep(
 PAIRED_METRICS = ("min_distance", "smoothness")
 
 
-def _paired_section(df: pd.DataFrame, group_by: Sequence[str]) -> list[str]:
+def _paired_section(
+    df: pd.DataFrame, group_by: Sequence[str], out_dir: Path | None = None
+) -> tuple[list[str], list[Path]]:
     """Markdown lines comparing each planner with ITOMP seed by seed
-    (:func:`paired_differences` on :data:`PAIRED_METRICS`), grouped like the summary; none
-    without ITOMP, another planner and two seeds."""
+    (:func:`paired_differences` on :data:`PAIRED_METRICS`), grouped like the summary, and,
+    with ``out_dir``, a ``paired_<metric>.png`` forest plot of each (:func:`plot_paired`);
+    nothing without ITOMP, another planner and two seeds."""
     if (
         "planner" not in group_by
         or "seed" not in df.columns
@@ -812,7 +860,7 @@ def _paired_section(df: pd.DataFrame, group_by: Sequence[str]) -> list[str]:
         or df["planner"].nunique() < 2
         or df["seed"].nunique() < 2
     ):
-        return []
+        return [], []
     groups = [c for c in group_by if c != "planner"]
     lines = ["", "## Paired by seed", ""]
     try:
@@ -822,9 +870,14 @@ def _paired_section(df: pd.DataFrame, group_by: Sequence[str]) -> list[str]:
             if m in df.columns
         ]
     except ConfigError as err:  # e.g. two episodes of one planner and seed in a group
-        return lines + [f"Not computed: {err}."]
+        return lines + [f"Not computed: {err}."], []
     if not parts:
-        return []
+        return [], []
+    plots = []
+    if out_dir is not None:
+        for part in parts:
+            m = str(part["metric"].iloc[0])
+            plots.append(plot_paired(part.drop(columns="metric"), m, out_dir / f"paired_{m}.png"))
     table = pd.concat(parts, ignore_index=True)
     cols = [*groups, "planner", "metric", "pairs", "mean_diff", "ci_low", "ci_high"]
     lines += [
@@ -835,7 +888,9 @@ def _paired_section(df: pd.DataFrame, group_by: Sequence[str]) -> list[str]:
         "",
         to_markdown(table[[*cols, "p_value", "wins"]]),
     ]
-    return lines
+    if plots:
+        lines += ["", "Plots: " + ", ".join(f"`{p.name}`" for p in plots) + "."]
+    return lines, plots
 
 
 def write_sweep_report(
@@ -847,7 +902,8 @@ def write_sweep_report(
     """Write ``results.csv`` (per episode), ``results.md`` (summary) and the PNGs.
 
     ``results.md`` also compares each planner with ITOMP seed by seed ("Paired by seed",
-    :func:`paired_differences`) when the results hold ITOMP, another planner and two seeds.
+    :func:`paired_differences`, with ``paired_<metric>.png`` forest plots) when the results
+    hold ITOMP, another planner and two seeds.
 
     Args:
         df: per-episode results.
@@ -879,8 +935,10 @@ def write_sweep_report(
     md += ["; ".join(legend) + ".", ""]
     md += ["Means over episodes: " + "; ".join(units) + ".", ""] if units else []
     md += [to_markdown(summary)]
-    md += _paired_section(df, group_by)
+    paired_md, paired_png = _paired_section(df, group_by, out_dir)
+    md += paired_md
     written[1].write_text("\n".join(md))
+    written += paired_png
     if len(group_by) >= 2:
         written += plot_comparison(df, out_dir, group_by=(group_by[-2], group_by[-1]))
     if sweep is not None:

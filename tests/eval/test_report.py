@@ -26,6 +26,7 @@ from iplanner_torch.eval.report import (
     paired_differences,
     paper_table_simulation,
     plot_comparison,
+    plot_paired,
     plot_sweep,
     report_groups,
     side_by_side,
@@ -564,9 +565,13 @@ def test_sweep_report_pairs_planners_with_itomp_by_seed(tmp_path: Path) -> None:
                          "min_distance": 0.05 + shift + g.normal(0, 0.005),
                          "smoothness": 40.0 + g.normal(0, 1.0)})  # fmt: skip
     df = pd.DataFrame(rows)
-    write_sweep_report(df, tmp_path / "a", ["scenario", "planner"])
+    written = write_sweep_report(df, tmp_path / "a", ["scenario", "planner"])
     md = (tmp_path / "a" / "results.md").read_text()
     assert "## Paired by seed" in md
+    for m in ("min_distance", "smoothness"):  # a forest plot each, listed and readable
+        png = tmp_path / "a" / f"paired_{m}.png"
+        assert png in written and f"`paired_{m}.png`" in md
+        assert matplotlib.image.imread(png).shape[2] in (3, 4)
     table = paired_differences(df, "min_distance")
     section = md.split("## Paired by seed")[1].splitlines()
     line = next(ln for ln in section if ln.startswith("| s |") and "| min_distance |" in ln)
@@ -582,3 +587,20 @@ def test_sweep_report_pairs_planners_with_itomp_by_seed(tmp_path: Path) -> None:
     # an episode twice in a group (a setting the groups do not keep apart): said, not raised
     write_sweep_report(pd.concat([df, df.iloc[:1]]), tmp_path / "d", ["scenario", "planner"])
     assert "Not computed: episode" in (tmp_path / "d" / "results.md").read_text()
+
+
+def test_plot_paired_draws_rows_without_an_interval(tmp_path: Path) -> None:
+    table = pd.DataFrame(
+        {
+            "scenario": ["a", "b"],
+            "planner": ["iplanner_ni", "iplanner_ni"],
+            "pairs": [5, 1],
+            "mean_diff": [0.02, -0.01],
+            "ci_low": [0.01, math.nan],  # one pair: no interval
+            "ci_high": [0.03, math.nan],
+        }
+    )
+    out = plot_paired(table, "min_distance", tmp_path / "sub" / "p.png", level=0.9)
+    assert out.is_file() and matplotlib.image.imread(out).ndim == 3
+    with pytest.raises(ConfigError, match="paired columns"):
+        plot_paired(table.drop(columns="ci_low"), "min_distance", tmp_path / "q.png")
