@@ -44,8 +44,8 @@ def reference_ms() -> float:
     The machine's speed drifts between runs (and within one) by up to 2x on the development
     machine; timed right beside a measurement, this workload moves with it, so the ratio of
     the two compares code across runs better than either time. The work is dispatch-bound,
-    like a replanning cycle: 600 operations on (8, 20, 7) tensors, in the calling thread
-    setting.
+    like a replanning cycle: 600 operations on (8, 20, 7) tensors, with the caller's torch
+    thread setting.
     """
     g = torch.Generator().manual_seed(0)
     a = torch.randn(8, 20, 7, generator=g)
