@@ -242,11 +242,13 @@ def print_help_if_asked(doc: str, argv: list[str]) -> None:
 #: Root keys every command reads, with their types (checked before the command runs).
 ROOT_KEYS: dict[str, type] = {"seed": int, "progress": bool, "device": str}
 
-#: The sweep aliases of conf/config.yaml with the range each allows (checked before the
-#: command runs, so the message names the key that was typed rather than the field it feeds).
+#: Keys of conf/config.yaml that feed a field under another name (the sweep aliases, and run
+#: settings), with the range each allows (checked before the command runs, so the message
+#: names the key that was typed rather than the field it feeds).
 ALIAS_RANGES: dict[str, tuple[float, float, str]] = {
     "tracker.noise": (0.0, math.inf, ">= 0 [m]"),
     "tracker.dropout": (0.0, 1.0, "in [0, 1)"),
+    "run.scene_hz": (0.0, math.inf, ">= 0 [Hz]"),
 }
 
 

@@ -96,6 +96,7 @@ def test_console_script_reports_a_wrong_type_in_one_line(tmp_path: Path) -> None
         ({"tracker": {"noise": float("inf")}}, "tracker.noise: expected >= 0 [m], got inf"),
         ({"tracker": {"dropout": 1.0}}, "tracker.dropout: expected in [0, 1), got 1.0"),
         ({"tracker": {"dropout": "x"}}, "tracker.dropout: expected float, got 'x'"),
+        ({"run": {"scene_hz": -1}}, "run.scene_hz: expected >= 0 [Hz], got -1.0"),
         ({"progress": "yes"}, "progress: expected bool, got 'yes'"),
     ],
 )
