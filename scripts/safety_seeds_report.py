@@ -20,7 +20,7 @@ import pandas as pd
 from _report import complete_rows, fail, parse_report_args, write_readme
 
 from iplanner_torch.errors import DataError
-from iplanner_torch.eval.report import gather_results, paired_differences, to_markdown
+from iplanner_torch.eval.report import gather_results, paired_table, to_markdown
 
 OUT = Path(__file__).resolve().parents[1] / "experiments" / "safety_seeds"
 
@@ -69,18 +69,14 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
 
 def paired(df: pd.DataFrame) -> pd.DataFrame:
     """Each planner minus ITOMP, seed by seed, on the closest distance [cm] and smoothness
-    (:func:`~iplanner_torch.eval.report.paired_differences`); empty without ITOMP rows."""
+    (:func:`~iplanner_torch.eval.report.paired_table`); empty without ITOMP rows."""
     if not (df["planner"] == "itomp").any():
         return pd.DataFrame()
-    parts = []
-    for metric, scale, label in (("min_distance", 100.0, "distance cm"), ("smoothness", 1.0, "")):
-        t = paired_differences(df, metric)
-        for c in ("mean_diff", "ci_low", "ci_high"):
-            t[c] = t[c] * scale
-        parts.append(t.assign(metric=label or metric))
-    out = pd.concat(parts, ignore_index=True)
-    cols = ["scenario", "planner", "metric", "pairs", "mean_diff", "ci_low", "ci_high"]
-    return out[[*cols, "p_value", "wins"]]
+    out = paired_table(df, ("min_distance", "smoothness"))
+    dist = out["metric"] == "min_distance"
+    out.loc[dist, ["mean_diff", "ci_low", "ci_high"]] *= 100.0
+    out.loc[dist, "metric"] = "distance cm"
+    return out
 
 
 def main() -> None:

@@ -452,7 +452,7 @@ def _log_scene(
     with torch.no_grad():
         rc = robot.sphere_centers(torch.as_tensor(q, dtype=ref.dtype, device=ref.device))
     rs = torch.cat([rc.cpu().double(), robot.sphere_radii.cpu().double().unsqueeze(-1)], -1)
-    hc = smap.matrix.double() @ torch.as_tensor(joints, dtype=torch.float64)  # (S_h, 3)
+    hc = smap.centers(torch.as_tensor(joints, dtype=torch.float64))  # (S_h, 3)
     hs = torch.cat([hc, smap.radii.double().unsqueeze(-1)], -1)
     writer.scene(t, rs, hs, [SceneEllipsoid(mean=m, cov=c) for m, c in ellipsoids])
 
@@ -983,7 +983,7 @@ def _metrics(
         rc = robot.sphere_centers(q)  # (T, S_r, 3)
     smap = HumanSphereMap.from_segments(JOINT_NAMES)
     hj = torch.as_tensor(np.asarray(h_hist), dtype=torch.float64)  # (T, K, 3)
-    hc = torch.einsum("sk,tkc->tsc", smap.matrix.double(), hj)  # (T, S_h, 3)
+    hc = smap.centers(hj)  # (T, S_h, 3)
     t_alone = None
     if not blocking:
         lift = np.array([0.0, 0.0, 0.04 - 0.5 * scene.block_size])

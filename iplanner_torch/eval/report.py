@@ -42,6 +42,7 @@ __all__ = [
     "summary_table",
     "comparison_table",
     "paired_differences",
+    "paired_table",
     "plot_paired",
     "TABLE_COLUMNS",
     "episode_contact",
@@ -846,13 +847,41 @@ def plot_sweep(
 PAIRED_METRICS = ("min_distance", "smoothness")
 
 
+def paired_table(
+    df: pd.DataFrame,
+    metrics: Sequence[str] = PAIRED_METRICS,
+    *,
+    group_by: Sequence[str] = ("scenario",),
+    baseline: str = "itomp",
+) -> pd.DataFrame:
+    """:func:`paired_differences` of each of ``metrics`` present in ``df``, stacked.
+
+    Returns:
+        The group columns, ``planner``, ``metric`` (the metric's column name), then the
+        columns of :func:`paired_differences`; one block of rows per metric, in the order of
+        ``metrics``. Empty when none of ``metrics`` is in ``df``.
+
+    Raises:
+        ConfigError: as :func:`paired_differences`.
+    """
+    parts = [
+        paired_differences(df, m, group_by=group_by, baseline=baseline).assign(metric=m)
+        for m in metrics
+        if m in df.columns
+    ]
+    cols = [*group_by, "planner", "metric", "pairs", "mean_diff", "ci_low", "ci_high"]
+    cols += ["p_value", "wins"]
+    if not parts:
+        return pd.DataFrame(columns=cols)
+    return pd.concat(parts, ignore_index=True)[cols]
+
+
 def _paired_section(
     df: pd.DataFrame, group_by: Sequence[str], out_dir: Path | None = None
 ) -> tuple[list[str], list[Path]]:
-    """Markdown lines comparing each planner with ITOMP seed by seed
-    (:func:`paired_differences` on :data:`PAIRED_METRICS`), grouped like the summary, and,
-    with ``out_dir``, a ``paired_<metric>.png`` forest plot of each (:func:`plot_paired`);
-    nothing without ITOMP, another planner and two seeds."""
+    """Markdown lines comparing each planner with ITOMP seed by seed (:func:`paired_table`),
+    grouped like the summary, and, with ``out_dir``, a ``paired_<metric>.png`` forest plot of
+    each metric (:func:`plot_paired`); nothing without ITOMP, another planner and two seeds."""
     if (
         "planner" not in group_by
         or "seed" not in df.columns
@@ -861,32 +890,25 @@ def _paired_section(
         or df["seed"].nunique() < 2
     ):
         return [], []
-    groups = [c for c in group_by if c != "planner"]
     lines = ["", "## Paired by seed", ""]
     try:
-        parts = [
-            paired_differences(df, m, group_by=groups).assign(metric=m)
-            for m in PAIRED_METRICS
-            if m in df.columns
-        ]
+        table = paired_table(df, group_by=[c for c in group_by if c != "planner"])
     except ConfigError as err:  # e.g. two episodes of one planner and seed in a group
         return lines + [f"Not computed: {err}."], []
-    if not parts:
+    if table.empty:
         return [], []
     plots = []
     if out_dir is not None:
-        for part in parts:
-            m = str(part["metric"].iloc[0])
-            plots.append(plot_paired(part.drop(columns="metric"), m, out_dir / f"paired_{m}.png"))
-    table = pd.concat(parts, ignore_index=True)
-    cols = [*groups, "planner", "metric", "pairs", "mean_diff", "ci_low", "ci_high"]
+        for m in dict.fromkeys(table["metric"]):
+            part = table[table["metric"] == m].drop(columns="metric")
+            plots.append(plot_paired(part, str(m), out_dir / f"paired_{m}.png"))
     lines += [
         "Each planner minus ITOMP in the same setting and seed (same person, noise and task "
         "order), in the units above: mean difference with its 95% Student-t interval, the "
         "paired t-test's p-value, and `wins`, the seeds where the difference is > 0 (a "
         "larger distance, or a rougher trajectory).",
         "",
-        to_markdown(table[[*cols, "p_value", "wins"]]),
+        to_markdown(table),
     ]
     if plots:
         lines += ["", "Plots: " + ", ".join(f"`{p.name}`" for p in plots) + "."]

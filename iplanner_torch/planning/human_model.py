@@ -73,6 +73,11 @@ class HumanSphereMap:
         """S_h."""
         return int(self.matrix.shape[0])
 
+    def centers(self, joints: torch.Tensor) -> torch.Tensor:
+        """Sphere centres of known joint positions: (..., K, 3) [m] -> (..., S_h, 3) [m]."""
+        m = self.matrix.to(device=joints.device, dtype=joints.dtype)
+        return torch.einsum("sk,...kc->...sc", m, joints)
+
     def centers_diag(
         self, mean: torch.Tensor, var: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -86,7 +91,4 @@ class HumanSphereMap:
             mean (..., S_h, 3) [m] and var (..., S_h, 3) [m^2].
         """
         m = self.matrix.to(device=mean.device, dtype=mean.dtype)
-        return (
-            torch.einsum("sk,...kc->...sc", m, mean),
-            torch.einsum("sk,...kc->...sc", m * m, var),
-        )
+        return self.centers(mean), torch.einsum("sk,...kc->...sc", m * m, var)

@@ -246,6 +246,12 @@ def test_sphere_map_interpolates_joints() -> None:
     u = 1 / 6
     assert torch.allclose(m[k], (1 - u) * mean[i_ls] + u * mean[i_le], atol=1e-6)
     assert torch.allclose(v[k], (1 - u) ** 2 * var[i_ls] + u**2 * var[i_le], atol=1e-6)
+    # known positions (a batch of frames): the same interpolation, the means of centers_diag
+    frames = torch.stack([mean, 2.0 * mean]).double()  # (2, K, 3)
+    c = sm.centers(frames)
+    assert c.shape == (2, 22, 3) and c.dtype == torch.float64
+    assert torch.allclose(c[0, k], (1 - u) * frames[0, i_ls] + u * frames[0, i_le])
+    assert torch.allclose(c[1].float(), sm.centers_diag(2.0 * mean, var)[0], atol=1e-6)
     with pytest.raises(ConfigError, match="needs joint 'head'"):
         HumanSphereMap.from_segments(JOINT_NAMES[1:])
 
