@@ -15,20 +15,19 @@ NaN in the result.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import torch
 
-from iplanner_torch.checks import finite_time
+from iplanner_torch.checks import finite_time, positive
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_finite, check_shape
 
 
-def _check_dt(dt: float) -> None:
-    """ConfigError unless a Python-number ``dt`` is finite and > 0 (a tensor is not checked)."""
-    if not isinstance(dt, torch.Tensor) and not 0.0 < dt < math.inf:
-        raise ConfigError(f"expected dt > 0 and finite, got {dt}")
+def _check_positive(name: str, value: float | torch.Tensor) -> None:
+    """:func:`~iplanner_torch.checks.positive` for a Python number (a tensor is not checked)."""
+    if not isinstance(value, torch.Tensor):
+        positive(name, value)
 
 
 def velocities(q: torch.Tensor, dt: float) -> torch.Tensor:
@@ -44,7 +43,7 @@ def velocities(q: torch.Tensor, dt: float) -> torch.Tensor:
     Raises:
         ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
-    _check_dt(dt)
+    _check_positive("dt", dt)
     return (q[..., 1:, :] - q[..., :-1, :]) / dt
 
 
@@ -66,7 +65,7 @@ def accelerations(
     Raises:
         ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
-    _check_dt(dt)
+    _check_positive("dt", dt)
     acc = (q[..., 2:, :] - 2.0 * q[..., 1:-1, :] + q[..., :-2, :]) / (dt * dt)
     if qd_start is None:
         return acc
@@ -85,8 +84,7 @@ def uniform_times(
     """
     if not isinstance(t0, torch.Tensor):
         finite_time("t0", t0)
-    if not isinstance(duration, torch.Tensor) and not 0.0 < duration < math.inf:
-        raise ConfigError(f"expected duration > 0 and finite, got {duration}")
+    _check_positive("duration", duration)
     return t0 + torch.linspace(0.0, duration, num_waypoints, device=like.device, dtype=like.dtype)
 
 
