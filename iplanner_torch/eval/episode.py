@@ -63,7 +63,8 @@ measured joint trajectory and on sphere models of the robot and the true human, 
   source) divided by the time until the human took the last block; NaN when unfinished;
 * ``sim/contacts`` / ``sim/contact_steps``: robot-human contacts from MuJoCo (onsets / control
   periods in contact); ``plan/*``: replanning cycles, overruns, waits, evasions (no safe
-  trajectory and holding riskier than moving: ``PlanResult.evasive``) and solve times.
+  trajectory and holding riskier than moving: ``PlanResult.evasive``), escapes (the evasions
+  that stepped out of the way: ``PlanResult.escape``) and solve times.
 """
 
 from __future__ import annotations
@@ -943,6 +944,7 @@ def _run_episode(
             "plan/waits": float(getattr(stats, "waits", 0)),
             "plan/wait_s": float(getattr(stats, "wait_s", 0.0)),
             "plan/evasions": float(getattr(stats, "evasions", 0)),
+            "plan/escapes": float(getattr(stats, "escapes", 0)),
             "plan/emergencies": float(getattr(stats, "emergencies", 0)),
             "plan/stall_cycles": float(stall_cycles),
             "plan/mean_solve_ms": float(getattr(stats, "mean_solve_ms", 0.0)),

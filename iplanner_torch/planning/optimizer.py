@@ -14,9 +14,14 @@ the execution window enters as a quadratic penalty on ``log(bound / target)`` ab
 ``target`` a fraction of ``1 - delta`` so that solutions land inside the feasible set; the
 constraint is then checked exactly (all sphere pairs) when a trajectory is accepted. When no
 trajectory meets it, the plan follows the best one up to its last safe waypoint and waits there
-(sec. 5), reporting the delay. Beyond the paper, ``CostWeights.human_lookahead_penalty`` puts
-the same penalty, as a soft cost only, on the waypoints after the window, so a plan bends
-around where the person is predicted to be before that part of it is executed.
+(sec. 5), reporting the delay; when holding there is riskier than moving along a candidate,
+the least risky candidate runs instead (an evasion). Beyond the paper, opt-in:
+``OptimizerCfg.safe_hold`` stops a wait earlier when its hold would itself break the
+constraint, and ``OptimizerCfg.escape_within_s`` steps out of the person's way when holding
+breaks it within that time and no candidate is less risky. Also beyond the paper,
+``CostWeights.human_lookahead_penalty`` puts the same penalty, as a soft cost only, on the
+waypoints after the window, so a plan bends around where the person is predicted to be before
+that part of it is executed.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ from typing import Protocol, runtime_checkable
 
 import torch
 
-from iplanner_torch.checks import finite_time
+from iplanner_torch.checks import finite_time, flag
 from iplanner_torch.errors import ConfigError, PlanningError
 from iplanner_torch.planning import costs as C
 from iplanner_torch.planning.human_model import HumanSphereMap
@@ -127,6 +132,15 @@ class OptimizerCfg:
     prune_every: int = 8
     # cost weights
     weights: C.CostWeights = field(default_factory=C.CostWeights)
+    # a wait stops at the latest waypoint of its path whose hold keeps the bound within the
+    # confidence limit, when the hold at the last waypoint before the first unsafe one
+    # (the paper's wait) is itself unsafe; False: the paper's wait
+    safe_hold: bool = False
+    # when no trajectory is safe and holding breaks the confidence limit within this many
+    # seconds of the window's start (before the next cycle, due wait_lead_s after a wait,
+    # could react), and no candidate is less risky than holding: step out of the person's
+    # way (PlanResult.escape) instead of waiting in it; None: always wait (the paper)
+    escape_within_s: float | None = None
     # seed of the random initial perturbations (same seed -> same plan)
     seed: int = 0
     # device of the plan; None follows the robot model's tensors
@@ -159,6 +173,9 @@ class OptimizerCfg:
             raise ConfigError("expected prune_every >= 1 and prune_margin >= 0")
         if not isinstance(self.weights, C.CostWeights):
             raise ConfigError(f"expected weights to be CostWeights, got {type(self.weights)}")
+        flag("safe_hold", self.safe_hold)
+        if self.escape_within_s is not None and not self.escape_within_s >= 0.0:
+            raise ConfigError(f"expected escape_within_s >= 0 or None, got {self.escape_within_s}")
 
 
 @dataclass(kw_only=True)
@@ -182,7 +199,11 @@ class PlanResult:
             times), ``collision_ms`` (bound evaluations, forward), ``optimiser_ms`` (the rest),
             ``total_ms``.
         evasive: no trajectory met the constraint and waiting would have been riskier than
-            moving: the plan is the candidate with the smallest peak bound (no wait).
+            moving: the plan is the candidate with the smallest peak bound (no wait), or the
+            escape.
+        escape: an evasive plan that steps out of the person's way instead of heading for
+            the goal: no candidate was less risky than holding
+            (:meth:`TrajectoryOptimizer._escape`).
     """
 
     feasible: bool
@@ -196,6 +217,7 @@ class PlanResult:
     cost_terms: dict[str, float]
     timings: dict[str, float]
     evasive: bool = False
+    escape: bool = False
 
     def trajectory(self) -> Trajectory:
         """The plan as an executable :class:`Trajectory`."""
@@ -861,14 +883,7 @@ class TrajectoryOptimizer:
         rank = self._weighted(
             {k: v for k, v in terms.items() if not k.startswith("human_confidence")}
         )
-        bad = torch.zeros(b, w, dtype=torch.bool, device=q_all.device)  # (B, W)
-        if clearance is not None:
-            ends = torch.minimum(clearance[:, :1], clearance[:, -1:])  # (B, 1)
-            floor = (ends - END_CLEARANCE_SLACK).clamp(max=0.0)
-            bad[:, 1:] |= clearance[:, 1:] < floor
-        # a segment faster than the limits could jump past the checks
-        too_fast = ((q_all[:, 1:] - q_all[:, :-1]).abs() / dt > VEL_TOL * self.v_max).any(-1)
-        bad[:, 1:] |= too_fast
+        bad = self._static_bad(q_all, dt, clearance)  # (B, W)
         static_ok = ~bad.any(-1)  # (B,) clear of the static scene and within the limits
         if bound is not None:
             bad[:, win_idx] |= bound > limit
@@ -912,20 +927,82 @@ class TrajectoryOptimizer:
                 or float(bound2.amax()) <= max(limit, float(bound1.amax()))
             ):
                 q_hold, terms1, bound1 = q_soft[0], terms2, bound2
+        if cfg.safe_hold and bound1 is not None and hold >= 1 and float(bound1.amax()) > limit:
+            # The hold is itself unsafe (the person is predicted to come to the held pose):
+            # stop earlier on the same path, at the latest waypoint whose hold is safe.
+            earlier = list(range(hold - 1, -1, -1))
+            stops = torch.stack([self._stop(q_all[best], h) for h in earlier])
+            terms_s, bound_s, _ = self._accept_terms(
+                stops, dt, qd_start, q_goal, human, win_idx, timer, look_idx
+            )
+            if bound_s is not None:
+                safe = torch.nonzero(bound_s.amax(-1) <= limit).flatten()
+                if safe.numel() > 0:
+                    k = int(safe[0])
+                    hold, q_hold, bound1 = earlier[k], stops[k], bound_s[k : k + 1]
+                    terms1 = {name: v[k : k + 1] for name, v in terms_s.items()}
         t_end = float(times[-1]) if window is None else min(float(window[1]), float(times[-1]))
         wait_s = max(t_end - float(times[hold]), 0.0)
-        if bound is not None and bound1 is not None and bool(static_ok.any()):
+        if (
+            human is not None
+            and bound is not None
+            and bound1 is not None
+            and float(bound1.amax()) > limit
+        ):
             # Holding is itself unsafe (the person comes towards the held pose): move along
-            # the candidate with the smallest peak bound instead, when that is lower.
+            # the candidate with the smallest peak bound instead, when that is lower; when
+            # none is (every candidate is riskier, or leaves the static scene or the limits),
+            # step out of the person's way (:meth:`_escape`) when that is lower.
+            hold_peak = float(bound1.amax())
             peak = torch.where(static_ok, bound.amax(-1), torch.full_like(rank, math.inf))
             evade = int(peak.argmin())
-            hold_peak = float(bound1.amax())
-            if hold_peak > limit and float(peak[evade]) < hold_peak:
+            if float(peak[evade]) < hold_peak:
                 res = self._result(
                     False, q_all, evade, times, bound, win_idx, terms, qd_start, 0.0
                 )
                 res.evasive = True
                 return res
+            if not self._imminent(bound1[0], times, win_idx, window, limit):
+                return self._wait_result(
+                    q_all, best, q_hold, times, bound1, win_idx, terms1, qd_start, wait_s, hold
+                )
+            escape = self._escape(
+                q_all[0, 0], qd_start, dt, q_goal, human, win_idx, timer, look_idx
+            )
+            q_esc = escape.unsqueeze(0)
+            terms_e, bound_e, clear_e = self._accept_terms(
+                q_esc, dt, qd_start, q_goal, human, win_idx, timer, look_idx
+            )
+            if (
+                bound_e is not None
+                and self._static_ok(q_esc, dt, clear_e, qd_start)
+                and float(bound_e.amax()) < hold_peak
+            ):
+                q_cand = q_all.clone()
+                q_cand[best] = escape
+                res = self._result(
+                    False, q_cand, best, times, bound_e, win_idx, terms_e, qd_start, 0.0, row=0
+                )
+                res.evasive = res.escape = True
+                return res
+        return self._wait_result(
+            q_all, best, q_hold, times, bound1, win_idx, terms1, qd_start, wait_s, hold
+        )
+
+    def _wait_result(
+        self,
+        q_all: torch.Tensor,
+        best: int,
+        q_hold: torch.Tensor,
+        times: torch.Tensor,
+        bound1: torch.Tensor | None,
+        win_idx: torch.Tensor,
+        terms1: dict[str, torch.Tensor],
+        qd_start: torch.Tensor | None,
+        wait_s: float,
+        hold: int,
+    ) -> PlanResult:
+        """The wait: candidate ``best`` replaced by its stop ``q_hold`` (W, J)."""
         q_cand = q_all.clone()
         q_cand[best] = q_hold
         res = self._result(
@@ -933,6 +1010,172 @@ class TrajectoryOptimizer:
         )
         res.hold_index = hold
         return res
+
+    def _imminent(
+        self,
+        hold_bound: torch.Tensor,
+        times: torch.Tensor,
+        win_idx: torch.Tensor,
+        window: tuple[float, float] | None,
+        limit: float,
+    ) -> bool:
+        """Whether the hold's bound (W_x,) breaks ``limit`` within ``cfg.escape_within_s`` of
+        the window's start (False when the escape is off)."""
+        within = self.cfg.escape_within_s
+        if within is None:
+            return False
+        t_a = float(times[0]) if window is None else float(window[0])
+        soon = times[win_idx] <= t_a + within + 1e-9  # (W_x,)
+        return bool(soon.any()) and float(hold_bound[soon].max()) > limit
+
+    def _stop(self, q: torch.Tensor, hold: int) -> torch.Tensor:
+        """(W, J) the path q (W, J) stopped at waypoint ``hold``: slowed down to a stop at or
+        before it (:func:`smooth_stop`) with ``acc_max`` and ``hold >= 1``, else held there
+        from that waypoint on."""
+        if self.cfg.acc_max is not None and hold >= 1:
+            return smooth_stop(q, hold)
+        out = q.clone()
+        out[hold + 1 :] = out[hold]
+        return out
+
+    def _static_bad(
+        self,
+        q: torch.Tensor,
+        dt: float,
+        clearance: torch.Tensor | None,
+        free_end: bool = False,
+    ) -> torch.Tensor:
+        """(B, W) waypoints of q (B, W, J) that break the static checks: clearance below the
+        plan's ends (only its start with ``free_end``: a plan that does not end at the task's
+        goal) by more than ``END_CLEARANCE_SLACK`` (below 0 at most), or reached by a segment
+        faster than ``VEL_TOL`` times the velocity limits."""
+        bad = torch.zeros(q.shape[:2], dtype=torch.bool, device=q.device)  # (B, W)
+        if clearance is not None:
+            ends = clearance[:, :1]  # (B, 1)
+            if not free_end:
+                ends = torch.minimum(ends, clearance[:, -1:])
+            floor = (ends - END_CLEARANCE_SLACK).clamp(max=0.0)
+            bad[:, 1:] |= clearance[:, 1:] < floor
+        # a segment faster than the limits could jump past the checks
+        bad[:, 1:] |= ((q[:, 1:] - q[:, :-1]).abs() / dt > VEL_TOL * self.v_max).any(-1)
+        return bad
+
+    def _static_ok(
+        self,
+        q: torch.Tensor,
+        dt: float,
+        clearance: torch.Tensor | None,
+        qd_start: torch.Tensor | None,
+    ) -> bool:
+        """Whether the single trajectory q (1, W, J), which need not end at the goal, passes
+        the static checks and, with ``acc_max``, stays within ``ACC_TOL`` times it."""
+        if bool(self._static_bad(q, dt, clearance, free_end=True).any()):
+            return False
+        if self.cfg.acc_max is None:
+            return True
+        acc = accelerations(q, dt, qd_start)
+        return float(acc.abs().max()) <= ACC_TOL * self.cfg.acc_max
+
+    def _escape(
+        self,
+        q_start: torch.Tensor,
+        qd_start: torch.Tensor | None,
+        dt: float,
+        q_goal: torch.Tensor,
+        human: C.HumanObstacle,
+        win_idx: torch.Tensor,
+        timer: _Timer,
+        look_idx: torch.Tensor | None,
+    ) -> torch.Tensor:
+        """(W, J) a way out of the person's path, for when holding is unsafe and no candidate
+        is less risky (the robot waits where the person is about to reach, e.g. at the spot
+        it has just delivered to).
+
+        From ``q_start`` (moving at ``qd_start``), each waypoint inside the execution window
+        heads down the gradient of the risk of staying at the current pose for the rest of
+        the window (the confidence penalty of its bound on the window's later waypoints plus
+        the penetration of the mean human spheres), at ``INIT_VEL_FRACTION`` of the velocity
+        limits (scaled so that no joint exceeds its share), reached within ``cfg.acc_max``.
+        When a step would bring the robot within ``cfg.static_margin`` of the static scene
+        (or closer than it already is), its part along the clearance gradient is removed, so
+        the way out slides along the table instead of into it. After the window, or where
+        the gradient vanishes, the motion brakes to rest within ``cfg.acc_max``. Joint limits
+        are respected. The caller checks the result exactly, as any plan.
+        """
+        cfg, w = self.cfg, self.cfg.num_waypoints
+        weights = cfg.weights
+        target = math.log(cfg.penalty_target * (1.0 - cfg.confidence))
+        v_lim = INIT_VEL_FRACTION * self.v_max
+        a_step = math.inf if cfg.acc_max is None else cfg.acc_max * dt
+        last_window = int(win_idx.max())
+        v = torch.zeros_like(q_start) if qd_start is None else qd_start.clone()
+        path = [q_start]
+        for i in range(1, w):
+            p = path[-1]
+            v_des = torch.zeros_like(p)
+            normal = None  # gradient of the static clearance
+            clear_now = math.inf
+            with torch.enable_grad():
+                x = p.detach().clone().requires_grad_(True)
+                if i <= last_window:
+                    terms, bound, _, _ = self._terms(
+                        x.expand(1, w, -1),
+                        dt,
+                        None,
+                        q_goal,
+                        human,
+                        win_idx,
+                        None,
+                        timer,
+                        prune=cfg.prune_margin,
+                        look_idx=look_idx,
+                    )
+                    later = (win_idx >= i).to(p.dtype)  # (W_x,)
+                    log_b = torch.log(bound[0].clamp_min(1e-30))
+                    excess = torch.relu(log_b - target) * later
+                    risk = weights.human_confidence_penalty * excess.square().sum()
+                    pen = terms["human_mean_penetration"][0]
+                    risk = risk + weights.human_mean_penetration * pen
+                    if risk.requires_grad:
+                        (g,) = torch.autograd.grad(risk, x)
+                        g = g.nan_to_num(nan=0.0, posinf=0.0, neginf=0.0)
+                        scale = float((g.abs() / v_lim).max())
+                        if scale > 0.0:
+                            v_des = -g / scale
+                scene = self.static_scene
+                if scene is not None:
+                    clear = self._clearance(scene, x)
+                    clear_now = float(clear.detach())
+                    if clear.requires_grad:
+                        (n,) = torch.autograd.grad(clear, x)
+                        if all_finite(n) and float(n.square().sum()) > 0.0:
+                            normal = n
+            v = torch.minimum(torch.maximum(v + (v_des - v).clamp(-a_step, a_step), -v_lim), v_lim)
+            if normal is not None and scene is not None:
+                with torch.no_grad():
+                    # slide along the obstacle when the step would bring it closer than the
+                    # margin (or closer than it already is)
+                    limit_c = min(clear_now, cfg.static_margin)
+                    if float(self._clearance(scene, p + v * dt)) < limit_c:
+                        v = self._slide(v, normal)
+            nxt = torch.minimum(torch.maximum(p + v * dt, self.q_min), self.q_max)
+            v = (nxt - p) / dt
+            path.append(nxt)
+        return torch.stack(path)
+
+    def _clearance(self, scene: C.ClearanceScene, q: torch.Tensor) -> torch.Tensor:
+        """() the smallest clearance [m] of the robot's spheres at q (J,) from ``scene``."""
+        centers = self.robot.sphere_centers(q).view(1, 1, -1, 3)
+        return scene.clearance(centers, self.radii).min()
+
+    @staticmethod
+    def _slide(v: torch.Tensor, normal: torch.Tensor) -> torch.Tensor:
+        """v (J,) without its part against ``normal`` (J,), the clearance gradient: a
+        velocity that would reduce the clearance moves along the obstacle instead."""
+        into = float(v @ normal)
+        if into >= 0.0:
+            return v
+        return v - (into / float(normal @ normal)) * normal
 
     def _accept_terms(
         self,

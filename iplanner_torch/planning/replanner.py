@@ -248,6 +248,9 @@ class ReplannerStats:
         wait_s: total seconds of waits planned.
         evasions: solves where no trajectory met the constraint and holding was riskier than
             moving (``PlanResult.evasive``: the least risky trajectory, no wait).
+        escapes: the evasions among them that stepped out of the person's way rather than
+            heading for the goal (``PlanResult.escape``: no candidate was less risky than
+            holding).
         emergencies: cycles whose new forecast put the plans already committed above the
             confidence limit, so that the new plan took over after ``emergency_lead_s``.
         solve_ms: wall-clock milliseconds of each solve.
@@ -258,6 +261,7 @@ class ReplannerStats:
     waits: int = 0
     wait_s: float = 0.0
     evasions: int = 0
+    escapes: int = 0
     emergencies: int = 0
     solve_ms: list[float] = field(default_factory=list)
 
@@ -546,6 +550,7 @@ class Replanner:
             )
         if result.evasive:
             self.stats.evasions += 1
+            self.stats.escapes += int(result.escape)
         elif not result.feasible:
             self.stats.waits += 1
             self.stats.wait_s += result.wait_s

@@ -74,3 +74,27 @@ def mc_ball_probability(
     gen = torch.Generator().manual_seed(seed)
     x = d.double() + var.double().sqrt() * torch.randn(n, 3, generator=gen, dtype=torch.float64)
     return float((x.norm(dim=-1) <= rad).double().mean())
+
+
+def approaching(
+    start_x: float,
+    arrive_s: float,
+    y: float,
+    std: float = 0.05,
+    dtype: torch.dtype = torch.float64,
+) -> Forecast:
+    """One joint at (x, y, 0) moving from x = ``start_x`` to 0 over ``arrive_s`` seconds, then
+    resting; isotropic ``std`` [m]; 30 frames at 0.05 s."""
+    n_f, dt = 30, 0.05
+    t = dt * torch.arange(1, n_f + 1, dtype=dtype)
+    mean = torch.zeros(1, 1, n_f, 1, 3, dtype=dtype)
+    mean[0, 0, :, 0, 0] = start_x * (1.0 - t / arrive_s).clamp_min(0.0)
+    mean[0, 0, :, 0, 1] = y
+    return Forecast(
+        weights=torch.ones(1, 1, dtype=dtype),
+        mean=mean,
+        var=torch.full_like(mean, std * std),
+        dt=dt,
+        joint_names=("j",),
+        action_names=("approach",),
+    )

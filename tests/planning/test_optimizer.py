@@ -3,12 +3,15 @@ the iiwa beside a Gaussian human sphere, and the infeasible case that waits."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
 from planning_fakes import (
     PlanarArm,
     PointRobot,
+    approaching,
     mc_ball_probability,
     one_sphere_map,
     static_forecast,
@@ -534,6 +537,143 @@ def test_when_holding_is_riskier_than_moving_the_least_risky_trajectory_is_taken
         duration=1.0,
     )
     assert not res2.feasible and not res2.evasive and res2.wait_s > 0.0
+
+
+class _Behind:
+    """Half-space x <= x1 (signed distance of spheres to it): something behind the robot."""
+
+    def __init__(self, x1: float) -> None:
+        self.x1 = x1
+
+    def clearance(self, centers: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
+        return centers[..., 0] - self.x1 - radii
+
+
+def _wait_cfg(**cfg_kw: object) -> OptimizerCfg:
+    """Two given trajectories of 11 waypoints, not optimised, under an acceleration limit."""
+    return OptimizerCfg(
+        num_trajectories=2,
+        num_waypoints=11,
+        warm_iterations=0,
+        collision_substeps=1,
+        acc_max=6.0,
+        **cfg_kw,
+    )
+
+
+def _escape_setup(behind: bool, **cfg_kw: object) -> tuple[TrajectoryOptimizer, dict]:
+    robot = PointRobot(dtype=torch.float64)
+    w = 11
+    cfg = _wait_cfg(**{"escape_within_s": 0.2, **cfg_kw})
+    static = _Behind(-0.08) if behind else None
+    opt = TrajectoryOptimizer(robot, cfg, static_scene=static, human_spheres=one_sphere_map(0.1))
+    s = torch.linspace(0.0, 1.0, w, dtype=torch.float64)
+    towards = torch.stack([0.9 * s, torch.zeros_like(s)], -1)  # (W, 2), through the person
+    bent = torch.stack([0.9 * s, -0.05 * torch.sin(math.pi * s)], -1)
+    args = {
+        "q_start": torch.zeros(2, dtype=torch.float64),
+        "q_goal": torch.tensor([0.9, 0.0], dtype=torch.float64),
+        "duration": 1.0,
+        "q_init": torch.stack([towards, bent]),
+    }
+    return opt, args
+
+
+@pytest.mark.parametrize("behind", [False, True])
+def test_when_no_candidate_is_less_risky_than_holding_the_robot_steps_out_of_the_way(
+    behind: bool,
+) -> None:
+    # The person comes at where the robot stands, arriving within 0.3 s, and every candidate
+    # heads for a goal beyond the person: holding is unsafe at once and moving along any
+    # candidate is riskier still. The plan then steps out of the way (the escape) instead of
+    # waiting there. With a wall right behind the robot, the way out goes sideways, never into
+    # the wall.
+    opt, args = _escape_setup(behind)
+    forecast = approaching(0.3, 0.3, -0.04)  # coming in just right of centre
+    res = opt.solve(args.pop("q_start"), args.pop("q_goal"), forecast=forecast, **args)
+    start = torch.zeros(2, dtype=torch.float64)
+    assert not res.feasible and res.evasive and res.escape
+    assert res.wait_s == 0.0 and res.hold_index is None
+    assert torch.equal(res.q[0], start)
+    w = res.q.shape[0]
+    hold_bound = opt.collision_bound(start.expand(w - 1, 2), res.times[1:], forecast, 0.0)
+    assert float(res.bound.max()) < float(hold_bound.max())
+    # within the velocity and acceleration limits, and clear of the wall
+    dt = float(res.times[1] - res.times[0])
+    vel = (res.q[1:] - res.q[:-1]) / dt
+    assert bool((vel.abs() <= opt.v_max).all())
+    acc = accelerations(res.q.unsqueeze(0), dt, None).abs().max()
+    assert float(acc) <= ACC_TOL * opt.cfg.acc_max
+    if behind:
+        assert float(res.q[:, 0].min()) >= -0.08 + 0.05 - 1e-9  # the sphere never enters
+        assert float(res.q[-1, 1]) > 0.1  # sideways, away from the person's side
+    else:
+        assert float(res.q[-1, 0]) < -0.1  # straight back
+
+    # independent check: Monte Carlo risk of the escape's worst waypoint against holding
+    def risk(q: torch.Tensor, t: float) -> float:
+        c = torch.tensor([0.3 * max(1.0 - t / 0.3, 0.0), -0.04, 0.0], dtype=torch.float64)
+        d = c - torch.cat([q, torch.zeros(1, dtype=torch.float64)])
+        var = torch.full((3,), 0.05**2, dtype=torch.float64)
+        return mc_ball_probability(d, var, 0.15, n=50_000)
+
+    escaping = max(risk(q, float(t)) for q, t in zip(res.q[1:], res.times[1:]))
+    holding = max(risk(start, float(t)) for t in res.times[1:])
+    assert escaping < holding
+    assert holding > 1 - opt.cfg.confidence
+
+
+def test_a_hold_that_breaks_the_limit_only_later_or_with_the_escape_off_stays_a_wait() -> None:
+    # the same person arriving only after 1 s: the next cycle can still react, so it waits
+    opt, args = _escape_setup(False)
+    q_s, q_g = args.pop("q_start"), args.pop("q_goal")
+    late = opt.solve(q_s, q_g, forecast=approaching(0.6, 1.0, -0.04), **args)
+    assert not late.feasible and not late.evasive and not late.escape
+    # arriving at once, but with the escape off
+    opt_off, _ = _escape_setup(False, escape_within_s=None)
+    off = opt_off.solve(q_s, q_g, forecast=approaching(0.3, 0.3, -0.04), **args)
+    assert not off.feasible and not off.evasive and not off.escape and off.wait_s > 0.0
+    with pytest.raises(ConfigError, match="escape_within_s"):
+        OptimizerCfg(escape_within_s=-0.1)
+
+
+def test_safe_hold_stops_before_where_the_person_is_predicted_to_come() -> None:
+    # The person comes from x = 0.8 to rest at x = 0.3 by 1 s, and the only path heads for a
+    # goal beyond them. The paper's wait holds at the path's last safe waypoint, where the
+    # person then arrives (the hold breaks the limit); with safe_hold it stops earlier, at
+    # the latest waypoint whose hold stays within the limit.
+    robot = PointRobot(dtype=torch.float64)
+    w = 11
+    s = torch.linspace(0.0, 1.0, w, dtype=torch.float64)
+    path = torch.stack([0.9 * s, torch.zeros_like(s)], -1)
+    q_init = torch.stack([path, path])
+    forecast = approaching(0.8, 1.0, 0.0)
+    forecast.mean[..., 0] = forecast.mean[..., 0].clamp_min(0.3)
+    results = {}
+    for safe in (False, True):
+        cfg = _wait_cfg(safe_hold=safe)
+        opt = TrajectoryOptimizer(robot, cfg, human_spheres=one_sphere_map(0.1))
+        res = opt.solve(path[0], path[-1], forecast=forecast, duration=1.0, q_init=q_init)
+        assert not res.feasible and not res.evasive and res.wait_s > 0.0
+        results[safe] = res
+    limit = 1 - 0.95
+    paper, safe = results[False], results[True]
+    assert float(paper.bound.max()) > limit  # the paper's wait holds in the person's way
+    assert float(safe.bound.max()) <= limit
+    assert safe.hold_index < paper.hold_index
+    assert float(safe.q[-1, 0]) < float(paper.q[-1, 0])
+
+    # independent check: Monte Carlo risk of every waypoint of the safe-hold plan
+    def risk(q: torch.Tensor, t: float) -> float:
+        c = torch.tensor([max(0.8 * (1.0 - t), 0.3), 0.0, 0.0], dtype=torch.float64)
+        d = c - torch.cat([q, torch.zeros(1, dtype=torch.float64)])
+        var = torch.full((3,), 0.05**2, dtype=torch.float64)
+        return mc_ball_probability(d, var, 0.15, n=50_000)
+
+    assert max(risk(q, float(t)) for q, t in zip(safe.q[1:], safe.times[1:])) <= limit
+    assert max(risk(q, float(t)) for q, t in zip(paper.q[1:], paper.times[1:])) > limit
+    with pytest.raises(ConfigError, match="safe_hold"):
+        OptimizerCfg(safe_hold=1)
 
 
 def test_smooth_stop_slows_down_along_the_path_and_never_passes_the_hold() -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from planning_fakes import PointRobot, one_sphere_map, static_forecast
+from planning_fakes import PointRobot, approaching, one_sphere_map, static_forecast
 
 from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.planning import costs as C
@@ -328,6 +328,29 @@ def test_after_a_wait_the_next_plan_takes_over_after_wait_lead(point_robot) -> N
         assert rp.next_cycle == pytest.approx(t + expected)
     with pytest.raises(ConfigError, match="wait_lead_s"):
         ReplannerCfg(replan_step_s=0.5, wait_lead_s=0.6)
+
+
+def test_a_cycle_that_steps_out_of_the_way_counts_as_an_escape(point_robot) -> None:
+    # the person comes straight at where the robot stands and the goal lies beyond them: no
+    # plan towards it is safe, holding is not either, so the cycle steps out of the way
+    # (OptimizerCfg.escape_within_s)
+    cfg = OptimizerCfg(
+        iterations=0,
+        warm_iterations=0,
+        horizon_s=1.0,
+        perturbation_std=0.0,
+        acc_max=6.0,
+        escape_within_s=0.2,
+    )
+    opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.1))
+    coming = approaching(0.8, 0.8, -0.04, dtype=torch.float32)  # at the robot by 0.8 s
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, goal_change_lead_s=None))
+    q0, goal = torch.zeros(2), torch.tensor([0.9, 0.0])
+    rp.reset(q0, goal, t=0.0)
+    res = rp.step(0.0, q0, coming, forecast_t0=0.0)
+    assert res.evasive and res.escape
+    assert (rp.stats.evasions, rp.stats.escapes, rp.stats.waits) == (1, 1, 0)
+    assert float(res.q[-1].norm()) > 0.1  # it moved away from where the person arrives
 
 
 def test_non_finite_measurements_and_times_are_data_errors(point_robot: PointRobot) -> None:
