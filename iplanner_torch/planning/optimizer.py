@@ -268,6 +268,13 @@ def smooth_stop(q: torch.Tensor, hold: int) -> torch.Tensor:
     return (1.0 - frac) * q[lo] + frac * q[lo + 1]
 
 
+def _held(q: torch.Tensor, hold: int) -> torch.Tensor:
+    """(W, J) the path q (W, J) up to waypoint ``hold``, then held there (an abrupt stop)."""
+    out = q.clone()
+    out[hold + 1 :] = out[hold]
+    return out
+
+
 def _finite_time(name: str, value: object) -> float:
     """``value`` as a float [s] (:func:`~iplanner_torch.checks.finite_time`); anything
     ``float()`` converts is accepted, and a value it cannot convert is a :class:`ConfigError`
@@ -891,8 +898,7 @@ class TrajectoryOptimizer:
         if cfg.acc_max is not None:
             # prefer plans the acceleration-limited tracking follows exactly (else the executed
             # motion leaves the checked path); when none is, the best safe one still goes
-            acc = accelerations(q_all, dt, qd_start).abs().amax(dim=(-2, -1))  # (B,)
-            smooth_ok = ok & (acc <= ACC_TOL * cfg.acc_max)
+            smooth_ok = ok & self._within_acc(q_all, dt, qd_start, cfg.acc_max)
             if bool(smooth_ok.any()):
                 ok = smooth_ok
         if bool(ok.any()):
@@ -907,8 +913,7 @@ class TrajectoryOptimizer:
         score = first_bad.to(rank.dtype) * 1e6 - rank.clamp(max=1e5)
         best = int(score.argmax())
         hold = max(int(first_bad[best]) - 1, 0)
-        q_hold = q_all[best].clone()
-        q_hold[hold + 1 :] = q_hold[hold]
+        q_hold = _held(q_all[best], hold)
         q_one = q_hold.unsqueeze(0)
         terms1, bound1, _ = self._accept_terms(
             q_one, dt, qd_start, q_goal, human, win_idx, timer, look_idx
@@ -1034,9 +1039,7 @@ class TrajectoryOptimizer:
         from that waypoint on."""
         if self.cfg.acc_max is not None and hold >= 1:
             return smooth_stop(q, hold)
-        out = q.clone()
-        out[hold + 1 :] = out[hold]
-        return out
+        return _held(q, hold)
 
     def _static_bad(
         self,
@@ -1073,8 +1076,16 @@ class TrajectoryOptimizer:
             return False
         if self.cfg.acc_max is None:
             return True
-        acc = accelerations(q, dt, qd_start)
-        return float(acc.abs().max()) <= ACC_TOL * self.cfg.acc_max
+        return bool(self._within_acc(q, dt, qd_start, self.cfg.acc_max).all())
+
+    @staticmethod
+    def _within_acc(
+        q: torch.Tensor, dt: float, qd_start: torch.Tensor | None, acc_max: float
+    ) -> torch.Tensor:
+        """(B,) whether each trajectory of q (B, W, J) stays within ``ACC_TOL`` times
+        ``acc_max`` [rad/s^2] (from ``qd_start``)."""
+        acc = accelerations(q, dt, qd_start).abs().amax(dim=(-2, -1))  # (B,)
+        return acc <= ACC_TOL * acc_max
 
     def _escape(
         self,
