@@ -1,4 +1,5 @@
-"""Dimension glossary and the tensor checks shared by the whole package.
+"""Dimension glossary, the tensor checks and the device resolution shared by the whole
+package.
 
 Dimension letters used in every docstring:
 
@@ -30,7 +31,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from iplanner_torch.errors import DataError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 
 
 def check_shape(name: str, x: torch.Tensor, expected: Sequence[int | str | None]) -> None:
@@ -147,3 +148,27 @@ def non_finite_error(name: str, x: torch.Tensor | np.ndarray) -> DataError:
 def default_device() -> torch.device:
     """The CUDA device when one is available, else the CPU."""
     return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def resolve_device(device: torch.device | str) -> torch.device:
+    """The usable torch device ``device`` names; ``"auto"`` is :func:`default_device`.
+
+    Raises:
+        ConfigError: for a name torch does not know, a CUDA device when CUDA is not
+            available, or a CUDA index beyond the devices present.
+    """
+    if isinstance(device, str) and device == "auto":
+        return default_device()
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError) as exc:
+        raise ConfigError(f"unknown device {device!r}: {exc}") from exc
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ConfigError(f"device {str(dev)!r} requested but CUDA is not available")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ConfigError(
+                f"device {str(dev)!r} requested but only {torch.cuda.device_count()} CUDA "
+                f"device(s) exist"
+            )
+    return dev

@@ -11,7 +11,6 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
-import torch
 from omegaconf import DictConfig, OmegaConf
 
 from iplanner_torch.errors import ConfigError, IPlannerError
@@ -152,19 +151,6 @@ def cfg_list(node: DictConfig, key: str, kind: type) -> list[Any]:
             f"(e.g. {key}=[0,1,2])"
         )
     return [kind(v) for v in value]
-
-
-def resolve_device(name: str) -> torch.device:
-    """``auto`` -> CUDA when available, else CPU; anything else is passed to torch.device."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        device = torch.device(name)
-    except RuntimeError as exc:
-        raise ConfigError(f"unknown device {name!r}") from exc
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise ConfigError("device=cuda asked for, but no CUDA device is available")
-    return device
 
 
 def repo_path(path: str | Path) -> Path:

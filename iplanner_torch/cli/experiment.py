@@ -45,8 +45,8 @@ from iplanner_torch.cli._common import (
     instantiate,
     print_help_if_asked,
     repo_path,
-    resolve_device,
 )
+from iplanner_torch.types import resolve_device
 
 #: predictor variant of a planner (see eval.episode.PLANNER_KINDS) -> conf/predictor option
 VARIANT_OPTION = {"no_ni": "iplanner_no_ni", "ni": "iplanner_ni"}

@@ -40,29 +40,17 @@ from iplanner_torch.robot.description import (
 )
 from iplanner_torch.robot.kinematics import SerialChainKinematics
 from iplanner_torch.robot.spheres import fit_link_spheres
-from iplanner_torch.types import check_finite, check_shape
+from iplanner_torch.types import check_finite, check_shape, resolve_device
 
 RobotName = Literal["kuka_iiwa14", "fetch"]
 
 
 def _check_device_dtype(device: torch.device | str, dtype: torch.dtype) -> torch.device:
-    """The model's device, or ConfigError for an unknown or unavailable device or a
-    non-floating dtype."""
+    """The model's device (:func:`~iplanner_torch.types.resolve_device`), or ConfigError for
+    an unknown or unavailable device or a non-floating dtype."""
     if not isinstance(dtype, torch.dtype) or not dtype.is_floating_point:
         raise ConfigError(f"expected a floating dtype (floating dtypes only), got {dtype}")
-    try:
-        dev = torch.device(device)
-    except (RuntimeError, TypeError) as exc:
-        raise ConfigError(f"unknown device {device!r}: {exc}") from exc
-    if dev.type == "cuda":
-        if not torch.cuda.is_available():
-            raise ConfigError(f"device {str(dev)!r} requested but CUDA is not available")
-        if dev.index is not None and dev.index >= torch.cuda.device_count():
-            raise ConfigError(
-                f"device {str(dev)!r} requested but only {torch.cuda.device_count()} CUDA "
-                f"device(s) exist"
-            )
-    return dev
+    return resolve_device(device)
 
 
 @dataclass(frozen=True, kw_only=True)

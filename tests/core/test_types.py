@@ -1,9 +1,9 @@
 import pytest
 import torch
 
-from iplanner_torch.errors import ShapeError
+from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_shape, default_device, resolve_device
 
 
 def test_check_shape_accepts_matching_and_named_dims() -> None:
@@ -51,3 +51,19 @@ def test_forecast_mixture_mean_and_shape_checks() -> None:
             joint_names=tuple(f"j{i}" for i in range(k)),
             action_names=("a", "b", "c"),
         )
+
+
+def test_resolve_device_names_usable_devices_only() -> None:
+    assert resolve_device("auto") == default_device()
+    assert resolve_device("cpu") == torch.device("cpu")
+    assert resolve_device(torch.device("cpu")) == torch.device("cpu")
+    for bad in ("tpu9", "", 3.5):
+        with pytest.raises(ConfigError, match="unknown device"):
+            resolve_device(bad)  # type: ignore[arg-type]
+    if not torch.cuda.is_available():
+        with pytest.raises(ConfigError, match="CUDA is not available"):
+            resolve_device("cuda")
+    else:
+        assert resolve_device("cuda:0").type == "cuda"
+        with pytest.raises(ConfigError, match="CUDA device"):
+            resolve_device(f"cuda:{torch.cuda.device_count()}")
