@@ -650,6 +650,8 @@ def _run_episode(
     oracle = planner_kind == "oracle"
     # the planner's forecast predicts motion (ITOMP's holds the observed pose still)
     forecasts_motion = use_prediction or oracle
+    # ITOMP's conservative spread of the held pose (not the stalled I-Planner's fallback)
+    itomp_spread = pcfg.itomp_spread_mps if planner_kind == "itomp" else 0.0
     if use_prediction and predictor is None:
         raise ConfigError(f"planner_kind {planner_kind!r} needs a predictor, got None")
     scenario = cfg.scenario
@@ -830,12 +832,13 @@ def _run_episode(
                         std=cfg.oracle_std,
                         like=ref,
                     )
-                else:  # ITOMP, or a stalled I-Planner
+                else:  # ITOMP, or a stalled I-Planner (whose person stays still)
                     forecast = static_human_forecast(
                         tens(tracker.latest_pose()),
                         cfg.static_forecast_frames,
                         cfg.static_forecast_dt,
                         JOINT_NAMES,
+                        spread=itomp_spread,
                     )
                 if forecasts_motion and not stalled:  # scored by eval/mhd and logged
                     mean = forecast.expected_mean()[0][:, HAND_JOINTS]  # (n_f, 2, 3)

@@ -3,14 +3,21 @@
 ITOMP replans against the observed pose only: no prediction and no uncertainty. To run the
 same code path, the observed pose becomes a degenerate forecast: one action of weight 1, the
 pose repeated over the horizon, and a tiny variance.
+
+ITOMP's own paper (Park, Pan and Manocha, ICAPS 2012) plans against a conservative local
+bound on where each moving obstacle can be over a short time. ``spread`` gives the held pose
+a Gaussian stand-in for that bound: its standard deviation grows linearly with the time since
+the observation. 0 (the default) is the pose held still.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import torch
 
+from iplanner_torch.checks import non_negative
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.planning.optimizer import PlanResult, TrajectoryOptimizer
 from iplanner_torch.prediction.forecast import Forecast
@@ -24,6 +31,7 @@ def static_human_forecast(
     joint_names: Sequence[str],
     *,
     std: float = 0.01,
+    spread: float = 0.0,
 ) -> Forecast:
     """A forecast in which the human stays at ``pose`` (one action, weight 1).
 
@@ -32,20 +40,30 @@ def static_human_forecast(
         n_f: frames of the forecast.
         dt: seconds between frames.
         joint_names: the K joint names.
-        std: per-coordinate standard deviation [m] (1 cm: the pose is taken as exact).
+        std: per-coordinate standard deviation at the observation [m] (1 cm: the pose is
+            taken as exact).
+        spread: growth of that standard deviation per second after the observation [m/s]:
+            frame k (at ``k dt``, k = 1..n_f) has ``std + spread k dt``. 0 holds the pose
+            still; > 0 stands in for ITOMP's conservative bound on a moving obstacle.
 
     Returns:
         Forecast with weights (1, 1), mean and var (1, 1, n_f, K, 3).
 
     Raises:
         ShapeError: when ``pose`` is not (K, 3) with K = len(joint_names).
-        ConfigError: when n_f < 1, dt <= 0 or std <= 0.
+        ConfigError: when n_f < 1, dt <= 0, std <= 0, or spread is negative or not finite.
     """
     check_shape("pose", pose, (len(joint_names), 3))
     if n_f < 1:
         raise ConfigError(f"expected n_f >= 1, got {n_f}")
+    spread = non_negative("spread", spread)
     path = pose.unsqueeze(0).expand(n_f, *pose.shape)
-    return path_forecast(path, dt, joint_names, std=std, action="observed")
+    fc = path_forecast(path, dt, joint_names, std=std, action="observed")
+    if spread > 0.0:
+        t = dt * torch.arange(1, n_f + 1, dtype=fc.var.dtype, device=fc.var.device)  # (n_f,)
+        s = std + spread * t
+        fc = replace(fc, var=(s * s).view(1, 1, n_f, 1, 1).expand_as(fc.var).clone())
+    return fc
 
 
 def path_forecast(

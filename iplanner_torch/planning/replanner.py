@@ -47,7 +47,7 @@ from typing import Literal
 
 import torch
 
-from iplanner_torch.checks import finite, finite_time, optional
+from iplanner_torch.checks import finite, finite_time, non_negative, optional
 from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.planning.optimizer import OptimizerCfg, PlanResult, TrajectoryOptimizer
 from iplanner_torch.planning.trajectory import Trajectory, resample_linear
@@ -192,10 +192,16 @@ class PlannerCfg:
     optimizer: OptimizerCfg = field(default_factory=OptimizerCfg)
     # the replanning loop
     replanner: ReplannerCfg = field(default_factory=ReplannerCfg)
+    # itomp only: the observed pose's standard deviation grows by this much per second after
+    # the observation [m/s] (:func:`~iplanner_torch.planning.itomp.static_human_forecast`), a
+    # Gaussian stand-in for ITOMP's conservative bound on where a moving obstacle can be;
+    # 0: the pose held still (the paper's baseline as reproduced here)
+    itomp_spread_mps: float = 0.0
 
     def __post_init__(self) -> None:
         finite("confidence", self.confidence)
         finite("replan_step_s", self.replan_step_s)
+        non_negative("itomp_spread_mps", self.itomp_spread_mps)
         if self.kind not in ("itomp", "iplanner", "oracle"):
             raise ConfigError(f"expected kind 'itomp', 'iplanner' or 'oracle', got {self.kind!r}")
         if self.kind == "iplanner" and self.predictor_variant not in ("no_ni", "ni"):

@@ -165,6 +165,15 @@ def test_itomp_sees_the_observed_pose_only(tmp_path: Path) -> None:
     rest = fakes.rest_pose()
     np.testing.assert_allclose(forecast.mean[0, 0, -1].numpy(), rest, atol=0.05)
     assert math.isnan(res.metrics["eval/mhd"]) and res.mcap_path is None
+    assert float(forecast.var.max()) == pytest.approx(1e-4)  # 1 cm, held still
+    # planner.itomp_spread_mps widens the held pose with time (std 1 cm + 0.2 m/s t)
+    base = _cfg(0.6)
+    wide = replace(base, planner=replace(base.planner, itomp_spread_mps=0.2))
+    replanner = fakes.LinearReplanner()
+    _fake_episode(tmp_path, wide, "itomp", replanner)
+    forecast = replanner.forecasts[0][1]
+    std = forecast.var[0, 0, :, 0, 0].sqrt()
+    np.testing.assert_allclose(std.numpy(), (0.01 + 0.2 * forecast.times).numpy(), rtol=1e-5)
 
 
 def test_oracle_plans_on_the_true_future(tmp_path: Path) -> None:

@@ -131,6 +131,37 @@ def test_itomp_avoids_the_observed_pose(point_robot: PointRobot) -> None:
         static_human_forecast(pose, 0, 0.1, ("j",))
 
 
+def test_itomp_spread_grows_the_held_pose_and_the_bound_covers_it(
+    point_robot: PointRobot,
+) -> None:
+    """``spread`` widens the held pose by a std growing linearly in time; the planner's bound
+    for a robot 0.3 m away then rises over the first 1.5 s and stays above the Monte Carlo
+    collision probability of that widened pose (and is ~0 for the pose held still)."""
+    pose = torch.tensor([[0.0, 0.0, 0.0]])
+    still = static_human_forecast(pose, 20, 0.1, ("j",))
+    wide = static_human_forecast(pose, 20, 0.1, ("j",), spread=0.1)
+    assert torch.equal(wide.mean, still.mean) and wide.action_names == ("observed",)
+    k = torch.arange(1, 21, dtype=wide.var.dtype)
+    expected = ((0.01 + 0.01 * k) ** 2)[:, None].expand(20, 3)
+    torch.testing.assert_close(wide.var[0, 0, :, 0], expected)
+    assert torch.equal(static_human_forecast(pose, 20, 0.1, ("j",), spread=0.0).var, still.var)
+    opt = ITOMP(point_robot, OptimizerCfg(), human_spheres=one_sphere_map(0.1))
+    times = torch.tensor([0.5, 1.0, 1.5, 2.0])
+    q = torch.tensor([0.3, 0.0]).expand(4, 2)
+    bound = opt.collision_bound(q, times, wide, 0.0)
+    assert float(opt.collision_bound(q, times, still, 0.0).max()) < 1e-6
+    assert bool((bound[:3].diff() > 0).all())  # later the pose spreads thinner
+    d = torch.tensor([0.3, 0.0, 0.0])
+    for t, b in zip(times.tolist(), bound.tolist(), strict=True):
+        std = 0.01 + 0.1 * t
+        p = mc_ball_probability(d, torch.full((3,), std * std), 0.05 + 0.1, n=100_000)
+        assert b >= p - 0.005
+    assert p > 0.02  # at 2 s the widened pose reaches the robot
+    for bad in (-0.1, float("nan"), True):
+        with pytest.raises(ConfigError, match="spread"):
+            static_human_forecast(pose, 5, 0.1, ("j",), spread=bad)
+
+
 def test_window_restricts_the_constraint(point_robot: PointRobot) -> None:
     opt = TrajectoryOptimizer(
         point_robot, OptimizerCfg(iterations=0), human_spheres=one_sphere_map(0.1)

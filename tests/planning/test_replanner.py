@@ -405,3 +405,6 @@ def test_planner_cfg_rejects_non_finite_values() -> None:
         PlannerCfg(replan_step_s=math.inf)
     with pytest.raises(ConfigError, match="confidence"):
         PlannerCfg(confidence=math.nan)
+    for bad in (-0.1, math.inf, math.nan):
+        with pytest.raises(ConfigError, match="itomp_spread_mps"):
+            PlannerCfg(itomp_spread_mps=bad)
