@@ -7,7 +7,7 @@ Configs (``__post_init__``) and public functions check their number arguments wi
 - :func:`integer`, :func:`seed`: an integer (not a bool), optionally bounded below;
 - :func:`flag`: ``True`` or ``False``;
 - :func:`finite_time`: anything with a float value (also numpy numbers and one-element
-  tensors), as :func:`math.isfinite` takes it;
+  tensors), as :func:`math.isfinite` takes it; anything else is ``error`` too;
 - :func:`optional`: any of the above for a field that may also be None.
 
 Each check raises ``error`` (:class:`~iplanner_torch.errors.ConfigError` unless the caller
@@ -108,17 +108,21 @@ def seed(value: object, *, error: type[Exception] = ConfigError) -> int:
 
 
 def finite_time(name: str, value: Any, *, error: type[Exception] = ConfigError) -> float:
-    """``value`` as a float time [s]; ``error`` when it is NaN or infinite.
+    """``value`` as a float time [s]; ``error`` when it is NaN, infinite or not a number.
 
     Anything :func:`math.isfinite` takes is accepted: Python and numpy numbers, one-element
     tensors. Unlike :func:`finite` this does not ask for a :class:`numbers.Real`, since times
     often come out of tensors.
 
     Raises:
-        error: when ``value`` is NaN or infinite.
-        TypeError: when ``value`` has no float value (as from :func:`math.isfinite`).
+        error: when ``value`` is NaN or infinite, or has no float value (e.g. a string or
+            ``None``).
     """
-    if not math.isfinite(value):
+    try:
+        ok = math.isfinite(value)
+    except (TypeError, ValueError) as err:
+        raise error(f"expected {name} a finite time [s], got {value!r}") from err
+    if not ok:
         raise error(f"expected {name} a finite time [s], got {value!r}")
     return float(value)
 

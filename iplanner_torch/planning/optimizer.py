@@ -275,17 +275,6 @@ def _held(q: torch.Tensor, hold: int) -> torch.Tensor:
     return out
 
 
-def _finite_time(name: str, value: object) -> float:
-    """``value`` as a float [s] (:func:`~iplanner_torch.checks.finite_time`); anything
-    ``float()`` converts is accepted, and a value it cannot convert is a :class:`ConfigError`
-    too (not a TypeError)."""
-    try:
-        t = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError) as err:
-        raise ConfigError(f"expected {name} a finite time [s], got {value!r}") from err
-    return finite_time(name, t)
-
-
 def unsafe_if_not_finite(bound: torch.Tensor, human: C.HumanObstacle) -> torch.Tensor:
     """The collision bound with every value that cannot be trusted set to 1 (unsafe).
 
@@ -632,19 +621,19 @@ class TrajectoryOptimizer:
         check_shape("q_goal", q_goal, (j,))
         check_finite("q_start", q_start, ("joint",))
         check_finite("q_goal", q_goal, ("joint",))
-        _finite_time("t0", t0)
-        _finite_time("forecast_t0", forecast_t0)
+        finite_time("t0", t0)
+        finite_time("forecast_t0", forecast_t0)
         if duration is not None:
-            _finite_time("duration", duration)
+            finite_time("duration", duration)
         if arrive is not None:
-            _finite_time("arrive", arrive)
+            finite_time("arrive", arrive)
         if window is not None:
             try:
                 t_a, t_b = window
             except (TypeError, ValueError) as err:
                 raise ConfigError(f"expected window (t_a, t_b) [s], got {window!r}") from err
-            _finite_time("window end", t_b)  # the order: _window_indices
-            _finite_time("window start", t_a)
+            finite_time("window end", t_b)  # the order: _window_indices
+            finite_time("window start", t_a)
         q_start = q_start.to(self.device, self.dtype)
         q_goal = q_goal.to(self.device, self.dtype)
         if qd_start is not None:
@@ -794,7 +783,7 @@ class TrajectoryOptimizer:
         """
         check_shape("q", q, ("N", self.num_joints))
         check_shape("times", times, (q.shape[0],))
-        _finite_time("forecast_t0", forecast_t0)
+        finite_time("forecast_t0", forecast_t0)
         q = q.to(self.device, self.dtype)
         with torch.no_grad():
             human = self._human_obstacle(forecast, times.to(self.device, self.dtype), forecast_t0)

@@ -54,8 +54,11 @@ def test_finite_time_and_optional() -> None:
     assert checks.finite_time("t", np.float32(0.25)) == 0.25
     with pytest.raises(DataError, match=r"expected t a finite time \[s\], got nan"):
         checks.finite_time("t", math.nan, error=DataError)
-    with pytest.raises(TypeError):
-        checks.finite_time("t", "soon")
+    for bad in ("soon", None, [1.0]):
+        with pytest.raises(ConfigError, match="expected t a finite time"):
+            checks.finite_time("t", bad)
+    with pytest.raises(DataError, match="expected t a finite time"):
+        checks.finite_time("t", "soon", error=DataError)
     assert checks.optional(checks.positive, "b", None) is None
     assert checks.optional(checks.positive, "b", 2) == 2.0
     with pytest.raises(ConfigError, match="expected b > 0"):

@@ -278,6 +278,8 @@ def test_unsafe_if_not_finite_keeps_finite_bounds_and_their_gradients() -> None:
         ({"t0": float("inf")}, "t0 a finite time"),
         ({"forecast_t0": float("nan")}, "forecast_t0 a finite time"),
         ({"duration": float("nan")}, "duration a finite time"),
+        ({"t0": "soon"}, "t0 a finite time"),
+        ({"window": (None, 0.5)}, "window start a finite time"),
     ],
 )
 def test_non_finite_times_are_config_errors(
