@@ -14,12 +14,13 @@ from omegaconf import DictConfig
 SWEEP_COLUMNS = ("noise", "dropout", "confidence")
 
 
-def episode_report(df: Any, out_dir: Path) -> list[Path]:
+def episode_report(df: Any, out_dir: Path, baseline: str = "itomp") -> list[Path]:
     """Write the report of per-episode results ``df`` into ``out_dir``.
 
     The summary keeps every setting that takes several values apart
     (:func:`~iplanner_torch.eval.report.report_groups`); the sweep plots put the first of
-    :data:`SWEEP_COLUMNS` that varies on their x axis.
+    :data:`SWEEP_COLUMNS` that varies on their x axis; the paired section compares each
+    planner with ``baseline``.
 
     Returns:
         The written files (``results.csv``, ``results.md``, PNGs).
@@ -34,7 +35,9 @@ def episode_report(df: Any, out_dir: Path) -> list[Path]:
         ),
         None,
     )
-    return write_sweep_report(df, out_dir, group_by=report_groups(df), sweep=sweep)
+    return write_sweep_report(
+        df, out_dir, group_by=report_groups(df), sweep=sweep, baseline=baseline
+    )
 
 
 def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:

@@ -7,6 +7,9 @@ Modes (``evaluate.mode``)::
     iplanner-evaluate evaluate.mode=noise_sweep         # fig. result_prediction (NI vs no NI)
     iplanner-evaluate evaluate.mode=episode evaluate.logs=outputs/experiment/<run>/episodes
     iplanner-evaluate evaluate.mode=episode evaluate.logs=outputs/experiment/<run>/results.csv
+    iplanner-evaluate evaluate.mode=episode \\
+        'evaluate.logs=[<runA>/results.csv,<runB>/results.csv]' \\
+        'evaluate.labels=[held,spread]' evaluate.baseline=itomp@spread
 
 ``prediction`` evaluates one checkpoint on the held-out demonstrations of ``data`` (the same
 split by demonstration as training); ``noise_sweep`` re-noises the held-out clean motion at
@@ -17,7 +20,10 @@ experiment's ``results.csv``, or rows gathered from several runs), with one row 
 summary table and plots, and prints the table ``iplanner-experiment`` prints
 (:func:`~iplanner_torch.eval.report.comparison_table`: episode counts, then the paper's metrics
 in cm and ms); an episode whose log was cut before its metrics counts in ``contact_unknown``,
-not as contact-free nor as a contact.
+not as contact-free nor as a contact. ``evaluate.logs`` may list several sources: with
+``evaluate.labels`` each source's planners are renamed ``<planner>@<label>``, so two runs of
+one planner (with and without an option) stay apart, and ``evaluate.baseline`` names the
+planner that ``results.md`` compares the others with, seed by seed.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
@@ -136,24 +143,13 @@ def _noise_sweep(cfg: DictConfig) -> None:
     print("wrote " + ", ".join(str(p) for p in written))
 
 
-def _episode(cfg: DictConfig) -> None:
-    from iplanner_torch.cli.callbacks import episode_report
-    from iplanner_torch.eval.report import (
-        comparison_table,
-        gather_results,
-        incomplete_logs_note,
-        print_table,
-    )
+def _episode_rows(path: Path) -> Any:
+    """The episode rows of one source of ``evaluate.logs`` (an .mcap file, a folder of them or
+    a results .csv), refused with a clear error when it holds none."""
+    from iplanner_torch.eval.report import gather_results
 
-    if not cfg.evaluate.logs:
-        raise ConfigError(
-            "evaluate.mode=episode needs evaluate.logs=<an .mcap file, a folder of them or a "
-            "results .csv>"
-        )
-    path = repo_path(cfg.evaluate.logs)
     if path.is_dir() and not any(path.rglob("*.mcap")):
         raise ConfigError(f"{path}: no .mcap episode logs found")
-    out_dir = _out_dir(cfg)
     df = gather_results(path)  # a folder: every log below it, in numbered order
     if path.suffix == ".csv" and df.empty:
         raise DataError(f"{path}: no episode rows; nothing to report")
@@ -164,7 +160,56 @@ def _episode(cfg: DictConfig) -> None:
             f"{path}: none of the {len(df)} episode log(s) could be read as far as its "
             "metadata (each is truncated or damaged near its start); nothing to report"
         )
-    written = episode_report(df, out_dir)
+    return df
+
+
+def _episode(cfg: DictConfig) -> None:
+    import pandas as pd
+    from omegaconf import ListConfig
+
+    from iplanner_torch.cli.callbacks import episode_report
+    from iplanner_torch.eval.report import comparison_table, incomplete_logs_note, print_table
+
+    logs = cfg.evaluate.logs
+    if not logs:
+        raise ConfigError(
+            "evaluate.mode=episode needs evaluate.logs=<an .mcap file, a folder of them or a "
+            "results .csv>, or a list of them"
+        )
+    several = isinstance(logs, (list, tuple, ListConfig))
+    sources = (
+        cfg_list(cfg.evaluate, "logs", str) if several else [cfg_scalar(cfg.evaluate, "logs", str)]
+    )
+    paths = [repo_path(x) for x in sources]
+    labels: list[str] | None = None
+    if cfg.evaluate.get("labels") is not None:
+        labels = cfg_list(cfg.evaluate, "labels", str)
+        if len(labels) != len(paths) or len(set(labels)) != len(labels) or "" in labels:
+            raise ConfigError(
+                f"evaluate.labels: expected {len(paths)} different, non-empty labels, one per "
+                f"source of evaluate.logs, got {labels}"
+            )
+    baseline = cfg.evaluate.get("baseline")
+    out_dir = _out_dir(cfg)
+    frames = []
+    for i, path in enumerate(paths):
+        df = _episode_rows(path)
+        if labels is not None:  # keep the runs apart: itomp@held, itomp@spread, ...
+            named = df["planner"].notna()  # a log cut before its metadata has none
+            df = df.assign(planner=df["planner"].where(~named, df["planner"] + "@" + labels[i]))
+        frames.append(df)
+    df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+    if baseline is None:
+        baseline = "itomp"
+    else:
+        baseline = cfg_scalar(cfg.evaluate, "baseline", str)
+        if not (df["planner"] == baseline).any():
+            names = sorted(str(x) for x in df["planner"].dropna().unique())
+            raise ConfigError(
+                f"evaluate.baseline={baseline!r}: no episodes of that planner; the planners "
+                f"are {names}"
+            )
+    written = episode_report(df, out_dir, baseline=baseline)
     print_table(comparison_table(df))  # the columns and units of iplanner-experiment's table
     note = incomplete_logs_note(df)
     if note:

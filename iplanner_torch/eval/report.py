@@ -877,22 +877,28 @@ def paired_table(
 
 
 def _paired_section(
-    df: pd.DataFrame, group_by: Sequence[str], out_dir: Path | None = None
+    df: pd.DataFrame,
+    group_by: Sequence[str],
+    out_dir: Path | None = None,
+    baseline: str = "itomp",
 ) -> tuple[list[str], list[Path]]:
-    """Markdown lines comparing each planner with ITOMP seed by seed (:func:`paired_table`),
-    grouped like the summary, and, with ``out_dir``, a ``paired_<metric>.png`` forest plot of
-    each metric (:func:`plot_paired`); nothing without ITOMP, another planner and two seeds."""
+    """Markdown lines comparing each planner with ``baseline`` seed by seed
+    (:func:`paired_table`), grouped like the summary, and, with ``out_dir``, a
+    ``paired_<metric>.png`` forest plot of each metric (:func:`plot_paired`); nothing without
+    the baseline, another planner and two seeds."""
     if (
         "planner" not in group_by
         or "seed" not in df.columns
-        or not (df["planner"] == "itomp").any()
+        or not (df["planner"] == baseline).any()
         or df["planner"].nunique() < 2
         or df["seed"].nunique() < 2
     ):
         return [], []
     lines = ["", "## Paired by seed", ""]
     try:
-        table = paired_table(df, group_by=[c for c in group_by if c != "planner"])
+        table = paired_table(
+            df, group_by=[c for c in group_by if c != "planner"], baseline=baseline
+        )
     except ConfigError as err:  # e.g. two episodes of one planner and seed in a group
         return lines + [f"Not computed: {err}."], []
     if table.empty:
@@ -902,8 +908,9 @@ def _paired_section(
         for m in dict.fromkeys(table["metric"]):
             part = table[table["metric"] == m].drop(columns="metric")
             plots.append(plot_paired(part, str(m), out_dir / f"paired_{m}.png"))
+    name = "ITOMP" if baseline == "itomp" else f"`{baseline}`"
     lines += [
-        "Each planner minus ITOMP in the same setting and seed (same person, noise and task "
+        f"Each planner minus {name} in the same setting and seed (same person, noise and task "
         "order), in the units above: mean difference with its 95% Student-t interval, the "
         "paired t-test's p-value, and `wins`, the seeds where the difference is > 0 (a "
         "larger distance, or a rougher trajectory).",
@@ -920,12 +927,13 @@ def write_sweep_report(
     out_dir: str | Path,
     group_by: Sequence[str] = ("scenario", "planner"),
     sweep: str | None = None,
+    baseline: str = "itomp",
 ) -> list[Path]:
     """Write ``results.csv`` (per episode), ``results.md`` (summary) and the PNGs.
 
-    ``results.md`` also compares each planner with ITOMP seed by seed ("Paired by seed",
-    :func:`paired_differences`, with ``paired_<metric>.png`` forest plots) when the results
-    hold ITOMP, another planner and two seeds.
+    ``results.md`` also compares each planner with ``baseline`` seed by seed ("Paired by
+    seed", :func:`paired_differences`, with ``paired_<metric>.png`` forest plots) when the
+    results hold the baseline, another planner and two seeds.
 
     Args:
         df: per-episode results.
@@ -936,6 +944,7 @@ def write_sweep_report(
             (up to two; the last two of them when there are more) lay out its panels
             (:func:`plot_sweep`). No sweep plot is written when ``sweep`` takes one value
             in every panel.
+        baseline: the planner of the paired comparison (ITOMP unless given).
 
     Returns:
         Every written path.
@@ -957,7 +966,7 @@ def write_sweep_report(
     md += ["; ".join(legend) + ".", ""]
     md += ["Means over episodes: " + "; ".join(units) + ".", ""] if units else []
     md += [to_markdown(summary)]
-    paired_md, paired_png = _paired_section(df, group_by, out_dir)
+    paired_md, paired_png = _paired_section(df, group_by, out_dir, baseline)
     md += paired_md
     written[1].write_text("\n".join(md))
     written += paired_png

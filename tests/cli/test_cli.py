@@ -288,6 +288,53 @@ def test_evaluate_episode_reports_a_results_csv(tmp_path: Path) -> None:
     assert res.returncode == 2 and "header.csv: no episode rows; nothing to report" in res.stderr
 
 
+def test_evaluate_episode_compares_labelled_runs_seed_by_seed(tmp_path: Path) -> None:
+    """Two results CSVs of the same planners: ``evaluate.labels`` keeps the runs apart
+    (``itomp@held``, ``itomp@wide``) and ``evaluate.baseline`` is the planner the paired
+    section subtracts, seed by seed. Bad labels and an unknown baseline are refused."""
+    import pandas as pd
+
+    def run_rows(itomp: list[float], ni: list[float]) -> pd.DataFrame:
+        return pd.DataFrame(
+            {
+                "scenario": ["s1"] * 6,
+                "planner": ["itomp"] * 3 + ["iplanner_ni"] * 3,
+                "seed": [0, 1, 2] * 2,
+                "eval/smoothness": itomp + ni,
+                "eval/min_distance": [0.05] * 6,
+                "eval/contact": [0.0] * 6,
+            }
+        )
+
+    run_rows([40.0, 44.0, 42.0], [30.0, 31.0, 35.0]).to_csv(tmp_path / "a.csv", index=False)
+    run_rows([60.0, 50.0, 70.0], [30.0, 31.0, 35.0]).to_csv(tmp_path / "b.csv", index=False)
+    logs = f"evaluate.logs=[{tmp_path / 'a.csv'},{tmp_path / 'b.csv'}]"
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode", logs,
+                "evaluate.labels=[held,wide]", "evaluate.baseline=itomp@wide",
+                f"evaluate.out_dir={tmp_path / 'out'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "12 episode(s)" in res.stdout and "itomp@held" in res.stdout
+    md = (tmp_path / "out" / "results.md").read_text()
+    assert "Each planner minus `itomp@wide`" in md
+    rows = {
+        tuple(c.strip() for c in ln.strip("|").split("|")[1:3]): ln
+        for ln in md.splitlines()
+        if ln.startswith("| s1 |")
+    }
+    # iplanner_ni@held - itomp@wide per seed: -30, -19, -35 (mean -28); itomp@held: -20, -6, -28
+    assert "| -28 |" in rows[("iplanner_ni@held", "smoothness")]
+    assert "| -18 |" in rows[("itomp@held", "smoothness")]
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode", logs, "evaluate.labels=[held]",
+                f"evaluate.out_dir={tmp_path / 'out2'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 2 and "evaluate.labels: expected 2 different" in res.stderr
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode", logs,
+                "evaluate.baseline=itomp@wide", f"evaluate.out_dir={tmp_path / 'out3'}"],
+               tmp_path)  # fmt: skip
+    assert res.returncode == 2
+    assert "evaluate.baseline='itomp@wide': no episodes of that planner" in res.stderr
+    assert "['iplanner_ni', 'itomp']" in res.stderr
+
+
 def test_evaluate_refuses_bad_paths_before_it_computes(tmp_path: Path) -> None:
     """A file as the output folder, a folder as the checkpoint, logs cut before their
     metadata: one-line errors with exit code 2, and nothing computed first."""
