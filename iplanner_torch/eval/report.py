@@ -7,11 +7,13 @@ prefix is dropped (``eval/smoothness`` -> ``smoothness``). Group keys default to
 keys ``scenario`` and ``planner``.
 
 Every table counts its episodes the same way: ``episodes`` (all of them), ``contact_free``
-(episodes whose contact is known and none occurred), ``contact_unknown`` (episodes whose
-contact is unknown, e.g. read from a log truncated before its metrics; counted neither as
-contact-free nor as contact) and, when the results have a ``completed`` column,
-``completed`` (episodes known to have finished their tasks before their time ran out; an
-unfinished episode has no efficiency).
+(episodes whose contact is known and none occurred: the robot's and the person's sphere models
+never overlapped, ``min_distance > 0``, a stricter test than MuJoCo's contacts),
+``contact_unknown`` (episodes whose contact is unknown, e.g. read from a log truncated before
+its metrics; counted neither as contact-free nor as contact), when the results have a
+``completed`` column, ``completed`` (episodes known to have finished their tasks before their
+time ran out; an unfinished episode has no efficiency), and, when they have MuJoCo's own
+count (``sim/contacts``), ``touched`` (episodes with a MuJoCo robot-human contact).
 
 Units are SI throughout, including the paper's table (its centimetres are stored as metres),
 except in :func:`comparison_table`, which shows the paper's units (cm, ms).
@@ -354,8 +356,15 @@ def episode_contact(df: pd.DataFrame) -> pd.Series:
     return state
 
 
-def _episode_counts(g: pd.DataFrame, with_completed: bool) -> dict[str, int]:
-    """``episodes``, ``contact_free``, ``contact_unknown`` (and ``completed``) of one group."""
+#: the column of MuJoCo robot-human contacts per episode (the simulation's own count)
+MUJOCO_CONTACTS = "sim/contacts"
+
+
+def _episode_counts(
+    g: pd.DataFrame, with_completed: bool, with_touched: bool = False
+) -> dict[str, int]:
+    """``episodes``, ``contact_free``, ``contact_unknown`` (and ``completed``, and
+    ``touched``: episodes with a MuJoCo robot-human contact) of one group."""
     contact = episode_contact(g)
     counts = {
         "episodes": len(g),
@@ -364,7 +373,16 @@ def _episode_counts(g: pd.DataFrame, with_completed: bool) -> dict[str, int]:
     }
     if with_completed:
         counts["completed"] = int((pd.to_numeric(g["completed"], errors="coerce") > 0).sum())
+    if with_touched:
+        counts["touched"] = int((pd.to_numeric(g[MUJOCO_CONTACTS], errors="coerce") > 0).sum())
     return counts
+
+
+def _has_touched(df: pd.DataFrame) -> bool:
+    """Whether ``df`` counts MuJoCo contacts for at least one episode."""
+    return MUJOCO_CONTACTS in df.columns and bool(
+        pd.to_numeric(df[MUJOCO_CONTACTS], errors="coerce").notna().any()
+    )
 
 
 def incomplete_logs_note(df: pd.DataFrame) -> str:
@@ -418,8 +436,9 @@ def summary_table(
         appearance): the group keys, ``episodes``, ``contact_free`` and ``contact_unknown``
         (:func:`episode_contact` 0 and NaN: an episode of unknown contact is not
         contact-free), ``completed`` (episodes with ``completed > 0``; only when ``df`` has
-        that column) and ``<metric>_mean``, ``<metric>_std`` (sample std; NaN for a single
-        episode). NaN values are left out of means.
+        that column), ``touched`` (episodes with ``sim/contacts > 0``, MuJoCo's robot-human
+        contacts; only when ``df`` has that column) and ``<metric>_mean``, ``<metric>_std``
+        (sample std; NaN for a single episode). NaN values are left out of means.
 
     Raises:
         ConfigError: when a group or metric column is missing.
@@ -449,7 +468,7 @@ def _per_group(
     for keys, g in df.groupby(group_by, sort=False, dropna=False):
         keys = keys if isinstance(keys, tuple) else (keys,)
         row: dict[str, Any] = dict(zip(group_by, keys))
-        row.update(_episode_counts(g, "completed" in df.columns))
+        row.update(_episode_counts(g, "completed" in df.columns, _has_touched(df)))
         row.update(columns(g))
         rows.append(row)
     return _sort_groups(pd.DataFrame.from_records(rows), group_by).reset_index(drop=True)
@@ -553,9 +572,10 @@ def comparison_table(df: pd.DataFrame, group_by: Sequence[str] | None = None) ->
 
     Returns:
         One row per group in display order: the group keys, ``episodes``, ``contact_free``,
-        ``contact_unknown``, ``completed`` (as in :func:`summary_table`), then the mean over
-        episodes of each :data:`TABLE_COLUMNS` metric under its header, in the paper's units
-        (``MHD cm``, ``distance cm``, ``pred. ms``; NaN where no episode has it).
+        ``contact_unknown``, ``completed``, ``touched`` (as in :func:`summary_table`), then
+        the mean over episodes of each :data:`TABLE_COLUMNS` metric under its header, in the
+        paper's units (``MHD cm``, ``distance cm``, ``pred. ms``; NaN where no episode has
+        it).
 
     Raises:
         ConfigError: when a group column is missing.
@@ -957,11 +977,15 @@ def write_sweep_report(
     note = incomplete_logs_note(df)
     md = ["# Results", "", f"{len(df)} episodes.", ""] + ([note, ""] if note else [])
     legend = [
-        "`contact_free`: episodes whose contact is known and none occurred",
+        "`contact_free`: episodes whose contact is known and none occurred (the robot's and "
+        "the person's sphere models never overlapped: `min_distance` > 0, stricter than a "
+        "MuJoCo contact)",
         "`contact_unknown`: episodes whose contact is unknown",
     ]
     if "completed" in summary.columns:
         legend.append("`completed`: episodes known to have finished their tasks")
+    if "touched" in summary.columns:
+        legend.append("`touched`: episodes with a MuJoCo robot-human contact")
     units = [DEFAULT_METRICS[m] for m in DEFAULT_METRICS if f"{m}_mean" in summary.columns]
     md += ["; ".join(legend) + ".", ""]
     md += ["Means over episodes: " + "; ".join(units) + ".", ""] if units else []

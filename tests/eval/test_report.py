@@ -604,3 +604,21 @@ def test_plot_paired_draws_rows_without_an_interval(tmp_path: Path) -> None:
     assert out.is_file() and matplotlib.image.imread(out).ndim == 3
     with pytest.raises(ConfigError, match="paired columns"):
         plot_paired(table.drop(columns="ci_low"), "min_distance", tmp_path / "q.png")
+
+
+def test_touched_counts_mujoco_contacts_apart_from_sphere_overlaps() -> None:
+    """``contact_free`` is about the sphere models (``min_distance``); ``touched`` counts
+    MuJoCo's robot-human contacts (``sim/contacts``), and appears only with that column."""
+    rows = [
+        {"planner": "itomp", "seed": 0, "eval/min_distance": 0.02, "sim/contacts": 0.0},
+        {"planner": "itomp", "seed": 1, "eval/min_distance": -0.01, "sim/contacts": 0.0},
+        {"planner": "itomp", "seed": 2, "eval/min_distance": -0.03, "sim/contacts": 2.0},
+        {"planner": "itomp", "seed": 3, "eval/min_distance": math.nan, "sim/contacts": math.nan},
+    ]
+    df = gather_results(rows)
+    for table in (comparison_table(df), summary_table(df, group_by=("planner",))):
+        row = table.iloc[0]
+        assert (row.episodes, row.contact_free, row.contact_unknown) == (4, 1, 1)
+        assert row.touched == 1
+    plain = gather_results([{k: v for k, v in r.items() if k != "sim/contacts"} for r in rows])
+    assert "touched" not in comparison_table(plain).columns
