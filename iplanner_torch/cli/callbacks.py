@@ -14,13 +14,88 @@ from omegaconf import DictConfig
 SWEEP_COLUMNS = ("noise", "dropout", "confidence")
 
 
-def episode_report(df: Any, out_dir: Path, baseline: str = "itomp") -> list[Path]:
+def sweep_overrides(df: Any, root: Path) -> tuple[Any, list[str]]:
+    """Add to episode rows ``df`` the command-line overrides that differ between the jobs of
+    the multirun folder ``root``.
+
+    Each job folder below ``root`` keeps its overrides in ``.hydra/overrides.yaml``; a row
+    belongs to the job folder its log ``path`` lies in. Every override key whose value is not
+    the same in all jobs (e.g. ``planner.itomp_spread_mps`` in ``-m
+    planner.itomp_spread_mps=0,0.1``) becomes a column named by the key, holding the job's
+    value (a number where it reads as one).
+
+    Returns:
+        ``(rows, keys)``: the rows with those columns, and the keys in the order the jobs
+        give them; ``(df, [])`` when ``df`` has no ``path`` column or no job folder has
+        overrides.
+    """
+    import pandas as pd
+    from omegaconf import OmegaConf
+
+    if "path" not in df.columns:
+        return df, []
+    root = Path(root).resolve()
+    jobs: dict[str, dict[str, str]] = {}
+    for file in sorted(root.glob("*/.hydra/overrides.yaml")):
+        try:
+            items = OmegaConf.to_container(OmegaConf.load(file))
+        except Exception:  # noqa: BLE001 - an unreadable job record only loses its columns
+            continue
+        if not isinstance(items, list):
+            continue
+        pairs = [str(x).lstrip("+~").split("=", 1) for x in items if "=" in str(x)]
+        jobs[file.parent.parent.name] = {k: v for k, v in pairs if not k.startswith("hydra")}
+    if len(jobs) < 2:
+        return df, []
+    keys = list(dict.fromkeys(k for o in jobs.values() for k in o))
+    swept = [k for k in keys if len({o.get(k) for o in jobs.values()}) > 1]
+    if not swept:
+        return df, []
+
+    def job_of(path: Any) -> str | None:
+        try:
+            return Path(str(path)).resolve().relative_to(root).parts[0]
+        except (ValueError, IndexError):
+            return None
+
+    job = df["path"].map(job_of)
+    out = df.copy()
+    for k in swept:
+        values = job.map(lambda j, k=k: jobs.get(j, {}).get(k) if j is not None else None)
+        numbers = pd.to_numeric(values, errors="coerce")
+        out[k] = numbers if bool(numbers.notna().eq(values.notna()).all()) else values
+    return out, swept
+
+
+#: override keys ending in these name repeats of one setting, never a setting to keep apart
+REPEAT_KEYS = ("seed", "seeds")
+
+
+def _split_by(df: Any, groups: tuple[str, ...], extra: list[str]) -> list[str]:
+    """The columns of ``extra`` that take several values within a group of ``groups``: those a
+    summary by ``groups`` would average over. Seeds (:data:`REPEAT_KEYS`, e.g.
+    ``experiment.seeds`` split over two jobs) are repeats and never kept apart."""
+    keys = list(groups)
+    out = []
+    for c in extra:
+        if c not in df.columns or c in groups or c.rsplit(".", 1)[-1] in REPEAT_KEYS:
+            continue
+        spread = df.groupby(keys, dropna=False)[c].nunique(dropna=False) if keys else None
+        if int(spread.max() if keys else df[c].nunique(dropna=False)) > 1:
+            out.append(c)
+    return out
+
+
+def episode_report(
+    df: Any, out_dir: Path, baseline: str = "itomp", split_by: list[str] | None = None
+) -> list[Path]:
     """Write the report of per-episode results ``df`` into ``out_dir``.
 
     The summary keeps every setting that takes several values apart
-    (:func:`~iplanner_torch.eval.report.report_groups`); the sweep plots put the first of
-    :data:`SWEEP_COLUMNS` that varies on their x axis; the paired section compares each
-    planner with ``baseline``.
+    (:func:`~iplanner_torch.eval.report.report_groups`), and also each column of ``split_by``
+    (e.g. the swept overrides of :func:`sweep_overrides`) that those groups would average
+    over; the sweep plots put the first of :data:`SWEEP_COLUMNS` that varies on their x axis;
+    the paired section compares each planner with ``baseline``.
 
     Returns:
         The written files (``results.csv``, ``results.md``, PNGs).
@@ -35,14 +110,17 @@ def episode_report(df: Any, out_dir: Path, baseline: str = "itomp") -> list[Path
         ),
         None,
     )
-    return write_sweep_report(
-        df, out_dir, group_by=report_groups(df), sweep=sweep, baseline=baseline
-    )
+    groups = report_groups(df)
+    extra = _split_by(df, groups, list(split_by or []))
+    if extra:  # ("scenario", swept settings, ..., "planner"): the overrides go before planner
+        groups = (*groups[:-1], *extra, groups[-1])
+    return write_sweep_report(df, out_dir, group_by=groups, sweep=sweep, baseline=baseline)
 
 
 def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
     """Read every ``*.mcap`` below ``root`` (in numbered order) and report them into
-    ``out_dir`` (:func:`episode_report`).
+    ``out_dir`` (:func:`episode_report`), with the overrides that differ between the jobs of
+    a multirun as columns kept apart in the summary (:func:`sweep_overrides`).
 
     Returns:
         The written files, or [] when no logs exist.
@@ -51,7 +129,8 @@ def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
 
     if not any(root.rglob("*.mcap")):
         return []
-    return episode_report(gather_results(root), out_dir)  # gather_results keeps numbered order
+    df, swept = sweep_overrides(gather_results(root), root)  # numbered order kept
+    return episode_report(df, out_dir, split_by=swept)
 
 
 class GatherSweepResults(Callback):

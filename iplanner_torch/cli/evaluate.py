@@ -167,7 +167,7 @@ def _episode(cfg: DictConfig) -> None:
     import pandas as pd
     from omegaconf import ListConfig
 
-    from iplanner_torch.cli.callbacks import episode_report
+    from iplanner_torch.cli.callbacks import episode_report, sweep_overrides
     from iplanner_torch.eval.report import comparison_table, incomplete_logs_note, print_table
 
     logs = cfg.evaluate.logs
@@ -191,9 +191,12 @@ def _episode(cfg: DictConfig) -> None:
             )
     baseline = cfg.evaluate.get("baseline")
     out_dir = _out_dir(cfg)
-    frames = []
+    frames, swept = [], []
     for i, path in enumerate(paths):
         df = _episode_rows(path)
+        if path.is_dir():  # a multirun folder: the overrides its jobs differ in
+            df, keys = sweep_overrides(df, path)
+            swept += [k for k in keys if k not in swept]
         if labels is not None:  # keep the runs apart: itomp@held, itomp@spread, ...
             named = df["planner"].notna()  # a log cut before its metadata has none
             df = df.assign(planner=df["planner"].where(~named, df["planner"] + "@" + labels[i]))
@@ -209,7 +212,7 @@ def _episode(cfg: DictConfig) -> None:
                 f"evaluate.baseline={baseline!r}: no episodes of that planner; the planners "
                 f"are {names}"
             )
-    written = episode_report(df, out_dir, baseline=baseline)
+    written = episode_report(df, out_dir, baseline=baseline, split_by=swept)
     print_table(comparison_table(df))  # the columns and units of iplanner-experiment's table
     note = incomplete_logs_note(df)
     if note:

@@ -36,3 +36,34 @@ def test_a_folder_of_logs_without_job_folders_is_gathered(tmp_path: Path) -> Non
     md = (tmp_path / "summary" / "results.md").read_text()
     assert md.index("| itomp |") < md.index("| iplanner_ni |")
     assert gather_episode_logs(tmp_path / "empty", tmp_path / "none") == []
+
+
+def test_a_swept_override_is_kept_apart_and_seed_splits_are_not(tmp_path: Path) -> None:
+    """Jobs of ``-m planner.itomp_spread_mps=0,0.1 'experiment.seeds=[0],[1]'``: the spread,
+    which no result column names, becomes a column and its own rows in the summary (not an
+    average over both values); the seed split is a repeat and stays merged; a key every job
+    shares adds nothing."""
+    sweep = tmp_path / "sweep"
+    jobs = [(0, "0", "[0]", 40.0), (1, "0", "[1]", 44.0), (2, "0.1", "[0]", 60.0),
+            (3, "0.1", "[1]", 70.0)]  # fmt: skip
+    for job, spread, seeds, smooth in jobs:
+        (sweep / str(job) / ".hydra").mkdir(parents=True)
+        (sweep / str(job) / ".hydra" / "overrides.yaml").write_text(
+            f"- planner.itomp_spread_mps={spread}\n- experiment.seeds={seeds}\n"
+            "- run.max_duration_s=8\n- hydra.launcher.n_jobs=2\n"
+        )
+        meta = {"scenario": "s", "planner": "itomp", "seed": int(seeds[1])}
+        with EpisodeWriter(sweep / str(job) / "episodes" / "e.mcap", metadata=meta) as log:
+            log.metrics(1.0, {"eval/smoothness": smooth, "eval/min_distance": 0.1})
+    gather_episode_logs(sweep, tmp_path / "summary")
+    df = pd.read_csv(tmp_path / "summary" / "results.csv")
+    assert list(df["planner.itomp_spread_mps"]) == [0.0, 0.0, 0.1, 0.1]
+    assert "run.max_duration_s" not in df.columns
+    md = (tmp_path / "summary" / "results.md").read_text()
+    header = next(ln for ln in md.splitlines() if ln.startswith("| scenario"))
+    cols = [c.strip() for c in header.strip("|").split("|")]
+    assert cols[:3] == ["scenario", "planner.itomp_spread_mps", "planner"]
+    assert "experiment.seeds" not in cols
+    rows = [ln for ln in md.splitlines() if ln.startswith("| s |")]
+    assert len(rows) == 2
+    assert "| 42 ± 2.83 |" in rows[0] and "| 65 ± 7.07 |" in rows[1]
