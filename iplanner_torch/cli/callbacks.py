@@ -22,12 +22,14 @@ def sweep_overrides(df: Any, root: Path) -> tuple[Any, list[str]]:
     belongs to the job folder its log ``path`` lies in. Every override key whose value is not
     the same in all jobs (e.g. ``planner.itomp_spread_mps`` in ``-m
     planner.itomp_spread_mps=0,0.1``) becomes a column named by the key, holding the job's
-    value (a number where it reads as one).
+    value (a number where it reads as one). A key that is already a column of ``df`` (e.g.
+    ``planner=itomp`` or ``seed=1`` against the episodes' own ``planner`` and ``seed``) gets
+    the column ``override.<key>`` instead, so the episodes' values are never replaced.
 
     Returns:
-        ``(rows, keys)``: the rows with those columns, and the keys in the order the jobs
-        give them; ``(df, [])`` when ``df`` has no ``path`` column or no job folder has
-        overrides.
+        ``(rows, columns)``: the rows with those columns, and the columns' names in the order
+        the jobs give the keys; ``(df, [])`` when ``df`` has no ``path`` column or no job
+        folder has overrides.
     """
     import pandas as pd
     from omegaconf import OmegaConf
@@ -60,11 +62,14 @@ def sweep_overrides(df: Any, root: Path) -> tuple[Any, list[str]]:
 
     job = df["path"].map(job_of)
     out = df.copy()
+    columns = []
     for k in swept:
         values = job.map(lambda j, k=k: jobs.get(j, {}).get(k) if j is not None else None)
         numbers = pd.to_numeric(values, errors="coerce")
-        out[k] = numbers if bool(numbers.notna().eq(values.notna()).all()) else values
-    return out, swept
+        name = f"override.{k}" if k in df.columns else k
+        out[name] = numbers if bool(numbers.notna().eq(values.notna()).all()) else values
+        columns.append(name)
+    return out, columns
 
 
 #: override keys ending in these name repeats of one setting, never a setting to keep apart

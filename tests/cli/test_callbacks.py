@@ -41,8 +41,9 @@ def test_a_folder_of_logs_without_job_folders_is_gathered(tmp_path: Path) -> Non
 def test_a_swept_override_is_kept_apart_and_seed_splits_are_not(tmp_path: Path) -> None:
     """Jobs of ``-m planner.itomp_spread_mps=0,0.1 'experiment.seeds=[0],[1]'``: the spread,
     which no result column names, becomes a column and its own rows in the summary (not an
-    average over both values); the seed split is a repeat and stays merged; a key every job
-    shares adds nothing."""
+    average over both values); the seed split is a repeat and stays merged (also a root
+    ``seed``, which must not replace the episodes' seeds); a key every job shares adds
+    nothing."""
     sweep = tmp_path / "sweep"
     jobs = [(0, "0", "[0]", 40.0), (1, "0", "[1]", 44.0), (2, "0.1", "[0]", 60.0),
             (3, "0.1", "[1]", 70.0)]  # fmt: skip
@@ -50,7 +51,7 @@ def test_a_swept_override_is_kept_apart_and_seed_splits_are_not(tmp_path: Path) 
         (sweep / str(job) / ".hydra").mkdir(parents=True)
         (sweep / str(job) / ".hydra" / "overrides.yaml").write_text(
             f"- planner.itomp_spread_mps={spread}\n- experiment.seeds={seeds}\n"
-            "- run.max_duration_s=8\n- hydra.launcher.n_jobs=2\n"
+            f"- seed={job}\n- run.max_duration_s=8\n- hydra.launcher.n_jobs=2\n"
         )
         meta = {"scenario": "s", "planner": "itomp", "seed": int(seeds[1])}
         with EpisodeWriter(sweep / str(job) / "episodes" / "e.mcap", metadata=meta) as log:
@@ -59,6 +60,8 @@ def test_a_swept_override_is_kept_apart_and_seed_splits_are_not(tmp_path: Path) 
     df = pd.read_csv(tmp_path / "summary" / "results.csv")
     assert list(df["planner.itomp_spread_mps"]) == [0.0, 0.0, 0.1, 0.1]
     assert "run.max_duration_s" not in df.columns
+    # an override named like a result column never replaces the episodes' own values
+    assert list(df["seed"]) == [0, 1, 0, 1] and list(df["override.seed"]) == [0, 1, 2, 3]
     md = (tmp_path / "summary" / "results.md").read_text()
     header = next(ln for ln in md.splitlines() if ln.startswith("| scenario"))
     cols = [c.strip() for c in header.strip("|").split("|")]
