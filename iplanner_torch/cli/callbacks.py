@@ -85,8 +85,11 @@ def _split_by(df: Any, groups: tuple[str, ...], extra: list[str]) -> list[str]:
     for c in extra:
         if c not in df.columns or c in groups or c.rsplit(".", 1)[-1] in REPEAT_KEYS:
             continue
-        spread = df.groupby(keys, dropna=False)[c].nunique(dropna=False) if keys else None
-        if int(spread.max() if keys else df[c].nunique(dropna=False)) > 1:
+        if keys:
+            values = int(df.groupby(keys, dropna=False)[c].nunique(dropna=False).max())
+        else:
+            values = int(df[c].nunique(dropna=False))
+        if values > 1:
             out.append(c)
     return out
 

@@ -80,6 +80,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from iplanner_torch.checks import non_negative
 from iplanner_torch.data.skeleton import JOINT_INDEX, JOINT_NAMES
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.eval import metrics as M
@@ -200,8 +201,7 @@ class EpisodeCfg:
             raise ConfigError("expected mhd_horizon_s > 0 and mhd_min_motion >= 0")
         if self.metrics_hz <= 0 or self.log_hz <= 0:
             raise ConfigError("expected metrics_hz > 0 and log_hz > 0")
-        if not 0.0 <= self.scene_hz < math.inf:
-            raise ConfigError(f"expected scene_hz >= 0 and finite, got {self.scene_hz!r}")
+        non_negative("scene_hz", self.scene_hz)
         if self.torch_threads is not None and self.torch_threads < 1:
             raise ConfigError(f"expected torch_threads >= 1 or None, got {self.torch_threads}")
         if self.task_planner_episodes < 0:

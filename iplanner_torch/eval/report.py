@@ -465,10 +465,11 @@ def _per_group(
     """One row per group of ``df``, in display order: the group keys, the episode counts
     (:func:`_episode_counts`) and ``columns(group)``."""
     rows = []
+    with_completed, with_touched = "completed" in df.columns, _has_touched(df)
     for keys, g in df.groupby(group_by, sort=False, dropna=False):
         keys = keys if isinstance(keys, tuple) else (keys,)
         row: dict[str, Any] = dict(zip(group_by, keys))
-        row.update(_episode_counts(g, "completed" in df.columns, _has_touched(df)))
+        row.update(_episode_counts(g, with_completed, with_touched))
         row.update(columns(g))
         rows.append(row)
     return _sort_groups(pd.DataFrame.from_records(rows), group_by).reset_index(drop=True)

@@ -531,17 +531,22 @@ class TrajectoryOptimizer:
                     centers_x, self.radii, human, pairs, exact=exact
                 )
                 bound = unsafe_if_not_finite(bound, human)
-            target = math.log(self.cfg.penalty_target * (1.0 - self.cfg.confidence))
             if look_idx is not None:
-                excess = torch.relu(torch.log(bound[:, n_x:].clamp_min(1e-30)) - target)
+                excess = self._excess(bound[:, n_x:])
                 terms["human_lookahead_penalty"] = excess.square().sum(-1)
                 bound = bound[:, :n_x]
             bound = bound.view(q.shape[0], -1, self.cfg.collision_substeps).amax(-1)  # (B, W_x)
-            excess = torch.relu(torch.log(bound.clamp_min(1e-30)) - target)
+            excess = self._excess(bound)
             terms["human_collision_bound"] = bound.sum(-1)
             terms["human_confidence_penalty"] = excess.square().sum(-1)
             terms["human_mean_penetration"] = pen
         return terms, bound, clearance, pairs
+
+    def _excess(self, bound: torch.Tensor) -> torch.Tensor:
+        """``log(bound / target)`` where positive, else 0 (same shape as ``bound``): what the
+        confidence penalty squares, with ``target = penalty_target (1 - confidence)``."""
+        target = math.log(self.cfg.penalty_target * (1.0 - self.cfg.confidence))
+        return torch.relu(torch.log(bound.clamp_min(1e-30)) - target)
 
     def _sphere_centers(
         self, q: torch.Tensor, win_idx: torch.Tensor, with_window: bool
@@ -1104,7 +1109,6 @@ class TrajectoryOptimizer:
         """
         cfg, w = self.cfg, self.cfg.num_waypoints
         weights = cfg.weights
-        target = math.log(cfg.penalty_target * (1.0 - cfg.confidence))
         v_lim = INIT_VEL_FRACTION * self.v_max
         a_step = math.inf if cfg.acc_max is None else cfg.acc_max * dt
         last_window = int(win_idx.max())
@@ -1131,8 +1135,7 @@ class TrajectoryOptimizer:
                         look_idx=look_idx,
                     )
                     later = (win_idx >= i).to(p.dtype)  # (W_x,)
-                    log_b = torch.log(bound[0].clamp_min(1e-30))
-                    excess = torch.relu(log_b - target) * later
+                    excess = self._excess(bound[0]) * later
                     risk = weights.human_confidence_penalty * excess.square().sum()
                     pen = terms["human_mean_penetration"][0]
                     risk = risk + weights.human_mean_penetration * pen

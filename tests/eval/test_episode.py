@@ -228,6 +228,9 @@ def test_errors(tmp_path: Path) -> None:
         EpisodeCfg(stall_fallback_s=0.0)
     with pytest.raises(ConfigError, match="still_radius"):
         EpisodeCfg(still_radius=-0.1)
+    for bad in (-1.0, math.inf, math.nan):
+        with pytest.raises(ConfigError, match="expected scene_hz >= 0 and finite"):
+            EpisodeCfg(scene_hz=bad)
 
 
 def test_table_clearance_against_brute_force() -> None:
