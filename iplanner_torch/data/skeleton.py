@@ -33,8 +33,13 @@ class Segment:
         name: segment name (``"left_forearm"``).
         joint_a: first joint's name.
         joint_b: second joint's name (equal to ``joint_a`` for a single sphere on a joint).
-        radius: sphere radius for a body of the reference size [m].
+        radius: sphere radius for a body of the reference size [m]; the simulated person's
+            capsule around the segment has this radius.
         n_spheres: spheres spread evenly from ``joint_a`` to ``joint_b``.
+        length: ``joint_a`` to ``joint_b`` distance of the reference body [m] (0 for a single
+            joint); the covering sphere layout
+            (:meth:`~iplanner_torch.planning.human_model.HumanSphereMap.from_segments`) is
+            designed for it.
     """
 
     name: str
@@ -42,19 +47,44 @@ class Segment:
     joint_b: str
     radius: float
     n_spheres: int
+    length: float = 0.0
 
 
 #: Segments of the reference body (height about 1.75 m); radii scale with body size.
 SEGMENTS: tuple[Segment, ...] = (
     Segment(name="head", joint_a="head", joint_b="head", radius=0.11, n_spheres=1),
-    Segment(name="neck", joint_a="neck", joint_b="head", radius=0.06, n_spheres=1),
-    Segment(name="upper_torso", joint_a="neck", joint_b="torso", radius=0.15, n_spheres=2),
-    Segment(name="lower_torso", joint_a="torso", joint_b="waist", radius=0.14, n_spheres=2),
+    Segment(name="neck", joint_a="neck", joint_b="head", radius=0.06, n_spheres=1, length=0.20),
     Segment(
-        name="left_shoulder", joint_a="neck", joint_b="left_shoulder", radius=0.07, n_spheres=1
+        name="upper_torso",
+        joint_a="neck",
+        joint_b="torso",
+        radius=0.15,
+        n_spheres=2,
+        length=0.30,
     ),
     Segment(
-        name="right_shoulder", joint_a="neck", joint_b="right_shoulder", radius=0.07, n_spheres=1
+        name="lower_torso",
+        joint_a="torso",
+        joint_b="waist",
+        radius=0.14,
+        n_spheres=2,
+        length=0.25,
+    ),
+    Segment(
+        name="left_shoulder",
+        joint_a="neck",
+        joint_b="left_shoulder",
+        radius=0.07,
+        n_spheres=1,
+        length=0.18,
+    ),
+    Segment(
+        name="right_shoulder",
+        joint_a="neck",
+        joint_b="right_shoulder",
+        radius=0.07,
+        n_spheres=1,
+        length=0.18,
     ),
     Segment(
         name="left_upper_arm",
@@ -62,6 +92,7 @@ SEGMENTS: tuple[Segment, ...] = (
         joint_b="left_elbow",
         radius=0.055,
         n_spheres=3,
+        length=0.30,
     ),
     Segment(
         name="right_upper_arm",
@@ -69,9 +100,15 @@ SEGMENTS: tuple[Segment, ...] = (
         joint_b="right_elbow",
         radius=0.055,
         n_spheres=3,
+        length=0.30,
     ),
     Segment(
-        name="left_forearm", joint_a="left_elbow", joint_b="left_hand", radius=0.045, n_spheres=3
+        name="left_forearm",
+        joint_a="left_elbow",
+        joint_b="left_hand",
+        radius=0.045,
+        n_spheres=3,
+        length=0.28,
     ),
     Segment(
         name="right_forearm",
@@ -79,6 +116,7 @@ SEGMENTS: tuple[Segment, ...] = (
         joint_b="right_hand",
         radius=0.045,
         n_spheres=3,
+        length=0.28,
     ),
     Segment(name="left_hand", joint_a="left_hand", joint_b="left_hand", radius=0.06, n_spheres=1),
     Segment(

@@ -36,7 +36,7 @@ import torch
 from iplanner_torch.checks import finite_time, flag
 from iplanner_torch.errors import ConfigError, PlanningError
 from iplanner_torch.planning import costs as C
-from iplanner_torch.planning.human_model import HumanSphereMap
+from iplanner_torch.planning.human_model import HumanSphereMap, SphereLayout
 from iplanner_torch.planning.trajectory import Trajectory, accelerations, uniform_times
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import all_finite, check_finite, check_shape
@@ -141,6 +141,11 @@ class OptimizerCfg:
     # could react), and no candidate is less risky than holding: step out of the person's
     # way (PlanResult.escape) instead of waiting in it; None: always wait (the paper)
     escape_within_s: float | None = None
+    # the person's collision spheres (HumanSphereMap.from_segments): "cover", spheres up to
+    # 1 cm larger than the body's capsules whose union contains them, so the bound is one on
+    # touching the body (42 spheres); "inner", the 22 spheres on the skeleton of earlier
+    # commits, which leave parts of the capsules out (up to 3 cm of the forearm)
+    human_spheres: SphereLayout = "cover"
     # seed of the random initial perturbations (same seed -> same plan)
     seed: int = 0
     # device of the plan; None follows the robot model's tensors
@@ -174,6 +179,10 @@ class OptimizerCfg:
         if not isinstance(self.weights, C.CostWeights):
             raise ConfigError(f"expected weights to be CostWeights, got {type(self.weights)}")
         flag("safe_hold", self.safe_hold)
+        if self.human_spheres not in ("inner", "cover"):
+            raise ConfigError(
+                f"expected human_spheres 'inner' or 'cover', got {self.human_spheres!r}"
+            )
         if self.escape_within_s is not None and not self.escape_within_s >= 0.0:
             raise ConfigError(f"expected escape_within_s >= 0 or None, got {self.escape_within_s}")
 
@@ -305,7 +314,8 @@ class TrajectoryOptimizer:
         cfg: settings.
         static_scene: static obstacles with a ``clearance`` query, or None.
         human_spheres: joint-to-sphere map of the human (``centers_diag``, ``radii``); None
-            builds :class:`HumanSphereMap` from the forecast's joint names.
+            builds :class:`HumanSphereMap` from the forecast's joint names (layout
+            ``cfg.human_spheres``).
     """
 
     def __init__(
@@ -337,7 +347,9 @@ class TrajectoryOptimizer:
         if self.human_spheres is not None:
             return self.human_spheres
         if joint_names not in self._sphere_cache:
-            self._sphere_cache[joint_names] = HumanSphereMap.from_segments(joint_names)
+            self._sphere_cache[joint_names] = HumanSphereMap.from_segments(
+                joint_names, layout=self.cfg.human_spheres
+            )
         return self._sphere_cache[joint_names]
 
     def min_duration(
