@@ -141,11 +141,12 @@ class OptimizerCfg:
     # could react), and no candidate is less risky than holding: step out of the person's
     # way (PlanResult.escape) instead of waiting in it; None: always wait (the paper)
     escape_within_s: float | None = None
-    # the person's collision spheres (HumanSphereMap.from_segments): "cover", spheres up to
-    # 1 cm larger than the body's capsules whose union contains them, so the bound is one on
-    # touching the body (42 spheres); "inner", the 22 spheres on the skeleton of earlier
-    # commits, which leave parts of the capsules out (up to 3 cm of the forearm)
-    human_spheres: SphereLayout = "cover"
+    # the person's collision spheres (HumanSphereMap.from_segments): "inner", the 22 spheres
+    # on the skeleton, which leave parts of the body's capsules out (up to 3 cm of the
+    # forearm, 4.5 cm of the upper arm), so the bound is one on touching those spheres;
+    # "cover", 42 spheres up to 1 cm larger than the capsules whose union contains them, so
+    # the bound is one on touching the body
+    human_spheres: SphereLayout = "inner"
     # seed of the random initial perturbations (same seed -> same plan)
     seed: int = 0
     # device of the plan; None follows the robot model's tensors
