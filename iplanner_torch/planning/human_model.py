@@ -18,8 +18,8 @@ from iplanner_torch.data.skeleton import SEGMENTS, Segment
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.types import check_shape
 
-#: ``"inner"``: the paper's spheres on the skeleton, inside the body; ``"cover"``: spheres whose
-#: union contains the body's capsules (:meth:`HumanSphereMap.from_segments`).
+#: ``"inner"``: spheres on the skeleton, inside the body (the default); ``"cover"``: spheres
+#: whose union contains the body's capsules (:meth:`HumanSphereMap.from_segments`).
 SphereLayout = Literal["inner", "cover"]
 #: the most a covering sphere's radius exceeds its segment's [m]
 COVER_MAX_GAP = 0.01
@@ -61,8 +61,9 @@ class HumanSphereMap:
 
         - ``"inner"``: ``n_spheres`` spheres of the segment's radius at ``u = (i + 0.5) / n``
           (``u = 0`` when the segment is a single joint). They lie inside the capsule of that
-          radius around the segment but leave parts of it out: up to about 3 cm of the
-          forearm, 4.5 cm of the upper arm and 7 cm of the torso for the reference body.
+          radius around the segment but leave parts of it out: about 4 cm of the forearm,
+          5 cm of the upper arm and 7 cm of the torso on the reaching set's bodies
+          (``scripts/human_sphere_gaps.py``).
         - ``"cover"``: spheres at ``u = i / m``, ``i = 0..m``, of radius
           ``sqrt(r^2 + (L / 2m)^2)``, with ``m`` the fewest intervals that keep that radius
           within ``r + max_gap`` at the design length ``L = length_scale * scale *

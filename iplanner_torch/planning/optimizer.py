@@ -142,8 +142,8 @@ class OptimizerCfg:
     # way (PlanResult.escape) instead of waiting in it; None: always wait (the paper)
     escape_within_s: float | None = None
     # the person's collision spheres (HumanSphereMap.from_segments): "inner", the 22 spheres
-    # on the skeleton, which leave parts of the body's capsules out (up to 3 cm of the
-    # forearm, 4.5 cm of the upper arm), so the bound is one on touching those spheres;
+    # on the skeleton, which leave parts of the body's capsules out (about 4 cm of the
+    # forearm, 5 cm of the upper arm), so the bound is one on touching those spheres;
     # "cover", 42 spheres up to 1 cm larger than the capsules whose union contains them, so
     # the bound is one on touching the body
     human_spheres: SphereLayout = "inner"
