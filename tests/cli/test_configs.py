@@ -140,3 +140,15 @@ def test_comparison_table_keeps_swept_settings_apart() -> None:
         ("slow", "b"): (1, 10.0),
         ("fast", "b"): (2, 30.0),
     }
+
+
+def test_human_sphere_layout_reaches_the_optimiser() -> None:
+    """``planner.optimizer.human_spheres`` from the command line to the optimiser's config;
+    an unknown layout is a ConfigError naming the key."""
+    base = instantiate(compose(config_name="config").planner)
+    assert base.optimizer_cfg().human_spheres == "inner"
+    cfg = compose(config_name="config", overrides=["planner.optimizer.human_spheres=cover"])
+    assert instantiate(cfg.planner).optimizer_cfg().human_spheres == "cover"
+    bad = compose(config_name="config", overrides=["planner.optimizer.human_spheres=outer"])
+    with pytest.raises(ConfigError, match="human_spheres"):
+        instantiate(bad.planner)
