@@ -6,8 +6,9 @@ the planned trajectory) for ``physics_dt``-sized MuJoCo steps. A MuJoCo position
 applies ``kp (ctrl - q) - kv qd``; its set point is advanced by ``(kv / kp) qd_des`` so that the
 force is the PD tracking law ``kp (q_des - q) + kv (qd_des - qd)`` (no velocity lag). The
 human's capsules follow the scripted human at every physics step, and robot-human contacts are
-read from ``data.contact``. After the physics, blocks are picked / placed, the human's script
-advances and the tracker samples the human.
+read from ``data.contact``. At the end of every period the robot's distance to the person's
+body is measured on MuJoCo's own geometry (:meth:`SimEnv.body_distance`). After the physics,
+blocks are picked / placed, the human's script advances and the tracker samples the human.
 
 Blocks are kinematic (mocap): resting on the table, following the robot's tool point after a
 pick (fixed offset), resting on the delivery spot after the release, following the human's
@@ -38,6 +39,9 @@ from iplanner_torch.sim.scene import (
 )
 from iplanner_torch.sim.tasks import FetchCfg, FetchPhase, FetchTask
 from iplanner_torch.sim.tracker import Tracker, TrackerCfg
+
+#: geom pairs farther apart than this are not measured exactly; a distance is capped there [m]
+BODY_DISTANCE_MAX = 1.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -167,6 +171,10 @@ class SimEnv:
         kp = -self.model.actuator_biasprm[self.handles.actuator_ids, 1]
         kv = -self.model.actuator_biasprm[self.handles.actuator_ids, 2]
         self._vel_ff_s = np.where(kp > 0, kv / np.where(kp > 0, kp, 1.0), 0.0)  # (J,) [s]
+        # the robot geoms that can touch the person (conaffinity bit 2) and the person's geoms
+        touching = self.handles.robot_geom & ((self.model.geom_conaffinity & 2) != 0)
+        self._robot_geoms = np.nonzero(touching)[0]  # (R,)
+        self._human_geoms = np.asarray(self.handles.human_geom_ids)  # (H,)
         self.reset()
 
     # -- state --------------------------------------------------------------------------------
@@ -205,6 +213,7 @@ class SimEnv:
         self.all_done = False
         pose_human(self.model, self.data, self.handles, self.human.joint_positions(0.0))
         mujoco.mj_forward(self.model, self.data)
+        self.min_body_distance = self.body_distance()
         self.tracker.observe(0.0, self.human.joint_positions(0.0))
 
     @property
@@ -298,6 +307,7 @@ class SimEnv:
         self._in_contact = contact
         self.contact_steps += int(contact)
         self.contact_onsets += int(new_contact)
+        self.min_body_distance = min(self.min_body_distance, self.body_distance())
         events.extend(self._update_fetch(t))
         for ev in self.human.update(t, set(self.delivered)):
             events.append(TaskEvent(kind=ev.kind, block=ev.block, time=ev.time))
@@ -318,6 +328,39 @@ class SimEnv:
             events.append(TaskEvent(kind="done", block=-1, time=t))
         self.tracker.observe(t, self.human.joint_positions(t))
         return StepInfo(events=events, contact=contact, new_contact=new_contact)
+
+    def geom_distances(self) -> np.ndarray:
+        """(R, H) signed distances [m] between the R robot geoms that can touch the person and
+        the person's H capsules and spheres, from MuJoCo's ``mj_geomDistance`` at the state of
+        the last physics step (< 0: they overlap by that much). Pairs farther apart than
+        ``BODY_DISTANCE_MAX`` read ``BODY_DISTANCE_MAX``."""
+        m, d = self.model, self.data
+        out = np.empty((self._robot_geoms.size, self._human_geoms.size))
+        for i, g1 in enumerate(self._robot_geoms):
+            for j, g2 in enumerate(self._human_geoms):
+                out[i, j] = mujoco.mj_geomDistance(m, d, int(g1), int(g2), BODY_DISTANCE_MAX, None)
+        return out
+
+    def body_distance(self) -> float:
+        """The smallest of :meth:`geom_distances` [m]: how close the robot is to the
+        person's body (the capsules MuJoCo's contacts are found on, not the planner's sphere
+        models). Pairs whose bounding spheres cannot be closer than the best pair so far are
+        skipped, which does not change the result; ``BODY_DISTANCE_MAX`` when every pair is
+        farther."""
+        m, d = self.model, self.data
+        r, h = self._robot_geoms, self._human_geoms
+        if r.size == 0 or h.size == 0:
+            return BODY_DISTANCE_MAX
+        gap = np.linalg.norm(d.geom_xpos[r][:, None] - d.geom_xpos[h][None], axis=-1)
+        lower = gap - m.geom_rbound[r][:, None] - m.geom_rbound[h][None]  # (R, H)
+        best = BODY_DISTANCE_MAX
+        for flat in np.argsort(lower, axis=None):
+            i, j = divmod(int(flat), h.size)
+            if lower[i, j] >= best:
+                break
+            dist = mujoco.mj_geomDistance(m, d, int(r[i]), int(h[j]), BODY_DISTANCE_MAX, None)
+            best = min(best, dist)
+        return float(best)
 
     # -- internals ----------------------------------------------------------------------------
 

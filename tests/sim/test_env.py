@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 import pytest
 import torch
@@ -105,6 +106,8 @@ def test_contact_when_arm_goes_through_the_human(arm) -> None:
     assert env.contact_onsets >= 1
     assert env.contact_steps == sum(seen) >= 1
     assert max(listed) >= 1
+    # MuJoCo's contacts and its distances agree: the body distance went below zero
+    assert env.min_body_distance < 0.0
 
 
 def test_no_contact_far_from_the_human(arm) -> None:
@@ -112,6 +115,53 @@ def test_no_contact_far_from_the_human(arm) -> None:
     for _ in range(100):
         env.step(arm.q_home.numpy(), np.zeros(3))
     assert env.contact_steps == 0
+    assert env.min_body_distance > 0.05
+
+
+def _axis(env: SimEnv, g: int, n: int) -> tuple[np.ndarray, float]:
+    """(n, 3) points along the axis of capsule or sphere geom g, and its radius."""
+    m, d = env.model, env.data
+    half = m.geom_size[g, 1] if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE else 0.0
+    z = d.geom_xmat[g].reshape(3, 3)[:, 2]
+    s = np.linspace(-half, half, n)[:, None]
+    return d.geom_xpos[g] + s * z, float(m.geom_size[g, 0])
+
+
+def test_body_distance_against_brute_force_capsule_distances(arm) -> None:
+    """Each robot-capsule to human-capsule distance equals the brute-force distance between
+    points along the two axes, less both radii; the pruned body distance is the smallest of
+    all pairs."""
+    cfg = HumanCfg(
+        mode="blocking",
+        blocking_start_s=0.0,
+        blocking_target=(0.15, -0.05, 0.2),
+        blocking_hold_s=5.0,
+    )
+    env = _env(arm, cfg)
+    for _ in range(150):
+        env.step(arm.q_home.numpy(), np.zeros(3))
+    hand = env.human_joints()[9]
+    q = torch.as_tensor(env.robot_q(), dtype=torch.float32)
+    path = _ik_path(arm, q, hand, n=60)
+    capsule = mujoco.mjtGeom.mjGEOM_CAPSULE
+    checked = 0
+    for q_des in path[::6]:
+        for _ in range(8):
+            env.step(q_des, np.zeros(3))
+        dist = env.geom_distances()  # (R, H)
+        assert env.body_distance() == pytest.approx(float(dist.min()), abs=1e-12)
+        for i, g1 in enumerate(env._robot_geoms):
+            if env.model.geom_type[g1] != capsule:
+                continue
+            a, ra = _axis(env, int(g1), 1500)
+            for j, g2 in enumerate(env._human_geoms):
+                b, rb = _axis(env, int(g2), 1500)
+                brute = np.linalg.norm(a[:, None] - b[None], axis=-1).min() - ra - rb
+                if brute < 0.9:
+                    assert dist[i, j] == pytest.approx(brute, abs=1e-3)
+                    checked += 1
+    assert checked > 50
+    assert env.min_body_distance <= float(dist.min()) + 1e-12
 
 
 def test_pick_and_deliver_by_a_scripted_path(arm) -> None:
