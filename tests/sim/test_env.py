@@ -85,7 +85,9 @@ def _ik_path(arm, q0: torch.Tensor, point: np.ndarray, n: int = 150) -> list[np.
     return [(q0 + (q1 - q0) * s).numpy() for s in np.linspace(0.0, 1.0, n)]
 
 
-def test_contact_when_arm_goes_through_the_human(arm) -> None:
+def _blocked_env(arm) -> SimEnv:
+    """An environment whose person has held the right hand in the robot's workspace since
+    the start (150 control periods in, the robot at home)."""
     cfg = HumanCfg(
         mode="blocking",
         blocking_start_s=0.0,
@@ -95,6 +97,11 @@ def test_contact_when_arm_goes_through_the_human(arm) -> None:
     env = _env(arm, cfg)
     for _ in range(150):  # the human's right hand moves into the workspace
         env.step(arm.q_home.numpy(), np.zeros(3))
+    return env
+
+
+def test_contact_when_arm_goes_through_the_human(arm) -> None:
+    env = _blocked_env(arm)
     assert env.contact_steps == 0
     hand = env.human_joints()[9]
     q = torch.as_tensor(env.robot_q(), dtype=torch.float32)
@@ -131,15 +138,7 @@ def test_body_distance_against_brute_force_capsule_distances(arm) -> None:
     """Each robot-capsule to human-capsule distance equals the brute-force distance between
     points along the two axes, less both radii; the pruned body distance is the smallest of
     all pairs."""
-    cfg = HumanCfg(
-        mode="blocking",
-        blocking_start_s=0.0,
-        blocking_target=(0.15, -0.05, 0.2),
-        blocking_hold_s=5.0,
-    )
-    env = _env(arm, cfg)
-    for _ in range(150):
-        env.step(arm.q_home.numpy(), np.zeros(3))
+    env = _blocked_env(arm)
     hand = env.human_joints()[9]
     q = torch.as_tensor(env.robot_q(), dtype=torch.float32)
     path = _ik_path(arm, q, hand, n=60)
