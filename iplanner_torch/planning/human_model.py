@@ -14,6 +14,7 @@ from typing import Literal
 
 import torch
 
+from iplanner_torch.checks import positive
 from iplanner_torch.data.skeleton import SEGMENTS, Segment
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.types import check_shape
@@ -84,18 +85,15 @@ class HumanSphereMap:
 
         Raises:
             ConfigError: when a segment names a joint that is not in ``joint_names``, on an
-                unknown layout, a non-positive ``scale``, ``max_gap`` or ``length_scale``, or
-                (``"cover"``) a two-joint segment without a positive ``length``.
+                unknown layout, a ``scale``, ``max_gap`` or ``length_scale`` that is not a
+                finite number > 0, or (``"cover"``) a two-joint segment without a positive
+                ``length``.
         """
         if layout not in ("inner", "cover"):
             raise ConfigError(f"expected layout 'inner' or 'cover', got {layout!r}")
-        for name, value in (
-            ("scale", scale),
-            ("max_gap", max_gap),
-            ("length_scale", length_scale),
-        ):
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-                raise ConfigError(f"expected {name} > 0, got {value!r}")
+        scale = positive("scale", scale)
+        max_gap = positive("max_gap", max_gap)
+        length_scale = positive("length_scale", length_scale)
         index = {name: i for i, name in enumerate(joint_names)}
         rows: list[torch.Tensor] = []
         radii: list[float] = []
