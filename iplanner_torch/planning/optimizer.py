@@ -990,10 +990,8 @@ class TrajectoryOptimizer:
                 and self._static_ok(q_esc, dt, clear_e, qd_start)
                 and float(bound_e.amax()) < hold_peak
             ):
-                q_cand = q_all.clone()
-                q_cand[best] = escape
-                res = self._result(
-                    False, q_cand, best, times, bound_e, win_idx, terms_e, qd_start, 0.0, row=0
+                res = self._replaced_result(
+                    q_all, best, escape, times, bound_e, win_idx, terms_e, qd_start, 0.0
                 )
                 res.evasive = res.escape = True
                 return res
@@ -1015,13 +1013,31 @@ class TrajectoryOptimizer:
         hold: int,
     ) -> PlanResult:
         """The wait: candidate ``best`` replaced by its stop ``q_hold`` (W, J)."""
-        q_cand = q_all.clone()
-        q_cand[best] = q_hold
-        res = self._result(
-            False, q_cand, best, times, bound1, win_idx, terms1, qd_start, wait_s, row=0
+        res = self._replaced_result(
+            q_all, best, q_hold, times, bound1, win_idx, terms1, qd_start, wait_s
         )
         res.hold_index = hold
         return res
+
+    def _replaced_result(
+        self,
+        q_all: torch.Tensor,
+        best: int,
+        q_new: torch.Tensor,
+        times: torch.Tensor,
+        bound1: torch.Tensor | None,
+        win_idx: torch.Tensor,
+        terms1: dict[str, torch.Tensor],
+        qd_start: torch.Tensor | None,
+        wait_s: float,
+    ) -> PlanResult:
+        """An infeasible result whose plan is candidate ``best`` of q_all (B, W, J) replaced
+        by q_new (W, J), with the bound (1, W_x) and terms of q_new alone."""
+        q_cand = q_all.clone()
+        q_cand[best] = q_new
+        return self._result(
+            False, q_cand, best, times, bound1, win_idx, terms1, qd_start, wait_s, row=0
+        )
 
     def _imminent(
         self,
