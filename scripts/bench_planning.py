@@ -25,8 +25,8 @@ import time
 import torch
 from _timing import reference_ms
 
+from iplanner_torch.collision.human_spheres import SphereLayout
 from iplanner_torch.data.skeleton import JOINT_NAMES
-from iplanner_torch.planning.human_model import SphereLayout
 from iplanner_torch.planning.optimizer import OptimizerCfg, TrajectoryOptimizer
 from iplanner_torch.planning.replanner import Replanner, ReplannerCfg
 from iplanner_torch.prediction.forecast import Forecast

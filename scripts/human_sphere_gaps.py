@@ -23,10 +23,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.data.skeleton import JOINT_INDEX, JOINT_NAMES, SEGMENTS
 from iplanner_torch.errors import DataError
-from iplanner_torch.planning.human_model import HumanSphereMap
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -16,7 +16,7 @@ from iplanner_torch.collision.gaussian import (
     sphere_collision_bound_diag,
     trajectory_collision_bound,
 )
-from iplanner_torch.collision.human_spheres import HumanSphereModel
+from iplanner_torch.collision.human_spheres import HumanSphereMap, SphereLayout
 from iplanner_torch.collision.static import (
     Box,
     Plane,
@@ -27,8 +27,9 @@ from iplanner_torch.collision.static import (
 
 __all__ = [
     "Box",
-    "HumanSphereModel",
+    "HumanSphereMap",
     "Plane",
+    "SphereLayout",
     "StaticScene",
     "exact_ball_probability",
     "max_density_point",

@@ -1,14 +1,17 @@
-"""Human bounding spheres on body segments and their Gaussian centres (eq. center_distribution).
+"""The person's collision spheres as a linear map of joint Gaussians (eq. center_distribution).
 
-A sphere at fraction ``u`` of the segment from joint ``a`` to joint ``b`` has the centre
-``(1 - u) z_a + u z_b``. With independent Gaussian joints ``z_a ~ N(mu_a, S_a)`` and
-``z_b ~ N(mu_b, S_b)`` the centre is ``N((1 - u) mu_a + u mu_b, (1 - u)^2 S_a + u^2 S_b)``.
+A sphere centre ``c = (1 - u) z_a + u z_b`` between two joints with independent Gaussians
+``z_a ~ N(mu_a, S_a)`` and ``z_b ~ N(mu_b, S_b)`` is ``N((1 - u) mu_a + u mu_b,
+(1 - u)^2 S_a + u^2 S_b)``. So all centres are one matrix product: ``mean_s = M @ mean_k``
+and ``cov_s = sum_k M_sk^2 S_k`` (per coordinate ``var_s = (M * M) @ var_k``), with ``M``
+of shape (S_h, K). The planner, the episode metrics and the logs all use this one map.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Literal
 
 import torch
 
@@ -17,105 +20,273 @@ from iplanner_torch.data.skeleton import SEGMENTS, Segment
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_shape, non_finite_error
 
+#: ``"inner"``: spheres on the skeleton, inside the body (the default); ``"cover"``: spheres
+#: whose union contains the body's capsules (:meth:`HumanSphereMap.from_segments`).
+SphereLayout = Literal["inner", "cover"]
+#: the most a covering sphere's radius exceeds its segment's [m]
+COVER_MAX_GAP = 0.01
+#: design length of the covering layout relative to the reference body (body sizes of the
+#: generated people reach about 1.19 times it)
+COVER_LENGTH_SCALE = 1.25
 
-class HumanSphereModel:
-    """The human's collision spheres, spread along the skeleton's segments.
 
-    Each segment with ``n_spheres = n`` gets spheres at ``u = i / n`` for ``i = 1..n`` (evenly
-    spaced in ``(0, 1]``), or at ``u = 0.5`` when ``n = 1``; a segment from a joint to itself
-    puts its spheres on the joint (``u = 1``). Segments whose joints are not
-    tracked are skipped.
+class HumanSphereMap:
+    """Linear map from K joint Gaussians to S_h sphere-centre Gaussians.
+
+    Build one with :meth:`from_segments`; the constructor takes the map itself.
 
     Args:
-        joint_names: the K tracked joint names, in the order of the K axis.
-        segments: body segments (default: :data:`iplanner_torch.data.skeleton.SEGMENTS`).
-        scale: body size relative to the reference body; radii are multiplied by it.
+        matrix: (S_h, K) interpolation weights, each row >= 0 and summing to 1.
+        radii: (S_h,) sphere radii [m], finite and > 0.
+        names: S_h sphere names (default ``sphere_0`` ...).
 
     Raises:
-        ConfigError: on a non-positive or non-finite scale, duplicate joint names, a used
-            segment with a non-positive or non-finite radius or fewer than one sphere, or no
-            usable segment.
+        ShapeError: on wrong shapes or a ``names`` of another length.
+        ConfigError: on a row that is negative somewhere or does not sum to 1, or a radius
+            that is not finite and > 0.
     """
 
     def __init__(
         self,
+        matrix: torch.Tensor,
+        radii: torch.Tensor,
+        names: Sequence[str] | None = None,
+    ) -> None:
+        check_shape("matrix", matrix, ("S_h", "K"))
+        check_shape("radii", radii, (matrix.shape[0],))
+        if matrix.shape[0] == 0:
+            raise ConfigError("expected at least one sphere in the sphere map")
+        if not torch.allclose(matrix.sum(-1), torch.ones_like(matrix[:, 0]), atol=1e-5):
+            raise ConfigError("expected every row of the sphere map to sum to 1")
+        if bool((matrix < 0).any()):
+            raise ConfigError("expected sphere map weights >= 0")
+        if not bool((torch.isfinite(radii) & (radii > 0)).all()):
+            raise ConfigError(f"expected sphere radii > 0 and finite, got {radii.tolist()}")
+        if names is None:
+            names = [f"sphere_{i}" for i in range(len(radii))]
+        names = tuple(names)
+        if len(names) != matrix.shape[0]:
+            raise ShapeError(f"expected {matrix.shape[0]} sphere names, got {len(names)}")
+        self.matrix = matrix
+        self.radii = radii
+        self.names: tuple[str, ...] = names
+
+    @classmethod
+    def from_segments(
+        cls,
         joint_names: Sequence[str],
         segments: Sequence[Segment] = SEGMENTS,
+        *,
         scale: float = 1.0,
-    ) -> None:
-        positive("scale", scale)
-        names = tuple(joint_names)
-        if len(set(names)) != len(names):
-            raise ConfigError(f"expected distinct joint names, got {names}")
-        index = {n: i for i, n in enumerate(names)}
-        ia, ib, us, radii, sphere_names = [], [], [], [], []
+        layout: SphereLayout = "inner",
+        max_gap: float = COVER_MAX_GAP,
+        length_scale: float = COVER_LENGTH_SCALE,
+    ) -> HumanSphereMap:
+        """The spheres of each segment, as linear maps of its two joints.
+
+        Layouts:
+
+        - ``"inner"``: ``n_spheres`` spheres of the segment's radius at ``u = (i + 0.5) / n``
+          (``u = 0`` when the segment is a single joint). They lie inside the capsule of that
+          radius around the segment but leave parts of it out: about 4 cm of the forearm,
+          5 cm of the upper arm and 7 cm of the torso on the reaching set's bodies
+          (``scripts/human_sphere_gaps.py``).
+        - ``"cover"``: spheres at ``u = i / m``, ``i = 0..m``, of radius
+          ``sqrt(r^2 + (L / 2m)^2)``, with ``m`` the fewest intervals that keep that radius
+          within ``r + max_gap`` at the design length ``L = length_scale * scale *
+          segment.length``. Their union contains the capsule of radius ``r`` around the
+          segment for every segment length up to ``L`` (a point of the capsule lies within
+          ``r`` of its projection on the segment, or of an end joint, and that projection
+          within ``L / 2m`` of a centre). A single joint gets one sphere of radius ``r``. A
+          joint shared by segments keeps one sphere, the largest.
+
+        Sphere names are ``<segment>_<i>``; a covering layout's sphere on a joint is named
+        after the joint.
+
+        Args:
+            joint_names: the K joint names of the forecast, in its order (distinct).
+            segments: the body segments carrying spheres.
+            scale: radius (and, for ``"cover"``, length) scale for a body larger or smaller
+                than the reference.
+            layout: ``"inner"`` or ``"cover"``.
+            max_gap: ``"cover"``: the most a sphere's radius may exceed the segment's [m].
+            length_scale: ``"cover"``: design length relative to the reference body's.
+
+        Raises:
+            ConfigError: when a segment names a joint that is not in ``joint_names``, on
+                duplicate joint names, an unknown layout, a ``scale``, ``max_gap`` or
+                ``length_scale`` that is not a finite number > 0, a segment radius that is
+                not, an ``"inner"`` segment with fewer than one sphere, no segment, or
+                (``"cover"``) a two-joint segment without a positive ``length``.
+        """
+        if layout not in ("inner", "cover"):
+            raise ConfigError(f"expected layout 'inner' or 'cover', got {layout!r}")
+        scale = positive("scale", scale)
+        max_gap = positive("max_gap", max_gap)
+        length_scale = positive("length_scale", length_scale)
+        joint_names = tuple(joint_names)
+        if len(set(joint_names)) != len(joint_names):
+            raise ConfigError(f"expected distinct joint names, got {joint_names}")
+        if not segments:
+            raise ConfigError("expected at least one body segment")
+        index = {name: i for i, name in enumerate(joint_names)}
+        rows: list[torch.Tensor] = []
+        radii: list[float] = []
+        names: list[str] = []
+        at_joint: dict[int, int] = {}  # cover: joint index -> its sphere's row
+
+        def add(weights: dict[int, float], radius: float, name: str) -> None:
+            joints = [j for j, wt in weights.items() if wt != 0.0]
+            if layout == "cover" and len(joints) == 1:
+                j = joints[0]
+                if j in at_joint:
+                    radii[at_joint[j]] = max(radii[at_joint[j]], radius)
+                    return
+                at_joint[j] = len(rows)
+                name = joint_names[j]
+            row = torch.zeros(len(joint_names))
+            for j, wt in weights.items():
+                row[j] += wt
+            rows.append(row)
+            radii.append(radius)
+            names.append(name)
+
         for seg in segments:
-            if seg.joint_a not in index or seg.joint_b not in index:
-                continue
-            if seg.n_spheres < 1:
-                raise ConfigError(f"expected n_spheres >= 1 in segment {seg.name!r}")
-            if not 0 < seg.radius < math.inf:
+            for name in (seg.joint_a, seg.joint_b):
+                if name not in index:
+                    raise ConfigError(f"segment {seg.name!r} needs joint {name!r}, not tracked")
+            if not 0.0 < seg.radius < math.inf:
                 raise ConfigError(
                     f"expected radius > 0 and finite in segment {seg.name!r}, got {seg.radius}"
                 )
-            if seg.joint_a == seg.joint_b:
-                # One joint: u = 1 keeps the joint's own covariance (z_a and z_b are the same
-                # variable, so the independent-joints formula would halve it at u = 0.5).
-                fractions = [1.0] * seg.n_spheres
-            elif seg.n_spheres == 1:
-                fractions = [0.5]
-            else:
-                fractions = [(i + 1) / seg.n_spheres for i in range(seg.n_spheres)]
-            for i, u in enumerate(fractions):
-                ia.append(index[seg.joint_a])
-                ib.append(index[seg.joint_b])
-                us.append(u)
-                radii.append(seg.radius * scale)
-                sphere_names.append(f"{seg.name}_{i}")
-        if not radii:
-            raise ConfigError(f"no segment has both joints among {names}")
-        self.joint_names: tuple[str, ...] = names
-        self.names: tuple[str, ...] = tuple(sphere_names)
-        self.scale = float(scale)
-        self._ia = torch.tensor(ia, dtype=torch.long)
-        self._ib = torch.tensor(ib, dtype=torch.long)
-        self._u = torch.tensor(us, dtype=torch.float64)
-        self._radii = torch.tensor(radii, dtype=torch.float64)
+            a, b = index[seg.joint_a], index[seg.joint_b]
+            r = seg.radius * scale
+            if layout == "inner":
+                if seg.n_spheres < 1:
+                    raise ConfigError(f"expected n_spheres >= 1 in segment {seg.name!r}")
+                for i in range(seg.n_spheres):
+                    u = 0.0 if a == b else (i + 0.5) / seg.n_spheres
+                    add({a: 1.0 - u, b: u} if a != b else {a: 1.0}, r, f"{seg.name}_{i}")
+                continue
+            if a == b:
+                add({a: 1.0}, r, seg.name)
+                continue
+            if not seg.length > 0.0:
+                raise ConfigError(
+                    f"segment {seg.name!r} needs a length > 0 for the covering layout"
+                )
+            length = length_scale * scale * seg.length
+            half = math.sqrt((r + max_gap) ** 2 - r**2)  # the largest half spacing
+            m = max(1, math.ceil(length / (2.0 * half) - 1e-9))
+            radius = math.sqrt(r**2 + (length / (2.0 * m)) ** 2)
+            for i in range(m + 1):
+                u = i / m
+                weights = {a: 1.0 - u, b: u} if 0 < i < m else {a if i == 0 else b: 1.0}
+                add(weights, radius, f"{seg.name}_{i}")
+        return cls(torch.stack(rows), torch.tensor(radii), names)
 
     @property
     def num_spheres(self) -> int:
         """S_h."""
-        return len(self.names)
+        return int(self.matrix.shape[0])
 
     @property
-    def radii(self) -> torch.Tensor:
-        """(S_h,) sphere radii [m], float32."""
-        return self._radii.float()
+    def num_joints(self) -> int:
+        """K."""
+        return int(self.matrix.shape[1])
 
-    @property
-    def fractions(self) -> torch.Tensor:
-        """(S_h,) position ``u`` of each sphere along its segment, float32."""
-        return self._u.float()
+    def centers(self, joints: torch.Tensor) -> torch.Tensor:
+        """Sphere centres of known joint positions.
 
-    def _gather(self, x: torch.Tensor, axis: int) -> tuple[torch.Tensor, torch.Tensor]:
-        ia = self._ia.to(x.device)
-        ib = self._ib.to(x.device)
-        return x.index_select(axis, ia), x.index_select(axis, ib)
+        Args:
+            joints: (..., K, 3) joint positions [m], floating.
+
+        Returns:
+            (..., S_h, 3) sphere centres [m], in the dtype of ``joints``.
+
+        Raises:
+            ShapeError: on a wrong shape or a non-floating dtype.
+        """
+        self._check_mean("joints", joints)
+        m = self.matrix.to(device=joints.device, dtype=joints.dtype)
+        return torch.einsum("sk,...kc->...sc", m, joints)
+
+    def centers_diag(
+        self, mean: torch.Tensor, var: torch.Tensor, *, validate: bool = True
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Sphere-centre Gaussians from joint Gaussians with per-axis variances.
+
+        Args:
+            mean: (..., K, 3) joint means [m].
+            var: (..., K, 3) joint per-coordinate variances [m^2], >= 0.
+            validate: test ``mean`` and ``var`` for NaN, inf and negative variances (one
+                host synchronisation). The planner passes False for a
+                :class:`~iplanner_torch.prediction.forecast.Forecast`, already checked
+                finite, whose rounding negatives it floors afterwards. Shapes and dtypes
+                are checked always.
+
+        Returns:
+            mean (..., S_h, 3) [m] and var (..., S_h, 3) [m^2].
+
+        Raises:
+            ShapeError: on wrong shapes, a non-floating dtype, or ``var`` of another dtype
+                or device than ``mean``.
+            DataError: (``validate``) on NaN or inf in ``mean`` or ``var``, or a negative
+                variance.
+        """
+        self._check(mean, "var", var, (), validate)
+        m = self.matrix.to(device=mean.device, dtype=mean.dtype)
+        mean_s = torch.einsum("sk,...kc->...sc", m, mean)
+        return mean_s, torch.einsum("sk,...kc->...sc", m * m, var)
+
+    def centers_full(
+        self, mean: torch.Tensor, cov: torch.Tensor, *, validate: bool = True
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Sphere-centre Gaussians from joint Gaussians with full covariances.
+
+        Args:
+            mean: (..., K, 3) joint means [m].
+            cov: (..., K, 3, 3) joint covariances [m^2] (joints independent of each other).
+            validate: test ``mean`` and ``cov`` for NaN and inf (one host synchronisation).
+
+        Returns:
+            ``(mean (..., S_h, 3) [m], cov (..., S_h, 3, 3) [m^2])``.
+
+        Raises:
+            ShapeError: on wrong shapes, a non-floating dtype, or ``cov`` of another dtype
+                or device than ``mean``.
+            DataError: (``validate``) on NaN or inf in ``mean`` or ``cov``.
+        """
+        self._check(mean, "cov", cov, (3,), validate)
+        m = self.matrix.to(device=mean.device, dtype=mean.dtype)
+        mean_s = torch.einsum("sk,...kc->...sc", m, mean)
+        return mean_s, torch.einsum("sk,...kij->...sij", m * m, cov)
+
+    def _check_mean(self, name: str, mean: torch.Tensor) -> None:
+        check_shape(name, mean, ("...", self.num_joints, 3))
+        if not mean.is_floating_point():
+            raise ShapeError(f"expected {name} of a floating dtype, got {mean.dtype}")
 
     def _check(
-        self, mean: torch.Tensor, name: str, spread: torch.Tensor, event: tuple[int, ...]
+        self,
+        mean: torch.Tensor,
+        name: str,
+        spread: torch.Tensor,
+        event: tuple[int, ...],
+        validate: bool,
     ) -> None:
-        """Shapes, dtypes, devices and finiteness of ``mean`` and its covariance or variance
-        ``spread`` (named ``name``), with one host sync; a variance must also be >= 0."""
-        check_shape("mean", mean, ("...", len(self.joint_names), 3))
+        """Shapes, dtypes and devices of ``mean`` and its covariance or variance ``spread``
+        (named ``name``); with ``validate`` also finiteness and, for a variance, >= 0, in one
+        host synchronisation."""
+        self._check_mean("mean", mean)
         check_shape(name, spread, tuple(mean.shape) + event)
-        if not mean.is_floating_point():
-            raise ShapeError(f"expected mean of a floating dtype, got {mean.dtype}")
         if spread.dtype != mean.dtype or spread.device != mean.device:
             raise ShapeError(
                 f"expected {name} {mean.dtype} on {mean.device} (as mean), "
                 f"got {spread.dtype} on {spread.device}"
             )
+        if not validate:
+            return
         mean_ok, spread_ok, spread_nonneg = torch.stack(
             [torch.isfinite(mean).all(), torch.isfinite(spread).all(), (spread >= 0).all()]
         ).tolist()
@@ -124,55 +295,3 @@ class HumanSphereModel:
                 raise non_finite_error(arg_name, arg)
         if name == "var" and not spread_nonneg:
             raise DataError(f"expected var >= 0, got min {float(spread.min())}")
-
-    def centers(self, mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Gaussian sphere centres from Gaussian joints with full covariances.
-
-        Args:
-            mean: (..., K, 3) joint means [m].
-            cov: (..., K, 3, 3) joint covariances [m^2] (joints independent of each other).
-
-        Returns:
-            ``(mean (..., S_h, 3) [m], cov (..., S_h, 3, 3) [m^2])``.
-
-        Raises:
-            ShapeError: on wrong shapes, a non-floating dtype, or ``cov`` of another dtype
-                or device than ``mean``.
-            DataError: on NaN or Inf in ``mean`` or ``cov``.
-        """
-        self._check(mean, "cov", cov, (3,))
-        k_axis = mean.dim() - 2
-        u = self._u.to(mean)[:, None]  # (S_h, 1)
-        ma, mb = self._gather(mean, k_axis)  # (..., S_h, 3)
-        ca, cb = self._gather(cov, k_axis)  # (..., S_h, 3, 3)
-        m = (1.0 - u) * ma + u * mb
-        uu = u[..., None]  # (S_h, 1, 1)
-        c = (1.0 - uu) ** 2 * ca + uu**2 * cb
-        return m, c
-
-    def centers_diag(
-        self, mean: torch.Tensor, var: torch.Tensor
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Gaussian sphere centres from joints with per-axis variances.
-
-        Args:
-            mean: (..., K, 3) joint means [m].
-            var: (..., K, 3) joint per-axis variances [m^2], >= 0. A
-                :class:`~iplanner_torch.prediction.forecast.Forecast` lets rounding
-                negatives through (the planner floors them); pass ``var.clamp_min(0)``
-                of a forecast built elsewhere than the package's predictors.
-
-        Returns:
-            ``(mean (..., S_h, 3) [m], var (..., S_h, 3) [m^2])``.
-
-        Raises:
-            ShapeError: on wrong shapes, a non-floating dtype, or ``var`` of another dtype
-                or device than ``mean``.
-            DataError: on NaN or Inf in ``mean`` or ``var``, or a negative variance.
-        """
-        self._check(mean, "var", var, ())
-        k_axis = mean.dim() - 2
-        u = self._u.to(mean)[:, None]  # (S_h, 1)
-        ma, mb = self._gather(mean, k_axis)
-        va, vb = self._gather(var, k_axis)
-        return (1.0 - u) * ma + u * mb, (1.0 - u) ** 2 * va + u**2 * vb

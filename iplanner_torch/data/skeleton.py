@@ -38,7 +38,7 @@ class Segment:
         n_spheres: spheres spread evenly from ``joint_a`` to ``joint_b``.
         length: ``joint_a`` to ``joint_b`` distance of the reference body [m] (0 for a single
             joint); the covering sphere layout
-            (:meth:`~iplanner_torch.planning.human_model.HumanSphereMap.from_segments`) is
+            (:meth:`~iplanner_torch.collision.human_spheres.HumanSphereMap.from_segments`) is
             designed for it.
     """
 

@@ -84,10 +84,10 @@ import torch
 from tqdm.auto import tqdm
 
 from iplanner_torch.checks import non_negative
+from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.skeleton import JOINT_INDEX, JOINT_NAMES
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.eval import metrics as M
-from iplanner_torch.planning.human_model import HumanSphereMap
 from iplanner_torch.planning.itomp import path_forecast, static_human_forecast
 from iplanner_torch.planning.replanner import PlannerCfg, build_replanner
 from iplanner_torch.prediction.forecast import Forecast

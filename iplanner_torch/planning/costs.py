@@ -521,14 +521,16 @@ def human_collision_bound(
 
 
 class SphereMap(Protocol):
-    """Joint Gaussians to sphere Gaussians (``HumanSphereMap`` or ``HumanSphereModel``)."""
+    """Joint Gaussians to sphere Gaussians (as
+    :class:`~iplanner_torch.collision.human_spheres.HumanSphereMap`)."""
 
     radii: torch.Tensor
 
     def centers_diag(
-        self, mean: torch.Tensor, var: torch.Tensor
+        self, mean: torch.Tensor, var: torch.Tensor, *, validate: bool = True
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """(..., K, 3), (..., K, 3) -> (..., S_h, 3), (..., S_h, 3)."""
+        """(..., K, 3), (..., K, 3) -> (..., S_h, 3), (..., S_h, 3); ``validate=False`` skips
+        the finiteness tests (the forecast passed them)."""
         ...
 
 
@@ -564,7 +566,7 @@ def forecast_to_obstacle(
     a = (u - lo.to(dt_)).view(-1, 1, 1, 1)
     m = (1.0 - a) * mean[lo] + a * mean[hi]  # (W_x, A, K, 3)
     v = (1.0 - a) * var[lo] + a * var[hi]
-    s_mean, s_var = spheres.centers_diag(m, v)
+    s_mean, s_var = spheres.centers_diag(m, v, validate=False)  # Forecast checked finite
     weights = forecast.weights[index].to(device=dev, dtype=dt_)
     radii = spheres.radii.to(device=dev, dtype=dt_)
     return HumanObstacle(mean=s_mean, var=s_var.clamp_min(1e-10), radii=radii, weights=weights)

@@ -34,9 +34,9 @@ from typing import Protocol, runtime_checkable
 import torch
 
 from iplanner_torch.checks import finite_time, flag
+from iplanner_torch.collision.human_spheres import HumanSphereMap, SphereLayout
 from iplanner_torch.errors import ConfigError, PlanningError
 from iplanner_torch.planning import costs as C
-from iplanner_torch.planning.human_model import HumanSphereMap, SphereLayout
 from iplanner_torch.planning.trajectory import Trajectory, accelerations, uniform_times
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import all_finite, check_finite, check_shape

@@ -101,7 +101,7 @@ def test_short_iplanner_episode_writes_mcap(tmp_path: Path) -> None:
     assert q.shape[1] == 3 and len(t) >= 70
     # the 3D scene at scene_hz (5 Hz): the robot's spheres at the logged q, the person's
     # spheres on the true joints, and 2 x K predicted joint ellipsoids from the first forecast
-    from iplanner_torch.planning.human_model import HumanSphereMap
+    from iplanner_torch.collision.human_spheres import HumanSphereMap
 
     t_s, robot_s, human_s = ep.scene_spheres()
     assert len(t_s) == pytest.approx(5.0 * 5.0, abs=1)

@@ -6,7 +6,7 @@ import math
 
 import torch
 
-from iplanner_torch.planning.human_model import HumanSphereMap
+from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.prediction.forecast import Forecast
 
 

@@ -9,10 +9,10 @@ import pytest
 import torch
 from planning_fakes import mc_ball_probability, static_forecast
 
+from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.skeleton import JOINT_NAMES
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.planning import costs as C
-from iplanner_torch.planning.human_model import HumanSphereMap
 from iplanner_torch.prediction.forecast import Forecast
 
 

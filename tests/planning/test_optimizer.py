@@ -17,6 +17,8 @@ from planning_fakes import (
     static_forecast,
 )
 
+from iplanner_torch.collision.human_spheres import HumanSphereMap
+from iplanner_torch.data.skeleton import JOINT_NAMES
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.planning.costs import CostWeights, HumanObstacle
 from iplanner_torch.planning.itomp import ITOMP, path_forecast, static_human_forecast
@@ -796,3 +798,14 @@ def test_non_finite_start_goal_or_warm_start_is_a_data_error(point_robot: PointR
     q_init[3, 5, 1] = nan
     with pytest.raises(DataError, match="q_init is NaN/Inf at trajectory 3, waypoint 5, joint 1"):
         opt.solve(q_s, q_g, q_init=q_init)
+
+
+def test_optimizer_uses_the_configured_layout(point_robot) -> None:
+    for layout, n in (("inner", 22), ("cover", None)):
+        opt = TrajectoryOptimizer(point_robot, OptimizerCfg(human_spheres=layout))
+        got = opt._spheres_for(JOINT_NAMES)
+        want = HumanSphereMap.from_segments(JOINT_NAMES, layout=layout)
+        assert torch.equal(got.matrix, want.matrix) and torch.equal(got.radii, want.radii)
+        assert n is None or got.num_spheres == n
+    with pytest.raises(ConfigError, match="human_spheres"):
+        OptimizerCfg(human_spheres="outer")  # type: ignore[arg-type]
