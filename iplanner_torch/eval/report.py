@@ -75,12 +75,15 @@ DEFAULT_METRICS: dict[str, str] = {
 }
 
 #: Columns of :func:`comparison_table` in the paper's units: metric -> (header, scale from SI).
+#: ``distance cm`` is the closest distance of the sphere models (the paper's metric); ``body
+#: cm`` the closest of the robot's MuJoCo geoms to the person's capsules (``sim/body_distance``).
 TABLE_COLUMNS: dict[str, tuple[str, float]] = {
     "prediction_ms": ("pred. ms", 1.0),
     "mhd": ("MHD cm", 100.0),
     "smoothness": ("smoothness", 1.0),
     "jerkiness": ("jerkiness", 1.0),
     "min_distance": ("distance cm", 100.0),
+    "body_distance": ("body cm", 100.0),
     "efficiency": ("efficiency", 1.0),
     "waits": ("waits", 1.0),
 }
@@ -575,8 +578,8 @@ def comparison_table(df: pd.DataFrame, group_by: Sequence[str] | None = None) ->
         One row per group in display order: the group keys, ``episodes``, ``contact_free``,
         ``contact_unknown``, ``completed``, ``touched`` (as in :func:`summary_table`), then
         the mean over episodes of each :data:`TABLE_COLUMNS` metric under its header, in the
-        paper's units (``MHD cm``, ``distance cm``, ``pred. ms``; NaN where no episode has
-        it).
+        paper's units (``MHD cm``, ``distance cm``, ``body cm``, ``pred. ms``; NaN where no
+        episode has it).
 
     Raises:
         ConfigError: when a group column is missing.

@@ -453,6 +453,7 @@ def test_comparison_table_shows_the_paper_units_and_completed_episodes() -> None
             "planner": "iplanner_ni",
             "seed": seed,
             "eval/min_distance": d,
+            "sim/body_distance": d + 0.02,
             "eval/mhd": mhd,
             "eval/contact": 0.0,
             "eval/completed": done,
@@ -479,6 +480,7 @@ def test_comparison_table_shows_the_paper_units_and_completed_episodes() -> None
     row = table.iloc[0]
     assert (row.episodes, row.completed, row.contact_free) == (3, 2, 3)
     assert row["distance cm"] == pytest.approx(6.04) and row["MHD cm"] == pytest.approx(4.58)
+    assert row["body cm"] == pytest.approx(8.04)  # MuJoCo's geoms, sim/body_distance
     assert row["efficiency"] == pytest.approx(1.6)  # the two finished episodes
     assert row["waits"] == pytest.approx(6.0) and row["pred. ms"] == pytest.approx(2.0)
     text = format_table(table).splitlines()
