@@ -26,7 +26,7 @@ if not OmegaConf.has_resolver("basename"):
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-def instantiate(node: Any) -> Any:
+def instantiate(node: Any, expected: type | None = None, name: str | None = None) -> Any:
     """Build the dataclass described by a config node (``_target_`` plus keyword arguments).
 
     A value whose type does not fit its dataclass field (``bool``, ``int``, ``float`` or
@@ -34,9 +34,16 @@ def instantiate(node: Any) -> Any:
     with its full key, so ``planner.optimizer.iterations=1.5`` fails at start-up, not in the
     middle of a run.
 
+    Args:
+        node: the config node.
+        expected: the class the node must build (a group file without ``_target_``, e.g. a
+            new ``conf/predictor/<name>.yaml`` that lists only the changed fields, would
+            otherwise build a plain dict).
+        name: the node's key in messages (default: its full key in the config).
+
     Raises:
         ConfigError: when the node cannot be built (unknown key, wrong type, bad value), with
-            the underlying reason.
+            the underlying reason, or builds something other than ``expected``.
     """
     from hydra.errors import InstantiationException
     from hydra.utils import instantiate as hydra_instantiate
@@ -45,15 +52,25 @@ def instantiate(node: Any) -> Any:
     if wrong:
         raise ConfigError(wrong)
     try:
-        return hydra_instantiate(node, _convert_="all")
+        built = hydra_instantiate(node, _convert_="all")
     except InstantiationException as exc:
         cause = exc.__cause__ or exc
         if isinstance(cause, IPlannerError):
             raise ConfigError(str(cause)) from exc
         raise ConfigError(f"cannot build config node: {cause}") from exc
+    if expected is not None and not isinstance(built, expected):
+        key = name or (_full_key(node, None) if isinstance(node, DictConfig) else "")
+        target = f"{expected.__module__}.{expected.__qualname__}"
+        raise ConfigError(
+            f"config node {key or '<root>'!r} built a {type(built).__name__}, not a "
+            f"{expected.__name__}: its file needs '_target_: {target}', or, to change only "
+            "some fields of an existing file of its group, a first line "
+            "'defaults: [<that file>, _self_]'"
+        )
+    return built
 
 
-def _full_key(node: DictConfig, key: str) -> str:
+def _full_key(node: DictConfig, key: str | None) -> str:
     try:
         return str(node._get_full_key(key)) or key
     except Exception:  # a detached node

@@ -140,6 +140,7 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     """The :class:`~iplanner_torch.eval.experiment.ExperimentCfg` this run describes."""
     from dataclasses import replace
 
+    from iplanner_torch.eval.episode import EpisodeCfg
     from iplanner_torch.eval.experiment import ExperimentCfg
 
     episode_node = OmegaConf.create(
@@ -157,7 +158,7 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     exp_node = cfg.get("experiment")
     if exp_node is not None and exp_node.get("episode") is not None:
         episode_node = OmegaConf.merge(episode_node, exp_node.episode)
-    episode = instantiate(episode_node)
+    episode = instantiate(episode_node, EpisodeCfg)
     device = str(resolve_device(str(cfg.device)))
     if exp_node is None:
         scenario = replace(
@@ -180,7 +181,7 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     node.setdefault("robot", str(cfg.robot.name))
     node["device"] = device
     node["predictor_paths"] = predictor_paths
-    exp = instantiate(OmegaConf.create(node))
+    exp = instantiate(OmegaConf.create(node), ExperimentCfg, name="experiment")
     return replace(exp, episode=episode)
 
 
@@ -208,14 +209,11 @@ def _app(cfg: DictConfig) -> None:
     warnings.simplefilter("ignore", PlanningOverrunWarning)
     t0 = time.perf_counter()
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    earlier = [p for p in ("results.csv", "episodes") if (out_dir / p).exists()]
-    if earlier:
+    message = _used_run_dir(out_dir)
+    if message:
         from iplanner_torch.errors import ConfigError
 
-        raise ConfigError(
-            f"{out_dir} already holds {' and '.join(earlier)} of an earlier run, which this "
-            "run would replace; choose another hydra.run.dir (or delete them)"
-        )
+        raise ConfigError(message)
     (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
     exp_node = cfg.get("experiment")
     planners = (
@@ -277,7 +275,35 @@ def dump_config_safe(cfg: DictConfig) -> str:
 def main() -> None:
     """Console entry point."""
     print_help_if_asked(__doc__ or "", sys.argv[1:])
+    _refuse_used_run_dir(sys.argv[1:])
     _app()
+
+
+def _used_run_dir(out_dir: Path) -> str | None:
+    """The refusal for a run folder that holds an earlier run's results, or None."""
+    earlier = [p for p in ("results.csv", "episodes") if (out_dir / p).exists()]
+    if not earlier:
+        return None
+    return (
+        f"{out_dir} already holds {' and '.join(earlier)} of an earlier run, which this "
+        "run would replace; choose another hydra.run.dir (or delete them)"
+    )
+
+
+def _refuse_used_run_dir(argv: list[str]) -> None:
+    """Exit 2 before Hydra starts when ``hydra.run.dir=<folder>`` on the command line names a
+    folder with an earlier run's results: Hydra would first rewrite that run's ``.hydra/``
+    files and add to its log. (A folder set in a config file is refused inside the run, after
+    Hydra has done so.)"""
+    if any(a in ("-m", "--multirun", "-c", "--cfg") or a.startswith("--cfg=") for a in argv):
+        return
+    for arg in argv:
+        if arg.startswith("hydra.run.dir="):
+            value = arg.split("=", 1)[1].strip("'\"")
+            message = None if "${" in value else _used_run_dir(Path(value).absolute())
+            if message:
+                print(f"error: ConfigError: {message}", file=sys.stderr)
+                raise SystemExit(2)
 
 
 if __name__ == "__main__":

@@ -50,14 +50,14 @@ def train_from_config(
         data_node: a ``conf/data`` node (default ``cfg.data``); generated when absent.
     """
     data_node = cfg.data if data_node is None else data_node
-    from iplanner_torch.data.windows import build_windows, split_by_demonstration
+    from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
     from iplanner_torch.eval.prediction import evaluate_prediction
-    from iplanner_torch.prediction.predictor import HumanMotionPredictor
-    from iplanner_torch.prediction.training import train_predictor
+    from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
+    from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
-    predictor_cfg = instantiate(predictor_node)
-    trainer_cfg = instantiate(trainer_node)
-    window_cfg = instantiate(data_node.windows)
+    predictor_cfg = instantiate(predictor_node, PredictorCfg)
+    trainer_cfg = instantiate(trainer_node, TrainerCfg)
+    window_cfg = instantiate(data_node.windows, WindowCfg)
     demos = load_dataset(
         data_node, generate_if_missing=True, progress=cfg_scalar(cfg, "progress", bool)
     )

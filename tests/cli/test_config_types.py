@@ -32,6 +32,40 @@ def test_instantiate_accepts_fitting_types() -> None:
     assert isinstance(human, HumanCfg) and human.hold_s == 1
 
 
+def test_a_node_without_target_is_refused_with_the_way_to_write_it(tmp_path: Path) -> None:
+    """A new group file that lists only the fields it changes builds a dict: refused by name,
+    with the two ways to write it; the way with a defaults list composes to a PredictorCfg."""
+    from iplanner_torch.prediction.predictor import PredictorCfg
+
+    root = OmegaConf.create({"predictor": {"ivm_max_import": 30, "svgp": {"num_inducing": 50}}})
+    with pytest.raises(ConfigError) as err:
+        instantiate(root.predictor, PredictorCfg)
+    msg = str(err.value)
+    assert msg.startswith("config node 'predictor' built a dict, not a PredictorCfg")
+    assert "_target_: iplanner_torch.prediction.predictor.PredictorCfg" in msg
+    assert "defaults: [<that file>, _self_]" in msg
+    with pytest.raises(ConfigError, match="config node 'experiment' built a dict"):
+        instantiate(OmegaConf.create({"name": "x"}), PredictorCfg, name="experiment")
+    # the documented way: a defaults list on an existing file of the group
+    conf = tmp_path / "predictor"
+    conf.mkdir()
+    (conf / "small.yaml").write_text(
+        "defaults: [iplanner_ni, _self_]\nivm_max_import: 30\nsvgp: {num_inducing: 50}\n"
+    )
+    from hydra import compose, initialize_config_dir
+
+    from iplanner_torch.cli._common import CONF_DIR
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose(
+            "config",
+            overrides=["predictor=small", f"hydra.searchpath=[file://{tmp_path}]"],
+        )
+    built = instantiate(cfg.predictor, PredictorCfg)
+    assert built.ivm_max_import == 30 and built.svgp.num_inducing == 50
+    assert built.svgp.noisy_input == "simple"  # the rest from iplanner_ni.yaml
+
+
 @pytest.mark.parametrize(
     ("key", "value", "message"),
     [

@@ -13,6 +13,7 @@ import torch
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.robot.description import (
     FETCH_DEFAULT_TORSO_HEIGHT,
+    ROBOT_NAMES,
     asset_paths,
     fetch_description,
     mjcf_string,
@@ -39,6 +40,12 @@ FETCH_RANGE = (
     (-2.16, 2.16),
     None,
 )
+
+
+def test_every_listed_robot_is_tested() -> None:
+    """A robot added to ``ROBOT_NAMES`` needs its tool link here, so that the FK-versus-MuJoCo
+    tests below cover it."""
+    assert set(ROBOTS) == set(ROBOT_NAMES) == set(TOOL)
 
 
 def _pk_chain(name: str) -> pk.SerialChain:
