@@ -394,6 +394,10 @@ def _read_csv(path: Path) -> dict[str, Any]:
     }
 
 
+#: how far the median timestamp spacing may stray from 1 / fps (relative)
+TIMESTAMP_TOLERANCE = 0.05
+
+
 def _check_no_inf(path: Path, field: str, pos: np.ndarray, joints: Sequence[str]) -> None:
     """Raise when ``pos`` ((T, K, 3) [m]) holds +-Inf: a lost joint is NaN, never Inf."""
     inf = np.isinf(pos)
@@ -475,6 +479,21 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
     _check_no_inf(path, "positions", pos, joints)
     if clean is not None:
         _check_no_inf(path, "clean_positions", clean, joints)
+        nan = np.isnan(clean)
+        if nan.any():  # the noise-free training targets: nothing to impute them from
+            t_nan, k_nan, _ = np.argwhere(nan)[0]
+            raise DataError(
+                f"{path}: field 'clean_positions' has {int(nan.sum())} NaN value(s), the first "
+                f"at frame {t_nan}, joint {joints[k_nan]!r}; the noise-free positions must be "
+                "complete (leave the field out when there are none)"
+            )
+    if ts is not None and t >= 2:
+        spacing = float(np.median(np.diff(ts)))
+        if abs(spacing * the_fps - 1.0) > TIMESTAMP_TOLERANCE:
+            raise DataError(
+                f"{path}: field 'timestamps' is spaced {spacing:.4g} s apart (median), but fps "
+                f"{the_fps:g} means {1.0 / the_fps:.4g} s; the frames are used at 1 / fps"
+            )
     return Demonstration(
         positions=pos,
         labels=labels,

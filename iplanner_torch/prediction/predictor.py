@@ -322,8 +322,9 @@ class HumanMotionPredictor:
             f_prev: (B, n_p, D) features of the observed frames (positions [m], velocities
                 [m/s], accelerations [m/s^2], as :func:`data.windows.compute_features`), B >= 1,
                 finite (lost joints imputed: :meth:`predict_positions` does that).
-            progress: (B,) integer (int64) progress-state bitmasks, >= 0 (a state without its
-                own GP uses the fallbacks of the module docstring).
+            progress: (B,) integer (int64) progress-state bitmasks, >= 0, with bit ``a`` set
+                only for an action ``a`` of ``progress_actions`` (a state without its own GP
+                uses the fallbacks of the module docstring). Gradients are not tracked.
 
         Returns:
             The Forecast: weights (B, A), mean/var (B, A, n_f, K, 3) in the world frame.
@@ -331,7 +332,7 @@ class HumanMotionPredictor:
         Raises:
             ShapeError: for wrong shapes, no window (B = 0), or a ``progress`` that is not of
                 an integer dtype.
-            ConfigError: for a negative ``progress``.
+            ConfigError: for a negative ``progress`` or one with a bit of no progress action.
             DataError: when ``f_prev`` holds NaN or inf (naming window, frame and feature).
         """
         check_shape("f_prev", f_prev, ("B", self.n_prev, self.num_features))
@@ -343,12 +344,16 @@ class HumanMotionPredictor:
         check_shape("progress", progress, (f_prev.shape[0],))
         if progress.is_floating_point() or progress.is_complex() or progress.dtype == torch.bool:
             raise ShapeError(f"expected progress of an integer dtype, got {progress.dtype}")
-        f_prev = f_prev.to(self.device, torch.float32)
+        f_prev = f_prev.detach().to(self.device, torch.float32)
         progress = progress.to(self.device, torch.int64)
-        if bool((progress < 0).any()):
+        mask = sum(1 << a for a in self.progress_actions)  # the bits that stand for an action
+        stray = (progress < 0) | ((progress & ~mask) != 0)
+        if bool(stray.any()):
+            i = int(stray.nonzero()[0, 0])
             raise ConfigError(
-                f"expected progress bitmasks >= 0, got {int(progress.min())} "
-                f"(window {int((progress < 0).nonzero()[0, 0])})"
+                f"expected progress bitmasks >= 0 with bits of progress actions only (bit a "
+                f"for action a in {list(self.progress_actions)}), got {int(progress[i])} "
+                f"(window {i})"
             )
         if not all_finite(f_prev):  # the D names are built for the message only
             check_finite("f_prev", f_prev, ("window", "frame", self.feature_names))
@@ -412,9 +417,9 @@ class HumanMotionPredictor:
             As :meth:`predict`.
 
         Raises:
-            ShapeError: for wrong shapes (as :meth:`predict`).
+            ShapeError: for wrong shapes (as :meth:`predict`) or a dtype that is not floating.
             ConfigError: as :meth:`predict`.
-            DataError: when every joint is NaN in every frame of a window.
+            DataError: when every joint is NaN in every frame of a window, or on inf.
         """
         from iplanner_torch.data.windows import compute_features
 
@@ -424,8 +429,18 @@ class HumanMotionPredictor:
                 f"expected at least one window in positions (B >= 1, {self.n_prev}, "
                 f"{self.num_joints}, 3), got {tuple(positions.shape)}"
             )
+        if not positions.is_floating_point():
+            raise ShapeError(f"expected positions of a floating dtype, got {positions.dtype}")
+        positions = positions.detach()
         seen = torch.isfinite(positions).all(-1).any(1).any(1)  # (B,) any joint observed
-        if not bool(seen.all()):
+        all_seen, no_inf = torch.stack([seen.all(), ~torch.isinf(positions).any()]).tolist()
+        if not no_inf:
+            b_i, t_i, k_i = torch.isinf(positions).any(-1).nonzero()[0].tolist()
+            raise DataError(
+                f"positions hold inf (first: window {b_i}, frame {t_i}, joint "
+                f"{self.joint_names[k_i]!r}); mark a lost joint with NaN"
+            )
+        if not all_seen:
             bi = int((~seen).nonzero()[0])
             raise DataError(f"no joint is observed in any frame of window {bi}: cannot forecast")
         f = compute_features(
@@ -545,6 +560,8 @@ class HumanMotionPredictor:
                 f"predictor checkpoint {path} has format version {version!r}; this code reads "
                 f"version {CHECKPOINT_VERSION} (retrain, or load it with the matching code)"
             )
+        if expect_joints is not None and "joint_names" not in d:
+            raise CheckpointError(f"predictor checkpoint {path} is incomplete: no joint_names")
         if expect_joints is not None and tuple(expect_joints) != tuple(d["joint_names"]):
             raise CheckpointError(
                 f"{path} was trained on joints {tuple(d['joint_names'])}, expected "
@@ -564,7 +581,27 @@ class HumanMotionPredictor:
                     f"cannot move predictor checkpoint {path} to map_location "
                     f"{map_location!r}: {err}"
                 ) from err
-        return pred.prepare()
+        try:
+            return pred.prepare()._self_check()
+        except Exception as err:  # noqa: BLE001 - any failure here means an inconsistent file
+            raise CheckpointError(
+                f"predictor checkpoint {path} is inconsistent: its parts fail on a test window "
+                f"({type(err).__name__}: {err})"
+            ) from err
+
+    def _self_check(self) -> HumanMotionPredictor:
+        """Run every part once: a forecast of the mean window at every progress state with
+        GPs (so every GP, the classifier and the fallbacks) and the next-action model; the
+        output shapes are checked by :class:`Forecast`. Returns self."""
+        states = sorted({p for p, _ in self.gps} | {0})
+        f = self.feat_mean.to(self.device, torch.float32).expand(len(states), self.n_prev, -1)
+        self.predict(f, torch.tensor(states, dtype=torch.int64))
+        probs = self.next_action(states[-1], 0)
+        if tuple(probs.shape) != (self.num_actions,):
+            raise ShapeError(
+                f"next-action model gives {tuple(probs.shape)} for A = {self.num_actions}"
+            )
+        return self
 
     @classmethod
     def _from_dict(cls, d: dict[str, Any]) -> HumanMotionPredictor:
@@ -611,9 +648,12 @@ def _rebuild(d: dict[str, Any], name: str) -> Any:
             with a ``from_state_dict`` (naming the field; the caller adds the file).
     """
     field_name = f"{name}_class"
-    qualname, state = d.get(field_name), d.get(name)
-    if qualname is None or state is None:
+    qualname, state = d[field_name], d[name]  # KeyError: an incomplete checkpoint
+    if qualname is None and state is None:  # saved without this part
         return None
+    if qualname is None or state is None:
+        missing = field_name if qualname is None else name
+        raise CheckpointError(f"{missing} is None but {name!r} is not saved as absent")
     mod_name, sep, cls_name = str(qualname).partition(":")
     try:
         if not sep or not mod_name or not cls_name:

@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import warnings
 from dataclasses import asdict, dataclass
@@ -27,7 +28,7 @@ from torch.utils.data import DataLoader, TensorDataset
 from tqdm.auto import tqdm
 
 from iplanner_torch.data.windows import WindowSet
-from iplanner_torch.errors import CheckpointError, ConfigError, DataError
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
 from iplanner_torch.prediction.predictor import (
     HumanMotionPredictor,
     PredictorCfg,
@@ -430,13 +431,19 @@ def train_predictor(
         trainer_cfg: Lightning settings.
         out_dir: folder for checkpoints (``*.ckpt``) and logs (``logs/`` CSV, ``tb/``).
         progress: progress bars.
-        resume: skip sub-models whose checkpoint already exists in ``out_dir``.
+        resume: skip sub-models whose checkpoint already exists in ``out_dir``, after
+            checking that ``out_dir / training_inputs.json`` records the same training data
+            (fingerprint), actions, joints and settings.
 
     Returns:
         The path of ``predictor.ckpt``.
 
     Raises:
         DataError: for empty data.
+        CheckpointError: (``resume``) when the folder's sub-models were trained on other
+            inputs, or a reused sub-model cannot be read; or when the assembled predictor
+            fails on its own training windows (a sub-model of another shape). An existing
+            ``predictor.ckpt`` is then left as it was.
     """
     _quiet()
     out_dir = Path(out_dir)
@@ -449,6 +456,8 @@ def train_predictor(
     feat_mean = train.f_prev.reshape(-1, d).mean(0)
     feat_std = train.f_prev.reshape(-1, d).std(0).clamp_min(1e-6)
     progress_actions = train.cfg.progress_indices(train.action_names)
+    fingerprint = dataset_fingerprint(train.f_prev, train.xi_next, train.current)
+    _record_inputs(out_dir, fingerprint, train, cfg, resume)
 
     groups: dict[tuple[int, int], torch.Tensor] = {}
     for p in torch.unique(train.progress).tolist():
@@ -538,10 +547,71 @@ def train_predictor(
         next_model=next_model,
         gps=gps,
         pooled=pooled,
-        fingerprint=dataset_fingerprint(train.f_prev, train.xi_next, train.current),
+        fingerprint=fingerprint,
         window_cfg=asdict(train.cfg),
     )
+    try:  # the assembled predictor must run on its own windows before it replaces a file
+        predictor.predict(train.f_prev[:4], train.progress[:4])
+    except Exception as err:  # noqa: BLE001 - reported with the way out
+        raise CheckpointError(
+            f"the predictor assembled from the sub-models in {out_dir} fails on its own "
+            f"training windows ({type(err).__name__}: {err}); {out_dir / 'predictor.ckpt'} "
+            "is left as it was. Delete the sub-model checkpoints (*.ckpt) or run with "
+            "train.resume=false"
+        ) from err
     return predictor.save(out_dir / "predictor.ckpt")
+
+
+#: the file in a training folder that records what its sub-models were trained on
+INPUTS_FILE = "training_inputs.json"
+
+
+def _record_inputs(
+    out_dir: Path, fingerprint: str, train: WindowSet, cfg: PredictorCfg, resume: bool
+) -> None:
+    """Write ``out_dir / INPUTS_FILE`` (training data fingerprint, action names, predictor and
+    window settings). With ``resume``, first compare it with the file already there: sub-models
+    trained on other data or settings must not be mixed into this predictor.
+
+    Raises:
+        CheckpointError: (``resume``) when the recorded inputs differ, naming what differs.
+    """
+    inputs = json.loads(
+        json.dumps(
+            {
+                "fingerprint": fingerprint,
+                "action_names": list(train.action_names),
+                "joint_names": list(train.joint_names),
+                "predictor_cfg": asdict(cfg),
+                "window_cfg": asdict(train.cfg),
+            },
+            default=str,
+        )
+    )
+    path = out_dir / INPUTS_FILE
+    if resume and path.is_file():
+        try:
+            before = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as err:
+            raise CheckpointError(
+                f"cannot resume in {out_dir}: {path.name} is unreadable ({err}); "
+                "run with train.resume=false"
+            ) from err
+        changed = sorted(k for k in inputs if before.get(k) != inputs[k])
+        if changed:
+            raise CheckpointError(
+                f"cannot resume in {out_dir}: its sub-models were trained with other "
+                f"{', '.join(changed)} than this run's; choose another train.out_dir or run "
+                "with train.resume=false"
+            )
+    elif resume and any(out_dir.glob("*.ckpt")):
+        warnings.warn(
+            f"{out_dir} has no {INPUTS_FILE} (written since this check exists): the reused "
+            "sub-models cannot be checked against this run's data and settings",
+            DataWarning,
+            stacklevel=3,
+        )
+    path.write_text(json.dumps(inputs, indent=2) + "\n", encoding="utf-8")
 
 
 def _train_classifier(

@@ -137,6 +137,26 @@ def test_error_non_monotonic_timestamps(tmp_path):
         load_demonstrations(p)
 
 
+def test_error_timestamps_that_disagree_with_fps(tmp_path):
+    """Frames are used at 1 / fps: timestamps spaced otherwise (30 Hz under fps 15) are refused;
+    a few ms of jitter is not."""
+    p = _npz(tmp_path / "x.npz", timestamps=np.arange(12) / 30.0)
+    with pytest.raises(DataError, match=r"x\.npz: field 'timestamps' is spaced 0\.03333 s apart"):
+        load_demonstrations(p)
+    jitter = np.arange(12) / 15.0 + np.random.default_rng(0).uniform(-0.002, 0.002, 12)
+    assert len(load_demonstrations(_npz(tmp_path / "y.npz", timestamps=jitter))) == 1
+
+
+def test_error_nan_in_clean_positions(tmp_path):
+    clean = _demo().clean_positions.copy()
+    clean[4, 6, 0] = np.nan
+    p = _npz(tmp_path / "x.npz", clean_positions=clean)
+    with pytest.raises(
+        DataError, match=r"x\.npz: field 'clean_positions' has 1 NaN .*frame 4, joint 'left_hand'"
+    ):
+        load_demonstrations(p)
+
+
 def test_error_empty_files(tmp_path):
     (tmp_path / "e.npz").write_bytes(b"")
     with pytest.raises(DataError, match="e.npz: empty file"):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
@@ -96,7 +97,13 @@ def test_batched_forecast_equals_single_window_forecasts(trained) -> None:
 def test_unseen_progress_uses_pooled_gp_or_constant_velocity(trained) -> None:
     path, w = trained
     pred = HumanMotionPredictor.load(path)
-    unseen = torch.full((2,), 1 << 20, dtype=torch.int64)
+    # a valid state whose GPs are gone stands for one never seen in training
+    state = max(p for p, _ in pred.gps)
+    assert state > 0
+    for key in [k for k in pred.gps if k[0] == state]:
+        del pred.gps[key]
+    pred.prepare()
+    unseen = torch.full((2,), state, dtype=torch.int64)
     fc = pred.predict(w.f_prev[:2], unseen)
     for a in range(pred.num_actions):
         reg = pred.pooled.get(a)
@@ -118,6 +125,32 @@ def test_unseen_progress_uses_pooled_gp_or_constant_velocity(trained) -> None:
         torch.testing.assert_close(fc.mean[:, a], expect)
     var_t = pred.cfg.fallback_sigma0**2 + (pred.cfg.fallback_sigma_rate * t) ** 2
     torch.testing.assert_close(fc.var[0, 0, :, 0, 0], var_t)
+
+
+def test_progress_with_a_bit_of_no_progress_action_is_refused(trained) -> None:
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    free = next(a for a in range(62) if a not in pred.progress_actions)
+    for bad in (1 << free, (1 << 62) | 1 << pred.progress_actions[0], -1):
+        with pytest.raises(ConfigError, match="bits of progress actions only"):
+            pred.predict(w.f_prev[:2], torch.full((2,), bad, dtype=torch.int64))
+
+
+def test_predict_positions_refuses_inf_and_non_float_and_ignores_gradients(trained) -> None:
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    pos = w.f_prev[:2, :, :9].reshape(2, -1, 3, 3).clone()
+    progress = w.progress[:2]
+    ref = pred.predict_positions(pos, progress)
+    got = pred.predict_positions(pos.clone().requires_grad_(True), progress)
+    torch.testing.assert_close(got.mean, ref.mean)
+    bad = pos.clone()
+    bad[1, 2, 0, 1] = math.inf
+    with pytest.raises(DataError, match="positions hold inf .*window 1, frame 2"):
+        pred.predict_positions(bad, progress)
+    for dtype in (torch.int64, torch.bool):
+        with pytest.raises(ShapeError, match="positions of a floating dtype"):
+            pred.predict_positions(pos.to(dtype), progress)
 
 
 def test_predict_positions_with_nan(trained) -> None:
@@ -193,7 +226,9 @@ def test_empty_batch_and_bad_progress_raise(trained) -> None:
         pred.predict_positions(torch.zeros(0, pred.n_prev, 3, 3), w.progress[:0])
     with pytest.raises(ShapeError, match="expected progress of an integer dtype"):
         pred.predict(w.f_prev[:2], w.progress[:2].float() + 0.5)
-    with pytest.raises(ConfigError, match=r"expected progress bitmasks >= 0, got -1 \(window 1\)"):
+    with pytest.raises(
+        ConfigError, match=r"expected progress bitmasks >= 0 .*, got -1 \(window 1\)"
+    ):
         pred.predict(w.f_prev[:2], torch.tensor([0, -1]))
     # any integer dtype is taken as before
     fc = pred.predict(w.f_prev[:2], w.progress[:2].int())
@@ -229,6 +264,22 @@ def test_damaged_or_foreign_checkpoints_raise_checkpoint_errors(trained, tmp_pat
     bad = _rewrite(path, tmp_path / "next.ckpt", next_model_class="math:pi")
     with pytest.raises(CheckpointError, match="next.ckpt: next_model_class 'math:pi'"):
         HumanMotionPredictor.load(bad)
+    # parts that do not fit together: caught at load, not at the first forecast
+    d = torch.load(path, weights_only=False)
+    n_f = _rewrite(path, tmp_path / "nf.ckpt", n_future=d["n_future"] - 2)
+    with pytest.raises(CheckpointError, match="nf.ckpt is inconsistent: its parts fail"):
+        HumanMotionPredictor.load(n_f)
+    half = _rewrite(path, tmp_path / "half.ckpt", classifier=None)
+    with pytest.raises(CheckpointError, match="half.ckpt: classifier is None but"):
+        HumanMotionPredictor.load(half)
+    gone = torch.load(path, weights_only=False)
+    del gone["classifier"], gone["joint_names"]
+    torch.save(gone, tmp_path / "gone.ckpt")
+    with pytest.raises(CheckpointError, match="gone.ckpt is incomplete"):
+        HumanMotionPredictor.load(tmp_path / "gone.ckpt", expect_joints=JOINTS)
+    # saved without a classifier (both fields None): uniform weights, as documented
+    plain = _rewrite(path, tmp_path / "plain.ckpt", classifier=None, classifier_class=None)
+    assert HumanMotionPredictor.load(plain).classifier is None
     with pytest.raises(CheckpointError, match="is a directory, not a checkpoint file"):
         HumanMotionPredictor.load(tmp_path)
     with pytest.raises(ConfigError, match="expected map_location a torch device.*'bogus'"):

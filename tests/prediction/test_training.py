@@ -23,11 +23,11 @@ REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.usefixtures("one_thread")
 
 
-def _windows(joints: tuple[str, ...]):
+def _windows(joints: tuple[str, ...], n_future: int = 8):
     rc = ReachingCfg(n_targets=2, reaches_per_target=5)
     demos = [d for t in range(2) for r in range(5) for d in reaching_demonstrations(rc, t, r)]
     tr, va, _ = split_by_demonstration(demos, (0.7, 0.3, 0.0))
-    wc = WindowCfg(n_prev=6, n_future=8, stride=2, joints=joints)
+    wc = WindowCfg(n_prev=6, n_future=n_future, stride=2, joints=joints)
     return build_windows(tr, wc), build_windows(va, wc)
 
 
@@ -87,6 +87,63 @@ def test_writes_checkpoints_logs_and_resumes(tmp_path: Path) -> None:
             resume()
         assert str(broken) in str(e.value)
         broken.write_bytes(good)
+
+
+def test_resume_never_mixes_in_sub_models_of_other_inputs(tmp_path: Path) -> None:
+    """Resuming on other data or settings is refused by the folder's training_inputs.json; a
+    sub-model of another shape (a folder without that record) is caught before the predictor
+    is written. Either way the folder's predictor.ckpt is left as it was."""
+    import shutil
+    import warnings
+
+    from iplanner_torch.errors import DataWarning
+
+    joints = ("torso", "left_hand", "right_hand")
+    tcfg = TrainerCfg(accelerator="cpu", tensorboard=False)
+
+    def train(windows, out: Path, resume: bool = False) -> Path:
+        return train_predictor(
+            windows, predictor_cfg=_cfg(), trainer_cfg=tcfg, out_dir=out, progress=False,
+            resume=resume,
+        )  # fmt: skip
+
+    a, b = _windows(joints), _windows(joints, n_future=5)
+    train(a, tmp_path / "a")
+    train(b, tmp_path / "b")
+    ckpt_a = (tmp_path / "a" / "predictor.ckpt").read_bytes()
+    recorded = (tmp_path / "a" / "training_inputs.json").read_text()
+    assert '"fingerprint"' in recorded and '"n_future": 8' in recorded
+    with pytest.raises(CheckpointError, match="trained with other fingerprint, window_cfg"):
+        train(b, tmp_path / "a", resume=True)
+    with pytest.raises(CheckpointError, match="other predictor_cfg"):
+        train_predictor(
+            a, predictor_cfg=_cfg("nigp"), trainer_cfg=tcfg, out_dir=tmp_path / "a",
+            progress=False, resume=True,
+        )  # fmt: skip
+    assert (tmp_path / "a" / "predictor.ckpt").read_bytes() == ckpt_a
+    # a folder from before the record, with one GP of b's (5 future frames) among a's
+    mixed = tmp_path / "mixed"
+    shutil.copytree(tmp_path / "a", mixed)
+    (mixed / "training_inputs.json").unlink()
+    gp = sorted((tmp_path / "b").glob("gp_*.ckpt"))[0]
+    assert (mixed / gp.name).is_file()
+    shutil.copy(gp, mixed / gp.name)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(CheckpointError, match="fails on its own training windows"):
+            train(a, mixed, resume=True)
+    assert any(issubclass(w.category, DataWarning) for w in caught)
+    assert (mixed / "predictor.ckpt").read_bytes() == ckpt_a
+    # the same folder with its own sub-models resumes to the same predictor
+    shutil.copy(tmp_path / "a" / gp.name, mixed / gp.name)
+    train(a, mixed, resume=True)
+    fc = HumanMotionPredictor.load(mixed / "predictor.ckpt").predict(
+        a[1].f_prev[:2], a[1].progress[:2]
+    )
+    fc_a = HumanMotionPredictor.load(tmp_path / "a" / "predictor.ckpt").predict(
+        a[1].f_prev[:2], a[1].progress[:2]
+    )
+    torch.testing.assert_close(fc.mean, fc_a.mean)
 
 
 def test_single_wrist_dataset_with_nigp(tmp_path: Path) -> None:
