@@ -19,6 +19,7 @@ training tuple is ``(F_prev, p, c, n, xi_next)``:
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Literal
@@ -28,7 +29,7 @@ import torch
 
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.skeleton import BONES
-from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, DataWarning, ShapeError
 from iplanner_torch.types import check_shape
 
 FeatureKind = Literal["position", "velocity", "acceleration"]
@@ -417,6 +418,9 @@ def build_windows(demos: Sequence[Demonstration], cfg: WindowCfg) -> WindowSet:
     Returns:
         The windows (CPU tensors, float32 features).
 
+    Windows in which no joint is observed in any frame (the whole body lost for ``n_prev``
+    frames or more) are left out with a :class:`DataWarning` naming the demonstration.
+
     Raises:
         DataError: when demonstrations disagree or lack a selected joint.
         ConfigError: for unknown progress actions.
@@ -433,7 +437,21 @@ def build_windows(demos: Sequence[Demonstration], cfg: WindowCfg) -> WindowSet:
         s = s[d.labels[s] >= 0] if s.size else s
         if s.size == 0:
             continue
-        win_pos.append(d.positions[s[:, None] + np.arange(-n_p + 1, 1)])  # (N_i, n_p, K, 3)
+        window = d.positions[s[:, None] + np.arange(-n_p + 1, 1)]  # (N_i, n_p, K, 3)
+        seen = np.isfinite(window).all(-1).any(axis=(1, 2))  # (N_i,) some joint observed
+        if not seen.all():
+            blind = s[~seen]
+            warnings.warn(
+                f"demonstration {d.name!r}: {blind.size} window(s) in which no joint is "
+                f"observed in any frame (ending at frames {blind.min()}-{blind.max()}) are "
+                "left out",
+                DataWarning,
+                stacklevel=2,
+            )
+            s, window = s[seen], window[seen]
+            if s.size == 0:
+                continue
+        win_pos.append(window)
         source = d.clean_positions
         if source is None:
             try:

@@ -102,6 +102,28 @@ def test_joint_lost_in_whole_window():
     np.testing.assert_array_equal(out[:, 1:], subset[:, 1:])
 
 
+def test_windows_with_the_whole_body_lost_are_left_out_with_a_warning():
+    """A demonstration whose every joint is lost for longer than a window: those windows are
+    dropped (with a DataWarning naming it), the others kept, their targets interpolated."""
+    from iplanner_torch.errors import DataWarning
+
+    rc = ReachingCfg(n_targets=2, reaches_per_target=2)
+    demos = [d for r in range(2) for d in reaching_demonstrations(rc, 0, r)]
+    cfg = WindowCfg(n_prev=5, n_future=4, stride=1)
+    full = build_windows(demos, cfg)
+    blind = demos[0].positions.copy()
+    blind[30:45] = np.nan  # 15 frames, every joint
+    demos[0] = Demonstration(
+        positions=blind, labels=demos[0].labels, fps=demos[0].fps,
+        joint_names=demos[0].joint_names, action_names=demos[0].action_names,
+        name=demos[0].name,
+    )  # fmt: skip
+    with pytest.warns(DataWarning, match=rf"{demos[0].name}.*11 window\(s\) in which no joint"):
+        w = build_windows(demos, cfg)
+    assert len(w) == len(full) - 11  # windows ending at frames 34..44 see nothing
+    assert torch.isfinite(w.f_prev).all() and torch.isfinite(w.xi_next).all()
+
+
 def test_feature_errors():
     with pytest.raises(ShapeError, match=r"expected positions \(..., T, K, 3\)"):
         compute_features(torch.zeros(15, 10, 2), FPS)
