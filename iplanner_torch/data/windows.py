@@ -422,7 +422,8 @@ def build_windows(demos: Sequence[Demonstration], cfg: WindowCfg) -> WindowSet:
     frames or more) are left out with a :class:`DataWarning` naming the demonstration.
 
     Raises:
-        DataError: when demonstrations disagree or lack a selected joint.
+        DataError: when demonstrations disagree or lack a selected joint, or a demonstration
+            has no window with an observed joint.
         ConfigError: for unknown progress actions.
     """
     demos = _common(demos, cfg.joints)
@@ -439,6 +440,11 @@ def build_windows(demos: Sequence[Demonstration], cfg: WindowCfg) -> WindowSet:
             continue
         window = d.positions[s[:, None] + np.arange(-n_p + 1, 1)]  # (N_i, n_p, K, 3)
         seen = np.isfinite(window).all(-1).any(axis=(1, 2))  # (N_i,) some joint observed
+        if not seen.any():
+            raise DataError(
+                f"demonstration {d.name!r}: no joint is observed in any frame of any window "
+                "(lost (NaN) in every frame)"
+            )
         if not seen.all():
             blind = s[~seen]
             warnings.warn(
@@ -449,8 +455,6 @@ def build_windows(demos: Sequence[Demonstration], cfg: WindowCfg) -> WindowSet:
                 stacklevel=2,
             )
             s, window = s[seen], window[seen]
-            if s.size == 0:
-                continue
         win_pos.append(window)
         source = d.clean_positions
         if source is None:
