@@ -1,8 +1,9 @@
 """read_episode: an episode's MCAP log back as pandas frames and tensors.
 
-A complete file is read through its summary (indexed reader). A file without summary or
-footer (an episode killed midway) or with a damaged record is read sequentially up to the last
-complete chunk, with a :class:`~iplanner_torch.errors.DataWarning`.
+A complete file is read through its summary (indexed reader), after checking the summary's
+checksum. A file without summary or footer (an episode killed midway) or with a damaged
+record or summary is read sequentially up to the last complete chunk, with a
+:class:`~iplanner_torch.errors.DataWarning`.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,7 +21,7 @@ import numpy as np
 import pandas as pd
 import torch
 from mcap.reader import make_reader
-from mcap.records import Channel, Footer, Message, Metadata
+from mcap.records import Channel, DataEnd, Footer, Message, Metadata
 from mcap.stream_reader import StreamReader
 
 from iplanner_torch.errors import DataError, DataWarning
@@ -75,63 +77,105 @@ def _ellipsoid_rows(entity: dict[str, Any]) -> list[dict[str, np.ndarray]]:
     return out
 
 
+def _number(m: dict[str, Any], key: str) -> float:
+    """``m[key]`` as a float: a JSON number, or null (NaN) / "inf" as the codec writes them;
+    anything else (a string, a bool, a list) is a ValueError."""
+    v = decode_scalar(m[key])
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ValueError(f"field {key!r} must be a number, got {m[key]!r}")
+    return float(v)
+
+
+def _names(m: dict[str, Any], key: str) -> tuple[str, ...]:
+    v = m[key]
+    if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+        raise ValueError(f"field {key!r} must be a list of strings, got {v!r}")
+    return tuple(v)
+
+
+def _sized(m: dict[str, Any], key: str, shape: tuple[int, ...]) -> np.ndarray:
+    """``m[key]`` decoded and of exactly ``shape`` (-1: any size on that axis)."""
+    x = decode_array(m[key])
+    n_fixed = math.prod(n for n in shape if n >= 0)
+    if -1 in shape:
+        free = x.size // n_fixed if n_fixed else 0
+        if n_fixed == 0 or x.size % n_fixed or free == 0:
+            raise ValueError(f"field {key!r} has {x.size} values, not a multiple of {n_fixed}")
+        shape = tuple(free if n < 0 else n for n in shape)
+    if x.size != math.prod(shape):
+        raise ValueError(f"field {key!r} has {x.size} values, expected shape {shape}")
+    return x.reshape(shape)
+
+
 def _row_joint_state(m: dict[str, Any], _: int) -> dict[str, Any]:
+    names = _names(m, "joint_names")
     return {
-        "t": m["t"],
-        "q": decode_array(m["position"]),
-        "qd": decode_array(m["velocity"]),
-        "joint_names": tuple(m["joint_names"]),
+        "t": _number(m, "t"),
+        "q": _sized(m, "position", (len(names),)),
+        "qd": _sized(m, "velocity", (len(names),)),
+        "joint_names": names,
     }
 
 
 def _row_human(m: dict[str, Any], _: int) -> dict[str, Any]:
-    p = decode_array(m["positions"]).reshape(-1, 3)
-    return {"t": m["t"], "positions": p, "joint_names": tuple(m["joint_names"])}
+    names = _names(m, "joint_names")
+    p = _sized(m, "positions", (len(names), 3))
+    return {"t": _number(m, "t"), "positions": p, "joint_names": names}
 
 
 def _row_forecast(m: dict[str, Any], _: int) -> dict[str, Any]:
-    a, k = len(m["action_names"]), len(m["joint_names"])
-    mean = decode_array(m["mean"]).reshape(a, -1, k, 3)
+    actions, joints = _names(m, "action_names"), _names(m, "joint_names")
+    a, k = len(actions), len(joints)
+    mean = _sized(m, "mean", (a, -1, k, 3))
     return {
-        "t": m["t"],
-        "dt": m["dt"],
-        "weights": decode_array(m["weights"]).reshape(a),
+        "t": _number(m, "t"),
+        "dt": _number(m, "dt"),
+        "weights": _sized(m, "weights", (a,)),
         "mean": mean,
-        "var": decode_array(m["var"]).reshape(mean.shape),
-        "action_names": tuple(m["action_names"]),
-        "joint_names": tuple(m["joint_names"]),
+        "var": _sized(m, "var", mean.shape),
+        "action_names": actions,
+        "joint_names": joints,
     }
 
 
 def _row_bound(m: dict[str, Any], _: int) -> dict[str, Any]:
+    times = decode_array(m["times"])
     return {
-        "t": m["t"],
-        "times": decode_array(m["times"]),
-        "bound": decode_array(m["bound"]),
-        "confidence": m["confidence"],
-        "max_bound": float(decode_array(m["max_bound"])),
+        "t": _number(m, "t"),
+        "times": times,
+        "bound": _sized(m, "bound", times.shape),
+        "confidence": _number(m, "confidence"),
+        "max_bound": _number(m, "max_bound"),
     }
 
 
 def _row_plan(m: dict[str, Any], _: int) -> dict[str, Any]:
     times = decode_array(m["times"])
     q = decode_array(m["q"])
+    if q.size % max(times.shape[0], 1):
+        raise ValueError(f"field 'q' has {q.size} values for {times.shape[0]} times")
+    if not isinstance(m["feasible"], bool):
+        raise ValueError(f"field 'feasible' must be true or false, got {m['feasible']!r}")
     return {
-        "t": m["t"],
+        "t": _number(m, "t"),
         "times": times,
         "q": q.reshape(times.shape[0], -1) if q.size else q.reshape(times.shape[0], 0),
-        "feasible": bool(m["feasible"]),
-        "wait_s": m["wait_s"],
-        "solve_ms": m["solve_ms"],
+        "feasible": m["feasible"],
+        "wait_s": _number(m, "wait_s"),
+        "solve_ms": _number(m, "solve_ms"),
     }
 
 
 def _row_event(m: dict[str, Any], _: int) -> dict[str, Any]:
-    return {"t": m["t"], "kind": m["kind"], "detail": _decode_value(m["detail"])}
+    if not isinstance(m["kind"], str):
+        raise ValueError(f"field 'kind' must be a string, got {m['kind']!r}")
+    return {"t": _number(m, "t"), "kind": m["kind"], "detail": _decode_value(m["detail"])}
 
 
 def _row_metrics(m: dict[str, Any], _: int) -> dict[str, Any]:
-    return {"t": m["t"], "metrics": _decode_value(m["metrics"])}
+    if not isinstance(m["metrics"], dict):
+        raise ValueError(f"field 'metrics' must be an object, got {m['metrics']!r}")
+    return {"t": _number(m, "t"), "metrics": _decode_value(m["metrics"])}
 
 
 def _row_scene(m: dict[str, Any], offset_ns: int) -> dict[str, Any]:
@@ -198,8 +242,10 @@ class Episode:
         frames: topic -> DataFrame with one row per message in file order, a ``t`` column
             (simulation time [s]) and array-valued columns (e.g. ``/robot/joint_state`` has
             ``q`` and ``qd``, each a (J,) array per row).
-        complete: False when the file had no footer (truncated) and was read up to its last
-            complete chunk.
+        complete: whether every data record is there: False when the file was cut or
+            damaged before the end of its data section (it is then read up to its last
+            complete chunk), or its episode metadata record is missing. A file cut or damaged
+            only in its summary section is complete (and read with a warning).
     """
 
     path: Path
@@ -250,7 +296,7 @@ class Episode:
         """
         df = self._frame("/prediction/forecast")
         for col in ("action_names", "joint_names", "dt"):
-            if df[col].nunique() != 1:
+            if df[col].nunique(dropna=False) != 1:
                 raise DataError(f"{self.path}: {col} changes between forecasts")
         t = torch.as_tensor(df["t"].to_numpy(dtype=np.float64, copy=True))
         fc = Forecast(
@@ -303,7 +349,35 @@ class _Raw:
     problem: str = ""
 
 
+#: bytes of the footer record (opcode, length, summary_start, summary_offset_start, crc)
+_FOOTER_SIZE = 1 + 8 + 8 + 8 + 4
+
+
+def _check_summary_crc(f: Any) -> None:
+    """Raise DataError when the footer's summary CRC does not match the summary section (the
+    mcap reader does not check it, and a damaged index would drop or rename data silently).
+    A CRC of 0 means none was written."""
+    f.seek(0, 2)
+    n = f.tell()
+    if n < len(_MAGIC) * 2 + _FOOTER_SIZE:
+        raise DataError("too short for a footer")
+    f.seek(n - len(_MAGIC) - _FOOTER_SIZE)
+    footer = f.read(_FOOTER_SIZE)
+    if footer[0] != 0x02:
+        raise DataError("no footer record before the closing magic bytes")
+    start = int.from_bytes(footer[9:17], "little")
+    crc = int.from_bytes(footer[25:29], "little")
+    if start == 0 or crc == 0:
+        return
+    f.seek(start)
+    covered = f.read(n - len(_MAGIC) - 4 - start)
+    if zlib.crc32(covered) != crc:
+        raise DataError("summary section fails its checksum")
+
+
 def _read_indexed(f: Any) -> _Raw:
+    _check_summary_crc(f)
+    f.seek(0)
     reader = make_reader(f, validate_crcs=True)
     if reader.get_summary() is None:
         raise DataError("no summary section")
@@ -335,7 +409,7 @@ def _read_stream(f: Any, size: int) -> _Raw:
                 raw.messages.append((ch.topic, record.log_time, record.data))
         elif isinstance(record, Metadata):
             raw.metadata[record.name] = dict(record.metadata)
-        elif isinstance(record, Footer):
+        elif isinstance(record, DataEnd | Footer):  # every data record has been read
             raw.complete = True
     return raw
 
@@ -350,11 +424,16 @@ def read_episode(path: str | Path) -> Episode:
         The decoded :class:`Episode`.
 
     Raises:
-        DataError: when the file is missing, is not MCAP, or a message cannot be decoded.
+        DataError: when the file is missing or unreadable, is not MCAP, its metadata is not a
+            JSON object, or a message cannot be decoded (a field missing or of the wrong type,
+            or an array whose size does not fit its joint or action names).
 
     Warns:
-        DataWarning: when the file is truncated or damaged; the episode then holds the messages
-            of every chunk before the damage (a prefix of what was written).
+        DataWarning: when the file is truncated or damaged (a chunk or the summary failing its
+            checksum, a missing footer or episode metadata record); the episode then holds
+            the messages of every chunk before the damage (a prefix of what was written). A
+            file cut within its first 8 bytes (empty included) is an empty, incomplete
+            episode.
     """
     path = Path(path)
     if path.is_dir():
@@ -364,18 +443,28 @@ def read_episode(path: str | Path) -> Episode:
         )
     if not path.is_file():
         raise DataError(f"{path}: no such episode log")
-    size = path.stat().st_size
-    with open(path, "rb") as f:
-        if f.read(len(_MAGIC)) != _MAGIC:
-            raise DataError(f"{path} is not an MCAP file (bad magic bytes)")
-        f.seek(0)
-        try:
-            raw = _read_indexed(f)
-        except Exception as err:  # no or damaged summary: fall back to a sequential read
-            f.seek(0)
-            raw = _read_stream(f, size)
-            if not raw.problem:
-                raw.problem = f"{type(err).__name__}: {err}"
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            head = f.read(len(_MAGIC))
+            if head != _MAGIC and not (len(head) < len(_MAGIC) and _MAGIC.startswith(head)):
+                raise DataError(f"{path} is not an MCAP file (bad magic bytes)")
+            if head != _MAGIC:  # cut within the opening magic bytes: nothing was written
+                raw = _Raw(problem=f"{size} bytes, cut within the opening magic bytes")
+            else:
+                f.seek(0)
+                try:
+                    raw = _read_indexed(f)
+                except Exception as err:  # no or damaged summary: read sequentially
+                    f.seek(0)
+                    raw = _read_stream(f, size)
+                    first = f"{type(err).__name__}: {err}"
+                    raw.problem = f"{first}; then {raw.problem}" if raw.problem else first
+    except OSError as err:
+        raise DataError(f"{path}: cannot read the episode log: {err}") from err
+    if raw.complete and EPISODE_METADATA_NAME not in raw.metadata:
+        raw.complete = False  # which episode it is is lost: counted with the incomplete ones
+        raw.problem = raw.problem or f"no {EPISODE_METADATA_NAME} metadata record"
     if not raw.complete or raw.problem:
         warnings.warn(
             f"{path}: episode log is truncated or damaged ({raw.problem or 'no footer'}); "
@@ -387,6 +476,8 @@ def read_episode(path: str | Path) -> Episode:
     try:
         metadata = json.loads(meta_rec["json"]) if "json" in meta_rec else {}
         offset_ns = int(meta_rec.get("time_offset_ns", "0"))
+        if not isinstance(metadata, dict):
+            raise TypeError(f"expected a JSON object, got {type(metadata).__name__}")
     except (ValueError, TypeError) as err:
         raise DataError(f"{path}: bad episode metadata record: {err}") from err
     rows: dict[str, list[dict[str, Any]]] = {}

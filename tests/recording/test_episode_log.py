@@ -232,7 +232,6 @@ def test_truncated_file_reads_a_prefix_with_a_warning(
     cut.write_bytes(blob[: int(len(blob) * fraction)])
     with pytest.warns(DataWarning, match="truncated or damaged"):
         ep = read_episode(cut)
-    assert not ep.complete
     total = 0
     for topic, df in ep.frames.items():
         ref = full.frames[topic]
@@ -246,6 +245,9 @@ def test_truncated_file_reads_a_prefix_with_a_warning(
         assert ep.metadata == full.metadata
     if fraction >= 0.3:  # several 8 KiB chunks survive
         assert total > 0.2 * sum(len(df) for df in full.frames.values())
+    # complete exactly when every message survived (a cut in the summary section loses none)
+    assert ep.complete == (total == sum(len(df) for df in full.frames.values()))
+    assert ep.complete == (fraction > 0.9)
 
 
 def test_damaged_chunk_stops_the_read_there(log_path: Path, tmp_path: Path) -> None:
@@ -407,3 +409,88 @@ def test_the_readme_example_runs_on_a_log(log_path: Path, capsys: pytest.Capture
     assert namespace["q"].shape[1] == len(JOINTS) and namespace["joints"].shape[-1] == 3
     assert namespace["over"].shape == namespace["t_b"].shape
     assert namespace["forecast"].batch_size == len(namespace["t_f"])
+
+
+def _raw_log(path: Path, messages: list[tuple[str, dict]], metadata: object = None) -> Path:
+    """A minimal MCAP file written with the plain mcap writer: the episode metadata record
+    (``metadata`` as its JSON, unless None) and JSON ``messages`` on their topics."""
+    from mcap.writer import Writer
+
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        if metadata is not None:
+            w.add_metadata("iplanner.episode", {"json": json.dumps(metadata)})
+        schema = w.register_schema("any", "jsonschema", b"{}")
+        ids: dict[str, int] = {}
+        for i, (topic, msg) in enumerate(messages):
+            if topic not in ids:
+                ids[topic] = w.register_channel(topic, "json", schema)
+            data = json.dumps(msg).encode()
+            w.add_message(ids[topic], log_time=i, data=data, publish_time=i)
+        w.finish()
+    return path
+
+
+@pytest.mark.parametrize(
+    ("topic", "message", "error"),
+    [
+        ("/robot/joint_state", {"t": 0.0, "joint_names": ["a", "b"], "position": [1.0],
+                                "velocity": [0.0, 0.0]}, "'position' has 1 values"),
+        ("/human/joints_true", {"t": 0.0, "joint_names": ["a", "b"],
+                                "positions": [[0.0] * 4] * 3}, "'positions' has 12 values"),
+        ("/robot/joint_state", {"t": "abc", "joint_names": ["a"], "position": [1.0],
+                                "velocity": [0.0]}, "'t' must be a number"),
+        ("/episode/metrics", {"t": 1.0, "metrics": [1, 2]}, "'metrics' must be an object"),
+        ("/planner/plan", {"t": 1.0, "times": [0.0, 1.0], "q": [0.0, 1.0], "feasible": "false",
+                           "wait_s": 0.0, "solve_ms": 1.0}, "'feasible' must be true or false"),
+        ("/prediction/forecast", {"t": 0.0, "dt": 0.1, "action_names": [["x"]],
+                                  "joint_names": ["a"], "weights": [1.0], "mean": [0.0] * 3,
+                                  "var": [0.0] * 3}, "'action_names' must be a list of strings"),
+    ],
+)  # fmt: skip
+def test_messages_of_the_wrong_size_or_type_are_named(
+    tmp_path: Path, topic: str, message: dict, error: str
+) -> None:
+    """Arrays that do not fit their names, and fields of the wrong type, raise instead of
+    being padded with NaN (a NaN joint would read as a tracker dropout) or reshaped."""
+    path = _raw_log(tmp_path / "bad.mcap", [(topic, message)], metadata={"planner": "x"})
+    with pytest.raises(DataError, match=rf"bad.mcap: cannot decode a message on {topic}.*{error}"):
+        read_episode(path)
+
+
+def test_a_damaged_summary_falls_back_to_reading_every_chunk(log_path: Path, tmp_path: Path):
+    """The summary's checksum is verified: one changed byte there (which the mcap reader
+    would follow into dropped or renamed data) gives a warning and a full sequential read."""
+    data = bytearray(log_path.read_bytes())
+    n = len(data)
+    summary_start = int.from_bytes(data[n - 8 - 29 + 9 : n - 8 - 29 + 17], "little")
+    assert 0 < summary_start < n - 37
+    full = read_episode(log_path)
+    for where in (summary_start + 1, (summary_start + n - 37) // 2):
+        bad = bytearray(data)
+        bad[where] ^= 0x40
+        (tmp_path / "s.mcap").write_bytes(bytes(bad))
+        with pytest.warns(DataWarning, match="summary section fails its checksum"):
+            ep = read_episode(tmp_path / "s.mcap")
+        assert ep.complete
+        for topic, frame in full.frames.items():
+            assert len(ep.frames[topic]) == len(frame), topic
+
+
+def test_cut_in_the_magic_bytes_or_without_metadata_is_an_incomplete_episode(
+    tmp_path: Path,
+) -> None:
+    for size in (0, 5):  # killed before the first flush
+        p = tmp_path / f"cut{size}.mcap"
+        p.write_bytes(b"\x89MCAP0\r\n"[:size])
+        with pytest.warns(DataWarning, match="cut within the opening magic bytes"):
+            ep = read_episode(p)
+        assert not ep.complete and ep.metadata == {} and ep.frames == {}
+    p = _raw_log(tmp_path / "anon.mcap", [("/episode/metrics", {"t": 1.0, "metrics": {}})])
+    with pytest.warns(DataWarning, match="no iplanner.episode metadata record"):
+        ep = read_episode(p)
+    assert not ep.complete
+    p = _raw_log(tmp_path / "list.mcap", [], metadata=[1, 2])
+    with pytest.raises(DataError, match="list.mcap: bad episode metadata record: expected a JSON"):
+        read_episode(p)
