@@ -97,6 +97,8 @@ def _info(cfg: DictConfig) -> None:
 
     path = repo_path(cfg.data.path)
     fps = cfg.data.get("fps", None)
+    # the joints training selects (data.windows.joints), so info accepts what it accepts
+    selected = cfg.data.windows.get("joints", None) if "windows" in cfg.data else None
     if cfg.data.get("format", "native") == "lego_assembly":
         demos = load_lego_assembly(path, fps=float(fps or 30.0))
         root = path if path.is_dir() else path.parent
@@ -108,10 +110,12 @@ def _info(cfg: DictConfig) -> None:
                 gen = f"iplanner-data generate data.path={cfg.data.path}"
                 hint = f"generate it with `{gen}` or {hint}"
             raise DataError(f"{path}: no such file or folder; {hint}")
-        # the joints training selects (data.windows.joints), so info accepts what it accepts
-        selected = cfg.data.windows.get("joints", None) if "windows" in cfg.data else None
         demos = load_demonstrations(path, fps=fps, joints=list(selected) if selected else None)
         files = demonstration_files(path)
+    if demos:  # the cross-file checks training makes (action names, fps, joints)
+        from iplanner_torch.data.windows import compatible_demonstrations
+
+        compatible_demonstrations(demos, tuple(selected) if selected else None)
     frames = sum(d.num_frames for d in demos)
     joints = demos[0].joint_names if demos else ()
     actions = demos[0].action_names if demos else ()

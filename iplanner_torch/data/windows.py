@@ -380,7 +380,15 @@ class WindowSet:
         return {n: getattr(self, n)[index] for n in self.TENSORS}
 
 
-def _common(demos: Sequence[Demonstration], joints: tuple[str, ...] | None) -> list[Demonstration]:
+def compatible_demonstrations(
+    demos: Sequence[Demonstration], joints: tuple[str, ...] | None = None
+) -> list[Demonstration]:
+    """The demonstrations as :func:`build_windows` uses them: checked to share action names,
+    fps and joints (or to hold every joint of ``joints``, then selected to them).
+
+    Raises:
+        DataError: when there is no demonstration, or one disagrees with the first, naming it.
+    """
     if not demos:
         raise DataError("no demonstrations to build windows from")
     first = demos[0]
@@ -426,7 +434,7 @@ def build_windows(demos: Sequence[Demonstration], cfg: WindowCfg) -> WindowSet:
             has no window with an observed joint.
         ConfigError: for unknown progress actions.
     """
-    demos = _common(demos, cfg.joints)
+    demos = compatible_demonstrations(demos, cfg.joints)
     first = demos[0]
     n_p, n_f = cfg.n_prev, cfg.n_future
     prog_idx = cfg.progress_indices(first.action_names)

@@ -145,6 +145,14 @@ def test_data_info_names_the_files_training_would_reject(tmp_path: Path) -> None
                 "data.windows.joints=[head,right_hand]"], tmp_path)  # fmt: skip
     assert res.returncode == 0, res.stderr
     assert "7 demonstrations" in res.stdout and "joints (2): head, right_hand" in res.stdout
+    # one file at another frame rate: the cross-file check training makes
+    from dataclasses import replace
+
+    save_demonstration(replace(demos[3], fps=30.0, timestamps=None), files[3])
+    res = _run(["iplanner-data", "info", f"data.path={out}",
+                "data.windows.joints=[head,right_hand]"], tmp_path)  # fmt: skip
+    assert res.returncode == 2
+    assert f"error: DataError: demonstration '{files[3].stem}': fps 30.0 differs" in res.stderr
 
 
 def test_data_missing_folder_errors_say_how_to_fix(tmp_path: Path) -> None:
