@@ -256,7 +256,8 @@ ALIAS_RANGES: dict[str, tuple[float, float, str]] = {
 
 
 def check_root_keys(cfg: DictConfig) -> None:
-    """Type-check :data:`ROOT_KEYS` and range-check :data:`ALIAS_RANGES` where ``cfg`` has them.
+    """Type-check :data:`ROOT_KEYS` and range-check :data:`ALIAS_RANGES` where ``cfg`` has them;
+    ``device`` must name a usable torch device (:func:`iplanner_torch.types.resolve_device`).
 
     Raises:
         ConfigError: naming the key, what it expects and what it got.
@@ -264,6 +265,13 @@ def check_root_keys(cfg: DictConfig) -> None:
     for key, kind in ROOT_KEYS.items():
         if key in cfg:
             cfg_scalar(cfg, key, kind)
+    if "device" in cfg:  # a device torch does not know, or CUDA where there is none
+        from iplanner_torch.types import resolve_device
+
+        try:
+            resolve_device(str(cfg.device))
+        except ConfigError as err:
+            raise ConfigError(f"device: {err}") from err
     for dotted, (lo, hi, text) in ALIAS_RANGES.items():
         group, key = dotted.split(".")
         node = cfg.get(group)
