@@ -292,12 +292,15 @@ class Episode:
             ``forecast.var`` (T, A, n_f, K, 3); ``t`` is float64.
 
         Raises:
-            DataError: when there are no forecasts, or actions, joints or dt change over time.
+            DataError: when there are no forecasts, or actions, joints, dt or the horizon
+                change over time.
         """
         df = self._frame("/prediction/forecast")
         for col in ("action_names", "joint_names", "dt"):
             if df[col].nunique(dropna=False) != 1:
                 raise DataError(f"{self.path}: {col} changes between forecasts")
+        if len({m.shape for m in df["mean"]}) != 1:
+            raise DataError(f"{self.path}: the forecast horizon changes between forecasts")
         t = torch.as_tensor(df["t"].to_numpy(dtype=np.float64, copy=True))
         fc = Forecast(
             weights=torch.as_tensor(_stack(list(df["weights"])), dtype=dtype),

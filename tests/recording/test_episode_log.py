@@ -494,3 +494,22 @@ def test_cut_in_the_magic_bytes_or_without_metadata_is_an_incomplete_episode(
     p = _raw_log(tmp_path / "list.mcap", [], metadata=[1, 2])
     with pytest.raises(DataError, match="list.mcap: bad episode metadata record: expected a JSON"):
         read_episode(p)
+
+
+def test_forecasts_that_change_horizon_or_dt_are_named(tmp_path: Path) -> None:
+    def fc(t: float, n_f: int, dt: object) -> tuple[str, dict]:
+        return "/prediction/forecast", {
+            "t": t, "dt": dt, "action_names": ["a"], "joint_names": ["j"], "weights": [1.0],
+            "mean": [0.0] * (3 * n_f), "var": [0.01] * (3 * n_f),
+        }  # fmt: skip
+
+    path = _raw_log(tmp_path / "h.mcap", [fc(0.0, 4, 0.1), fc(0.1, 3, 0.1)], metadata={})
+    with pytest.raises(DataError, match="h.mcap: the forecast horizon changes"):
+        read_episode(path).forecasts()
+    path = _raw_log(tmp_path / "d.mcap", [fc(0.0, 4, 0.1), fc(0.1, 4, None)], metadata={})
+    with pytest.raises(DataError, match="d.mcap: dt changes between forecasts"):
+        read_episode(path).forecasts()
+    t, f = read_episode(
+        _raw_log(tmp_path / "ok.mcap", [fc(0.0, 4, 0.1)] * 2, metadata={})
+    ).forecasts()
+    assert f.mean.shape == (2, 1, 4, 1, 3)
