@@ -8,7 +8,9 @@ Examples::
     iplanner-train data=lego 'data.windows.joints=[right_hand]'
 
 Writes ``<train.out_dir>/predictor.ckpt`` (default ``checkpoints/<dataset>/<predictor>/``), the
-sub-models' Lightning checkpoints and CSV / TensorBoard logs, then prints held-out metrics.
+sub-models' Lightning checkpoints, CSV / TensorBoard logs and ``training_inputs.json`` (what
+they were trained on; a resume on other data or settings is refused), then prints held-out
+metrics.
 """
 
 from __future__ import annotations
