@@ -126,6 +126,38 @@ def gp_inputs(f_prev: torch.Tensor, num_joints: int, kind: str = "relative") -> 
     return f_prev.reshape(b, -1)
 
 
+def content_digest(d: dict[str, Any]) -> str:
+    """SHA-256 of a checkpoint dict's contents (every key and value, tensors by dtype, shape
+    and bytes), without its own ``digest`` entry: :meth:`HumanMotionPredictor.save` stores
+    it and :meth:`HumanMotionPredictor.load` checks it, so that a changed byte inside a
+    tensor (which torch reads without complaint) is caught."""
+    h = hashlib.sha256()
+
+    def feed(v: Any) -> None:
+        if isinstance(v, dict):
+            h.update(b"{")
+            for k in sorted(v, key=repr):
+                h.update(repr(k).encode())
+                feed(v[k])
+            h.update(b"}")
+        elif isinstance(v, list | tuple):
+            h.update(b"(" if isinstance(v, tuple) else b"[")
+            for e in v:
+                feed(e)
+            h.update(b")")
+        elif isinstance(v, torch.Tensor):
+            t = v.detach().cpu().contiguous().reshape(-1)
+            h.update(f"T{t.dtype}{tuple(v.shape)}".encode())
+            h.update(t.view(torch.uint8).numpy().tobytes())
+        elif v is None or isinstance(v, bool | int | float | str):
+            h.update(f"{type(v).__name__}:{v!r}".encode())
+        else:
+            h.update(f"{type(v).__module__}.{type(v).__qualname__}".encode())
+
+    feed({k: v for k, v in d.items() if k != "digest"})
+    return h.hexdigest()
+
+
 def dataset_fingerprint(*tensors: torch.Tensor) -> str:
     """A short hash of the training tensors (shapes and a sample of values)."""
     h = hashlib.sha256()
@@ -506,7 +538,9 @@ class HumanMotionPredictor:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(path.suffix + ".tmp")
-        torch.save(self.to_checkpoint(), tmp)
+        d = self.to_checkpoint()
+        d["digest"] = content_digest(d)  # checked by load: torch does not check its zip CRCs
+        torch.save(d, tmp)
         tmp.replace(path)
         return path
 
@@ -559,6 +593,11 @@ class HumanMotionPredictor:
             raise CheckpointError(
                 f"predictor checkpoint {path} has format version {version!r}; this code reads "
                 f"version {CHECKPOINT_VERSION} (retrain, or load it with the matching code)"
+            )
+        if "digest" in d and d["digest"] != content_digest(d):
+            raise CheckpointError(
+                f"predictor checkpoint {path} is damaged: its contents do not match the "
+                "digest written with them (retrain, or restore the file)"
             )
         if expect_joints is not None and "joint_names" not in d:
             raise CheckpointError(f"predictor checkpoint {path} is incomplete: no joint_names")

@@ -15,6 +15,7 @@ from iplanner_torch.prediction.predictor import (
     CHECKPOINT_VERSION,
     HumanMotionPredictor,
     PredictorCfg,
+    content_digest,
     gp_inputs,
 )
 from iplanner_torch.prediction.svgp import SVGPCfg
@@ -235,9 +236,13 @@ def test_empty_batch_and_bad_progress_raise(trained) -> None:
     torch.testing.assert_close(fc.mean, pred.predict(w.f_prev[:2], w.progress[:2]).mean)
 
 
-def _rewrite(src: Path, dst: Path, **changes: object) -> Path:
+def _rewrite(src: Path, dst: Path, *, digest: bool = True, **changes: object) -> Path:
+    """A copy of checkpoint ``src`` with ``changes``; its digest recomputed (a file written
+    that way), or with ``digest=False`` kept from ``src`` (a file damaged after writing)."""
     d = torch.load(src, map_location="cpu", weights_only=False)
     d.update(changes)
+    if digest:
+        d["digest"] = content_digest(d)
     torch.save(d, dst)
     return dst
 
@@ -273,10 +278,18 @@ def test_damaged_or_foreign_checkpoints_raise_checkpoint_errors(trained, tmp_pat
     with pytest.raises(CheckpointError, match="half.ckpt: classifier is None but"):
         HumanMotionPredictor.load(half)
     gone = torch.load(path, weights_only=False)
-    del gone["classifier"], gone["joint_names"]
+    del gone["classifier"], gone["joint_names"], gone["digest"]  # as an older file
     torch.save(gone, tmp_path / "gone.ckpt")
     with pytest.raises(CheckpointError, match="gone.ckpt is incomplete"):
         HumanMotionPredictor.load(tmp_path / "gone.ckpt", expect_joints=JOINTS)
+    # a changed byte inside a tensor (torch reads it without complaint) breaks the digest
+    d = torch.load(path, weights_only=False)
+    assert d["digest"] == content_digest(d)
+    rot = d["feat_mean"].clone()
+    rot[0] += 1.0
+    rotten = _rewrite(path, tmp_path / "rot.ckpt", digest=False, feat_mean=rot)
+    with pytest.raises(CheckpointError, match="rot.ckpt is damaged: its contents do not match"):
+        HumanMotionPredictor.load(rotten)
     # saved without a classifier (both fields None): uniform weights, as documented
     plain = _rewrite(path, tmp_path / "plain.ckpt", classifier=None, classifier_class=None)
     assert HumanMotionPredictor.load(plain).classifier is None
