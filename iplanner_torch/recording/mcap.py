@@ -47,7 +47,12 @@ from scipy.stats import chi2
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.recording.codec import as_numpy, dumps, encode_array, encode_value
-from iplanner_torch.recording.reader import EPISODE_METADATA_NAME, Episode, read_episode
+from iplanner_torch.recording.reader import (
+    EPISODE_METADATA_NAME,
+    Episode,
+    metadata_crc,
+    read_episode,
+)
 from iplanner_torch.recording.schemas import TOPIC_SCHEMAS, WORLD_FRAME
 from iplanner_torch.types import check_shape
 
@@ -242,9 +247,13 @@ class EpisodeWriter:
         self._closed = False
         self._last_t = 0.0  # the last logged time [s] (an interruption is logged there)
         self._writer.start(profile="", library="iplanner_torch")
-        self._writer.add_metadata(
+        self._writer.add_metadata(  # metadata records carry no checksum of their own
             EPISODE_METADATA_NAME,
-            {"json": meta_json, "time_offset_ns": str(self._offset_ns)},
+            {
+                "json": meta_json,
+                "time_offset_ns": str(self._offset_ns),
+                "crc32": str(metadata_crc(meta_json, str(self._offset_ns))),
+            },
         )
         self._channels: dict[str, int] = {}
         self._sequence: dict[str, int] = {}

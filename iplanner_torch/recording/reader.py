@@ -28,11 +28,17 @@ from iplanner_torch.errors import DataError, DataWarning
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.recording.codec import decode_array, decode_scalar, loads
 
-__all__ = ["Episode", "read_episode", "EPISODE_METADATA_NAME"]
+__all__ = ["Episode", "read_episode", "EPISODE_METADATA_NAME", "metadata_crc"]
 
 #: Name of the MCAP metadata record holding the episode's metadata dict.
 EPISODE_METADATA_NAME = "iplanner.episode"
 _MAGIC = b"\x89MCAP0\r\n"
+
+
+def metadata_crc(json_text: str, time_offset_ns: str) -> int:
+    """CRC-32 of the episode metadata record's ``json`` and ``time_offset_ns`` values, stored
+    beside them as ``crc32`` (MCAP metadata records have no checksum of their own)."""
+    return zlib.crc32(f"{time_offset_ns}\n{json_text}".encode())
 
 
 def _decode_value(x: Any) -> Any:
@@ -465,7 +471,16 @@ def read_episode(path: str | Path) -> Episode:
                     raw.problem = f"{first}; then {raw.problem}" if raw.problem else first
     except OSError as err:
         raise DataError(f"{path}: cannot read the episode log: {err}") from err
-    if raw.complete and EPISODE_METADATA_NAME not in raw.metadata:
+    meta_rec = raw.metadata.get(EPISODE_METADATA_NAME, {})
+    if "crc32" in meta_rec and meta_rec["crc32"] != str(
+        metadata_crc(meta_rec.get("json", ""), meta_rec.get("time_offset_ns", "0"))
+    ):
+        meta_rec = {}  # its values cannot be trusted
+        raw.problem = "; ".join(
+            p for p in (raw.problem, "episode metadata fails its checksum") if p
+        )
+        raw.complete = False
+    elif raw.complete and EPISODE_METADATA_NAME not in raw.metadata:
         raw.complete = False  # which episode it is is lost: counted with the incomplete ones
         raw.problem = raw.problem or f"no {EPISODE_METADATA_NAME} metadata record"
     if not raw.complete or raw.problem:
@@ -475,7 +490,6 @@ def read_episode(path: str | Path) -> Episode:
             DataWarning,
             stacklevel=2,
         )
-    meta_rec = raw.metadata.get(EPISODE_METADATA_NAME, {})
     try:
         metadata = json.loads(meta_rec["json"]) if "json" in meta_rec else {}
         offset_ns = int(meta_rec.get("time_offset_ns", "0"))

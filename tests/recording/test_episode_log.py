@@ -513,3 +513,19 @@ def test_forecasts_that_change_horizon_or_dt_are_named(tmp_path: Path) -> None:
         _raw_log(tmp_path / "ok.mcap", [fc(0.0, 4, 0.1)] * 2, metadata={})
     ).forecasts()
     assert f.mean.shape == (2, 1, 4, 1, 3)
+
+
+def test_a_changed_byte_in_the_episode_metadata_is_caught(log_path: Path, tmp_path: Path):
+    """Metadata records have no MCAP checksum: the writer stores a CRC beside the JSON, so a
+    changed value (a planner name, a seed) reads as unknown, not as another episode."""
+    full = read_episode(log_path)
+    assert full.metadata and full.complete
+    blob = bytearray(log_path.read_bytes())
+    key = json.dumps(next(iter(full.metadata))).encode()  # the first key, quoted
+    at = blob.index(key) + 1
+    blob[at] = ord("X") if blob[at] != ord("X") else ord("Y")
+    (tmp_path / "m.mcap").write_bytes(bytes(blob))
+    with pytest.warns(DataWarning, match="episode metadata fails its checksum"):
+        ep = read_episode(tmp_path / "m.mcap")
+    assert ep.metadata == {} and not ep.complete
+    assert len(ep.frames["/robot/joint_state"]) == len(full.frames["/robot/joint_state"])
