@@ -274,7 +274,7 @@ def _read_csv_header(path: Path, comment: list[str]) -> dict[str, Any]:
 
 def _read_csv(path: Path) -> dict[str, Any]:
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (Excel) is dropped
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: unreadable CSV file ({exc})") from exc
     lines = text.splitlines()

@@ -73,6 +73,18 @@ def test_joint_subset_one_wrist(tmp_path):
     np.testing.assert_array_equal(e.clean_positions[:, 0], d.clean_positions[:, 9])
 
 
+def test_csv_saved_with_a_byte_order_mark_reads_the_same(tmp_path):
+    """Spreadsheet programs prefix UTF-8 CSVs with a byte-order mark, which used to hide the
+    '#' header line."""
+    d = _demo()
+    save_demonstration(d, tmp_path / "a.csv")
+    bom = tmp_path / "b.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + (tmp_path / "a.csv").read_bytes())
+    a, b = load_demonstrations(tmp_path / "a.csv")[0], load_demonstrations(bom)[0]
+    np.testing.assert_array_equal(a.positions, b.positions)
+    assert (a.fps, a.action_names, a.joint_names) == (b.fps, b.action_names, b.joint_names)
+
+
 def test_csv_without_header_needs_fps(tmp_path):
     p = tmp_path / "raw.csv"
     p.write_text("right_hand_x,right_hand_y,right_hand_z\n0,0,0\n1,,2\n")
