@@ -33,6 +33,14 @@ import torch
 
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 
+MAX_POSITION_M = 1.0e4
+"""Largest joint coordinate [m] that demonstration files and forecasts take.
+
+A person beside a robot is metres from the world origin: a coordinate of 10 km means other
+units or a corrupted sample. Such values used to train and forecast: a forecast 1e30 m away
+is finite, so the planner read it as "no human near".
+"""
+
 
 def check_shape(name: str, x: torch.Tensor, expected: Sequence[int | str | None]) -> None:
     """Check ``x.shape`` against ``expected`` and raise :class:`ShapeError` when it differs.

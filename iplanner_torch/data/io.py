@@ -36,6 +36,7 @@ import numpy as np
 
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.errors import DataError
+from iplanner_torch.types import MAX_POSITION_M
 
 SUFFIXES: tuple[str, ...] = (".npz", ".csv")
 _REQUIRED_NPZ = ("positions", "labels", "joint_names", "action_names")
@@ -398,14 +399,24 @@ def _read_csv(path: Path) -> dict[str, Any]:
 TIMESTAMP_TOLERANCE = 0.05
 
 
-def _check_no_inf(path: Path, field: str, pos: np.ndarray, joints: Sequence[str]) -> None:
-    """Raise when ``pos`` ((T, K, 3) [m]) holds +-Inf: a lost joint is NaN, never Inf."""
+def _check_coordinates(path: Path, field: str, pos: np.ndarray, joints: Sequence[str]) -> None:
+    """Raise when ``pos`` ((T, K, 3) [m]) holds +-Inf (a lost joint is NaN, never Inf) or a
+    coordinate beyond :data:`~iplanner_torch.types.MAX_POSITION_M` (other units, or junk)."""
     inf = np.isinf(pos)
     if inf.any():
         t, k, _ = np.argwhere(inf)[0]
         raise DataError(
             f"{path}: field {field!r} has {int(inf.sum())} Inf value(s), the first at frame {t}, "
             f"joint {joints[k]!r}; mark a lost joint with NaN (an empty CSV cell)"
+        )
+    with np.errstate(invalid="ignore"):  # NaN compares False: lost joints pass
+        huge = np.abs(pos) > MAX_POSITION_M
+    if huge.any():
+        t, k, _ = np.argwhere(huge)[0]
+        raise DataError(
+            f"{path}: field {field!r} has {int(huge.sum())} coordinate(s) beyond "
+            f"{MAX_POSITION_M:g} m, the first at frame {t}, joint {joints[k]!r}: "
+            f"{pos[t, k].tolist()}; positions are metres (convert other units first)"
         )
 
 
@@ -476,9 +487,9 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
     with np.errstate(over="ignore"):  # values beyond float32's range become Inf: rejected
         pos = pos.astype(np.float32)
         clean = None if clean is None else np.asarray(clean).astype(np.float32)
-    _check_no_inf(path, "positions", pos, joints)
+    _check_coordinates(path, "positions", pos, joints)
     if clean is not None:
-        _check_no_inf(path, "clean_positions", clean, joints)
+        _check_coordinates(path, "clean_positions", clean, joints)
         nan = np.isnan(clean)
         if nan.any():  # the noise-free training targets: nothing to impute them from
             t_nan, k_nan, _ = np.argwhere(nan)[0]
@@ -667,7 +678,7 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
         if table.shape[1] != 18:
             raise DataError(f"{f}: field 'positions' must have 18 columns, got {table.shape[1]}")
         pos = table.reshape(-1, 6, 3)[:, order]  # (T, 6, 3)
-        _check_no_inf(f, "positions", pos, LEGO_OUTPUT_JOINTS)
+        _check_coordinates(f, "positions", pos, LEGO_OUTPUT_JOINTS)
         rel = f.relative_to(root).with_suffix("")
         parts = rel.parts
         demos.append(

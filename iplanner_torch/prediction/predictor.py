@@ -33,7 +33,7 @@ import torch
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
-from iplanner_torch.types import all_finite, check_finite, check_shape
+from iplanner_torch.types import MAX_POSITION_M, all_finite, check_finite, check_shape
 
 CHECKPOINT_VERSION = 1
 
@@ -451,7 +451,8 @@ class HumanMotionPredictor:
         Raises:
             ShapeError: for wrong shapes (as :meth:`predict`) or a dtype that is not floating.
             ConfigError: as :meth:`predict`.
-            DataError: when every joint is NaN in every frame of a window, or on inf.
+            DataError: when every joint is NaN in every frame of a window, or on inf or a
+                coordinate beyond :data:`MAX_POSITION_M`.
         """
         from iplanner_torch.data.windows import compute_features
 
@@ -465,12 +466,21 @@ class HumanMotionPredictor:
             raise ShapeError(f"expected positions of a floating dtype, got {positions.dtype}")
         positions = positions.detach()
         seen = torch.isfinite(positions).all(-1).any(1).any(1)  # (B,) any joint observed
-        all_seen, no_inf = torch.stack([seen.all(), ~torch.isinf(positions).any()]).tolist()
-        if not no_inf:
-            b_i, t_i, k_i = torch.isinf(positions).any(-1).nonzero()[0].tolist()
+        huge = positions.abs() > MAX_POSITION_M  # inf included, NaN not
+        all_seen, no_huge = torch.stack([seen.all(), ~huge.any()]).tolist()
+        if not no_huge:
+            b_i, t_i, k_i = huge.any(-1).nonzero()[0].tolist()
+            value = positions[b_i, t_i, k_i]
+            if bool(torch.isinf(value).any()):
+                raise DataError(
+                    f"positions hold inf (first: window {b_i}, frame {t_i}, joint "
+                    f"{self.joint_names[k_i]!r}); mark a lost joint with NaN"
+                )
             raise DataError(
-                f"positions hold inf (first: window {b_i}, frame {t_i}, joint "
-                f"{self.joint_names[k_i]!r}); mark a lost joint with NaN"
+                f"positions hold a coordinate beyond {MAX_POSITION_M:g} m (first: window "
+                f"{b_i}, frame {t_i}, joint {self.joint_names[k_i]!r}: {value.tolist()}); "
+                "positions are metres in the world frame: check the units, or mark a bad "
+                "sample lost with NaN"
             )
         if not all_seen:
             bi = int((~seen).nonzero()[0])

@@ -245,6 +245,29 @@ def test_error_inf_positions(tmp_path):
         load_demonstrations(c, fps=10)
 
 
+def test_error_coordinates_beyond_the_limit(tmp_path):
+    """Millimetres, or a corrupted sample, are refused before they train or forecast."""
+    from iplanner_torch.types import MAX_POSITION_M
+
+    pos = _demo().positions.copy()
+    pos[4, 2, 0] = 1e30
+    pos[5, 2, 0] = -2 * MAX_POSITION_M
+    p = _npz(tmp_path / "x.npz", positions=pos)
+    with pytest.raises(
+        DataError, match=r"x\.npz: field 'positions' has 2 coordinate\(s\) beyond 10000 m, the "
+        r"first at frame 4, joint '.*': \[1\.0000.*e\+30, .*metres"
+    ):  # fmt: skip
+        load_demonstrations(p)
+    ok = _demo().positions.copy()
+    ok[4, 2, 0] = MAX_POSITION_M  # the limit itself is taken
+    ok[6, 1, :] = np.nan  # and lost joints are not coordinates
+    load_demonstrations(_npz(tmp_path / "ok.npz", positions=ok))
+    c = tmp_path / "mm.csv"
+    c.write_text("a_x,a_y,a_z\n1,2,3\n1200,-15000,3\n")
+    with pytest.raises(DataError, match=r"mm\.csv: field 'positions' has 1 coordinate.*frame 1"):
+        load_demonstrations(c, fps=10)
+
+
 def test_joint_lost_in_every_frame_is_kept_and_reported(tmp_path):
     pos = _demo().positions.copy()
     pos[:, 0, 1] = np.nan  # head lost in every frame (one coordinate is enough)
