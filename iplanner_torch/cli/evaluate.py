@@ -81,6 +81,27 @@ def _checkpoint(path: Path, cfg: DictConfig) -> Path:
     return path
 
 
+def _check_joints(cfg: DictConfig, predictor: Any, ckpt: Path) -> None:
+    """Refuse a ``data.windows.joints`` selection that leaves out a joint of the checkpoint.
+
+    Evaluation forecasts the joints the predictor was trained on, so the held-out data must
+    keep them all; a narrower selection used to fail later as "unknown joint names" for the
+    joints it had dropped.
+    """
+    selected = cfg.data.windows.get("joints", None) if "windows" in cfg.data else None
+    if not selected:
+        return
+    selected = [str(j) for j in selected]
+    dropped = [j for j in predictor.joint_names if j not in selected]
+    if dropped:
+        raise ConfigError(
+            f"data.windows.joints={selected} leaves out {dropped}, which {ckpt} was trained "
+            f"on (its joints: {list(predictor.joint_names)}); evaluation forecasts the "
+            "checkpoint's joints: leave data.windows.joints out, or evaluate a checkpoint "
+            "trained with that selection"
+        )
+
+
 def _held_out(cfg: DictConfig) -> list:
     from iplanner_torch.data.windows import split_by_demonstration
 
@@ -101,6 +122,7 @@ def _prediction(cfg: DictConfig) -> None:
     ckpt = _checkpoint(repo_path(cfg.evaluate.checkpoint), cfg)
     out = _out_dir(cfg) / "prediction_metrics.json"
     predictor = HumanMotionPredictor.load(ckpt)
+    _check_joints(cfg, predictor, ckpt)
     metrics = evaluate_prediction(predictor, _held_out(cfg))
     out.write_text(json.dumps(metrics, indent=2, default=float))
     print(f"{ckpt} on held-out demonstrations of {cfg.data.path}:")
@@ -129,6 +151,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
                 trainer_node=cfg.trainer,
             )
         predictors[str(option)] = HumanMotionPredictor.load(ckpt)
+        _check_joints(cfg, predictors[str(option)], ckpt)
     df = prediction_vs_noise(
         predictors,
         _held_out(cfg),

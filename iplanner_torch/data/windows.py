@@ -404,7 +404,10 @@ def compatible_demonstrations(
         if joints is not None:
             missing = [j for j in joints if j not in d.joint_names]
             if missing:
-                raise DataError(f"demonstration {d.name!r}: unknown joint names {missing}")
+                raise DataError(
+                    f"demonstration {d.name!r} has no joint(s) {missing} of the selection "
+                    f"{list(joints)} (it has {list(d.joint_names)})"
+                )
             d = d.select_joints(list(joints)) if d.joint_names != joints else d
         elif d.joint_names != first.joint_names:
             raise DataError(f"demonstration {d.name!r}: joint_names differ from {first.name!r}'s")

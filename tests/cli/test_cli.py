@@ -407,3 +407,25 @@ def test_an_interrupted_experiment_keeps_what_it_wrote(tmp_path: Path, sig: str)
     t, q = cut.robot_q()
     assert len(t) > 5 and [e["kind"] for e in cut.events()][-1] == "interrupted"
     assert "interrupted: what was written before is kept" in (run / "experiment.log").read_text()
+
+
+def test_evaluate_refuses_a_joint_selection_that_drops_checkpoint_joints(tmp_path: Path) -> None:
+    """``data.windows.joints`` must keep every joint the checkpoint forecasts (any order, more
+    allowed); a narrower one is a ConfigError naming both, not "unknown joint names" later."""
+    from types import SimpleNamespace
+
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli.evaluate import _check_joints
+    from iplanner_torch.errors import ConfigError
+
+    predictor = SimpleNamespace(joint_names=("head", "right_elbow", "right_hand"))
+    ckpt = tmp_path / "predictor.ckpt"
+    for ok in (None, [], ["right_hand", "head", "right_elbow"], ["a", "head", "right_elbow",
+                                                                 "right_hand"]):  # fmt: skip
+        _check_joints(OmegaConf.create({"data": {"windows": {"joints": ok}}}), predictor, ckpt)
+    _check_joints(OmegaConf.create({"data": {"path": "x"}}), predictor, ckpt)
+    cfg = OmegaConf.create({"data": {"windows": {"joints": ["right_hand", "right_elbow"]}}})
+    with pytest.raises(ConfigError, match=r"leaves out \['head'\], which .*predictor\.ckpt was "
+                       r"trained on .*leave data\.windows\.joints out"):  # fmt: skip
+        _check_joints(cfg, predictor, ckpt)
