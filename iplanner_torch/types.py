@@ -33,12 +33,12 @@ import torch
 
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 
-MAX_POSITION_M = 1.0e4
+MAX_POSITION_M = 100.0
 """Largest joint coordinate [m] that demonstration files and forecasts take.
 
-A person beside a robot is metres from the world origin: a coordinate of 10 km means other
-units or a corrupted sample. Such values used to train and forecast: a forecast 1e30 m away
-is finite, so the planner read it as "no human near".
+A person beside a robot is metres from the world origin: a coordinate beyond 100 m means other
+units (a recording in millimetres, say) or a corrupted sample. Such values used to train and
+forecast: a forecast 1e30 m away is finite, so the planner read it as "no human near".
 """
 
 

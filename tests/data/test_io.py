@@ -254,7 +254,7 @@ def test_error_coordinates_beyond_the_limit(tmp_path):
     pos[5, 2, 0] = -2 * MAX_POSITION_M
     p = _npz(tmp_path / "x.npz", positions=pos)
     with pytest.raises(
-        DataError, match=r"x\.npz: field 'positions' has 2 coordinate\(s\) beyond 10000 m, the "
+        DataError, match=r"x\.npz: field 'positions' has 2 coordinate\(s\) beyond 100 m, the "
         r"first at frame 4, joint '.*': \[1\.0000.*e\+30, .*metres"
     ):  # fmt: skip
         load_demonstrations(p)
@@ -263,8 +263,8 @@ def test_error_coordinates_beyond_the_limit(tmp_path):
     ok[6, 1, :] = np.nan  # and lost joints are not coordinates
     load_demonstrations(_npz(tmp_path / "ok.npz", positions=ok))
     c = tmp_path / "mm.csv"
-    c.write_text("a_x,a_y,a_z\n1,2,3\n1200,-15000,3\n")
-    with pytest.raises(DataError, match=r"mm\.csv: field 'positions' has 1 coordinate.*frame 1"):
+    c.write_text("a_x,a_y,a_z\n1,2,3\n1200,-150,3\n")
+    with pytest.raises(DataError, match=r"mm\.csv: field .positions. has 2 coordinate.*frame 1"):
         load_demonstrations(c, fps=10)
 
 
