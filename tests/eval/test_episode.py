@@ -53,6 +53,88 @@ def _fake_episode(tmp_path, cfg, kind, replanner, *, predictor=None, path=None, 
     )
 
 
+class _Clock:
+    """Stands in for ``time`` in the episode module: wall time passes only in forecasts."""
+
+    def __init__(self) -> None:
+        self.now = 50.0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+
+def test_distance_prediction_time_and_realtime_factor_from_the_log(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``eval/min_distance`` equals a brute-force minimum over every sphere pair of the logged
+    robot states and true human joints (logged at the metrics' rate here); the timing
+    metrics equal what a fake clock implies: 2.5 ms per forecast, no other wall time."""
+    import iplanner_torch.eval.episode as episode_module
+    from iplanner_torch.collision.human_spheres import HumanSphereMap
+    from iplanner_torch.recording.reader import read_episode
+
+    clock = _Clock()
+    monkeypatch.setattr(episode_module, "time", clock)
+
+    class ClockedPredictor(fakes.ConstantPredictor):
+        def predict_positions(self, positions, progress):
+            clock.now += 0.0025
+            return super().predict_positions(positions, progress)
+
+    predictor = ClockedPredictor()
+    path = tmp_path / "ep.mcap"
+    cfg = replace(_cfg(3.0), metrics_hz=25.0, log_hz=25.0)
+    res = _fake_episode(tmp_path, cfg, "iplanner_ni", fakes.LinearReplanner(speed=1.5),
+                        predictor=predictor, path=path, seed=1)  # fmt: skip
+    m = res.metrics
+    n_calls = len(predictor.calls)
+    assert n_calls >= 6
+    assert m["eval/prediction_ms"] == pytest.approx(2.5)
+    assert m["sim/realtime_factor"] == pytest.approx(m["sim/duration_s"] / (0.0025 * n_calls))
+    ep = read_episode(path)
+    t_q, q = ep.robot_q()
+    t_h, joints = ep.human_true()
+    assert torch.equal(t_q, t_h) and len(t_q) == pytest.approx(25 * 3.0, abs=2)
+    arm = fakes.FakeArm(tmp_path)
+    smap = HumanSphereMap.from_segments(JOINT_NAMES)
+    robot_c = arm.sphere_centers(q.to(arm.q_home.dtype)).double()  # (T, 5, 3)
+    human_c = torch.einsum("sk,tkc->tsc", smap.matrix.double(), joints)  # (T, S_h, 3)
+    best = math.inf
+    for rc, hc in zip(robot_c.tolist(), human_c.tolist(), strict=True):
+        for a, ra in zip(rc, arm.sphere_radii.tolist(), strict=True):
+            for b, rb in zip(hc, smap.radii.tolist(), strict=True):
+                best = min(best, math.dist(a, b) - ra - rb)
+    assert 0.0 < best < 1.0  # the arm works beside the person: a distance worth checking
+    assert m["eval/min_distance"] == pytest.approx(best, abs=1e-6)
+
+
+def test_efficiency_of_a_completed_episode_against_the_closed_form(tmp_path: Path) -> None:
+    """A completed episode: ``eval/task_time_s`` is when the person took the last block,
+    ``eval/human_alone_s`` the closed-form time of doing every task alone (stand-in reaches
+    to each block's far position and delivery spot, plus the mean idle), and
+    ``eval/efficiency`` their ratio."""
+    cfg = _cfg(60.0)
+    res = _fake_episode(tmp_path, cfg, "itomp", fakes.LinearReplanner(speed=1.5), seed=0)
+    m = res.metrics
+    took = [(t, b) for t, k, b in res.events if k == "human_took"]
+    assert m["eval/completed"] == 1.0 and [b for _, b in took] == [0, 1, 2, 3]
+    assert m["eval/task_time_s"] == pytest.approx(took[-1][0])
+    scene, human = cfg.scene_cfg(), cfg.sim.human
+    lift = np.array([0.0, 0.0, 0.04 - 0.5 * scene.block_size])
+    far = {i: scene.block_position(i) + lift for i in scene.block_ids}
+    spots = {i: scene.delivery_position(i) + lift for i in scene.block_ids}
+    alone = fakes.fake_solo_duration(
+        (0, 1, 2, 3),
+        far,
+        spots,
+        speed=human.speed_factor,
+        hold_s=human.hold_s,
+        idle_s=human.idle_s,
+    )
+    assert m["eval/human_alone_s"] == pytest.approx(alone, rel=1e-9)
+    assert m["eval/efficiency"] == pytest.approx(alone / took[-1][0], rel=1e-9)
+
+
 def test_short_iplanner_episode_writes_mcap(tmp_path: Path) -> None:
     from iplanner_torch.recording.reader import read_episode
 
@@ -87,8 +169,6 @@ def test_short_iplanner_episode_writes_mcap(tmp_path: Path) -> None:
     m = res.metrics
     assert m["sim/duration_s"] == pytest.approx(5.0, abs=0.02)
     assert m["eval/smoothness"] > 0 and math.isfinite(m["eval/jerkiness"])
-    assert 0.0 < m["eval/min_distance"] < 2.0
-    assert m["eval/prediction_ms"] > 0
     assert math.isnan(m["eval/efficiency"]) and m["eval/completed"] == 0.0
     ep = read_episode(path)
     assert ep.metrics()["plan/cycles"] == len(cycle_t)
@@ -287,7 +367,6 @@ def test_real_kuka_episode_delivers_every_block(tmp_path: Path, kind: str) -> No
     assert res.metrics["eval/completed"] == 1.0
     for name in ("eval/smoothness", "eval/min_distance", "eval/efficiency", "plan/mean_solve_ms"):
         assert math.isfinite(res.metrics[name]), name
-    assert res.metrics["plan/mean_solve_ms"] < 500.0  # well inside the step m = 0.5 s
     ep = read_episode(path)
     assert ep.metadata["planner"] == kind
     assert ep.metrics()["eval/completed"] == 1.0

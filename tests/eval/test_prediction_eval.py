@@ -72,9 +72,25 @@ def test_regression_precision_accuracy_and_classification() -> None:
     n_f, k = 15, 3
     expect_prec = n_f * k * 3 * offset**2 * fc.dt
     torch.testing.assert_close(m["reg_precision"], torch.full((3,), expect_prec))
-    second = (fc.weights[:, :, None, None, None] * (fc.var + fc.mean**2)).sum(1)
-    var_mix = second - fc.expected_mean() ** 2
-    torch.testing.assert_close(m["reg_accuracy"], var_mix.prod(-1).sum((-1, -2)) * fc.dt)
+    # two actions: the mixture variance per coordinate is w1 v1 + w2 v2 + w1 w2 (m1 - m2)^2
+    w1, w2 = 0.9, 0.1
+    v1, v2 = fc.var[:, 0].double(), fc.var[:, 1].double()
+    d = (fc.mean[:, 0] - fc.mean[:, 1]).double()
+    var_mix = w1 * v1 + w2 * v2 + w1 * w2 * d**2
+    expect_acc = (var_mix.prod(-1).sum((-1, -2)) * fc.dt).float()
+    torch.testing.assert_close(m["reg_accuracy"], expect_acc, rtol=1e-4, atol=1e-9)
+    certain = Forecast(
+        weights=torch.tensor([[1.0, 0.0]]).expand(3, 2),
+        mean=fc.mean,
+        var=fc.var,
+        dt=fc.dt,
+        joint_names=JOINTS,
+        action_names=("a", "b"),
+    )
+    m_certain = window_metrics(certain, truth, current)  # one action: its own variance
+    torch.testing.assert_close(
+        m_certain["reg_accuracy"], fc.var[:, 0].prod(-1).sum((-1, -2)) * fc.dt
+    )
     assert m["correct"].tolist() == [True, False, True]
     for b in range(3):  # moving hand = the hand with the larger true displacement over 1 s
         disp = [float((truth[b, -1, j] - truth[b, 0, j]).norm()) for j in (1, 2)]

@@ -45,3 +45,72 @@ def test_resample_speed_errors() -> None:
     demo.clean_positions = None
     with pytest.raises(DataError, match="clean_positions"):
         resample_speed(demo, 2.0)
+
+
+def test_noise_sweep_rows_noise_levels_and_shared_noise(monkeypatch, tmp_path) -> None:
+    """One row per (predictor, noise, speed); each predictor sees the same noisy replay; at
+    noise 0 the replay is the clean motion with nothing lost, above it the added noise has
+    the asked standard deviation; the report holds every row."""
+    import pandas as pd
+
+    import iplanner_torch.eval.prediction as prediction_module
+    from iplanner_torch.eval.prediction_sweep import prediction_vs_noise, write_noise_report
+
+    seen: list[tuple[object, list[Demonstration]]] = []
+
+    def spy(predictor, demos):
+        seen.append((predictor, demos))
+        err = np.concatenate([(d.positions - d.clean_positions).ravel() for d in demos])
+        lost = np.isnan(err)
+        return {
+            "frames": sum(d.num_frames for d in demos),
+            "lost_share": float(lost.mean()),
+            "noise_std": float(err[~lost].std()),
+        }
+
+    monkeypatch.setattr(prediction_module, "evaluate_prediction", spy)
+    demos = [_demo(3001), _demo(1801)]
+    predictors = {"p1": object(), "p2": object()}
+    df = prediction_vs_noise(
+        predictors,
+        demos,
+        noises=(0.0, 0.02),
+        speeds=("slow", "fast"),
+        dropout_rate=0.05,
+        seed=3,
+        progress=False,
+    )
+    assert len(df) == 2 * 2 * 2
+    combos = set(zip(df["predictor"], df["noise"], df["speed"], strict=True))
+    assert combos == {(p, n, s) for p in predictors for n in (0.0, 0.02) for s in ("slow", "fast")}
+    for (_, noise), g in df.groupby(["speed", "noise"]):
+        assert len(g) == 2
+        assert g["frames"].nunique() == 1 and g["noise_std"].nunique() == 1
+        if noise == 0.0:
+            assert (g["lost_share"] == 0.0).all() and (g["noise_std"] == 0.0).all()
+        else:
+            assert g["noise_std"].iloc[0] == pytest.approx(0.02, rel=0.05)
+            assert 0.03 < g["lost_share"].iloc[0] < 0.07  # about dropout_rate of joint-frames
+    slow_frames = df[df["speed"] == "slow"]["frames"].iloc[0]
+    fast_frames = df[df["speed"] == "fast"]["frames"].iloc[0]
+    assert (slow_frames, fast_frames) == (6001 + 3601, 1501 + 901)
+    for i in range(0, len(seen), 2):  # p1 then p2 at each (speed, noise): the same replay
+        (p1, a), (p2, b) = seen[i], seen[i + 1]
+        assert p1 is predictors["p1"] and p2 is predictors["p2"]
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x.positions, y.positions)
+    with pytest.raises(ConfigError, match=r"unknown speeds \['brisk'\]"):
+        prediction_vs_noise(predictors, demos, speeds=("brisk",), progress=False)
+    with pytest.raises(DataError, match="no held-out"):
+        prediction_vs_noise(predictors, [], progress=False)
+    df["mhd_1s"] = 0.1
+    written = write_noise_report(df, tmp_path / "report", command="iplanner-evaluate x")
+    assert [p.name for p in written] == [
+        "prediction_vs_noise.csv",
+        "prediction_vs_noise.png",
+        "README.md",
+    ]
+    pd.testing.assert_frame_equal(pd.read_csv(written[0]), df, check_dtype=False)
+    readme = written[2].read_text()
+    assert "iplanner-evaluate x" in readme
+    assert readme.count("\n| p1 |") + readme.count("\n| p2 |") == len(df)

@@ -72,7 +72,11 @@ def test_breakdown_outside_waits() -> None:
     late = [PlanRecord(times=p.times + 5.0, q=p.q, wait_s=p.wait_s) for p in PLANS]
     b = smoothness_breakdown(t, q, late, settle_s=1.0)  # window [7, 8.5] s: no acceleration
     assert b.wait_share == pytest.approx(0.0)
-    assert b.smoothness_outside == pytest.approx(b.smoothness / (1.0 - b.wait_time_share))
+    # the 38 samples 7.00, 7.04, ..., 8.48 s lie in the window; the whole integral lies
+    # outside it, over the other 10 - 38 H seconds
+    exact = (A * A * (1.0 - H) + 2 * (A / 2) ** 2 * H) / 10.0
+    assert b.wait_time_share == pytest.approx(38 * H / 10.0, rel=1e-9)
+    assert b.smoothness_outside == pytest.approx(exact * 10.0 / (10.0 - 38 * H), rel=1e-9)
 
 
 def test_breakdown_errors() -> None:

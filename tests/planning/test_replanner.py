@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-import time
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -13,6 +13,7 @@ from planning_fakes import PointRobot, approaching, one_sphere_map, static_forec
 
 from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.planning import costs as C
+from iplanner_torch.planning import replanner as replanner_module
 from iplanner_torch.planning.itomp import ITOMP
 from iplanner_torch.planning.optimizer import OptimizerCfg, PlanResult, TrajectoryOptimizer
 from iplanner_torch.planning.replanner import (
@@ -27,27 +28,53 @@ from iplanner_torch.planning.trajectory import resample_linear
 CONF = Path(__file__).resolve().parents[2] / "conf" / "planner"
 
 
-class SpyOptimizer(TrajectoryOptimizer):
-    """Records the arguments of every solve and optionally sleeps."""
+class FakeClock:
+    """Stands in for ``time`` in the replanner module: wall time passes only in solves."""
 
-    def __init__(self, *args, sleep_s: float = 0.0, **kwargs) -> None:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+
+class SpyOptimizer(TrajectoryOptimizer):
+    """Records the arguments of every solve; with a clock, each solve takes ``solve_s``."""
+
+    def __init__(
+        self, *args, clock: FakeClock | None = None, solve_s: float = 0.0, **kwargs
+    ) -> None:
         super().__init__(*args, **kwargs)
-        self.sleep_s = sleep_s
+        self.clock, self.solve_s = clock, solve_s
         self.calls: list[dict] = []
 
     def solve(self, q_start, q_goal, **kwargs) -> PlanResult:
         self.calls.append({"q_start": q_start.clone(), **kwargs})
-        time.sleep(self.sleep_s)
-        return super().solve(q_start, q_goal, **kwargs)
+        result = super().solve(q_start, q_goal, **kwargs)
+        if self.clock is not None:
+            self.clock.now += self.solve_s
+        return result
 
 
-def _spy(robot, sleep_s: float = 0.0) -> SpyOptimizer:
+def _spy(
+    robot, monkeypatch: pytest.MonkeyPatch | None = None, solve_s: float = 0.0
+) -> SpyOptimizer:
+    """A spy optimiser; given ``monkeypatch``, the replanner reads wall time from a fake clock
+    on which every solve takes exactly ``solve_s``."""
+    clock = None
+    if monkeypatch is not None:
+        clock = FakeClock()
+        monkeypatch.setattr(replanner_module, "time", clock)
     cfg = OptimizerCfg(iterations=5, warm_iterations=2, horizon_s=2.0)
-    return SpyOptimizer(robot, cfg, human_spheres=one_sphere_map(0.1), sleep_s=sleep_s)
+    return SpyOptimizer(
+        robot, cfg, human_spheres=one_sphere_map(0.1), clock=clock, solve_s=solve_s
+    )
 
 
-def test_cycles_every_m_and_warm_starts_from_the_shifted_plan(point_robot: PointRobot) -> None:
-    opt = _spy(point_robot)
+def test_cycles_every_m_and_warm_starts_from_the_shifted_plan(
+    point_robot: PointRobot, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    opt = _spy(point_robot, monkeypatch, solve_s=0.01)
     cfg = ReplannerCfg(
         replan_step_s=0.5, fresh_fraction=0.5, goal_change_lead_s=None, tracking="exact"
     )
@@ -185,16 +212,28 @@ def test_filtered_command_follows_a_smooth_plan_closely(point_robot: PointRobot)
     assert err < 2e-3
 
 
-def test_overruns_are_counted_and_warned(point_robot: PointRobot) -> None:
-    opt = _spy(point_robot, sleep_s=0.06)
-    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, budget_s=0.05))
+def test_overruns_are_counted_and_warned(
+    point_robot: PointRobot, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Solves of 60 ms against a 50 ms budget are two overruns and two warnings; 40 ms ones
+    are none (a fake clock: the counts do not depend on the machine's load)."""
     q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    opt = _spy(point_robot, monkeypatch, solve_s=0.06)
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, budget_s=0.05))
     rp.reset(q0, qg, t=0.0)
-    with pytest.warns(PlanningOverrunWarning, match="over its budget"):
+    with pytest.warns(PlanningOverrunWarning, match=r"took 0\.060 s, over its budget 0\.050"):
         rp.step(0.0, q0, None)
         rp.step(0.5, rp.command(0.5)[0], None)
     assert rp.stats.cycles == 2 and rp.stats.overruns == 2
-    assert rp.stats.mean_solve_ms >= 60.0
+    assert rp.stats.mean_solve_ms == pytest.approx(60.0)
+    opt.solve_s = 0.04
+    rp.reset(q0, qg, t=0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PlanningOverrunWarning)
+        rp.step(0.0, q0, None)
+        rp.step(0.5, rp.command(0.5)[0], None)
+    assert rp.stats.cycles == 2 and rp.stats.overruns == 0
+    assert rp.stats.mean_solve_ms == pytest.approx(40.0)
 
 
 def test_wait_delays_the_goal_and_is_counted(point_robot: PointRobot) -> None:
@@ -256,7 +295,9 @@ def test_planner_cfg_validates_and_builds() -> None:
     rp = build_replanner(cfg, PointRobot())
     assert isinstance(rp.optimizer, ITOMP)
     assert rp.optimizer.cfg.confidence == 0.99 and rp.cfg.replan_step_s == 0.25
-    assert replace(cfg, kind="iplanner", predictor_variant="ni").kind == "iplanner"
+    ip = build_replanner(replace(cfg, kind="iplanner", predictor_variant="ni"), PointRobot())
+    assert type(ip.optimizer) is TrajectoryOptimizer  # plans on the predictor's forecast
+    assert ip.optimizer.cfg.confidence == 0.99 and ip.cfg.replan_step_s == 0.25
     oracle = build_replanner(replace(cfg, kind="oracle"), PointRobot())
     assert type(oracle.optimizer) is TrajectoryOptimizer  # no ITOMP: it plans on a forecast
     with pytest.raises(ConfigError, match="oracle"):

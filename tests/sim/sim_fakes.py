@@ -155,6 +155,21 @@ class FakeMotion:
         return frames
 
 
+def fake_solo_duration(order, far, targets, *, speed: float, hold_s: float, idle_s) -> float:
+    """The human-alone time in closed form for :class:`FakeMotion` (reach out, hold, back to
+    the rest pose: 2 n + hold frames, n from the distance to the hand on the target's side)."""
+    rest, fps = rest_pose(), FakeMotion.fps
+    total = 0.0
+    for i in order:
+        for target in (far[i], targets[i]):
+            hand = rest[JOINT_INDEX["left_hand" if target[1] > 0 else "right_hand"]]
+            move_s = float(np.linalg.norm(target - hand)) / (0.5 * speed) + 0.2
+            n = max(2, round(move_s * fps))
+            total += (2 * n + max(1, round(hold_s * fps)) - 1) / fps
+        total += 0.5 * (idle_s[0] + idle_s[1])
+    return total
+
+
 class FakeOrder:
     """A fixed sequential task order."""
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sim_fakes import FakeMotion, FakeOrder, deadline
+from sim_fakes import FakeMotion, FakeOrder, deadline, fake_solo_duration
 
 from iplanner_torch.data.skeleton import JOINT_INDEX
 from iplanner_torch.errors import ConfigError, DataError
@@ -271,3 +271,22 @@ def test_preview_of_far_times_in_blocking_mode() -> None:
     with deadline(10.0):
         far = human.preview(np.array([30.0, 1e7]), set(), 0.01)
     np.testing.assert_array_equal(far[0], far[1])
+
+
+@pytest.mark.parametrize("speed", ["slow", "medium", "fast"])
+def test_solo_duration_sums_the_reaches_of_doing_every_task_alone(speed: str) -> None:
+    """Efficiency's reference: a reach to each block's far position, one to its delivery
+    spot, and the mean idle, in the task order, at the human's speed."""
+    human = _human(speed=speed)
+    far = {i: SCENE.block_position(i) + [0.0, 0.0, 0.015] for i in SCENE.block_ids}
+    cfg = human.cfg
+    expect = fake_solo_duration(
+        (2, 0, 1, 3),
+        far,
+        TARGETS,
+        speed=cfg.speed_factor,
+        hold_s=cfg.hold_s,
+        idle_s=cfg.idle_s,
+    )
+    assert human.solo_duration(far) == pytest.approx(expect, rel=1e-12)
+    assert expect > 8 * cfg.hold_s  # eight reaches, each holding
