@@ -386,8 +386,16 @@ def test_an_interrupted_experiment_keeps_what_it_wrote(tmp_path: Path, sig: str)
     second = run / "episodes" / "arrangement_1x4_medium_n0.01_itomp_s1.mcap"
     deadline = time.monotonic() + 300
     while not (second.exists() and second.stat().st_size > 0) and time.monotonic() < deadline:
+        if proc.poll() is not None:
+            break
         time.sleep(0.05)
-    time.sleep(1.5)  # into the second episode
+    if not second.exists():
+        proc.kill()
+        out, err = proc.communicate(timeout=60)
+        pytest.fail(f"the second episode's log never appeared (exit {proc.returncode}): "
+                    f"{err[-2000:]}")  # fmt: skip
+    time.sleep(1.5)  # into the second episode (one takes several seconds)
+    assert proc.poll() is None, "the run ended before it could be interrupted"
     proc.send_signal(getattr(signal, sig))
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err[-3000:]
@@ -429,3 +437,43 @@ def test_evaluate_refuses_a_joint_selection_that_drops_checkpoint_joints(tmp_pat
     with pytest.raises(ConfigError, match=r"leaves out \['head'\], which .*predictor\.ckpt was "
                        r"trained on .*leave data\.windows\.joints out"):  # fmt: skip
         _check_joints(cfg, predictor, ckpt)
+
+
+def test_train_writes_a_checkpoint_and_held_out_metrics_and_resumes(tmp_path: Path) -> None:
+    """``iplanner-train`` on a small generated dataset: a checkpoint that loads and forecasts,
+    the held-out metrics file with what it prints, and a resumed run that reuses the
+    sub-models (same forecasts)."""
+    import json
+
+    import torch
+
+    from iplanner_torch.data.windows import WindowCfg, build_windows
+    from iplanner_torch.prediction.predictor import HumanMotionPredictor
+
+    ds, ck = tmp_path / "ds", tmp_path / "ck"
+    gen = ["iplanner-data", "generate", f"data.path={ds}", "progress=false",
+           "data.generator.n_targets=2", "data.generator.reaches_per_target=5"]  # fmt: skip
+    res = _run(gen, tmp_path)
+    assert res.returncode == 0, res.stderr
+    train = ["iplanner-train", "trainer=fast", f"data.path={ds}", f"train.out_dir={ck}",
+             "data.split=[0.6,0.2,0.2]", "progress=false"]  # fmt: skip
+    res = _run([*train, f"hydra.run.dir={tmp_path / 'h1'}"], tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert f"predictor checkpoint: {ck / 'predictor.ckpt'}" in res.stdout
+    metrics = json.loads((ck / "heldout_metrics.json").read_text())
+    for key in ("train_windows", "n_windows", "class_precision", "mhd_1s", "coverage95"):
+        assert key in metrics and f"  {key}" in res.stdout, key
+    assert metrics["n_windows"] > 0 and 0.0 <= metrics["coverage95"] <= 1.0
+    assert sorted(p.name for p in ck.glob("gp_*.ckpt")) and (ck / "classifier.ckpt").exists()
+    pred = HumanMotionPredictor.load(ck / "predictor.ckpt")
+    demos = load_demonstrations(ds)
+    w = build_windows(demos[:2], WindowCfg(n_prev=pred.n_prev, n_future=pred.n_future))
+    before = pred.predict(w.f_prev[:4], w.progress[:4])
+    assert bool(torch.isfinite(before.mean).all()) and before.horizon == pred.n_future
+    stamps = {p.name: p.stat().st_mtime_ns for p in ck.glob("gp_*.ckpt")}
+    res = _run([*train, "train.resume=true", f"hydra.run.dir={tmp_path / 'h2'}"], tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert {p.name: p.stat().st_mtime_ns for p in ck.glob("gp_*.ckpt")} == stamps
+    after = HumanMotionPredictor.load(ck / "predictor.ckpt").predict(w.f_prev[:4], w.progress[:4])
+    torch.testing.assert_close(after.mean, before.mean)
+    torch.testing.assert_close(after.weights, before.weights)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 
 import pytest
@@ -56,8 +57,9 @@ def test_every_option_composes_and_instantiates(group: str, option: str) -> None
     else:
         assert targets, f"{group}={option} has nothing to instantiate"
     for t in targets:
-        obj = instantiate(t)
-        assert obj is not None
+        module, _, name = str(t._target_).rpartition(".")
+        cls = getattr(importlib.import_module(module), name)
+        assert isinstance(instantiate(t), cls), t._target_
 
 
 def test_default_config_composes_with_every_section() -> None:

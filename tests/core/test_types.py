@@ -32,14 +32,20 @@ def test_forecast_mixture_mean_and_shape_checks() -> None:
     fc = Forecast(
         weights=w,
         mean=mean,
-        var=torch.ones(b, a, f, k, 3),
+        var=0.5 + torch.rand(b, a, f, k, 3),
         dt=1 / 15,
         joint_names=tuple(f"j{i}" for i in range(k)),
         action_names=("a", "b", "c"),
     )
     expected = (w[:, :, None, None, None] * mean).sum(1)
     torch.testing.assert_close(fc.expected_mean(), expected)
-    assert fc.joint_cov().shape == (b, a, f, k, 3, 3)
+    cov = fc.joint_cov()
+    assert cov.shape == (b, a, f, k, 3, 3)
+    for i in range(3):  # the per-axis variances on the diagonal, nothing off it
+        torch.testing.assert_close(cov[..., i, i], fc.var[..., i])
+        for j in range(3):
+            if j != i:
+                assert bool((cov[..., i, j] == 0).all())
     assert fc.select(1).batch_size == 1
     torch.testing.assert_close(fc.times[-1], torch.tensor(f / 15))
     with pytest.raises(ShapeError, match="expected mean"):

@@ -253,3 +253,14 @@ def test_features_and_progress_on_cuda_match_cpu():
     lab = torch.tensor([0, 1, 1, 2, 0, 3], device="cuda")
     assert progress_bitmask(lab).device.type == "cuda"
     torch.testing.assert_close(progress_bitmask(lab).cpu(), progress_bitmask(lab.cpu()))
+
+
+def test_progress_indices_default_and_explicit() -> None:
+    """By default every action but idle/return/unlabelled records progress; an explicit list
+    picks those actions in its own order, and a name that is not an action is refused."""
+    names = ("idle", "reach_0", "return", "reach_1", "unlabelled", "take_2")
+    assert WindowCfg().progress_indices(names) == (1, 3, 5)
+    cfg = WindowCfg(progress_actions=("take_2", "reach_0"))
+    assert cfg.progress_indices(names) == (5, 1)
+    with pytest.raises(ConfigError, match=r"progress_actions \['reach_9'\] are not among"):
+        WindowCfg(progress_actions=("reach_0", "reach_9")).progress_indices(names)

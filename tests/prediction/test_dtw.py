@@ -93,6 +93,49 @@ def test_symmetry_batch_and_paired():
     torch.testing.assert_close(dtw_paired(x, y), dtw_distance(x, y).diagonal(), atol=1e-12, rtol=0)
 
 
+def test_band_limits_against_closed_forms():
+    """Band references that do not restate the band rule: band 0 on equal lengths allows the
+    lock-step alignment only (DTW: the sum of frame distances; GAK: the product of the
+    local kernels); a band as wide as the windows is no band; a band never shortens DTW."""
+    g = torch.Generator().manual_seed(6)
+    x = torch.randn(4, 6, 3, generator=g, dtype=torch.float64)
+    y = torch.randn(4, 6, 3, generator=g, dtype=torch.float64)
+    z = torch.randn(5, 8, 3, generator=g, dtype=torch.float64)
+    sigma = 1.3
+    lock_dtw = (x[:, None] - y[None]).norm(dim=-1).sum(-1)  # (4, 4)
+    d2 = (x[:, None] - y[None]).square().sum(-1) / (2 * sigma**2)
+    lock_gak = (torch.exp(-d2) / (2.0 - torch.exp(-d2))).log().sum(-1)
+    torch.testing.assert_close(dtw_distance(x, y, band=0), lock_dtw, atol=1e-12, rtol=0)
+    torch.testing.assert_close(dtw_paired(x, y, band=0), lock_dtw.diagonal(), atol=1e-12, rtol=0)
+    torch.testing.assert_close(gak_log(x, y, sigma=sigma, band=0), lock_gak, atol=1e-12, rtol=0)
+    torch.testing.assert_close(
+        gak_log_paired(x, y, sigma=sigma, band=0), lock_gak.diagonal(), atol=1e-12, rtol=0
+    )
+    for a, b in ((x, y), (x, z), (z, x)):
+        free, wide = dtw_distance(a, b), dtw_distance(a, b, band=8)
+        torch.testing.assert_close(wide, free, atol=1e-12, rtol=0)
+        torch.testing.assert_close(
+            gak_log(a, b, sigma=sigma, band=8), gak_log(a, b, sigma=sigma), atol=1e-12, rtol=0
+        )
+        for band in (0, 1, 2):
+            assert bool((dtw_distance(a, b, band=band) >= free - 1e-12).all())
+    # the paired functions agree with the Gram's diagonal under a band, on unequal lengths
+    zz = z[:4]
+    for band in (0, 1, 2):
+        torch.testing.assert_close(
+            dtw_paired(x, zz, band=band),
+            dtw_distance(x, zz, band=band).diagonal(),
+            atol=1e-12,
+            rtol=0,
+        )
+        torch.testing.assert_close(
+            gak_log_paired(x, zz, sigma=sigma, band=band),
+            gak_log(x, zz, sigma=sigma, band=band).diagonal(),
+            atol=1e-12,
+            rtol=0,
+        )
+
+
 @pytest.mark.slow  # tslearn compiles its numba code on first use (~30 s)
 def test_matches_tslearn_squared_variant():
     tslearn = pytest.importorskip("tslearn.metrics")
@@ -157,10 +200,15 @@ def test_dtw_kernel_value_and_median():
     x = torch.randn(8, 5, 2, generator=g, dtype=torch.float64)
     d = dtw_distance(x, x)
     torch.testing.assert_close(DTWKernel(2.5)(x, x), torch.exp(-d / 2.5))
-    med = median_dtw(x, n_pairs=400, seed=0)
-    off = d[~torch.eye(8, dtype=torch.bool)]
-    assert float(off.min()) <= med <= float(off.max())
-    assert med == median_dtw(x, n_pairs=400, seed=0)
+    # pairs of distinct windows drawn uniformly: about the median of the 56 off-diagonal
+    # distances (between their 40th and 60th percentiles with 4000 pairs)
+    med = median_dtw(x, n_pairs=4000, seed=0)
+    off = d[~torch.eye(8, dtype=torch.bool)].double()
+    assert float(off.quantile(0.4)) <= med <= float(off.quantile(0.6))
+    assert med == median_dtw(x, n_pairs=4000, seed=0)
+    # two windows: every pair is the same pair; identical windows: the documented 1.0
+    assert median_dtw(x[:2], n_pairs=7, seed=3) == pytest.approx(float(d[0, 1]), rel=1e-12)
+    assert median_dtw(x[:1].expand(3, 5, 2), n_pairs=9) == 1.0
 
 
 def test_errors():

@@ -93,6 +93,49 @@ def test_first_import_is_brute_force_argmin():
     assert abs(ivm.loss_history_[1] - min(best)) < 1e-6 * abs(min(best))
 
 
+@pytest.mark.parametrize("kind", ["rbf", "dtw"])
+def test_final_fit_is_the_exact_kernel_logistic_regression_on_its_imports(kind: str) -> None:
+    """On the import vectors it chose, the IVM's final H and probabilities are scipy's minimum
+    of the documented objective: softmax NLL + lam / 2 sum_c a_c^T (K_SS + s I) a_c, with s
+    the jitter plus, for the indefinite DTW kernel, the shift to the smallest eigenvalue."""
+    from iplanner_torch.prediction import ivm as ivm_module
+
+    x, y = sine_windows(40, 8, classes=(0, 1, 2), t=6, d=2)
+    # a wide DTW kernel: its Gram on these 40 windows is indefinite (smallest eigenvalue -0.05)
+    kernel = RBFKernel(2.0) if kind == "rbf" else DTWKernel(4 * median_dtw(x, 200, seed=0))
+    lam = 0.05
+    ivm = IVMClassifier(
+        kernel, num_classes=3, lam=lam, max_import=4, tol=0.0, candidates=None, newton_steps=200
+    ).fit(x, y)
+    sel = ivm.import_index_.tolist()
+    assert len(sel) == 4
+    kmat = kernel(x, x).double().numpy()
+    kmat = 0.5 * (kmat + kmat.T)
+    eig_min = float(np.linalg.eigvalsh(kmat)[0])
+    shift = ivm_module._JITTER * float(np.abs(np.diag(kmat)).mean())
+    if kind == "dtw":
+        assert eig_min < -0.01  # the shift is exercised
+        shift += -eig_min * (1.0 + 1e-6)
+    k_ns = kmat[:, sel]  # (N, 4)
+    pen = kmat[np.ix_(sel, sel)] + shift * np.eye(4)
+    onehot = np.eye(3)[y.numpy()]
+
+    def h(theta: np.ndarray) -> float:
+        b, a = theta[:3], theta[3:].reshape(4, 3)
+        f = b[None] + k_ns @ a  # (N, 3)
+        lse = np.log(np.exp(f - f.max(1, keepdims=True)).sum(1)) + f.max(1)
+        return float(-(onehot * (f - lse[:, None])).sum() + 0.5 * lam * np.trace(a.T @ pen @ a))
+
+    best = minimize(h, np.zeros(15), method="BFGS", options={"gtol": 1e-10, "maxiter": 5000})
+    assert ivm.loss_history_[-1] == pytest.approx(best.fun, rel=1e-8)
+    b, a = best.x[:3], best.x[3:].reshape(4, 3)
+    xt, _ = sine_windows(7, 9, classes=(0, 1, 2), t=6, d=2)
+    f = b[None] + kernel(xt, x[sel]).double().numpy() @ a
+    p_ref = np.exp(f - f.max(1, keepdims=True))
+    p_ref /= p_ref.sum(1, keepdims=True)
+    np.testing.assert_allclose(ivm.predict_proba(xt).double().numpy(), p_ref, atol=2e-6)
+
+
 def test_state_dict_round_trip(data):
     (x, y), (xt, _) = data
     ivm = IVMClassifier(DTWKernel(4.0, band=3), num_classes=3, max_import=6).fit(x, y)

@@ -57,6 +57,9 @@ def test_forecast_is_gp_mean_plus_pose(trained) -> None:
     fc = pred.predict(w.f_prev[:5], w.progress[:5])
     assert fc.weights.shape == (5, pred.num_actions)
     torch.testing.assert_close(fc.weights.sum(-1), torch.ones(5))
+    # the weights are the classifier's p(c | F_prev, p) on standardised features
+    x = (w.f_prev[:5] - pred.feat_mean) / pred.feat_std
+    torch.testing.assert_close(fc.weights, pred.classifier.predict_proba(x, w.progress[:5]))
     for b in range(5):
         p, c = int(w.progress[b]), int(w.current[b])
         reg = pred.model_for(p, c)
@@ -106,12 +109,19 @@ def test_unseen_progress_uses_pooled_gp_or_constant_velocity(trained) -> None:
     pred.prepare()
     unseen = torch.full((2,), state, dtype=torch.int64)
     fc = pred.predict(w.f_prev[:2], unseen)
+    assert pred.pooled  # the loop below checks something
     for a in range(pred.num_actions):
         reg = pred.pooled.get(a)
         if reg is not None:
-            m, _ = reg.predict(gp_inputs(w.f_prev[:2], 3))
+            m, v = reg.predict_gpytorch(gp_inputs(w.f_prev[:2], 3))
             torch.testing.assert_close(
-                fc.mean[:, a], m.view(2, pred.n_future, 3, 3) + w.pose_now[:2].unsqueeze(1)
+                fc.mean[:, a],
+                m.view(2, pred.n_future, 3, 3) + w.pose_now[:2].unsqueeze(1),
+                atol=1e-4,
+                rtol=1e-4,
+            )
+            torch.testing.assert_close(
+                fc.var[:, a], v.view(2, pred.n_future, 3, 3), atol=1e-5, rtol=1e-3
             )
     # no model at all: constant velocity with the documented variance
     pred.gps.clear()
