@@ -37,3 +37,7 @@ class NumericalWarning(UserWarning):
 
 class DataWarning(UserWarning):
     """Input data was degraded but usable (NaN joints imputed, frames dropped, ...)."""
+
+
+class ConfigWarning(UserWarning):
+    """A setting is valid but probably not what was meant (it is used as given)."""

@@ -249,7 +249,7 @@ ROOT_KEYS: dict[str, type] = {"seed": int, "progress": bool, "device": str}
 #: settings), with the range each allows (checked before the command runs, so the message
 #: names the key that was typed rather than the field it feeds).
 ALIAS_RANGES: dict[str, tuple[float, float, str]] = {
-    "tracker.noise": (0.0, math.inf, ">= 0 [m]"),
+    "tracker.noise": (0.0, 1.0 + 1e-12, "in [0, 1] m"),  # sim.tracker.MAX_NOISE_M
     "tracker.dropout": (0.0, 1.0, "in [0, 1)"),
     "run.scene_hz": (0.0, math.inf, ">= 0 [Hz]"),
 }
@@ -272,6 +272,15 @@ def check_root_keys(cfg: DictConfig) -> None:
             resolve_device(str(cfg.device))
         except ConfigError as err:
             raise ConfigError(f"device: {err}") from err
+    human = cfg.get("human")
+    if isinstance(human, DictConfig) and "speed" in human:
+        from iplanner_torch.sim.human import SPEED_FACTORS
+
+        speed = human.get("speed")
+        if speed not in SPEED_FACTORS:
+            raise ConfigError(
+                f"human.speed: expected one of {sorted(SPEED_FACTORS)}, got {speed!r}"
+            )
     for dotted, (lo, hi, text) in ALIAS_RANGES.items():
         group, key = dotted.split(".")
         node = cfg.get(group)
@@ -317,6 +326,27 @@ class _Tee:
         return getattr(self._stream, name)
 
 
+#: file a failed job of a multirun leaves in its folder: the error line it printed
+FAILED_MARKER = "FAILED"
+
+_MEMORY_HINT = (
+    "lower planner.optimizer.num_trajectories or num_waypoints, the training batch sizes, or "
+    "the sweep's parallel jobs (hydra.launcher.n_jobs); what was written before is kept"
+)
+
+
+def multirun_job_dir() -> Path | None:
+    """This job's folder when it is one job of a multirun (``-m``), else None."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+        from hydra.types import RunMode
+
+        hc = HydraConfig.get()
+        return Path(hc.runtime.output_dir) if hc.mode == RunMode.MULTIRUN else None
+    except Exception:  # noqa: BLE001 - not in a Hydra job
+        return None
+
+
 def job_log_path() -> Path | None:
     """The log file Hydra gives this job (``<run folder>/<command>.log``), or None outside a
     Hydra job."""
@@ -354,6 +384,11 @@ def copy_output_to(path: Path | None) -> Iterator[None]:
 def friendly_errors(fn: F) -> F:
     """Turn library errors into a one-line message and exit code 2 instead of a traceback.
 
+    In one job of a multirun the job ends with that line instead, leaving a
+    :data:`FAILED_MARKER` file in its folder, so the sweep's other jobs still run; the sweep
+    lists the failed jobs at its end and exits 2. Running out of memory is a one-line error
+    too, with what to lower.
+
     The root keys are checked first (:func:`check_root_keys`), so ``seed=abc`` or
     ``tracker.noise=-1`` is named as such rather than where it is interpolated. Inside a Hydra
     job, what the command prints, the error line included, is also written to the job's log
@@ -368,7 +403,24 @@ def friendly_errors(fn: F) -> F:
                     check_root_keys(args[0])
                 return fn(*args, **kwargs)
             except IPlannerError as exc:
-                print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
+                line = f"error: {type(exc).__name__}: {exc}"
+                print(line, file=sys.stderr)
+                job_dir = multirun_job_dir()
+                if job_dir is None:
+                    raise SystemExit(2) from None
+                # one job of a sweep: the others still run; the sweep names the failed jobs
+                # when it ends and exits 2 (cli.callbacks.GatherSweepResults)
+                (job_dir / FAILED_MARKER).write_text(line + "\n", encoding="utf-8")
+                return None
+            except MemoryError as exc:
+                print(f"error: out of memory ({exc}); {_MEMORY_HINT}", file=sys.stderr)
+                raise SystemExit(2) from None
+            except RuntimeError as exc:  # torch's allocators raise RuntimeError subclasses
+                text = str(exc)
+                if "out of memory" not in text and "can't allocate memory" not in text:
+                    raise
+                first = text.strip().splitlines()[0] if text.strip() else type(exc).__name__
+                print(f"error: out of memory ({first[:200]}); {_MEMORY_HINT}", file=sys.stderr)
                 raise SystemExit(2) from None
             except KeyboardInterrupt:
                 where = f" in {log_path.parent}" if log_path is not None else ""

@@ -141,11 +141,47 @@ def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
     return episode_report(df, out_dir, split_by=swept)
 
 
+def failed_jobs(sweep_dir: Path) -> list[tuple[Path, str, str]]:
+    """The jobs of a multirun folder that failed: ``(job folder, its overrides, its error
+    line)`` for each job folder holding a :data:`~iplanner_torch.cli._common.FAILED_MARKER`,
+    in job order."""
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli._common import FAILED_MARKER
+
+    def order(path: Path) -> tuple[int, str]:
+        name = path.parent.name
+        return (int(name), "") if name.isdigit() else (1 << 30, str(path))
+
+    out = []
+    for marker in sorted(Path(sweep_dir).rglob(FAILED_MARKER), key=order):
+        job = marker.parent
+        overrides = job / ".hydra" / "overrides.yaml"
+        try:
+            items = OmegaConf.load(overrides) if overrides.exists() else []
+            text = " ".join(str(o) for o in items)  # type: ignore[union-attr]
+        except Exception:  # noqa: BLE001 - a damaged overrides file still names the job
+            text = "?"
+        out.append((job, text, marker.read_text(encoding="utf-8").strip()))
+    return out
+
+
 class GatherSweepResults(Callback):
-    """At the end of a multirun, write ``<sweep dir>/summary/results.{csv,md}`` and plots."""
+    """At the end of a multirun, write ``<sweep dir>/summary/results.{csv,md}`` and plots of
+    the jobs that ran, then name the jobs that failed, if any, and exit 2."""
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        import sys
+
         sweep_dir = Path(str(config.hydra.sweep.dir))
         written = gather_episode_logs(sweep_dir, sweep_dir / "summary")
         if written:
             print(f"sweep summary: {sweep_dir / 'summary' / 'results.md'} ({len(written)} files)")
+        failed = failed_jobs(sweep_dir)
+        if failed:
+            jobs = sum(1 for _ in sweep_dir.rglob("overrides.yaml"))
+            lines = [f"{len(failed)} of {jobs} sweep job(s) failed (the others ran):"]
+            for job, overrides, error in failed:
+                lines.append(f"  {job} [{overrides}]: {error}")
+            print("\n".join(lines), file=sys.stderr, flush=True)
+            raise SystemExit(2)

@@ -136,12 +136,24 @@ def ensure_predictors(
     return paths
 
 
+def _task_overrides() -> list[str]:
+    """This run's command-line overrides (none outside a Hydra run)."""
+    try:
+        return list(HydraConfig.get().overrides.task)
+    except ValueError:  # HydraConfig not set: built outside a Hydra app (tests)
+        return []
+
+
 def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     """The :class:`~iplanner_torch.eval.experiment.ExperimentCfg` this run describes."""
     from dataclasses import replace
 
+    from iplanner_torch.errors import ConfigError
     from iplanner_torch.eval.episode import EpisodeCfg
     from iplanner_torch.eval.experiment import ExperimentCfg
+    from iplanner_torch.robot.model import RobotCfg
+
+    robot = instantiate(cfg.robot, RobotCfg, name="robot")
 
     episode_node = OmegaConf.create(
         {
@@ -166,7 +178,7 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
         )
         return ExperimentCfg(
             name="main",
-            robot=str(cfg.robot.name),
+            robot=robot,
             device=device,
             scenarios=[scenario],
             planners=cfg_list(cfg.run, "planners", str),
@@ -178,11 +190,20 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     node = OmegaConf.to_container(exp_node, resolve=True)
     assert isinstance(node, dict)
     node.pop("episode", None)
-    node.setdefault("robot", str(cfg.robot.name))
+    named = node.pop("robot", None)
+    if named is not None and str(named) != robot.name:
+        # experiment.robot=<name> is the robot group option <name> (as robot=<name>)
+        chosen = [o for o in _task_overrides() if o.split("=", 1)[0].lstrip("+~") == "robot"]
+        if chosen:
+            raise ConfigError(
+                f"experiment.robot={named!r} contradicts {chosen[0]}: choose the robot once "
+                "(robot=<name>)"
+            )
+        robot = instantiate(option_node("robot", str(named), cfg), RobotCfg, name="robot")
     node["device"] = device
     node["predictor_paths"] = predictor_paths
     exp = instantiate(OmegaConf.create(node), ExperimentCfg, name="experiment")
-    return replace(exp, episode=episode)
+    return replace(exp, robot=robot, episode=episode)
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")

@@ -101,6 +101,9 @@ from iplanner_torch.sim.tracker import Tracker
 HAND_JOINTS: list[int] = [JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]]
 
 PlannerKind = Literal["itomp", "iplanner_no_ni", "iplanner_ni", "oracle"]
+#: how far the tool point may end from a blocking scenario's crossing start or goal [m]
+CROSSING_TOLERANCE_M = 0.02
+
 #: Planner kinds and the predictor variant each one reads (None: no predictor).
 PLANNER_KINDS: dict[str, str | None] = {
     "itomp": None,
@@ -194,7 +197,7 @@ class EpisodeCfg:
     still_radius: float = 0.08
 
     def __post_init__(self) -> None:
-        if self.max_duration_s <= 0:
+        if not self.max_duration_s > 0:  # NaN fails too (inf: until the tasks are done)
             raise ConfigError(f"expected max_duration_s > 0, got {self.max_duration_s}")
         if self.static_forecast_frames < 1 or self.static_forecast_dt <= 0:
             raise ConfigError("expected static_forecast_frames >= 1 and static_forecast_dt > 0")
@@ -362,11 +365,33 @@ def held_window(tracker: Any) -> np.ndarray:
 
 
 def _predictor_window(predictor: object, default: int) -> int:
+    """The frames a predictor forecasts from (``n_prev``, or ``n_p`` of a stand-in), else
+    ``default`` (``sim.tracker_window``)."""
     for owner in (predictor, getattr(predictor, "cfg", None)):
-        n = getattr(owner, "n_p", None)
-        if isinstance(n, int) and n > 0:
-            return n
+        for attr in ("n_prev", "n_p"):
+            n = getattr(owner, attr, None)
+            if isinstance(n, int) and not isinstance(n, bool) and n > 0:
+                return n
     return default
+
+
+def check_predictor_rate(predictor: object, tracker_fps: float) -> None:
+    """Refuse a tracker rate other than the one a predictor was trained at.
+
+    Its windows are ``n_prev`` frames at its ``fps``; fed another rate it forecasts from a
+    window of another duration and steps its forecast at the wrong ``dt``, without error.
+
+    Raises:
+        ConfigError: when the predictor states an ``fps`` that differs from ``tracker_fps``.
+    """
+    fps = getattr(predictor, "fps", None)
+    if isinstance(fps, (int, float)) and not isinstance(fps, bool):
+        if not math.isclose(float(fps), float(tracker_fps), rel_tol=1e-6):
+            raise ConfigError(
+                f"sim.tracker_fps={tracker_fps:g}, but the predictor was trained on "
+                f"{float(fps):g} Hz frames: set sim.tracker_fps={float(fps):g}, or train it "
+                "on data at the tracker's rate"
+            )
 
 
 def _action_names(predictor: object) -> tuple[str, ...]:
@@ -661,6 +686,8 @@ def _run_episode(
     scene = cfg.scene_cfg()
     blocking = scenario.kind == "blocking"
     human_cfg = replace(cfg.sim.human, mode="blocking" if blocking else "tasks")
+    if use_prediction:
+        check_predictor_rate(predictor, cfg.sim.tracker_fps)
     window = _predictor_window(predictor, cfg.sim.tracker_window) if use_prediction else 15
     sim_cfg = replace(cfg.sim, human=human_cfg, tracker_window=window)
     motion = motion or ReachingMotionSource(seed, seat_x=scene.human_seat_x)
@@ -688,6 +715,16 @@ def _run_episode(
     if blocking:
         q_a = ik(np.asarray(scenario.crossing_start), q_home)
         goal_q = ik(np.asarray(scenario.crossing_goal), q_a)
+        ends = {"crossing_start": (scenario.crossing_start, q_a)}
+        ends["crossing_goal"] = (scenario.crossing_goal, goal_q)
+        for key, (point, q_pt) in ends.items():
+            miss = float(np.linalg.norm(robot.ee_position(q_pt).detach().cpu().numpy() - point))
+            if miss > CROSSING_TOLERANCE_M:
+                raise ConfigError(
+                    f"scenario.{key}={list(point)}: the robot's tool point gets no closer than "
+                    f"{100 * miss:.1f} cm to it (tolerance {100 * CROSSING_TOLERANCE_M:g} cm): "
+                    "out of its reach or of its joint limits"
+                )
         env.reset(q_init=q_a.detach().cpu().numpy())
     else:
         env.reset()

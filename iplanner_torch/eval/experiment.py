@@ -4,7 +4,6 @@ and fig. speed_response): planners x scenarios x human speeds x tracker noises x
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -12,9 +11,16 @@ from typing import Any
 import pandas as pd
 
 from iplanner_torch.errors import ConfigError
-from iplanner_torch.eval.episode import PLANNER_KINDS, EpisodeCfg, run_episode
+from iplanner_torch.eval.episode import (
+    PLANNER_KINDS,
+    EpisodeCfg,
+    check_predictor_rate,
+    run_episode,
+)
+from iplanner_torch.robot.model import RobotCfg
 from iplanner_torch.sim.human import SPEED_FACTORS
 from iplanner_torch.sim.tasks import ScenarioCfg
+from iplanner_torch.sim.tracker import MAX_NOISE_M
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -23,8 +29,9 @@ class ExperimentCfg:
 
     # experiment name (result folder and table caption)
     name: str = "table_simulation"
-    # robot name for RobotModel.load
-    robot: str = "kuka_iiwa14"
+    # the robot and its base pose (a name: RobotCfg(name=...) with the robot's defaults;
+    # None: the iiwa)
+    robot: RobotCfg | str | None = "kuka_iiwa14"
     # device of the robot model, planner and predictor ("cpu", "cuda")
     device: str = "cpu"
     # scenarios (rows of the paper's table)
@@ -45,6 +52,16 @@ class ExperimentCfg:
     write_mcap: bool = True
 
     def __post_init__(self) -> None:
+        for name in ("scenarios", "planners", "seeds", "speeds", "noises"):
+            value = getattr(self, name)
+            if not isinstance(value, (list, tuple)):  # a string would iterate as letters
+                raise ConfigError(f"{name}: expected a list, e.g. {name}=[...], got {value!r}")
+        if self.robot is None:  # a config's "robot: null" (the CLI's robot group)
+            object.__setattr__(self, "robot", RobotCfg(name="kuka_iiwa14"))
+        elif isinstance(self.robot, str):
+            object.__setattr__(self, "robot", RobotCfg(name=self.robot))  # type: ignore[arg-type]
+        elif not isinstance(self.robot, RobotCfg):
+            raise ConfigError(f"expected robot a RobotCfg or a name, got {self.robot!r}")
         unknown = [p for p in self.planners if p not in PLANNER_KINDS]
         if unknown or not self.planners:
             raise ConfigError(f"expected planners from {sorted(PLANNER_KINDS)}, got {unknown}")
@@ -53,10 +70,15 @@ class ExperimentCfg:
             raise ConfigError(f"expected speeds from {sorted(SPEED_FACTORS)}, got {bad}")
         if not self.seeds or not self.scenarios:
             raise ConfigError("expected at least one seed and one scenario")
-        if not all(isinstance(n, (int, float)) and 0 <= n < math.inf for n in self.noises):
-            raise ConfigError(f"expected noises finite and >= 0, got {self.noises}")
+        if not all(isinstance(n, (int, float)) and 0 <= n <= MAX_NOISE_M for n in self.noises):
+            raise ConfigError(f"expected noises in [0, {MAX_NOISE_M:g}] m, got {self.noises}")
         if not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in self.seeds):
             raise ConfigError(f"expected seeds as integers >= 0, got {self.seeds}")
+        for name in ("seeds", "planners", "speeds", "noises"):
+            values = list(getattr(self, name))
+            twice = sorted({str(v) for v in values if values.count(v) > 1})
+            if twice:  # the same episode twice: counted twice, its log written over
+                raise ConfigError(f"{name}: {', '.join(twice)} given twice")
 
 
 def _load_predictor(path: str, device: str) -> Any:
@@ -85,7 +107,8 @@ def run_experiment(cfg: ExperimentCfg, out_dir: Path) -> pd.DataFrame:
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    robot = RobotModel.load(cfg.robot, device=cfg.device)
+    assert isinstance(cfg.robot, RobotCfg)  # a name became one in __post_init__
+    robot = RobotModel.from_cfg(cfg.robot, device=cfg.device)
     predictors: dict[str, Any] = {}
     for kind in cfg.planners:
         variant = PLANNER_KINDS[kind]
@@ -94,6 +117,7 @@ def run_experiment(cfg: ExperimentCfg, out_dir: Path) -> pd.DataFrame:
         if variant not in cfg.predictor_paths:
             raise ConfigError(f"planner {kind!r} needs predictor_paths[{variant!r}], none given")
         predictors[variant] = _load_predictor(cfg.predictor_paths[variant], cfg.device)
+        check_predictor_rate(predictors[variant], cfg.episode.sim.tracker_fps)  # before episodes
     base = cfg.episode
     speeds = cfg.speeds or [base.sim.human.speed]
     noises = cfg.noises or [base.sim.tracker_noise]

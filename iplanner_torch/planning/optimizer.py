@@ -87,6 +87,12 @@ class KinematicModel(Protocol):
         ...
 
 
+#: largest ``horizon_s``, the least duration of a plan [s]: a plan stretched over more than a
+#: minute hardly moves the robot (a horizon of 1e9 s used to run and report an idle robot as
+#: safe)
+MAX_HORIZON_S = 60.0
+
+
 @dataclass(frozen=True, kw_only=True)
 class OptimizerCfg:
     """Settings of :class:`TrajectoryOptimizer`."""
@@ -157,14 +163,18 @@ class OptimizerCfg:
             raise ConfigError(f"expected num_trajectories >= 1, got {self.num_trajectories}")
         if self.num_waypoints < 3:
             raise ConfigError(f"expected num_waypoints >= 3, got {self.num_waypoints}")
-        if not self.horizon_s > 0.0:
-            raise ConfigError(f"expected horizon_s > 0, got {self.horizon_s}")
+        if not 0.0 < self.horizon_s <= MAX_HORIZON_S:
+            raise ConfigError(
+                f"expected horizon_s in (0, {MAX_HORIZON_S:g}] s, got {self.horizon_s}"
+            )
         if self.iterations < 0 or self.warm_iterations < 0:
             raise ConfigError("expected iterations and warm_iterations >= 0")
         if not self.lr > 0.0 or not 0.0 < self.lr_final_ratio <= 1.0:
             raise ConfigError(f"expected lr > 0 and lr_final_ratio in (0, 1], got {self.lr}")
-        if self.perturbation_std < 0.0:
-            raise ConfigError(f"expected perturbation_std >= 0, got {self.perturbation_std}")
+        if not 0.0 <= self.perturbation_std < math.inf:
+            raise ConfigError(
+                f"expected perturbation_std finite and >= 0, got {self.perturbation_std}"
+            )
         if not 0.0 < self.confidence < 1.0:
             raise ConfigError(f"expected confidence in (0, 1), got {self.confidence}")
         if not 0.0 < self.penalty_target <= 1.0:

@@ -62,6 +62,11 @@ class PlanningOverrunWarning(UserWarning):
     """A replanning cycle took longer than its wall-clock budget."""
 
 
+#: longest replanning step ``m`` [s]: the paper replans every fraction of a second; a step of
+#: minutes leaves the robot blind to the person for that long (1e9 s exhausted the memory)
+MAX_REPLAN_STEP_S = 10.0
+
+
 @dataclass(frozen=True, kw_only=True)
 class ReplannerCfg:
     """Settings of :class:`Replanner`."""
@@ -127,8 +132,10 @@ class ReplannerCfg:
             "tracking_max_gap_s",
         ):  # the fields typed float | None may be None
             optional(finite, name, getattr(self, name))
-        if not self.replan_step_s > 0.0:
-            raise ConfigError(f"expected replan_step_s > 0, got {self.replan_step_s}")
+        if not 0.0 < self.replan_step_s <= MAX_REPLAN_STEP_S:
+            raise ConfigError(
+                f"expected replan_step_s in (0, {MAX_REPLAN_STEP_S:g}] s, got {self.replan_step_s}"
+            )
         if self.budget_s is not None and not self.budget_s > 0.0:
             raise ConfigError(f"expected budget_s > 0 or None, got {self.budget_s}")
         if not self.min_duration_s > 0.0:
@@ -211,8 +218,10 @@ class PlannerCfg:
             )
         if not 0.0 < self.confidence < 1.0:
             raise ConfigError(f"expected confidence in (0, 1), got {self.confidence}")
-        if not self.replan_step_s > 0.0:
-            raise ConfigError(f"expected replan_step_s > 0, got {self.replan_step_s}")
+        if not 0.0 < self.replan_step_s <= MAX_REPLAN_STEP_S:
+            raise ConfigError(
+                f"expected replan_step_s in (0, {MAX_REPLAN_STEP_S:g}] s, got {self.replan_step_s}"
+            )
 
     def optimizer_cfg(self) -> OptimizerCfg:
         """The optimiser's settings with this planner's confidence; with filtered tracking

@@ -38,7 +38,7 @@ from iplanner_torch.sim.scene import (
     pose_human,
 )
 from iplanner_torch.sim.tasks import FetchCfg, FetchPhase, FetchTask
-from iplanner_torch.sim.tracker import Tracker, TrackerCfg
+from iplanner_torch.sim.tracker import MAX_NOISE_M, Tracker, TrackerCfg
 
 #: geom pairs farther apart than this are not measured exactly; a distance is capped there [m]
 BODY_DISTANCE_MAX = 1.0
@@ -58,7 +58,7 @@ class SimCfg:
     tracker_noise: float = 0.01
     # probability that a joint is lost in a tracker frame
     tracker_dropout: float = 0.0
-    # frames in the tracker window (the predictor's n_p)
+    # frames in the tracker window; a predictor that states its window (n_prev) sets it
     tracker_window: int = 15
     # human behaviour (speed, holds, idles, blocking)
     human: HumanCfg = field(default_factory=HumanCfg)
@@ -82,7 +82,10 @@ class SimCfg:
             )
         # the tracker fields under their names here (TrackerCfg checks them again)
         checks.positive("tracker_fps", self.tracker_fps)
-        checks.non_negative("tracker_noise", self.tracker_noise)
+        if not checks.non_negative("tracker_noise", self.tracker_noise) <= MAX_NOISE_M:
+            raise ConfigError(
+                f"expected tracker_noise in [0, {MAX_NOISE_M:g}] m, got {self.tracker_noise!r}"
+            )
         if not 0.0 <= checks.finite("tracker_dropout", self.tracker_dropout) < 1.0:
             raise ConfigError(f"expected tracker_dropout in [0, 1), got {self.tracker_dropout!r}")
         checks.integer("tracker_window", self.tracker_window, minimum=1)

@@ -67,7 +67,7 @@ class ScenarioCfg:
         # parsed now, so a malformed order fails here and not when an episode starts; blocking
         # runs do not use it (only its syntax is checked, against every block id)
         ids = ARRANGEMENT_IDS["2x4" if self.kind == "blocking" else self.arrangement]
-        parse_order(self.task_order, ids)
+        parse_order(self.task_order, ids, warn_untouched=self.kind != "blocking")
         checks.finite_tuple("crossing_start", self.crossing_start, 3)
         checks.finite_tuple("crossing_goal", self.crossing_goal, 3)
 
@@ -76,16 +76,23 @@ class ScenarioCfg:
         return SceneCfg(arrangement=self.arrangement, **overrides)  # type: ignore[arg-type]
 
 
-def parse_order(expr: str, block_ids: tuple[int, ...]) -> TaskOrderLike:
+def parse_order(
+    expr: str, block_ids: tuple[int, ...], *, warn_untouched: bool = True
+) -> TaskOrderLike:
     """Parse a task order expression and check that it names the scene's blocks.
 
     Args:
         expr: ``"(0,1)->(2,3)"``, ``"random"`` (any order of ``block_ids``) ...
         block_ids: the blocks present in the scene.
+        warn_untouched: warn when the order leaves some of ``block_ids`` out.
 
     Raises:
         ConfigError: on a syntax error (naming its position) or when the order names blocks
             absent from the scene.
+
+    Warns:
+        ConfigWarning: when the order leaves some of the scene's blocks out (allowed: the
+            episode then ends when the named blocks are done).
     """
     from iplanner_torch.data.tasks import parse_task_order
 
@@ -103,6 +110,18 @@ def parse_order(expr: str, block_ids: tuple[int, ...]) -> TaskOrderLike:
     unknown = sorted(set(int(i) for i in sample) - set(block_ids))
     if unknown:
         raise ConfigError(f"task order {expr!r} names blocks {unknown}, scene has {block_ids}")
+    untouched = sorted(set(block_ids) - set(int(i) for i in sample))
+    if untouched and warn_untouched:
+        import warnings
+
+        from iplanner_torch.errors import ConfigWarning
+
+        warnings.warn(
+            f"task order {expr!r} leaves blocks {untouched} of the scene untouched: an episode "
+            "is complete when the blocks it names are done",
+            ConfigWarning,
+            stacklevel=2,
+        )
     return order
 
 

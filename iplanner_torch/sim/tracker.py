@@ -23,6 +23,12 @@ from iplanner_torch.errors import ConfigError, DataError, ShapeError
 _MAX_CATCH_UP = 1024
 
 
+#: largest tracker noise standard deviation [m]: a metre of noise per coordinate is no longer
+#: a tracker of a person at a table (larger values used to run, the I-Planner then stopping
+#: at the predictor's coordinate limit and ITOMP planning around a person 100 m away)
+MAX_NOISE_M = 1.0
+
+
 @dataclass(frozen=True, kw_only=True)
 class TrackerCfg:
     """Sampling and corruption of the tracked skeleton."""
@@ -38,7 +44,10 @@ class TrackerCfg:
 
     def __post_init__(self) -> None:
         checks.positive("fps", self.fps)
-        checks.non_negative("noise_sigma", self.noise_sigma)
+        if not checks.non_negative("noise_sigma", self.noise_sigma) <= MAX_NOISE_M:
+            raise ConfigError(
+                f"expected noise_sigma in [0, {MAX_NOISE_M:g}] m, got {self.noise_sigma!r}"
+            )
         if not 0.0 <= checks.finite("dropout_rate", self.dropout_rate) < 1.0:
             raise ConfigError(f"expected dropout_rate in [0, 1), got {self.dropout_rate!r}")
         checks.integer("window", self.window, minimum=1)

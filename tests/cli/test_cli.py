@@ -477,3 +477,51 @@ def test_train_writes_a_checkpoint_and_held_out_metrics_and_resumes(tmp_path: Pa
     after = HumanMotionPredictor.load(ck / "predictor.ckpt").predict(w.f_prev[:4], w.progress[:4])
     torch.testing.assert_close(after.mean, before.mean)
     torch.testing.assert_close(after.weights, before.weights)
+
+
+def test_a_failed_sweep_job_leaves_the_others_running_and_is_named(tmp_path: Path) -> None:
+    """``-m`` with one bad value among good ones: the good jobs run and are summarised, the bad
+    job leaves its error line in a FAILED file, and the sweep names it and exits 2."""
+    sweep = tmp_path / "sweep"
+    args = ["iplanner-experiment", "-m", f"hydra.sweep.dir={sweep}", "tracker.noise=0,-1,0.02",
+            "run.planners=[itomp]", "run.max_duration_s=2", "progress=false"]  # fmt: skip
+    res = _run(args, tmp_path)
+    assert res.returncode == 2, res.stderr[-2000:]
+    assert (sweep / "0" / "results.csv").exists() and (sweep / "2" / "results.csv").exists()
+    assert not (sweep / "1" / "results.csv").exists()
+    line = "error: ConfigError: tracker.noise: expected in [0, 1] m, got -1.0"
+    assert (sweep / "1" / "FAILED").read_text().strip() == line
+    assert (sweep / "summary" / "results.csv").exists()
+    err = res.stderr.strip().splitlines()
+    at = err.index("1 of 3 sweep job(s) failed (the others ran):")
+    assert err[at + 1].startswith(f"  {sweep / '1'} [tracker.noise=-1 ") and err[at + 1].endswith(
+        line
+    )
+
+
+def test_the_robot_group_configures_every_experiment() -> None:
+    """``robot=fetch robot.torso_height=...`` reaches the experiment's robot (its fields used to
+    be ignored but for the name); ``experiment.robot=<name>`` picks that group option."""
+    from hydra import compose, initialize_config_dir
+
+    from iplanner_torch.cli._common import CONF_DIR
+    from iplanner_torch.cli.experiment import build_experiment
+    from iplanner_torch.errors import ConfigError
+
+    with initialize_config_dir(version_base="1.3", config_dir=CONF_DIR):
+        cases = {
+            ("robot=fetch", "robot.torso_height=0.2"): ("fetch", 0.2, (1.0, 0.0, -0.75)),
+            ("experiment=table_simulation", "robot=fetch", "robot.base_position=[1.1,0,-0.75]"): (
+                "fetch", 0.26, (1.1, 0.0, -0.75)),
+            ("experiment=speed_response", "experiment.robot=fetch"): ("fetch", 0.26, None),
+            ("experiment=speed_response",): ("kuka_iiwa14", None, (0.75, 0.0, 0.0)),
+        }  # fmt: skip
+        for overrides, (name, torso, base) in cases.items():
+            robot = build_experiment(compose("config", overrides=list(overrides)), {}).robot
+            assert (robot.name, robot.torso_height) == (name, torso), overrides
+            assert base is None or robot.base_position == base, overrides
+        with pytest.raises(ConfigError, match="unknown robot 'ur5'"):
+            build_experiment(compose("config", overrides=["robot.name=ur5"]), {})
+        with pytest.raises(ConfigError, match="no config option robot=ur5"):
+            bad = ["experiment=speed_response", "experiment.robot=ur5"]
+            build_experiment(compose("config", overrides=bad), {})

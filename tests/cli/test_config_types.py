@@ -125,9 +125,14 @@ def test_console_script_reports_a_wrong_type_in_one_line(tmp_path: Path) -> None
 @pytest.mark.parametrize(
     ("root", "message"),
     [
-        ({"tracker": {"noise": -1}}, "tracker.noise: expected >= 0 [m], got -1.0"),
-        ({"tracker": {"noise": float("nan")}}, "tracker.noise: expected >= 0 [m], got nan"),
-        ({"tracker": {"noise": float("inf")}}, "tracker.noise: expected >= 0 [m], got inf"),
+        ({"tracker": {"noise": -1}}, "tracker.noise: expected in [0, 1] m, got -1.0"),
+        ({"tracker": {"noise": float("nan")}}, "tracker.noise: expected in [0, 1] m, got nan"),
+        ({"tracker": {"noise": float("inf")}}, "tracker.noise: expected in [0, 1] m, got inf"),
+        ({"tracker": {"noise": 100}}, "tracker.noise: expected in [0, 1] m, got 100.0"),
+        (
+            {"human": {"speed": "turbo"}},
+            "human.speed: expected one of ['fast', 'medium', 'slow'], got 'turbo'",
+        ),
         ({"tracker": {"dropout": 1.0}}, "tracker.dropout: expected in [0, 1), got 1.0"),
         ({"tracker": {"dropout": "x"}}, "tracker.dropout: expected float, got 'x'"),
         ({"run": {"scene_hz": -1}}, "run.scene_hz: expected >= 0 [Hz], got -1.0"),
@@ -141,6 +146,7 @@ def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
     from iplanner_torch.cli._common import check_root_keys
 
     check_root_keys(OmegaConf.create({"seed": 0, "tracker": {"noise": 0.0, "dropout": 0.5}}))
+    check_root_keys(OmegaConf.create({"tracker": {"noise": 1.0}, "human": {"speed": "slow"}}))
     with pytest.raises(ConfigError) as err:
         check_root_keys(OmegaConf.create(root))
     assert str(err.value) == message or (
@@ -229,3 +235,31 @@ def test_copy_output_to_keeps_printed_lines_and_last_bar_state(tmp_path: Path) -
     with copy_output_to(None):
         print("not copied")
     assert log.read_text() == before
+
+
+def test_library_errors_and_running_out_of_memory_are_one_line(capsys) -> None:
+    """Outside a sweep a library error exits 2 with its line; running out of memory (torch's
+    allocator raises RuntimeError) exits 2 with what to lower; other errors pass through."""
+    from iplanner_torch.cli._common import friendly_errors
+
+    def raising(exc: BaseException):
+        @friendly_errors
+        def job() -> None:
+            raise exc
+
+        return job
+
+    with pytest.raises(SystemExit) as stop:
+        raising(ConfigError("bad knob"))()
+    assert stop.value.code == 2
+    assert capsys.readouterr().err.strip() == "error: ConfigError: bad knob"
+    alloc = RuntimeError("[enforce fail at alloc_cpu.cpp:117] DefaultCPUAllocator: can't "
+                         "allocate memory: you tried to allocate 79999999988 bytes.")  # fmt: skip
+    for exc in (alloc, MemoryError()):
+        with pytest.raises(SystemExit) as stop:
+            raising(exc)()
+        assert stop.value.code == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: out of memory (") and "num_trajectories" in err
+    with pytest.raises(RuntimeError, match="something else"):
+        raising(RuntimeError("something else"))()

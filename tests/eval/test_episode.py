@@ -537,9 +537,15 @@ def test_dropouts_never_give_the_predictor_a_joint_lost_in_the_whole_window(
     [
         ("seeds", [0, -1], "expected seeds as integers >= 0"),
         ("seeds", [0.5], "expected seeds as integers >= 0"),
-        ("noises", [float("nan")], "expected noises finite and >= 0"),
-        ("noises", [-0.01], "expected noises finite and >= 0"),
+        ("noises", [float("nan")], r"expected noises in \[0, 1\] m"),
+        ("noises", [-0.01], r"expected noises in \[0, 1\] m"),
+        ("noises", [2.0], r"expected noises in \[0, 1\] m"),
         ("planners", [], "expected planners"),
+        ("seeds", [3, 1, 3], "seeds: 3 given twice"),
+        ("planners", ["itomp", "itomp"], "planners: itomp given twice"),
+        ("speeds", "slow", r"speeds: expected a list, e\.g\. speeds=\[\.\.\.\], got 'slow'"),
+        ("seeds", 5, "seeds: expected a list"),
+        ("robot", "ur5", "unknown robot 'ur5'"),
     ],
 )
 def test_experiment_grid_is_checked_before_it_runs(field: str, value: list, match: str) -> None:
@@ -547,3 +553,31 @@ def test_experiment_grid_is_checked_before_it_runs(field: str, value: list, matc
 
     with pytest.raises(ConfigError, match=match):
         ExperimentCfg(**{field: value})
+
+
+def test_a_predictor_sets_the_tracker_window_and_must_match_the_tracker_rate() -> None:
+    """The window is the predictor's ``n_prev`` (``n_p`` of a stand-in), else the sim's; a
+    predictor trained at another frame rate than the tracker's is refused."""
+    from iplanner_torch.eval.episode import _predictor_window, check_predictor_rate
+
+    assert _predictor_window(SimpleNamespace(n_prev=10, n_p=7), 15) == 10
+    assert _predictor_window(fakes.ConstantPredictor(), 9) == fakes.ConstantPredictor.n_p
+    assert _predictor_window(SimpleNamespace(cfg=SimpleNamespace(n_prev=12)), 15) == 12
+    assert _predictor_window(SimpleNamespace(n_prev=True), 15) == 15
+    assert _predictor_window(object(), 15) == 15
+    check_predictor_rate(SimpleNamespace(fps=15.0), 15)
+    check_predictor_rate(object(), 30.0)  # a stand-in without a rate
+    with pytest.raises(ConfigError, match=r"sim\.tracker_fps=30, but the predictor was trained "
+                       r"on 15 Hz frames: set sim\.tracker_fps=15"):  # fmt: skip
+        check_predictor_rate(SimpleNamespace(fps=15.0), 30.0)
+
+
+def test_an_unreachable_crossing_is_refused_before_the_episode(tmp_path: Path) -> None:
+    cfg = replace(
+        _cfg(2.0), scenario=ScenarioCfg(name="b", kind="blocking", crossing_start=(5.0, 5.0, 5.0))
+    )
+    with pytest.raises(ConfigError, match=r"scenario\.crossing_start=\[5\.0, 5\.0, 5\.0\]: the "
+                       r"robot's tool point gets no closer than .* cm to it"):  # fmt: skip
+        _fake_episode(tmp_path, cfg, "itomp", fakes.LinearReplanner())
+    reach = replace(cfg, scenario=ScenarioCfg(name="b", kind="blocking"))  # the default points
+    _fake_episode(tmp_path, reach, "itomp", fakes.LinearReplanner())

@@ -216,6 +216,13 @@ def test_inputs_and_config_are_validated(point_robot: PointRobot) -> None:
         OptimizerCfg(confidence=1.0)
     with pytest.raises(ConfigError, match="num_waypoints"):
         OptimizerCfg(num_waypoints=2)
+    for bad in (float("inf"), float("nan"), 0.0, 60.5):
+        with pytest.raises(ConfigError, match=r"expected horizon_s in \(0, 60\] s"):
+            OptimizerCfg(horizon_s=bad)
+    assert OptimizerCfg(horizon_s=60.0).horizon_s == 60.0
+    for bad in (float("nan"), float("inf"), -0.1):
+        with pytest.raises(ConfigError, match="expected perturbation_std finite and >= 0"):
+            OptimizerCfg(perturbation_std=bad)
     opt = TrajectoryOptimizer(point_robot, OptimizerCfg(iterations=1))
     with pytest.raises(ShapeError, match=r"expected q_start \(2\)"):
         opt.solve(torch.zeros(3), torch.zeros(2))

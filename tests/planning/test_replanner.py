@@ -291,6 +291,9 @@ def test_planner_cfg_validates_and_builds() -> None:
         PlannerCfg(kind="iplanner", predictor_variant=None)
     with pytest.raises(ConfigError, match="replan_step_s"):
         ReplannerCfg(replan_step_s=0.0)
+    for cls in (ReplannerCfg, PlannerCfg):
+        with pytest.raises(ConfigError, match=r"expected replan_step_s in \(0, 10\] s"):
+            cls(replan_step_s=1e9)
     cfg = PlannerCfg(kind="itomp", predictor_variant=None, confidence=0.99, replan_step_s=0.25)
     rp = build_replanner(cfg, PointRobot())
     assert isinstance(rp.optimizer, ITOMP)

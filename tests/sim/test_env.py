@@ -223,6 +223,7 @@ def test_step_and_reset_reject_non_finite_commands(arm, bad: float) -> None:
         (dict(tracker_fps=float("nan")), "tracker_fps"),
         (dict(tracker_noise=float("nan")), "tracker_noise"),
         (dict(tracker_noise=float("inf")), "tracker_noise"),
+        (dict(tracker_noise=1.5), r"tracker_noise in \[0, 1\] m"),
         (dict(tracker_dropout=float("nan")), "tracker_dropout"),
         (dict(human={"speed": "fast"}), "human"),
         (dict(fetch=None), "fetch"),

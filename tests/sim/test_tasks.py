@@ -85,6 +85,22 @@ def test_scenario_cfg_accepts_valid_orders() -> None:
         ScenarioCfg(kind="blocking", task_order="0->")
 
 
+def test_an_order_that_leaves_blocks_out_is_used_with_a_warning() -> None:
+    import warnings
+
+    from iplanner_torch.errors import ConfigWarning
+
+    with pytest.warns(ConfigWarning, match=r"leaves blocks \[3\] of the scene untouched"):
+        order = parse_order("0->1->2", (0, 1, 2, 3))
+    assert order.sample(np.random.default_rng(0)) == [0, 1, 2]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ConfigWarning)
+        parse_order("(0,1)->(2,3)", (0, 1, 2, 3))
+        parse_order("random", (0, 1, 2, 3))
+        parse_order("0", (0, 1, 2, 3), warn_untouched=False)
+        ScenarioCfg(kind="blocking", task_order="0")  # the order of a blocking run is unused
+
+
 def test_parse_order_names_the_position_of_odd_digits() -> None:
     with pytest.raises(ConfigError, match=r"object id \(digits 0-9\), got '²' at position 3"):
         parse_order("0->²", (0, 1, 2, 3))
