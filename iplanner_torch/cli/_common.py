@@ -55,9 +55,13 @@ def instantiate(node: Any, expected: type | None = None, name: str | None = None
         built = hydra_instantiate(node, _convert_="all")
     except InstantiationException as exc:
         cause = exc.__cause__ or exc
+        key = name or (_full_key(node, None) if isinstance(node, DictConfig) else "")
         if isinstance(cause, IPlannerError):
-            raise ConfigError(str(cause)) from exc
-        raise ConfigError(f"cannot build config node: {cause}") from exc
+            text = str(cause)
+            raise ConfigError(
+                f"{key}: {text}" if key and not text.startswith(key) else text
+            ) from exc
+        raise ConfigError(f"cannot build config node {key or '<root>'!r}: {cause}") from exc
     if expected is not None and not isinstance(built, expected):
         key = name or (_full_key(node, None) if isinstance(node, DictConfig) else "")
         target = f"{expected.__module__}.{expected.__qualname__}"

@@ -154,6 +154,12 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     from iplanner_torch.robot.model import RobotCfg
 
     robot = instantiate(cfg.robot, RobotCfg, name="robot")
+    # each group on its own first, so that a bad value is named with its group
+    instantiate(cfg.scenario, name="scenario")
+    instantiate(cfg.sim, name="sim")
+    instantiate(cfg.planner, name="planner")
+    if not cfg_scalar(cfg.run, "max_duration_s", float) > 0:
+        raise ConfigError(f"run.max_duration_s: expected > 0 [s], got {cfg.run.max_duration_s}")
 
     episode_node = OmegaConf.create(
         {

@@ -263,3 +263,26 @@ def test_library_errors_and_running_out_of_memory_are_one_line(capsys) -> None:
         assert err.startswith("error: out of memory (") and "num_trajectories" in err
     with pytest.raises(RuntimeError, match="something else"):
         raising(RuntimeError("something else"))()
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("sim.tracker_fps=0", "sim: expected tracker_fps > 0"),
+        ("sim.human.hold_s=-1", "sim: expected hold_s >= 0"),
+        ("planner.optimizer.horizon_s=inf", r"planner: expected horizon_s in \(0, 60\] s"),
+        ("scenario.arrangement=3x3", "scenario: expected arrangement in"),
+        ("run.max_duration_s=nan", r"run\.max_duration_s: expected > 0 \[s\], got nan"),
+    ],
+)
+def test_experiment_settings_are_named_by_their_group(override: str, message: str) -> None:
+    """A bad value inside a group's dataclasses is named with the group it came from."""
+    from hydra import compose, initialize_config_dir
+
+    from iplanner_torch.cli._common import CONF_DIR
+    from iplanner_torch.cli.experiment import build_experiment
+
+    with initialize_config_dir(version_base="1.3", config_dir=CONF_DIR):
+        cfg = compose("config", overrides=[override])
+        with pytest.raises(ConfigError, match=f"^{message}"):
+            build_experiment(cfg, {})
