@@ -39,3 +39,27 @@ def lego_dir() -> Path:
     if not path.is_dir():
         pytest.skip("shared LEGO assembly recording not found")
     return path
+
+
+class FakeClock:
+    """Stands in for the ``time`` module of the code under test: ``perf_counter`` reads
+    ``now``, which only the test moves, so timing metrics do not depend on the machine."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+
+@pytest.fixture
+def fake_clock(monkeypatch: pytest.MonkeyPatch):
+    """``fake_clock(module)``: replace ``module.time`` by a :class:`FakeClock` (undone after
+    the test) and return the clock."""
+
+    def patch(module: object) -> FakeClock:
+        clock = FakeClock()
+        monkeypatch.setattr(module, "time", clock)
+        return clock
+
+    return patch

@@ -14,6 +14,7 @@ from typing import Any, TypeVar
 from omegaconf import DictConfig, OmegaConf
 
 from iplanner_torch.errors import ConfigError, IPlannerError
+from iplanner_torch.sim.tracker import MAX_NOISE_M
 
 #: conf/ at the repository root (the package is installed editable from the clone).
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
@@ -51,11 +52,11 @@ def instantiate(node: Any, expected: type | None = None, name: str | None = None
     wrong = _wrong_type(node) if isinstance(node, DictConfig) else None
     if wrong:
         raise ConfigError(wrong)
+    key = name or (_full_key(node, None) if isinstance(node, DictConfig) else "")
     try:
         built = hydra_instantiate(node, _convert_="all")
     except InstantiationException as exc:
         cause = exc.__cause__ or exc
-        key = name or (_full_key(node, None) if isinstance(node, DictConfig) else "")
         if isinstance(cause, IPlannerError):
             text = str(cause)
             raise ConfigError(
@@ -63,7 +64,6 @@ def instantiate(node: Any, expected: type | None = None, name: str | None = None
             ) from exc
         raise ConfigError(f"cannot build config node {key or '<root>'!r}: {cause}") from exc
     if expected is not None and not isinstance(built, expected):
-        key = name or (_full_key(node, None) if isinstance(node, DictConfig) else "")
         target = f"{expected.__module__}.{expected.__qualname__}"
         raise ConfigError(
             f"config node {key or '<root>'!r} built a {type(built).__name__}, not a "
@@ -253,7 +253,7 @@ ROOT_KEYS: dict[str, type] = {"seed": int, "progress": bool, "device": str}
 #: settings), with the range each allows (checked before the command runs, so the message
 #: names the key that was typed rather than the field it feeds).
 ALIAS_RANGES: dict[str, tuple[float, float, str]] = {
-    "tracker.noise": (0.0, 1.0 + 1e-12, "in [0, 1] m"),  # sim.tracker.MAX_NOISE_M
+    "tracker.noise": (0.0, math.nextafter(MAX_NOISE_M, math.inf), f"in [0, {MAX_NOISE_M:g}] m"),
     "tracker.dropout": (0.0, 1.0, "in [0, 1)"),
     "run.scene_hz": (0.0, math.inf, ">= 0 [Hz]"),
 }
@@ -416,15 +416,14 @@ def friendly_errors(fn: F) -> F:
                 # when it ends and exits 2 (cli.callbacks.GatherSweepResults)
                 (job_dir / FAILED_MARKER).write_text(line + "\n", encoding="utf-8")
                 return None
-            except MemoryError as exc:
-                print(f"error: out of memory ({exc}); {_MEMORY_HINT}", file=sys.stderr)
-                raise SystemExit(2) from None
-            except RuntimeError as exc:  # torch's allocators raise RuntimeError subclasses
-                text = str(exc)
-                if "out of memory" not in text and "can't allocate memory" not in text:
+            except (MemoryError, RuntimeError) as exc:  # torch's allocators: RuntimeError
+                text = str(exc).strip()
+                if not isinstance(exc, MemoryError) and not (
+                    "out of memory" in text or "can't allocate memory" in text
+                ):
                     raise
-                first = text.strip().splitlines()[0] if text.strip() else type(exc).__name__
-                print(f"error: out of memory ({first[:200]}); {_MEMORY_HINT}", file=sys.stderr)
+                first = text.splitlines()[0][:200] if text else type(exc).__name__
+                print(f"error: out of memory ({first}); {_MEMORY_HINT}", file=sys.stderr)
                 raise SystemExit(2) from None
             except KeyboardInterrupt:
                 where = f" in {log_path.parent}" if log_path is not None else ""

@@ -715,8 +715,10 @@ def _run_episode(
     if blocking:
         q_a = ik(np.asarray(scenario.crossing_start), q_home)
         goal_q = ik(np.asarray(scenario.crossing_goal), q_a)
-        ends = {"crossing_start": (scenario.crossing_start, q_a)}
-        ends["crossing_goal"] = (scenario.crossing_goal, goal_q)
+        ends = {
+            "crossing_start": (scenario.crossing_start, q_a),
+            "crossing_goal": (scenario.crossing_goal, goal_q),
+        }
         for key, (point, q_pt) in ends.items():
             miss = float(np.linalg.norm(robot.ee_position(q_pt).detach().cpu().numpy() - point))
             if miss > CROSSING_TOLERANCE_M:

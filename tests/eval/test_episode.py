@@ -53,18 +53,8 @@ def _fake_episode(tmp_path, cfg, kind, replanner, *, predictor=None, path=None, 
     )
 
 
-class _Clock:
-    """Stands in for ``time`` in the episode module: wall time passes only in forecasts."""
-
-    def __init__(self) -> None:
-        self.now = 50.0
-
-    def perf_counter(self) -> float:
-        return self.now
-
-
 def test_distance_prediction_time_and_realtime_factor_from_the_log(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, fake_clock
 ) -> None:
     """``eval/min_distance`` equals a brute-force minimum over every sphere pair of the logged
     robot states and true human joints (logged at the metrics' rate here); the timing
@@ -73,8 +63,7 @@ def test_distance_prediction_time_and_realtime_factor_from_the_log(
     from iplanner_torch.collision.human_spheres import HumanSphereMap
     from iplanner_torch.recording.reader import read_episode
 
-    clock = _Clock()
-    monkeypatch.setattr(episode_module, "time", clock)
+    clock = fake_clock(episode_module)
 
     class ClockedPredictor(fakes.ConstantPredictor):
         def predict_positions(self, positions, progress):

@@ -6,6 +6,7 @@ import math
 import warnings
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 import torch
@@ -28,22 +29,10 @@ from iplanner_torch.planning.trajectory import resample_linear
 CONF = Path(__file__).resolve().parents[2] / "conf" / "planner"
 
 
-class FakeClock:
-    """Stands in for ``time`` in the replanner module: wall time passes only in solves."""
-
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def perf_counter(self) -> float:
-        return self.now
-
-
 class SpyOptimizer(TrajectoryOptimizer):
     """Records the arguments of every solve; with a clock, each solve takes ``solve_s``."""
 
-    def __init__(
-        self, *args, clock: FakeClock | None = None, solve_s: float = 0.0, **kwargs
-    ) -> None:
+    def __init__(self, *args, clock: Any = None, solve_s: float = 0.0, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.clock, self.solve_s = clock, solve_s
         self.calls: list[dict] = []
@@ -56,15 +45,10 @@ class SpyOptimizer(TrajectoryOptimizer):
         return result
 
 
-def _spy(
-    robot, monkeypatch: pytest.MonkeyPatch | None = None, solve_s: float = 0.0
-) -> SpyOptimizer:
-    """A spy optimiser; given ``monkeypatch``, the replanner reads wall time from a fake clock
-    on which every solve takes exactly ``solve_s``."""
-    clock = None
-    if monkeypatch is not None:
-        clock = FakeClock()
-        monkeypatch.setattr(replanner_module, "time", clock)
+def _spy(robot, fake_clock: Any = None, solve_s: float = 0.0) -> SpyOptimizer:
+    """A spy optimiser; given the ``fake_clock`` fixture, the replanner reads wall time from a
+    fake clock on which every solve takes exactly ``solve_s``."""
+    clock = None if fake_clock is None else fake_clock(replanner_module)
     cfg = OptimizerCfg(iterations=5, warm_iterations=2, horizon_s=2.0)
     return SpyOptimizer(
         robot, cfg, human_spheres=one_sphere_map(0.1), clock=clock, solve_s=solve_s
@@ -72,9 +56,9 @@ def _spy(
 
 
 def test_cycles_every_m_and_warm_starts_from_the_shifted_plan(
-    point_robot: PointRobot, monkeypatch: pytest.MonkeyPatch
+    point_robot: PointRobot, fake_clock: Any
 ) -> None:
-    opt = _spy(point_robot, monkeypatch, solve_s=0.01)
+    opt = _spy(point_robot, fake_clock, solve_s=0.01)
     cfg = ReplannerCfg(
         replan_step_s=0.5, fresh_fraction=0.5, goal_change_lead_s=None, tracking="exact"
     )
@@ -212,13 +196,11 @@ def test_filtered_command_follows_a_smooth_plan_closely(point_robot: PointRobot)
     assert err < 2e-3
 
 
-def test_overruns_are_counted_and_warned(
-    point_robot: PointRobot, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_overruns_are_counted_and_warned(point_robot: PointRobot, fake_clock: Any) -> None:
     """Solves of 60 ms against a 50 ms budget are two overruns and two warnings; 40 ms ones
     are none (a fake clock: the counts do not depend on the machine's load)."""
     q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
-    opt = _spy(point_robot, monkeypatch, solve_s=0.06)
+    opt = _spy(point_robot, fake_clock, solve_s=0.06)
     rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, budget_s=0.05))
     rp.reset(q0, qg, t=0.0)
     with pytest.warns(PlanningOverrunWarning, match=r"took 0\.060 s, over its budget 0\.050"):
