@@ -12,8 +12,9 @@ animation (GIF with Pillow, or MP4 when imageio with ffmpeg is installed)::
     python scripts/render_episode.py --mcap runs/ep.mcap --frames 6 --camera overview \
         --overlay --video runs/ep.gif
 
-Rendering needs a GL backend: ``MUJOCO_GL=osmesa`` (package libosmesa6) on CPU machines,
-``MUJOCO_GL=egl`` on GPU machines.
+Rendering needs a GL backend: ``MUJOCO_GL=osmesa`` (package libosmesa6) or ``MUJOCO_GL=egl``
+(Mesa's software EGL, package libegl-mesa0, or a GPU driver); without a display, the one
+installed is picked when the variable is unset.
 """
 
 from __future__ import annotations
@@ -265,7 +266,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--height", type=int, help="image height [px] (scene 360, episode 480)")
     args = parser.parse_args(argv)
     if not gl_available():
-        sys.exit("no OpenGL backend loads: install libosmesa6 and set MUJOCO_GL=osmesa")
+        sys.exit(
+            "no OpenGL backend loads: install libosmesa6 (MUJOCO_GL=osmesa) or libegl-mesa0 "
+            "(MUJOCO_GL=egl)"
+        )
     if args.frames < 1:
         sys.exit("--frames must be >= 1")
     if args.scene:

@@ -6,10 +6,12 @@ add translucent spheres (predicted human spheres, robot bounding spheres) to the
 
 GL backend: MuJoCo picks its OpenGL backend from ``MUJOCO_GL``. When that variable is unset
 and no display is configured (``DISPLAY`` / ``WAYLAND_DISPLAY``), importing this module sets
-``MUJOCO_GL=osmesa`` (software rendering, Debian package ``libosmesa6``); on a GPU machine set
-``MUJOCO_GL=egl`` yourself. The renderer opens its GL context from the backend this variable
-names, so it works even when ``mujoco`` was imported before this module. Rendering is optional:
-:func:`gl_available` says whether a context can be opened, without raising.
+``MUJOCO_GL=osmesa`` when libOSMesa is installed (software rendering, Debian package
+``libosmesa6``), else ``MUJOCO_GL=egl`` when libEGL is (Mesa's software EGL, package
+``libegl-mesa0``, or a GPU driver), else leaves it unset; set it yourself to choose. The
+renderer opens its GL context from the backend this variable names, so it works even when
+``mujoco`` was imported before this module. Rendering is optional: :func:`gl_available` says
+whether a context can be opened, without raising.
 
 Close every renderer (``close()`` or a ``with`` block) before the process exits, as MuJoCo's
 documentation asks: GL contexts freed during interpreter shutdown can crash.
@@ -25,10 +27,29 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal
 
+
+def _headless_backend() -> str | None:
+    """The offscreen GL backend whose library this machine has: ``osmesa`` (libOSMesa) first,
+    then ``egl`` (libEGL, e.g. Mesa's llvmpipe or a GPU driver), or None.
+
+    Only a backend whose library is found is named: ``MUJOCO_GL`` is inherited by child
+    processes, and with mujoco 4.0 a backend whose library is missing makes ``import mujoco``
+    itself fail there.
+    """
+    import ctypes.util
+
+    for backend, library in (("osmesa", "OSMesa"), ("egl", "EGL")):
+        if ctypes.util.find_library(library):
+            return backend
+    return None
+
+
 if "MUJOCO_GL" not in os.environ and not (
     os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
 ):
-    os.environ["MUJOCO_GL"] = "osmesa"
+    _backend = _headless_backend()
+    if _backend is not None:
+        os.environ["MUJOCO_GL"] = _backend
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402

@@ -23,7 +23,7 @@ from iplanner_torch.sim.render import (
 from iplanner_torch.sim.scene import SceneCfg, SceneHandles, build_scene, pose_human
 
 needs_gl = pytest.mark.skipif(
-    not gl_available(), reason="no OpenGL backend (install libosmesa6, MUJOCO_GL=osmesa)"
+    not gl_available(), reason="no OpenGL backend (libosmesa6 or libegl-mesa0)"
 )
 
 W, H = 320, 240
@@ -181,3 +181,42 @@ def test_contact_sheet(tmp_path: Path) -> None:
         save_contact_sheet(frames, ["a"], tmp_path / "x.png")
     with pytest.raises(ShapeError, match=r"expected every frame \(60, 80, 3\)"):
         save_contact_sheet([frames[0], frames[1][:30]], ["a", "b"], tmp_path / "x.png")
+
+
+def test_headless_backend_names_only_an_installed_library(monkeypatch) -> None:
+    """osmesa when libOSMesa is found, else egl when libEGL is, else nothing."""
+    import ctypes.util
+
+    from iplanner_torch.sim import render
+
+    def finder(present: set[str]):
+        return lambda name: f"lib{name}.so" if name in present else None
+
+    monkeypatch.setattr(ctypes.util, "find_library", finder({"OSMesa", "EGL"}))
+    assert render._headless_backend() == "osmesa"
+    monkeypatch.setattr(ctypes.util, "find_library", finder({"EGL"}))
+    assert render._headless_backend() == "egl"
+    monkeypatch.setattr(ctypes.util, "find_library", finder(set()))
+    assert render._headless_backend() is None
+
+
+def test_importing_the_renderer_leaves_mujoco_importable_in_child_processes() -> None:
+    """The backend this module picks without a display is inherited by child processes, where
+    ``import mujoco`` loads it: it must be one this machine has."""
+    import os
+    import subprocess
+    import sys
+
+    env = {
+        k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "DISPLAY", "WAYLAND_DISPLAY")
+    }
+    code = (
+        "import os, subprocess, sys; import iplanner_torch.sim.render; "
+        "r = subprocess.run([sys.executable, '-c', 'import mujoco'], capture_output=True, "
+        "text=True); print(os.environ.get('MUJOCO_GL')); sys.stderr.write(r.stderr); "
+        "sys.exit(r.returncode)"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
