@@ -59,8 +59,12 @@ def instantiate(node: Any, expected: type | None = None, name: str | None = None
         cause = exc.__cause__ or exc
         if isinstance(cause, IPlannerError):
             text = str(cause)
+            where = _bad_value_key(node, key, str(exc), text)
+            field = where.rsplit(".", 1)[-1]
+            if where != field and text.startswith(f"{field}: "):  # "seeds: ..." names it too
+                text = text[len(field) + 2 :]
             raise ConfigError(
-                f"{key}: {text}" if key and not text.startswith(key) else text
+                f"{where}: {text}" if where and not text.startswith(where) else text
             ) from exc
         raise ConfigError(f"cannot build config node {key or '<root>'!r}: {cause}") from exc
     if expected is not None and not isinstance(built, expected):
@@ -72,6 +76,45 @@ def instantiate(node: Any, expected: type | None = None, name: str | None = None
             "'defaults: [<that file>, _self_]'"
         )
     return built
+
+
+def _bad_value_key(node: Any, key: str, hydra_message: str, text: str) -> str:
+    """The dotted key of the value a dataclass refused, for the message (``sim.tracker_fps``).
+
+    Hydra ends its message with the full key of the node whose ``_target_`` raised
+    (``full_key: planner.optimizer``); the field is the first of that dataclass's fields that
+    the message names as a word (``expected horizon_s in (0, 60] s``). Falls back to the node
+    (``planner.optimizer``), then to ``key``.
+    """
+    import dataclasses
+
+    from hydra.utils import get_class
+
+    if not isinstance(node, DictConfig):
+        return key
+    found = re.search(r"full_key: (\S+)\s*$", hydra_message)
+    own = _full_key(node, None) or ""
+    inner = found.group(1) if found else own
+    if own and inner != own and not inner.startswith(own + "."):
+        return key
+    suffix = inner[len(own) :].lstrip(".") if own else inner
+    sub: Any = OmegaConf.select(node, suffix) if suffix else node
+    where = ".".join(part for part in (key, suffix) if part)
+    target = sub.get("_target_") if isinstance(sub, DictConfig) else None
+    try:
+        cls = get_class(target) if isinstance(target, str) else None
+    except Exception:
+        cls = None
+    if cls is None or not dataclasses.is_dataclass(cls):
+        return where
+    named = [
+        (m.start(), f.name)
+        for f in dataclasses.fields(cls)
+        if (m := re.search(rf"(?<![\w.]){re.escape(f.name)}(?!\w)", text))
+    ]
+    if not named:
+        return where
+    return ".".join(part for part in (where, min(named)[1]) if part)
 
 
 def _full_key(node: DictConfig, key: str | None) -> str:

@@ -132,8 +132,64 @@ def ensure_predictors(
                 data_node=data_node,
             )
             print(f"  trained in {time.perf_counter() - t0:.0f} s -> {ckpt}", flush=True)
+        else:
+            stale = checkpoint_differences(ckpt, option_node("predictor", option, cfg), data_node)
+            if stale:
+                from iplanner_torch.errors import ConfigError
+
+                raise ConfigError(
+                    f"{ckpt} was trained with other settings than this run would train it "
+                    f"with: {'; '.join(stale)}. Delete {out_dir} to train it anew, or set "
+                    "paths.checkpoints=<another folder>"
+                )
         paths[variant] = str(ckpt)
     return paths
+
+
+def checkpoint_differences(
+    ckpt: Path, predictor_node: DictConfig, data_node: DictConfig
+) -> list[str]:
+    """Where a trained predictor's settings differ from those it would be trained with now.
+
+    Compares the checkpoint's window settings with ``data_node.windows`` and its predictor
+    settings with ``predictor_node`` (seeds left out: the root seed also names the data), key
+    by key where both have the key, so checkpoints of earlier versions stay usable. A file
+    that does not read gives no differences here: loading it reports why.
+
+    Returns:
+        ``"windows.n_prev: 15 -> 5"`` lines (checkpoint -> now); empty when they agree.
+    """
+    from dataclasses import asdict
+
+    import torch
+
+    from iplanner_torch.data.windows import WindowCfg
+    from iplanner_torch.prediction.predictor import PredictorCfg
+
+    try:
+        saved = torch.load(ckpt, map_location="cpu", weights_only=False)
+        saved_windows, saved_cfg = dict(saved["window_cfg"] or {}), dict(saved["cfg"])
+    except Exception:  # noqa: BLE001 - HumanMotionPredictor.load says what is wrong
+        return []
+    now_windows = asdict(instantiate(data_node.windows, WindowCfg, name="data.windows"))
+    now_cfg = instantiate(predictor_node, PredictorCfg, name="predictor").to_dict()
+
+    def plain(value: Any) -> Any:
+        return list(value) if isinstance(value, tuple) else value
+
+    def diff(prefix: str, old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+        out = []
+        for key in sorted(set(old) & set(new)):
+            a, b = old[key], new[key]
+            if key == "seed":
+                continue
+            if isinstance(a, dict) and isinstance(b, dict):
+                out += diff(f"{prefix}{key}.", a, b)
+            elif plain(a) != plain(b):
+                out.append(f"{prefix}{key}: {a!r} -> {b!r}")
+        return out
+
+    return diff("windows.", saved_windows, now_windows) + diff("predictor.", saved_cfg, now_cfg)
 
 
 def _task_overrides() -> list[str]:
@@ -142,6 +198,29 @@ def _task_overrides() -> list[str]:
         return list(HydraConfig.get().overrides.task)
     except ValueError:  # HydraConfig not set: built outside a Hydra app (tests)
         return []
+
+
+def unused_overrides(overrides: list[str], train_data: str) -> list[str]:
+    """The command-line overrides that ``iplanner-experiment`` would not read.
+
+    Missing predictors are trained with their own ``conf/predictor/<variant>.yaml`` and the
+    ``run.train_trainer`` option, so the ``predictor`` and ``trainer`` groups, and ``train`` and
+    ``evaluate`` (the other commands' settings), are not read; the ``data`` group is read only
+    with ``run.train_data=data``.
+
+    Args:
+        overrides: Hydra task overrides (``key=value``, ``+key=value``, ``group=option``).
+        train_data: ``run.train_data`` (the value the overrides set, where they set it).
+    """
+    unread = {"predictor", "trainer", "train", "evaluate"}
+    if train_data != "data":
+        unread.add("data")
+    unused = []
+    for override in overrides:
+        key = override.split("=", 1)[0].lstrip("+~")
+        if key.split(".", 1)[0].split("@", 1)[0] in unread:
+            unused.append(override)
+    return unused
 
 
 def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
@@ -176,23 +255,31 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     exp_node = cfg.get("experiment")
     if exp_node is not None and exp_node.get("episode") is not None:
         episode_node = OmegaConf.merge(episode_node, exp_node.episode)
-    episode = instantiate(episode_node, EpisodeCfg)
+    overridden = exp_node is not None and exp_node.get("episode") is not None
+    episode = instantiate(
+        episode_node, EpisodeCfg, name="experiment.episode" if overridden else "run"
+    )
     device = str(resolve_device(str(cfg.device)))
     if exp_node is None:
         scenario = replace(
             episode.scenario, confidence=cfg_scalar(cfg.planner, "confidence", float)
         )
-        return ExperimentCfg(
-            name="main",
-            robot=robot,
-            device=device,
-            scenarios=[scenario],
-            planners=cfg_list(cfg.run, "planners", str),
-            seeds=cfg_list(cfg.run, "seeds", int),
-            predictor_paths=predictor_paths,
-            episode=replace(episode, scenario=scenario),
-            write_mcap=cfg_scalar(cfg.run, "write_mcap", bool),
-        )
+        try:
+            return ExperimentCfg(
+                name="main",
+                robot=robot,
+                device=device,
+                scenarios=[scenario],
+                planners=cfg_list(cfg.run, "planners", str),
+                seeds=cfg_list(cfg.run, "seeds", int),
+                predictor_paths=predictor_paths,
+                episode=replace(episode, scenario=scenario),
+                write_mcap=cfg_scalar(cfg.run, "write_mcap", bool),
+            )
+        except ConfigError as exc:  # "seeds: ..." is run.seeds here
+            text = str(exc)
+            field = text.split(":", 1)[0]
+            raise ConfigError(f"run.{text}" if field in ("planners", "seeds") else text) from exc
     node = OmegaConf.to_container(exp_node, resolve=True)
     assert isinstance(node, dict)
     node.pop("episode", None)
@@ -242,6 +329,23 @@ def _app(cfg: DictConfig) -> None:
 
         raise ConfigError(message)
     (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
+    unused = unused_overrides(_task_overrides(), str(cfg.run.train_data))
+    if unused:
+        from iplanner_torch.errors import ConfigError
+
+        raise ConfigError(
+            f"iplanner-experiment does not read {' '.join(unused)}: it trains a missing "
+            "predictor with conf/predictor/<variant>.yaml, the run.train_trainer option and, "
+            f"with run.train_data={cfg.run.train_data}, "
+            + (
+                "the data group"
+                if str(cfg.run.train_data) == "data"
+                else "each scenario's task demonstrations (the data group only with "
+                "run.train_data=data)"
+            )
+            + "; train with other settings first (iplanner-train ... train.out_dir="
+            "<paths.checkpoints>/<dataset folder>/<variant>), see the README"
+        )
     exp_node = cfg.get("experiment")
     planners = (
         cfg_list(exp_node, "planners", str)
@@ -252,7 +356,10 @@ def _app(cfg: DictConfig) -> None:
     if unknown:
         from iplanner_torch.errors import ConfigError
 
-        raise ConfigError(f"unknown planners {unknown}; expected some of {sorted(PLANNER_KINDS)}")
+        key = "experiment.planners" if exp_node is not None else "run.planners"
+        raise ConfigError(
+            f"{key}: unknown planners {unknown}; expected some of {sorted(PLANNER_KINDS)}"
+        )
     variants = sorted({v for p in planners if (v := PLANNER_KINDS[p]) is not None})
     experiment = build_experiment(cfg, {})
     n = len(experiment.scenarios) * len(experiment.planners) * len(experiment.seeds)

@@ -64,16 +64,22 @@ class ExperimentCfg:
             raise ConfigError(f"expected robot a RobotCfg or a name, got {self.robot!r}")
         unknown = [p for p in self.planners if p not in PLANNER_KINDS]
         if unknown or not self.planners:
-            raise ConfigError(f"expected planners from {sorted(PLANNER_KINDS)}, got {unknown}")
+            raise ConfigError(
+                f"planners: expected planners from {sorted(PLANNER_KINDS)}, got "
+                f"{unknown or self.planners}"
+            )
         bad = [s for s in self.speeds if s not in SPEED_FACTORS]
         if bad:
-            raise ConfigError(f"expected speeds from {sorted(SPEED_FACTORS)}, got {bad}")
-        if not self.seeds or not self.scenarios:
-            raise ConfigError("expected at least one seed and one scenario")
+            raise ConfigError(f"speeds: expected speeds from {sorted(SPEED_FACTORS)}, got {bad}")
+        for name in ("seeds", "scenarios"):
+            if not getattr(self, name):
+                raise ConfigError(f"{name}: expected at least one, got []")
         if not all(isinstance(n, (int, float)) and 0 <= n <= MAX_NOISE_M for n in self.noises):
-            raise ConfigError(f"expected noises in [0, {MAX_NOISE_M:g}] m, got {self.noises}")
+            raise ConfigError(
+                f"noises: expected noises in [0, {MAX_NOISE_M:g}] m, got {self.noises}"
+            )
         if not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in self.seeds):
-            raise ConfigError(f"expected seeds as integers >= 0, got {self.seeds}")
+            raise ConfigError(f"seeds: expected seeds as integers >= 0, got {self.seeds}")
         for name in ("seeds", "planners", "speeds", "noises"):
             values = list(getattr(self, name))
             twice = sorted({str(v) for v in values if values.count(v) > 1})

@@ -204,7 +204,7 @@ def test_error_line_reaches_the_job_log(tmp_path: Path) -> None:
     res = _run(["iplanner-experiment", "run.planners=[nope]", "progress=false",
                 f"hydra.run.dir={tmp_path / 'run'}"], tmp_path)  # fmt: skip
     assert res.returncode == 2
-    line = "error: ConfigError: unknown planners ['nope']"
+    line = "error: ConfigError: run.planners: unknown planners ['nope']"
     assert line in res.stderr
     assert line in (tmp_path / "run" / "experiment.log").read_text()
 

@@ -268,15 +268,24 @@ def test_library_errors_and_running_out_of_memory_are_one_line(capsys) -> None:
 @pytest.mark.parametrize(
     ("override", "message"),
     [
-        ("sim.tracker_fps=0", "sim: expected tracker_fps > 0"),
-        ("sim.human.hold_s=-1", "sim: expected hold_s >= 0"),
-        ("planner.optimizer.horizon_s=inf", r"planner: expected horizon_s in \(0, 60\] s"),
-        ("scenario.arrangement=3x3", "scenario: expected arrangement in"),
+        ("sim.tracker_fps=0", r"sim\.tracker_fps: expected tracker_fps > 0"),
+        ("sim.human.hold_s=-1", r"sim\.human\.hold_s: expected hold_s >= 0"),
+        (
+            "planner.optimizer.horizon_s=inf",
+            r"planner\.optimizer\.horizon_s: expected horizon_s in \(0, 60\] s",
+        ),
+        ("planner.confidence=2", r"planner\.confidence: expected confidence in \(0, 1\)"),
+        (
+            "planner.optimizer.iterations=-3",
+            r"planner\.optimizer\.iterations: expected iterations and warm_iterations >= 0",
+        ),
+        ("scenario.arrangement=3x3", r"scenario\.arrangement: expected arrangement in"),
+        ("robot.base_yaw=nan", r"robot\.base_yaw: expected a finite base_yaw"),
         ("run.max_duration_s=nan", r"run\.max_duration_s: expected > 0 \[s\], got nan"),
     ],
 )
 def test_experiment_settings_are_named_by_their_group(override: str, message: str) -> None:
-    """A bad value inside a group's dataclasses is named with the group it came from."""
+    """A bad value inside a group's dataclasses is named by its full dotted key."""
     from hydra import compose, initialize_config_dir
 
     from iplanner_torch.cli._common import CONF_DIR
@@ -286,3 +295,119 @@ def test_experiment_settings_are_named_by_their_group(override: str, message: st
         cfg = compose("config", overrides=[override])
         with pytest.raises(ConfigError, match=f"^{message}"):
             build_experiment(cfg, {})
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        (["run.seeds=[]"], r"run\.seeds: expected at least one, got \[\]"),
+        (["run.seeds=[3,3]"], r"run\.seeds: 3 given twice"),
+        (["run.stall_fallback_s=-1"], r"run\.stall_fallback_s: expected stall_fallback_s > 0"),
+        (
+            ["experiment=table_simulation", "experiment.seeds=[]"],
+            r"experiment\.seeds: expected at least one, got \[\]",
+        ),
+        (
+            ["experiment=table_simulation", "experiment.episode.max_duration_s=-1"],
+            r"experiment\.episode\.max_duration_s: expected max_duration_s > 0",
+        ),
+    ],
+)
+def test_run_and_experiment_settings_are_named_by_their_key(
+    overrides: list[str], message: str
+) -> None:
+    """The episode grid's settings are named as the command line writes them."""
+    from hydra import compose, initialize_config_dir
+
+    from iplanner_torch.cli._common import CONF_DIR
+    from iplanner_torch.cli.experiment import build_experiment
+
+    with initialize_config_dir(version_base="1.3", config_dir=CONF_DIR):
+        cfg = compose("config", overrides=overrides)
+        with pytest.raises(ConfigError, match=f"^{message}"):
+            build_experiment(cfg, {})
+
+
+def test_experiment_names_the_overrides_it_would_not_read() -> None:
+    """predictor/trainer/train/evaluate are never read by iplanner-experiment, the data group
+    only with run.train_data=data; everything else is."""
+    from iplanner_torch.cli.experiment import unused_overrides
+
+    overrides = [
+        "trainer.max_steps=5",
+        "predictor=iplanner_no_ni",
+        "+predictor.svgp.num_inducing=8",
+        "train.resume=true",
+        "evaluate.mode=episode",
+        "data.windows.n_prev=5",
+        "data=lego",
+        "tracker.noise=0.02",
+        "planner.confidence=0.99",
+        "scenario=arrangement_2x2",
+        "robot=fetch",
+        "run.train_data=tasks",
+        "hydra/launcher=joblib",
+        "paths.datasets=/tmp/d",
+    ]
+    assert unused_overrides(overrides, "tasks") == overrides[:7]
+    assert unused_overrides(overrides, "data") == overrides[:5]
+    assert unused_overrides(["tracker.noise=0", "human.speed=fast"], "tasks") == []
+
+
+def test_experiment_refuses_an_override_it_would_not_read(tmp_path: Path) -> None:
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "iplanner_torch.cli.experiment",
+            "trainer.max_steps=5",
+            "progress=false",
+            f"hydra.run.dir={tmp_path / 'run'}",
+        ],  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 2
+    assert "error: ConfigError: iplanner-experiment does not read trainer.max_steps=5" in (
+        res.stderr
+    )
+    assert not (tmp_path / "run" / "results.csv").exists()
+
+
+def test_a_checkpoint_trained_with_other_settings_is_named(tmp_path: Path) -> None:
+    """ensure_predictors' check: the checkpoint's windows and predictor settings against the
+    ones this run would train with, seeds left out, keys of one side only ignored."""
+    from dataclasses import asdict, replace
+
+    import torch
+    from hydra import compose, initialize_config_dir
+
+    from iplanner_torch.cli._common import CONF_DIR
+    from iplanner_torch.cli.experiment import checkpoint_differences, option_node
+    from iplanner_torch.data.windows import WindowCfg
+    from iplanner_torch.prediction.predictor import PredictorCfg
+
+    with initialize_config_dir(version_base="1.3", config_dir=CONF_DIR):
+        cfg = compose("config", overrides=["data.windows.n_prev=5", "seed=3"])
+        node = option_node("predictor", "iplanner_ni", cfg)
+        predictor = instantiate(node, PredictorCfg)
+        windows = instantiate(cfg.data.windows, WindowCfg)
+        ckpt = tmp_path / "predictor.ckpt"
+
+        def save(window_cfg: dict, predictor_cfg: dict) -> None:
+            torch.save({"window_cfg": window_cfg, "cfg": predictor_cfg}, ckpt)
+
+        same = predictor.to_dict() | {"seed": 0, "retired_field": 1}
+        same["svgp"] = same["svgp"] | {"seed": 0}
+        save(asdict(windows), same)
+        assert checkpoint_differences(ckpt, node, cfg.data) == []
+        old = predictor.to_dict()
+        old["svgp"] = old["svgp"] | {"num_inducing": 50}
+        save(asdict(replace(windows, n_prev=15)), old)
+        assert checkpoint_differences(ckpt, node, cfg.data) == [
+            "windows.n_prev: 15 -> 5",
+            "predictor.svgp.num_inducing: 50 -> 100",
+        ]
+        ckpt.write_bytes(b"not a checkpoint")  # the loader reports this one
+        assert checkpoint_differences(ckpt, node, cfg.data) == []
