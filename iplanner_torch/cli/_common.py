@@ -506,7 +506,11 @@ def dump_config(cfg: DictConfig) -> str:
 
 
 def load_dataset(
-    data_cfg: DictConfig, *, generate_if_missing: bool = False, progress: bool = True
+    data_cfg: DictConfig,
+    *,
+    generate_if_missing: bool = False,
+    progress: bool = True,
+    overridden: set[str] | None = None,
 ) -> list[Any]:
     """Load the demonstrations a ``data`` config node describes.
 
@@ -515,12 +519,17 @@ def load_dataset(
             ``windows``).
         generate_if_missing: generate the dataset with its generator when the folder is absent.
         progress: progress bars.
+        overridden: the ``data.generator`` fields compared with an existing generated
+            dataset's card (default: those this run's command line sets; see
+            :func:`_check_generator_settings`).
 
     Returns:
         The list of :class:`~iplanner_torch.data.demonstration.Demonstration`.
 
     Raises:
         DataError: when the folder is absent and cannot (or may not) be generated.
+        ConfigError: when a generated folder's card keeps other generator settings than the
+            command line gives.
     """
     from iplanner_torch.data.io import load_demonstrations, load_lego_assembly
     from iplanner_torch.errors import DataError
@@ -537,8 +546,67 @@ def load_dataset(
             )
         print(f"dataset {path} missing: generating it", flush=True)
         generate_dataset(data_cfg, path, progress=progress)
+    else:
+        _check_generator_settings(data_cfg, path, overridden)
     joints = data_cfg.windows.get("joints", None) if "windows" in data_cfg else None
     return load_demonstrations(path, fps=fps, joints=list(joints) if joints else None)
+
+
+def _overridden_generator_keys() -> set[str]:
+    """The ``data.generator`` fields this run's command line sets (none outside Hydra)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    try:
+        overrides = list(HydraConfig.get().overrides.task)
+    except ValueError:  # HydraConfig not set: called outside a Hydra app
+        return set()
+    keys = (o.split("=", 1)[0].lstrip("+~") for o in overrides)
+    return {k.split(".")[2] for k in keys if k.startswith("data.generator.") and k.count(".") >= 2}
+
+
+def _check_generator_settings(
+    data_cfg: DictConfig, path: Path, overridden: set[str] | None = None
+) -> None:
+    """Refuse an existing generated dataset whose card keeps another value of a generator
+    setting than the command line gives (``data.generator.reaches_per_target=10`` over a folder
+    generated with 30): the old files would otherwise be trained on silently.
+
+    Only the settings the command line sets are compared, so ``data.path=<folder>`` alone
+    reads a folder generated with any settings. A folder without a generator config, without
+    a card, or with a card written before cards kept their settings is not checked.
+
+    Args:
+        data_cfg: the ``data`` node.
+        path: its existing folder.
+        overridden: the generator fields to compare (default: those this run's command line
+            sets).
+
+    Raises:
+        ConfigError: naming each setting that differs (dataset -> data.generator).
+    """
+    from iplanner_torch.data.dataset_card import (
+        generator_settings,
+        read_generator_settings,
+        settings_differences,
+    )
+
+    keys = _overridden_generator_keys() if overridden is None else overridden
+    if not keys or data_cfg.get("generator") is None:
+        return
+    saved = read_generator_settings(path)
+    if saved is None:
+        return
+    now = generator_settings(instantiate(data_cfg.generator, name="data.generator"))
+    differ = settings_differences(
+        {k: v for k, v in saved.items() if k in keys}, {k: v for k, v in now.items() if k in keys}
+    )
+    if differ:
+        raise ConfigError(
+            f"{path} was generated with other settings than data.generator: "
+            f"{'; '.join(differ)} (dataset -> data.generator). Generate it anew with "
+            f"`iplanner-data generate data.path={data_cfg.path} data.overwrite=true` and the "
+            "same data.generator overrides, or choose another data.path"
+        )
 
 
 def generate_dataset(

@@ -133,63 +133,58 @@ def ensure_predictors(
             )
             print(f"  trained in {time.perf_counter() - t0:.0f} s -> {ckpt}", flush=True)
         else:
-            stale = checkpoint_differences(ckpt, option_node("predictor", option, cfg), data_node)
+            stale = checkpoint_differences(ckpt, data_node, _overridden_window_keys())
             if stale:
                 from iplanner_torch.errors import ConfigError
 
                 raise ConfigError(
-                    f"{ckpt} was trained with other settings than this run would train it "
-                    f"with: {'; '.join(stale)}. Delete {out_dir} to train it anew, or set "
-                    "paths.checkpoints=<another folder>"
+                    f"{ckpt} was trained with other window settings than the command line "
+                    f"gives: {'; '.join(stale)} (checkpoint -> now). Delete {out_dir} to "
+                    "train it anew with them, or set paths.checkpoints=<another folder>"
                 )
         paths[variant] = str(ckpt)
     return paths
 
 
-def checkpoint_differences(
-    ckpt: Path, predictor_node: DictConfig, data_node: DictConfig
-) -> list[str]:
-    """Where a trained predictor's settings differ from those it would be trained with now.
+def checkpoint_differences(ckpt: Path, data_node: DictConfig, keys: set[str]) -> list[str]:
+    """Where a trained predictor's window settings differ from ``data_node.windows``.
 
-    Compares the checkpoint's window settings with ``data_node.windows`` and its predictor
-    settings with ``predictor_node`` (seeds left out: the root seed also names the data), key
-    by key where both have the key, so checkpoints of earlier versions stay usable. A file
-    that does not read gives no differences here: loading it reports why.
+    Only ``keys`` are compared (the ``data.windows`` fields the command line sets), so a
+    predictor trained otherwise on purpose (``iplanner-train`` into the folder the experiment
+    reads) is used as it is. A file that does not read gives no differences here: loading it
+    reports why.
 
     Returns:
-        ``"windows.n_prev: 15 -> 5"`` lines (checkpoint -> now); empty when they agree.
+        ``"n_prev: 15 -> 5"`` lines (checkpoint -> now); empty when they agree.
     """
     from dataclasses import asdict
 
     import torch
 
     from iplanner_torch.data.windows import WindowCfg
-    from iplanner_torch.prediction.predictor import PredictorCfg
 
+    if not keys:
+        return []
     try:
-        saved = torch.load(ckpt, map_location="cpu", weights_only=False)
-        saved_windows, saved_cfg = dict(saved["window_cfg"] or {}), dict(saved["cfg"])
+        saved = dict(torch.load(ckpt, map_location="cpu", weights_only=False)["window_cfg"])
     except Exception:  # noqa: BLE001 - HumanMotionPredictor.load says what is wrong
         return []
-    now_windows = asdict(instantiate(data_node.windows, WindowCfg, name="data.windows"))
-    now_cfg = instantiate(predictor_node, PredictorCfg, name="predictor").to_dict()
+    now = asdict(instantiate(data_node.windows, WindowCfg, name="data.windows"))
 
     def plain(value: Any) -> Any:
         return list(value) if isinstance(value, tuple) else value
 
-    def diff(prefix: str, old: dict[str, Any], new: dict[str, Any]) -> list[str]:
-        out = []
-        for key in sorted(set(old) & set(new)):
-            a, b = old[key], new[key]
-            if key == "seed":
-                continue
-            if isinstance(a, dict) and isinstance(b, dict):
-                out += diff(f"{prefix}{key}.", a, b)
-            elif plain(a) != plain(b):
-                out.append(f"{prefix}{key}: {a!r} -> {b!r}")
-        return out
+    return [
+        f"{k}: {saved[k]!r} -> {now[k]!r}"
+        for k in sorted(keys & set(saved) & set(now))
+        if plain(saved[k]) != plain(now[k])
+    ]
 
-    return diff("windows.", saved_windows, now_windows) + diff("predictor.", saved_cfg, now_cfg)
+
+def _overridden_window_keys() -> set[str]:
+    """The ``data.windows`` fields this run's command line sets."""
+    keys = (o.split("=", 1)[0].lstrip("+~") for o in _task_overrides())
+    return {k.split(".")[2] for k in keys if k.startswith("data.windows.") and k.count(".") >= 2}
 
 
 def _task_overrides() -> list[str]:

@@ -3,9 +3,12 @@ clearing a folder of an earlier generated dataset before writing a new one."""
 
 from __future__ import annotations
 
+import dataclasses
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from iplanner_torch.data.io import demonstration_files
 from iplanner_torch.errors import ConfigError
@@ -14,6 +17,8 @@ from iplanner_torch.errors import ConfigError
 CARD_NAME = "README.md"
 #: The line under the card's heading that marks a README as a generated dataset card.
 CARD_MARK = "Generated; do not edit by hand."
+#: The line that opens the card's JSON block of generator settings.
+SETTINGS_MARK = "Generator settings (JSON):"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -37,12 +42,18 @@ class DatasetSummary:
     bytes_on_disk: int
 
 
+def generator_settings(cfg: Any) -> dict[str, Any]:
+    """A generator config dataclass as the JSON-plain dict the card keeps (tuples as lists)."""
+    return json.loads(json.dumps(dataclasses.asdict(cfg), default=str))
+
+
 def write_dataset_card(
     summary: DatasetSummary,
     *,
     title: str,
     facts: Sequence[tuple[str, str]],
     command: str,
+    settings: dict[str, Any] | None = None,
 ) -> Path:
     """Write ``summary.out_dir / README.md``: a table of facts, counts, cost and the command.
 
@@ -51,6 +62,8 @@ def write_dataset_card(
         title: the card's heading.
         facts: (name, value) rows (actions, fps, noise, seed ...).
         command: how to regenerate the dataset.
+        settings: the generator's settings (:func:`generator_settings`), kept as a JSON block
+            that :func:`read_generator_settings` reads back.
 
     Returns:
         The README path.
@@ -78,9 +91,42 @@ def write_dataset_card(
         "```",
         "",
     ]
+    if settings is not None:
+        lines += [SETTINGS_MARK, "", "```json", json.dumps(settings, indent=2), "```", ""]
     path = summary.out_dir / CARD_NAME
     path.write_text("\n".join(lines))
     return path
+
+
+def read_generator_settings(folder: str | Path) -> dict[str, Any] | None:
+    """The generator settings a dataset folder's card keeps, or None.
+
+    None when the folder has no generated dataset card, or a card written before the cards
+    kept their settings, or one whose settings block does not parse (edited by hand).
+    """
+    card = Path(folder) / CARD_NAME
+    if not is_dataset_card(card):
+        return None
+    text = card.read_text(errors="replace")
+    _, mark, rest = text.partition(SETTINGS_MARK)
+    if not mark:
+        return None
+    _, fence, body = rest.partition("```json")
+    block, end, _ = body.partition("```")
+    try:
+        settings = json.loads(block) if fence and end else None
+    except json.JSONDecodeError:
+        return None
+    return settings if isinstance(settings, dict) else None
+
+
+def settings_differences(saved: dict[str, Any], now: dict[str, Any]) -> list[str]:
+    """``"n_demos: 40 -> 8"`` for each key both dicts have and whose values differ."""
+    return [
+        f"{k}: {saved[k]!r} -> {now[k]!r}"
+        for k in sorted(set(saved) & set(now))
+        if saved[k] != now[k]
+    ]
 
 
 def is_dataset_card(path: str | Path) -> bool:

@@ -35,7 +35,11 @@ from typing import Literal
 import numpy as np
 from tqdm.auto import tqdm
 
-from iplanner_torch.data.dataset_card import DatasetSummary, write_dataset_card
+from iplanner_torch.data.dataset_card import (
+    DatasetSummary,
+    generator_settings,
+    write_dataset_card,
+)
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.io import save_demonstration
 from iplanner_torch.data.kinematic_human import (
@@ -364,6 +368,7 @@ def generate_reaching_dataset(
             ("seed", str(cfg.seed)),
             ("format", cfg.file_format),
         ],
+        settings=generator_settings(cfg),
         command=command
         or (
             'python -c "from iplanner_torch.data.reaching import *; '

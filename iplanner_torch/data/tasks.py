@@ -25,7 +25,11 @@ from typing import Literal
 import numpy as np
 from tqdm.auto import tqdm
 
-from iplanner_torch.data.dataset_card import DatasetSummary, write_dataset_card
+from iplanner_torch.data.dataset_card import (
+    DatasetSummary,
+    generator_settings,
+    write_dataset_card,
+)
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.io import save_demonstration
 from iplanner_torch.data.kinematic_human import (
@@ -381,6 +385,7 @@ def generate_task_dataset(
             ("dropout rate", f"{cfg.dropout_rate:g}"),
             ("seed", str(cfg.seed)),
         ],
+        settings=generator_settings(cfg),
         command=command
         or (
             'python -c "from iplanner_torch.data.tasks import *; '

@@ -77,3 +77,67 @@ def test_is_dataset_card(tmp_path):
     assert not is_dataset_card(tmp_path / "other.md")
     assert not is_dataset_card(tmp_path / "missing.md")
     assert not is_dataset_card(tmp_path)
+
+
+def test_card_keeps_the_generator_settings(tmp_path):
+    """Both generators write their settings into the card; they read back equal to the
+    dataclass, and a card without them, or with a broken block, reads as None."""
+    from dataclasses import asdict
+
+    from iplanner_torch.data.dataset_card import read_generator_settings
+    from iplanner_torch.data.tasks import TaskDatasetCfg, generate_task_dataset
+
+    cfg = ReachingCfg(n_targets=2, reaches_per_target=1, speeds=(0.5, 2.0), seed=7)
+    generate_reaching_dataset(cfg, tmp_path / "reach", progress=False)
+    saved = read_generator_settings(tmp_path / "reach")
+    assert saved == {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
+    tasks = TaskDatasetCfg(n_demos=2, order="(1,5)->(2,6)", arrangement="2x2")
+    generate_task_dataset(tasks, tmp_path / "tasks", progress=False)
+    saved = read_generator_settings(tmp_path / "tasks")
+    assert saved is not None and saved["n_demos"] == 2 and saved["order"] == "(1,5)->(2,6)"
+    assert saved["arrangement"] == "2x2"
+
+    card = tmp_path / "reach" / "README.md"
+    text = card.read_text()
+    card.write_text(text.replace('"seed": 7', '"seed": 7,,'))  # a hand edit that breaks it
+    assert read_generator_settings(tmp_path / "reach") is None
+    card.write_text(text.split("Generator settings")[0])  # a card of an earlier version
+    assert read_generator_settings(tmp_path / "reach") is None
+    assert read_generator_settings(tmp_path / "absent") is None
+
+
+def test_loading_refuses_a_dataset_generated_with_other_settings(tmp_path):
+    """The commands that generate a dataset when it is missing refuse one that exists with
+    other values of the generator settings the command line gives, instead of training on it
+    silently; settings the command line does not give are not compared."""
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli._common import load_dataset
+
+    def node(**generator):
+        return OmegaConf.create(
+            {
+                "path": str(tmp_path / "ds"),
+                "generator": {
+                    "_target_": "iplanner_torch.data.reaching.ReachingCfg",
+                    "n_targets": 2,
+                    "reaches_per_target": 1,
+                    **generator,
+                },
+                "windows": {"joints": None},
+            }
+        )
+
+    demos = load_dataset(node(), generate_if_missing=True, progress=False)
+    assert len(demos) == 2
+    given = {"reaches_per_target", "n_subjects"}
+    assert len(load_dataset(node(), progress=False, overridden=given)) == 2
+    # only data.path given: the folder is read whatever it was generated with
+    assert len(load_dataset(node(reaches_per_target=2), progress=False, overridden=set())) == 2
+    with pytest.raises(
+        ConfigError,
+        match=r"generated with other settings than data\.generator: "
+        r"n_subjects: 6 -> 3; reaches_per_target: 1 -> 2 \(dataset -> data\.generator\)",
+    ):
+        load_dataset(node(reaches_per_target=2, n_subjects=3), progress=False, overridden=given)
+    assert len(list((tmp_path / "ds").glob("*.npz"))) == 2  # nothing was touched
