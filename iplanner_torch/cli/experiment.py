@@ -57,13 +57,17 @@ TRAIN_DATA = ("tasks", "data")
 
 
 def option_node(group: str, option: str, cfg: DictConfig) -> DictConfig:
-    """The ``conf/<group>/<option>.yaml`` node, with ``${seed}`` resolved against ``cfg``."""
+    """The ``conf/<group>/<option>.yaml`` node, with ``${seed}`` and ``${paths.*}`` resolved
+    against ``cfg``."""
     from iplanner_torch.errors import ConfigError
 
     path = Path(CONF_DIR) / group / f"{option}.yaml"
     if not path.exists():
         raise ConfigError(f"no config option {group}={option} ({path})")
-    root = OmegaConf.create({"seed": cfg_scalar(cfg, "seed", int), "node": OmegaConf.load(path)})
+    paths = OmegaConf.to_container(cfg.paths, resolve=True) if "paths" in cfg else {}
+    root = OmegaConf.create(
+        {"seed": cfg_scalar(cfg, "seed", int), "paths": paths, "node": OmegaConf.load(path)}
+    )
     return root.node
 
 
@@ -218,6 +222,91 @@ def unused_overrides(overrides: list[str], train_data: str) -> list[str]:
     return unused
 
 
+#: Sweep aliases (conf/config.yaml) -> the episode settings they feed (conf/sim/default.yaml).
+ALIAS_PATHS = {
+    "tracker.noise": "sim.tracker_noise",
+    "tracker.dropout": "sim.tracker_dropout",
+    "human.speed": "sim.human.speed",
+}
+#: run.* keys -> the EpisodeCfg fields they feed.
+RUN_EPISODE_PATHS = {
+    "run.max_duration_s": "max_duration_s",
+    "run.stall_fallback_s": "stall_fallback_s",
+    "run.scene_hz": "scene_hz",
+}
+
+
+def replaced_overrides(overrides: list[str], exp_node: DictConfig | None) -> list[str]:
+    """Command-line overrides that a value of the run replaces, each with what to set instead.
+
+    Always: ``planner.kind`` and ``planner.predictor_variant`` (each episode sets them from
+    the planners list). With ``experiment=...``: ``run.planners``, ``run.seeds`` and
+    ``run.write_mcap`` (the experiment's own lists), the ``scenario`` group and
+    ``planner.confidence`` (the experiment's scenarios), ``human.speed`` / ``tracker.noise``
+    when the experiment lists speeds / noises, and any ``sim.*``, ``planner.*`` or
+    ``run.*`` episode setting (or its sweep alias) that ``experiment.episode`` sets.
+
+    Returns:
+        ``"run.seeds=[5] (set experiment.seeds)"`` lines; empty when none is replaced.
+    """
+    out = []
+    for override in overrides:
+        key = override.split("=", 1)[0].lstrip("+~")
+        head = key.split(".", 1)[0]
+        instead = None
+        if key in ("planner.kind", "planner.predictor_variant"):
+            instead = "choose planners with run.planners, experiment.planners or planner=<option>"
+        elif exp_node is None or head in ("experiment", "hydra") or "/" in key:
+            pass
+        elif key in ("run.planners", "run.seeds", "run.write_mcap"):
+            instead = f"set experiment.{key[4:]}"
+        elif head == "scenario":
+            instead = "the experiment's scenarios set it: edit experiment.scenarios"
+        elif key == "planner.confidence":
+            instead = "each of experiment.scenarios has its confidence"
+        else:
+            path = ALIAS_PATHS.get(key) or RUN_EPISODE_PATHS.get(key)
+            path = path or (key if head in ("sim", "planner") else None)
+            if path == "sim.human.speed" and exp_node.get("speeds"):
+                instead = "set experiment.speeds"
+            elif path == "sim.tracker_noise" and exp_node.get("noises"):
+                instead = "set experiment.noises"
+            elif (
+                path is not None
+                and exp_node.get("episode") is not None
+                and OmegaConf.select(exp_node.episode, path) is not None
+            ):
+                instead = f"set experiment.episode.{path}"
+        if instead:
+            out.append(f"{override} ({instead})")
+    return out
+
+
+def choose_planner(cfg: DictConfig, overrides: list[str]) -> None:
+    """Narrow the run to the planner the ``planner`` group option names (``planner=itomp``),
+    so that ``-m planner=itomp,iplanner_ni`` runs one planner per job.
+
+    Raises:
+        ConfigError: when the command line also lists the planners, differently.
+    """
+    from iplanner_torch.errors import ConfigError
+
+    chosen = [o.split("=", 1)[1] for o in overrides if o.split("=", 1)[0].lstrip("+") == "planner"]
+    if not chosen:
+        return
+    option = chosen[-1]
+    exp_node = cfg.get("experiment")
+    key = "experiment.planners" if exp_node is not None else "run.planners"
+    given = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") == key]
+    node = exp_node if exp_node is not None else cfg.run
+    if given and cfg_list(node, "planners", str) != [option]:
+        raise ConfigError(
+            f"planner={option} runs the {option} planner alone, but {given[-1]} lists "
+            "others: choose with one of them"
+        )
+    node.planners = [option]
+
+
 def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     """The :class:`~iplanner_torch.eval.experiment.ExperimentCfg` this run describes."""
     from dataclasses import replace
@@ -341,6 +430,16 @@ def _app(cfg: DictConfig) -> None:
             + "; train with other settings first (iplanner-train ... train.out_dir="
             "<paths.checkpoints>/<dataset folder>/<variant>), see the README"
         )
+    replaced = replaced_overrides(_task_overrides(), cfg.get("experiment"))
+    if replaced:
+        from iplanner_torch.errors import ConfigError
+
+        raise ConfigError(
+            "another setting of this run would replace "
+            f"{'this override' if len(replaced) == 1 else 'these overrides'}: "
+            f"{'; '.join(replaced)}"
+        )
+    choose_planner(cfg, _task_overrides())
     exp_node = cfg.get("experiment")
     planners = (
         cfg_list(exp_node, "planners", str)

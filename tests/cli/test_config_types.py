@@ -401,3 +401,66 @@ def test_a_checkpoint_trained_with_other_window_settings_is_named(tmp_path: Path
     assert checkpoint_differences(ckpt, cfg.data, given) == []
     ckpt.write_bytes(b"not a checkpoint")  # the loader reports this one
     assert checkpoint_differences(ckpt, cfg.data, given) == []
+
+
+def test_experiment_names_overrides_that_another_setting_replaces() -> None:
+    """With experiment=..., the experiment's lists, scenarios and episode settings replace the
+    main job's; planner.kind / predictor_variant are set per episode in every run."""
+    from hydra import compose, initialize_config_dir
+
+    from iplanner_torch.cli._common import CONF_DIR
+    from iplanner_torch.cli.experiment import replaced_overrides
+
+    def replaced(overrides: list[str]) -> list[str]:
+        with initialize_config_dir(version_base="1.3", config_dir=CONF_DIR):
+            cfg = compose("config", overrides=overrides)
+        return [
+            line.split(" (", 1)[0] for line in replaced_overrides(overrides, cfg.get("experiment"))
+        ]
+
+    main_job = ["run.seeds=[0,1]", "human.speed=fast", "planner.confidence=0.99",
+                "run.max_duration_s=5", "scenario=arrangement_2x2",
+                "tracker.noise=0.02"]  # fmt: skip
+    assert replaced(main_job) == []
+    assert replaced(["planner.kind=itomp", "planner.predictor_variant=ni"]) == [
+        "planner.kind=itomp",
+        "planner.predictor_variant=ni",
+    ]
+    speed = ["experiment=speed_response", "run.seeds=[5]", "run.planners=[itomp]",
+             "run.write_mcap=false", "human.speed=slow", "planner.confidence=0.5",
+             "scenario=arrangement_2x2", "run.max_duration_s=2",
+             "planner.optimizer.weights.human_lookahead_penalty=0", "sim.human.mode=tasks",
+             # not replaced: the experiment lists no noises and sets none of these
+             "tracker.noise=0.02", "planner.itomp_spread_mps=0.1", "sim.human.hold_s=0.3",
+             "run.stall_fallback_s=3", "experiment.seeds=[1]",
+             "hydra/launcher=joblib"]  # fmt: skip
+    assert replaced(speed) == speed[1:10]
+    table = ["experiment=table_simulation", "human.speed=slow", "run.max_duration_s=30"]
+    assert replaced(table) == ["run.max_duration_s=30"]  # the table lists no speeds
+
+
+def test_the_planner_group_option_narrows_the_run_to_that_planner() -> None:
+    from hydra import compose, initialize_config_dir
+
+    from iplanner_torch.cli._common import CONF_DIR
+    from iplanner_torch.cli.experiment import choose_planner
+
+    def planners(overrides: list[str]) -> list[str]:
+        with initialize_config_dir(version_base="1.3", config_dir=CONF_DIR):
+            cfg = compose("config", overrides=overrides)
+        choose_planner(cfg, overrides)
+        node = cfg.experiment if cfg.get("experiment") is not None else cfg.run
+        return list(node.planners)
+
+    assert planners([]) == ["itomp", "iplanner_no_ni", "iplanner_ni"]
+    assert planners(["planner=itomp"]) == ["itomp"]
+    assert planners(["planner=iplanner_no_ni", "run.planners=[iplanner_no_ni]"]) == [
+        "iplanner_no_ni"
+    ]
+    assert planners(["experiment=table_simulation", "planner=iplanner_ni"]) == ["iplanner_ni"]
+    with pytest.raises(ConfigError, match=r"planner=itomp runs the itomp planner alone, but "
+                       r"run\.planners=\[iplanner_ni\] lists others"):  # fmt: skip
+        planners(["planner=itomp", "run.planners=[iplanner_ni]"])
+    with pytest.raises(ConfigError, match=r"experiment\.planners=\[itomp,iplanner_ni\]"):
+        planners(["experiment=speed_response", "planner=itomp",
+                  "experiment.planners=[itomp,iplanner_ni]"])  # fmt: skip
