@@ -240,7 +240,8 @@ def replaced_overrides(overrides: list[str], exp_node: DictConfig | None) -> lis
     """Command-line overrides that a value of the run replaces, each with what to set instead.
 
     Always: ``planner.kind`` and ``planner.predictor_variant`` (each episode sets them from
-    the planners list). With ``experiment=...``: ``run.planners``, ``run.seeds`` and
+    the planners list), ``sim.human.mode`` (the scenario's kind) and ``planner.optimizer.seed``
+    (the episode's seed). With ``experiment=...``: ``run.planners``, ``run.seeds`` and
     ``run.write_mcap`` (the experiment's own lists), the ``scenario`` group and
     ``planner.confidence`` (the experiment's scenarios), ``human.speed`` / ``tracker.noise``
     when the experiment lists speeds / noises, and any ``sim.*``, ``planner.*`` or
@@ -256,6 +257,10 @@ def replaced_overrides(overrides: list[str], exp_node: DictConfig | None) -> lis
         instead = None
         if key in ("planner.kind", "planner.predictor_variant"):
             instead = "choose planners with run.planners, experiment.planners or planner=<option>"
+        elif key == "sim.human.mode":
+            instead = "the scenario's kind sets it: scenario.kind=tasks|blocking"
+        elif key == "planner.optimizer.seed":
+            instead = "each episode's seed replaces it: set run.seeds or experiment.seeds"
         elif exp_node is None or head in ("experiment", "hydra") or "/" in key:
             pass
         elif key in ("run.planners", "run.seeds", "run.write_mcap"):

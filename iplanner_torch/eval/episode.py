@@ -688,7 +688,11 @@ def _run_episode(
     human_cfg = replace(cfg.sim.human, mode="blocking" if blocking else "tasks")
     if use_prediction:
         check_predictor_rate(predictor, cfg.sim.tracker_fps)
-    window = _predictor_window(predictor, cfg.sim.tracker_window) if use_prediction else 15
+    window = (
+        _predictor_window(predictor, cfg.sim.tracker_window)
+        if use_prediction
+        else cfg.sim.tracker_window
+    )
     sim_cfg = replace(cfg.sim, human=human_cfg, tracker_window=window)
     motion = motion or ReachingMotionSource(seed, seat_x=scene.human_seat_x)
     order = None if blocking else parse_order(scenario.task_order, scene.block_ids)

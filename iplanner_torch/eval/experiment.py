@@ -27,7 +27,7 @@ from iplanner_torch.sim.tracker import MAX_NOISE_M
 class ExperimentCfg:
     """A grid of closed-loop episodes."""
 
-    # experiment name (result folder and table caption)
+    # experiment name (printed when the run starts)
     name: str = "table_simulation"
     # the robot and its base pose (a name: RobotCfg(name=...) with the robot's defaults;
     # None: the iiwa)

@@ -422,10 +422,9 @@ def test_experiment_names_overrides_that_another_setting_replaces() -> None:
                 "run.max_duration_s=5", "scenario=arrangement_2x2",
                 "tracker.noise=0.02"]  # fmt: skip
     assert replaced(main_job) == []
-    assert replaced(["planner.kind=itomp", "planner.predictor_variant=ni"]) == [
-        "planner.kind=itomp",
-        "planner.predictor_variant=ni",
-    ]
+    always = ["planner.kind=itomp", "planner.predictor_variant=ni", "sim.human.mode=blocking",
+              "planner.optimizer.seed=3"]  # fmt: skip
+    assert replaced(always) == always
     speed = ["experiment=speed_response", "run.seeds=[5]", "run.planners=[itomp]",
              "run.write_mcap=false", "human.speed=slow", "planner.confidence=0.5",
              "scenario=arrangement_2x2", "run.max_duration_s=2",

@@ -570,3 +570,21 @@ def test_an_unreachable_crossing_is_refused_before_the_episode(tmp_path: Path) -
         _fake_episode(tmp_path, cfg, "itomp", fakes.LinearReplanner())
     reach = replace(cfg, scenario=ScenarioCfg(name="b", kind="blocking"))  # the default points
     _fake_episode(tmp_path, reach, "itomp", fakes.LinearReplanner())
+
+
+def test_itomp_keeps_the_tracker_window_the_sim_config_gives(tmp_path: Path, monkeypatch) -> None:
+    """Without a predictor, the tracker keeps sim.tracker_window frames."""
+    import iplanner_torch.eval.episode as episode_module
+
+    windows = []
+    real = episode_module.Tracker
+
+    def recording(cfg, **kwargs):
+        windows.append(cfg.window)
+        return real(cfg, **kwargs)
+
+    monkeypatch.setattr(episode_module, "Tracker", recording)
+    cfg = _cfg(0.5)
+    cfg = replace(cfg, sim=replace(cfg.sim, tracker_window=4))
+    _fake_episode(tmp_path, cfg, "itomp", fakes.LinearReplanner())
+    assert windows == [4]
