@@ -552,15 +552,19 @@ def load_dataset(
     return load_demonstrations(path, fps=fps, joints=list(joints) if joints else None)
 
 
-def _overridden_generator_keys() -> set[str]:
-    """The ``data.generator`` fields this run's command line sets (none outside Hydra)."""
+def task_overrides() -> list[str]:
+    """This run's command-line overrides (none outside a Hydra run)."""
     from hydra.core.hydra_config import HydraConfig
 
     try:
-        overrides = list(HydraConfig.get().overrides.task)
-    except ValueError:  # HydraConfig not set: called outside a Hydra app
-        return set()
-    keys = (o.split("=", 1)[0].lstrip("+~") for o in overrides)
+        return list(HydraConfig.get().overrides.task)
+    except ValueError:  # HydraConfig not set: called outside a Hydra app (tests)
+        return []
+
+
+def _overridden_generator_keys() -> set[str]:
+    """The ``data.generator`` fields this run's command line sets (none outside Hydra)."""
+    keys = (o.split("=", 1)[0].lstrip("+~") for o in task_overrides())
     return {k.split(".")[2] for k in keys if k.startswith("data.generator.") and k.count(".") >= 2}
 
 

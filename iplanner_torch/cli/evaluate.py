@@ -11,10 +11,18 @@ Modes (``evaluate.mode``)::
         'evaluate.logs=[<runA>/results.csv,<runB>/results.csv]' \\
         'evaluate.labels=[held,spread]' evaluate.baseline=itomp@spread
 
-``prediction`` evaluates one checkpoint on the held-out demonstrations of ``data`` (the same
-split by demonstration as training); ``noise_sweep`` re-noises the held-out clean motion at
-each ``evaluate.noises`` level and replays it at each ``evaluate.speeds`` speed, for each
-predictor in ``evaluate.compare`` (trained when missing), and writes CSV, PNG plots and a
+``prediction`` evaluates one checkpoint on the held-out demonstrations of ``data``: those of
+the split by demonstration its training recorded in ``training_inputs.json`` beside it (its
+``seed`` and ``data.split``; a different ``seed`` or ``data.split`` on the command line is
+refused), or, for a checkpoint trained before that record, the split ``seed`` and
+``data.split`` draw now. The checkpoint defines the windows (``data.windows.n_prev``,
+``n_future``, ``stride``, ``feature_kinds``, ``progress_actions``; a different value on the
+command line is refused) and the predictor runs on ``device``. ``noise_sweep`` re-noises the
+held-out clean motion at each ``evaluate.noises`` level and replays it at each
+``evaluate.speeds`` speed, for each predictor in ``evaluate.compare``, read from
+``<paths.checkpoints>/<data folder>/<option>/predictor.ckpt`` (trained with
+``conf/predictor/<option>.yaml`` and ``trainer`` when missing; ``evaluate.checkpoint``,
+``train.out_dir`` and ``predictor`` are not read, and refused), and writes CSV, PNG plots and a
 README; ``episode`` summarises MCAP episode logs, or the episode rows of a results CSV (an
 experiment's ``results.csv``, or rows gathered from several runs), with one row per episode, a
 summary table and plots, and prints the table ``iplanner-experiment`` prints
@@ -31,7 +39,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
@@ -46,9 +54,24 @@ from iplanner_torch.cli._common import (
     print_help_if_asked,
     repo_path,
 )
+from iplanner_torch.cli._common import (
+    task_overrides as _task_overrides,
+)
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError
 
+if TYPE_CHECKING:
+    from iplanner_torch.eval.prediction import SplitRecord
+
 MODES = ("prediction", "noise_sweep", "episode")
+
+#: ``data.windows`` fields a checkpoint defines at evaluation (``joints``: :func:`_check_joints`)
+CHECKPOINT_WINDOW_KEYS = ("n_prev", "n_future", "stride", "feature_kinds", "progress_actions")
+
+
+def _given() -> dict[str, str]:
+    """The keys this run's command line sets, each with its override as typed
+    (``{"seed": "seed=1", "predictor": "predictor=iplanner_no_ni"}``)."""
+    return {o.split("=", 1)[0].lstrip("+~"): o for o in _task_overrides()}
 
 
 def _out_dir(cfg: DictConfig) -> Path:
@@ -102,28 +125,177 @@ def _check_joints(cfg: DictConfig, predictor: Any, ckpt: Path) -> None:
         )
 
 
-def _held_out(cfg: DictConfig) -> list:
-    from iplanner_torch.data.windows import split_by_demonstration
+def _check_windows(cfg: DictConfig, predictor: Any, ckpt: Path) -> None:
+    """Refuse a command-line ``data.windows`` value (:data:`CHECKPOINT_WINDOW_KEYS`) other than
+    the checkpoint's: evaluation cuts the held-out windows with the checkpoint's settings, so
+    ``data.windows.n_prev=10`` on a checkpoint trained with 15 would otherwise be ignored."""
+    from omegaconf import OmegaConf
+
+    saved_cfg = dict(predictor.window_cfg or {})
+    saved = {
+        "n_prev": predictor.n_prev,
+        "n_future": predictor.n_future,
+        "stride": saved_cfg.get("stride", 1),  # evaluate_prediction's default when absent
+        "feature_kinds": predictor.feature_kinds,
+    }
+    if "progress_actions" in saved_cfg:
+        saved["progress_actions"] = saved_cfg["progress_actions"]
+
+    def plain(value: Any) -> Any:
+        if OmegaConf.is_config(value):
+            value = OmegaConf.to_container(value)
+        return list(value) if isinstance(value, (list, tuple)) else value
+
+    given = _given()
+    differ = [
+        f"data.windows.{key}={plain(cfg.data.windows[key])} (checkpoint: {plain(saved[key])})"
+        for key in CHECKPOINT_WINDOW_KEYS
+        if f"data.windows.{key}" in given
+        and key in saved
+        and plain(cfg.data.windows[key]) != plain(saved[key])
+    ]
+    if differ:
+        raise ConfigError(
+            f"{'; '.join(differ)}: {ckpt} was trained with other window settings, and "
+            "evaluation cuts the held-out windows with the checkpoint's; leave "
+            f"{'it' if len(differ) == 1 else 'them'} out, or evaluate a checkpoint trained "
+            "with them (iplanner-train ... data.windows.<key>=<value>)"
+        )
+
+
+def _config_split(cfg: DictConfig) -> SplitRecord:
+    """The split ``seed`` and ``data.split`` describe."""
+    from iplanner_torch.eval.prediction import SplitRecord
+
+    seed = cfg_scalar(cfg, "seed", int)
+    try:
+        fractions = tuple(float(f) for f in cfg.data.get("split", (0.8, 0.1, 0.1)))
+        return SplitRecord(seed=seed, fractions=fractions)
+    except (ConfigError, TypeError, ValueError) as err:
+        raise ConfigError(f"data.split: {err}") from None
+
+
+def _evaluation_split(
+    cfg: DictConfig,
+    recorded: dict[Path, SplitRecord | None],
+    to_train: list[Path],
+    *,
+    seed_draws_noise: bool = False,
+) -> SplitRecord:
+    """The split whose held-out demonstrations are scored: the one the checkpoints' training
+    recorded, else (checkpoints from before the record) the one ``seed`` and ``data.split``
+    draw, which the checkpoints ``to_train`` will be trained on.
+
+    Args:
+        cfg: the root config.
+        recorded: checkpoint -> its :func:`~iplanner_torch.eval.prediction.recorded_split`
+            (None when it has none).
+        to_train: checkpoints still to train (with ``seed`` and ``data.split``).
+        seed_draws_noise: ``seed`` also draws something else (the noise sweep's noise), so a
+            ``seed`` other than the recorded split's is not refused: the recorded split is
+            scored and ``seed`` draws only the rest.
+
+    Raises:
+        ConfigError: when the checkpoints were trained on different splits, when the command
+            line sets ``seed`` or ``data.split`` otherwise than the recorded split, or when a
+            checkpoint to train would be trained on another split than the recorded one.
+    """
+    from iplanner_torch.eval.prediction import INPUTS_FILE
+
+    config = _config_split(cfg)
+    found = {ckpt: rec for ckpt, rec in recorded.items() if rec is not None}
+    if len({(r.seed, r.fractions) for r in found.values()}) > 1:
+        listed = "; ".join(f"{ckpt}: {rec.describe()}" for ckpt, rec in found.items())
+        raise ConfigError(
+            f"the compared checkpoints were trained on different splits ({listed}), so they "
+            "held out different demonstrations; retrain them on one split (delete their "
+            "folders and pass seed and data.split)"
+        )
+    if not found:
+        return config
+    ckpt, rec = next(iter(found.items()))
+    where = f"{ckpt} was trained on the split {rec.describe()} (recorded in "
+    where += f"{ckpt.parent / INPUTS_FILE})"
+    given = _given()
+    differ = [
+        given[key]
+        for key, same in (
+            ("seed", config.seed == rec.seed or (seed_draws_noise and not to_train)),
+            ("data.split", config.fractions == rec.fractions),
+        )
+        if key in given and not same
+    ]
+    if differ:
+        raise ConfigError(
+            f"{' '.join(differ)}: {where}, and evaluation scores the demonstrations that split "
+            f"held out; leave {' and '.join(d.split('=', 1)[0] for d in differ)} out, or "
+            f"evaluate a checkpoint trained with {' '.join(differ)}"
+        )
+    if to_train and (config.seed, config.fractions) != (rec.seed, rec.fractions):
+        missing = ", ".join(str(c) for c in to_train)
+        raise ConfigError(
+            f"{where}, but the missing {missing} would be trained on {config.describe()} and "
+            f"hold out other demonstrations; pass {rec.describe()} to train "
+            f"{'it' if len(to_train) == 1 else 'them'} on the same split"
+        )
+    return rec
+
+
+def _held_out(
+    cfg: DictConfig, split: SplitRecord, source: str, *, recorded: bool, generate: bool = False
+) -> list:
+    """The demonstrations of ``data`` that ``split`` holds out (announced with ``source``,
+    where the split comes from; ``recorded``: by the checkpoints' training).
+
+    Raises:
+        ConfigError: when the split holds none out.
+    """
+    from iplanner_torch.eval.prediction import held_out_demonstrations
 
     demos = load_dataset(
-        cfg.data, generate_if_missing=False, progress=cfg_scalar(cfg, "progress", bool)
+        cfg.data, generate_if_missing=generate, progress=cfg_scalar(cfg, "progress", bool)
     )
-    fractions = tuple(float(f) for f in cfg.data.get("split", (0.8, 0.1, 0.1)))
-    _, _, test = split_by_demonstration(demos, fractions, cfg_scalar(cfg, "seed", int))
+    test = held_out_demonstrations(demos, split)
     if not test:
-        raise ConfigError(f"data.split={list(fractions)} leaves no held-out demonstrations")
+        raise ConfigError(
+            f"{split.describe()} ({source}) leaves no held-out demonstrations of the "
+            f"{len(demos)} in {cfg.data.path}: "
+            + ("retrain with" if recorded else "give")
+            + " a larger test share, e.g. data.split=[0.6,0.2,0.2]"
+        )
+    print(f"held-out split: {split.describe()} ({source}): {len(test)} demonstration(s)")
     return test
 
 
+def _split_source(recorded: SplitRecord | None) -> str:
+    """Where the split comes from, for messages."""
+    from iplanner_torch.eval.prediction import INPUTS_FILE
+
+    if recorded is not None:
+        return f"recorded in {INPUTS_FILE} by the training"
+    return f"from seed and data.split: no {INPUTS_FILE} beside the checkpoint records its split"
+
+
+def _device(cfg: DictConfig) -> Any:
+    """The torch device ``device`` names (``auto``: CUDA when present)."""
+    from iplanner_torch.types import resolve_device
+
+    return resolve_device(str(cfg.get("device", "cpu")))
+
+
 def _prediction(cfg: DictConfig) -> None:
-    from iplanner_torch.eval.prediction import evaluate_prediction
+    from iplanner_torch.eval.prediction import evaluate_prediction, recorded_split
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
     ckpt = _checkpoint(repo_path(cfg.evaluate.checkpoint), cfg)
     out = _out_dir(cfg) / "prediction_metrics.json"
-    predictor = HumanMotionPredictor.load(ckpt)
+    predictor = HumanMotionPredictor.load(ckpt, map_location=_device(cfg))
     _check_joints(cfg, predictor, ckpt)
-    metrics = evaluate_prediction(predictor, _held_out(cfg))
+    _check_windows(cfg, predictor, ckpt)
+    record = recorded_split(ckpt, predictor.fingerprint)
+    split = _evaluation_split(cfg, {ckpt: record}, [])
+    held_out = _held_out(cfg, split, _split_source(record), recorded=record is not None)
+    metrics = evaluate_prediction(predictor, held_out)
     out.write_text(json.dumps(metrics, indent=2, default=float))
     print(f"{ckpt} on held-out demonstrations of {cfg.data.path}:")
     for key, value in metrics.items():
@@ -131,36 +303,80 @@ def _prediction(cfg: DictConfig) -> None:
     print(f"wrote {out}")
 
 
+def _refuse_unread_sweep_overrides(cfg: DictConfig) -> None:
+    """Refuse command-line keys ``noise_sweep`` does not read: ``evaluate.checkpoint``,
+    ``train.out_dir`` and the ``predictor`` group and its keys (its checkpoints come from
+    ``paths.checkpoints`` and ``evaluate.compare``)."""
+    unread = [
+        override
+        for key, override in _given().items()
+        if key in ("evaluate.checkpoint", "train.out_dir")
+        or key.split(".", 1)[0].split("@", 1)[0] == "predictor"
+    ]
+    if unread:
+        folder = Path(str(cfg.paths.checkpoints)) / Path(str(cfg.data.path)).name
+        raise ConfigError(
+            f"evaluate.mode=noise_sweep does not read {' '.join(unread)}: it compares "
+            f"<paths.checkpoints>/<data folder>/<option>/predictor.ckpt for each option of "
+            f"evaluate.compare (here {folder}/{{{','.join(str(o) for o in cfg.evaluate.compare)}"
+            "}), training a missing one with conf/predictor/<option>.yaml; choose them with "
+            "evaluate.compare and paths.checkpoints, or score one checkpoint with "
+            "evaluate.mode=prediction evaluate.checkpoint=<file>"
+        )
+
+
 def _noise_sweep(cfg: DictConfig) -> None:
     from iplanner_torch.cli.experiment import option_node
     from iplanner_torch.cli.train import train_from_config
+    from iplanner_torch.eval.prediction import recorded_split
     from iplanner_torch.eval.prediction_sweep import prediction_vs_noise, write_noise_report
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
+    _refuse_unread_sweep_overrides(cfg)
     report_dir = _out_dir(cfg)
-    predictors = {}
-    for option in cfg.evaluate.compare:
-        out_dir = repo_path(Path(cfg.paths.checkpoints) / Path(cfg.data.path).name / str(option))
-        ckpt = out_dir / "predictor.ckpt"
-        if not ckpt.exists():
-            print(f"training missing predictor {option} ...", flush=True)
-            train_from_config(
-                cfg,
-                option_node("predictor", str(option), cfg),
-                out_dir,
-                trainer_node=cfg.trainer,
-            )
-        predictors[str(option)] = HumanMotionPredictor.load(ckpt)
-        _check_joints(cfg, predictors[str(option)], ckpt)
+    device = _device(cfg)
+    folder = Path(cfg.paths.checkpoints) / Path(cfg.data.path).name
+    ckpts = {str(o): repo_path(folder / str(o)) / "predictor.ckpt" for o in cfg.evaluate.compare}
+    for ckpt in ckpts.values():
+        if ckpt.is_dir():
+            raise CheckpointError(f"{ckpt}: is a folder, not a checkpoint file")
+    missing = [option for option, ckpt in ckpts.items() if not ckpt.exists()]
+    # the trained ones first: their windows and split are checked before anything is trained
+    loaded, recorded = {}, {}
+    for option, ckpt in ckpts.items():
+        if option not in missing:
+            loaded[option] = HumanMotionPredictor.load(ckpt, map_location=device)
+            _check_joints(cfg, loaded[option], ckpt)
+            _check_windows(cfg, loaded[option], ckpt)
+            recorded[ckpt] = recorded_split(ckpt, loaded[option].fingerprint)
+    split = _evaluation_split(cfg, recorded, [ckpts[o] for o in missing], seed_draws_noise=True)
+    record = next((r for r in recorded.values() if r is not None), None)
+    source = _split_source(record)
+    if missing:
+        source = f"from seed and data.split, which {', '.join(missing)} will be trained on"
+    held_out = _held_out(
+        cfg, split, source, recorded=record is not None and not missing, generate=bool(missing)
+    )
+    for option in missing:
+        print(f"training missing predictor {option} ...", flush=True)
+        train_from_config(
+            cfg,
+            option_node("predictor", option, cfg),
+            ckpts[option].parent,
+            trainer_node=cfg.trainer,
+        )
+        loaded[option] = HumanMotionPredictor.load(ckpts[option], map_location=device)
+        _check_joints(cfg, loaded[option], ckpts[option])
+    predictors = {option: loaded[option] for option in ckpts}  # in evaluate.compare's order
     df = prediction_vs_noise(
         predictors,
-        _held_out(cfg),
+        held_out,
         noises=cfg_list(cfg.evaluate, "noises", float),
         speeds=[str(s) for s in cfg.evaluate.speeds],
         seed=cfg_scalar(cfg, "seed", int),
         progress=cfg_scalar(cfg, "progress", bool),
     )
-    command = "iplanner-evaluate " + " ".join(HydraConfig.get().overrides.task)
+    command = " ".join(["iplanner-evaluate", *_task_overrides()])
     written = write_noise_report(df, report_dir, command=command)
     print(df.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     print("wrote " + ", ".join(str(p) for p in written))

@@ -46,6 +46,9 @@ from iplanner_torch.cli._common import (
     print_help_if_asked,
     repo_path,
 )
+from iplanner_torch.cli._common import (
+    task_overrides as _task_overrides,
+)
 from iplanner_torch.types import resolve_device
 
 #: predictor variant of a planner (see eval.episode.PLANNER_KINDS) -> conf/predictor option
@@ -189,14 +192,6 @@ def _overridden_window_keys() -> set[str]:
     """The ``data.windows`` fields this run's command line sets."""
     keys = (o.split("=", 1)[0].lstrip("+~") for o in _task_overrides())
     return {k.split(".")[2] for k in keys if k.startswith("data.windows.") and k.count(".") >= 2}
-
-
-def _task_overrides() -> list[str]:
-    """This run's command-line overrides (none outside a Hydra run)."""
-    try:
-        return list(HydraConfig.get().overrides.task)
-    except ValueError:  # HydraConfig not set: built outside a Hydra app (tests)
-        return []
 
 
 def unused_overrides(overrides: list[str], train_data: str) -> list[str]:

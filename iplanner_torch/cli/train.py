@@ -9,8 +9,10 @@ Examples::
 
 Writes ``<train.out_dir>/predictor.ckpt`` (default ``checkpoints/<dataset>/<predictor>/``), the
 sub-models' Lightning checkpoints, CSV / TensorBoard logs and ``training_inputs.json`` (what
-they were trained on; a resume on other data or settings is refused), then prints held-out
-metrics.
+they were trained on: data, predictor, window and trainer settings, and the split by
+demonstration, ``seed`` and ``data.split``, with the names of the held-out demonstrations,
+which ``iplanner-evaluate`` scores; a resume on other data or settings is refused), then
+prints held-out metrics.
 """
 
 from __future__ import annotations
@@ -53,7 +55,7 @@ def train_from_config(
     """
     data_node = cfg.data if data_node is None else data_node
     from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
-    from iplanner_torch.eval.prediction import evaluate_prediction
+    from iplanner_torch.eval.prediction import SplitRecord, evaluate_prediction
     from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
     from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
@@ -64,7 +66,10 @@ def train_from_config(
         data_node, generate_if_missing=True, progress=cfg_scalar(cfg, "progress", bool)
     )
     fractions = tuple(float(f) for f in data_node.get("split", (0.8, 0.1, 0.1)))
-    train, val, test = split_by_demonstration(demos, fractions, cfg_scalar(cfg, "seed", int))
+    seed = cfg_scalar(cfg, "seed", int)
+    train, val, test = split_by_demonstration(demos, fractions, seed)
+    # recorded beside the checkpoint: iplanner-evaluate scores the same held-out demonstrations
+    split = SplitRecord(seed=seed, fractions=fractions, held_out=tuple(d.name for d in test))
     train_w = build_windows(train, window_cfg)
     val_w = build_windows(val, window_cfg) if val else None
     t0 = time.perf_counter()
@@ -75,6 +80,7 @@ def train_from_config(
         out_dir=out_dir,
         progress=cfg_scalar(cfg, "progress", bool),
         resume=cfg_scalar(cfg.train, "resume", bool),
+        split=split,
     )
     seconds = time.perf_counter() - t0
     metrics: dict = {"train_seconds": seconds, "train_windows": len(train_w)}

@@ -15,26 +15,145 @@ Metrics, per held-out window (averaged over windows unless stated):
 * ``coverage90/95/99``: share of held-out future joint positions inside the 90/95/99 %
   ellipsoids of the *top action's* Gaussian (diagonal covariance; squared Mahalanobis distance
   against the chi-square quantile with 3 degrees of freedom).
+
+The held-out demonstrations are those the predictor's training left out: training records its
+split (:class:`SplitRecord`) in ``training_inputs.json`` beside the checkpoint
+(:func:`recorded_split`), and :func:`held_out_demonstrations` draws the same split again.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import torch
 from scipy.stats import chi2
 
 from iplanner_torch.data.demonstration import Demonstration
-from iplanner_torch.data.windows import WindowCfg, WindowSet, build_windows
-from iplanner_torch.errors import DataError, DataWarning
+from iplanner_torch.data.windows import (
+    WindowCfg,
+    WindowSet,
+    build_windows,
+    split_by_demonstration,
+)
+from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.eval.metrics import modified_hausdorff_batch as modified_hausdorff
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import check_shape
 
 COVERAGE_LEVELS = (0.90, 0.95, 0.99)
+
+#: the file beside a trained ``predictor.ckpt`` that records what its sub-models were trained
+#: on (written by :func:`iplanner_torch.prediction.training.train_predictor`; defined here so
+#: that reading it does not load Lightning)
+INPUTS_FILE = "training_inputs.json"
+
+
+@dataclass(frozen=True, kw_only=True)
+class SplitRecord:
+    """How a training run split its demonstrations (:func:`split_by_demonstration`), recorded
+    with its checkpoint so that evaluation scores the demonstrations training held out."""
+
+    # shuffling seed of split_by_demonstration.
+    seed: int
+    # (train, val, test) shares of the demonstrations.
+    fractions: tuple[float, float, float]
+    # names of the test (held-out) demonstrations; empty: not recorded.
+    held_out: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        fr = tuple(float(f) for f in self.fractions)
+        object.__setattr__(self, "fractions", fr)
+        object.__setattr__(self, "held_out", tuple(str(n) for n in self.held_out))
+        if len(fr) != 3 or any(not f >= 0 for f in fr) or not math.isclose(sum(fr), 1.0):
+            raise ConfigError(
+                f"fractions: expected 3 non-negative shares (train, val, test) summing to 1, "
+                f"got {list(fr)}"
+            )
+
+    def describe(self) -> str:
+        """``seed=1 data.split=[0.6,0.2,0.2]``: the command-line settings that draw this split."""
+        return f"seed={self.seed} data.split=[{','.join(f'{f:g}' for f in self.fractions)}]"
+
+
+def recorded_split(ckpt: str | Path, fingerprint: str) -> SplitRecord | None:
+    """The split recorded in :data:`INPUTS_FILE` beside ``ckpt``, when that file records the
+    training of this checkpoint (the same training-data ``fingerprint``).
+
+    Args:
+        ckpt: a ``predictor.ckpt``.
+        fingerprint: the checkpoint's ``HumanMotionPredictor.fingerprint``.
+
+    Returns:
+        The record, or None when there is none for this checkpoint: trained before the split
+        was recorded, copied away from its training folder, or the folder was trained anew
+        since (its record then names other training data).
+
+    Warns:
+        DataWarning: when the file is there but cannot be read.
+    """
+    path = Path(ckpt).parent / INPUTS_FILE
+    if not fingerprint or not path.is_file():
+        return None
+    try:
+        inputs = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(inputs, dict) or inputs.get("fingerprint") != fingerprint:
+            return None
+        split = inputs.get("split")
+        if split is None:
+            return None
+        return SplitRecord(
+            seed=int(split["seed"]),
+            fractions=tuple(split["fractions"]),
+            held_out=tuple(split.get("held_out", ())),
+        )
+    except (OSError, ValueError, TypeError, KeyError, AttributeError) as err:
+        warnings.warn(
+            f"cannot read the held-out split of {ckpt} from {path} ({type(err).__name__}: "
+            f"{err}); the split is drawn from seed and data.split",
+            DataWarning,
+            stacklevel=2,
+        )
+        return None
+
+
+def held_out_demonstrations(
+    demos: Sequence[Demonstration], split: SplitRecord
+) -> list[Demonstration]:
+    """The test demonstrations of ``split`` among ``demos`` (drawn again with its seed and
+    fractions).
+
+    Args:
+        demos: the dataset's demonstrations.
+        split: how training split them.
+
+    Returns:
+        The held-out demonstrations, in the input order.
+
+    Warns:
+        DataWarning: when the split records the names of its held-out demonstrations and the
+            ones drawn now are others: ``demos`` is not the dataset the predictor was trained
+            on (or it was generated anew), so the metrics may include training demonstrations.
+    """
+    _, _, test = split_by_demonstration(demos, split.fractions, split.seed)
+    names = sorted(d.name for d in test)
+    if split.held_out and names != sorted(split.held_out):
+        unknown = sorted(set(names) - set(split.held_out))
+        warnings.warn(
+            f"{split.describe()} holds out {len(test)} demonstration(s) of this data, "
+            f"{len(unknown)} of them not among the {len(split.held_out)} the predictor's "
+            f"training held out{f' (e.g. {unknown[:3]})' if unknown else ''}: this is not the "
+            "dataset it was trained on, or it was generated anew; the metrics may include "
+            "demonstrations it was trained on, or leave out some it was not",
+            DataWarning,
+            stacklevel=2,
+        )
+    return test
 
 
 def window_metrics(fc: Forecast, xi_true: torch.Tensor, current: torch.Tensor) -> dict[str, Any]:

@@ -10,7 +10,11 @@
 * :func:`train_predictor` trains everything, writes a Lightning ``.ckpt`` per sub-model
   (``classifier.ckpt``, ``gp_p{p}_c{c}.ckpt``, ``gp_pooled_c{c}.ckpt``) and the combined
   ``predictor.ckpt`` (loadable by :meth:`HumanMotionPredictor.load`), with CSV and TensorBoard
-  logs under ``out_dir``. ``resume=True`` reuses sub-model checkpoints already written.
+  logs under ``out_dir``, and ``training_inputs.json``: what the sub-models were trained on
+  (data fingerprint, actions, joints, predictor, window and trainer settings, and the
+  demonstration split when the caller gives it, which evaluation reads to score the same
+  held-out demonstrations). ``resume=True`` reuses sub-model checkpoints already written, after
+  checking that record.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from tqdm.auto import tqdm
 
 from iplanner_torch.data.windows import WindowSet
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
+from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord
 from iplanner_torch.prediction.predictor import (
     HumanMotionPredictor,
     PredictorCfg,
@@ -42,6 +47,7 @@ __all__ = [
     "PredictorCfg",
     "SVGPCfg",
     "SVGPModule",
+    "SplitRecord",
     "TrainerCfg",
     "train_predictor",
 ]
@@ -421,6 +427,7 @@ def train_predictor(
     out_dir: str | Path,
     progress: bool = True,
     resume: bool = False,
+    split: SplitRecord | None = None,
 ) -> Path:
     """Train the classifier, the next-action model and all GPs; write ``predictor.ckpt``.
 
@@ -433,7 +440,10 @@ def train_predictor(
         progress: progress bars.
         resume: skip sub-models whose checkpoint already exists in ``out_dir``, after
             checking that ``out_dir / training_inputs.json`` records the same training data
-            (fingerprint), actions, joints and settings.
+            (fingerprint), actions, joints and settings (predictor, window, trainer, split).
+        split: how the demonstrations behind ``data`` were split, recorded in
+            ``training_inputs.json`` so that evaluation scores the ones held out
+            (:func:`iplanner_torch.eval.prediction.recorded_split`); None: not recorded.
 
     Returns:
         The path of ``predictor.ckpt``.
@@ -457,7 +467,7 @@ def train_predictor(
     feat_std = train.f_prev.reshape(-1, d).std(0).clamp_min(1e-6)
     progress_actions = train.cfg.progress_indices(train.action_names)
     fingerprint = dataset_fingerprint(train.f_prev, train.xi_next, train.current)
-    _record_inputs(out_dir, fingerprint, train, cfg, resume)
+    _record_inputs(out_dir, fingerprint, train, cfg, trainer_cfg, split, resume)
 
     groups: dict[tuple[int, int], torch.Tensor] = {}
     for p in torch.unique(train.progress).tolist():
@@ -562,16 +572,26 @@ def train_predictor(
     return predictor.save(out_dir / "predictor.ckpt")
 
 
-#: the file in a training folder that records what its sub-models were trained on
-INPUTS_FILE = "training_inputs.json"
+#: the trainer settings that shape the fitted sub-models, compared on resume (accelerator,
+#: devices, log_every_n_steps and tensorboard change where they are computed and what is
+#: logged, not what is fitted)
+RESUME_TRAINER_FIELDS = ("max_epochs", "max_steps", "seed")
 
 
 def _record_inputs(
-    out_dir: Path, fingerprint: str, train: WindowSet, cfg: PredictorCfg, resume: bool
+    out_dir: Path,
+    fingerprint: str,
+    train: WindowSet,
+    cfg: PredictorCfg,
+    tcfg: TrainerCfg,
+    split: SplitRecord | None,
+    resume: bool,
 ) -> None:
-    """Write ``out_dir / INPUTS_FILE`` (training data fingerprint, action names, predictor and
-    window settings). With ``resume``, first compare it with the file already there: sub-models
-    trained on other data or settings must not be mixed into this predictor.
+    """Write ``out_dir / INPUTS_FILE`` (training data fingerprint, action names, predictor,
+    window and trainer settings, and the split when given). With ``resume``, first compare it
+    with the file already there: sub-models trained on other data or settings must not be mixed
+    into this predictor. The trainer settings (:data:`RESUME_TRAINER_FIELDS`) and the split
+    (seed, fractions) are compared only where the file records them (it did not always).
 
     Raises:
         CheckpointError: (``resume``) when the recorded inputs differ, naming what differs.
@@ -584,6 +604,8 @@ def _record_inputs(
                 "joint_names": list(train.joint_names),
                 "predictor_cfg": asdict(cfg),
                 "window_cfg": asdict(train.cfg),
+                "trainer_cfg": asdict(tcfg),
+                **({} if split is None else {"split": asdict(split)}),
             },
             default=str,
         )
@@ -597,12 +619,24 @@ def _record_inputs(
                 f"cannot resume in {out_dir}: {path.name} is unreadable ({err}); "
                 "run with train.resume=false"
             ) from err
-        changed = sorted(k for k in inputs if before.get(k) != inputs[k])
+        always = ("fingerprint", "action_names", "joint_names", "predictor_cfg", "window_cfg")
+        changed = sorted(k for k in always if before.get(k) != inputs[k])
+        for key, fields in (
+            ("trainer_cfg", RESUME_TRAINER_FIELDS),
+            ("split", ("seed", "fractions")),
+        ):
+            was, now = before.get(key), inputs.get(key)
+            if not isinstance(was, dict) or now is None:  # not recorded then, or not given now
+                continue
+            differ = [f"{f} {was.get(f)!r} -> {now[f]!r}" for f in fields if was.get(f) != now[f]]
+            if differ:
+                changed.append(f"{key} ({', '.join(differ)})")
         if changed:
+            values = " (recorded -> now)" if any("->" in c for c in changed) else ""
             raise CheckpointError(
                 f"cannot resume in {out_dir}: its sub-models were trained with other "
-                f"{', '.join(changed)} than this run's; choose another train.out_dir or run "
-                "with train.resume=false"
+                f"{', '.join(changed)} than this run's{values}; choose another train.out_dir "
+                "or run with train.resume=false"
             )
     elif resume and any(out_dir.glob("*.ckpt")):
         warnings.warn(

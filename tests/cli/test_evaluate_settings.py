@@ -1,0 +1,286 @@
+"""``iplanner-evaluate`` uses what it is given or refuses it: the split a checkpoint's training
+recorded, the checkpoint's windows, ``device``; ``noise_sweep`` refuses the keys it does not
+read, and an empty held-out split, before it trains anything."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from omegaconf import DictConfig
+
+import iplanner_torch.cli.evaluate as evaluate
+import iplanner_torch.cli.train as cli_train
+import iplanner_torch.eval.prediction as eval_prediction
+from iplanner_torch.cli._common import CONF_DIR
+from iplanner_torch.data.io import load_demonstrations
+from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
+from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
+from iplanner_torch.errors import ConfigError, DataWarning
+from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord, held_out_demonstrations
+from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
+from iplanner_torch.prediction.svgp import SVGPCfg
+from iplanner_torch.prediction.training import TrainerCfg, train_predictor
+
+FRACTIONS = (0.6, 0.2, 0.2)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
+    """A tiny predictor trained on 10 generated reaching demonstrations split with seed 1 and
+    (0.6, 0.2, 0.2), windows n_prev 6, n_future 8, stride 2, with its training record."""
+    root = tmp_path_factory.mktemp("trained")
+    ds = root / "ds"
+    generate_reaching_dataset(ReachingCfg(n_targets=2, reaches_per_target=5), ds, progress=False)
+    train, val, test = split_by_demonstration(load_demonstrations(ds), FRACTIONS, 1)
+    wc = WindowCfg(n_prev=6, n_future=8, stride=2, joints=("torso", "left_hand", "right_hand"))
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        ckpt = train_predictor(
+            (build_windows(train, wc), build_windows(val, wc)),
+            predictor_cfg=PredictorCfg(
+                svgp=SVGPCfg(num_inducing=16, epochs=2, max_steps=12),
+                classifier_kernel="rbf",
+                ivm_max_import=6,
+                ivm_candidates=8,
+                min_group_size=10,
+            ),
+            trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False),
+            out_dir=root / "ck" / "ds" / "iplanner_ni",
+            progress=False,
+            split=SplitRecord(seed=1, fractions=FRACTIONS, held_out=[d.name for d in test]),
+        )
+    finally:
+        torch.set_num_threads(threads)
+    return SimpleNamespace(ds=ds, ckpt=ckpt, held_out=[d.name for d in test])
+
+
+@pytest.fixture(autouse=True)
+def _hydra() -> Any:
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        yield
+    GlobalHydra.instance().clear()
+
+
+def _cfg(monkeypatch: pytest.MonkeyPatch, *overrides: str) -> DictConfig:
+    """The config of ``iplanner-evaluate <overrides>``, with the overrides as its command line."""
+    monkeypatch.setattr(evaluate, "_task_overrides", lambda: list(overrides))
+    return compose(config_name="config", overrides=["progress=false", *overrides])
+
+
+@pytest.fixture
+def scored(monkeypatch: pytest.MonkeyPatch) -> list[SimpleNamespace]:
+    """What ``evaluate_prediction`` is called with (it returns a stub)."""
+    calls: list[SimpleNamespace] = []
+
+    def fake(predictor: Any, demos: Any, **kwargs: Any) -> dict[str, float]:
+        calls.append(SimpleNamespace(predictor=predictor, names=sorted(d.name for d in demos)))
+        return {"n_windows": 1.0}
+
+    monkeypatch.setattr(eval_prediction, "evaluate_prediction", fake)
+    return calls
+
+
+def _prediction_args(trained: SimpleNamespace, out: Path, ckpt: Path | None = None) -> list[str]:
+    return [f"data.path={trained.ds}", f"evaluate.checkpoint={ckpt or trained.ckpt}",
+            f"evaluate.out_dir={out}"]  # fmt: skip
+
+
+def test_prediction_scores_the_split_its_checkpoint_recorded(
+    trained: SimpleNamespace, scored: list, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture,
+) -> None:  # fmt: skip
+    """Trained with seed 1, evaluated with the default seed 0: the recorded split is scored
+    (seed 0 would score training demonstrations); a checkpoint without its record (copied
+    away, or its folder trained anew since) keeps drawing the split from seed and data.split."""
+    seed0 = sorted(d.name for d in split_by_demonstration(
+        load_demonstrations(trained.ds), FRACTIONS, 0)[2])  # fmt: skip
+    assert seed0 != sorted(trained.held_out)
+    split = "data.split=[0.6,0.2,0.2]"
+    for given in ([], ["seed=1"], [split], ["seed=1", split]):
+        evaluate._prediction(_cfg(monkeypatch, *_prediction_args(trained, tmp_path), *given))
+        assert scored[-1].names == sorted(trained.held_out), given
+    assert (
+        "held-out split: seed=1 data.split=[0.6,0.2,0.2] (recorded in" in capsys.readouterr().out
+    )
+    # the record must name this checkpoint's training data
+    other = tmp_path / "other"
+    shutil.copytree(trained.ckpt.parent, other)
+    inputs = json.loads((other / INPUTS_FILE).read_text())
+    (other / INPUTS_FILE).write_text(json.dumps({**inputs, "fingerprint": "retrained"}))
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    shutil.copy(trained.ckpt, alone / "predictor.ckpt")
+    for ckpt in (other / "predictor.ckpt", alone / "predictor.ckpt"):
+        args = _prediction_args(trained, tmp_path, ckpt)
+        evaluate._prediction(_cfg(monkeypatch, *args, split))
+        assert scored[-1].names == seed0, ckpt
+        assert "no training_inputs.json beside the checkpoint" in capsys.readouterr().out
+        empty = r"seed=0 data.split=\[0.8,0.1,0.1\] \(from seed and data.split.*leaves no held-out"
+        with pytest.raises(ConfigError, match=empty):
+            evaluate._prediction(_cfg(monkeypatch, *args))
+
+
+def test_prediction_refuses_another_split_on_the_command_line(
+    trained: SimpleNamespace, scored: list, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    args = _prediction_args(trained, tmp_path)
+    recorded = (rf"{trained.ckpt} was trained on the split seed=1 data.split=\[0.6,0.2,0.2\] "
+                rf"\(recorded in {trained.ckpt.parent / INPUTS_FILE}\)")  # fmt: skip
+    with pytest.raises(ConfigError, match=rf"^seed=0: {recorded}.*leave seed out"):
+        evaluate._prediction(_cfg(monkeypatch, *args, "seed=0"))
+    with pytest.raises(ConfigError, match=rf"^data.split=\[0.2,0.2,0.6\]: {recorded}"):
+        evaluate._prediction(_cfg(monkeypatch, *args, "data.split=[0.2,0.2,0.6]"))
+    assert not scored
+
+
+def test_prediction_refuses_window_settings_other_than_the_checkpoints(
+    trained: SimpleNamespace, scored: list, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The checkpoint (n_prev 6, n_future 8, stride 2, three feature kinds) defines the
+    windows; a command-line value it does not have is named with the checkpoint's."""
+    args = _prediction_args(trained, tmp_path)
+    for given, text in (
+        ("data.windows.n_prev=15", r"data.windows.n_prev=15 \(checkpoint: 6\)"),
+        ("data.windows.n_future=4", r"data.windows.n_future=4 \(checkpoint: 8\)"),
+        ("data.windows.stride=1", r"data.windows.stride=1 \(checkpoint: 2\)"),
+        ("data.windows.feature_kinds=[position]",
+         r"data.windows.feature_kinds=\['position'\] \(checkpoint: \['position', 'velocity', "
+         r"'acceleration'\]\)"),
+    ):  # fmt: skip
+        with pytest.raises(ConfigError, match=rf"^{text}: .*predictor.ckpt was trained with "
+                           "other window settings.*leave it out"):  # fmt: skip
+            evaluate._prediction(_cfg(monkeypatch, *args, given))
+    assert not scored
+    same = ("data.windows.n_prev=6", "data.windows.n_future=8", "data.windows.stride=2")
+    evaluate._prediction(_cfg(monkeypatch, *args, *same))
+    assert scored[-1].names == sorted(trained.held_out)
+
+
+def test_prediction_loads_the_predictor_on_device(
+    trained: SimpleNamespace, scored: list, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    device: torch.device,
+) -> None:  # fmt: skip
+    asked: list[Any] = []
+    load = HumanMotionPredictor.load
+
+    def spy(path: Any, map_location: Any = None, **kwargs: Any) -> HumanMotionPredictor:
+        asked.append(map_location)
+        return load(path, map_location=map_location, **kwargs)
+
+    monkeypatch.setattr(HumanMotionPredictor, "load", spy)
+    evaluate._prediction(_cfg(monkeypatch, *_prediction_args(trained, tmp_path),
+                              f"device={device.type}"))  # fmt: skip
+    assert asked == [device] and scored[-1].predictor.device.type == device.type
+
+
+@pytest.fixture
+def no_training(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Training fails the test."""
+
+    def refuse(*args: Any, **kwargs: Any) -> None:
+        raise AssertionError("trained before the refusal")
+
+    monkeypatch.setattr(cli_train, "train_from_config", refuse)
+
+
+def _sweep_args(trained: SimpleNamespace, tmp_path: Path) -> list[str]:
+    return [
+        "evaluate.mode=noise_sweep",
+        f"data.path={trained.ds}",
+        f"paths.checkpoints={tmp_path / 'ck'}",
+        f"evaluate.out_dir={tmp_path / 'out'}",
+    ]
+
+
+def test_noise_sweep_refuses_the_keys_it_does_not_read(
+    trained: SimpleNamespace, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_training: None
+) -> None:
+    sweep = _sweep_args(trained, tmp_path)
+    for given in ("predictor=iplanner_no_ni", "predictor.min_group_size=3",
+                  f"evaluate.checkpoint={trained.ckpt}", f"train.out_dir={tmp_path}"):  # fmt: skip
+        with pytest.raises(ConfigError, match=rf"^evaluate.mode=noise_sweep does not read "
+                           rf"{given}: it compares <paths.checkpoints>/<data folder>/<option>/"
+                           rf"predictor.ckpt for each option of evaluate.compare \(here "
+                           rf"{tmp_path / 'ck' / 'ds'}/{{iplanner_no_ni,iplanner_ni}}\).*"
+                           "evaluate.mode=prediction evaluate.checkpoint=<file>$"):  # fmt: skip
+            evaluate._noise_sweep(_cfg(monkeypatch, *sweep, given))
+    assert not (tmp_path / "ck").exists()
+
+
+def test_noise_sweep_checks_the_split_and_windows_before_training(
+    trained: SimpleNamespace, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_training: None
+) -> None:
+    """An empty held-out split, a missing checkpoint that would hold out other demonstrations
+    than a trained one, and window settings a trained one does not have are refused before
+    the missing checkpoint is trained."""
+    sweep = _sweep_args(trained, tmp_path)
+    with pytest.raises(ConfigError, match=r"^seed=0 data.split=\[0.8,0.1,0.1\] \(from seed and "
+                       r"data.split, which iplanner_no_ni, iplanner_ni will be trained on\) "
+                       r"leaves no held-out demonstrations of the 10"):  # fmt: skip
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
+    shutil.copytree(trained.ckpt.parent, tmp_path / "ck" / "ds" / "iplanner_ni")
+    with pytest.raises(ConfigError, match=r"iplanner_ni/predictor.ckpt was trained on the split "
+                       r"seed=1 data.split=\[0.6,0.2,0.2\] .* but the missing .*iplanner_no_ni/"
+                       r"predictor.ckpt would be trained on seed=0 data.split=\[0.8,0.1,0.1\].*"
+                       r"pass seed=1 data.split=\[0.6,0.2,0.2\]"):  # fmt: skip
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
+    with pytest.raises(ConfigError, match=r"^data.windows.n_prev=15 \(checkpoint: 6\)"):
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "data.windows.n_prev=15"))
+    with pytest.raises(AssertionError, match="trained before the refusal"):  # now it may train
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "seed=1", "data.split=[0.6,0.2,0.2]"))
+
+
+def test_held_out_demonstrations_warn_on_other_data(trained: SimpleNamespace) -> None:
+    demos = load_demonstrations(trained.ds)
+    split = SplitRecord(seed=1, fractions=FRACTIONS, held_out=["reach_t0_r00_v1", "elsewhere"])
+    with pytest.warns(DataWarning, match=r"seed=1 data.split=\[0.6,0.2,0.2\] holds out 2 "
+                      r"demonstration\(s\) of this data, 2 of them not among the 2"):  # fmt: skip
+        assert len(held_out_demonstrations(demos, split)) == 2
+    with pytest.raises(ConfigError, match=r"fractions: expected 3 non-negative shares"):
+        SplitRecord(seed=0, fractions=(0.5, 0.5))
+
+
+def test_the_refusal_is_one_line_with_exit_code_2(tmp_path: Path) -> None:
+    """The command line's overrides reach the check through Hydra (no stand-in)."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+    res = subprocess.run(
+        [sys.executable, "-m", "iplanner_torch.cli.evaluate", "evaluate.mode=noise_sweep",
+         "predictor=iplanner_no_ni", f"paths.checkpoints={tmp_path / 'ck'}",
+         f"data.path={tmp_path / 'ds'}", f"hydra.run.dir={tmp_path / 'run'}", "progress=false"],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(
+        "error: ConfigError: evaluate.mode=noise_sweep does not read predictor=iplanner_no_ni: "
+    )
+
+
+def test_noise_sweep_scores_the_recorded_split_and_draws_its_noise_with_seed(
+    trained: SimpleNamespace,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    no_training: None,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """In the noise sweep ``seed`` also draws the noise: a seed other than the recorded split's
+    is not refused there, and the recorded split is still the one scored."""
+    shutil.copytree(trained.ckpt.parent, tmp_path / "ck" / "ds" / "iplanner_ni")
+    sweep = [*_sweep_args(trained, tmp_path), "evaluate.compare=[iplanner_ni]",
+             "evaluate.noises=[0.0,0.02]", "evaluate.speeds=[medium]"]  # fmt: skip
+    evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "seed=5"))
+    out = capsys.readouterr().out
+    assert "held-out split: seed=1 data.split=[0.6,0.2,0.2] (recorded in" in out

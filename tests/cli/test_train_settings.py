@@ -1,0 +1,126 @@
+"""``iplanner-train`` records what evaluation and a resume must know: the split by
+demonstration (seed, fractions, held-out names) and the trainer settings."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+
+import iplanner_torch.prediction.training as training
+from iplanner_torch.cli._common import CONF_DIR
+from iplanner_torch.cli.train import train_from_config
+from iplanner_torch.data.io import load_demonstrations
+from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
+from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
+from iplanner_torch.errors import CheckpointError
+from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord
+from iplanner_torch.prediction.predictor import PredictorCfg
+from iplanner_torch.prediction.svgp import SVGPCfg
+from iplanner_torch.prediction.training import TrainerCfg, train_predictor
+
+FRACTIONS = (0.6, 0.2, 0.2)
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """10 generated reaching demonstrations (2 targets x 5 reaches)."""
+    ds = tmp_path_factory.mktemp("data") / "ds"
+    generate_reaching_dataset(ReachingCfg(n_targets=2, reaches_per_target=5), ds, progress=False)
+    return ds
+
+
+def test_train_from_config_records_the_split_it_trains_on(
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The split handed to train_predictor is the one seed and data.split draw, with the
+    names of the demonstrations it holds out."""
+    given: dict[str, Any] = {}
+
+    class Stop(Exception):
+        pass
+
+    def capture(data: Any, **kwargs: Any) -> None:
+        given.update(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(training, "train_predictor", capture)
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        cfg = compose(
+            config_name="config",
+            overrides=[f"data.path={dataset}", "seed=1", "data.split=[0.6,0.2,0.2]",
+                       "trainer=fast", "progress=false"],
+        )  # fmt: skip
+    GlobalHydra.instance().clear()
+    with pytest.raises(Stop):
+        train_from_config(cfg, cfg.predictor, tmp_path / "ck", trainer_node=cfg.trainer)
+    test = split_by_demonstration(load_demonstrations(dataset), FRACTIONS, 1)[2]
+    assert test and given["split"] == SplitRecord(
+        seed=1, fractions=FRACTIONS, held_out=tuple(d.name for d in test)
+    )
+
+
+def test_resume_refuses_other_trainer_settings_and_split(dataset: Path, tmp_path: Path) -> None:
+    """training_inputs.json records the trainer settings and the split; a resume under other
+    ones that shape the sub-models (max_steps, the split) is refused, while logging settings
+    may change; a folder recorded before the trainer settings were resumes as before."""
+    demos = load_demonstrations(dataset)
+    train, val, test = split_by_demonstration(demos, FRACTIONS, 1)
+    wc = WindowCfg(n_prev=6, n_future=8, stride=2, joints=("torso", "left_hand", "right_hand"))
+    windows = (build_windows(train, wc), build_windows(val, wc))
+    cfg = PredictorCfg(
+        svgp=SVGPCfg(num_inducing=16, epochs=2, max_steps=12),
+        classifier_kernel="rbf",
+        ivm_max_import=6,
+        ivm_candidates=8,
+        min_group_size=10,
+    )
+    split = SplitRecord(seed=1, fractions=FRACTIONS, held_out=[d.name for d in test])
+    out = tmp_path / "ck"
+
+    def run(resume: bool = False, split: SplitRecord = split, **trainer: Any) -> Path:
+        return train_predictor(
+            windows,
+            predictor_cfg=cfg,
+            trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False, **trainer),
+            out_dir=out,
+            progress=False,
+            resume=resume,
+            split=split,
+        )
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        run(max_steps=8)
+        inputs = json.loads((out / INPUTS_FILE).read_text())
+        assert inputs["split"] == {"seed": 1, "fractions": list(FRACTIONS),
+                                   "held_out": [d.name for d in test]}  # fmt: skip
+        assert inputs["trainer_cfg"]["max_steps"] == 8
+        stamps = {p.name: p.stat().st_mtime_ns for p in out.glob("*.ckpt")}
+        with pytest.raises(CheckpointError, match=rf"^cannot resume in {out}: its sub-models were "
+                           r"trained with other trainer_cfg \(max_steps 8 -> 5\) than this run's "
+                           r"\(recorded -> now\).*train.resume=false$"):  # fmt: skip
+            run(resume=True, max_steps=5)
+        with pytest.raises(CheckpointError, match=r"other trainer_cfg \(seed 0 -> 3\)"):
+            run(resume=True, max_steps=8, seed=3)
+        other = SplitRecord(seed=1, fractions=(0.5, 0.25, 0.25), held_out=split.held_out)
+        with pytest.raises(CheckpointError, match=r"other split \(fractions \[0.6, 0.2, 0.2\] "
+                           r"-> \[0.5, 0.25, 0.25\]\)"):  # fmt: skip
+            run(resume=True, split=other, max_steps=8)
+        run(resume=True, max_steps=8, log_every_n_steps=1)  # logging only: resumes
+        del inputs["trainer_cfg"]  # a folder from before the trainer settings were recorded
+        (out / INPUTS_FILE).write_text(json.dumps(inputs))
+        run(resume=True, max_steps=5)
+    finally:
+        torch.set_num_threads(threads)
+    sub_models = {
+        p.name: p.stat().st_mtime_ns for p in out.glob("*.ckpt") if p.stem != "predictor"
+    }
+    assert sub_models == {k: v for k, v in stamps.items() if k != "predictor.ckpt"}
