@@ -562,10 +562,35 @@ def task_overrides() -> list[str]:
         return []
 
 
-def _overridden_generator_keys() -> set[str]:
-    """The ``data.generator`` fields this run's command line sets (none outside Hydra)."""
-    keys = (o.split("=", 1)[0].lstrip("+~") for o in task_overrides())
-    return {k.split(".")[2] for k in keys if k.startswith("data.generator.") and k.count(".") >= 2}
+def override_key(override: str) -> str:
+    """The key an override sets: ``data.windows.n_prev`` for ``+data.windows.n_prev=5``,
+    ``planner`` for ``planner=itomp``."""
+    return override.split("=", 1)[0].lstrip("+~")
+
+
+def overridden_fields(node: str, overrides: list[str] | None = None) -> set[str]:
+    """The fields directly under ``node`` that the overrides (default: this run's command
+    line) set: ``{"n_prev"}`` for ``node="data.windows"`` and ``data.windows.n_prev=5``."""
+    prefix = node + "."
+    keys = (override_key(o) for o in (task_overrides() if overrides is None else overrides))
+    return {k[len(prefix) :].split(".")[0] for k in keys if k.startswith(prefix)}
+
+
+def differing_settings(
+    saved: dict[str, Any], now: dict[str, Any], keys: set[str]
+) -> list[tuple[str, Any, Any]]:
+    """``(key, saved value, value now)`` for each of ``keys`` that both dicts hold and whose
+    values differ, in key order; a tuple equals the list of its items (a value read back from
+    JSON or a checkpoint against a dataclass field)."""
+
+    def plain(value: Any) -> Any:
+        return list(value) if isinstance(value, tuple) else value
+
+    return [
+        (k, saved[k], now[k])
+        for k in sorted(keys & set(saved) & set(now))
+        if plain(saved[k]) != plain(now[k])
+    ]
 
 
 def _check_generator_settings(
@@ -588,22 +613,16 @@ def _check_generator_settings(
     Raises:
         ConfigError: naming each setting that differs (dataset -> data.generator).
     """
-    from iplanner_torch.data.dataset_card import (
-        generator_settings,
-        read_generator_settings,
-        settings_differences,
-    )
+    from iplanner_torch.data.dataset_card import generator_settings, read_generator_settings
 
-    keys = _overridden_generator_keys() if overridden is None else overridden
+    keys = overridden_fields("data.generator") if overridden is None else overridden
     if not keys or data_cfg.get("generator") is None:
         return
     saved = read_generator_settings(path)
     if saved is None:
         return
     now = generator_settings(instantiate(data_cfg.generator, name="data.generator"))
-    differ = settings_differences(
-        {k: v for k, v in saved.items() if k in keys}, {k: v for k, v in now.items() if k in keys}
-    )
+    differ = [f"{k}: {a!r} -> {b!r}" for k, a, b in differing_settings(saved, now, keys)]
     if differ:
         raise ConfigError(
             f"{path} was generated with other settings than data.generator: "

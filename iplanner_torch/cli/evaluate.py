@@ -49,8 +49,11 @@ from iplanner_torch.cli._common import (
     CONF_DIR,
     cfg_list,
     cfg_scalar,
+    differing_settings,
     friendly_errors,
     load_dataset,
+    overridden_fields,
+    override_key,
     print_help_if_asked,
     repo_path,
 )
@@ -71,7 +74,7 @@ CHECKPOINT_WINDOW_KEYS = ("n_prev", "n_future", "stride", "feature_kinds", "prog
 def _given() -> dict[str, str]:
     """The keys this run's command line sets, each with its override as typed
     (``{"seed": "seed=1", "predictor": "predictor=iplanner_no_ni"}``)."""
-    return {o.split("=", 1)[0].lstrip("+~"): o for o in _task_overrides()}
+    return {override_key(o): o for o in _task_overrides()}
 
 
 def _out_dir(cfg: DictConfig) -> Path:
@@ -146,13 +149,12 @@ def _check_windows(cfg: DictConfig, predictor: Any, ckpt: Path) -> None:
             value = OmegaConf.to_container(value)
         return list(value) if isinstance(value, (list, tuple)) else value
 
-    given = _given()
+    keys = overridden_fields("data.windows", _task_overrides()) & set(CHECKPOINT_WINDOW_KEYS)
+    now = {key: plain(cfg.data.windows[key]) for key in keys}
+    found = differing_settings(saved, now, keys)
     differ = [
-        f"data.windows.{key}={plain(cfg.data.windows[key])} (checkpoint: {plain(saved[key])})"
-        for key in CHECKPOINT_WINDOW_KEYS
-        if f"data.windows.{key}" in given
-        and key in saved
-        and plain(cfg.data.windows[key]) != plain(saved[key])
+        f"data.windows.{key}={plain(value)} (checkpoint: {plain(old)})"
+        for key, old, value in sorted(found, key=lambda d: CHECKPOINT_WINDOW_KEYS.index(d[0]))
     ]
     if differ:
         raise ConfigError(

@@ -40,9 +40,12 @@ from iplanner_torch.cli._common import (
     CONF_DIR,
     cfg_list,
     cfg_scalar,
+    differing_settings,
     dump_config,
     friendly_errors,
     instantiate,
+    overridden_fields,
+    override_key,
     print_help_if_asked,
     repo_path,
 )
@@ -140,7 +143,7 @@ def ensure_predictors(
             )
             print(f"  trained in {time.perf_counter() - t0:.0f} s -> {ckpt}", flush=True)
         else:
-            stale = checkpoint_differences(ckpt, data_node, _overridden_window_keys())
+            stale = checkpoint_differences(ckpt, data_node, overridden_fields("data.windows"))
             if stale:
                 from iplanner_torch.errors import ConfigError
 
@@ -177,21 +180,7 @@ def checkpoint_differences(ckpt: Path, data_node: DictConfig, keys: set[str]) ->
     except Exception:  # noqa: BLE001 - HumanMotionPredictor.load says what is wrong
         return []
     now = asdict(instantiate(data_node.windows, WindowCfg, name="data.windows"))
-
-    def plain(value: Any) -> Any:
-        return list(value) if isinstance(value, tuple) else value
-
-    return [
-        f"{k}: {saved[k]!r} -> {now[k]!r}"
-        for k in sorted(keys & set(saved) & set(now))
-        if plain(saved[k]) != plain(now[k])
-    ]
-
-
-def _overridden_window_keys() -> set[str]:
-    """The ``data.windows`` fields this run's command line sets."""
-    keys = (o.split("=", 1)[0].lstrip("+~") for o in _task_overrides())
-    return {k.split(".")[2] for k in keys if k.startswith("data.windows.") and k.count(".") >= 2}
+    return [f"{k}: {a!r} -> {b!r}" for k, a, b in differing_settings(saved, now, keys)]
 
 
 def unused_overrides(overrides: list[str], train_data: str) -> list[str]:
@@ -209,12 +198,7 @@ def unused_overrides(overrides: list[str], train_data: str) -> list[str]:
     unread = {"predictor", "trainer", "train", "evaluate"}
     if train_data != "data":
         unread.add("data")
-    unused = []
-    for override in overrides:
-        key = override.split("=", 1)[0].lstrip("+~")
-        if key.split(".", 1)[0].split("@", 1)[0] in unread:
-            unused.append(override)
-    return unused
+    return [o for o in overrides if override_key(o).split(".", 1)[0].split("@", 1)[0] in unread]
 
 
 #: Sweep aliases (conf/config.yaml) -> the episode settings they feed (conf/sim/default.yaml).
@@ -247,7 +231,7 @@ def replaced_overrides(overrides: list[str], exp_node: DictConfig | None) -> lis
     """
     out = []
     for override in overrides:
-        key = override.split("=", 1)[0].lstrip("+~")
+        key = override_key(override)
         head = key.split(".", 1)[0]
         instead = None
         if key in ("planner.kind", "planner.predictor_variant"):
@@ -297,7 +281,7 @@ def choose_planner(cfg: DictConfig, overrides: list[str]) -> None:
     option = chosen[-1]
     exp_node = cfg.get("experiment")
     key = "experiment.planners" if exp_node is not None else "run.planners"
-    given = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") == key]
+    given = [o for o in overrides if override_key(o) == key]
     node = exp_node if exp_node is not None else cfg.run
     if given and cfg_list(node, "planners", str) != [option]:
         raise ConfigError(
@@ -337,9 +321,9 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
         }
     )
     exp_node = cfg.get("experiment")
-    if exp_node is not None and exp_node.get("episode") is not None:
-        episode_node = OmegaConf.merge(episode_node, exp_node.episode)
     overridden = exp_node is not None and exp_node.get("episode") is not None
+    if overridden:
+        episode_node = OmegaConf.merge(episode_node, exp_node.episode)
     episode = instantiate(
         episode_node, EpisodeCfg, name="experiment.episode" if overridden else "run"
     )
@@ -370,7 +354,7 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     named = node.pop("robot", None)
     if named is not None and str(named) != robot.name:
         # experiment.robot=<name> is the robot group option <name> (as robot=<name>)
-        chosen = [o for o in _task_overrides() if o.split("=", 1)[0].lstrip("+~") == "robot"]
+        chosen = [o for o in _task_overrides() if override_key(o) == "robot"]
         if chosen:
             raise ConfigError(
                 f"experiment.robot={named!r} contradicts {chosen[0]}: choose the robot once "
@@ -413,7 +397,8 @@ def _app(cfg: DictConfig) -> None:
 
         raise ConfigError(message)
     (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
-    unused = unused_overrides(_task_overrides(), str(cfg.run.train_data))
+    overrides = _task_overrides()
+    unused = unused_overrides(overrides, str(cfg.run.train_data))
     if unused:
         from iplanner_torch.errors import ConfigError
 
@@ -430,7 +415,7 @@ def _app(cfg: DictConfig) -> None:
             + "; train with other settings first (iplanner-train ... train.out_dir="
             "<paths.checkpoints>/<dataset folder>/<variant>), see the README"
         )
-    replaced = replaced_overrides(_task_overrides(), cfg.get("experiment"))
+    replaced = replaced_overrides(overrides, cfg.get("experiment"))
     if replaced:
         from iplanner_torch.errors import ConfigError
 
@@ -439,7 +424,7 @@ def _app(cfg: DictConfig) -> None:
             f"{'this override' if len(replaced) == 1 else 'these overrides'}: "
             f"{'; '.join(replaced)}"
         )
-    choose_planner(cfg, _task_overrides())
+    choose_planner(cfg, overrides)
     exp_node = cfg.get("experiment")
     planners = (
         cfg_list(exp_node, "planners", str)

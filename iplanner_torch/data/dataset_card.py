@@ -120,15 +120,6 @@ def read_generator_settings(folder: str | Path) -> dict[str, Any] | None:
     return settings if isinstance(settings, dict) else None
 
 
-def settings_differences(saved: dict[str, Any], now: dict[str, Any]) -> list[str]:
-    """``"n_demos: 40 -> 8"`` for each key both dicts have and whose values differ."""
-    return [
-        f"{k}: {saved[k]!r} -> {now[k]!r}"
-        for k in sorted(set(saved) & set(now))
-        if saved[k] != now[k]
-    ]
-
-
 def is_dataset_card(path: str | Path) -> bool:
     """Whether ``path`` is a file written by :func:`write_dataset_card`."""
     path = Path(path)

@@ -24,46 +24,37 @@ import iplanner_torch.cli.train as cli_train
 import iplanner_torch.eval.prediction as eval_prediction
 from iplanner_torch.cli._common import CONF_DIR
 from iplanner_torch.data.io import load_demonstrations
-from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
-from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
+from iplanner_torch.data.windows import split_by_demonstration
 from iplanner_torch.errors import ConfigError, DataWarning
 from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord, held_out_demonstrations
-from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
-from iplanner_torch.prediction.svgp import SVGPCfg
+from iplanner_torch.prediction.predictor import HumanMotionPredictor
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
 FRACTIONS = (0.6, 0.2, 0.2)
 
 
 @pytest.fixture(scope="module")
-def trained(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
-    """A tiny predictor trained on 10 generated reaching demonstrations split with seed 1 and
-    (0.6, 0.2, 0.2), windows n_prev 6, n_future 8, stride 2, with its training record."""
+def trained(
+    tmp_path_factory: pytest.TempPathFactory, tiny_reaching: SimpleNamespace
+) -> SimpleNamespace:
+    """A tiny predictor trained on ``tiny_reaching`` (10 generated reaching demonstrations
+    split with seed 1 and (0.6, 0.2, 0.2), windows n_prev 6, n_future 8, stride 2), with its
+    training record."""
     root = tmp_path_factory.mktemp("trained")
-    ds = root / "ds"
-    generate_reaching_dataset(ReachingCfg(n_targets=2, reaches_per_target=5), ds, progress=False)
-    train, val, test = split_by_demonstration(load_demonstrations(ds), FRACTIONS, 1)
-    wc = WindowCfg(n_prev=6, n_future=8, stride=2, joints=("torso", "left_hand", "right_hand"))
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
         ckpt = train_predictor(
-            (build_windows(train, wc), build_windows(val, wc)),
-            predictor_cfg=PredictorCfg(
-                svgp=SVGPCfg(num_inducing=16, epochs=2, max_steps=12),
-                classifier_kernel="rbf",
-                ivm_max_import=6,
-                ivm_candidates=8,
-                min_group_size=10,
-            ),
+            tiny_reaching.windows,
+            predictor_cfg=tiny_reaching.cfg,
             trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False),
             out_dir=root / "ck" / "ds" / "iplanner_ni",
             progress=False,
-            split=SplitRecord(seed=1, fractions=FRACTIONS, held_out=[d.name for d in test]),
+            split=tiny_reaching.split,
         )
     finally:
         torch.set_num_threads(threads)
-    return SimpleNamespace(ds=ds, ckpt=ckpt, held_out=[d.name for d in test])
+    return SimpleNamespace(ds=tiny_reaching.ds, ckpt=ckpt, held_out=tiny_reaching.held_out)
 
 
 @pytest.fixture(autouse=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -16,23 +17,18 @@ import iplanner_torch.prediction.training as training
 from iplanner_torch.cli._common import CONF_DIR
 from iplanner_torch.cli.train import train_from_config
 from iplanner_torch.data.io import load_demonstrations
-from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
-from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
+from iplanner_torch.data.windows import split_by_demonstration
 from iplanner_torch.errors import CheckpointError
 from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord
-from iplanner_torch.prediction.predictor import PredictorCfg
-from iplanner_torch.prediction.svgp import SVGPCfg
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
 FRACTIONS = (0.6, 0.2, 0.2)
 
 
-@pytest.fixture(scope="module")
-def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+@pytest.fixture
+def dataset(tiny_reaching: SimpleNamespace) -> Path:
     """10 generated reaching demonstrations (2 targets x 5 reaches)."""
-    ds = tmp_path_factory.mktemp("data") / "ds"
-    generate_reaching_dataset(ReachingCfg(n_targets=2, reaches_per_target=5), ds, progress=False)
-    return ds
+    return tiny_reaching.ds
 
 
 def test_train_from_config_records_the_split_it_trains_on(
@@ -66,22 +62,13 @@ def test_train_from_config_records_the_split_it_trains_on(
     )
 
 
-def test_resume_refuses_other_trainer_settings_and_split(dataset: Path, tmp_path: Path) -> None:
+def test_resume_refuses_other_trainer_settings_and_split(
+    tiny_reaching: SimpleNamespace, tmp_path: Path
+) -> None:
     """training_inputs.json records the trainer settings and the split; a resume under other
     ones that shape the sub-models (max_steps, the split) is refused, while logging settings
     may change; a folder recorded before the trainer settings were resumes as before."""
-    demos = load_demonstrations(dataset)
-    train, val, test = split_by_demonstration(demos, FRACTIONS, 1)
-    wc = WindowCfg(n_prev=6, n_future=8, stride=2, joints=("torso", "left_hand", "right_hand"))
-    windows = (build_windows(train, wc), build_windows(val, wc))
-    cfg = PredictorCfg(
-        svgp=SVGPCfg(num_inducing=16, epochs=2, max_steps=12),
-        classifier_kernel="rbf",
-        ivm_max_import=6,
-        ivm_candidates=8,
-        min_group_size=10,
-    )
-    split = SplitRecord(seed=1, fractions=FRACTIONS, held_out=[d.name for d in test])
+    windows, cfg, split = tiny_reaching.windows, tiny_reaching.cfg, tiny_reaching.split
     out = tmp_path / "ck"
 
     def run(resume: bool = False, split: SplitRecord = split, **trainer: Any) -> Path:
@@ -101,7 +88,7 @@ def test_resume_refuses_other_trainer_settings_and_split(dataset: Path, tmp_path
         run(max_steps=8)
         inputs = json.loads((out / INPUTS_FILE).read_text())
         assert inputs["split"] == {"seed": 1, "fractions": list(FRACTIONS),
-                                   "held_out": [d.name for d in test]}  # fmt: skip
+                                   "held_out": tiny_reaching.held_out}  # fmt: skip
         assert inputs["trainer_cfg"]["max_steps"] == 8
         stamps = {p.name: p.stat().st_mtime_ns for p in out.glob("*.ckpt")}
         with pytest.raises(CheckpointError, match=rf"^cannot resume in {out}: its sub-models were "
