@@ -7,7 +7,7 @@ import functools
 import math
 import re
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -576,6 +576,47 @@ def overridden_fields(node: str, overrides: list[str] | None = None) -> set[str]
     return {k[len(prefix) :].split(".")[0] for k in keys if k.startswith(prefix)}
 
 
+def unread_overrides(read: Iterable[str], overrides: list[str] | None = None) -> list[str]:
+    """The overrides (default: this run's command line) whose key a command does not read.
+
+    Args:
+        read: what the command reads: ``"data"`` reads ``data=<option>`` and every ``data.*``
+            key, ``"evaluate.logs"`` that key (and any below it), and ``"predictor="`` the
+            group's option alone (``predictor=iplanner_no_ni``, not ``predictor.svgp.*``).
+            ``progress`` is always read.
+    """
+    exact = {r[:-1] for r in read if r.endswith("=")}
+    prefixes = [r for r in read if not r.endswith("=")] + ["progress"]
+    out = []
+    for override in task_overrides() if overrides is None else overrides:
+        key = override_key(override)
+        head, _, rest = key.partition(".")
+        key = head.split("@", 1)[0] + ("." + rest if rest else "")  # predictor@x.y -> predictor.y
+        if key in exact or any(key == r or key.startswith(r + ".") for r in prefixes):
+            continue
+        out.append(override)
+    return out
+
+
+def refuse_unread_overrides(
+    command: str, read: Iterable[str], hint: str, overrides: list[str] | None = None
+) -> None:
+    """Refuse the command-line overrides ``command`` does not read (:func:`unread_overrides`),
+    which would otherwise change nothing without a word.
+
+    Args:
+        command: how the message names the command (``iplanner-train``).
+        read: as :func:`unread_overrides` takes it.
+        hint: what decides those settings instead, or where they belong.
+
+    Raises:
+        ConfigError: ``"<command> does not read <overrides>: <hint>"``.
+    """
+    unread = unread_overrides(read, overrides)
+    if unread:
+        raise ConfigError(f"{command} does not read {' '.join(unread)}: {hint}")
+
+
 def differing_settings(
     saved: dict[str, Any], now: dict[str, Any], keys: set[str]
 ) -> list[tuple[str, Any, Any]]:
@@ -602,7 +643,8 @@ def _check_generator_settings(
 
     Only the settings the command line sets are compared, so ``data.path=<folder>`` alone
     reads a folder generated with any settings. A folder without a generator config, without
-    a card, or with a card written before cards kept their settings is not checked.
+    a card, or with a card written before cards kept their settings is not checked; a card
+    whose settings block was broken by hand is refused (``DataError``), since it cannot be.
 
     Args:
         data_cfg: the ``data`` node.

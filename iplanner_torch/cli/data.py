@@ -27,6 +27,9 @@ Config group and main options:
     data.windows.joints=[a,b]      info: check only these joints, as training selects them
     progress=false                 generate: no progress bar
 
+Other overrides (seed, trainer, ...) are refused: neither command reads them; the generator
+draws from data.generator.seed.
+
 Examples:
 
     iplanner-data generate              # synthetic reaching set -> datasets/reaching
@@ -52,6 +55,7 @@ from iplanner_torch.cli._common import (
     friendly_errors,
     generate_dataset,
     refuse_conflicting_flags,
+    refuse_unread_overrides,
     repo_path,
 )
 from iplanner_torch.errors import ConfigError, DataError
@@ -139,6 +143,12 @@ def _info(cfg: DictConfig) -> None:
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 @friendly_errors
 def _app(cfg: DictConfig) -> None:
+    refuse_unread_overrides(
+        f"iplanner-data {_command}",
+        ("data", "paths.datasets"),
+        "it reads data, paths.datasets and progress (a generated set draws from "
+        "data.generator.seed, not seed)",
+    )
     {"generate": _generate, "info": _info}[_command](cfg)
 
 

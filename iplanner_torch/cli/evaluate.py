@@ -32,6 +32,11 @@ not as contact-free nor as a contact. ``evaluate.logs`` may list several sources
 ``evaluate.labels`` each source's planners are renamed ``<planner>@<label>``, so two runs of
 one planner (with and without an option) stay apart, and ``evaluate.baseline`` names the
 planner that ``results.md`` compares the others with, seed by seed.
+
+Each mode refuses the overrides it does not read (:data:`MODE_READS`): ``prediction`` the
+``trainer`` group and ``predictor.*`` keys (the checkpoint defines them), ``episode``
+everything but ``evaluate.logs``, ``labels``, ``baseline`` and ``out_dir``, and every mode the
+closed-loop groups of ``iplanner-experiment``.
 """
 
 from __future__ import annotations
@@ -55,6 +60,7 @@ from iplanner_torch.cli._common import (
     overridden_fields,
     override_key,
     print_help_if_asked,
+    refuse_unread_overrides,
     repo_path,
 )
 from iplanner_torch.cli._common import (
@@ -461,12 +467,62 @@ def _episode(cfg: DictConfig) -> None:
     print(f"{len(df)} episode(s); wrote " + ", ".join(str(p) for p in written))
 
 
+#: What each mode reads besides ``evaluate.mode`` and ``evaluate.out_dir``
+#: (:func:`~iplanner_torch.cli._common.unread_overrides`).
+MODE_READS = {
+    "prediction": ("data", "seed", "device", "paths", "evaluate.checkpoint"),
+    "noise_sweep": (
+        "data", "trainer", "seed", "device", "paths",
+        "evaluate.compare", "evaluate.noises", "evaluate.speeds",
+    ),
+    "episode": ("evaluate.logs", "evaluate.labels", "evaluate.baseline"),
+}  # fmt: skip
+#: Why a mode does not read what it does not read.
+MODE_HINTS = {
+    "prediction": (
+        "the checkpoint defines the predictor and how it was trained; choose it with "
+        "evaluate.checkpoint=<file> or predictor=<option> (read from train.out_dir). "
+        "evaluate.compare, noises and speeds belong to evaluate.mode=noise_sweep, "
+        "evaluate.logs, labels and baseline to evaluate.mode=episode, and the closed-loop "
+        "settings (robot, scenario, planner, sim, run, tracker, human) to iplanner-experiment"
+    ),
+    "noise_sweep": (
+        "it re-noises held-out demonstrations of data at each of evaluate.noises and "
+        "evaluate.speeds for the predictors of evaluate.compare (trained with trainer when "
+        "missing); evaluate.logs, labels and baseline belong to evaluate.mode=episode, and the "
+        "closed-loop settings (robot, scenario, planner, sim, run, tracker, human) to "
+        "iplanner-experiment"
+    ),
+    "episode": (
+        "it summarises what the logs recorded; it reads evaluate.logs, evaluate.labels, "
+        "evaluate.baseline and evaluate.out_dir (the episodes' settings are those they ran "
+        "with: set them on iplanner-experiment)"
+    ),
+}
+
+
+def _refuse_unread(mode: str) -> None:
+    """Refuse command-line settings ``mode`` does not read (:data:`MODE_READS`)."""
+    read = [*MODE_READS[mode], "evaluate.mode", "evaluate.out_dir"]
+    hint = MODE_HINTS[mode]
+    if mode == "prediction" and "evaluate.checkpoint" not in _given():
+        read += ["predictor=", "train.out_dir"]  # they name the default checkpoint
+    elif mode == "prediction":
+        hint = "evaluate.checkpoint names the checkpoint, and " + hint
+    refuse_unread_overrides(
+        f"iplanner-evaluate evaluate.mode={mode}", read, hint, _task_overrides()
+    )
+
+
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 @friendly_errors
 def _app(cfg: DictConfig) -> None:
     mode = str(cfg.evaluate.mode)
     if mode not in MODES:
         raise ConfigError(f"evaluate.mode must be one of {MODES}, got {mode!r}")
+    if mode == "noise_sweep":
+        _refuse_unread_sweep_overrides(cfg)  # the more specific message first
+    _refuse_unread(mode)
     {"prediction": _prediction, "noise_sweep": _noise_sweep, "episode": _episode}[mode](cfg)
 
 

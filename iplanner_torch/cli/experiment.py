@@ -19,7 +19,9 @@ episode settings it does not override. The I-Planner variants need predictors: b
 arrangement and task order (``datasets/tasks_<...>``, generated when absent; a blocking
 scenario's from the reaching set), kept in ``checkpoints/<dataset>/iplanner_{ni,no_ni}/``;
 missing ones are trained first on a small budget (``run.train_trainer``) when
-``run.train_if_missing`` is true. Results: ``results.csv``, ``results.md``, plots and
+``run.train_if_missing`` is true; an existing one is used as it is, but a command-line
+``run.train_trainer``, ``seed`` or ``data.windows.*`` value it was not trained with is refused.
+Results: ``results.csv``, ``results.md``, plots and
 ``episodes/*.mcap`` in the run folder.
 """
 
@@ -144,13 +146,20 @@ def ensure_predictors(
             print(f"  trained in {time.perf_counter() - t0:.0f} s -> {ckpt}", flush=True)
         else:
             stale = checkpoint_differences(ckpt, data_node, overridden_fields("data.windows"))
+            given = {override_key(o) for o in _task_overrides()}
+            stale += training_differences(
+                ckpt,
+                option_node("trainer", str(cfg.run.train_trainer), cfg),
+                seed=cfg_scalar(cfg, "seed", int) if "seed" in given else None,
+                budget="run.train_trainer" in given,
+            )
             if stale:
                 from iplanner_torch.errors import ConfigError
 
                 raise ConfigError(
-                    f"{ckpt} was trained with other window settings than the command line "
-                    f"gives: {'; '.join(stale)} (checkpoint -> now). Delete {out_dir} to "
-                    "train it anew with them, or set paths.checkpoints=<another folder>"
+                    f"{ckpt} was trained with other settings than the command line gives: "
+                    f"{'; '.join(stale)} (checkpoint -> now). Delete {out_dir} to train it "
+                    "anew with them, or set paths.checkpoints=<another folder>"
                 )
         paths[variant] = str(ckpt)
     return paths
@@ -181,6 +190,50 @@ def checkpoint_differences(ckpt: Path, data_node: DictConfig, keys: set[str]) ->
         return []
     now = asdict(instantiate(data_node.windows, WindowCfg, name="data.windows"))
     return [f"{k}: {a!r} -> {b!r}" for k, a, b in differing_settings(saved, now, keys)]
+
+
+def training_differences(
+    ckpt: Path, trainer_node: DictConfig, *, seed: int | None, budget: bool
+) -> list[str]:
+    """Where a trained predictor's recorded training differs from what the command line asks.
+
+    Read from the ``training_inputs.json`` beside ``ckpt``; a checkpoint without that record,
+    or with one that does not read or records no trainer, gives no differences (it is used as
+    it is, like one trained on purpose with ``iplanner-train`` into the experiment's folder).
+
+    Args:
+        ckpt: the predictor checkpoint.
+        trainer_node: the ``conf/trainer`` node of ``run.train_trainer``.
+        seed: ``seed`` when the command line gives it (compared with the trainer's seed and
+            the split's), else None.
+        budget: whether the command line gives ``run.train_trainer`` (its ``max_epochs`` and
+            ``max_steps`` are then compared).
+
+    Returns:
+        ``"trainer max_steps: 40 -> None"`` lines (checkpoint -> now); empty when they agree.
+    """
+    import json
+    from dataclasses import asdict
+
+    from iplanner_torch.eval.prediction import INPUTS_FILE
+    from iplanner_torch.prediction.training import TrainerCfg
+
+    if seed is None and not budget:
+        return []
+    try:
+        record = json.loads((ckpt.parent / INPUTS_FILE).read_text(encoding="utf-8"))
+        trainer = dict(record["trainer_cfg"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    now = asdict(instantiate(trainer_node, TrainerCfg, name="trainer"))  # its seed is ${seed}
+    keys = {"max_epochs", "max_steps"} if budget else set()
+    if seed is not None:
+        keys.add("seed")
+    out = [f"trainer {k}: {a!r} -> {b!r}" for k, a, b in differing_settings(trainer, now, keys)]
+    split = record.get("split")
+    if seed is not None and isinstance(split, dict) and split.get("seed", seed) != seed:
+        out.append(f"split seed: {split['seed']!r} -> {seed!r}")
+    return out
 
 
 def unused_overrides(overrides: list[str], train_data: str) -> list[str]:

@@ -12,7 +12,9 @@ sub-models' Lightning checkpoints, CSV / TensorBoard logs and ``training_inputs.
 they were trained on: data, predictor, window and trainer settings, and the split by
 demonstration, ``seed`` and ``data.split``, with the names of the held-out demonstrations,
 which ``iplanner-evaluate`` scores; a resume on other data or settings is refused), then
-prints held-out metrics.
+prints held-out metrics. It reads ``data``, ``predictor``, ``trainer``, ``train``, ``seed``,
+``paths`` and ``progress``; any other override (``device``: training runs on
+``trainer.accelerator``) is refused.
 """
 
 from __future__ import annotations
@@ -31,9 +33,12 @@ from iplanner_torch.cli._common import (
     friendly_errors,
     instantiate,
     load_dataset,
+    overridden_fields,
     print_help_if_asked,
+    refuse_unread_overrides,
     repo_path,
 )
+from iplanner_torch.errors import ConfigError
 
 
 def train_from_config(
@@ -91,9 +96,36 @@ def train_from_config(
     return ckpt, metrics
 
 
+def _refuse_unread_svgp_fields(cfg: DictConfig) -> None:
+    """Refuse a command-line ``predictor.svgp`` field that the chosen ``noisy_input`` does not
+    read (:data:`~iplanner_torch.prediction.svgp.UNREAD_BY_NOISY_INPUT`):
+    ``predictor.svgp.nigp_iterations=4`` with ``noisy_input=simple`` would change nothing."""
+    from iplanner_torch.prediction.svgp import UNREAD_BY_NOISY_INPUT
+
+    mode = str(cfg.predictor.svgp.get("noisy_input", "simple"))
+    unread = sorted(overridden_fields("predictor.svgp") & set(UNREAD_BY_NOISY_INPUT.get(mode, ())))
+    if unread:
+        keys = ", ".join(f"predictor.svgp.{k}" for k in unread)
+        raise ConfigError(
+            f"{keys}: not read with predictor.svgp.noisy_input={mode} (nigp_iterations and "
+            "nigp_refit_steps are read with noisy_input=nigp, input_noise_sigma with simple "
+            "or nigp, velocity_limit with simple); set predictor.svgp.noisy_input too, or "
+            "leave them out"
+        )
+
+
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 @friendly_errors
 def _app(cfg: DictConfig) -> None:
+    refuse_unread_overrides(
+        "iplanner-train",
+        ("data", "predictor", "trainer", "train", "seed", "paths"),
+        "it reads data, predictor, trainer, train, seed, paths and progress; it trains on "
+        "trainer.accelerator (device is where iplanner-evaluate and iplanner-experiment run "
+        "the predictors), evaluate.* belongs to iplanner-evaluate, and the closed-loop "
+        "settings (robot, scenario, planner, sim, run, tracker, human) to iplanner-experiment",
+    )
+    _refuse_unread_svgp_fields(cfg)
     out_dir = repo_path(cfg.train.out_dir)
     ckpt, metrics = train_from_config(cfg, cfg.predictor, out_dir, trainer_node=cfg.trainer)
     print(f"predictor checkpoint: {ckpt}")

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from iplanner_torch.data.io import demonstration_files
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError
 
 #: The dataset card's file name, in the dataset folder.
 CARD_NAME = "README.md"
@@ -102,7 +102,11 @@ def read_generator_settings(folder: str | Path) -> dict[str, Any] | None:
     """The generator settings a dataset folder's card keeps, or None.
 
     None when the folder has no generated dataset card, or a card written before the cards
-    kept their settings, or one whose settings block does not parse (edited by hand).
+    kept their settings.
+
+    Raises:
+        DataError: when the card has a settings block that does not read as a JSON object
+            (edited by hand), naming the card and what is wrong.
     """
     card = Path(folder) / CARD_NAME
     if not is_dataset_card(card):
@@ -113,11 +117,25 @@ def read_generator_settings(folder: str | Path) -> dict[str, Any] | None:
         return None
     _, fence, body = rest.partition("```json")
     block, end, _ = body.partition("```")
+    fix = (
+        "repair it, or generate the dataset anew (iplanner-data generate data.path=<folder> "
+        "data.overwrite=true)"
+    )
+    if not (fence and end):
+        raise DataError(f"{card}: the {SETTINGS_MARK!r} block has no ```json ... ``` fence; {fix}")
     try:
-        settings = json.loads(block) if fence and end else None
-    except json.JSONDecodeError:
-        return None
-    return settings if isinstance(settings, dict) else None
+        settings = json.loads(block)
+    except json.JSONDecodeError as err:
+        raise DataError(
+            f"{card}: the generator settings block is not valid JSON ({err.msg} at line "
+            f"{err.lineno}, column {err.colno} of the block); {fix}"
+        ) from err
+    if not isinstance(settings, dict):
+        raise DataError(
+            f"{card}: the generator settings block holds a {type(settings).__name__}, not a "
+            f"JSON object; {fix}"
+        )
+    return settings
 
 
 def is_dataset_card(path: str | Path) -> bool:

@@ -74,6 +74,15 @@ from iplanner_torch.types import check_shape
 KernelName = Literal["rbf", "matern", "gak", "dtw"]
 NoisyInput = Literal["none", "simple", "nigp"]
 
+#: The :class:`SVGPCfg` fields each ``noisy_input`` mode does not read: ``input_noise_sigma``
+#: feeds ``simple`` and ``nigp``, ``velocity_limit`` ``simple`` alone, and ``nigp_iterations``
+#: and ``nigp_refit_steps`` ``nigp`` alone.
+UNREAD_BY_NOISY_INPUT: dict[str, tuple[str, ...]] = {
+    "none": ("input_noise_sigma", "velocity_limit", "nigp_iterations", "nigp_refit_steps"),
+    "simple": ("nigp_iterations", "nigp_refit_steps"),
+    "nigp": ("velocity_limit",),
+}
+
 #: version of :meth:`SVGPRegressor.to_checkpoint`'s layout
 CHECKPOINT_FORMAT = 2
 

@@ -403,6 +403,45 @@ def test_a_checkpoint_trained_with_other_window_settings_is_named(tmp_path: Path
     assert checkpoint_differences(ckpt, cfg.data, given) == []
 
 
+def test_a_checkpoint_trained_with_another_trainer_or_seed_is_named(tmp_path: Path) -> None:
+    """ensure_predictors' check of the recorded training: run.train_trainer's budget and seed
+    against training_inputs.json, each only when the command line gives it."""
+    import json
+    from dataclasses import asdict
+
+    from hydra import compose, initialize_config_dir
+
+    from iplanner_torch.cli._common import CONF_DIR
+    from iplanner_torch.cli.experiment import option_node, training_differences
+    from iplanner_torch.eval.prediction import INPUTS_FILE
+    from iplanner_torch.prediction.training import TrainerCfg
+
+    with initialize_config_dir(version_base="1.3", config_dir=CONF_DIR):
+        cfg = compose("config", overrides=["seed=3"])
+    fast = option_node("trainer", "fast", cfg)  # max_steps 40, seed ${seed} = 3
+    default = option_node("trainer", "default", cfg)  # max_steps None
+    ckpt = tmp_path / "predictor.ckpt"
+    record = {"trainer_cfg": asdict(TrainerCfg(max_steps=40, seed=0)), "split": {"seed": 0}}
+    (tmp_path / INPUTS_FILE).write_text(json.dumps(record))
+    assert training_differences(ckpt, fast, seed=None, budget=True) == []
+    assert training_differences(ckpt, default, seed=None, budget=True) == [
+        "trainer max_steps: 40 -> None"
+    ]
+    assert training_differences(ckpt, default, seed=None, budget=False) == []  # not given
+    assert training_differences(ckpt, fast, seed=3, budget=False) == [
+        "trainer seed: 0 -> 3",
+        "split seed: 0 -> 3",
+    ]
+    assert training_differences(ckpt, fast, seed=3, budget=True) == [
+        "trainer seed: 0 -> 3",
+        "split seed: 0 -> 3",
+    ]
+    (tmp_path / INPUTS_FILE).write_text("{broken")  # no record to compare: used as it is
+    assert training_differences(ckpt, default, seed=3, budget=True) == []
+    (tmp_path / INPUTS_FILE).unlink()
+    assert training_differences(ckpt, default, seed=3, budget=True) == []
+
+
 def test_experiment_names_overrides_that_another_setting_replaces() -> None:
     """With experiment=..., the experiment's lists, scenarios and episode settings replace the
     main job's; planner.kind / predictor_variant are set per episode in every run."""

@@ -14,7 +14,7 @@ from iplanner_torch.data.dataset_card import (
     write_dataset_card,
 )
 from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError
 
 SMALL = ReachingCfg(n_targets=2, reaches_per_target=2)
 
@@ -81,7 +81,7 @@ def test_is_dataset_card(tmp_path):
 
 def test_card_keeps_the_generator_settings(tmp_path):
     """Both generators write their settings into the card; they read back equal to the
-    dataclass, and a card without them, or with a broken block, reads as None."""
+    dataclass; a card without them reads as None, and a broken block is named."""
     from dataclasses import asdict
 
     from iplanner_torch.data.dataset_card import read_generator_settings
@@ -100,7 +100,16 @@ def test_card_keeps_the_generator_settings(tmp_path):
     card = tmp_path / "reach" / "README.md"
     text = card.read_text()
     card.write_text(text.replace('"seed": 7', '"seed": 7,,'))  # a hand edit that breaks it
-    assert read_generator_settings(tmp_path / "reach") is None
+    broken = r"README.md: the generator settings block is not valid JSON \(Expecting property"
+    with pytest.raises(DataError, match=broken):
+        read_generator_settings(tmp_path / "reach")
+    card.write_text(text.replace("```json", "```"))  # its fence lost
+    with pytest.raises(DataError, match="has no ```json ... ``` fence; repair it"):
+        read_generator_settings(tmp_path / "reach")
+    block = text.split("```json", 1)[1].split("```", 1)[0]
+    card.write_text(text.replace(block, "\n[1, 2]\n"))  # valid JSON, not an object
+    with pytest.raises(DataError, match="holds a list, not a JSON object"):
+        read_generator_settings(tmp_path / "reach")
     card.write_text(text.split("Generator settings")[0])  # a card of an earlier version
     assert read_generator_settings(tmp_path / "reach") is None
     assert read_generator_settings(tmp_path / "absent") is None
