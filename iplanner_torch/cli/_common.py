@@ -230,13 +230,22 @@ def _plain_text(rst: str) -> str:
     return re.sub(r"::$", ":", text, flags=re.MULTILINE)
 
 
-def command_help(doc: str) -> str:
+#: The root keys ``--help`` lists (``iplanner-train`` lists its own: it does not read ``device``).
+ROOT_KEYS_HELP = "seed=<int>, device=auto|cpu|cuda, progress=true|false"
+
+
+def command_help(
+    doc: str, groups: Iterable[str] | None = None, root_keys: str = ROOT_KEYS_HELP
+) -> str:
     """The ``--help`` text of a command: its docstring (``doc``), then the config groups of
-    ``conf/`` and their options, the main root keys and Hydra's own flags."""
+    ``conf/`` it reads (``groups``; default all) and their options, its root keys
+    (``root_keys``) and Hydra's own flags."""
     import textwrap
 
     conf = Path(CONF_DIR)
     names = sorted(d.name for d in conf.iterdir() if d.is_dir() and d.name != "hydra")
+    if groups is not None:
+        names = [n for n in names if n in set(groups)]
     root = OmegaConf.load(conf / "config.yaml")
     defaults = {}
     for item in root.get("defaults", []):
@@ -257,9 +266,10 @@ def command_help(doc: str) -> str:
     lines += [
         f"  {'hydra/launcher':15s} basic*, joblib, " + ", ".join(launchers),
         "",
-        "Root keys: seed=<int>, device=auto|cpu|cuda, progress=true|false.",
-        "Any key of the composed config can be overridden as key=value; print it with",
-        "`--cfg job` (add `--resolve` to resolve interpolations).",
+        f"Root keys: {root_keys}.",
+        "Any key of these that the command reads can be overridden as key=value (others",
+        "are refused); print the composed config with `--cfg job` (add `--resolve` to",
+        "resolve interpolations).",
         "",
         "Hydra flags: -m (sweep over comma-separated values), --cfg job|hydra|all,",
         "--hydra-help (Hydra's own help), -cd/-cn (another config folder or name).",
@@ -280,11 +290,17 @@ def refuse_conflicting_flags(argv: list[str]) -> None:
         raise SystemExit(2)
 
 
-def print_help_if_asked(doc: str, argv: list[str]) -> None:
-    """Print :func:`command_help` and exit 0 when ``-h`` or ``--help`` is among ``argv``;
-    refuse flags that cannot go together (:func:`refuse_conflicting_flags`)."""
+def print_help_if_asked(
+    doc: str,
+    argv: list[str],
+    groups: Iterable[str] | None = None,
+    root_keys: str = ROOT_KEYS_HELP,
+) -> None:
+    """Print :func:`command_help` (of ``groups`` and ``root_keys``) and exit 0 when ``-h`` or
+    ``--help`` is among ``argv``; refuse flags that cannot go together
+    (:func:`refuse_conflicting_flags`)."""
     if "-h" in argv or "--help" in argv:
-        print(command_help(doc))
+        print(command_help(doc, groups, root_keys))
         raise SystemExit(0)
     refuse_conflicting_flags(argv)
 

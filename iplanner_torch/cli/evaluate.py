@@ -528,7 +528,8 @@ def _app(cfg: DictConfig) -> None:
 
 def main() -> None:
     """Console entry point."""
-    print_help_if_asked(__doc__ or "", sys.argv[1:])
+    # predictor: which checkpoint (prediction); trainer: a missing one's (noise_sweep)
+    print_help_if_asked(__doc__ or "", sys.argv[1:], groups=("data", "predictor", "trainer"))
     _app()
 
 

@@ -139,7 +139,12 @@ def _app(cfg: DictConfig) -> None:
 
 def main() -> None:
     """Console entry point."""
-    print_help_if_asked(__doc__ or "", sys.argv[1:])
+    print_help_if_asked(
+        __doc__ or "",
+        sys.argv[1:],
+        groups=("data", "predictor", "trainer"),
+        root_keys="seed=<int>, progress=true|false (training runs on trainer.accelerator)",
+    )
     _app()
 
 

@@ -197,6 +197,24 @@ def test_help_lists_groups_options_and_defaults() -> None:
         groups["experiment"].startswith("null*, ") and "table_simulation" in groups["experiment"]
     )
     assert "slurm" in groups["hydra/launcher"] and "joblib" in groups["hydra/launcher"]
+    assert "Root keys: seed=<int>, device=auto|cpu|cuda, progress=true|false." in lines
+
+
+def test_help_of_a_command_lists_the_groups_and_root_keys_it_reads() -> None:
+    """iplanner-train's --help: the groups training reads and no device, which it refuses."""
+    result = subprocess.run(
+        [sys.executable, "-m", "iplanner_torch.cli.train", "--help"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    after = lines[lines.index("Config groups (group=option; * the default):") + 1 :]
+    groups = [ln.split()[0] for ln in after if ln.startswith("  ")]
+    assert groups == ["data", "predictor", "trainer", "hydra/launcher"]
+    root = next(ln for ln in lines if ln.startswith("Root keys:"))
+    assert "seed=<int>" in root and "device" not in root.split("(")[0]
 
 
 def test_console_help_exits_zero(tmp_path: Path) -> None:
