@@ -125,19 +125,51 @@ def episode_report(
     return write_sweep_report(df, out_dir, group_by=groups, sweep=sweep, baseline=baseline)
 
 
-def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
-    """Read every ``*.mcap`` below ``root`` (in numbered order) and report them into
-    ``out_dir`` (:func:`episode_report`), with the overrides that differ between the jobs of
-    a multirun as columns kept apart in the summary (:func:`sweep_overrides`).
+def run_rows(root: Path) -> Any:
+    """The episode rows of a run or multirun folder: one per ``*.mcap`` below ``root`` (in
+    numbered order), then the ``results.csv`` rows of each run folder (``root`` itself or a job
+    folder directly below it, one with ``.hydra/``) that holds no episode log, as a run with
+    ``run.write_mcap=false`` leaves it. Each row has a ``path`` (its log, or that
+    ``results.csv``), so :func:`sweep_overrides` can place it in its job. A gathered summary
+    (``summary/results.csv``, no ``.hydra/``) is never read back.
 
     Returns:
-        The written files, or [] when no logs exist.
+        A DataFrame; empty when the folder holds neither.
     """
-    from iplanner_torch.eval.report import gather_results
+    import pandas as pd
 
-    if not any(root.rglob("*.mcap")):
+    from iplanner_torch.eval.report import gather_results, natural_key
+
+    root = Path(root)
+    if not root.is_dir():
+        return pd.DataFrame()
+    frames = [gather_results(root)] if any(root.rglob("*.mcap")) else []
+    runs = [root, *sorted((d for d in root.iterdir() if d.is_dir()), key=natural_key)]
+    for run in runs:
+        csv = run / "results.csv"
+        if (run / ".hydra").is_dir() and csv.is_file() and not any(run.rglob("*.mcap")):
+            rows = gather_results(csv)
+            if not rows.empty:
+                frames.append(rows.assign(path=str(csv)))
+    frames = [f for f in frames if not f.empty]
+    if not frames:
+        return pd.DataFrame()
+    return pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+
+
+def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
+    """Read the episode rows of ``root`` (:func:`run_rows`: every ``*.mcap`` below it, and the
+    ``results.csv`` of jobs that wrote no log) and report them into ``out_dir``
+    (:func:`episode_report`), with the overrides that differ between the jobs of a multirun
+    as columns kept apart in the summary (:func:`sweep_overrides`).
+
+    Returns:
+        The written files, or [] when there are no episode rows.
+    """
+    df = run_rows(root)
+    if df.empty:
         return []
-    df, swept = sweep_overrides(gather_results(root), root)  # numbered order kept
+    df, swept = sweep_overrides(df, root)  # numbered order kept
     return episode_report(df, out_dir, split_by=swept)
 
 

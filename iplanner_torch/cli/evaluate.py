@@ -24,8 +24,9 @@ held-out clean motion at each ``evaluate.noises`` level and replays it at each
 ``conf/predictor/<option>.yaml`` and ``trainer`` when missing; ``evaluate.checkpoint``,
 ``train.out_dir`` and ``predictor`` are not read, and refused), and writes CSV, PNG plots and a
 README; ``episode`` summarises MCAP episode logs, or the episode rows of a results CSV (an
-experiment's ``results.csv``, or rows gathered from several runs), with one row per episode, a
-summary table and plots, and prints the table ``iplanner-experiment`` prints
+experiment's ``results.csv``, or rows gathered from several runs; in a run or multirun folder,
+a run made with ``run.write_mcap=false`` is read from its ``results.csv``), with one row per
+episode, a summary table and plots, and prints the table ``iplanner-experiment`` prints
 (:func:`~iplanner_torch.eval.report.comparison_table`: episode counts, then the paper's metrics
 in cm and ms); an episode whose log was cut before its metrics counts in ``contact_unknown``,
 not as contact-free nor as a contact. ``evaluate.logs`` may list several sources: with
@@ -392,12 +393,19 @@ def _noise_sweep(cfg: DictConfig) -> None:
 
 def _episode_rows(path: Path) -> Any:
     """The episode rows of one source of ``evaluate.logs`` (an .mcap file, a folder of them or
-    a results .csv), refused with a clear error when it holds none."""
+    a results .csv; in a run or multirun folder, the ``results.csv`` of a run that wrote no
+    log stands for it), refused with a clear error when it holds none."""
+    from iplanner_torch.cli.callbacks import run_rows
     from iplanner_torch.eval.report import gather_results
 
-    if path.is_dir() and not any(path.rglob("*.mcap")):
-        raise ConfigError(f"{path}: no .mcap episode logs found")
-    df = gather_results(path)  # a folder: every log below it, in numbered order
+    if path.is_dir():
+        df = run_rows(path)  # every log below it, in numbered order, then log-less runs
+        if df.empty:
+            raise ConfigError(
+                f"{path}: no .mcap episode logs found, nor the results.csv of a run folder"
+            )
+    else:
+        df = gather_results(path)
     if path.suffix == ".csv" and df.empty:
         raise DataError(f"{path}: no episode rows; nothing to report")
     if path.suffix == ".csv" and "planner" not in df.columns:

@@ -70,3 +70,48 @@ def test_a_swept_override_is_kept_apart_and_seed_splits_are_not(tmp_path: Path) 
     rows = [ln for ln in md.splitlines() if ln.startswith("| s |")]
     assert len(rows) == 2
     assert "| 42 ± 2.83 |" in rows[0] and "| 65 ± 7.07 |" in rows[1]
+
+
+def test_jobs_that_wrote_no_logs_are_gathered_from_their_results_csv(tmp_path: Path) -> None:
+    """``-m run.stall_fallback_s=2,null run.write_mcap=false``: each job's results.csv stands
+    for its logs, its rows are placed in their job (the swept value is a column), a job with
+    logs is read from them, and a summary gathered before is not read back."""
+    from iplanner_torch.cli.callbacks import run_rows
+
+    sweep = tmp_path / "sweep"
+    for job, value, smooth in ((0, "2", [40.0, 41.0]), (1, "null", [50.0, 52.0])):
+        folder = sweep / str(job)
+        (folder / ".hydra").mkdir(parents=True)
+        (folder / ".hydra" / "overrides.yaml").write_text(
+            f"- run.stall_fallback_s={value}\n- run.write_mcap=false\n"
+        )
+        pd.DataFrame(
+            {"planner": "iplanner_ni", "scenario": "s", "seed": [0, 1], "smoothness": smooth,
+             "min_distance": 0.1}
+        ).to_csv(folder / "results.csv", index=False)  # fmt: skip
+    (sweep / "summary").mkdir()
+    pd.DataFrame({"planner": ["x"], "smoothness": [1e9]}).to_csv(
+        sweep / "summary" / "results.csv", index=False
+    )
+    # a third job that wrote a log: read from it, not from its results.csv
+    (sweep / "2" / ".hydra").mkdir(parents=True)
+    (sweep / "2" / ".hydra" / "overrides.yaml").write_text(
+        "- run.stall_fallback_s=10\n- run.write_mcap=true\n"
+    )
+    _log(sweep / "2" / "episodes" / "e.mcap", "iplanner_ni", 0.0, 60.0)
+    pd.DataFrame({"planner": ["iplanner_ni"], "smoothness": [-1.0]}).to_csv(
+        sweep / "2" / "results.csv", index=False
+    )
+    rows = run_rows(sweep)
+    assert sorted(rows["smoothness"]) == [40.0, 41.0, 50.0, 52.0, 60.0]
+    gather_episode_logs(sweep, tmp_path / "summary")
+    df = pd.read_csv(tmp_path / "summary" / "results.csv")
+    by_value = df.groupby("run.stall_fallback_s")["smoothness"].mean().to_dict()
+    assert by_value == {2.0: 40.5, 10.0: 60.0}  # a number where it reads as one
+    assert list(df.loc[df["run.stall_fallback_s"].isna(), "smoothness"]) == [50.0, 52.0]
+    md = (tmp_path / "summary" / "results.md").read_text()
+    assert "run.stall_fallback_s" in md
+    # one run folder with no log: its own results.csv
+    assert list(run_rows(sweep / "0")["smoothness"]) == [40.0, 41.0]
+    (tmp_path / "empty").mkdir()
+    assert run_rows(tmp_path / "empty").empty and run_rows(tmp_path / "absent").empty
