@@ -191,3 +191,67 @@ def test_config_files_instantiate(name: str) -> None:
         assert obj.seed == 3
     else:
         assert isinstance(obj, TrainerCfg)
+
+
+def _flat(obj: object, prefix: str = "") -> dict[str, object]:
+    """Every leaf of a checkpoint (nested dicts, lists and tuples) by its path."""
+    if isinstance(obj, dict):
+        return {k: v for key, val in obj.items() for k, v in _flat(val, f"{prefix}/{key}").items()}
+    if isinstance(obj, list | tuple):
+        return {k: v for i, val in enumerate(obj) for k, v in _flat(val, f"{prefix}/{i}").items()}
+    return {prefix: obj}
+
+
+def test_training_runs_on_its_own_thread_count(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """TrainerCfg.num_threads holds while training, whatever torch's count around it (restored
+    after), so the same seed gives the same predictor, to the bit, on machines with other core
+    counts."""
+    import iplanner_torch.prediction.training as training
+
+    tr, va = _windows(("torso", "left_hand", "right_hand"))
+    inner = training._train_predictor
+    seen: list[int] = []
+
+    def spy(*args: object, **kwargs: object) -> Path:
+        seen.append(torch.get_num_threads())
+        return inner(*args, **kwargs)
+
+    monkeypatch.setattr(training, "_train_predictor", spy)
+    before = torch.get_num_threads()
+    saved = []
+    try:
+        for outer in (1, 3):
+            torch.set_num_threads(outer)
+            path = train_predictor(
+                (tr, va),
+                predictor_cfg=_cfg(),
+                trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False, num_threads=2),
+                out_dir=tmp_path / str(outer),
+                progress=False,
+            )
+            assert torch.get_num_threads() == outer
+            saved.append(_flat(torch.load(path, map_location="cpu", weights_only=False)))
+        torch.set_num_threads(1)
+        train_predictor(
+            (tr, va),
+            predictor_cfg=_cfg(),
+            trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False, num_threads=None),
+            out_dir=tmp_path / "default",
+            progress=False,
+        )
+    finally:
+        torch.set_num_threads(before)
+    assert seen == [2, 2, 1]  # None leaves torch's count
+    a, b = saved
+    assert a.keys() == b.keys()
+    tensors = [k for k, v in a.items() if isinstance(v, torch.Tensor)]
+    assert len(tensors) > 20
+    for key in a:
+        if isinstance(a[key], torch.Tensor):
+            assert torch.equal(a[key], b[key]), key
+        else:
+            assert a[key] == b[key] or a[key] != a[key], key  # NaN equals itself here
+    with pytest.raises(ConfigError, match="num_threads must be >= 1 or None, got 0"):
+        TrainerCfg(num_threads=0)
