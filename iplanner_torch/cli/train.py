@@ -92,6 +92,18 @@ def train_from_config(
     if test:
         predictor = HumanMotionPredictor.load(ckpt)
         metrics.update(evaluate_prediction(predictor, test))
+    else:
+        import warnings
+
+        from iplanner_torch.errors import DataWarning
+
+        warnings.warn(
+            f"data.split={list(fractions)} holds out none of the {len(demos)} demonstrations "
+            "(each group of one target or first action is cut by rounding), so there are no "
+            "held-out metrics; use more demonstrations or a larger test fraction",
+            DataWarning,
+            stacklevel=2,
+        )
     (out_dir / "heldout_metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
     return ckpt, metrics
 

@@ -111,3 +111,31 @@ def test_resume_refuses_other_trainer_settings_and_split(
         p.name: p.stat().st_mtime_ns for p in out.glob("*.ckpt") if p.stem != "predictor"
     }
     assert sub_models == {k: v for k, v in stamps.items() if k != "predictor.ckpt"}
+
+
+def test_a_split_that_holds_out_nothing_is_said(
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """5 reaches per target and a test fraction of 0.05 round to no held-out demonstration:
+    training goes on, and says there are no held-out metrics instead of printing none."""
+    from iplanner_torch.errors import DataWarning
+
+    def fake_train(data: Any, *, out_dir: Path, **kwargs: Any) -> Path:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        return out_dir / "predictor.ckpt"
+
+    monkeypatch.setattr(training, "train_predictor", fake_train)
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        cfg = compose(
+            config_name="config",
+            overrides=[f"data.path={dataset}", "data.split=[0.75,0.2,0.05]", "trainer=fast",
+                       "progress=false"],
+        )  # fmt: skip
+    GlobalHydra.instance().clear()
+    with pytest.warns(DataWarning, match=r"data.split=\[0.75, 0.2, 0.05\] holds out none of "
+                      r"the 10 demonstrations .* no held-out metrics"):  # fmt: skip
+        _, metrics = train_from_config(
+            cfg, cfg.predictor, tmp_path / "ck", trainer_node=cfg.trainer
+        )
+    assert "mhd_1s" not in metrics and metrics["train_windows"] > 0
