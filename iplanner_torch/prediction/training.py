@@ -73,8 +73,8 @@ class TrainerCfg:
     tensorboard: bool = True
     # torch CPU threads while training (restored after). The CPU sums are split across the
     # threads, so the thread count changes the fitted numbers in their last digits, which the
-    # closed loop can amplify: a fixed count gives the same predictor for the same seed on
-    # any machine with the same CPU kind. None: torch's default (the machine's core count).
+    # closed loop can amplify: a fixed count gives the same predictor for the same seed
+    # whatever torch's own setting (core count, OMP_NUM_THREADS). None: torch's setting.
     num_threads: int | None = 2
 
     def __post_init__(self) -> None:
@@ -442,7 +442,8 @@ def train_predictor(
         data: training windows: a WindowSet, a (train, val) pair of WindowSets (val may be
             None), or a DataModule with ``train_windows`` / ``val_windows``.
         predictor_cfg: predictor settings.
-        trainer_cfg: Lightning settings.
+        trainer_cfg: Lightning settings, and the torch thread count while training
+            (:attr:`TrainerCfg.num_threads`; torch's count is restored after).
         out_dir: folder for checkpoints (``*.ckpt``) and logs (``logs/`` CSV, ``tb/``).
         progress: progress bars.
         resume: skip sub-models whose checkpoint already exists in ``out_dir``, after
