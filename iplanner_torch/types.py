@@ -26,7 +26,8 @@ and :func:`non_finite_error` (DataError). Scalar checks live in :mod:`iplanner_t
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 import torch
@@ -180,3 +181,16 @@ def resolve_device(device: torch.device | str) -> torch.device:
                 f"device(s) exist"
             )
     return dev
+
+
+@contextlib.contextmanager
+def torch_threads(n: int | None) -> Iterator[None]:
+    """Run the block on ``n`` torch CPU threads (None: torch's setting as it is), restoring
+    torch's count after it. The count splits the CPU sums, so it fixes their last digits."""
+    threads = torch.get_num_threads()
+    if n is not None:
+        torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)

@@ -20,7 +20,7 @@ import torch
 from _timing import median_seconds
 
 from iplanner_torch.prediction.dtw import dtw_distance
-from iplanner_torch.types import all_finite
+from iplanner_torch.types import all_finite, torch_threads
 
 
 def _median_time(fn: Callable[[], object], repeats: int) -> float:
@@ -37,9 +37,7 @@ def run(quick: bool) -> dict[str, dict]:
     g = torch.Generator().manual_seed(0)
     x = torch.randn(n, t, d, generator=g, dtype=torch.float64)
     x_np = x.numpy()
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with torch_threads(1):
         ours = dtw_distance(x, x, squared=True)
         ref = torch.from_numpy(np.asarray(cdist_dtw(x_np)))
         err = float((ours - ref).abs().max())
@@ -54,8 +52,6 @@ def run(quick: bool) -> dict[str, dict]:
         reps = 20 if quick else 200
         t_check = _median_time(lambda: all_finite(xc), reps)
         t_check_ref = _median_time(lambda: bool(torch.isfinite(xc).all()), reps)
-    finally:
-        torch.set_num_threads(threads)
     pairs = n * n
     return {
         "dtw.gram_speedup_vs_tslearn": {

@@ -30,6 +30,7 @@ from iplanner_torch.data.skeleton import JOINT_NAMES
 from iplanner_torch.planning.optimizer import OptimizerCfg, TrajectoryOptimizer
 from iplanner_torch.planning.replanner import Replanner, ReplannerCfg
 from iplanner_torch.prediction.forecast import Forecast
+from iplanner_torch.types import torch_threads
 
 #: the cycle-time goal [ms] for B = 8 on a 2-core CPU
 GOAL_MS = 50.0
@@ -123,17 +124,13 @@ def run(quick: bool) -> dict[str, dict]:
     """Replanning-cycle figures (medians over repeated warm-started cycles)."""
     from iplanner_torch.robot.model import RobotModel
 
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with torch_threads(1):
         robot = RobotModel.load("kuka_iiwa14")
         forecast = synthetic_forecast()
         repeats = 5 if quick else 30
         b8 = _cycle_times(robot, 8, forecast, repeats)
         b64 = _cycle_times(robot, 64, forecast, max(3, repeats // 3))
         b8_cover = _cycle_times(robot, 8, forecast, repeats, layout="cover")
-    finally:
-        torch.set_num_threads(threads)
     note = (
         f"iiwa, W=20, S_r={robot.num_spheres}, S_h={b8['human_spheres']}, A=10, warm-started "
         "(6 iterations), 1 thread; synthetic forecast: predict_ms excludes the predictor"

@@ -96,6 +96,7 @@ from iplanner_torch.sim.human import MotionSource, ReachingMotionSource, Scripte
 from iplanner_torch.sim.scene import SceneCfg
 from iplanner_torch.sim.tasks import ScenarioCfg, next_feasible, parse_order
 from iplanner_torch.sim.tracker import Tracker
+from iplanner_torch.types import torch_threads
 
 #: Joint indices of the hands: the joints the forecasts are scored and logged on.
 HAND_JOINTS: list[int] = [JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]]
@@ -575,10 +576,7 @@ def run_episode(
     Raises:
         ConfigError: on an unknown planner kind or an I-Planner without a predictor.
     """
-    threads = torch.get_num_threads()
-    if cfg.torch_threads is not None:
-        torch.set_num_threads(cfg.torch_threads)
-    try:
+    with torch_threads(cfg.torch_threads):
         return _run_episode(
             cfg,
             robot=robot,
@@ -590,8 +588,6 @@ def run_episode(
             motion=motion,
             task_policy=task_policy,
         )
-    finally:
-        torch.set_num_threads(threads)
 
 
 def predictor_task_policy(

@@ -41,6 +41,7 @@ from iplanner_torch.prediction.predictor import (
     gp_inputs,
 )
 from iplanner_torch.prediction.svgp import SVGPCfg, SVGPRegressor
+from iplanner_torch.types import torch_threads
 
 __all__ = [
     "IVMModule",
@@ -463,10 +464,7 @@ def train_predictor(
             fails on its own training windows (a sub-model of another shape). An existing
             ``predictor.ckpt`` is then left as it was.
     """
-    threads = torch.get_num_threads()
-    if trainer_cfg.num_threads is not None:
-        torch.set_num_threads(trainer_cfg.num_threads)
-    try:
+    with torch_threads(trainer_cfg.num_threads):
         return _train_predictor(
             data,
             predictor_cfg=predictor_cfg,
@@ -476,8 +474,6 @@ def train_predictor(
             resume=resume,
             split=split,
         )
-    finally:
-        torch.set_num_threads(threads)
 
 
 def _train_predictor(

@@ -3,7 +3,7 @@ import torch
 
 from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
-from iplanner_torch.types import check_shape, default_device, resolve_device
+from iplanner_torch.types import check_shape, default_device, resolve_device, torch_threads
 
 
 def test_check_shape_accepts_matching_and_named_dims() -> None:
@@ -73,3 +73,20 @@ def test_resolve_device_names_usable_devices_only() -> None:
         assert resolve_device("cuda:0").type == "cuda"
         with pytest.raises(ConfigError, match="CUDA device"):
             resolve_device(f"cuda:{torch.cuda.device_count()}")
+
+
+def test_torch_threads_sets_the_count_in_the_block_and_restores_it() -> None:
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(3)
+        with torch_threads(1):
+            assert torch.get_num_threads() == 1
+        assert torch.get_num_threads() == 3
+        with torch_threads(None):  # torch's count as it is
+            assert torch.get_num_threads() == 3
+        with pytest.raises(RuntimeError), torch_threads(2):
+            assert torch.get_num_threads() == 2
+            raise RuntimeError("inside")
+        assert torch.get_num_threads() == 3  # restored on an error too
+    finally:
+        torch.set_num_threads(before)
