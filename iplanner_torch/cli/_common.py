@@ -584,6 +584,13 @@ def override_key(override: str) -> str:
     return override.split("=", 1)[0].lstrip("+~")
 
 
+def override_group(override: str) -> str:
+    """The config group or root key an override sets: ``predictor`` for
+    ``predictor=iplanner_no_ni``, ``predictor.svgp.epochs=2`` and
+    ``predictor@alias.svgp.epochs=2``."""
+    return override_key(override).split(".", 1)[0].split("@", 1)[0]
+
+
 def overridden_fields(node: str, overrides: list[str] | None = None) -> set[str]:
     """The fields directly under ``node`` that the overrides (default: this run's command
     line) set: ``{"n_prev"}`` for ``node="data.windows"`` and ``data.windows.n_prev=5``."""
@@ -605,9 +612,8 @@ def unread_overrides(read: Iterable[str], overrides: list[str] | None = None) ->
     prefixes = [r for r in read if not r.endswith("=")] + ["progress"]
     out = []
     for override in task_overrides() if overrides is None else overrides:
-        key = override_key(override)
-        head, _, rest = key.partition(".")
-        key = head.split("@", 1)[0] + ("." + rest if rest else "")  # predictor@x.y -> predictor.y
+        rest = override_key(override).partition(".")[2]
+        key = override_group(override) + ("." + rest if rest else "")  # p@x.y -> p.y
         if key in exact or any(key == r or key.startswith(r + ".") for r in prefixes):
             continue
         out.append(override)

@@ -59,6 +59,7 @@ from iplanner_torch.cli._common import (
     friendly_errors,
     load_dataset,
     overridden_fields,
+    override_group,
     override_key,
     print_help_if_asked,
     refuse_unread_overrides,
@@ -296,6 +297,7 @@ def _prediction(cfg: DictConfig) -> None:
     from iplanner_torch.eval.prediction import evaluate_prediction, recorded_split
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
+    _refuse_unread("prediction")
     ckpt = _checkpoint(repo_path(cfg.evaluate.checkpoint), cfg)
     out = _out_dir(cfg) / "prediction_metrics.json"
     predictor = HumanMotionPredictor.load(ckpt, map_location=_device(cfg))
@@ -320,7 +322,7 @@ def _refuse_unread_sweep_overrides(cfg: DictConfig) -> None:
         override
         for key, override in _given().items()
         if key in ("evaluate.checkpoint", "train.out_dir")
-        or key.split(".", 1)[0].split("@", 1)[0] == "predictor"
+        or override_group(override) == "predictor"
     ]
     if unread:
         folder = Path(str(cfg.paths.checkpoints)) / Path(str(cfg.data.path)).name
@@ -341,7 +343,8 @@ def _noise_sweep(cfg: DictConfig) -> None:
     from iplanner_torch.eval.prediction_sweep import prediction_vs_noise, write_noise_report
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
-    _refuse_unread_sweep_overrides(cfg)
+    _refuse_unread_sweep_overrides(cfg)  # the more specific message first
+    _refuse_unread("noise_sweep")
     report_dir = _out_dir(cfg)
     device = _device(cfg)
     folder = Path(cfg.paths.checkpoints) / Path(cfg.data.path).name
@@ -425,6 +428,7 @@ def _episode(cfg: DictConfig) -> None:
     from iplanner_torch.cli.callbacks import episode_report, sweep_overrides
     from iplanner_torch.eval.report import comparison_table, incomplete_logs_note, print_table
 
+    _refuse_unread("episode")
     logs = cfg.evaluate.logs
     if not logs:
         raise ConfigError(
@@ -528,9 +532,6 @@ def _app(cfg: DictConfig) -> None:
     mode = str(cfg.evaluate.mode)
     if mode not in MODES:
         raise ConfigError(f"evaluate.mode must be one of {MODES}, got {mode!r}")
-    if mode == "noise_sweep":
-        _refuse_unread_sweep_overrides(cfg)  # the more specific message first
-    _refuse_unread(mode)
     {"prediction": _prediction, "noise_sweep": _noise_sweep, "episode": _episode}[mode](cfg)
 
 

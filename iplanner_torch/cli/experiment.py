@@ -47,6 +47,7 @@ from iplanner_torch.cli._common import (
     friendly_errors,
     instantiate,
     overridden_fields,
+    override_group,
     override_key,
     print_help_if_asked,
     repo_path,
@@ -117,6 +118,11 @@ def ensure_predictors(
     from iplanner_torch.cli.train import train_from_config
     from iplanner_torch.errors import CheckpointError
 
+    if not variants:  # no predicting planner: run.train_trainer is not read
+        return {}
+    trainer_node = option_node("trainer", str(cfg.run.train_trainer), cfg)
+    given = {override_key(o) for o in _task_overrides()}
+    windows_given = overridden_fields("data.windows")
     paths: dict[str, str] = {}
     for variant in variants:
         option = VARIANT_OPTION[variant]
@@ -140,16 +146,15 @@ def ensure_predictors(
                 cfg,
                 option_node("predictor", option, cfg),
                 out_dir,
-                trainer_node=option_node("trainer", str(cfg.run.train_trainer), cfg),
+                trainer_node=trainer_node,
                 data_node=data_node,
             )
             print(f"  trained in {time.perf_counter() - t0:.0f} s -> {ckpt}", flush=True)
         else:
-            stale = checkpoint_differences(ckpt, data_node, overridden_fields("data.windows"))
-            given = {override_key(o) for o in _task_overrides()}
+            stale = checkpoint_differences(ckpt, data_node, windows_given)
             stale += training_differences(
                 ckpt,
-                option_node("trainer", str(cfg.run.train_trainer), cfg),
+                trainer_node,
                 seed=cfg_scalar(cfg, "seed", int) if "seed" in given else None,
                 budget="run.train_trainer" in given,
             )
@@ -251,7 +256,7 @@ def unused_overrides(overrides: list[str], train_data: str) -> list[str]:
     unread = {"predictor", "trainer", "train", "evaluate"}
     if train_data != "data":
         unread.add("data")
-    return [o for o in overrides if override_key(o).split(".", 1)[0].split("@", 1)[0] in unread]
+    return [o for o in overrides if override_group(o) in unread]
 
 
 #: Sweep aliases (conf/config.yaml) -> the episode settings they feed (conf/sim/default.yaml).
@@ -328,7 +333,11 @@ def choose_planner(cfg: DictConfig, overrides: list[str]) -> None:
     """
     from iplanner_torch.errors import ConfigError
 
-    chosen = [o.split("=", 1)[1] for o in overrides if o.split("=", 1)[0].lstrip("+") == "planner"]
+    chosen = [
+        o.split("=", 1)[1]
+        for o in overrides
+        if not o.startswith("~") and override_key(o) == "planner"
+    ]
     if not chosen:
         return
     option = chosen[-1]

@@ -12,6 +12,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
+from omegaconf import DictConfig
 
 import iplanner_torch.prediction.training as training
 from iplanner_torch.cli._common import CONF_DIR
@@ -23,6 +24,17 @@ from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
 FRACTIONS = (0.6, 0.2, 0.2)
+
+
+def _config(*overrides: str) -> DictConfig:
+    """The root config with ``trainer=fast progress=false`` and ``overrides``."""
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        cfg = compose(
+            config_name="config", overrides=[*overrides, "trainer=fast", "progress=false"]
+        )
+    GlobalHydra.instance().clear()
+    return cfg
 
 
 @pytest.fixture
@@ -46,14 +58,7 @@ def test_train_from_config_records_the_split_it_trains_on(
         raise Stop
 
     monkeypatch.setattr(training, "train_predictor", capture)
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        cfg = compose(
-            config_name="config",
-            overrides=[f"data.path={dataset}", "seed=1", "data.split=[0.6,0.2,0.2]",
-                       "trainer=fast", "progress=false"],
-        )  # fmt: skip
-    GlobalHydra.instance().clear()
+    cfg = _config(f"data.path={dataset}", "seed=1", "data.split=[0.6,0.2,0.2]")
     with pytest.raises(Stop):
         train_from_config(cfg, cfg.predictor, tmp_path / "ck", trainer_node=cfg.trainer)
     test = split_by_demonstration(load_demonstrations(dataset), FRACTIONS, 1)[2]
@@ -125,14 +130,7 @@ def test_a_split_that_holds_out_nothing_is_said(
         return out_dir / "predictor.ckpt"
 
     monkeypatch.setattr(training, "train_predictor", fake_train)
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        cfg = compose(
-            config_name="config",
-            overrides=[f"data.path={dataset}", "data.split=[0.75,0.2,0.05]", "trainer=fast",
-                       "progress=false"],
-        )  # fmt: skip
-    GlobalHydra.instance().clear()
+    cfg = _config(f"data.path={dataset}", "data.split=[0.75,0.2,0.05]")
     with pytest.warns(DataWarning, match=r"data.split=\[0.75, 0.2, 0.05\] holds out none of "
                       r"the 10 demonstrations .* no held-out metrics"):  # fmt: skip
         _, metrics = train_from_config(
