@@ -568,6 +568,30 @@ def load_dataset(
     return load_demonstrations(path, fps=fps, joints=list(joints) if joints else None)
 
 
+def config_split(cfg: DictConfig, data_node: DictConfig | None = None) -> Any:
+    """The split by demonstration that ``seed`` and ``data.split`` draw (its held-out names
+    not yet known), as a :class:`~iplanner_torch.eval.prediction.SplitRecord`.
+
+    Args:
+        cfg: the root config (``seed``).
+        data_node: a ``conf/data`` node (default ``cfg.data``); without ``split``, the shares
+            are :data:`~iplanner_torch.data.windows.DEFAULT_SPLIT`.
+
+    Raises:
+        ConfigError: naming ``data.split`` when it is not 3 non-negative shares summing to 1.
+    """
+    from iplanner_torch.data.windows import DEFAULT_SPLIT
+    from iplanner_torch.eval.prediction import SplitRecord
+
+    data_node = cfg.data if data_node is None else data_node
+    seed = cfg_scalar(cfg, "seed", int)
+    fractions = data_node.get("split", None)
+    try:
+        return SplitRecord(seed=seed, fractions=DEFAULT_SPLIT if fractions is None else fractions)
+    except ConfigError as err:
+        raise ConfigError(f"data.split: {err}") from None
+
+
 def task_overrides() -> list[str]:
     """This run's command-line overrides (none outside a Hydra run)."""
     from hydra.core.hydra_config import HydraConfig

@@ -55,6 +55,7 @@ from iplanner_torch.cli._common import (
     CONF_DIR,
     cfg_list,
     cfg_scalar,
+    config_split,
     differing_settings,
     friendly_errors,
     load_dataset,
@@ -173,18 +174,6 @@ def _check_windows(cfg: DictConfig, predictor: Any, ckpt: Path) -> None:
         )
 
 
-def _config_split(cfg: DictConfig) -> SplitRecord:
-    """The split ``seed`` and ``data.split`` describe."""
-    from iplanner_torch.eval.prediction import SplitRecord
-
-    seed = cfg_scalar(cfg, "seed", int)
-    try:
-        fractions = tuple(float(f) for f in cfg.data.get("split", (0.8, 0.1, 0.1)))
-        return SplitRecord(seed=seed, fractions=fractions)
-    except (ConfigError, TypeError, ValueError) as err:
-        raise ConfigError(f"data.split: {err}") from None
-
-
 def _evaluation_split(
     cfg: DictConfig,
     recorded: dict[Path, SplitRecord | None],
@@ -212,7 +201,7 @@ def _evaluation_split(
     """
     from iplanner_torch.eval.prediction import INPUTS_FILE
 
-    config = _config_split(cfg)
+    config = config_split(cfg)
     found = {ckpt: rec for ckpt, rec in recorded.items() if rec is not None}
     if len({(r.seed, r.fractions) for r in found.values()}) > 1:
         listed = "; ".join(f"{ckpt}: {rec.describe()}" for ckpt, rec in found.items())

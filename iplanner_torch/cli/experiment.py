@@ -203,8 +203,9 @@ def training_differences(
     """Where a trained predictor's recorded training differs from what the command line asks.
 
     Read from the ``training_inputs.json`` beside ``ckpt``; a checkpoint without that record,
-    or with one that does not read or records no trainer, gives no differences (it is used as
-    it is, like one trained on purpose with ``iplanner-train`` into the experiment's folder).
+    or with one that records no trainer, gives no differences (it is used as it is, like one
+    trained on purpose with ``iplanner-train`` into the experiment's folder). So does one whose
+    record does not read, with a warning.
 
     Args:
         ckpt: the predictor checkpoint.
@@ -216,20 +217,33 @@ def training_differences(
 
     Returns:
         ``"trainer max_steps: 40 -> None"`` lines (checkpoint -> now); empty when they agree.
+
+    Warns:
+        DataWarning: when the record is there but does not read.
     """
-    import json
+    import warnings
     from dataclasses import asdict
 
-    from iplanner_torch.eval.prediction import INPUTS_FILE
+    from iplanner_torch.errors import CheckpointError, DataWarning
+    from iplanner_torch.eval.prediction import read_training_inputs
     from iplanner_torch.prediction.training import TrainerCfg
 
     if seed is None and not budget:
         return []
     try:
-        record = json.loads((ckpt.parent / INPUTS_FILE).read_text(encoding="utf-8"))
-        trainer = dict(record["trainer_cfg"])
-    except (OSError, ValueError, KeyError, TypeError):
+        record = read_training_inputs(ckpt)
+    except CheckpointError as err:
+        given = [k for k, v in (("seed", seed is not None), ("run.train_trainer", budget)) if v]
+        warnings.warn(
+            f"{err}: {ckpt} is used as it is, unchecked against the command line's "
+            f"{' and '.join(given)}",
+            DataWarning,
+            stacklevel=2,
+        )
         return []
+    if record is None or not isinstance(record.get("trainer_cfg"), dict):
+        return []
+    trainer = dict(record["trainer_cfg"])
     now = asdict(instantiate(trainer_node, TrainerCfg, name="trainer"))  # its seed is ${seed}
     keys = {"max_epochs", "max_steps"} if budget else set()
     if seed is not None:

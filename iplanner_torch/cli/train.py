@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import hydra
@@ -30,6 +31,7 @@ from omegaconf import DictConfig
 from iplanner_torch.cli._common import (
     CONF_DIR,
     cfg_scalar,
+    config_split,
     friendly_errors,
     instantiate,
     load_dataset,
@@ -60,21 +62,20 @@ def train_from_config(
     """
     data_node = cfg.data if data_node is None else data_node
     from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
-    from iplanner_torch.eval.prediction import SplitRecord, evaluate_prediction
+    from iplanner_torch.eval.prediction import evaluate_prediction
     from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
     from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
     predictor_cfg = instantiate(predictor_node, PredictorCfg)
     trainer_cfg = instantiate(trainer_node, TrainerCfg)
     window_cfg = instantiate(data_node.windows, WindowCfg)
+    drawn = config_split(cfg, data_node)
     demos = load_dataset(
         data_node, generate_if_missing=True, progress=cfg_scalar(cfg, "progress", bool)
     )
-    fractions = tuple(float(f) for f in data_node.get("split", (0.8, 0.1, 0.1)))
-    seed = cfg_scalar(cfg, "seed", int)
-    train, val, test = split_by_demonstration(demos, fractions, seed)
+    train, val, test = split_by_demonstration(demos, drawn.fractions, drawn.seed)
     # recorded beside the checkpoint: iplanner-evaluate scores the same held-out demonstrations
-    split = SplitRecord(seed=seed, fractions=fractions, held_out=tuple(d.name for d in test))
+    split = replace(drawn, held_out=tuple(d.name for d in test))
     train_w = build_windows(train, window_cfg)
     val_w = build_windows(val, window_cfg) if val else None
     t0 = time.perf_counter()
@@ -98,9 +99,9 @@ def train_from_config(
         from iplanner_torch.errors import DataWarning
 
         warnings.warn(
-            f"data.split={list(fractions)} holds out none of the {len(demos)} demonstrations "
-            "(each group of one target or first action is cut by rounding), so there are no "
-            "held-out metrics; use more demonstrations or a larger test fraction",
+            f"data.split={list(drawn.fractions)} holds out none of the {len(demos)} "
+            "demonstrations (each group of one target or first action is cut by rounding), so "
+            "there are no held-out metrics; use more demonstrations or a larger test fraction",
             DataWarning,
             stacklevel=2,
         )

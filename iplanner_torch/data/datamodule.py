@@ -12,9 +12,11 @@ from torch.utils.data import BatchSampler, DataLoader, Dataset, RandomSampler, S
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.data.windows import (
+    DEFAULT_SPLIT,
     WindowCfg,
     WindowSet,
     build_windows,
+    check_split_fractions,
     split_by_demonstration,
 )
 from iplanner_torch.errors import ConfigError, DataError
@@ -56,7 +58,7 @@ class ReachingDataModule(L.LightningDataModule):
         data: str | Path | Sequence[Demonstration],
         window_cfg: WindowCfg | None = None,
         *,
-        fractions: tuple[float, float, float] = (0.8, 0.1, 0.1),
+        fractions: tuple[float, float, float] = DEFAULT_SPLIT,
         batch_size: int = 256,
         seed: int = 0,
         fps: float | None = None,
@@ -67,7 +69,7 @@ class ReachingDataModule(L.LightningDataModule):
             raise ConfigError(f"batch_size must be >= 1, got {batch_size}")
         self.data = data
         self.window_cfg = window_cfg or WindowCfg()
-        self.fractions = tuple(float(f) for f in fractions)
+        self.fractions = check_split_fractions(fractions)
         self.batch_size = int(batch_size)
         self.seed = int(seed)
         self.fps = fps

@@ -19,6 +19,7 @@ training tuple is ``(F_prev, p, c, n, xi_next)``:
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -522,9 +523,34 @@ def _stratum(d: Demonstration) -> str:
     return "none"
 
 
+#: (train, val, test) shares of the demonstrations when ``data.split`` does not say.
+DEFAULT_SPLIT: tuple[float, float, float] = (0.8, 0.1, 0.1)
+
+
+def check_split_fractions(fractions: Sequence[float]) -> tuple[float, float, float]:
+    """``fractions`` as three floats, checked: (train, val, test) shares, non-negative, summing
+    to 1.
+
+    Raises:
+        ConfigError: naming the shares given, when they are not that.
+    """
+    try:
+        fr = tuple(float(f) for f in fractions)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(
+            f"fractions: expected 3 numbers (train, val, test), got {fractions!r} ({err})"
+        ) from None
+    if len(fr) != 3 or any(not f >= 0 for f in fr) or not math.isclose(sum(fr), 1.0):
+        raise ConfigError(
+            f"fractions: expected 3 non-negative shares (train, val, test) summing to 1, "
+            f"got {list(fr)}"
+        )
+    return fr  # type: ignore[return-value]
+
+
 def split_by_demonstration(
     demos: Sequence[Demonstration],
-    fractions: tuple[float, float, float] = (0.8, 0.1, 0.1),
+    fractions: tuple[float, float, float] = DEFAULT_SPLIT,
     seed: int = 0,
 ) -> tuple[list[Demonstration], list[Demonstration], list[Demonstration]]:
     """Split demonstrations (never windows) into train / val / test.
@@ -545,9 +571,7 @@ def split_by_demonstration(
     Raises:
         ConfigError: for bad fractions.
     """
-    fr = tuple(float(f) for f in fractions)
-    if len(fr) != 3 or any(f < 0 for f in fr) or not np.isclose(sum(fr), 1.0):
-        raise ConfigError(f"fractions must be 3 non-negative numbers summing to 1, got {fr}")
+    fr = check_split_fractions(fractions)
     rng = np.random.default_rng(seed)
     groups: dict[str, list[int]] = {}
     for i, d in enumerate(demos):

@@ -39,9 +39,10 @@ from iplanner_torch.data.windows import (
     WindowCfg,
     WindowSet,
     build_windows,
+    check_split_fractions,
     split_by_demonstration,
 )
-from iplanner_torch.errors import ConfigError, DataError, DataWarning
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
 from iplanner_torch.eval.metrics import modified_hausdorff_batch as modified_hausdorff
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import check_shape
@@ -67,18 +68,39 @@ class SplitRecord:
     held_out: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        fr = tuple(float(f) for f in self.fractions)
-        object.__setattr__(self, "fractions", fr)
+        object.__setattr__(self, "fractions", check_split_fractions(self.fractions))
         object.__setattr__(self, "held_out", tuple(str(n) for n in self.held_out))
-        if len(fr) != 3 or any(not f >= 0 for f in fr) or not math.isclose(sum(fr), 1.0):
-            raise ConfigError(
-                f"fractions: expected 3 non-negative shares (train, val, test) summing to 1, "
-                f"got {list(fr)}"
-            )
 
     def describe(self) -> str:
         """``seed=1 data.split=[0.6,0.2,0.2]``: the command-line settings that draw this split."""
         return f"seed={self.seed} data.split=[{','.join(f'{f:g}' for f in self.fractions)}]"
+
+
+def read_training_inputs(folder: str | Path) -> dict[str, Any] | None:
+    """The :data:`INPUTS_FILE` record in a training folder (or beside a checkpoint in it).
+
+    Args:
+        folder: the training folder, or a checkpoint file in it.
+
+    Returns:
+        The record, or None when the folder has none.
+
+    Raises:
+        CheckpointError: naming the file, when it does not read as a JSON object.
+    """
+    folder = Path(folder)
+    path = (folder.parent if folder.suffix == ".ckpt" else folder) / INPUTS_FILE
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise CheckpointError(f"{path} is unreadable ({type(err).__name__}: {err})") from None
+    if not isinstance(record, dict):
+        raise CheckpointError(
+            f"{path} is unreadable (expected a JSON object, got {type(record).__name__})"
+        )
+    return record
 
 
 def recorded_split(ckpt: str | Path, fingerprint: str) -> SplitRecord | None:
@@ -97,12 +119,11 @@ def recorded_split(ckpt: str | Path, fingerprint: str) -> SplitRecord | None:
     Warns:
         DataWarning: when the file is there but cannot be read.
     """
-    path = Path(ckpt).parent / INPUTS_FILE
-    if not fingerprint or not path.is_file():
+    if not fingerprint:
         return None
     try:
-        inputs = json.loads(path.read_text(encoding="utf-8"))
-        if not isinstance(inputs, dict) or inputs.get("fingerprint") != fingerprint:
+        inputs = read_training_inputs(ckpt)
+        if inputs is None or inputs.get("fingerprint") != fingerprint:
             return None
         split = inputs.get("split")
         if split is None:
@@ -112,10 +133,10 @@ def recorded_split(ckpt: str | Path, fingerprint: str) -> SplitRecord | None:
             fractions=tuple(split["fractions"]),
             held_out=tuple(split.get("held_out", ())),
         )
-    except (OSError, ValueError, TypeError, KeyError, AttributeError) as err:
+    except (CheckpointError, ConfigError, ValueError, TypeError, KeyError, AttributeError) as err:
         warnings.warn(
-            f"cannot read the held-out split of {ckpt} from {path} ({type(err).__name__}: "
-            f"{err}); the split is drawn from seed and data.split",
+            f"cannot read the held-out split of {ckpt} ({type(err).__name__}: {err}); the "
+            "split is drawn from seed and data.split",
             DataWarning,
             stacklevel=2,
         )

@@ -33,7 +33,7 @@ from tqdm.auto import tqdm
 
 from iplanner_torch.data.windows import WindowSet
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
-from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord
+from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord, read_training_inputs
 from iplanner_torch.prediction.predictor import (
     HumanMotionPredictor,
     PredictorCfg,
@@ -643,14 +643,13 @@ def _record_inputs(
         )
     )
     path = out_dir / INPUTS_FILE
-    if resume and path.is_file():
-        try:
-            before = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as err:
-            raise CheckpointError(
-                f"cannot resume in {out_dir}: {path.name} is unreadable ({err}); "
-                "run with train.resume=false"
-            ) from err
+    try:
+        before = read_training_inputs(out_dir) if resume else None
+    except CheckpointError as err:
+        raise CheckpointError(
+            f"cannot resume in {out_dir}: {err}; run with train.resume=false"
+        ) from None
+    if before is not None:
         always = ("fingerprint", "action_names", "joint_names", "predictor_cfg", "window_cfg")
         changed = sorted(k for k in always if before.get(k) != inputs[k])
         for key, fields in (

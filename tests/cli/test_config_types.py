@@ -11,7 +11,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from iplanner_torch.cli._common import cfg_list, cfg_scalar, instantiate
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataWarning
 from iplanner_torch.prediction.training import TrainerCfg
 from iplanner_torch.sim.human import HumanCfg
 
@@ -455,6 +455,13 @@ def test_a_checkpoint_trained_with_another_trainer_or_seed_is_named(tmp_path: Pa
         "split seed: 0 -> 3",
     ]
     (tmp_path / INPUTS_FILE).write_text("{broken")  # no record to compare: used as it is
+    unchecked = r"used as it is, unchecked against the command line's seed"
+    with pytest.warns(DataWarning, match=rf"unreadable .*{unchecked} and run.train_trainer"):
+        assert training_differences(ckpt, default, seed=3, budget=True) == []
+    (tmp_path / INPUTS_FILE).write_text("[1, 2]")
+    with pytest.warns(DataWarning, match=rf"expected a JSON object, got list.*{unchecked}$"):
+        assert training_differences(ckpt, default, seed=3, budget=False) == []
+    (tmp_path / INPUTS_FILE).write_text("{}")  # a record without trainer settings
     assert training_differences(ckpt, default, seed=3, budget=True) == []
     (tmp_path / INPUTS_FILE).unlink()
     assert training_differences(ckpt, default, seed=3, budget=True) == []

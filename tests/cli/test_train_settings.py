@@ -15,11 +15,11 @@ from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig
 
 import iplanner_torch.prediction.training as training
-from iplanner_torch.cli._common import CONF_DIR
+from iplanner_torch.cli._common import CONF_DIR, config_split
 from iplanner_torch.cli.train import train_from_config
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.data.windows import split_by_demonstration
-from iplanner_torch.errors import CheckpointError
+from iplanner_torch.errors import CheckpointError, ConfigError
 from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
@@ -65,6 +65,30 @@ def test_train_from_config_records_the_split_it_trains_on(
     assert test and given["split"] == SplitRecord(
         seed=1, fractions=FRACTIONS, held_out=tuple(d.name for d in test)
     )
+
+
+@pytest.mark.parametrize(
+    ("overrides", "fractions"),
+    [((), (0.8, 0.1, 0.1)), (("~data.split",), (0.8, 0.1, 0.1)), (("seed=4",), (0.8, 0.1, 0.1))],
+)
+def test_config_split_reads_seed_and_data_split(
+    overrides: tuple[str, ...], fractions: tuple[float, ...]
+) -> None:
+    """iplanner-train and iplanner-evaluate draw the split from one reader: ``seed`` and
+    ``data.split``, or DEFAULT_SPLIT where a data config has no ``split``."""
+    cfg = _config(*overrides)
+    assert config_split(cfg) == SplitRecord(
+        seed=4 if "seed=4" in overrides else 0, fractions=fractions
+    )
+
+
+def test_a_bad_split_is_refused_before_the_dataset_is_read(tmp_path: Path) -> None:
+    """``data.split`` is checked before the (possibly long) generation of a missing dataset."""
+    missing = tmp_path / "not_generated"
+    cfg = _config(f"data.path={missing}", "data.split=[0.5,0.5,0.5]")
+    with pytest.raises(ConfigError, match=r"^data.split: fractions: .* got \[0.5, 0.5, 0.5\]"):
+        train_from_config(cfg, cfg.predictor, tmp_path / "ck", trainer_node=cfg.trainer)
+    assert not missing.exists()
 
 
 def test_resume_refuses_other_trainer_settings_and_split(

@@ -10,8 +10,10 @@ from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
 from iplanner_torch.data.skeleton import JOINT_NAMES
 from iplanner_torch.data.windows import (
+    DEFAULT_SPLIT,
     WindowCfg,
     build_windows,
+    check_split_fractions,
     compute_features,
     impute_nan,
     next_action_labels,
@@ -239,6 +241,27 @@ def test_split_no_leakage_and_stratified(reach_demos):
     assert [d.name for d in again[1]] == [d.name for d in va]
     with pytest.raises(ConfigError, match="summing to 1"):
         split_by_demonstration(reach_demos, (0.5, 0.5, 0.5))
+
+
+@pytest.mark.parametrize(
+    ("fractions", "message"),
+    [
+        ((0.5, 0.5), r"3 non-negative shares .* got \[0.5, 0.5\]"),
+        ((1.2, -0.1, -0.1), r"got \[1.2, -0.1, -0.1\]"),
+        ((float("nan"), 0.5, 0.5), r"got \[nan, 0.5, 0.5\]"),
+        (("a", 0.5, 0.5), r"expected 3 numbers .*could not convert"),
+        (0.8, r"expected 3 numbers"),
+    ],
+)
+def test_split_fractions_are_checked(reach_demos, fractions, message) -> None:
+    """One check serves split_by_demonstration, SplitRecord and the data module: a share
+    that is not a number, NaN, negative, or shares not summing to 1 are refused by name."""
+    with pytest.raises(ConfigError, match=message):
+        check_split_fractions(fractions)
+    with pytest.raises(ConfigError, match=message):
+        split_by_demonstration(reach_demos, fractions)
+    assert check_split_fractions(["0.6", 0.2, 0.2]) == (0.6, 0.2, 0.2)
+    assert check_split_fractions(DEFAULT_SPLIT) == (0.8, 0.1, 0.1)
 
 
 @pytest.mark.gpu

@@ -202,3 +202,41 @@ def test_action_name_mismatch_warns_on_demonstrations_and_windows() -> None:
     with pytest.warns(DataWarning, match="class_\\* metrics compare unrelated labels"):
         res = evaluate_prediction(predictor, windows)
     assert res["n_windows"] == len(windows)
+
+
+def test_training_inputs_record_reads_or_is_refused_by_name(tmp_path) -> None:
+    """One reader of training_inputs.json: None without it, the record beside a checkpoint or
+    in a folder, a CheckpointError naming the file when it is no JSON object; the recorded
+    split then falls back to seed and data.split with a warning."""
+    import json
+
+    from iplanner_torch.errors import CheckpointError
+    from iplanner_torch.eval.prediction import (
+        INPUTS_FILE,
+        SplitRecord,
+        read_training_inputs,
+        recorded_split,
+    )
+
+    ckpt = tmp_path / "predictor.ckpt"
+    assert read_training_inputs(tmp_path) is None and recorded_split(ckpt, "abc") is None
+    split = {"seed": 2, "fractions": [0.6, 0.2, 0.2], "held_out": ["d1"]}
+    (tmp_path / INPUTS_FILE).write_text(json.dumps({"fingerprint": "abc", "split": split}))
+    assert read_training_inputs(ckpt) == read_training_inputs(tmp_path)
+    assert recorded_split(ckpt, "abc") == SplitRecord(
+        seed=2, fractions=(0.6, 0.2, 0.2), held_out=("d1",)
+    )
+    assert recorded_split(ckpt, "other") is None  # the folder was trained anew since
+    bad = {"fingerprint": "abc", "split": dict(split, fractions=[0.5, 0.5, 0.5])}
+    for text, why in (
+        ("\xff", "JSONDecodeError"),
+        ("null", "expected a JSON object, got NoneType"),
+        (json.dumps(bad), r"ConfigError: fractions: expected 3 non-negative shares"),
+        (json.dumps({"fingerprint": "abc", "split": {"fractions": [1, 0, 0]}}), "KeyError"),
+    ):
+        (tmp_path / INPUTS_FILE).write_text(text)
+        if "fingerprint" not in text:
+            with pytest.raises(CheckpointError, match=f"{INPUTS_FILE} is unreadable \\({why}"):
+                read_training_inputs(ckpt)
+        with pytest.warns(DataWarning, match=f"cannot read the held-out split of .*{why}"):
+            assert recorded_split(ckpt, "abc") is None

@@ -121,6 +121,14 @@ def test_resume_never_mixes_in_sub_models_of_other_inputs(tmp_path: Path) -> Non
             progress=False, resume=True,
         )  # fmt: skip
     assert (tmp_path / "a" / "predictor.ckpt").read_bytes() == ckpt_a
+    # a record that is not a JSON object (broken by hand) is refused by name, not resumed past
+    broken = tmp_path / "broken"
+    shutil.copytree(tmp_path / "a", broken)
+    for text, why in (("[]", "expected a JSON object, got list"), ("{", "JSONDecodeError")):
+        (broken / "training_inputs.json").write_text(text)
+        with pytest.raises(CheckpointError, match=f"cannot resume in .*unreadable \\({why}"):
+            train(a, broken, resume=True)
+        assert (broken / "predictor.ckpt").read_bytes() == ckpt_a
     # a folder from before the record, with one GP of b's (5 future frames) among a's
     mixed = tmp_path / "mixed"
     shutil.copytree(tmp_path / "a", mixed)
