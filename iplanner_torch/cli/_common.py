@@ -444,8 +444,15 @@ def copy_output_to(path: Path | None) -> Iterator[None]:
             err.close_line()
 
 
-def friendly_errors(fn: F) -> F:
+def friendly_errors(
+    fn: F | None = None, *, before: Callable[[DictConfig], None] | None = None
+) -> Any:
     """Turn library errors into a one-line message and exit code 2 instead of a traceback.
+
+    Used as ``@friendly_errors``, or ``@friendly_errors(before=check)`` to run ``check(cfg)``
+    before the root keys are checked: a command's refusal of the overrides it does not read
+    (``iplanner-train device=cuda``) then comes before a complaint about their values (no
+    CUDA here), which would not matter to it.
 
     In one job of a multirun the job ends with that line instead, leaving a
     :data:`FAILED_MARKER` file in its folder, so the sweep's other jobs still run; the sweep
@@ -457,12 +464,17 @@ def friendly_errors(fn: F) -> F:
     job, what the command prints, the error line included, is also written to the job's log
     file (:func:`copy_output_to`)."""
 
+    if fn is None:
+        return functools.partial(friendly_errors, before=before)
+
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         log_path = job_log_path()
         with copy_output_to(log_path), _terminate_as_interrupt():
             try:
                 if args and isinstance(args[0], DictConfig):
+                    if before is not None:
+                        before(args[0])
                     check_root_keys(args[0])
                 return fn(*args, **kwargs)
             except IPlannerError as exc:

@@ -51,17 +51,15 @@ from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
-    _plain_text,
     friendly_errors,
     generate_dataset,
-    refuse_conflicting_flags,
+    print_help_if_asked,
     refuse_unread_overrides,
     repo_path,
 )
 from iplanner_torch.errors import ConfigError, DataError
 
 COMMANDS = ("generate", "info")
-HELP_FLAGS = ("-h", "--help")
 #: Files listed by name in ``info``'s report before the rest are counted.
 _MAX_LISTED = 10
 _command = "generate"
@@ -140,15 +138,19 @@ def _info(cfg: DictConfig) -> None:
             print(f"    ... and {len(lost) - _MAX_LISTED} more")
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
-@friendly_errors
-def _app(cfg: DictConfig) -> None:
+def _refuse_unread(cfg: DictConfig) -> None:
+    """Refuse the overrides iplanner-data does not read (before their values are checked)."""
     refuse_unread_overrides(
         f"iplanner-data {_command}",
         ("data", "paths.datasets"),
         "it reads data, paths.datasets and progress (a generated set draws from "
         "data.generator.seed, not seed)",
     )
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
+@friendly_errors(before=_refuse_unread)
+def _app(cfg: DictConfig) -> None:
     {"generate": _generate, "info": _info}[_command](cfg)
 
 
@@ -156,10 +158,12 @@ def main() -> None:
     """Console entry point: ``iplanner-data {generate,info} [overrides...]``."""
     global _command
     args = sys.argv[1:]
-    if any(a in HELP_FLAGS for a in args):
-        print(_plain_text(__doc__ or "").strip())
-        return
-    refuse_conflicting_flags(args)
+    print_help_if_asked(
+        __doc__ or "",
+        args,
+        groups=("data",),
+        root_keys="progress=true|false (a generated set draws from data.generator.seed)",
+    )
     if args and not args[0].startswith("-") and "=" not in args[0]:
         if args[0] not in COMMANDS:
             msg = f"error: unknown command {args[0]!r}; expected one of {COMMANDS}"

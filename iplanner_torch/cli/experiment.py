@@ -563,7 +563,9 @@ def dump_config_safe(cfg: DictConfig) -> str:
 
 def main() -> None:
     """Console entry point."""
-    print_help_if_asked(__doc__ or "", sys.argv[1:])
+    # predictor, trainer, train and evaluate are the other commands' (refused here)
+    groups = ("data", "experiment", "planner", "robot", "scenario", "sim")
+    print_help_if_asked(__doc__ or "", sys.argv[1:], groups=groups)
     _refuse_used_run_dir(sys.argv[1:])
     _app()
 

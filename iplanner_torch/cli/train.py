@@ -115,7 +115,10 @@ def _refuse_unread_svgp_fields(cfg: DictConfig) -> None:
     ``predictor.svgp.nigp_iterations=4`` with ``noisy_input=simple`` would change nothing."""
     from iplanner_torch.prediction.svgp import UNREAD_BY_NOISY_INPUT
 
-    mode = str(cfg.predictor.svgp.get("noisy_input", "simple"))
+    svgp = cfg.predictor.get("svgp")
+    if not isinstance(svgp, DictConfig):  # not a predictor config: instantiating it says so
+        return
+    mode = str(svgp.get("noisy_input", "simple"))
     unread = sorted(overridden_fields("predictor.svgp") & set(UNREAD_BY_NOISY_INPUT.get(mode, ())))
     if unread:
         keys = ", ".join(f"predictor.svgp.{k}" for k in unread)
@@ -127,9 +130,8 @@ def _refuse_unread_svgp_fields(cfg: DictConfig) -> None:
         )
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
-@friendly_errors
-def _app(cfg: DictConfig) -> None:
+def _refuse_unread(cfg: DictConfig) -> None:
+    """Refuse the overrides iplanner-train does not read (before their values are checked)."""
     refuse_unread_overrides(
         "iplanner-train",
         ("data", "predictor", "trainer", "train", "seed", "paths"),
@@ -138,6 +140,11 @@ def _app(cfg: DictConfig) -> None:
         "the predictors), evaluate.* belongs to iplanner-evaluate, and the closed-loop "
         "settings (robot, scenario, planner, sim, run, tracker, human) to iplanner-experiment",
     )
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
+@friendly_errors(before=_refuse_unread)
+def _app(cfg: DictConfig) -> None:
     _refuse_unread_svgp_fields(cfg)
     out_dir = repo_path(cfg.train.out_dir)
     ckpt, metrics = train_from_config(cfg, cfg.predictor, out_dir, trainer_node=cfg.trainer)

@@ -200,10 +200,23 @@ def test_help_lists_groups_options_and_defaults() -> None:
     assert "Root keys: seed=<int>, device=auto|cpu|cuda, progress=true|false." in lines
 
 
-def test_help_of_a_command_lists_the_groups_and_root_keys_it_reads() -> None:
-    """iplanner-train's --help: the groups training reads and no device, which it refuses."""
+@pytest.mark.parametrize(
+    ("module", "groups", "root_keys"),
+    [
+        ("train", ["data", "predictor", "trainer"], ["seed", "progress"]),
+        ("data", ["data"], ["progress"]),
+        ("experiment", ["data", "experiment", "planner", "robot", "scenario", "sim"],
+         ["seed", "device", "progress"]),
+    ],
+)  # fmt: skip
+def test_help_of_a_command_lists_the_groups_and_root_keys_it_reads(
+    module: str, groups: list[str], root_keys: list[str]
+) -> None:
+    """--help lists only what the command reads: iplanner-train no device, iplanner-data no
+    seed or device, iplanner-experiment not the predictor and trainer groups, which they
+    refuse."""
     result = subprocess.run(
-        [sys.executable, "-m", "iplanner_torch.cli.train", "--help"],
+        [sys.executable, "-m", f"iplanner_torch.cli.{module}", "--help"],
         capture_output=True,
         text=True,
         timeout=120,
@@ -211,10 +224,11 @@ def test_help_of_a_command_lists_the_groups_and_root_keys_it_reads() -> None:
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     after = lines[lines.index("Config groups (group=option; * the default):") + 1 :]
-    groups = [ln.split()[0] for ln in after if ln.startswith("  ")]
-    assert groups == ["data", "predictor", "trainer", "hydra/launcher"]
-    root = next(ln for ln in lines if ln.startswith("Root keys:"))
-    assert "seed=<int>" in root and "device" not in root.split("(")[0]
+    listed = [ln.split()[0] for ln in after if ln.startswith("  ")]
+    assert listed == [*groups, "hydra/launcher"]
+    root = next(ln for ln in lines if ln.startswith("Root keys:")).split("(")[0]
+    named = [k for k in ("seed", "device", "progress") if k in root]
+    assert named == root_keys
 
 
 def test_console_help_exits_zero(tmp_path: Path) -> None:

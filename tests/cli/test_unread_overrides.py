@@ -118,6 +118,11 @@ def _run(module: str, args: list[str], cwd: Path) -> subprocess.CompletedProcess
          "trainer.accelerator"),
         ("train", ["run.seeds=[1]"], "error: ConfigError: iplanner-train does not read "
          "run.seeds=[1]: "),
+        # refused as unread before its value is checked (where there is no CUDA)
+        ("train", ["device=cuda"], "error: ConfigError: iplanner-train does not read "
+         "device=cuda: "),
+        ("data", ["info", "device=cuda"], "error: ConfigError: iplanner-data info does not "
+         "read device=cuda: "),
         ("train", ["predictor.svgp.nigp_refit_steps=3", "predictor.svgp.velocity_limit=2"],
          "error: ConfigError: predictor.svgp.nigp_refit_steps: not read with "
          "predictor.svgp.noisy_input=simple (nigp_iterations and nigp_refit_steps are read "
@@ -183,3 +188,21 @@ def test_train_refuses_svgp_fields_its_noisy_input_does_not_read(
     start = f"{keys}: not read with predictor.svgp.noisy_input={mode} "
     with pytest.raises(ConfigError, match="^" + re.escape(start)):
         cli_train._refuse_unread_svgp_fields(cfg)
+
+
+def test_a_predictor_file_that_is_not_a_predictor_config_is_named(tmp_path: Path) -> None:
+    """A user's conf/predictor file without ``defaults:`` or ``_target_`` (and without an
+    ``svgp`` node) gets the one-line refusal the README promises, not a KeyError from the
+    svgp fields' check."""
+    (tmp_path / "conf" / "predictor").mkdir(parents=True)
+    (tmp_path / "conf" / "predictor" / "mine.yaml").write_text("ivm_max_import: 30\n")
+    args = ["-cd", str(tmp_path / "conf"), "predictor=mine", "trainer=fast"]
+    res = _run("train", [*args, f"hydra.run.dir={tmp_path / 'run'}"], tmp_path)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip().splitlines() == [
+        "error: ConfigError: config node 'predictor' built a dict, not a PredictorCfg: its file "
+        "needs '_target_: iplanner_torch.prediction.predictor.PredictorCfg', or, to change only "
+        "some fields of an existing file of its group, a first line 'defaults: [<that file>, "
+        "_self_]'"
+    ]
+    assert not (tmp_path / "datasets").exists()
