@@ -308,6 +308,16 @@ def print_help_if_asked(
 #: Root keys every command reads, with their types (checked before the command runs).
 ROOT_KEYS: dict[str, type] = {"seed": int, "progress": bool, "device": str}
 
+#: Path keys of conf/config.yaml that must name a path (not null or empty), checked before the
+#: command runs.
+PATH_KEYS = (
+    "paths.datasets",
+    "paths.checkpoints",
+    "data.path",
+    "train.out_dir",
+    "evaluate.checkpoint",
+)
+
 #: Keys of conf/config.yaml that feed a field under another name (the sweep aliases, and run
 #: settings), with the range each allows (checked before the command runs, so the message
 #: names the key that was typed rather than the field it feeds).
@@ -328,6 +338,17 @@ def check_root_keys(cfg: DictConfig) -> None:
     for key, kind in ROOT_KEYS.items():
         if key in cfg:
             cfg_scalar(cfg, key, kind)
+    if "seed" in cfg and cfg_scalar(cfg, "seed", int) < 0:  # numpy's generators refuse them
+        raise ConfigError(f"seed: expected an integer >= 0, got {cfg.seed}")
+    absent = object()
+    for key in PATH_KEYS:
+        try:
+            value = OmegaConf.select(cfg, key, default=absent)
+        except Exception:  # noqa: BLE001 - an interpolation the command that reads it reports
+            continue
+        if value is not absent and (value is None or not str(value).strip()):
+            got = "null" if value is None else repr(value)
+            raise ConfigError(f"{key}: expected a path, got {got}")
     if "device" in cfg:  # a device torch does not know, or CUDA where there is none
         from iplanner_torch.types import resolve_device
 
@@ -447,7 +468,9 @@ def copy_output_to(path: Path | None) -> Iterator[None]:
 def friendly_errors(
     fn: F | None = None, *, before: Callable[[DictConfig], None] | None = None
 ) -> Any:
-    """Turn library errors into a one-line message and exit code 2 instead of a traceback.
+    """Turn library errors, and the operating system's (``OSError``: a path that is a file
+    where a folder is expected, no permission, a full disk), into a one-line message and exit
+    code 2 instead of a traceback.
 
     Used as ``@friendly_errors``, or ``@friendly_errors(before=check)`` to run ``check(cfg)``
     before the root keys are checked: a command's refusal of the overrides it does not read
@@ -477,7 +500,7 @@ def friendly_errors(
                         before(args[0])
                     check_root_keys(args[0])
                 return fn(*args, **kwargs)
-            except IPlannerError as exc:
+            except (IPlannerError, OSError) as exc:  # OSError: a path that is a file, ...
                 line = f"error: {type(exc).__name__}: {exc}"
                 print(line, file=sys.stderr)
                 job_dir = multirun_job_dir()
@@ -533,6 +556,24 @@ def dump_config(cfg: DictConfig) -> str:
     return OmegaConf.to_yaml(cfg, resolve=True)
 
 
+#: frame rate of a LEGO assembly recording when ``data.fps`` does not say
+LEGO_FPS = 30.0
+
+
+def data_fps(data_cfg: DictConfig) -> float | None:
+    """``data.fps`` (the frame rate of files that do not state theirs), or None when unset.
+
+    Raises:
+        ConfigError: when it is not a finite number > 0.
+    """
+    fps = data_cfg.get("fps", None)
+    if fps is None:
+        return None
+    if not _fits(fps, float) or not 0 < float(fps) < math.inf:
+        raise ConfigError(f"data.fps: expected a frame rate > 0 [Hz], got {fps!r}")
+    return float(fps)
+
+
 def load_dataset(
     data_cfg: DictConfig,
     *,
@@ -563,10 +604,10 @@ def load_dataset(
     from iplanner_torch.errors import DataError
 
     path = repo_path(data_cfg.path)
-    fps = data_cfg.get("fps", None)
+    fps = data_fps(data_cfg)
     if data_cfg.get("format", "native") == "lego_assembly":
-        return load_lego_assembly(path, fps=float(fps or 30.0))
-    if not path.exists() or not any(path.iterdir()):
+        return load_lego_assembly(path, fps=LEGO_FPS if fps is None else fps)
+    if not path.exists() or (path.is_dir() and not any(path.iterdir())):
         if not generate_if_missing or data_cfg.get("generator") is None:
             raise DataError(
                 f"{path}: dataset not found; generate it with `iplanner-data generate "

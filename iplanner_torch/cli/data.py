@@ -51,8 +51,11 @@ from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
+    LEGO_FPS,
+    data_fps,
     friendly_errors,
     generate_dataset,
+    instantiate,
     print_help_if_asked,
     refuse_unread_overrides,
     repo_path,
@@ -98,11 +101,15 @@ def _info(cfg: DictConfig) -> None:
     )
 
     path = repo_path(cfg.data.path)
-    fps = cfg.data.get("fps", None)
+    fps = data_fps(cfg.data)
     # the joints training selects (data.windows.joints), so info accepts what it accepts
-    selected = cfg.data.windows.get("joints", None) if "windows" in cfg.data else None
+    selected = None
+    if "windows" in cfg.data:
+        from iplanner_torch.data.windows import WindowCfg
+
+        selected = instantiate(cfg.data.windows, WindowCfg, name="data.windows").joints
     if cfg.data.get("format", "native") == "lego_assembly":
-        demos = load_lego_assembly(path, fps=float(fps or 30.0))
+        demos = load_lego_assembly(path, fps=LEGO_FPS if fps is None else fps)
         root = path if path.is_dir() else path.parent
         files = [root / f"{d.name}.txt" for d in demos]
     else:

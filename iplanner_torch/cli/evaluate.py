@@ -329,15 +329,26 @@ def _noise_sweep(cfg: DictConfig) -> None:
     from iplanner_torch.cli.experiment import option_node
     from iplanner_torch.cli.train import train_from_config
     from iplanner_torch.eval.prediction import recorded_split
-    from iplanner_torch.eval.prediction_sweep import prediction_vs_noise, write_noise_report
+    from iplanner_torch.eval.prediction_sweep import (
+        check_sweep_grid,
+        prediction_vs_noise,
+        write_noise_report,
+    )
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
     _refuse_unread_sweep_overrides(cfg)  # the more specific message first
     _refuse_unread("noise_sweep")
+    noises = cfg_list(cfg.evaluate, "noises", float)
+    speeds = cfg_list(cfg.evaluate, "speeds", str)
+    compare = cfg_list(cfg.evaluate, "compare", str)
+    try:
+        check_sweep_grid(compare, noises, speeds)
+    except ConfigError as err:
+        raise ConfigError(f"evaluate.{err}") from None
     report_dir = _out_dir(cfg)
     device = _device(cfg)
     folder = Path(cfg.paths.checkpoints) / Path(cfg.data.path).name
-    ckpts = {str(o): repo_path(folder / str(o)) / "predictor.ckpt" for o in cfg.evaluate.compare}
+    ckpts = {o: repo_path(folder / o) / "predictor.ckpt" for o in compare}
     for ckpt in ckpts.values():
         if ckpt.is_dir():
             raise CheckpointError(f"{ckpt}: is a folder, not a checkpoint file")
@@ -372,8 +383,8 @@ def _noise_sweep(cfg: DictConfig) -> None:
     df = prediction_vs_noise(
         predictors,
         held_out,
-        noises=cfg_list(cfg.evaluate, "noises", float),
-        speeds=[str(s) for s in cfg.evaluate.speeds],
+        noises=noises,
+        speeds=speeds,
         seed=cfg_scalar(cfg, "seed", int),
         progress=cfg_scalar(cfg, "progress", bool),
     )
@@ -450,6 +461,8 @@ def _episode(cfg: DictConfig) -> None:
             df = df.assign(planner=df["planner"].where(~named, df["planner"] + "@" + labels[i]))
         frames.append(df)
     df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+    if labels is None and len(paths) > 1:
+        _warn_repeated_episodes(df, swept)
     if baseline is None:
         baseline = "itomp"
     else:
@@ -466,6 +479,34 @@ def _episode(cfg: DictConfig) -> None:
     if note:
         print(note)
     print(f"{len(df)} episode(s); wrote " + ", ".join(str(p) for p in written))
+
+
+#: The columns that tell two episodes apart (with the swept settings of a multirun folder).
+EPISODE_SETTINGS = (
+    "planner", "scenario", "arrangement", "task_order", "confidence", "noise", "dropout",
+    "speed", "seed",
+)  # fmt: skip
+
+
+def _warn_repeated_episodes(df: Any, swept: list[str]) -> None:
+    """Warn when sources given without ``evaluate.labels`` hold episodes with the same settings
+    (the same run given twice, or as its results.csv and its episodes folder): their rows
+    would be counted as more episodes."""
+    import warnings
+
+    from iplanner_torch.errors import DataWarning
+
+    keys = [c for c in (*EPISODE_SETTINGS, *swept) if c in df.columns]
+    repeated = df.duplicated(keys, keep="first") & df["planner"].notna()
+    if bool(repeated.any()):
+        warnings.warn(
+            f"{int(repeated.sum())} of the {len(df)} episodes repeat the settings "
+            f"({', '.join(keys)}) of another: is a run given twice (or as its results.csv and "
+            "its episodes folder)? They are counted as more episodes; give evaluate.labels to "
+            "keep different runs of the same settings apart",
+            DataWarning,
+            stacklevel=2,
+        )
 
 
 #: What each mode reads besides ``evaluate.mode`` and ``evaluate.out_dir``

@@ -131,7 +131,7 @@ def ensure_predictors(
         if ckpt.is_dir():
             raise CheckpointError(f"{ckpt}: is a folder, not a checkpoint file")
         if not ckpt.exists():
-            if not cfg.run.train_if_missing:
+            if not cfg_scalar(cfg.run, "train_if_missing", bool):
                 raise CheckpointError(
                     f"{ckpt}: no trained predictor; run `iplanner-train predictor={option} "
                     f"train.out_dir={out_dir}` on {data_node.path}"

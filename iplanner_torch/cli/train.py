@@ -74,6 +74,13 @@ def train_from_config(
         data_node, generate_if_missing=True, progress=cfg_scalar(cfg, "progress", bool)
     )
     train, val, test = split_by_demonstration(demos, drawn.fractions, drawn.seed)
+    if not train:
+        from iplanner_torch.errors import DataError
+
+        raise DataError(
+            f"data.split={list(drawn.fractions)} leaves none of the {len(demos)} "
+            "demonstrations to train on; give the train share (the first) more"
+        )
     # recorded beside the checkpoint: iplanner-evaluate scores the same held-out demonstrations
     split = replace(drawn, held_out=tuple(d.name for d in test))
     train_w = build_windows(train, window_cfg)

@@ -12,6 +12,7 @@ speed) and a README.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -73,6 +74,26 @@ def resample_speed(demo: Demonstration, factor: float) -> Demonstration:
     )
 
 
+def check_sweep_grid(
+    predictors: Sequence[str], noises: Sequence[float], speeds: Sequence[str]
+) -> None:
+    """Check a noise sweep's grid before any work: at least one predictor, noise level and
+    speed; noise levels finite and >= 0 [m]; speeds named in :data:`SPEEDS`.
+
+    Raises:
+        ConfigError: naming ``compare``, ``noises`` or ``speeds`` and what is wrong.
+    """
+    for key, values in (("compare", predictors), ("noises", noises), ("speeds", speeds)):
+        if len(values) == 0:
+            raise ConfigError(f"{key}: expected at least one value, got []")
+    bad_noise = [n for n in noises if not 0 <= float(n) < math.inf]
+    if bad_noise:
+        raise ConfigError(f"noises: expected finite noise levels >= 0 [m], got {bad_noise}")
+    bad = [s for s in speeds if s not in SPEEDS]
+    if bad:
+        raise ConfigError(f"speeds: unknown {bad}; expected some of {sorted(SPEEDS)}")
+
+
 def prediction_vs_noise(
     predictors: Mapping[str, Any],
     demos: Sequence[Demonstration],
@@ -96,14 +117,16 @@ def prediction_vs_noise(
 
     Returns:
         One row per (predictor, noise, speed) with the metrics of ``evaluate_prediction``.
+
+    Raises:
+        ConfigError: for an empty or bad grid (:func:`check_sweep_grid`).
+        DataError: without held-out demonstrations.
     """
     from tqdm.auto import tqdm
 
     from iplanner_torch.eval.prediction import evaluate_prediction
 
-    bad = [s for s in speeds if s not in SPEEDS]
-    if bad:
-        raise ConfigError(f"unknown speeds {bad}; expected some of {sorted(SPEEDS)}")
+    check_sweep_grid(list(predictors), noises, speeds)
     if not demos:
         raise DataError("no held-out demonstrations to evaluate")
     rows: list[dict[str, Any]] = []

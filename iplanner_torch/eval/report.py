@@ -203,9 +203,19 @@ def _row_of_path(p: Path) -> dict[str, Any]:
         row["complete"] = ep.complete
     elif p.suffix == ".json":
         try:
-            row = _row_of_dict(json.loads(p.read_text()))
-        except json.JSONDecodeError as err:
+            record = json.loads(p.read_text(encoding="utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as err:
             raise DataError(f"{p}: not valid JSON: {err}") from err
+        if not isinstance(record, dict):
+            raise DataError(f"{p}: expected a JSON object of metrics, got {type(record).__name__}")
+        if "metadata" in record and "metrics" in record:  # the {"metadata", "metrics"} form
+            for key in ("metadata", "metrics"):
+                if not isinstance(record[key], dict):
+                    raise DataError(
+                        f"{p}: expected {key!r} to be a JSON object, got "
+                        f"{type(record[key]).__name__}"
+                    )
+        row = _row_of_dict(record)
     else:
         raise DataError(
             f"{p}: expected a .mcap episode log, a .json result file or a results .csv"

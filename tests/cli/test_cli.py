@@ -340,6 +340,14 @@ def test_evaluate_episode_compares_labelled_runs_seed_by_seed(tmp_path: Path) ->
     assert res.returncode == 2
     assert "evaluate.baseline='itomp@wide': no episodes of that planner" in res.stderr
     assert "['iplanner_ni', 'itomp']" in res.stderr
+    # without labels the two runs' rows are counted together, with a warning saying so
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode", logs,
+                f"evaluate.out_dir={tmp_path / 'out4'}"], tmp_path)  # fmt: skip
+    assert res.returncode == 0 and "12 episode(s)" in res.stdout
+    assert (
+        "DataWarning: 6 of the 12 episodes repeat the settings (planner, scenario, seed) "
+        "of another: is a run given twice" in " ".join(res.stderr.split())
+    )
 
 
 def test_evaluate_refuses_bad_paths_before_it_computes(tmp_path: Path) -> None:

@@ -138,6 +138,10 @@ def test_console_script_reports_a_wrong_type_in_one_line(tmp_path: Path) -> None
         ({"run": {"scene_hz": -1}}, "run.scene_hz: expected >= 0 [Hz], got -1.0"),
         ({"progress": "yes"}, "progress: expected bool, got 'yes'"),
         ({"device": "tpu"}, "device: unknown device 'tpu'"),
+        ({"seed": -1}, "seed: expected an integer >= 0, got -1"),
+        ({"paths": {"datasets": None}}, "paths.datasets: expected a path, got null"),
+        ({"data": {"path": ""}}, "data.path: expected a path, got ''"),
+        ({"evaluate": {"checkpoint": None}}, "evaluate.checkpoint: expected a path, got null"),
     ],
 )
 def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
@@ -147,6 +151,8 @@ def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
 
     check_root_keys(OmegaConf.create({"seed": 0, "tracker": {"noise": 0.0, "dropout": 0.5}}))
     check_root_keys(OmegaConf.create({"tracker": {"noise": 1.0}, "human": {"speed": "slow"}}))
+    # a path key that interpolates a resolver it cannot resolve here is left to its command
+    check_root_keys(OmegaConf.create({"train": {"out_dir": "${hydra:runtime.choices.x}"}}))
     with pytest.raises(ConfigError) as err:
         check_root_keys(OmegaConf.create(root))
     assert str(err.value) == message or (
@@ -541,3 +547,40 @@ def test_the_planner_group_option_narrows_the_run_to_that_planner() -> None:
     with pytest.raises(ConfigError, match=r"experiment\.planners=\[itomp,iplanner_ni\]"):
         planners(["experiment=speed_response", "planner=itomp",
                   "experiment.planners=[itomp,iplanner_ni]"])  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("module", "args", "line"),
+    [
+        ("experiment", ["run.train_if_missing=no"],
+         "error: ConfigError: run.train_if_missing: expected bool, got 'no'"),
+        ("data", ["info", "data.path=nowhere", "+data.fps=0"],
+         "error: ConfigError: data.fps: expected a frame rate > 0 [Hz], got 0"),
+        ("data", ["info", "data.path=nowhere", "+data.fps=abc"],
+         "error: ConfigError: data.fps: expected a frame rate > 0 [Hz], got 'abc'"),
+        ("data", ["info", "data.path=nowhere", "data.windows.joints=[]"],
+         "error: ConfigError: data.windows.joints: joints must be non-empty and unique"),
+        ("data", ["generate", "data.path=a_file/sub"],
+         "error: NotADirectoryError: [Errno 20] Not a directory: "),
+        ("evaluate", ["evaluate.checkpoint=null"],
+         "error: ConfigError: evaluate.checkpoint: expected a path, got null"),
+    ],
+)  # fmt: skip
+def test_bad_values_get_one_line_before_any_work(
+    module: str, args: list[str], line: str, tmp_path: Path
+) -> None:
+    """A string for a bool, a frame rate of 0 or text, an empty joint list, a path through a
+    file, a null path: one error line and exit code 2, with nothing trained or generated."""
+    (tmp_path / "a_file").write_text("not a folder\n")
+    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+    if module != "data":  # it does not read paths.checkpoints
+        args = [*args, f"paths.checkpoints={tmp_path / 'ck'}"]
+    res = subprocess.run(
+        [sys.executable, "-m", f"iplanner_torch.cli.{module}", *args, "progress=false",
+         f"hydra.run.dir={tmp_path / 'run'}"],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(line), res.stderr
+    assert not (tmp_path / "ck").exists() and not (tmp_path / "datasets").exists()

@@ -211,6 +211,33 @@ def test_noise_sweep_refuses_the_keys_it_does_not_read(
     assert not (tmp_path / "ck").exists()
 
 
+@pytest.mark.parametrize(
+    ("given", "message"),
+    [
+        ("evaluate.noises=[]", r"evaluate.noises: expected at least one value, got \[\]"),
+        ("evaluate.speeds=[]", r"evaluate.speeds: expected at least one value"),
+        ("evaluate.compare=[]", r"evaluate.compare: expected at least one value"),
+        ("evaluate.noises=[0.01,-1]", r"evaluate.noises: expected finite noise levels >= 0"),
+        ("evaluate.noises=[nan]", r"evaluate.noises: expected finite .* got \[nan\]"),
+        ("evaluate.speeds=[brisk]", r"evaluate.speeds: unknown \['brisk'\]"),
+    ],
+)
+def test_noise_sweep_checks_its_grid_before_any_work(
+    given: str,
+    message: str,
+    trained: SimpleNamespace,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    no_training: None,
+) -> None:
+    """An empty or bad grid is refused by key before anything is loaded, trained or scored
+    (an empty one ended in a plotting error after all the work)."""
+    sweep = _sweep_args(trained, tmp_path)
+    with pytest.raises(ConfigError, match=f"^{message}"):
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep, given))
+    assert not (tmp_path / "ck").exists() and not (tmp_path / "out").exists()
+
+
 def test_noise_sweep_checks_the_split_and_windows_before_training(
     trained: SimpleNamespace, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_training: None
 ) -> None:

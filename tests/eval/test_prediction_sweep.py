@@ -99,8 +99,17 @@ def test_noise_sweep_rows_noise_levels_and_shared_noise(monkeypatch, tmp_path) -
         assert p1 is predictors["p1"] and p2 is predictors["p2"]
         for x, y in zip(a, b, strict=True):
             np.testing.assert_array_equal(x.positions, y.positions)
-    with pytest.raises(ConfigError, match=r"unknown speeds \['brisk'\]"):
-        prediction_vs_noise(predictors, demos, speeds=("brisk",), progress=False)
+    for kwargs, message in (
+        ({"speeds": ("brisk",)}, r"^speeds: unknown \['brisk'\]"),
+        ({"speeds": ()}, r"^speeds: expected at least one value, got \[\]"),
+        ({"noises": ()}, r"^noises: expected at least one value"),
+        ({"noises": (0.01, -1.0, float("nan"), float("inf"))},
+         r"^noises: expected finite noise levels >= 0 \[m\], got \[-1.0, nan, inf\]"),
+    ):  # fmt: skip
+        with pytest.raises(ConfigError, match=message):
+            prediction_vs_noise(predictors, demos, progress=False, **kwargs)
+    with pytest.raises(ConfigError, match=r"^compare: expected at least one value"):
+        prediction_vs_noise({}, demos, progress=False)
     with pytest.raises(DataError, match="no held-out"):
         prediction_vs_noise(predictors, [], progress=False)
     df["mhd_1s"] = 0.1

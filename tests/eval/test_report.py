@@ -89,6 +89,28 @@ def test_gather_results_reads_episode_logs_and_folders(tmp_path: Path) -> None:
         gather_results([tmp_path / "nope.mcap"])
 
 
+def test_gather_results_reads_json_results_and_names_malformed_ones(tmp_path: Path) -> None:
+    """A .json result file: a flat object of metrics or the {metadata, metrics} form; any
+    other JSON value is a DataError naming the file (it was an AttributeError)."""
+    good = tmp_path / "good.json"
+    good.write_text('{"metadata": {"planner": "itomp"}, "metrics": {"eval/smoothness": 2.0}}')
+    flat = tmp_path / "flat.json"
+    flat.write_text('{"planner": "oracle", "eval/smoothness": 1.0}')
+    df = gather_results([good, flat])
+    assert list(df["planner"]) == ["itomp", "oracle"] and list(df["smoothness"]) == [2.0, 1.0]
+    for text, why in (
+        ("[1, 2]", "expected a JSON object of metrics, got list"),
+        ('"str"', "expected a JSON object of metrics, got str"),
+        ('{"metadata": 5, "metrics": {}}', "expected 'metadata' to be a JSON object, got int"),
+        ('{"metadata": {}, "metrics": [1]}', "expected 'metrics' to be a JSON object, got list"),
+        ("{", "not valid JSON"),
+    ):
+        bad = tmp_path / "bad.json"
+        bad.write_text(text)
+        with pytest.raises(DataError, match=re.escape(f"{bad}: {why}")):
+            gather_results([good, bad])
+
+
 def test_gather_results_reads_results_csv_with_or_without_the_prefix(tmp_path: Path) -> None:
     raw = pd.DataFrame(
         {
