@@ -10,9 +10,13 @@ The formats are documented in ``datasets/README.md``. In short:
   whose text after the ``#`` joined together is a JSON object with ``fps``, ``action_names``
   and ``metadata``; then a column header row ``t,label,<joint>_x,<joint>_y,<joint>_z,...``
   (joint-major), optionally followed by ``clean_<joint>_x,...`` columns; then one row per
-  frame. An empty cell is NaN (a lost joint). Without the JSON header, ``fps`` must be given
-  to the loader and actions are named ``action_0 ...``; without a ``label`` column every
-  frame is labelled 0 with the action name ``unlabelled``; ``t`` is optional too.
+  frame. Those are the only column forms: any other column (``time``, a misspelt ``lable``)
+  is an error, never dropped silently. An empty cell is NaN (a lost joint). Without the JSON
+  header, ``fps`` must be given to the loader and actions are named ``action_0 ...``; ``t`` is
+  optional. Without a ``label`` column every frame is labelled 0 with the single action name
+  ``unlabelled`` when the header names no actions; when it names actions (``action_names``),
+  every frame is labelled -1 (unlabelled, no training windows) with a
+  :class:`~iplanner_torch.errors.DataWarning`, never silently the first action.
 
 Field types are checked on loading: ``fps`` is one real number (not a string or a boolean),
 finite and > 0; ``metadata`` is a JSON object; names are strings; ``timestamps`` are numbers;
@@ -24,8 +28,11 @@ name ``action_0 .. action_<largest label>``, at most :data:`MAX_IMPLICIT_ACTIONS
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
+import numbers
+import warnings
 import zipfile
 import zlib
 from collections.abc import Sequence
@@ -35,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from iplanner_torch.data.demonstration import Demonstration
-from iplanner_torch.errors import DataError
+from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.types import MAX_POSITION_M
 
 SUFFIXES: tuple[str, ...] = (".npz", ".csv")
@@ -47,6 +54,20 @@ _ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
 #: largest label is an error (a stray huge label would otherwise allocate that many names).
 MAX_IMPLICIT_ACTIONS = 10_000
 _JSON_TYPES = {dict: "object", list: "array", str: "string", bool: "boolean", type(None): "null"}
+#: The CSV column forms the loader accepts (for error messages).
+_CSV_COLUMN_FORMS = (
+    "t (seconds), label (int action index), <joint>_x, <joint>_y, <joint>_z, "
+    "clean_<joint>_x, clean_<joint>_y, clean_<joint>_z"
+)
+#: Likely meanings of unknown CSV columns, offered as a hint (besides close spellings).
+_CSV_COLUMN_HINTS = {
+    "time": "t",
+    "timestamp": "t",
+    "timestamps": "t",
+    "labels": "label",
+    "action": "label",
+    "actions": "label",
+}
 
 
 def _show(value: Any, limit: int = 60) -> str:
@@ -273,6 +294,36 @@ def _read_csv_header(path: Path, comment: list[str]) -> dict[str, Any]:
     }
 
 
+def _csv_column_known(c: str) -> bool:
+    """Whether ``c`` is one of the CSV column forms: ``t``, ``label``, ``<joint>_<axis>`` or
+    ``clean_<joint>_<axis>`` (a joint name is not empty)."""
+    if c in ("t", "label"):
+        return True
+    joint = c[:-2] if c[-2:] in ("_x", "_y", "_z") else ""
+    return joint not in ("", "clean")
+
+
+def _check_csv_columns(path: Path, cols: list[str], header_line: int) -> None:
+    """Raise a DataError naming the header row's columns of no accepted form (a misspelt
+    ``label`` column must not leave every frame labelled by default)."""
+    unknown = [c for c in cols if not _csv_column_known(c)]
+    if not unknown:
+        return
+    shown = []
+    for c in dict.fromkeys(unknown):
+        hint = _CSV_COLUMN_HINTS.get(c.lower()) or next(
+            iter(difflib.get_close_matches(c.lower(), ("t", "label"), n=1, cutoff=0.6)), None
+        )
+        if not c:
+            shown.append("'' (an unnamed column: a trailing comma?)")
+        else:
+            shown.append(f"{c!r}" + (f" (did you mean {hint!r}?)" if hint else ""))
+    raise DataError(
+        f"{path}: unknown column(s) {', '.join(shown)} in the header row (line {header_line}); "
+        f"the accepted columns are {_CSV_COLUMN_FORMS}: rename or remove the others"
+    )
+
+
 def _read_csv(path: Path) -> dict[str, Any]:
     try:
         text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (Excel) is dropped
@@ -286,6 +337,7 @@ def _read_csv(path: Path) -> dict[str, Any]:
     header = _read_csv_header(path, comment)
     header_line, header_row = body[0]
     cols = [c.strip() for c in header_row.split(",")]
+    _check_csv_columns(path, cols, header_line)
     rows = body[1:]
     if not rows:
         raise DataError(f"{path}: empty file (a header row but no frames)")
@@ -303,8 +355,7 @@ def _read_csv(path: Path) -> dict[str, Any]:
             raise DataError(f"{path}: line {n}: unreadable or corrupt CSV row ({exc})") from exc
     col: dict[str, int] = {}
     for i, c in enumerate(cols):
-        used = c in ("t", "label") or c[-2:] in ("_x", "_y", "_z")
-        if used and c in col:
+        if c in col:
             raise DataError(
                 f"{path}: column {c!r} appears twice in the header row (line {header_line})"
             )
@@ -379,10 +430,19 @@ def _read_csv(path: Path) -> dict[str, Any]:
                 f"expected -1 (unlabelled) or 0..{len(names) - 1}"
             )
         labels = lab.astype(np.int64)
-    else:
+    elif names is None:
         labels = np.zeros(t, dtype=np.int64)
-        if names is None:
-            names = ["unlabelled"]
+        names = ["unlabelled"]
+    else:
+        # the header names actions: label 0 is a real action, so no frame may default to it
+        labels = np.full(t, -1, dtype=np.int64)
+        warnings.warn(
+            f"{path}: no 'label' column, but the header comment names actions {names}: every "
+            "frame is unlabelled (-1) and gives no training window; add a label column of "
+            "action indices to use the file for training",
+            DataWarning,
+            stacklevel=3,  # the caller of load_demonstration
+        )
     return {
         "positions": pos,
         "labels": labels,
@@ -457,7 +517,10 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
         )
     file_fps = raw["fps"]
     if file_fps is None and fps is None:
-        raise DataError(f"{path}: field 'fps' missing; pass fps= to the loader")
+        raise DataError(
+            f"{path}: field 'fps' missing; pass fps= to the loader (+data.fps=<Hz> on the "
+            "command line)"
+        )
     if file_fps is not None and fps is not None and not np.isclose(file_fps, fps):
         raise DataError(f"{path}: field 'fps' is {file_fps}, but fps={fps} was requested")
     the_fps = float(file_fps if file_fps is not None else fps)
@@ -518,11 +581,81 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
     )
 
 
+def _fps_argument(path: Path, fps: Any, name: str = "field 'fps'") -> float | None:
+    """The loader's ``fps=`` argument checked: None, or one real number, finite and > 0 [Hz].
+
+    Args:
+        path: the file or folder loaded (for the message).
+        fps: the argument.
+        name: what the argument stands for, for the message.
+
+    Raises:
+        DataError: naming ``path`` and the argument, for a boolean, a string, a sequence or any
+            other non-number, or a value that is not finite or not > 0.
+    """
+    if fps is None:
+        return None
+    if isinstance(fps, bool) or not isinstance(fps, numbers.Real):
+        raise DataError(
+            f"{path}: {name} (the loader's fps= argument) must be one real number [Hz], not "
+            f"a boolean, a string or a sequence; got {_show(fps)}"
+        )
+    try:
+        value = float(fps)
+    except OverflowError:  # an int beyond float range
+        value = math.inf
+    if not (math.isfinite(value) and value > 0):
+        raise DataError(
+            f"{path}: {name} must be finite and > 0, got {_show(fps)} (the loader's fps= argument)"
+        )
+    return value
+
+
+def _joints_argument(joints: Any) -> tuple[str, ...] | None:
+    """The loader's ``joints=`` argument checked: None, or a non-empty sequence of unique
+    joint names.
+
+    Raises:
+        ConfigError: naming the argument, for a single string, a non-sequence, an empty
+            sequence, a name that is not a string, or a name given twice.
+    """
+    if joints is None:
+        return None
+    if isinstance(joints, str):
+        raise ConfigError(
+            f"joints= must be a list of joint names, got the single string {joints!r}; pass a "
+            f"list: joints=[{joints!r}]"
+        )
+    try:
+        names = tuple(joints)
+    except TypeError:
+        raise ConfigError(
+            f"joints= must be a non-empty list of unique joint names, got {_show(joints)}"
+        ) from None
+    if not names:
+        raise ConfigError(
+            "joints= must be a non-empty list of unique joint names, got an empty one (pass "
+            "joints=None to keep every joint)"
+        )
+    bad = [j for j in names if not isinstance(j, str)]
+    if bad:
+        raise ConfigError(f"joints= must hold joint names (strings), got {_show(bad)}")
+    twice = sorted({j for j in names if names.count(j) > 1})
+    if twice:
+        raise ConfigError(
+            f"joints= names joint(s) {twice} more than once, got {list(names)}; select each "
+            "joint once"
+        )
+    return names
+
+
 def load_demonstration(
     path: str | Path, *, fps: float | None = None, joints: Sequence[str] | None = None
 ) -> Demonstration:
     """Load and validate one NPZ or CSV demonstration file (see :func:`load_demonstrations`)."""
     path = Path(path)
+    fps = _fps_argument(path, fps)
+    joints = _joints_argument(joints)
     if not path.is_file():
         raise DataError(f"{path}: no such file")
     if path.suffix == ".npz":
@@ -577,10 +710,11 @@ def load_demonstrations(
     Args:
         path: one ``.npz`` / ``.csv`` file, or a folder searched recursively for them (other
             files, e.g. a README, are ignored); files are taken in sorted path order.
-        fps: frame rate for files that do not state one; a file stating another rate is an
-            error.
-        joints: keep only these joints, in this order (e.g. ``["right_hand"]``); without it
-            every file must have the same joint names in the same order.
+        fps: frame rate [Hz] for files that do not state one, one finite number > 0 (not a
+            boolean or a sequence); a file stating another rate is an error.
+        joints: keep only these joints, in this order: a non-empty list of unique names (e.g.
+            ``["right_hand"]``, not the string ``"right_hand"``); without it every file must
+            have the same joint names in the same order.
 
     Returns:
         The demonstrations; NaN joints are kept as NaN.
@@ -590,9 +724,18 @@ def load_demonstrations(
             file, missing key, wrong shape, a ragged CSV row (with its line number), Inf
             positions, every joint NaN in every frame, label out of range, non-increasing
             timestamps, unknown joint name in ``joints``, joint names differing between files,
-            fps missing or contradicting ``fps``.
+            fps missing or contradicting ``fps``, an ``fps`` argument that is not one finite
+            number > 0, a CSV column of no accepted form (named, with the accepted forms).
+        ConfigError: for a ``joints`` argument that is not a non-empty sequence of unique
+            names (a single string included).
+
+    Warns:
+        DataWarning: for a CSV without a ``label`` column whose header names actions (every
+            frame is then unlabelled, -1).
     """
     path = Path(path)
+    fps = _fps_argument(path, fps)
+    joints = _joints_argument(joints)
     files = demonstration_files(path)
     if not files:
         raise DataError(f"{path}: no .npz or .csv demonstration files in this folder")
@@ -644,8 +787,8 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
         One demonstration per trial, named ``Task1/Human1/trial1`` etc., in sorted order.
 
     Raises:
-        DataError: when nothing is found or a file is not a (T, 18) table of finite numbers or
-            NaN.
+        DataError: when nothing is found, a file is not a (T, 18) table of finite numbers or
+            NaN, or ``fps`` is not one finite number > 0.
     """
     path = Path(path)
     if path.is_dir():
@@ -664,8 +807,9 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
             f"{path}: no trial .txt files found (expected Task*/Human*/trial*.txt; set "
             "data.path=<folder> to the recording)"
         )
-    if not (math.isfinite(fps) and fps > 0):
-        raise DataError(f"{path}: fps must be finite and > 0, got {fps}")
+    fps = _fps_argument(path, fps, "fps")
+    if fps is None:
+        raise DataError(f"{path}: the fps= argument is required (the recording states none)")
     order = [LEGO_JOINTS.index(j) for j in LEGO_OUTPUT_JOINTS]
     demos = []
     for f in files:

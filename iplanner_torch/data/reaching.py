@@ -27,10 +27,11 @@ are applied on top; the clean positions are kept in ``clean_positions``.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -70,6 +71,53 @@ __all__ = [
 ]
 
 PHASE_REACH, PHASE_HOLD, PHASE_RETURN = 0, 1, 2
+
+
+def finite_number(name: str, value: Any) -> float:
+    """``value`` as a float when it is one finite real number (a config field's check).
+
+    A bare ``x < 0`` passes NaN, and no comparison with a finite bound refuses +Inf on its
+    open side: call this first, then compare.
+
+    Args:
+        name: the field, for the message (e.g. ``"ReachingCfg.fps"``).
+        value: the field's value.
+
+    Raises:
+        ConfigError: naming ``name``, for a boolean, a non-number, NaN or +-Inf.
+    """
+    if isinstance(value, bool):
+        raise ConfigError(f"{name} must be a finite number, got {value!r}")
+    try:
+        x = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ConfigError(f"{name} must be a finite number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise ConfigError(f"{name} must be finite, got {value!r}")
+    return x
+
+
+def _numbers(name: str, value: Any) -> tuple[float, ...]:
+    """``value`` (a list, tuple or array, not a string) as finite floats."""
+    try:
+        items = () if isinstance(value, (str, bytes)) else tuple(value)
+    except TypeError:
+        items = ()
+    if not items:
+        raise ConfigError(f"{name} must be a non-empty list of numbers, got {value!r}")
+    return tuple(finite_number(name, v) for v in items)
+
+
+def finite_range(name: str, value: Any) -> tuple[float, float]:
+    """``value`` as ``(low, high)`` with ``0 <= low <= high``, both finite [s].
+
+    Raises:
+        ConfigError: naming ``name``, unless ``value`` is two such numbers.
+    """
+    lo_hi = _numbers(name, value)
+    if len(lo_hi) != 2 or not 0 <= lo_hi[0] <= lo_hi[1]:
+        raise ConfigError(f"{name} must be (low, high) with 0 <= low <= high, got {value!r}")
+    return lo_hi  # type: ignore[return-value]
 
 
 def reach_targets(n_targets: int = 8) -> np.ndarray:
@@ -135,11 +183,14 @@ def reach_motion(
         0 = reach, 1 = hold, 2 = return); hold frames have the hand exactly at the target.
 
     Raises:
-        ConfigError: for a non-positive fps or speed, a negative hold or a bad shape.
+        ConfigError: for a non-positive fps or speed, a negative hold, a value that is not
+            finite, or a bad shape.
     """
     target = np.asarray(target, dtype=np.float64)
     if target.shape != (3,):
         raise ConfigError(f"expected target (3,), got {target.shape}")
+    for name, value in (("fps", fps), ("speed", speed), ("hold_s", hold_s)):
+        finite_number(name, value)
     if not (fps > 0 and speed > 0 and hold_s >= 0):
         raise ConfigError(f"need fps > 0, speed > 0, hold_s >= 0; got {fps}, {speed}, {hold_s}")
     if start_pose is not None:
@@ -220,24 +271,30 @@ class ReachingCfg:
     file_format: Literal["npz", "csv"] = "npz"  # one file per demonstration
 
     def __post_init__(self) -> None:
-        for name in ("speeds", "hold_s", "idle_start_s", "reaction_s", "idle_end_s"):
-            object.__setattr__(self, name, tuple(float(v) for v in getattr(self, name)))
+        # every float is checked finite first (NaN and Inf pass a bare "x < 0" test)
+        speeds = _numbers("ReachingCfg.speeds", self.speeds)
+        if any(not v > 0 for v in speeds):
+            raise ConfigError(f"ReachingCfg.speeds must be > 0, got {speeds}")
+        object.__setattr__(self, "speeds", speeds)
+        for name in ("hold_s", "idle_start_s", "reaction_s", "idle_end_s"):
+            object.__setattr__(
+                self, name, finite_range(f"ReachingCfg.{name}", getattr(self, name))
+            )
         reach_targets(self.n_targets)  # validates n_targets
         if self.reaches_per_target < 1 or self.n_subjects < 1:
             raise ConfigError("reaches_per_target and n_subjects must be >= 1")
-        if not self.fps > 0:
-            raise ConfigError(f"fps must be > 0, got {self.fps}")
-        if self.noise_sigma < 0 or not 0 <= self.dropout_rate < 1 or self.dropout_burst < 1:
+        if not finite_number("ReachingCfg.fps", self.fps) > 0:
+            raise ConfigError(f"ReachingCfg.fps must be finite and > 0, got {self.fps}")
+        if not finite_number("ReachingCfg.noise_sigma", self.noise_sigma) >= 0:
+            raise ConfigError(f"ReachingCfg.noise_sigma must be >= 0, got {self.noise_sigma}")
+        if not 0 <= finite_number("ReachingCfg.dropout_rate", self.dropout_rate) < 1:
             raise ConfigError(
-                "need noise_sigma >= 0, 0 <= dropout_rate < 1, dropout_burst >= 1; got "
-                f"{self.noise_sigma}, {self.dropout_rate}, {self.dropout_burst}"
+                f"ReachingCfg.dropout_rate must be in [0, 1), got {self.dropout_rate}"
             )
-        if not self.speeds or any(s <= 0 for s in self.speeds):
-            raise ConfigError(f"speeds must be non-empty and > 0, got {self.speeds}")
-        for name in ("hold_s", "idle_start_s", "reaction_s", "idle_end_s"):
-            lo_hi = getattr(self, name)
-            if len(lo_hi) != 2 or not 0 <= lo_hi[0] <= lo_hi[1]:
-                raise ConfigError(f"{name} must be (low, high) with 0 <= low <= high, got {lo_hi}")
+        if not finite_number("ReachingCfg.dropout_burst", self.dropout_burst) >= 1:
+            raise ConfigError(
+                f"ReachingCfg.dropout_burst must be >= 1 [frames], got {self.dropout_burst}"
+            )
         if self.file_format not in ("npz", "csv"):
             raise ConfigError(f"file_format must be 'npz' or 'csv', got {self.file_format!r}")
 

@@ -40,7 +40,13 @@ from iplanner_torch.data.kinematic_human import (
     random_sway,
     sample_body,
 )
-from iplanner_torch.data.reaching import add_tracker_noise, frame_times, reach_targets
+from iplanner_torch.data.reaching import (
+    add_tracker_noise,
+    finite_number,
+    finite_range,
+    frame_times,
+    reach_targets,
+)
 from iplanner_torch.data.skeleton import JOINT_NAMES
 from iplanner_torch.errors import ConfigError
 
@@ -123,14 +129,34 @@ def parse_task_order(expr: str, n_objects: int | None = None) -> TaskOrder:
 
     Raises:
         ConfigError: naming the position of a syntax error, a repeated id, or an id out of
-            range.
+            range (the position of that id).
     """
-    s = expr.replace("→", "->")
-    if s.strip().lower() == "random":
+    if expr.replace("→", "->").strip().lower() == "random":
         if n_objects is None or n_objects < 1:
             raise ConfigError("task order 'random' needs n_objects >= 1")
         return TaskOrder(groups=(tuple(range(n_objects)),))
+    order, where = _parse_with_positions(expr)
+    if n_objects is not None:
+        for i, at in zip(order.ids, where, strict=True):
+            if i >= n_objects:
+                raise ConfigError(
+                    f"task order {expr!r}: object id {i} out of range for {n_objects} objects "
+                    f"(ids 0..{n_objects - 1}) at position {at}"
+                )
+    return order
+
+
+def _parse_with_positions(expr: str) -> tuple[TaskOrder, tuple[int, ...]]:
+    """The order ``expr`` states (not ``random``) and the position of each of its ids.
+
+    Positions count characters of ``expr`` with ``→`` written ``->``.
+
+    Raises:
+        ConfigError: naming the position of a syntax error or a repeated id.
+    """
+    s = expr.replace("→", "->")
     pos = 0
+    where: list[int] = []  # the position of each id, in the order of TaskOrder.ids
 
     def err(msg: str) -> ConfigError:
         return ConfigError(f"task order {expr!r}: {msg} at position {pos}")
@@ -149,6 +175,7 @@ def parse_task_order(expr: str, n_objects: int | None = None) -> TaskOrder:
         if start == pos:
             got = f", got {s[pos]!r}" if pos < len(s) else ", got the end"
             raise err(f"expected an object id (digits 0-9){got}")
+        where.append(start)
         return int(s[start:pos])
 
     groups: list[tuple[int, ...]] = []
@@ -176,13 +203,11 @@ def parse_task_order(expr: str, n_objects: int | None = None) -> TaskOrder:
             continue
         raise err("expected '->' or the end")
     ids = [i for g in groups for i in g]
-    if len(set(ids)) != len(ids):
-        pos = 0
-        raise err(f"repeated object id in {ids}")
-    if n_objects is not None and max(ids) >= n_objects:
-        pos = 0
-        raise err(f"object id {max(ids)} out of range for {n_objects} objects")
-    return TaskOrder(groups=tuple(groups))
+    for k, i in enumerate(ids):
+        if i in ids[:k]:
+            pos = where[k]
+            raise err(f"repeated object id {i} in {ids}")
+    return TaskOrder(groups=tuple(groups)), tuple(where)
 
 
 def task_action_names(object_ids: Sequence[int]) -> tuple[str, ...]:
@@ -313,22 +338,39 @@ class TaskDatasetCfg:
 
     def __post_init__(self) -> None:
         ids, _ = arrangement_targets(self.arrangement)
-        order = parse_task_order(self.order, n_objects=8)
-        if str(self.order).strip().lower() == "random":
-            order = TaskOrder(groups=(ids,))
-        if set(order.ids) != set(ids):
+        if not isinstance(self.order, str):
+            raise ConfigError(f"TaskDatasetCfg.order must be a string, got {self.order!r}")
+        if self.order.strip().lower() != "random":
+            order, where = _parse_with_positions(self.order)
+            for i, at in zip(order.ids, where, strict=True):
+                if i not in ids:
+                    raise ConfigError(
+                        f"task order {self.order!r}: object id {i} at position {at} is not on "
+                        f"the table: arrangement {self.arrangement} has objects {list(ids)} "
+                        "(ids number the 2 x 4 grid of places 0..7)"
+                    )
+            left = [i for i in ids if i not in order.ids]
+            if left:
+                raise ConfigError(
+                    f"task order {self.order!r} leaves object(s) {left} out: arrangement "
+                    f"{self.arrangement} has {list(ids)}, and the order must take each once"
+                )
+        if self.n_demos < 1 or self.n_subjects < 1:
             raise ConfigError(
-                f"order {self.order!r} uses ids {sorted(order.ids)}, arrangement "
-                f"{self.arrangement} has {list(ids)}"
+                f"need n_demos >= 1 and n_subjects >= 1, got {self.n_demos}, {self.n_subjects}"
             )
-        if self.n_demos < 1 or self.n_subjects < 1 or not self.fps > 0:
-            raise ConfigError("need n_demos >= 1, n_subjects >= 1 and fps > 0")
-        if self.noise_sigma < 0 or not 0 <= self.dropout_rate < 1:
-            raise ConfigError("need noise_sigma >= 0 and 0 <= dropout_rate < 1")
+        # every float is checked finite first (NaN and Inf pass a bare "x < 0" test)
+        if not finite_number("TaskDatasetCfg.fps", self.fps) > 0:
+            raise ConfigError(f"TaskDatasetCfg.fps must be finite and > 0, got {self.fps}")
+        if not finite_number("TaskDatasetCfg.noise_sigma", self.noise_sigma) >= 0:
+            raise ConfigError(f"TaskDatasetCfg.noise_sigma must be >= 0, got {self.noise_sigma}")
+        if not 0 <= finite_number("TaskDatasetCfg.dropout_rate", self.dropout_rate) < 1:
+            raise ConfigError(
+                f"TaskDatasetCfg.dropout_rate must be in [0, 1), got {self.dropout_rate}"
+            )
         if self.file_format not in ("npz", "csv"):
             raise ConfigError(f"file_format must be 'npz' or 'csv', got {self.file_format!r}")
-        if len(self.idle_s) != 2 or not 0 <= self.idle_s[0] <= self.idle_s[1]:
-            raise ConfigError(f"idle_s must be (low, high), 0 <= low <= high; got {self.idle_s}")
+        object.__setattr__(self, "idle_s", finite_range("TaskDatasetCfg.idle_s", self.idle_s))
 
     def task_order(self) -> TaskOrder:
         """The parsed order (``random`` -> one group of the arrangement's ids)."""

@@ -18,7 +18,7 @@ from iplanner_torch.data.io import (
     save_demonstration,
 )
 from iplanner_torch.data.skeleton import JOINT_NAMES
-from iplanner_torch.errors import DataError
+from iplanner_torch.errors import ConfigError, DataError, DataWarning
 
 LEGO = Path(__file__).resolve().parents[3] / "shared" / "data" / "lego_assembly_3d"
 
@@ -569,3 +569,97 @@ def test_error_unreadable_npz(tmp_path, monkeypatch):
     monkeypatch.setattr("builtins.open", no_access)
     with pytest.raises(DataError, match=r"x\.npz: unreadable NPZ file \(.*Permission denied"):
         load_demonstrations(p)
+
+
+_AUDIT_JOINTS = ("torso", "left_hand", "right_hand")
+_AUDIT_HEADER = '# {"fps": 15.0, "action_names": ["idle", "reach"]}'
+
+
+def _audit_csv(path: Path, first: tuple[str, ...], header: str = _AUDIT_HEADER) -> Path:
+    """A 10-frame CSV at 15 Hz whose columns are ``first`` (``t`` the time, any other 1), then
+    3 joints' positions."""
+    cols = [*first] + [f"{j}_{a}" for j in _AUDIT_JOINTS for a in "xyz"]
+    rows = [
+        ",".join([f"{i / 15:.6f}" if c == "t" else "1" for c in first] + ["0.1"] * 9)
+        for i in range(10)
+    ]
+    path.write_text("\n".join([header, ",".join(cols), *rows]) + "\n")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("first", "message"),
+    [
+        (("t", "lable"), r"unknown column\(s\) 'lable' \(did you mean 'label'\?\)"),  # was all 0
+        (("time", "label"), r"unknown column\(s\) 'time' \(did you mean 't'\?\)"),  # was dropped
+        (("Label",), r"unknown column\(s\) 'Label' \(did you mean 'label'\?\)"),
+        (("t", "label", "subject"), r"unknown column\(s\) 'subject' in the header row"),
+        (("t", "label", ""), r"unknown column\(s\) '' \(an unnamed column: a trailing comma\?\)"),
+        (("_x",), r"unknown column\(s\) '_x' in"),  # a joint needs a name
+    ],
+)
+def test_error_csv_unknown_column_is_named(tmp_path, first, message):
+    p = _audit_csv(tmp_path / "my.csv", first)
+    with pytest.raises(DataError, match=rf"my\.csv: {message}") as info:
+        load_demonstrations(p)
+    assert "line 2); the accepted columns are t (seconds), label (int action index)" in str(
+        info.value
+    )
+    assert "clean_<joint>_x" in str(info.value)
+
+
+def test_csv_without_label_column_but_named_actions_is_unlabelled(tmp_path):
+    p = _audit_csv(tmp_path / "my.csv", ("t",))
+    with pytest.warns(DataWarning, match=r"my\.csv: no 'label' column, but the header comment "):
+        (d,) = load_demonstrations(p)
+    assert d.action_names == ("idle", "reach") and (d.labels == -1).all()  # never action 0
+    q = _audit_csv(tmp_path / "q.csv", ("t",), header='# {"fps": 15.0}')
+    (e,) = load_demonstrations(q)  # no names either: the single action "unlabelled", as before
+    assert e.action_names == ("unlabelled",) and (e.labels == 0).all()
+
+
+@pytest.mark.parametrize("fps", [[15.0], (15.0,), True, np.bool_(True), "15", np.array([15.0])])
+def test_error_loader_fps_argument_not_a_number(tmp_path, fps):
+    p = _csv(tmp_path / "x.csv", "")  # states no fps: the argument would be used
+    with pytest.raises(
+        DataError,
+        match=r"x\.csv: field 'fps' \(the loader's fps= argument\) must be one real number",
+    ):
+        load_demonstrations(p, fps=fps)
+    with pytest.raises(DataError, match=r"the loader's fps= argument\) must be one real number"):
+        load_demonstration(p, fps=fps)
+    (tmp_path / "trial1.txt").write_text(" ".join(["0.1"] * 18) + "\n")
+    with pytest.raises(DataError, match=r"fps= argument\) must be one real number"):
+        load_lego_assembly(tmp_path / "trial1.txt", fps=fps)
+
+
+def test_loader_fps_argument_numbers_are_accepted(tmp_path):
+    p = _csv(tmp_path / "x.csv", "")
+    for fps in (20, 20.0, np.float32(20.0), np.int64(20)):
+        (d,) = load_demonstrations(p, fps=fps)
+        assert d.fps == 20.0 and type(d.fps) is float
+
+
+@pytest.mark.parametrize(
+    ("joints", "message"),
+    [
+        (
+            "right_hand",
+            r"must be a list of joint names, got the single string 'right_hand'; pass a list: "
+            r"joints=\['right_hand'\]",
+        ),
+        (["right_hand", "right_hand"], r"names joint\(s\) \['right_hand'\] more than once"),
+        ([], r"must be a non-empty list of unique joint names, got an empty one"),
+        ((), r"must be a non-empty list of unique joint names, got an empty one"),
+        ([1], r"must hold joint names \(strings\), got \[1\]"),
+        (5, r"must be a non-empty list of unique joint names, got 5"),
+    ],
+)
+def test_error_loader_joints_argument(tmp_path, joints, message):
+    p = _audit_csv(tmp_path / "my.csv", ("t", "label"))
+    with pytest.raises(ConfigError, match=rf"^joints= {message}"):
+        load_demonstrations(p, joints=joints)
+    with pytest.raises(ConfigError, match=rf"^joints= {message}"):
+        load_demonstration(p, joints=joints)
+    with pytest.raises(ConfigError, match=rf"^joints= {message}"):  # checked before the files
+        load_demonstrations(tmp_path / "absent", joints=joints)

@@ -176,3 +176,41 @@ def test_translated_start_pose_moves_the_whole_motion():
     np.testing.assert_allclose(pos[0], start, atol=0.03)  # trunk and hands where asked
     hand = pos[:, JOINT_INDEX["left_hand"]]
     assert np.linalg.norm(hand[phase == 1] - target, axis=1).max() < 0.01
+
+
+@pytest.mark.parametrize("bad", [float("inf"), float("-inf"), float("nan")])
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [  # None stands for the bad value
+        ("fps", None),  # fps=inf was an OverflowError in frame_times
+        ("noise_sigma", None),
+        ("dropout_rate", None),
+        ("dropout_burst", None),
+        ("speeds", (1.0, None)),
+        ("hold_s", (0.2, None)),
+        ("idle_start_s", (None, 1.0)),
+        ("reaction_s", (0.1, None)),
+        ("idle_end_s", (0.5, None)),
+    ],
+)
+def test_non_finite_config_values_raise(field, value, bad):
+    if isinstance(value, tuple):
+        arg = tuple(bad if v is None else v for v in value)
+    else:
+        arg = bad
+    with pytest.raises(ConfigError, match=rf"^ReachingCfg\.{field} must be finite, got"):
+        ReachingCfg(**{field: arg})
+
+
+def test_bad_config_messages_name_the_field():
+    with pytest.raises(ConfigError, match=r"^ReachingCfg\.fps must be finite and > 0, got -15"):
+        ReachingCfg(fps=-15)
+    with pytest.raises(ConfigError, match=r"^ReachingCfg\.fps must be a finite number, got True"):
+        ReachingCfg(fps=True)
+    with pytest.raises(ConfigError, match=r"^ReachingCfg\.dropout_burst must be >= 1"):
+        ReachingCfg(dropout_burst=0.5)
+    with pytest.raises(ConfigError, match=r"^ReachingCfg\.speeds must be a non-empty list"):
+        ReachingCfg(speeds=())
+    with pytest.raises(ConfigError, match=r"^fps must be finite, got inf"):
+        reach_motion(sample_body(np.random.default_rng(0)), "left", np.zeros(3),
+                     np.random.default_rng(0), fps=float("inf"))  # fmt: skip

@@ -122,3 +122,44 @@ def test_task_dataset_round_trip(tmp_path):
         assert d.metadata["order"][0] == 0 and d.metadata["order"][-1] == 3
         np.testing.assert_array_equal(d.positions, d.clean_positions)
     assert "0->(1,2)->3" in (tmp_path / "README.md").read_text()
+
+
+@pytest.mark.parametrize("bad", [float("inf"), float("-inf"), float("nan")])
+@pytest.mark.parametrize("field", ["fps", "noise_sigma", "dropout_rate", "idle_s"])
+def test_non_finite_config_values_raise(field, bad):
+    value = (0.5, bad) if field == "idle_s" else bad  # fps=inf was an OverflowError
+    with pytest.raises(ConfigError, match=rf"^TaskDatasetCfg\.{field} must be finite, got"):
+        TaskDatasetCfg(**{field: value})
+
+
+def test_bad_config_messages_name_the_field():
+    with pytest.raises(ConfigError, match=r"^TaskDatasetCfg\.fps must be finite and > 0, got -15"):
+        TaskDatasetCfg(fps=-15)
+    with pytest.raises(ConfigError, match=r"^TaskDatasetCfg\.dropout_rate must be in \[0, 1\)"):
+        TaskDatasetCfg(dropout_rate=1.0)
+    with pytest.raises(ConfigError, match=r"^TaskDatasetCfg\.idle_s must be \(low, high\)"):
+        TaskDatasetCfg(idle_s=(2.0, 1.0))
+
+
+def test_order_id_off_the_arrangement_names_its_position_and_the_objects():
+    # was: "object id 9 out of range for 8 objects at position 0"
+    with pytest.raises(
+        ConfigError,
+        match=r"^task order '\(0,1\)->\(2,9\)': object id 9 at position 10 is not on the table: "
+        r"arrangement 1x4 has objects \[0, 1, 2, 3\] \(ids number the 2 x 4 grid",
+    ):
+        TaskDatasetCfg(order="(0,1)->(2,9)", arrangement="1x4")
+    with pytest.raises(ConfigError, match=r"object id 5 at position 3 .* arrangement 1x4 has"):
+        TaskDatasetCfg(order="(1,5)->(2,6)", arrangement="1x4")
+    with pytest.raises(ConfigError, match=r"leaves object\(s\) \[3\] out: arrangement 1x4 has"):
+        TaskDatasetCfg(order="(0,1)->2", arrangement="1x4")
+    assert TaskDatasetCfg(order="random", arrangement="2x2").task_order().ids == (1, 2, 5, 6)
+
+
+def test_semantic_errors_name_the_position_of_the_id():
+    with pytest.raises(
+        ConfigError, match=r"object id 5 out of range for 4 objects \(ids 0\.\.3\) at position 5$"
+    ):
+        parse_task_order("0 -> 5->1", n_objects=4)
+    with pytest.raises(ConfigError, match=r"repeated object id 1 in \[0, 1, 1\] at position 7$"):
+        parse_task_order("(0,1)->1")
