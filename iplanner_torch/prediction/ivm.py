@@ -45,6 +45,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from iplanner_torch import checks
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.dtw import KernelLike, kernel_from_state
 from iplanner_torch.types import check_shape
@@ -76,9 +77,10 @@ class IVMClassifier:
             :class:`~iplanner_torch.prediction.dtw.DTWKernel`; an attribute
             ``positive_definite = True`` skips the eigenvalue shift (see the module docstring).
         num_classes: C, the number of classes (labels are 0..C-1).
-        lam: regularisation weight (> 0).
+        lam: regularisation weight (> 0, finite).
         max_import: the largest number of import vectors.
-        tol: stop when the relative decrease of H in one import step is below this.
+        tol: stop when the relative decrease of H in one import step is below this (>= 0,
+            finite).
         candidates: random candidates scored per import step; None scores all.
         newton_steps: Newton (bound) steps per candidate and per refit.
         seed: seed of the candidate sampler.
@@ -103,12 +105,10 @@ class IVMClassifier:
     ) -> None:
         if num_classes < 1:
             raise ConfigError(f"expected num_classes >= 1, got {num_classes}")
-        if not lam > 0:
-            raise ConfigError(f"expected lam > 0, got {lam}")
+        checks.positive("lam", lam)  # NaN and inf refused too
         if max_import < 0:
             raise ConfigError(f"expected max_import >= 0, got {max_import}")
-        if not tol >= 0:
-            raise ConfigError(f"expected tol >= 0, got {tol}")
+        checks.non_negative("tol", tol)
         if candidates is not None and candidates < 1:
             raise ConfigError(f"expected candidates None or >= 1, got {candidates}")
         if newton_steps < 1:

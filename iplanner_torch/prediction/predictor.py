@@ -24,12 +24,15 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import math
+import numbers
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 import torch
 
+from iplanner_torch import checks
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
@@ -79,30 +82,74 @@ class PredictorCfg:
     def __post_init__(self) -> None:
         if isinstance(self.svgp, dict):
             object.__setattr__(self, "svgp", SVGPCfg(**self.svgp))
+        if not isinstance(self.svgp, SVGPCfg):
+            raise ConfigError(f"expected svgp an SVGPCfg, got {type(self.svgp).__name__}")
         if self.classifier_kernel not in ("dtw", "gak", "rbf"):
             raise ConfigError(
                 f"classifier_kernel must be dtw, gak or rbf, got {self.classifier_kernel!r}"
             )
-        if self.classifier_bandwidth is not None and self.classifier_bandwidth <= 0:
-            raise ConfigError(f"classifier_bandwidth must be > 0, got {self.classifier_bandwidth}")
-        if self.ivm_lam <= 0 or self.ivm_max_import < 1 or self.ivm_candidates < 1:
-            raise ConfigError("need ivm_lam > 0, ivm_max_import >= 1, ivm_candidates >= 1")
-        if self.ivm_tol < 0 or self.ivm_newton_steps < 1:
-            raise ConfigError("need ivm_tol >= 0 and ivm_newton_steps >= 1")
-        if self.classifier_max_train < 2 or self.max_gp_points < 2:
-            raise ConfigError("classifier_max_train and max_gp_points must be >= 2")
-        if self.coherence_smoothing < 0:
-            raise ConfigError(f"coherence_smoothing must be >= 0, got {self.coherence_smoothing}")
-        if self.min_group_size < 2:
-            raise ConfigError(f"min_group_size must be >= 2, got {self.min_group_size}")
+        # every number is checked for its range and, for floats, for NaN and infinities
+        # (``nan <= 0`` is False): a bad value fails here, before a training folder is touched
+        checks.optional(checks.positive, "classifier_bandwidth", self.classifier_bandwidth)
+        checks.positive("ivm_lam", self.ivm_lam)
+        checks.integer("ivm_max_import", self.ivm_max_import, minimum=1)
+        checks.non_negative("ivm_tol", self.ivm_tol)
+        checks.integer("ivm_candidates", self.ivm_candidates, minimum=1)
+        checks.integer("ivm_newton_steps", self.ivm_newton_steps, minimum=1)
+        checks.integer("classifier_max_train", self.classifier_max_train, minimum=2)
+        checks.non_negative("coherence_smoothing", self.coherence_smoothing)
+        checks.integer("min_group_size", self.min_group_size, minimum=2)
+        checks.integer("max_gp_points", self.max_gp_points, minimum=2)
         if self.gp_input not in ("window", "relative"):
             raise ConfigError(f"gp_input must be window or relative, got {self.gp_input!r}")
-        if self.fallback_sigma0 <= 0 or self.fallback_sigma_rate < 0:
-            raise ConfigError("need fallback_sigma0 > 0 and fallback_sigma_rate >= 0")
+        checks.positive("fallback_sigma0", self.fallback_sigma0)
+        checks.non_negative("fallback_sigma_rate", self.fallback_sigma_rate)
+        checks.seed(self.seed)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-dict form (saved in checkpoints)."""
         return asdict(self)
+
+
+def _check_floating(name: str, x: torch.Tensor) -> None:
+    """ShapeError unless ``x`` has a real floating dtype (not integer, bool or complex)."""
+    if not x.is_floating_point():
+        raise ShapeError(f"expected {name} of a floating dtype, got {x.dtype}")
+
+
+def _check_integer(name: str, x: torch.Tensor) -> None:
+    """ShapeError unless ``x`` has an integer dtype (not floating, complex or bool)."""
+    if x.is_floating_point() or x.is_complex() or x.dtype == torch.bool:
+        raise ShapeError(f"expected {name} of an integer dtype, got {x.dtype}")
+
+
+def _integer_scalar(name: str, value: Any) -> torch.Tensor:
+    """``value`` (a Python or numpy integer, or a one-element integer tensor) as a 0-d int64
+    CPU tensor.
+
+    Raises:
+        ShapeError: for anything else (a float, NaN, a bool, a tensor of other size or dtype).
+    """
+    if isinstance(value, torch.Tensor):
+        if value.numel() != 1:
+            raise ShapeError(f"expected {name} a single integer, got shape {tuple(value.shape)}")
+        _check_integer(name, value)
+        return value.detach().cpu().reshape(()).to(torch.int64)
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise ShapeError(
+            f"expected {name} of an integer dtype, got {type(value).__name__} {value!r}"
+        )
+    if not -(2**63) <= int(value) < 2**63:
+        raise ShapeError(f"expected {name} an int64, got {value!r}")
+    return torch.tensor(int(value), dtype=torch.int64)
+
+
+def _far_error(what: str, where: str, hint: str = "") -> DataError:
+    """The DataError for a position beyond :data:`MAX_POSITION_M` (``where``: its first)."""
+    return DataError(
+        f"{what} beyond {MAX_POSITION_M:g} m (first: {where}); positions are metres in the "
+        f"world frame: check the units{hint}"
+    )
 
 
 def gp_inputs(f_prev: torch.Tensor, num_joints: int, kind: str = "relative") -> torch.Tensor:
@@ -347,6 +394,50 @@ class HumanMotionPredictor:
         var = sd.view(1, -1, 1, 1).expand(mean.shape).clone()
         return mean, var
 
+    def _check_progress(self, progress: torch.Tensor) -> torch.Tensor:
+        """``progress`` ((B,) or 0-d) as int64 on its device, checked (:meth:`predict`).
+
+        Raises:
+            ShapeError: when it is not of an integer dtype.
+            ConfigError: for a negative bitmask or one with a bit of no progress action.
+        """
+        _check_integer("progress", progress)
+        progress = progress.to(torch.int64)
+        mask = sum(1 << a for a in self.progress_actions)  # the bits that stand for an action
+        stray = (progress < 0) | ((progress & ~mask) != 0)
+        if bool(stray.any()):
+            i = int(stray.reshape(-1).nonzero()[0, 0])
+            where = f" (window {i})" if progress.dim() == 1 else ""
+            raise ConfigError(
+                f"expected progress bitmasks >= 0 with bits of progress actions only (bit a "
+                f"for action a in {list(self.progress_actions)}), got "
+                f"{int(progress.reshape(-1)[i])}{where}"
+            )
+        return progress
+
+    def _check_window_values(self, f_prev: torch.Tensor, *, check_range: bool = True) -> None:
+        """DataError when ``f_prev`` (B, n_p, D) holds NaN or inf, or (``check_range``) a
+        position beyond :data:`MAX_POSITION_M`; one host synchronisation when it is fine (the
+        names of the message are built only on failure)."""
+        if not check_range:
+            if not all_finite(f_prev):
+                check_finite("f_prev", f_prev, ("window", "frame", self.feature_names))
+            return
+        k3 = 3 * self.num_joints
+        lo, hi = torch.aminmax(f_prev[:, :, :k3].contiguous())  # NaN propagates
+        stats = torch.stack([lo, hi, f_prev.sum()]).tolist()  # (3,): one sync
+        near = -MAX_POSITION_M <= stats[0] and stats[1] <= MAX_POSITION_M  # False on NaN
+        if near and math.isfinite(stats[2]):  # a NaN or inf makes the sum NaN or inf
+            return
+        check_finite("f_prev", f_prev, ("window", "frame", self.feature_names))
+        if not near:
+            b_i, t_i, d_i = (f_prev[:, :, :k3].abs() > MAX_POSITION_M).nonzero()[0].tolist()
+            raise _far_error(
+                "f_prev holds a position",
+                f"window {b_i}, frame {t_i}, {self.feature_names[d_i]!r}: "
+                f"{float(f_prev[b_i, t_i, d_i]):g}",
+            )
+
     def predict(self, f_prev: torch.Tensor, progress: torch.Tensor) -> Forecast:
         """Forecast the next n_f frames for a batch of windows (eq. motion_prediction).
 
@@ -362,33 +453,32 @@ class HumanMotionPredictor:
             The Forecast: weights (B, A), mean/var (B, A, n_f, K, 3) in the world frame.
 
         Raises:
-            ShapeError: for wrong shapes, no window (B = 0), or a ``progress`` that is not of
-                an integer dtype.
+            ShapeError: for wrong shapes, no window (B = 0), an ``f_prev`` that is not of a
+                floating dtype (integer, bool or complex), or a ``progress`` that is not of an
+                integer dtype.
             ConfigError: for a negative ``progress`` or one with a bit of no progress action.
-            DataError: when ``f_prev`` holds NaN or inf (naming window, frame and feature).
+            DataError: when ``f_prev`` holds NaN or inf (naming window, frame and feature), or
+                a position beyond :data:`MAX_POSITION_M`.
         """
+        return self._predict(f_prev, progress, positions_checked=False)
+
+    def _predict(
+        self, f_prev: torch.Tensor, progress: torch.Tensor, *, positions_checked: bool
+    ) -> Forecast:
+        """:meth:`predict`; ``positions_checked``: the caller has already refused positions
+        beyond :data:`MAX_POSITION_M` (:meth:`predict_positions`), so only finiteness is
+        checked here."""
         check_shape("f_prev", f_prev, ("B", self.n_prev, self.num_features))
         if f_prev.shape[0] == 0:
             raise ShapeError(
                 f"expected at least one window in f_prev (B >= 1, {self.n_prev}, "
                 f"{self.num_features}), got {tuple(f_prev.shape)}"
             )
+        _check_floating("f_prev", f_prev)
         check_shape("progress", progress, (f_prev.shape[0],))
-        if progress.is_floating_point() or progress.is_complex() or progress.dtype == torch.bool:
-            raise ShapeError(f"expected progress of an integer dtype, got {progress.dtype}")
         f_prev = f_prev.detach().to(self.device, torch.float32)
-        progress = progress.to(self.device, torch.int64)
-        mask = sum(1 << a for a in self.progress_actions)  # the bits that stand for an action
-        stray = (progress < 0) | ((progress & ~mask) != 0)
-        if bool(stray.any()):
-            i = int(stray.nonzero()[0, 0])
-            raise ConfigError(
-                f"expected progress bitmasks >= 0 with bits of progress actions only (bit a "
-                f"for action a in {list(self.progress_actions)}), got {int(progress[i])} "
-                f"(window {i})"
-            )
-        if not all_finite(f_prev):  # the D names are built for the message only
-            check_finite("f_prev", f_prev, ("window", "frame", self.feature_names))
+        progress = self._check_progress(progress.to(self.device))
+        self._check_window_values(f_prev, check_range=not positions_checked)
         b, k, a_n = f_prev.shape[0], self.num_joints, self.num_actions
         pose = f_prev[:, -1, : 3 * k].reshape(b, k, 3)  # (B, K, 3) current pose
         x = gp_inputs(f_prev, k, self.cfg.gp_input)  # (B, n_p * D)
@@ -462,8 +552,7 @@ class HumanMotionPredictor:
                 f"expected at least one window in positions (B >= 1, {self.n_prev}, "
                 f"{self.num_joints}, 3), got {tuple(positions.shape)}"
             )
-        if not positions.is_floating_point():
-            raise ShapeError(f"expected positions of a floating dtype, got {positions.dtype}")
+        _check_floating("positions", positions)
         positions = positions.detach()
         seen = torch.isfinite(positions).all(-1).any(1).any(1)  # (B,) any joint observed
         huge = positions.abs() > MAX_POSITION_M  # inf included, NaN not
@@ -476,11 +565,10 @@ class HumanMotionPredictor:
                     f"positions hold inf (first: window {b_i}, frame {t_i}, joint "
                     f"{self.joint_names[k_i]!r}); mark a lost joint with NaN"
                 )
-            raise DataError(
-                f"positions hold a coordinate beyond {MAX_POSITION_M:g} m (first: window "
-                f"{b_i}, frame {t_i}, joint {self.joint_names[k_i]!r}: {value.tolist()}); "
-                "positions are metres in the world frame: check the units, or mark a bad "
-                "sample lost with NaN"
+            raise _far_error(
+                "positions hold a coordinate",
+                f"window {b_i}, frame {t_i}, joint {self.joint_names[k_i]!r}: {value.tolist()}",
+                ", or mark a bad sample lost with NaN",
             )
         if not all_seen:
             bi = int((~seen).nonzero()[0])
@@ -491,15 +579,38 @@ class HumanMotionPredictor:
             self.feature_kinds,
             joint_names=self.joint_names,
         )
-        return self.predict(f, progress)
+        return self._predict(f, progress, positions_checked=True)
 
     def next_action(self, progress: int, current: int) -> torch.Tensor:
-        """(A,) p(n | p, c) (eq. next_action); uniform without a next-action model."""
+        """(A,) p(n | p, c) (eq. next_action); uniform without a next-action model.
+
+        Args:
+            progress: p, the progress-state bitmask: an integer >= 0 with bit ``a`` set only
+                for an action ``a`` of ``progress_actions``, as :meth:`predict` takes it.
+            current: c, the current action: an index into ``action_names``, in [0, A). There
+                is no "unknown" value: the model is fitted on labelled frames only (windows
+                whose current frame is unlabelled are left out of training), so a caller that
+                does not know c picks the action it stands for (the closed loop passes idle).
+
+        Returns:
+            (A,) probabilities of the next action (on the CPU), summing to 1.
+
+        Raises:
+            ShapeError: when ``progress`` or ``current`` is not an integer (a float, NaN, a
+                bool, a tensor of more than one element), as :meth:`predict` for ``progress``.
+            ConfigError: for a ``progress`` that :meth:`predict` refuses (negative, or with a
+                bit of no progress action), or a ``current`` outside [0, A).
+        """
+        p = self._check_progress(_integer_scalar("progress", progress))
+        c = _integer_scalar("current", current)
+        if not 0 <= int(c) < self.num_actions:
+            raise ConfigError(
+                f"expected current an action index in [0, {self.num_actions}) "
+                f"({', '.join(self.action_names)}), got {int(c)}"
+            )
         if self.next_model is None:
             return torch.full((self.num_actions,), 1.0 / self.num_actions)
-        p = torch.tensor([int(progress)], dtype=torch.int64)
-        c = torch.tensor([int(current)], dtype=torch.int64)
-        return self.next_model.prob(p, c)[0]
+        return self.next_model.prob(p.view(1), c.view(1))[0]
 
     # -------------------------------------------------------------------------- storing
     def to_checkpoint(self) -> dict[str, Any]:

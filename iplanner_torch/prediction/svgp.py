@@ -68,6 +68,7 @@ from gpytorch.variational import VariationalStrategy, _VariationalDistribution
 from linear_operator.operators import DenseLinearOperator
 from torch import nn
 
+from iplanner_torch import checks
 from iplanner_torch.errors import CheckpointError, ConfigError, ShapeError
 from iplanner_torch.types import check_shape
 
@@ -136,41 +137,34 @@ class SVGPCfg:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.num_inducing < 1:
-            raise ConfigError(f"num_inducing must be >= 1, got {self.num_inducing}")
+        # every number is checked for its range and, for floats, for NaN and infinities
+        # (``nan <= 0`` is False): a bad value fails here, before a training folder is touched
+        checks.integer("num_inducing", self.num_inducing, minimum=1)
         if self.kernel not in ("rbf", "matern", "gak", "dtw"):
             raise ConfigError(f"kernel must be one of rbf, matern, gak, dtw, got {self.kernel!r}")
         if self.noisy_input not in ("none", "simple", "nigp"):
             raise ConfigError(
                 f"noisy_input must be one of none, simple, nigp, got {self.noisy_input!r}"
             )
-        if self.input_noise_sigma < 0:
-            raise ConfigError(f"input_noise_sigma must be >= 0, got {self.input_noise_sigma}")
-        if self.velocity_limit < 0:
-            raise ConfigError(f"velocity_limit must be >= 0, got {self.velocity_limit}")
-        if self.nigp_iterations < 1:
-            raise ConfigError(f"nigp_iterations must be >= 1, got {self.nigp_iterations}")
-        if self.nigp_refit_steps < 0:
-            raise ConfigError(f"nigp_refit_steps must be >= 0, got {self.nigp_refit_steps}")
-        if self.lr <= 0:
-            raise ConfigError(f"lr must be > 0, got {self.lr}")
-        if self.epochs < 0 or self.max_steps < 0:
-            raise ConfigError(
-                f"epochs and max_steps must be >= 0, got {self.epochs}, {self.max_steps}"
-            )
-        if self.batch_size < 2:
-            raise ConfigError(f"batch_size must be >= 2, got {self.batch_size}")
-        if not self.noise_floor_init > self.noise_floor_min >= 0:
+        checks.non_negative("input_noise_sigma", self.input_noise_sigma)
+        checks.non_negative("velocity_limit", self.velocity_limit)
+        checks.integer("nigp_iterations", self.nigp_iterations, minimum=1)
+        checks.integer("nigp_refit_steps", self.nigp_refit_steps, minimum=0)
+        checks.positive("lr", self.lr)
+        checks.integer("epochs", self.epochs, minimum=0)
+        checks.integer("max_steps", self.max_steps, minimum=0)
+        checks.integer("batch_size", self.batch_size, minimum=2)
+        checks.positive("noise_floor_init", self.noise_floor_init)
+        checks.non_negative("noise_floor_min", self.noise_floor_min)
+        if not self.noise_floor_init > self.noise_floor_min:
             raise ConfigError(
                 f"need noise_floor_init > noise_floor_min >= 0, got {self.noise_floor_init}, "
                 f"{self.noise_floor_min}"
             )
-        if self.series_bandwidth is not None and self.series_bandwidth <= 0:
-            raise ConfigError(f"series_bandwidth must be > 0, got {self.series_bandwidth}")
-        if self.calibrate_min_windows < 1:
-            raise ConfigError(
-                f"calibrate_min_windows must be >= 1, got {self.calibrate_min_windows}"
-            )
+        checks.integer("calibrate_min_windows", self.calibrate_min_windows, minimum=1)
+        checks.optional(checks.positive, "series_bandwidth", self.series_bandwidth)
+        checks.optional(checks.integer, "series_band", self.series_band, minimum=0)
+        checks.seed(self.seed)
 
     @property
     def simple_extra_var(self) -> float:

@@ -31,6 +31,7 @@ import torch
 from torch.utils.data import DataLoader, TensorDataset
 from tqdm.auto import tqdm
 
+from iplanner_torch import checks
 from iplanner_torch.data.windows import WindowSet
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
 from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord, read_training_inputs
@@ -52,6 +53,10 @@ __all__ = [
     "TrainerCfg",
     "train_predictor",
 ]
+
+
+#: the largest seed Lightning's ``seed_everything`` takes (numpy's seeds are 32-bit)
+MAX_SEED = 2**32 - 1
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,18 +84,20 @@ class TrainerCfg:
     num_threads: int | None = 2
 
     def __post_init__(self) -> None:
-        if self.num_threads is not None and self.num_threads < 1:
-            raise ConfigError(f"num_threads must be >= 1 or None, got {self.num_threads}")
-        if self.max_epochs is not None and self.max_epochs < 0:
-            raise ConfigError(f"max_epochs must be >= 0 or None, got {self.max_epochs}")
+        # every number is checked for its range (NaN and infinities included): a bad value
+        # fails here, before a training folder is touched
+        checks.optional(checks.integer, "max_epochs", self.max_epochs, minimum=0)
+        checks.optional(checks.integer, "max_steps", self.max_steps, minimum=0)
         if self.accelerator not in ("auto", "cpu", "gpu", "cuda"):
             raise ConfigError(
                 f"accelerator must be auto, cpu, gpu or cuda, got {self.accelerator!r}"
             )
-        if self.max_steps is not None and self.max_steps < 0:
-            raise ConfigError(f"max_steps must be >= 0 or None, got {self.max_steps}")
-        if self.devices < 1 or self.log_every_n_steps < 1:
-            raise ConfigError("devices and log_every_n_steps must be >= 1")
+        checks.integer("devices", self.devices, minimum=1)
+        checks.integer("log_every_n_steps", self.log_every_n_steps, minimum=1)
+        # Lightning's seed_everything takes numpy's seeds only, 0 .. 2^32 - 1
+        if checks.seed(self.seed) > MAX_SEED:
+            raise ConfigError(f"expected seed <= {MAX_SEED} (2^32 - 1), got {self.seed}")
+        checks.optional(checks.integer, "num_threads", self.num_threads, minimum=1)
 
     def cap_steps(self, steps: int) -> int:
         """``steps`` capped by :attr:`max_steps`."""
@@ -427,6 +434,36 @@ def _classifier_kernel_factory(cfg: PredictorCfg) -> Any:
     return factory
 
 
+def _check_accelerator(tcfg: TrainerCfg) -> None:
+    """Check that ``tcfg.accelerator`` and ``tcfg.devices`` exist on this machine.
+
+    Lightning finds out only when its first trainer starts, after the training folder has
+    been written to (``training_inputs.json``, earlier logs replaced), and then raises its own
+    ``MisconfigurationException``.
+
+    Raises:
+        ConfigError: for ``cuda`` without CUDA, ``gpu`` without CUDA or MPS, or more
+            ``devices`` than CUDA devices where training runs on CUDA.
+    """
+    cuda = torch.cuda.is_available()
+    if tcfg.accelerator == "cuda" and not cuda:
+        raise ConfigError(
+            "trainer.accelerator=cuda but CUDA is not available here; use "
+            "trainer.accelerator=cpu or auto"
+        )
+    if tcfg.accelerator == "gpu" and not (cuda or torch.backends.mps.is_available()):
+        raise ConfigError(
+            "trainer.accelerator=gpu but no GPU (CUDA or MPS) is available here; use "
+            "trainer.accelerator=cpu or auto"
+        )
+    on_cuda = tcfg.accelerator == "cuda" or (tcfg.accelerator in ("gpu", "auto") and cuda)
+    if on_cuda and tcfg.devices > torch.cuda.device_count():
+        raise ConfigError(
+            f"trainer.devices={tcfg.devices} but this machine has "
+            f"{torch.cuda.device_count()} CUDA device(s)"
+        )
+
+
 def train_predictor(
     data: Any,
     *,
@@ -458,12 +495,15 @@ def train_predictor(
         The path of ``predictor.ckpt``.
 
     Raises:
+        ConfigError: when ``trainer_cfg.accelerator`` (or its ``devices``) is not available
+            on this machine; checked before anything is written to ``out_dir``.
         DataError: for empty data.
         CheckpointError: (``resume``) when the folder's sub-models were trained on other
             inputs, or a reused sub-model cannot be read; or when the assembled predictor
             fails on its own training windows (a sub-model of another shape). An existing
             ``predictor.ckpt`` is then left as it was.
     """
+    _check_accelerator(trainer_cfg)
     with torch_threads(trainer_cfg.num_threads):
         return _train_predictor(
             data,

@@ -162,6 +162,11 @@ def test_single_class_and_errors():
         ivm.fit(x, torch.zeros(10))
     with pytest.raises(ConfigError, match="lam > 0"):
         IVMClassifier(RBFKernel(1.0), num_classes=3, lam=0.0)
+    for value in (math.nan, math.inf):  # nan <= 0 is False: these used to pass
+        with pytest.raises(ConfigError, match=f"expected lam > 0 and finite, got {value}"):
+            IVMClassifier(RBFKernel(1.0), num_classes=3, lam=value)
+        with pytest.raises(ConfigError, match=f"expected tol >= 0 and finite, got {value}"):
+            IVMClassifier(RBFKernel(1.0), num_classes=3, tol=value)
     with pytest.raises(CheckpointError, match="not fitted"):
         IVMClassifier(RBFKernel(1.0), num_classes=3).predict_proba(x)
 

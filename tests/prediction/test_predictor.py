@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -249,6 +250,77 @@ def test_empty_batch_and_bad_progress_raise(trained) -> None:
     # any integer dtype is taken as before
     fc = pred.predict(w.f_prev[:2], w.progress[:2].int())
     torch.testing.assert_close(fc.mean, pred.predict(w.f_prev[:2], w.progress[:2]).mean)
+
+
+def test_predict_refuses_non_float_windows_and_far_positions(trained) -> None:
+    """As predict_positions: complex (the imaginary part used to be dropped with only torch's
+    warning), integer and bool windows are refused, and so are positions beyond 100 m."""
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    f = w.f_prev[:2].clone()
+    for dtype in (torch.complex64, torch.int64, torch.bool):
+        with pytest.raises(ShapeError, match=f"expected f_prev of a floating dtype, got {dtype}"):
+            pred.predict(f.to(dtype), w.progress[:2])
+    far = f.clone()
+    far[1, 2, 4] = 1e6  # 'left_hand position y'
+    with pytest.raises(
+        DataError,
+        match=r"f_prev holds a position beyond 100 m \(first: window 1, frame 2, "
+        r"'left_hand position y': 1e\+06\); positions are metres",
+    ):
+        pred.predict(far, w.progress[:2])
+    # velocities and accelerations are not positions: large ones are taken as they are
+    fast = f.clone()
+    fast[0, 3, 9 + 4] = 1e3
+    assert bool(torch.isfinite(pred.predict(fast, w.progress[:2]).mean).all())
+    torch.testing.assert_close(
+        pred.predict(f.double(), w.progress[:2]).mean, pred.predict(f, w.progress[:2]).mean
+    )
+
+
+def test_next_action_refuses_unknown_actions_and_bad_progress(trained) -> None:
+    """next_action checks its arguments as predict checks progress (one shared check)."""
+    path, _ = trained
+    pred = HumanMotionPredictor.load(path)
+    a_n = pred.num_actions
+    assert a_n == 4 and pred.progress_actions == (1, 2)
+    probs = pred.next_action(0b010, 0)
+    assert probs.shape == (a_n,) and math.isclose(float(probs.sum()), 1.0, rel_tol=1e-6)
+    # a numpy or 0-d tensor integer is an integer too
+    torch.testing.assert_close(pred.next_action(np.int64(2), torch.tensor(0)), probs)
+    for next_model in (pred.next_model, None):  # without a model the arguments are checked too
+        pred.next_model = next_model
+        for current in (-1, a_n, 99):
+            with pytest.raises(
+                ConfigError,
+                match=rf"expected current an action index in \[0, 4\) \(idle, .*\), got {current}",
+            ):
+                pred.next_action(0, current)
+        for progress in (-1, 1, 1 << 3, 1 << 40):  # bits 0 and 3 are no progress actions
+            with pytest.raises(
+                ConfigError,
+                match=r"expected progress bitmasks >= 0 with bits of progress actions only "
+                rf"\(bit a for action a in \[1, 2\]\), got {progress}$",
+            ):
+                pred.next_action(progress, 0)
+        with pytest.raises(
+            ShapeError, match="expected current of an integer dtype, got float 1.7"
+        ):
+            pred.next_action(0, 1.7)
+        with pytest.raises(
+            ShapeError, match="expected progress of an integer dtype, got float nan"
+        ):
+            pred.next_action(float("nan"), 0)
+        with pytest.raises(ShapeError, match="expected progress of an integer dtype, got bool"):
+            pred.next_action(True, 0)
+        with pytest.raises(
+            ShapeError, match="expected current of an integer dtype, got torch.float32"
+        ):
+            pred.next_action(0, torch.tensor(1.0))
+        with pytest.raises(
+            ShapeError, match=r"expected current a single integer, got shape \(2,\)"
+        ):
+            pred.next_action(0, torch.tensor([0, 1]))
 
 
 def _rewrite(src: Path, dst: Path, *, digest: bool = True, **changes: object) -> Path:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
+import typing
 from pathlib import Path
 
 import pandas as pd
@@ -186,6 +189,97 @@ def test_errors(tmp_path: Path) -> None:
         train_predictor("nope", predictor_cfg=_cfg(), trainer_cfg=TrainerCfg(), out_dir=tmp_path)
 
 
+def _numeric_fields() -> list[tuple[type, str]]:
+    """(config class, field) for every int or float field (also ``| None``) of the configs."""
+    out = []
+    for cls in (PredictorCfg, SVGPCfg, TrainerCfg):
+        hints = typing.get_type_hints(cls)
+        for f in dataclasses.fields(cls):
+            kinds = set(typing.get_args(hints[f.name])) - {type(None)} or {hints[f.name]}
+            if kinds in ({int}, {float}):
+                out.append((cls, f.name))
+    return out
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize(
+    ("cls", "name"), _numeric_fields(), ids=lambda v: getattr(v, "__name__", v)
+)
+def test_config_numbers_refuse_nan_and_infinities(cls: type, name: str, value: float) -> None:
+    """NaN passed range checks written as ``x <= 0`` (False for NaN) and failed only once
+    training had touched the output folder (Lightning replacing earlier logs), or in torch
+    (``Invalid learning rate: nan``); every number of the three configs is refused when the
+    config is built, naming the field (which the CLI turns into ``predictor.ivm_lam: ...``)."""
+    with pytest.raises(ConfigError, match=rf"(?<![\w.]){name}(?!\w).* got {value!r}$"):
+        cls(**{name: value})
+
+
+def test_config_seeds_and_bands_are_checked() -> None:
+    """Fields that used to have no check: a negative seed (Lightning's seed_everything and
+    numpy refuse it, mid-training) or a negative Sakoe-Chiba band."""
+    assert len(_numeric_fields()) == 34  # the parametrisation above covers every number
+    for cls in (PredictorCfg, SVGPCfg, TrainerCfg):
+        with pytest.raises(ConfigError, match="expected seed an integer >= 0, got -1"):
+            cls(seed=-1)
+    with pytest.raises(ConfigError, match=r"expected seed <= 4294967295 \(2\^32 - 1\)"):
+        TrainerCfg(seed=2**32)
+    assert TrainerCfg(seed=2**32 - 1).seed == 2**32 - 1
+    with pytest.raises(ConfigError, match="expected series_band an integer >= 0, got -1"):
+        SVGPCfg(series_band=-1)
+    with pytest.raises(ConfigError, match="expected ivm_max_import an integer >= 1, got 2.5"):
+        PredictorCfg(ivm_max_import=2.5)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="expected svgp an SVGPCfg, got NoneType"):
+        PredictorCfg(svgp=None)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="expected noise_floor_init > 0 and finite, got inf"):
+        SVGPCfg(noise_floor_init=math.inf)  # used to pass: inf > noise_floor_min
+
+
+def test_unavailable_accelerator_is_refused_before_anything_is_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """trainer.accelerator=cuda without CUDA ended in Lightning's MisconfigurationException,
+    after training_inputs.json had been rewritten."""
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.setattr(torch.backends.mps, "is_available", lambda: False)
+    tr, va = _windows(("torso", "left_hand", "right_hand"))
+    out = tmp_path / "run"
+    (out / "logs" / "classifier" / "version_0").mkdir(parents=True)
+    (out / "logs" / "classifier" / "version_0" / "metrics.csv").write_text("earlier run\n")
+    (out / "training_inputs.json").write_text("{}\n")
+    before = {q: q.read_bytes() for q in out.rglob("*") if q.is_file()}
+    cases = [
+        ("cuda", 1, r"^trainer.accelerator=cuda but CUDA is not available here; use "
+         r"trainer.accelerator=cpu or auto$"),
+        ("gpu", 1, r"^trainer.accelerator=gpu but no GPU \(CUDA or MPS\) is available here"),
+    ]  # fmt: skip
+    for accelerator, devices, message in cases:
+        for where in (out, tmp_path / f"new_{accelerator}"):
+            with pytest.raises(ConfigError, match=message):
+                train_predictor(
+                    (tr, va),
+                    predictor_cfg=_cfg(),
+                    trainer_cfg=TrainerCfg(
+                        accelerator=accelerator, devices=devices, tensorboard=False
+                    ),
+                    out_dir=where,
+                    progress=False,
+                )
+            assert where == out or not where.exists()
+    assert {q: q.read_bytes() for q in out.rglob("*") if q.is_file()} == before
+    # more CUDA devices than the machine has
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    with pytest.raises(ConfigError, match=r"trainer.devices=2 but this machine has 1 CUDA"):
+        train_predictor(
+            (tr, va),
+            predictor_cfg=_cfg(),
+            trainer_cfg=TrainerCfg(accelerator="cuda", devices=2, tensorboard=False),
+            out_dir=tmp_path / "two",
+            progress=False,
+        )
+    assert not (tmp_path / "two").exists()
+
+
 @pytest.mark.parametrize(
     "name",
     ["predictor/iplanner_ni", "predictor/iplanner_no_ni", "trainer/default", "trainer/fast"],
@@ -261,5 +355,5 @@ def test_training_runs_on_its_own_thread_count(
             assert torch.equal(a[key], b[key]), key
         else:
             assert a[key] == b[key] or a[key] != a[key], key  # NaN equals itself here
-    with pytest.raises(ConfigError, match="num_threads must be >= 1 or None, got 0"):
+    with pytest.raises(ConfigError, match="expected num_threads an integer >= 1, got 0"):
         TrainerCfg(num_threads=0)
