@@ -22,6 +22,11 @@ Times: ``t`` is simulation time [s]; a message's log time is ``round(t * 1e9) + 
 nanoseconds, and every message of our own schemas also carries ``t`` itself. All geometry is
 in the frame ``"world"`` (the table frame).
 
+Checks: every argument is checked before anything of its message is written (shapes,
+numbers, strings, bools; a ``ShapeError`` or ``DataError`` naming it), and the names of a
+channel (its joint and action names) are fixed by its first message: a message with other
+names is refused, so the arrays of a channel always stack into one tensor when read.
+
 Robustness: messages are grouped in small compressed chunks and the file is flushed whenever a
 chunk is complete, so an episode killed midway leaves a file whose complete chunks
 :func:`~iplanner_torch.recording.reader.read_episode` still reads (with a ``DataWarning``).
@@ -32,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import reprlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -174,18 +180,32 @@ def _entity(ns: int, entity_id: str, kind: str, spheres: list[dict]) -> dict[str
     }
 
 
+#: numpy dtype kinds taken as numbers: bool, int, uint, float, and object (None -> NaN).
+_NUMERIC_KINDS = "biufO"
+
+
 def _as_tensor(name: str, x: Any, expected: Sequence[int | str]) -> np.ndarray:
-    """Check the shape of a tensor / array argument and return it as a float64 numpy array."""
-    xt = x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x, dtype=np.float64))
+    """Check the shape of a tensor / array argument and return it as a float64 numpy array.
+
+    Raises:
+        ShapeError: when its shape is not ``expected``, or it is not numbers (strings, nested
+            lists of unequal lengths), naming the argument.
+    """
+    if not isinstance(x, torch.Tensor):
+        try:
+            a = np.asarray(x)
+            if a.dtype.kind not in _NUMERIC_KINDS:
+                raise TypeError(f"dtype {a.dtype}")
+            xt = torch.as_tensor(a.astype(np.float64, copy=False))
+        except (TypeError, ValueError) as err:
+            pretty = "(" + ", ".join(str(e) for e in expected) + ")"
+            raise ShapeError(
+                f"expected {name} {pretty} of numbers, got {reprlib.repr(x)}"
+            ) from err
+    else:
+        xt = x
     check_shape(name, xt, expected)
     return as_numpy(xt)
-
-
-def _names(name: str, names: Sequence[str], n: int) -> list[str]:
-    out = [str(s) for s in names]
-    if len(out) != n:
-        raise ShapeError(f"expected {n} {name}, got {len(out)}")
-    return out
 
 
 class EpisodeWriter:
@@ -209,7 +229,12 @@ class EpisodeWriter:
     Raises:
         ConfigError: on a non-positive chunk size, unknown compression or a confidence outside
             (0, 1).
-        DataError: when ``metadata`` is not JSON-serialisable.
+        DataError: when ``metadata`` is not JSON-serialisable, or ``path`` cannot be written
+            (a folder, below a file, no permission). The logging methods raise ``ShapeError``
+            on arrays of the wrong shape or not numbers, and ``DataError`` on other arguments
+            of the wrong type (a time or number that is not one, a non-bool ``feasible``,
+            names that are not strings) and on names that differ from the earlier ones of
+            their channel; nothing of a refused message is written.
     """
 
     def __init__(
@@ -237,10 +262,9 @@ class EpisodeWriter:
             meta_json = json.dumps(encode_value(dict(metadata)), allow_nan=False)
         except (TypeError, ValueError) as err:
             raise DataError(f"{self.path}: metadata is not JSON-serialisable: {err}") from err
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = self._open()  # closed in close()
         self._chi2_scale = float(chi2.ppf(ellipsoid_confidence, df=3))
         self._offset_ns = int(time_offset_ns)
-        self._file = open(self.path, "wb")  # closed in close()
         self._writer = Writer(
             self._file, chunk_size=chunk_size, compression=_COMPRESSION[compression]
         )
@@ -257,6 +281,8 @@ class EpisodeWriter:
         )
         self._channels: dict[str, int] = {}
         self._sequence: dict[str, int] = {}
+        # (topic, argument) -> the names of the channel's first message (see _checked_names)
+        self._channel_names: dict[tuple[str, str], tuple[str, ...]] = {}
         schema_ids: dict[str, int] = {}
         for topic, schema in TOPIC_SCHEMAS.items():
             name = schema["title"]
@@ -311,12 +337,36 @@ class EpisodeWriter:
 
     # -- plumbing -----------------------------------------------------------------------------
 
+    def _open(self) -> Any:
+        """The output file opened for writing, its folders created."""
+        if self.path.is_dir():
+            raise DataError(f"{self.path}: is a folder; EpisodeWriter writes one .mcap file")
+        parent = self.path.parent
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+        except (FileExistsError, NotADirectoryError) as err:  # a file where a folder goes
+            what = "it is a file" if parent.exists() else "a folder above it is a file"
+            raise DataError(
+                f"{self.path}: cannot write the episode log: {parent} is not a folder ({what})"
+            ) from err
+        except OSError as err:
+            raise DataError(f"{self.path}: cannot write the episode log: {err}") from err
+        try:
+            return open(self.path, "wb")
+        except OSError as err:
+            raise DataError(f"{self.path}: cannot write the episode log: {err}") from err
+
     def _check_open(self) -> None:
         if self._closed:
             raise DataError(f"{self.path}: episode log is already closed")
 
     def _log_time(self, t: float) -> int:
-        t = float(t)
+        try:
+            if isinstance(t, str | bytes | bool | np.bool_):  # float() would take "1.5", True
+                raise TypeError(type(t).__name__)
+            t = float(t)
+        except (TypeError, ValueError) as err:
+            raise DataError(f"{self.path}: expected a finite time t >= 0 s, got {t!r}") from err
         if not math.isfinite(t) or t < 0.0:
             raise DataError(f"{self.path}: expected a finite time t >= 0 s, got {t}")
         self._last_t = t
@@ -344,7 +394,54 @@ class EpisodeWriter:
 
     def _stamped(self, t: float) -> tuple[int, dict[str, Any]]:
         ns = self._log_time(t)
-        return ns, {"timestamp": _stamp_dict(ns), "t": float(t)}
+        return ns, {"timestamp": _stamp_dict(ns), "t": self._last_t}
+
+    def _number(self, name: str, x: Any) -> float:
+        """``x`` as a float (NaN and infinities included); a DataError naming the argument
+        when it is not a number (a string, a bool, None, an array)."""
+        if not isinstance(x, str | bytes | bool | np.bool_):
+            try:
+                return float(x)
+            except (TypeError, ValueError):
+                pass
+        raise DataError(f"{self.path}: expected {name} a number, got {reprlib.repr(x)}")
+
+    def _flag(self, name: str, x: Any) -> bool:
+        """``x`` as a bool: True or False (numpy's, or a one-element bool tensor, too)."""
+        if isinstance(x, bool | np.bool_) or (
+            isinstance(x, torch.Tensor) and x.dtype == torch.bool and x.numel() == 1
+        ):
+            return bool(x)
+        raise DataError(f"{self.path}: expected {name} True or False, got {reprlib.repr(x)}")
+
+    def _checked_names(
+        self, topic: str, name: str, names: Sequence[str], n: int
+    ) -> tuple[str, ...]:
+        """The ``n`` names of argument ``name`` of a ``topic`` message.
+
+        A channel's names are fixed by its first message (a reader stacks its arrays, whose
+        rows they name). They are cached, so names equal to them cost one tuple comparison.
+
+        Raises:
+            ShapeError: when there are not ``n`` names.
+            DataError: when one is not a string, or they differ from the channel's names.
+        """
+        got = names if isinstance(names, tuple) else tuple(names)
+        fixed = self._channel_names.get((topic, name))
+        if got == fixed and len(got) == n:
+            return fixed
+        if len(got) != n:
+            raise ShapeError(f"expected {n} {name}, got {len(got)}")
+        if not all(isinstance(s, str) for s in got):
+            raise DataError(f"{self.path}: expected {name} as strings, got {reprlib.repr(names)}")
+        if fixed is not None:
+            raise DataError(
+                f"{self.path}: {name} changed on {topic}: {list(fixed)} before, {list(got)} now "
+                "(a channel's names are fixed by its first message)"
+            )
+        fixed = tuple(str(s) for s in got)
+        self._channel_names[(topic, name)] = fixed
+        return fixed
 
     # -- channels -----------------------------------------------------------------------------
 
@@ -365,6 +462,8 @@ class EpisodeWriter:
             translation: (3,) child origin in the parent frame [m].
             rotation_xyzw: (4,) unit quaternion of the child frame in the parent frame.
         """
+        tr = _as_tensor("translation", translation, (3,))
+        rot = _as_tensor("rotation_xyzw", rotation_xyzw, (4,))
         ns = self._log_time(t)
         self._write(
             "/tf",
@@ -373,8 +472,8 @@ class EpisodeWriter:
                 "timestamp": _stamp_dict(ns),
                 "parent_frame_id": parent,
                 "child_frame_id": child,
-                "translation": _xyz(translation),
-                "rotation": dict(zip("xyzw", (float(v) for v in rotation_xyzw))),
+                "translation": _xyz(tr),
+                "rotation": dict(zip("xyzw", (float(v) for v in rot))),
             },
         )
 
@@ -385,15 +484,17 @@ class EpisodeWriter:
             t: simulation time [s].
             q: (J,) joint positions [rad].
             qd: (J,) joint velocities [rad/s].
-            joint_names: the J joint names.
+            joint_names: the J joint names (the same in every message).
         """
         q_np = _as_tensor("q", q, ("J",))
         qd_np = _as_tensor("qd", qd, (q_np.shape[0],))
+        topic = "/robot/joint_state"
+        names = self._checked_names(topic, "joint_names", joint_names, len(q_np))
         ns, msg = self._stamped(t)
-        msg["joint_names"] = _names("joint_names", joint_names, q_np.shape[0])
+        msg["joint_names"] = names
         msg["position"] = encode_array(q_np)
         msg["velocity"] = encode_array(qd_np)
-        self._write("/robot/joint_state", ns, msg)
+        self._write(topic, ns, msg)
 
     def human_joints(
         self, t: float, true: Any | None, tracked: Any | None, joint_names: Sequence[str]
@@ -404,18 +505,21 @@ class EpisodeWriter:
             t: simulation time [s].
             true: (K, 3) ground-truth joint positions [m], or None to skip.
             tracked: (K, 3) tracker output [m], NaN where a joint dropped out, or None to skip.
-            joint_names: the K joint names.
+            joint_names: the K joint names (the same in every message of a channel).
         """
-        ns, base = self._stamped(t)
+        checked = []  # both messages are checked before either is written
         for topic, name, x in (
             ("/human/joints_true", "true", true),
             ("/human/joints_tracked", "tracked", tracked),
         ):
-            if x is None:
-                continue
-            p = _as_tensor(name, x, ("K", 3))
+            if x is not None:
+                p = _as_tensor(name, x, ("K", 3))
+                names = self._checked_names(topic, "joint_names", joint_names, len(p))
+                checked.append((topic, p, names))
+        ns, base = self._stamped(t)
+        for topic, p, names in checked:
             msg = dict(base)
-            msg["joint_names"] = _names("joint_names", joint_names, p.shape[0])
+            msg["joint_names"] = names
             msg["positions"] = encode_array(p)
             self._write(topic, ns, msg)
 
@@ -436,23 +540,28 @@ class EpisodeWriter:
             weights: (A,) action probabilities.
             mean: (A, n_f, K, 3) predicted joint positions [m].
             var: (A, n_f, K, 3) per-coordinate variances [m^2].
-            action_names: the A action names.
+            action_names: the A action names (the same in every forecast).
             dt: seconds between predicted frames.
-            joint_names: the K joint names (default ``joint_0`` ... ``joint_{K-1}``).
+            joint_names: the K joint names (default ``joint_0`` ... ``joint_{K-1}``; the same
+                in every forecast).
         """
         w = _as_tensor("weights", weights, ("A",))
         m = _as_tensor("mean", mean, (w.shape[0], "n_f", "K", 3))
         v = _as_tensor("var", var, m.shape)
         k = m.shape[2]
         names = joint_names if joint_names is not None else [f"joint_{i}" for i in range(k)]
+        topic = "/prediction/forecast"
+        actions = self._checked_names(topic, "action_names", action_names, w.shape[0])
+        joints = self._checked_names(topic, "joint_names", names, k)
+        dt = self._number("dt", dt)
         ns, msg = self._stamped(t)
-        msg["dt"] = float(dt)
-        msg["action_names"] = _names("action_names", action_names, w.shape[0])
-        msg["joint_names"] = _names("joint_names", names, k)
+        msg["dt"] = dt
+        msg["action_names"] = actions
+        msg["joint_names"] = joints
         msg["weights"] = encode_array(w)
         msg["mean"] = encode_array(m)
         msg["var"] = encode_array(v)
-        self._write("/prediction/forecast", ns, msg)
+        self._write(topic, ns, msg)
 
     def log_forecast(self, t: float, forecast: Forecast, index: int = 0) -> None:
         """Log item ``index`` of the batch of a :class:`Forecast` (see :meth:`forecast`)."""
@@ -479,10 +588,11 @@ class EpisodeWriter:
         """
         tw = _as_tensor("times", times, ("W",))
         b = _as_tensor("bound", bound, (tw.shape[0],))
+        confidence = self._number("confidence", confidence)
         ns, msg = self._stamped(t)
         msg["times"] = encode_array(tw)
         msg["bound"] = encode_array(b)
-        msg["confidence"] = float(confidence)
+        msg["confidence"] = confidence
         msg["max_bound"] = encode_array(np.nanmax(b) if b.size else np.nan)
         self._write("/planner/bound", ns, msg)
 
@@ -501,12 +611,15 @@ class EpisodeWriter:
         """
         tw = _as_tensor("times", times, ("W",))
         qw = _as_tensor("q", q, (tw.shape[0], "J"))
+        feasible = self._flag("feasible", feasible)
+        wait_s = self._number("wait_s", wait_s)
+        solve_ms = self._number("solve_ms", solve_ms)
         ns, msg = self._stamped(t)
         msg["times"] = encode_array(tw)
         msg["q"] = encode_array(qw)
-        msg["feasible"] = bool(feasible)
-        msg["wait_s"] = float(wait_s)
-        msg["solve_ms"] = float(solve_ms)
+        msg["feasible"] = feasible
+        msg["wait_s"] = wait_s
+        msg["solve_ms"] = solve_ms
         self._write("/planner/plan", ns, msg)
 
     def task_event(self, t: float, kind: str, detail: Mapping[str, Any] | None = None) -> None:

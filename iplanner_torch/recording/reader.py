@@ -3,7 +3,8 @@
 A complete file is read through its summary (indexed reader), after checking the summary's
 checksum. A file without summary or footer (an episode killed midway) or with a damaged
 record or summary is read sequentially up to the last complete chunk, with a
-:class:`~iplanner_torch.errors.DataWarning`.
+:class:`~iplanner_torch.errors.DataWarning`. Channels of other tools are kept when they are
+JSON-encoded (one ``message`` column), and skipped, with a ``DataWarning``, when they are not.
 """
 
 from __future__ import annotations
@@ -221,6 +222,12 @@ _ROW_DECODERS: dict[str, Callable[[dict[str, Any], int], dict[str, Any]]] = {
 }
 
 
+def _is_read(channel: Channel) -> bool:
+    """Whether the messages of ``channel`` are decoded: those of an episode-log topic (which
+    must then be JSON) and JSON messages of any other topic (kept as dicts)."""
+    return channel.topic in _ROW_DECODERS or channel.message_encoding == "json"
+
+
 def _stack(arrays: list[np.ndarray]) -> np.ndarray:
     """Stack arrays of equal rank; ragged sizes are padded with NaN to the largest."""
     if not arrays:
@@ -265,30 +272,62 @@ class Episode:
             raise DataError(f"{self.path}: no messages on {topic}")
         return df
 
-    def _series(
-        self, topic: str, column: str, dtype: torch.dtype
-    ) -> tuple[torch.Tensor, torch.Tensor]:
+    def _constant_names(self, topic: str, column: str) -> tuple[str, ...]:
+        """The names in ``column`` (joint or action names) of the messages on ``topic``.
+
+        Raises:
+            DataError: when they change between messages (arrays of messages with other
+                names must not be stacked: their columns are other joints), naming the
+                channel and the first two name lists that differ.
+        """
         df = self._frame(topic)
+        names = df[column]
+        first = names.iloc[0]
+        for i, other in enumerate(names):
+            if other != first:
+                t = df["t"]
+                raise DataError(
+                    f"{self.path}: {column} changes between messages on {topic}: "
+                    f"{list(first)} at t={t.iloc[0]:g} s, then {list(other)} at t={t.iloc[i]:g} s"
+                )
+        return first
+
+    def _series(
+        self, topic: str, column: str, dtype: torch.dtype, names: str | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(t (T,), the arrays of column stacked (T, ...))``.
+
+        ``names``: the column of the names of the arrays' rows (joint names), which must be
+        the same in every message (see :meth:`_constant_names`); None: not checked.
+        """
+        df = self._frame(topic)
+        if names is not None:
+            self._constant_names(topic, names)
         t = torch.as_tensor(df["t"].to_numpy(dtype=np.float64, copy=True), dtype=dtype)
         return t, torch.as_tensor(_stack(list(df[column])), dtype=dtype)
 
     def robot_q(self, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(t (T,) [s], q (T, J) [rad])`` from ``/robot/joint_state`` (float64 by default)."""
-        return self._series("/robot/joint_state", "q", dtype)
+        """``(t (T,) [s], q (T, J) [rad])`` from ``/robot/joint_state`` (float64 by default).
+
+        Raises:
+            DataError: when there are no messages, or the joint names change between them
+                (also in :meth:`robot_qd`, :meth:`human_true` and :meth:`human_tracked`).
+        """
+        return self._series("/robot/joint_state", "q", dtype, names="joint_names")
 
     def robot_qd(self, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
         """``(t (T,) [s], qd (T, J) [rad/s])`` from ``/robot/joint_state``."""
-        return self._series("/robot/joint_state", "qd", dtype)
+        return self._series("/robot/joint_state", "qd", dtype, names="joint_names")
 
     def human_true(self, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
         """``(t (T,) [s], positions (T, K, 3) [m])`` of the ground-truth human joints."""
-        return self._series("/human/joints_true", "positions", dtype)
+        return self._series("/human/joints_true", "positions", dtype, names="joint_names")
 
     def human_tracked(
         self, dtype: torch.dtype = torch.float64
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """``(t (T,) [s], positions (T, K, 3) [m])`` of the tracker output (NaN: dropout)."""
-        return self._series("/human/joints_tracked", "positions", dtype)
+        return self._series("/human/joints_tracked", "positions", dtype, names="joint_names")
 
     def forecasts(self, dtype: torch.dtype = torch.float32) -> tuple[torch.Tensor, Forecast]:
         """All forecasts as one :class:`Forecast` whose batch axis is time.
@@ -302,9 +341,10 @@ class Episode:
                 change over time.
         """
         df = self._frame("/prediction/forecast")
-        for col in ("action_names", "joint_names", "dt"):
-            if df[col].nunique(dropna=False) != 1:
-                raise DataError(f"{self.path}: {col} changes between forecasts")
+        actions = self._constant_names("/prediction/forecast", "action_names")
+        joints = self._constant_names("/prediction/forecast", "joint_names")
+        if df["dt"].nunique(dropna=False) != 1:
+            raise DataError(f"{self.path}: dt changes between forecasts")
         if len({m.shape for m in df["mean"]}) != 1:
             raise DataError(f"{self.path}: the forecast horizon changes between forecasts")
         t = torch.as_tensor(df["t"].to_numpy(dtype=np.float64, copy=True))
@@ -313,8 +353,8 @@ class Episode:
             mean=torch.as_tensor(_stack(list(df["mean"])), dtype=dtype),
             var=torch.as_tensor(_stack(list(df["var"])), dtype=dtype),
             dt=float(df["dt"].iloc[0]),
-            joint_names=tuple(df["joint_names"].iloc[0]),
-            action_names=tuple(df["action_names"].iloc[0]),
+            joint_names=joints,
+            action_names=actions,
         )
         return t, fc
 
@@ -354,8 +394,15 @@ class _Raw:
 
     messages: list[tuple[str, int, bytes]] = field(default_factory=list)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: channels skipped (see :func:`_is_read`): "topic (message encoding ...)" -> messages
+    skipped: dict[str, int] = field(default_factory=dict)
     complete: bool = False
     problem: str = ""
+
+    def skip(self, channel: Channel) -> None:
+        """Count a message of a channel that is not read."""
+        key = f"{channel.topic} (message encoding {channel.message_encoding!r})"
+        self.skipped[key] = self.skipped.get(key, 0) + 1
 
 
 #: bytes of the footer record (opcode, length, summary_start, summary_offset_start, crc)
@@ -392,7 +439,10 @@ def _read_indexed(f: Any) -> _Raw:
         raise DataError("no summary section")
     raw = _Raw(complete=True)
     for _, channel, message in reader.iter_messages(log_time_order=False):
-        raw.messages.append((channel.topic, message.log_time, message.data))
+        if _is_read(channel):
+            raw.messages.append((channel.topic, message.log_time, message.data))
+        else:
+            raw.skip(channel)
     for m in reader.iter_metadata():
         raw.metadata[m.name] = dict(m.metadata)
     return raw
@@ -414,8 +464,10 @@ def _read_stream(f: Any, size: int) -> _Raw:
             channels[record.id] = record
         elif isinstance(record, Message):
             ch = channels.get(record.channel_id)
-            if ch is not None:
+            if ch is not None and _is_read(ch):
                 raw.messages.append((ch.topic, record.log_time, record.data))
+            elif ch is not None:
+                raw.skip(ch)
         elif isinstance(record, Metadata):
             raw.metadata[record.name] = dict(record.metadata)
         elif isinstance(record, DataEnd | Footer):  # every data record has been read
@@ -434,15 +486,18 @@ def read_episode(path: str | Path) -> Episode:
 
     Raises:
         DataError: when the file is missing or unreadable, is not MCAP, its metadata is not a
-            JSON object, or a message cannot be decoded (a field missing or of the wrong type,
-            or an array whose size does not fit its joint or action names).
+            JSON object, or a message cannot be decoded (not JSON or nested too deep, a field
+            missing or of the wrong type, or an array whose size does not fit its joint or
+            action names).
 
     Warns:
         DataWarning: when the file is truncated or damaged (a chunk or the summary failing its
             checksum, a missing footer or episode metadata record); the episode then holds
             the messages of every chunk before the damage (a prefix of what was written). A
             file cut within its first 8 bytes (empty included) is an empty, incomplete
-            episode.
+            episode. Also (one warning naming them) when channels are skipped: those of
+            other tools whose messages are not JSON (protobuf, raw bytes); other tools'
+            JSON channels are read into frames with one ``message`` column.
     """
     path = Path(path)
     if path.is_dir():
@@ -490,12 +545,19 @@ def read_episode(path: str | Path) -> Episode:
             DataWarning,
             stacklevel=2,
         )
+    if raw.skipped:
+        warnings.warn(
+            f"{path}: skipped {sum(raw.skipped.values())} messages on channels that are not "
+            f"episode-log topics and not JSON-encoded: {', '.join(sorted(raw.skipped))}",
+            DataWarning,
+            stacklevel=2,
+        )
     try:
         metadata = json.loads(meta_rec["json"]) if "json" in meta_rec else {}
         offset_ns = int(meta_rec.get("time_offset_ns", "0"))
         if not isinstance(metadata, dict):
             raise TypeError(f"expected a JSON object, got {type(metadata).__name__}")
-    except (ValueError, TypeError) as err:
+    except (ValueError, TypeError, RecursionError) as err:
         raise DataError(f"{path}: bad episode metadata record: {err}") from err
     rows: dict[str, list[dict[str, Any]]] = {}
     for topic, log_time, data in raw.messages:
@@ -506,7 +568,8 @@ def read_episode(path: str | Path) -> Episode:
                 row = {"t": (log_time - offset_ns) * 1e-9, "message": msg}
             else:
                 row = decoder(msg, offset_ns)
-        except (ValueError, KeyError, TypeError, IndexError) as err:
+        except (ValueError, KeyError, TypeError, IndexError, RecursionError) as err:
+            # RecursionError: JSON nested deeper than the decoders' recursion goes
             raise DataError(f"{path}: cannot decode a message on {topic}: {err!r}") from err
         rows.setdefault(topic, []).append(row)
     frames = {topic: pd.DataFrame.from_records(r) for topic, r in rows.items()}

@@ -1,0 +1,313 @@
+"""EpisodeWriter / read_episode on bad input: typed errors naming the argument, the channel or
+the path, and files of other tools read as far as they are ours."""
+
+from __future__ import annotations
+
+import json
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from mcap.writer import Writer
+
+from iplanner_torch.errors import DataError, DataWarning, ShapeError
+from iplanner_torch.recording import EpisodeWriter, read_episode
+
+ARM = ["shoulder", "elbow"]
+HANDS = ["left_hand", "right_hand"]
+
+
+def _mcap(
+    path: Path,
+    messages: list[tuple[str, dict | bytes]],
+    encodings: dict[str, str] | None = None,
+    metadata: dict | None = None,
+) -> Path:
+    """An MCAP file written with the plain mcap writer: the episode metadata record and
+    ``messages`` on their topics, each JSON-encoded unless it is bytes already; a topic's
+    channel has the message encoding ``encodings[topic]`` ("json" when not given)."""
+    encodings = encodings or {}
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        w.add_metadata("iplanner.episode", {"json": json.dumps(metadata or {})})
+        ids: dict[str, int] = {}
+        for i, (topic, msg) in enumerate(messages):
+            if topic not in ids:
+                encoding = encodings.get(topic, "json")
+                schema = 0
+                if encoding != "":  # a schemaless channel has schema id 0
+                    is_json = encoding == "json"
+                    schema = w.register_schema(
+                        f"{topic}.schema",
+                        "jsonschema" if is_json else encoding,
+                        b"{}" if is_json else b"\x0a\x01x",  # a protobuf descriptor's bytes
+                    )
+                ids[topic] = w.register_channel(topic, encoding, schema)
+            data = msg if isinstance(msg, bytes) else json.dumps(msg).encode()
+            w.add_message(ids[topic], log_time=i, data=data, publish_time=i)
+        w.finish()
+    return path
+
+
+def _state(t: float, names: list[str]) -> tuple[str, dict]:
+    n = len(names)
+    return "/robot/joint_state", {
+        "t": t, "joint_names": names, "position": [1.0] * n, "velocity": [0.0] * n,
+    }  # fmt: skip
+
+
+def _human(topic: str, t: float, names: list[str]) -> tuple[str, dict]:
+    return topic, {"t": t, "joint_names": names, "positions": [[0.0, 0.0, 1.0]] * len(names)}
+
+
+# -- 1. joint names that change within a channel ------------------------------------------------
+
+
+def test_the_writer_refuses_joint_names_that_change_on_a_channel(tmp_path: Path) -> None:
+    """The audit's example: a third joint appears in front of the others; the writer refuses
+    it (a bad log is never written) and what came before still reads back."""
+    path = tmp_path / "ragged.mcap"
+    with EpisodeWriter(path, metadata={}) as log:
+        log.robot_state(0.0, [1.0, 2.0], [0, 0], ARM)
+        log.robot_state(0.05, [1.5, 2.5], [0, 0], tuple(ARM))  # the same names: fine
+        with pytest.raises(
+            DataError,
+            match=r"ragged.mcap: joint_names changed on /robot/joint_state: "
+            r"\['shoulder', 'elbow'\] before, \['base', 'shoulder', 'elbow'\] now",
+        ):
+            log.robot_state(0.1, [9.0, 1.0, 2.0], [0, 0, 0], ["base", *ARM])
+        with pytest.raises(DataError, match=r"\['shoulder', 'elbow'\] before, \['elbow', 'sh"):
+            log.robot_state(0.1, [1.0, 2.0], [0, 0], ARM[::-1])  # reordered
+        log.human_joints(0.0, np.zeros((2, 3)), None, HANDS)
+        with pytest.raises(DataError, match=r"on /human/joints_true: \['left_hand', 'right_h"):
+            log.human_joints(0.1, np.zeros((1, 3)), np.zeros((1, 3)), ["right_hand"])
+        log.human_joints(0.2, None, np.zeros((1, 3)), ["right_hand"])  # tracked: its first
+        with pytest.raises(DataError, match=r"action_names changed on /prediction/forecast"):
+            for actions in (["reach"], ["place"]):
+                log.forecast(
+                    0.0, [1.0], np.zeros((1, 2, 2, 3)), np.ones((1, 2, 2, 3)), actions, 0.1
+                )
+    ep = read_episode(path)
+    t, q = ep.robot_q()
+    np.testing.assert_array_equal(q.numpy(), [[1.0, 2.0], [1.5, 2.5]])
+    assert ep.human_true()[1].shape == (1, 2, 3) and ep.human_tracked()[1].shape == (1, 1, 3)
+    assert ep.forecasts()[1].action_names == ("reach",)
+
+
+@pytest.mark.parametrize(
+    ("messages", "accessor", "error"),
+    [
+        ([_state(0.0, ARM), _state(0.1, ["base", *ARM])], "robot_q",
+         r"/robot/joint_state: \['shoulder', 'elbow'\] at t=0 s, then "
+         r"\['base', 'shoulder', 'elbow'\] at t=0.1 s"),
+        ([_state(0.0, ARM), _state(0.1, ARM), _state(0.2, ARM[::-1])], "robot_qd",
+         r"/robot/joint_state: \['shoulder', 'elbow'\] at t=0 s, then \['elbow', 'shoulder'\] "
+         r"at t=0.2 s"),
+        ([_human("/human/joints_true", 0.0, HANDS), _human("/human/joints_true", 0.1, ["r"])],
+         "human_true", r"/human/joints_true: \['left_hand', 'right_hand'\] at t=0 s, then "
+         r"\['r'\] at t=0.1 s"),
+        ([_human("/human/joints_tracked", 0.0, ["r"]),
+          _human("/human/joints_tracked", 0.1, HANDS)],
+         "human_tracked", r"/human/joints_tracked: \['r'\] at t=0 s, then \['left_hand'"),
+    ],
+    ids=["robot_q_added", "robot_qd_reordered", "human_true_dropped", "human_tracked_added"],
+)  # fmt: skip
+def test_accessors_refuse_joint_names_that_change_between_messages(
+    tmp_path: Path, messages: list, accessor: str, error: str
+) -> None:
+    """A log from another writer whose names change is not NaN-padded into mixed columns."""
+    path = _mcap(tmp_path / "ragged.mcap", messages)
+    with pytest.raises(
+        DataError, match=rf"ragged.mcap: joint_names changes between messages on {error}"
+    ):
+        getattr(read_episode(path), accessor)()
+
+
+def test_forecasts_name_the_names_that_change(tmp_path: Path) -> None:
+    def fc(t: float, joints: list[str]) -> tuple[str, dict]:
+        k = len(joints)
+        return "/prediction/forecast", {
+            "t": t, "dt": 0.1, "action_names": ["a"], "joint_names": joints, "weights": [1.0],
+            "mean": [0.0] * (6 * k), "var": [0.01] * (6 * k),
+        }  # fmt: skip
+
+    path = _mcap(tmp_path / "fc.mcap", [fc(0.0, ["x", "y"]), fc(0.5, ["y"])])
+    with pytest.raises(
+        DataError,
+        match=r"fc.mcap: joint_names changes between messages on /prediction/forecast: "
+        r"\['x', 'y'\] at t=0 s, then \['y'\] at t=0.5 s",
+    ):
+        read_episode(path).forecasts()
+
+
+# -- 2. channels of other tools ----------------------------------------------------------------
+
+
+def test_channels_neither_ours_nor_json_are_skipped_with_one_warning(tmp_path: Path) -> None:
+    """An MCAP from another tool with protobuf, schemaless binary and JSON channels of its own:
+    the first two are skipped, named in one warning; its JSON channel is kept."""
+    messages = [
+        _state(0.0, ARM),
+        ("/odom", b"\x08\x96\x01\xff\x00"),
+        ("/camera/raw", bytes(range(256))),
+        ("/odom", b"\x08\x97\x01"),
+        ("/notes", {"text": "hello"}),
+        _state(0.1, ARM),
+    ]
+    encodings = {"/odom": "protobuf", "/camera/raw": ""}
+    path = _mcap(tmp_path / "other.mcap", messages, encodings, metadata={"robot": "x"})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ep = read_episode(path)
+    assert [str(w.message) for w in caught] == [
+        f"{path}: skipped 3 messages on channels that are not episode-log topics and not "
+        "JSON-encoded: /camera/raw (message encoding ''), /odom (message encoding 'protobuf')"
+    ]
+    assert caught[0].category is DataWarning
+    assert ep.complete and ep.metadata == {"robot": "x"}
+    assert set(ep.frames) == {"/robot/joint_state", "/notes"}
+    assert ep.frames["/notes"]["message"].iloc[0] == {"text": "hello"}
+    assert ep.robot_q()[1].shape == (2, 2)
+
+    cut = tmp_path / "cut.mcap"  # without its summary: read record by record
+    blob = path.read_bytes()
+    summary_start = int.from_bytes(blob[-8 - 29 + 9 : -8 - 29 + 17], "little")
+    cut.write_bytes(blob[:summary_start])
+    with pytest.warns(DataWarning) as caught:
+        ep = read_episode(cut)
+    assert sorted(str(w.message).split(": ", 1)[1][:30] for w in caught) == [
+        "episode log is truncated or da",
+        "skipped 3 messages on channels",
+    ]
+    assert set(ep.frames) == {"/robot/joint_state", "/notes"}
+
+
+def test_our_topics_and_json_channels_with_bad_data_still_raise(tmp_path: Path) -> None:
+    path = _mcap(tmp_path / "p.mcap", [("/robot/joint_state", b"\x08\x96")], {
+        "/robot/joint_state": "protobuf"
+    })  # fmt: skip
+    with pytest.raises(DataError, match="p.mcap: cannot decode a message on /robot/joint_sta"):
+        read_episode(path)
+    path = _mcap(tmp_path / "j.mcap", [("/notes", b"\xff\x00not json")])
+    with pytest.raises(DataError, match="j.mcap: cannot decode a message on /notes"):
+        read_episode(path)
+
+
+# -- 3. messages nested too deep ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("topic", ["/robot/joint_state", "/notes"])
+def test_a_message_nested_too_deep_is_a_data_error(tmp_path: Path, topic: str) -> None:
+    """100000 nested arrays overflow the JSON decoder's recursion: a DataError, not a
+    RecursionError."""
+    deep = b"[" * 100_000 + b"]" * 100_000
+    path = _mcap(tmp_path / "deep.mcap", [(topic, deep)])
+    with pytest.raises(DataError, match=f"deep.mcap: cannot decode a message on {topic}: Rec"):
+        read_episode(path)
+
+
+def test_a_task_event_detail_nested_too_deep_is_a_data_error(tmp_path: Path) -> None:
+    """JSON a little shallower than the decoder's limit, but too deep to decode after it."""
+    detail: dict = {}
+    for _ in range(600):
+        detail = {"x": detail}
+    data = b'{"t":0.0,"kind":"deep","detail":' + json.dumps(detail).encode() + b"}"
+    json.loads(data)  # the JSON decoder itself takes it
+    path = _mcap(tmp_path / "deep.mcap", [("/task/events", data)])
+    with pytest.raises(DataError, match="deep.mcap: cannot decode a message on /task/events"):
+        read_episode(path)
+
+
+# -- 4. writer arguments -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "match"),
+    [
+        (lambda log: log.robot_state("x", [1.0], [0.0], ["a"]), DataError,
+         r"w.mcap: expected a finite time t >= 0 s, got 'x'"),
+        (lambda log: log.robot_state("0.5", [1.0], [0.0], ["a"]), DataError,
+         r"w.mcap: expected a finite time t >= 0 s, got '0.5'"),
+        (lambda log: log.metrics(None, {}), DataError,
+         r"w.mcap: expected a finite time t >= 0 s, got None"),
+        (lambda log: log.robot_state(0.0, ["a"], [0.0], ["a"]), ShapeError,
+         r"expected q \(J\) of numbers, got \['a'\]"),
+        (lambda log: log.robot_state(0.0, [1.0], ["1.0"], ["a"]), ShapeError,
+         r"expected qd \(1\) of numbers, got \['1.0'\]"),
+        (lambda log: log.human_joints(0.0, [[0, 0, 0], [1, 1]], None, ["a", "b"]), ShapeError,
+         r"expected true \(K, 3\) of numbers, got \[\[0, 0, 0\], \[1, 1\]\]"),
+        (lambda log: log.collision_bound(0.0, [0, 1], [0, 0], "high"), DataError,
+         r"w.mcap: expected confidence a number, got 'high'"),
+        (lambda log: log.plan(0.0, [0.0], [[1.0]], "false", 0.0, 1.0), DataError,
+         r"w.mcap: expected feasible True or False, got 'false'"),
+        (lambda log: log.plan(0.0, [0.0], [[1.0]], 1, 0.0, 1.0), DataError,
+         r"w.mcap: expected feasible True or False, got 1"),
+        (lambda log: log.plan(0.0, [0.0], [[1.0]], True, None, 1.0), DataError,
+         r"w.mcap: expected wait_s a number, got None"),
+        (lambda log: log.plan(0.0, [0.0], [[1.0]], True, 0.0, "fast"), DataError,
+         r"w.mcap: expected solve_ms a number, got 'fast'"),
+        (lambda log: log.forecast(0.0, [1.0], np.zeros((1, 2, 1, 3)), np.ones((1, 2, 1, 3)),
+                                  ["a"], "0.1"), DataError,
+         r"w.mcap: expected dt a number, got '0.1'"),
+        (lambda log: log.robot_state(0.0, [1.0], [0.0], [3]), DataError,
+         r"w.mcap: expected joint_names as strings, got \[3\]"),
+        (lambda log: log.human_joints(0.0, np.zeros((1, 3)), None, [b"hand"]), DataError,
+         r"w.mcap: expected joint_names as strings, got \[b'hand'\]"),
+        (lambda log: log.forecast(0.0, [1.0], np.zeros((1, 2, 1, 3)), np.ones((1, 2, 1, 3)),
+                                  [None], 0.1), DataError,
+         r"w.mcap: expected action_names as strings, got \[None\]"),
+        (lambda log: log.frame_transform(0.0, "world", "cam", ("1", 0, 0)), ShapeError,
+         r"expected translation \(3\) of numbers"),
+    ],
+    ids=["t_str", "t_numeric_str", "t_none", "q_str", "qd_numeric_str", "true_ragged",
+         "confidence_str", "feasible_str", "feasible_int", "wait_s_none", "solve_ms_str",
+         "dt_str", "joint_names_int", "joint_names_bytes", "action_names_none",
+         "translation_str"],
+)  # fmt: skip
+def test_writer_arguments_of_the_wrong_type_are_named(
+    tmp_path: Path, call, error: type[Exception], match: str
+) -> None:
+    path = tmp_path / "w.mcap"
+    with EpisodeWriter(path, metadata={}) as log:
+        with pytest.raises(error, match=match):
+            call(log)
+        log.robot_state(0.0, [1.0], [0.0], ["a"])  # the log goes on
+    ep = read_episode(path)
+    assert len(ep.frames["/robot/joint_state"]) == 1 and "/planner/plan" not in ep.frames
+
+
+def test_writer_takes_numpy_and_torch_scalars_and_names(tmp_path: Path) -> None:
+    path = tmp_path / "np.mcap"
+    with EpisodeWriter(path, metadata={}) as log:
+        log.robot_state(np.float32(0.5), [1.0], [0.0], np.array(["a"]))
+        log.robot_state(torch.tensor(1.0), [1.0], [0.0], ("a",))
+        log.plan(0.5, [0.0], [[1.0]], np.bool_(False), np.float64(0.25), torch.tensor(3.0))
+        log.plan(1.0, [0.0], [[1.0]], torch.tensor(True), 0, 1)
+        log.collision_bound(0.5, [0.0], [0.0], np.float32(0.95))
+    ep = read_episode(path)
+    assert ep.frames["/robot/joint_state"]["joint_names"].tolist() == [("a",), ("a",)]
+    assert ep.frames["/planner/plan"]["feasible"].tolist() == [False, True]
+    assert ep.frames["/planner/plan"]["solve_ms"].tolist() == [3.0, 1.0]
+
+
+def test_writer_path_that_is_a_folder_or_below_a_file_is_named(tmp_path: Path) -> None:
+    folder = re.escape(str(tmp_path))
+    with pytest.raises(DataError, match=rf"{folder}: is a folder; EpisodeWriter writes one"):
+        EpisodeWriter(tmp_path, metadata={})
+    (tmp_path / "notes").write_text("a file")
+    for path, why in (
+        (tmp_path / "notes" / "x.mcap", "it is a file"),
+        (tmp_path / "notes" / "sub" / "x.mcap", "a folder above it is a file"),
+    ):
+        parent = re.escape(str(path.parent))
+        with pytest.raises(
+            DataError,
+            match=rf"{re.escape(str(path))}: cannot write the episode log: {parent} is not a "
+            rf"folder \({why}\)",
+        ):
+            EpisodeWriter(path, metadata={})
+    assert (tmp_path / "notes").read_text() == "a file"
