@@ -706,7 +706,10 @@ class HumanMotionPredictor:
         try:
             d = torch.load(path, map_location="cpu", weights_only=False)
         except Exception as err:  # noqa: BLE001 - any unpickling failure means corrupt
-            raise CheckpointError(f"cannot read predictor checkpoint {path}: {err}") from err
+            raise CheckpointError(
+                f"cannot read predictor checkpoint {path} ({type(err).__name__}: {err}): the "
+                "file is cut short, damaged or not a torch checkpoint; train it again"
+            ) from err
         if not isinstance(d, dict) or d.get("kind") != "HumanMotionPredictor":
             raise CheckpointError(f"{path} is not a HumanMotionPredictor checkpoint")
         version = d.get("version")
