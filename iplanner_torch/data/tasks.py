@@ -248,7 +248,8 @@ def generate_task_demonstration(
         The demonstration; ``clean_positions`` holds the noise-free motion.
 
     Raises:
-        ConfigError: for a bad ``targets`` shape or an id in ``order`` not in ``object_ids``.
+        ConfigError: for a bad ``targets`` shape, an id in ``order`` not in ``object_ids``, or
+            a number out of its range or not finite.
     """
     targets = np.asarray(targets, dtype=np.float64)
     if targets.ndim != 2 or targets.shape[1] != 3:
@@ -259,6 +260,15 @@ def generate_task_demonstration(
     bad = [i for i in order if i not in ids]
     if bad:
         raise ConfigError(f"order has ids {bad} not among object_ids {ids}")
+    # the same checks as TaskDatasetCfg's (NaN and inf fail a bare comparison)
+    if not finite_number("fps", fps) > 0:
+        raise ConfigError(f"fps must be finite and > 0, got {fps}")
+    if not finite_number("noise_sigma", noise_sigma) >= 0:
+        raise ConfigError(f"noise_sigma must be >= 0, got {noise_sigma}")
+    if not 0 <= finite_number("dropout_rate", dropout_rate) < 1:
+        raise ConfigError(f"dropout_rate must be in [0, 1), got {dropout_rate}")
+    idle_s = finite_range("idle_s", idle_s)
+    hold_s = finite_range("hold_s", hold_s)
     plan = MotionPlan(body=body)
     random_sway(plan, rng)
     t = rng.uniform(*idle_s)

@@ -113,6 +113,27 @@ def test_task_demonstration_labels_and_kinematics():
     assert nxt[d.labels == 3][0] == 0 and nxt[np.flatnonzero(d.labels == 3)[-1] + 1] == 1
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"fps": float("inf")}, "fps must be finite, got inf"),
+        ({"fps": 0.0}, r"fps must be finite and > 0, got 0.0"),
+        ({"noise_sigma": float("nan")}, "noise_sigma must be finite, got nan"),
+        ({"dropout_rate": 1.0}, r"dropout_rate must be in \[0, 1\), got 1.0"),
+        ({"idle_s": (1.0, 0.5)}, r"idle_s must be \(low, high\) with 0 <= low <= high"),
+        ({"hold_s": (0.1, float("inf"))}, "hold_s must be finite, got inf"),
+    ],
+)
+def test_task_demonstration_refuses_bad_numbers(kwargs, message):
+    """The generator function checks its numbers as TaskDatasetCfg does (fps=inf overflowed)."""
+    ids, targets = arrangement_targets("1x4")
+    body = sample_body(np.random.default_rng(2))
+    with pytest.raises(ConfigError, match=message):
+        generate_task_demonstration(
+            ids, targets, body, np.random.default_rng(3), object_ids=ids, **kwargs
+        )
+
+
 def test_task_dataset_round_trip(tmp_path):
     cfg = TaskDatasetCfg(order="0->(1,2)->3", n_demos=3, noise_sigma=0.0, dropout_rate=0.0)
     s = generate_task_dataset(cfg, tmp_path, progress=False)
