@@ -101,10 +101,17 @@ def flag(name: str, value: object, *, error: type[Exception] = ConfigError) -> b
     return bool(value)
 
 
-def seed(value: object, *, error: type[Exception] = ConfigError) -> int:
-    """A random seed as an int; ``error`` unless it is a non-negative integer (numpy's
-    generators refuse negative seeds)."""
-    return integer("seed", value, minimum=0, error=error)
+#: the largest seed every generator takes (torch's manual_seed refuses larger ones)
+MAX_SEED = 2**63 - 1
+
+
+def seed(value: object, *, error: type[Exception] = ConfigError, name: str = "seed") -> int:
+    """A random seed as an int; ``error`` unless it is an integer in [0, :data:`MAX_SEED`]
+    (numpy's generators refuse negative seeds, torch's those beyond 64-bit signed)."""
+    out = integer(name, value, minimum=0, error=error)
+    if out > MAX_SEED:
+        raise error(f"expected {name} an integer <= {MAX_SEED} (2^63 - 1), got {value!r}")
+    return out
 
 
 def finite_time(name: str, value: Any, *, error: type[Exception] = ConfigError) -> float:

@@ -338,8 +338,11 @@ def check_root_keys(cfg: DictConfig) -> None:
     for key, kind in ROOT_KEYS.items():
         if key in cfg:
             cfg_scalar(cfg, key, kind)
-    if "seed" in cfg and cfg_scalar(cfg, "seed", int) < 0:  # numpy's generators refuse them
-        raise ConfigError(f"seed: expected an integer >= 0, got {cfg.seed}")
+    if "seed" in cfg:  # numpy's generators refuse negative seeds, torch's huge ones
+        from iplanner_torch.checks import MAX_SEED
+
+        if not 0 <= cfg_scalar(cfg, "seed", int) <= MAX_SEED:
+            raise ConfigError(f"seed: expected an integer in [0, 2^63 - 1], got {cfg.seed}")
     absent = object()
     for key in PATH_KEYS:
         try:

@@ -86,7 +86,7 @@ from tqdm.auto import tqdm
 from iplanner_torch.checks import non_negative
 from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.skeleton import JOINT_INDEX, JOINT_NAMES
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.eval import metrics as M
 from iplanner_torch.planning.itomp import path_forecast, static_human_forecast
 from iplanner_torch.planning.replanner import PlannerCfg, build_replanner
@@ -401,6 +401,40 @@ def _action_names(predictor: object) -> tuple[str, ...]:
         if names:
             return tuple(names)
     return ()
+
+
+def check_predicted(forecast: object, action_names: tuple[str, ...]) -> Forecast:
+    """The forecast a predictor's ``predict_positions`` returned for one window, checked
+    against what the loop needs: a :class:`Forecast` of batch 1, of every joint of
+    :data:`~iplanner_torch.data.skeleton.JOINT_NAMES` in that order, at least one frame, and
+    the predictor's actions (``action_names``, when it names them).
+
+    Raises:
+        ShapeError: naming what differs (a custom predictor's forecast of other joints, no
+            frame, other actions, or not a Forecast at all).
+    """
+    if not isinstance(forecast, Forecast):
+        raise ShapeError(
+            f"the predictor's predict_positions returned a {type(forecast).__name__}, "
+            "expected a Forecast (iplanner_torch.prediction.forecast)"
+        )
+    problems = []
+    if forecast.batch_size != 1:
+        problems.append(f"batch {forecast.batch_size} for one window")
+    if tuple(forecast.joint_names) != tuple(JOINT_NAMES):
+        problems.append(
+            f"joints {list(forecast.joint_names)}, expected the {len(JOINT_NAMES)} of "
+            f"JOINT_NAMES {list(JOINT_NAMES)}"
+        )
+    if forecast.horizon < 1:
+        problems.append("no predicted frame (n_f = 0)")
+    if action_names and tuple(forecast.action_names) != tuple(action_names):
+        problems.append(
+            f"actions {list(forecast.action_names)}, but the predictor names {list(action_names)}"
+        )
+    if problems:
+        raise ShapeError(f"the predictor's forecast has {'; '.join(problems)}")
+    return forecast
 
 
 def action_mask(action_names: tuple[str, ...], available: set[int]) -> torch.Tensor:
@@ -850,7 +884,10 @@ def _run_episode(
                         [human.progress_bitmask(action_names)], dtype=torch.int64, device=dev
                     )
                     w0 = time.perf_counter()
-                    forecast = predictor.predict_positions(pos, progress)  # type: ignore[union-attr]
+                    forecast = check_predicted(
+                        predictor.predict_positions(pos, progress),  # type: ignore[union-attr]
+                        action_names,
+                    )
                     predict_ms.append(1e3 * (time.perf_counter() - w0))
                     if cfg.mask_unavailable_actions and action_names and not blocking:
                         available = set(env.delivered) | {

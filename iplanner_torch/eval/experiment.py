@@ -10,6 +10,7 @@ from typing import Any
 
 import pandas as pd
 
+from iplanner_torch import checks
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.eval.episode import (
     PLANNER_KINDS,
@@ -78,8 +79,13 @@ class ExperimentCfg:
             raise ConfigError(
                 f"noises: expected noises in [0, {MAX_NOISE_M:g}] m, got {self.noises}"
             )
-        if not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in self.seeds):
-            raise ConfigError(f"seeds: expected seeds as integers >= 0, got {self.seeds}")
+        if not all(
+            isinstance(s, int) and not isinstance(s, bool) and 0 <= s <= checks.MAX_SEED
+            for s in self.seeds
+        ):
+            raise ConfigError(
+                f"seeds: expected seeds as integers in [0, 2^63 - 1], got {self.seeds}"
+            )
         for name in ("seeds", "planners", "speeds", "noises"):
             values = list(getattr(self, name))
             twice = sorted({str(v) for v in values if values.count(v) > 1})

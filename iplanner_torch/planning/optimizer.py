@@ -33,7 +33,7 @@ from typing import Protocol, runtime_checkable
 
 import torch
 
-from iplanner_torch.checks import finite_time, flag
+from iplanner_torch.checks import finite_time, flag, non_negative, positive
 from iplanner_torch.collision.human_spheres import HumanSphereMap, SphereLayout
 from iplanner_torch.errors import ConfigError, PlanningError
 from iplanner_torch.planning import costs as C
@@ -169,8 +169,9 @@ class OptimizerCfg:
             )
         if self.iterations < 0 or self.warm_iterations < 0:
             raise ConfigError("expected iterations and warm_iterations >= 0")
-        if not self.lr > 0.0 or not 0.0 < self.lr_final_ratio <= 1.0:
-            raise ConfigError(f"expected lr > 0 and lr_final_ratio in (0, 1], got {self.lr}")
+        positive("lr", self.lr)  # NaN and inf refused too
+        if not 0.0 < self.lr_final_ratio <= 1.0:
+            raise ConfigError(f"expected lr_final_ratio in (0, 1], got {self.lr_final_ratio}")
         if not 0.0 <= self.perturbation_std < math.inf:
             raise ConfigError(
                 f"expected perturbation_std finite and >= 0, got {self.perturbation_std}"
@@ -185,8 +186,10 @@ class OptimizerCfg:
             raise ConfigError(f"expected acc_max > 0 or None, got {self.acc_max}")
         if self.collision_substeps < 1:
             raise ConfigError(f"expected collision_substeps >= 1, got {self.collision_substeps}")
-        if self.prune_every < 1 or self.prune_margin < 0.0:
-            raise ConfigError("expected prune_every >= 1 and prune_margin >= 0")
+        if self.prune_every < 1:
+            raise ConfigError(f"expected prune_every >= 1, got {self.prune_every}")
+        non_negative("prune_margin", self.prune_margin)
+        non_negative("static_margin", self.static_margin)
         if not isinstance(self.weights, C.CostWeights):
             raise ConfigError(f"expected weights to be CostWeights, got {type(self.weights)}")
         flag("safe_hold", self.safe_hold)

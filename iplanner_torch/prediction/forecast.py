@@ -14,13 +14,17 @@ import torch
 from iplanner_torch.errors import DataError, ShapeError
 from iplanner_torch.types import all_finite, check_shape
 
+#: how far a row of forecast weights may sum from 1 (float32 rounding of A probabilities)
+WEIGHT_SUM_TOL = 1e-3
+
 
 @dataclass(kw_only=True)
 class Forecast:
     """Per-action Gaussian forecasts of the next ``n_f`` frames and the action weights.
 
     Attributes:
-        weights: (B, A) p(c = a | F_prev, p), rows sum to 1.
+        weights: (B, A) p(c = a | F_prev, p): >= 0, rows sum to 1 (within
+            :data:`WEIGHT_SUM_TOL`).
         mean: (B, A, n_f, K, 3) predicted joint positions [m], world (table) frame.
         var: (B, A, n_f, K, 3) per-coordinate variances [m^2] (independent output channels).
             Negative entries (rounding in a GP's predictive variance) are not rejected here:
@@ -34,7 +38,8 @@ class Forecast:
         ShapeError: when ``weights``, ``mean`` or ``var`` has the wrong shape, or
             ``action_names`` does not name A actions.
         DataError: when ``weights``, ``mean`` or ``var`` holds NaN or inf (naming the field
-            and, for ``mean`` and ``var``, the joint), or ``dt`` is not a finite number > 0.
+            and, for ``mean`` and ``var``, the joint), a row of ``weights`` is not
+            probabilities (all 0 would hide the person), or ``dt`` is not a finite number > 0.
             A non-finite forecast must never reach the planner, whose collision bound would
             read it as "no human".
     """
@@ -62,11 +67,17 @@ class Forecast:
             raise DataError(f"expected forecast dt a number > 0 [s], got {self.dt!r}") from err
         if not (math.isfinite(dt) and dt > 0.0):
             raise DataError(f"expected forecast dt a finite number > 0 [s], got {self.dt!r}")
-        if not all_finite(self.weights, self.mean, self.var):
-            self._raise_non_finite()
+        # weights that are not probabilities (negative, or rows not summing to 1) make a NaN
+        # flag, so that the one host sync of the finiteness check checks them too
+        w = self.weights
+        invalid = (w < 0).any() | ((w.sum(-1) - 1).abs() > WEIGHT_SUM_TOL).any()
+        flag = torch.where(invalid, math.nan, 0.0)
+        if not all_finite(self.weights, self.mean, self.var, flag):
+            self._raise_invalid()
 
-    def _raise_non_finite(self) -> None:
-        """Raise :class:`DataError` naming the first field and entry that is NaN or inf."""
+    def _raise_invalid(self) -> None:
+        """Raise :class:`DataError` naming the first field and entry that is NaN or inf, or
+        the first row of weights that are not probabilities."""
         bad_w = ~torch.isfinite(self.weights)
         if bool(bad_w.any()):
             b, a = (int(i) for i in bad_w.nonzero()[0])
@@ -81,6 +92,16 @@ class Forecast:
                     f"forecast {name} is NaN/Inf for joint {self.joint_names[k]!r} "
                     f"(batch {b}, action {self._action(a)!r}, frame {f})"
                 )
+        w = self.weights
+        rows = ((w < 0).any(-1) | ((w.sum(-1) - 1).abs() > WEIGHT_SUM_TOL)).nonzero()
+        if len(rows):
+            b = int(rows[0, 0])
+            raise DataError(
+                f"forecast weights of batch {b} are not probabilities: "
+                f"{[round(float(x), 6) for x in w[b]]} (sum {float(w[b].sum()):g}); expected "
+                "weights >= 0 summing to 1 over the actions (a forecast with every weight 0 "
+                "would hide the person from the planner)"
+            )
 
     def _derive(self, **fields: torch.Tensor) -> Forecast:
         """A copy with some tensors replaced, without the checks of ``__post_init__``.

@@ -53,6 +53,11 @@ def _check_device_dtype(device: torch.device | str, dtype: torch.dtype) -> torch
     return resolve_device(device)
 
 
+#: the largest max_sphere_excess [m]: spheres reaching further beyond their links than this
+#: no longer describe the arm (the default is 0.02 m)
+MAX_SPHERE_EXCESS = 0.2
+
+
 @dataclass(frozen=True, kw_only=True)
 class RobotCfg:
     """Which robot, where it stands, and how tightly spheres bound its links."""
@@ -75,8 +80,11 @@ class RobotCfg:
             raise ConfigError(f"expected a finite base_yaw, got {self.base_yaw}")
         if self.torso_height is not None and self.name != "fetch":
             raise ConfigError(f"{self.name} has no torso: expected torso_height=None")
-        if not self.max_sphere_excess > 0:
-            raise ConfigError(f"expected max_sphere_excess > 0, got {self.max_sphere_excess}")
+        if not 0 < self.max_sphere_excess <= MAX_SPHERE_EXCESS:  # NaN and inf fail too
+            raise ConfigError(
+                f"expected max_sphere_excess in (0, {MAX_SPHERE_EXCESS:g}] m, got "
+                f"{self.max_sphere_excess}"
+            )
 
 
 class RobotModel:

@@ -524,8 +524,9 @@ def test_dropouts_never_give_the_predictor_a_joint_lost_in_the_whole_window(
 @pytest.mark.parametrize(
     ("field", "value", "match"),
     [
-        ("seeds", [0, -1], "expected seeds as integers >= 0"),
-        ("seeds", [0.5], "expected seeds as integers >= 0"),
+        ("seeds", [0, -1], r"expected seeds as integers in \[0, 2\^63 - 1\]"),
+        ("seeds", [0.5], r"expected seeds as integers in \[0, 2\^63 - 1\]"),
+        ("seeds", [2**64], r"expected seeds as integers in \[0, 2\^63 - 1\]"),
         ("noises", [float("nan")], r"expected noises in \[0, 1\] m"),
         ("noises", [-0.01], r"expected noises in \[0, 1\] m"),
         ("noises", [2.0], r"expected noises in \[0, 1\] m"),
@@ -588,3 +589,43 @@ def test_itomp_keeps_the_tracker_window_the_sim_config_gives(tmp_path: Path, mon
     cfg = replace(cfg, sim=replace(cfg.sim, tracker_window=4))
     _fake_episode(tmp_path, cfg, "itomp", fakes.LinearReplanner())
     assert windows == [4]
+
+
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [
+        ("tensor", "predict_positions returned a Tensor, expected a Forecast"),
+        ("joints", r"joints \['head'.*\], expected the 10 of JOINT_NAMES"),
+        ("frames", r"no predicted frame \(n_f = 0\)"),
+        ("actions", r"actions \['reach_0'\], but the predictor names \['reach_0', 'reach_1'\]"),
+    ],
+)
+def test_a_custom_predictors_forecast_is_checked_in_the_loop(
+    tmp_path: Path, bad: str, message: str
+) -> None:
+    """A predictor of the PredictorLike protocol whose forecast the loop cannot use (not a
+    Forecast, joints missing, no frame, other actions) is named by a ShapeError, not an
+    IndexError deep in the planner."""
+    from iplanner_torch.errors import ShapeError
+
+    class BadPredictor(fakes.ConstantPredictor):
+        def predict_positions(self, positions, progress):
+            f = super().predict_positions(positions, progress)
+            if bad == "tensor":
+                return f.mean
+            a, k, n_f = 2, len(JOINT_NAMES), f.horizon
+            names, actions = f.joint_names, f.action_names
+            if bad == "joints":
+                k, names = k - 1, names[:-1]
+            elif bad == "frames":
+                n_f = 0
+            else:
+                a, actions = 1, actions[:1]
+            mean = f.mean[:, :a, :n_f, :k].contiguous()
+            return Forecast(weights=torch.full((1, a), 1.0 / a), mean=mean,
+                            var=torch.full_like(mean, 1e-4), dt=f.dt, joint_names=names,
+                            action_names=actions)  # fmt: skip
+
+    with pytest.raises(ShapeError, match=message):
+        _fake_episode(tmp_path, _cfg(3.0), "iplanner_ni", fakes.LinearReplanner(speed=1.5),
+                      predictor=BadPredictor())  # fmt: skip

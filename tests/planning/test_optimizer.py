@@ -220,6 +220,10 @@ def test_inputs_and_config_are_validated(point_robot: PointRobot) -> None:
         with pytest.raises(ConfigError, match=r"expected horizon_s in \(0, 60\] s"):
             OptimizerCfg(horizon_s=bad)
     assert OptimizerCfg(horizon_s=60.0).horizon_s == 60.0
+    for name in ("static_margin", "prune_margin", "lr"):  # NaN ran, changing the results
+        for bad in (float("nan"), float("inf"), -0.1):
+            with pytest.raises(ConfigError, match=f"expected {name} >"):
+                OptimizerCfg(**{name: bad})
     for bad in (float("nan"), float("inf"), -0.1):
         with pytest.raises(ConfigError, match="expected perturbation_std finite and >= 0"):
             OptimizerCfg(perturbation_std=bad)

@@ -3,6 +3,7 @@ the validation of a Forecast's values."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -134,3 +135,22 @@ def test_negative_variances_are_kept_and_every_derived_forecast_still_builds() -
             assert torch.equal(getattr(rebuilt, name), getattr(d, name))
     assert [d.batch_size for d in derived] == [2, 2, 2, 1, 2, 2]
     assert torch.equal(g.weights, replace(f, var=f.var).weights)  # g itself is unchanged
+
+
+@pytest.mark.parametrize(
+    ("weights", "shown"),
+    [
+        ([[0.5, 0.5], [0.0, 0.0]], "batch 1 are not probabilities: [0.0, 0.0] (sum 0)"),
+        ([[1.0, 1.0]], "batch 0 are not probabilities: [1.0, 1.0] (sum 2)"),
+        ([[1.5, -0.5]], "batch 0 are not probabilities: [1.5, -0.5] (sum 1)"),
+        ([[0.9, 0.09]], "batch 0 are not probabilities: [0.9, 0.09] (sum 0.99)"),
+    ],
+)
+def test_weights_that_are_not_probabilities_are_refused(
+    weights: list[list[float]], shown: str
+) -> None:
+    """All-zero weights would make the collision bound 0 (the person unseen by the planner),
+    so weights must be >= 0 and sum to 1; float rounding is tolerated."""
+    with pytest.raises(DataError, match=re.escape(f"forecast weights of {shown}; expected")):
+        _forecast(weights)
+    _forecast([[0.5, 0.5 + 1e-4], [1.0, 0.0]])  # rounding within WEIGHT_SUM_TOL

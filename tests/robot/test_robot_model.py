@@ -206,6 +206,9 @@ def test_errors() -> None:
         RobotModel.load("fetch", torso_height=0.6)
     with pytest.raises(ConfigError, match="base_position"):
         RobotCfg(name="fetch", base_position=(0.0, 1.0))
+    for excess in (float("inf"), float("nan"), 0.0, 10.0):  # inf made spheres of radius inf
+        with pytest.raises(ConfigError, match=r"expected max_sphere_excess in \(0, 0.2\] m"):
+            RobotCfg(name="kuka_iiwa14", max_sphere_excess=excess)
     model = RobotModel.load("kuka_iiwa14")
     with pytest.raises(ShapeError, match=r"expected q \(\.\.\., 7\), got \(4, 6\)"):
         model.sphere_centers(torch.zeros(4, 6))
