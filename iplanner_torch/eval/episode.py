@@ -83,7 +83,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from iplanner_torch.checks import non_negative
+from iplanner_torch.checks import integer, non_negative, optional, positive
 from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.skeleton import JOINT_INDEX, JOINT_NAMES
 from iplanner_torch.errors import ConfigError, ShapeError
@@ -200,21 +200,18 @@ class EpisodeCfg:
     def __post_init__(self) -> None:
         if not self.max_duration_s > 0:  # NaN fails too (inf: until the tasks are done)
             raise ConfigError(f"expected max_duration_s > 0, got {self.max_duration_s}")
-        if self.static_forecast_frames < 1 or self.static_forecast_dt <= 0:
-            raise ConfigError("expected static_forecast_frames >= 1 and static_forecast_dt > 0")
-        if not self.oracle_std > 0:
-            raise ConfigError(f"expected oracle_std > 0, got {self.oracle_std}")
-        if self.mhd_horizon_s <= 0 or self.mhd_min_motion < 0:
-            raise ConfigError("expected mhd_horizon_s > 0 and mhd_min_motion >= 0")
-        if self.metrics_hz <= 0 or self.log_hz <= 0:
-            raise ConfigError("expected metrics_hz > 0 and log_hz > 0")
+        # each number by name; NaN and infinities fail (a bare "x <= 0" passes NaN)
+        integer("static_forecast_frames", self.static_forecast_frames, minimum=1)
+        positive("static_forecast_dt", self.static_forecast_dt)
+        positive("oracle_std", self.oracle_std)
+        positive("mhd_horizon_s", self.mhd_horizon_s)
+        non_negative("mhd_min_motion", self.mhd_min_motion)
+        positive("metrics_hz", self.metrics_hz)
+        positive("log_hz", self.log_hz)
         non_negative("scene_hz", self.scene_hz)
-        if self.torch_threads is not None and self.torch_threads < 1:
-            raise ConfigError(f"expected torch_threads >= 1 or None, got {self.torch_threads}")
-        if self.task_planner_episodes < 0:
-            raise ConfigError(
-                f"expected task_planner_episodes >= 0, got {self.task_planner_episodes}"
-            )
+        non_negative("blocking_tail_s", self.blocking_tail_s)
+        optional(integer, "torch_threads", self.torch_threads, minimum=1)
+        integer("task_planner_episodes", self.task_planner_episodes, minimum=0)
         if self.stall_fallback_s is not None and not self.stall_fallback_s > 0:
             raise ConfigError(
                 f"expected stall_fallback_s > 0 or None, got {self.stall_fallback_s}"

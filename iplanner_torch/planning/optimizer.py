@@ -811,10 +811,12 @@ class TrajectoryOptimizer:
         Raises:
             ShapeError: on inputs of the wrong shape.
             ConfigError: when ``forecast_t0`` is not finite.
+            DataError: when ``times`` holds NaN or inf.
         """
         check_shape("q", q, ("N", self.num_joints))
         check_shape("times", times, (q.shape[0],))
         finite_time("forecast_t0", forecast_t0)
+        check_finite("times", times, ("configuration",))  # a NaN time indexes no frame
         q = q.to(self.device, self.dtype)
         with torch.no_grad():
             human = self._human_obstacle(forecast, times.to(self.device, self.dtype), forecast_t0)

@@ -92,8 +92,12 @@ class Tracker:
         Returns:
             Whether a frame was taken.
 
+        A true joint that is NaN or infinite (the caller could not place it) is taken as lost
+        in that frame, like a dropout: NaN in :meth:`window`, held in :meth:`latest_pose`.
+
         Raises:
-            DataError: when ``t`` is NaN or infinite.
+            DataError: when ``t`` is NaN or infinite, or a true joint of the first frame (which
+                initialises the held pose) is not finite.
             ShapeError: when ``joints`` is not (K, 3) of numbers, or K differs from the
                 stored frames'.
         """
@@ -124,8 +128,14 @@ class Tracker:
                 self._next_t += (math.floor(periods) + 1) * period
             if self._next_t <= due:  # rounding, or a t so large that a period vanishes in it
                 self._next_t = max(self._next_t + period, math.nextafter(due, math.inf))
+        unseen = ~np.isfinite(joints).all(1)  # (K,) a NaN or inf true joint: not observed
+        if unseen.any() and self._last_valid is None:
+            raise DataError(
+                f"the tracker's first frame (t = {t:g} s) has non-finite true joints (index "
+                f"{np.flatnonzero(unseen).tolist()}): it initialises the held pose"
+            )
         frame = joints + self._rng.normal(0.0, self.cfg.noise_sigma, size=joints.shape)
-        lost = self._rng.random(joints.shape[0]) < self.cfg.dropout_rate
+        lost = (self._rng.random(joints.shape[0]) < self.cfg.dropout_rate) | unseen
         frame[lost] = np.nan
         if self._last_valid is None:
             self._last_valid = np.where(lost[:, None], joints, frame)

@@ -300,6 +300,18 @@ def test_errors(tmp_path: Path) -> None:
     for bad in (-1.0, math.inf, math.nan):
         with pytest.raises(ConfigError, match="expected scene_hz >= 0 and finite"):
             EpisodeCfg(scene_hz=bad)
+    # every rate, horizon and count by name, NaN and infinities refused (NaN passed before)
+    for name in ("metrics_hz", "log_hz", "mhd_horizon_s", "static_forecast_dt", "oracle_std"):
+        for bad in (0.0, math.inf, math.nan):
+            with pytest.raises(ConfigError, match=f"expected {name} > 0 and finite"):
+                EpisodeCfg(**{name: bad})
+    for name in ("mhd_min_motion", "blocking_tail_s"):
+        with pytest.raises(ConfigError, match=f"expected {name} >= 0 and finite"):
+            EpisodeCfg(**{name: math.nan})
+    for name, bad in (("torch_threads", 1.5), ("task_planner_episodes", 1.5),
+                      ("static_forecast_frames", 0)):  # fmt: skip
+        with pytest.raises(ConfigError, match=f"expected {name} an integer"):
+            EpisodeCfg(**{name: bad})
 
 
 def test_table_clearance_against_brute_force() -> None:

@@ -152,6 +152,8 @@ def test_itomp_spread_grows_the_held_pose_and_the_bound_covers_it(
     q = torch.tensor([0.3, 0.0]).expand(4, 2)
     bound = opt.collision_bound(q, times, wide, 0.0)
     assert float(opt.collision_bound(q, times, still, 0.0).max()) < 1e-6
+    with pytest.raises(DataError, match="times is NaN/Inf at configuration 1"):  # IndexError
+        opt.collision_bound(q, torch.tensor([0.5, math.nan, 1.5, 2.0]), wide, 0.0)
     assert bool((bound[:3].diff() > 0).all())  # later the pose spreads thinner
     d = torch.tensor([0.3, 0.0, 0.0])
     for t, b in zip(times.tolist(), bound.tolist(), strict=True):

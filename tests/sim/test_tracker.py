@@ -143,3 +143,30 @@ def test_list_joints_equal_array_joints() -> None:
         assert a.observe(k / 15.0, truth) == b.observe(k / 15.0, truth.tolist())
     np.testing.assert_array_equal(a.window(), b.window())
     np.testing.assert_array_equal(a.latest_pose(), b.latest_pose())
+
+
+def test_a_non_finite_true_joint_is_a_lost_joint() -> None:
+    """NaN or inf in the true joints (a caller that could not place a joint) is a dropout of
+    that joint: NaN in the window, held at its last observation in latest_pose; the first
+    frame, which initialises the held pose, must be finite. Finite frames draw the same noise
+    as before (the same seed, the same observations)."""
+    pose = np.arange(12, dtype=float).reshape(4, 3) / 10
+    tr = Tracker(TrackerCfg(fps=10.0, noise_sigma=0.001, window=3), seed=4)
+    ref = Tracker(TrackerCfg(fps=10.0, noise_sigma=0.001, window=3), seed=4)
+    with pytest.raises(DataError, match=r"first frame \(t = 0 s\) has non-finite true joints "
+                       r"\(index \[1\]\)"):  # fmt: skip
+        Tracker(TrackerCfg(fps=10.0), seed=0).observe(0.0, np.where(np.arange(4)[:, None] == 1,
+                                                                     np.nan, pose))  # fmt: skip
+    for t in (0.0, 0.1):
+        tr.observe(t, pose)
+        ref.observe(t, pose)
+    held = tr.latest_pose()
+    bad = pose.copy()
+    bad[2] = np.nan
+    bad[3, 0] = np.inf
+    assert tr.observe(0.2, bad) and ref.observe(0.2, pose)
+    win, want = tr.window(), ref.window()
+    assert np.isnan(win[-1, 2:]).all()
+    np.testing.assert_array_equal(win[-1, :2], want[-1, :2])
+    np.testing.assert_array_equal(tr.latest_pose()[2:], held[2:])
+    assert np.isfinite(tr.latest_pose()).all()
