@@ -29,6 +29,7 @@ from typing import Literal
 
 import torch
 
+from iplanner_torch import checks
 from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.robot.description import (
     ROBOT_NAMES,
@@ -381,14 +382,14 @@ class RobotModel:
 
         Raises:
             ShapeError: for mismatched shapes or a non-floating ``q_init``.
-            ConfigError: for non-positive ``iters``, ``damping`` or ``max_step``.
+            ConfigError: for ``iters`` that is not an integer >= 1, ``damping`` or
+                ``max_step`` not finite and > 0, or ``tol`` not finite and >= 0.
             DataError: for a NaN or infinite entry in ``target`` or ``q_init``.
         """
-        if iters < 1 or not damping > 0 or not max_step > 0:
-            raise ConfigError(
-                f"expected iters >= 1, damping > 0, max_step > 0; got {iters}, {damping}, "
-                f"{max_step}"
-            )
+        checks.integer("iters", iters, minimum=1)
+        checks.positive("damping", damping)  # inf made every joint NaN
+        checks.positive("max_step", max_step)
+        checks.non_negative("tol", tol)
         check_shape("target", target, ("...", 3))
         check_shape("q_init", q_init, ("...", self.num_joints))
         if tuple(target.shape[:-1]) != tuple(q_init.shape[:-1]):

@@ -216,6 +216,16 @@ def test_errors() -> None:
         model.ee_position(torch.zeros(7, dtype=torch.long))
     with pytest.raises(ShapeError, match="equal leading"):
         model.ik(torch.zeros(2, 3), torch.zeros(3, 7))
+    target, q0 = model.ee_position(model.q_home) + 0.1, model.q_home
+    for kwargs, message in (
+        ({"damping": float("inf")}, "expected damping > 0 and finite"),  # gave NaN joints
+        ({"iters": 1.5}, "expected iters an integer >= 1"),  # a raw TypeError before
+        ({"iters": "5"}, "expected iters an integer >= 1"),
+        ({"max_step": float("nan")}, "expected max_step > 0 and finite"),
+        ({"tol": -1.0}, "expected tol >= 0 and finite"),
+    ):
+        with pytest.raises(ConfigError, match=message):
+            model.ik(target, q0, **kwargs)
     with pytest.raises(ConfigError, match="damping > 0"):
         model.ik(torch.zeros(3), model.q_home, damping=0.0)
 
