@@ -16,6 +16,8 @@ from iplanner_torch.types import all_finite, check_shape
 
 #: how far a row of forecast weights may sum from 1 (float32 rounding of A probabilities)
 WEIGHT_SUM_TOL = 1e-3
+#: weights of at most this many entries (on the CPU) are checked in Python, not with tensors
+_SMALL_WEIGHTS = 256
 
 
 @dataclass(kw_only=True)
@@ -67,9 +69,18 @@ class Forecast:
             raise DataError(f"expected forecast dt a number > 0 [s], got {self.dt!r}") from err
         if not (math.isfinite(dt) and dt > 0.0):
             raise DataError(f"expected forecast dt a finite number > 0 [s], got {self.dt!r}")
-        # weights that are not probabilities (negative, or rows not summing to 1) make a NaN
-        # flag, so that the one host sync of the finiteness check checks them too
+        # weights that are not probabilities: negative, or rows not summing to 1 (NaN is left
+        # to the finiteness check)
         w = self.weights
+        if w.device.type == "cpu" and w.numel() <= _SMALL_WEIGHTS:
+            # a planning cycle's forecast: a few numbers, checked in Python (one tolist) at a
+            # fraction of the cost of a chain of tiny tensor operations
+            rows = w.tolist()
+            bad = any(min(r) < 0 or abs(sum(r) - 1) > WEIGHT_SUM_TOL for r in rows if r)
+            if bad or not all_finite(self.weights, self.mean, self.var):
+                self._raise_invalid()
+            return
+        # a batch: a NaN flag, so that the one host sync of the finiteness check checks them
         invalid = (w < 0).any() | ((w.sum(-1) - 1).abs() > WEIGHT_SUM_TOL).any()
         flag = torch.where(invalid, math.nan, 0.0)
         if not all_finite(self.weights, self.mean, self.var, flag):

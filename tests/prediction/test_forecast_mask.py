@@ -3,6 +3,7 @@ the validation of a Forecast's values."""
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import replace
 
@@ -154,3 +155,16 @@ def test_weights_that_are_not_probabilities_are_refused(
     with pytest.raises(DataError, match=re.escape(f"forecast weights of {shown}; expected")):
         _forecast(weights)
     _forecast([[0.5, 0.5 + 1e-4], [1.0, 0.0]])  # rounding within WEIGHT_SUM_TOL
+
+
+def test_weights_of_a_large_batch_are_checked_with_tensors_alike() -> None:
+    """Above _SMALL_WEIGHTS entries the weights are checked with tensor operations (one host
+    sync): the same refusal, and float rounding tolerated."""
+    from iplanner_torch.prediction.forecast import _SMALL_WEIGHTS
+
+    rows = [[0.25, 0.25, 0.25, 0.25 + 1e-4]] * (_SMALL_WEIGHTS // 4 + 1)
+    _forecast(rows)
+    with pytest.raises(DataError, match=re.escape("weights of batch 5 are not probabilities")):
+        _forecast(rows[:5] + [[0.0, 0.0, 0.0, 0.0]] + rows[6:])
+    with pytest.raises(DataError, match=re.escape("weights is NaN/Inf for action 'x1' (batch 2)")):
+        _forecast(rows[:2] + [[0.5, math.nan, 0.25, 0.25]] + rows[3:])
