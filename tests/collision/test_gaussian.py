@@ -324,8 +324,8 @@ def test_non_finite_input_raises_data_error(name: str, bad: float) -> None:
             G.max_density_point(args["robot_center"], R, args["mean"], args["cov"])
 
 
-def test_audit_covariances_nan_and_inf_identity() -> None:
-    """The audit's cases: eigh used to fail with an untyped LinAlgError."""
+def test_covariances_nan_and_inf_identity() -> None:
+    """NaN, inf and identity covariances: eigh used to fail with an untyped LinAlgError."""
     args = _pair(1)
     for cov in (torch.full((3, 3), math.nan, dtype=F64), math.inf * torch.eye(3, dtype=F64)):
         with pytest.raises(DataError, match="expected finite cov, got"):

@@ -571,14 +571,14 @@ def test_error_unreadable_npz(tmp_path, monkeypatch):
         load_demonstrations(p)
 
 
-_AUDIT_JOINTS = ("torso", "left_hand", "right_hand")
-_AUDIT_HEADER = '# {"fps": 15.0, "action_names": ["idle", "reach"]}'
+_CSV_JOINTS = ("torso", "left_hand", "right_hand")
+_CSV_HEADER = '# {"fps": 15.0, "action_names": ["idle", "reach"]}'
 
 
-def _audit_csv(path: Path, first: tuple[str, ...], header: str = _AUDIT_HEADER) -> Path:
+def _user_csv(path: Path, first: tuple[str, ...], header: str = _CSV_HEADER) -> Path:
     """A 10-frame CSV at 15 Hz whose columns are ``first`` (``t`` the time, any other 1), then
     3 joints' positions."""
-    cols = [*first] + [f"{j}_{a}" for j in _AUDIT_JOINTS for a in "xyz"]
+    cols = [*first] + [f"{j}_{a}" for j in _CSV_JOINTS for a in "xyz"]
     rows = [
         ",".join([f"{i / 15:.6f}" if c == "t" else "1" for c in first] + ["0.1"] * 9)
         for i in range(10)
@@ -599,7 +599,7 @@ def _audit_csv(path: Path, first: tuple[str, ...], header: str = _AUDIT_HEADER) 
     ],
 )
 def test_error_csv_unknown_column_is_named(tmp_path, first, message):
-    p = _audit_csv(tmp_path / "my.csv", first)
+    p = _user_csv(tmp_path / "my.csv", first)
     with pytest.raises(DataError, match=rf"my\.csv: {message}") as info:
         load_demonstrations(p)
     assert "line 2); the accepted columns are t (seconds), label (int action index)" in str(
@@ -609,11 +609,11 @@ def test_error_csv_unknown_column_is_named(tmp_path, first, message):
 
 
 def test_csv_without_label_column_but_named_actions_is_unlabelled(tmp_path):
-    p = _audit_csv(tmp_path / "my.csv", ("t",))
+    p = _user_csv(tmp_path / "my.csv", ("t",))
     with pytest.warns(DataWarning, match=r"my\.csv: no 'label' column, but the header comment "):
         (d,) = load_demonstrations(p)
     assert d.action_names == ("idle", "reach") and (d.labels == -1).all()  # never action 0
-    q = _audit_csv(tmp_path / "q.csv", ("t",), header='# {"fps": 15.0}')
+    q = _user_csv(tmp_path / "q.csv", ("t",), header='# {"fps": 15.0}')
     (e,) = load_demonstrations(q)  # no names either: the single action "unlabelled", as before
     assert e.action_names == ("unlabelled",) and (e.labels == 0).all()
 
@@ -656,7 +656,7 @@ def test_loader_fps_argument_numbers_are_accepted(tmp_path):
     ],
 )
 def test_error_loader_joints_argument(tmp_path, joints, message):
-    p = _audit_csv(tmp_path / "my.csv", ("t", "label"))
+    p = _user_csv(tmp_path / "my.csv", ("t", "label"))
     with pytest.raises(ConfigError, match=rf"^joints= {message}"):
         load_demonstrations(p, joints=joints)
     with pytest.raises(ConfigError, match=rf"^joints= {message}"):

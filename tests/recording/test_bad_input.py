@@ -68,7 +68,7 @@ def _human(topic: str, t: float, names: list[str]) -> tuple[str, dict]:
 
 
 def test_the_writer_refuses_joint_names_that_change_on_a_channel(tmp_path: Path) -> None:
-    """The audit's example: a third joint appears in front of the others; the writer refuses
+    """A third joint appears in front of the others; the writer refuses
     it (a bad log is never written) and what came before still reads back."""
     path = tmp_path / "ragged.mcap"
     with EpisodeWriter(path, metadata={}) as log:
