@@ -120,6 +120,24 @@ def finite_range(name: str, value: Any) -> tuple[float, float]:
     return lo_hi  # type: ignore[return-value]
 
 
+def check_recording_numbers(prefix: str, fps: Any, noise_sigma: Any, dropout_rate: Any) -> None:
+    """Check a generator's frame rate, tracker noise and dropout rate (each finite first).
+
+    Args:
+        prefix: put before each name in the message (``"ReachingCfg."``, or ``""``).
+
+    Raises:
+        ConfigError: naming the first of them that is not finite or out of its range
+            (fps > 0, noise_sigma >= 0, dropout_rate in [0, 1)).
+    """
+    if not finite_number(f"{prefix}fps", fps) > 0:
+        raise ConfigError(f"{prefix}fps must be finite and > 0, got {fps}")
+    if not finite_number(f"{prefix}noise_sigma", noise_sigma) >= 0:
+        raise ConfigError(f"{prefix}noise_sigma must be >= 0, got {noise_sigma}")
+    if not 0 <= finite_number(f"{prefix}dropout_rate", dropout_rate) < 1:
+        raise ConfigError(f"{prefix}dropout_rate must be in [0, 1), got {dropout_rate}")
+
+
 def reach_targets(n_targets: int = 8) -> np.ndarray:
     """(n_targets, 3) hand targets on the table [m], in the layout of the module docstring.
 
@@ -283,14 +301,7 @@ class ReachingCfg:
         reach_targets(self.n_targets)  # validates n_targets
         if self.reaches_per_target < 1 or self.n_subjects < 1:
             raise ConfigError("reaches_per_target and n_subjects must be >= 1")
-        if not finite_number("ReachingCfg.fps", self.fps) > 0:
-            raise ConfigError(f"ReachingCfg.fps must be finite and > 0, got {self.fps}")
-        if not finite_number("ReachingCfg.noise_sigma", self.noise_sigma) >= 0:
-            raise ConfigError(f"ReachingCfg.noise_sigma must be >= 0, got {self.noise_sigma}")
-        if not 0 <= finite_number("ReachingCfg.dropout_rate", self.dropout_rate) < 1:
-            raise ConfigError(
-                f"ReachingCfg.dropout_rate must be in [0, 1), got {self.dropout_rate}"
-            )
+        check_recording_numbers("ReachingCfg.", self.fps, self.noise_sigma, self.dropout_rate)
         if not finite_number("ReachingCfg.dropout_burst", self.dropout_burst) >= 1:
             raise ConfigError(
                 f"ReachingCfg.dropout_burst must be >= 1 [frames], got {self.dropout_burst}"

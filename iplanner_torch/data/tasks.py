@@ -42,7 +42,7 @@ from iplanner_torch.data.kinematic_human import (
 )
 from iplanner_torch.data.reaching import (
     add_tracker_noise,
-    finite_number,
+    check_recording_numbers,
     finite_range,
     frame_times,
     reach_targets,
@@ -260,13 +260,7 @@ def generate_task_demonstration(
     bad = [i for i in order if i not in ids]
     if bad:
         raise ConfigError(f"order has ids {bad} not among object_ids {ids}")
-    # the same checks as TaskDatasetCfg's (NaN and inf fail a bare comparison)
-    if not finite_number("fps", fps) > 0:
-        raise ConfigError(f"fps must be finite and > 0, got {fps}")
-    if not finite_number("noise_sigma", noise_sigma) >= 0:
-        raise ConfigError(f"noise_sigma must be >= 0, got {noise_sigma}")
-    if not 0 <= finite_number("dropout_rate", dropout_rate) < 1:
-        raise ConfigError(f"dropout_rate must be in [0, 1), got {dropout_rate}")
+    check_recording_numbers("", fps, noise_sigma, dropout_rate)  # as TaskDatasetCfg's
     idle_s = finite_range("idle_s", idle_s)
     hold_s = finite_range("hold_s", hold_s)
     plan = MotionPlan(body=body)
@@ -370,14 +364,7 @@ class TaskDatasetCfg:
                 f"need n_demos >= 1 and n_subjects >= 1, got {self.n_demos}, {self.n_subjects}"
             )
         # every float is checked finite first (NaN and Inf pass a bare "x < 0" test)
-        if not finite_number("TaskDatasetCfg.fps", self.fps) > 0:
-            raise ConfigError(f"TaskDatasetCfg.fps must be finite and > 0, got {self.fps}")
-        if not finite_number("TaskDatasetCfg.noise_sigma", self.noise_sigma) >= 0:
-            raise ConfigError(f"TaskDatasetCfg.noise_sigma must be >= 0, got {self.noise_sigma}")
-        if not 0 <= finite_number("TaskDatasetCfg.dropout_rate", self.dropout_rate) < 1:
-            raise ConfigError(
-                f"TaskDatasetCfg.dropout_rate must be in [0, 1), got {self.dropout_rate}"
-            )
+        check_recording_numbers("TaskDatasetCfg.", self.fps, self.noise_sigma, self.dropout_rate)
         if self.file_format not in ("npz", "csv"):
             raise ConfigError(f"file_format must be 'npz' or 'csv', got {self.file_format!r}")
         object.__setattr__(self, "idle_s", finite_range("TaskDatasetCfg.idle_s", self.idle_s))
