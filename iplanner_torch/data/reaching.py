@@ -27,7 +27,6 @@ are applied on top; the clean positions are kept in ``clean_positions``.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -36,6 +35,7 @@ from typing import Any, Literal
 import numpy as np
 from tqdm.auto import tqdm
 
+from iplanner_torch import checks
 from iplanner_torch.data.dataset_card import (
     DatasetSummary,
     generator_settings,
@@ -73,30 +73,6 @@ __all__ = [
 PHASE_REACH, PHASE_HOLD, PHASE_RETURN = 0, 1, 2
 
 
-def finite_number(name: str, value: Any) -> float:
-    """``value`` as a float when it is one finite real number (a config field's check).
-
-    A bare ``x < 0`` passes NaN, and no comparison with a finite bound refuses +Inf on its
-    open side: call this first, then compare.
-
-    Args:
-        name: the field, for the message (e.g. ``"ReachingCfg.fps"``).
-        value: the field's value.
-
-    Raises:
-        ConfigError: naming ``name``, for a boolean, a non-number, NaN or +-Inf.
-    """
-    if isinstance(value, bool):
-        raise ConfigError(f"{name} must be a finite number, got {value!r}")
-    try:
-        x = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise ConfigError(f"{name} must be a finite number, got {value!r}") from None
-    if not math.isfinite(x):
-        raise ConfigError(f"{name} must be finite, got {value!r}")
-    return x
-
-
 def _numbers(name: str, value: Any) -> tuple[float, ...]:
     """``value`` (a list, tuple or array, not a string) as finite floats."""
     try:
@@ -105,7 +81,7 @@ def _numbers(name: str, value: Any) -> tuple[float, ...]:
         items = ()
     if not items:
         raise ConfigError(f"{name} must be a non-empty list of numbers, got {value!r}")
-    return tuple(finite_number(name, v) for v in items)
+    return tuple(checks.finite(name, v) for v in items)
 
 
 def finite_range(name: str, value: Any) -> tuple[float, float]:
@@ -114,28 +90,27 @@ def finite_range(name: str, value: Any) -> tuple[float, float]:
     Raises:
         ConfigError: naming ``name``, unless ``value`` is two such numbers.
     """
-    lo_hi = _numbers(name, value)
-    if len(lo_hi) != 2 or not 0 <= lo_hi[0] <= lo_hi[1]:
+    low, high = checks.finite_tuple(name, value, 2)
+    if not 0 <= low <= high:
         raise ConfigError(f"{name} must be (low, high) with 0 <= low <= high, got {value!r}")
-    return lo_hi  # type: ignore[return-value]
+    return low, high
 
 
 def check_recording_numbers(prefix: str, fps: Any, noise_sigma: Any, dropout_rate: Any) -> None:
-    """Check a generator's frame rate, tracker noise and dropout rate (each finite first).
+    """Check a generator's frame rate, tracker noise and dropout rate (each a real number,
+    not a bool, and finite: :mod:`iplanner_torch.checks`).
 
     Args:
         prefix: put before each name in the message (``"ReachingCfg."``, or ``""``).
 
     Raises:
-        ConfigError: naming the first of them that is not finite or out of its range
+        ConfigError: naming the first of them that is not a finite number or out of its range
             (fps > 0, noise_sigma >= 0, dropout_rate in [0, 1)).
     """
-    if not finite_number(f"{prefix}fps", fps) > 0:
-        raise ConfigError(f"{prefix}fps must be finite and > 0, got {fps}")
-    if not finite_number(f"{prefix}noise_sigma", noise_sigma) >= 0:
-        raise ConfigError(f"{prefix}noise_sigma must be >= 0, got {noise_sigma}")
-    if not 0 <= finite_number(f"{prefix}dropout_rate", dropout_rate) < 1:
-        raise ConfigError(f"{prefix}dropout_rate must be in [0, 1), got {dropout_rate}")
+    checks.positive(f"{prefix}fps", fps)
+    checks.non_negative(f"{prefix}noise_sigma", noise_sigma)
+    if not 0 <= checks.finite(f"{prefix}dropout_rate", dropout_rate) < 1:
+        raise ConfigError(f"expected {prefix}dropout_rate in [0, 1), got {dropout_rate!r}")
 
 
 def reach_targets(n_targets: int = 8) -> np.ndarray:
@@ -207,10 +182,9 @@ def reach_motion(
     target = np.asarray(target, dtype=np.float64)
     if target.shape != (3,):
         raise ConfigError(f"expected target (3,), got {target.shape}")
-    for name, value in (("fps", fps), ("speed", speed), ("hold_s", hold_s)):
-        finite_number(name, value)
-    if not (fps > 0 and speed > 0 and hold_s >= 0):
-        raise ConfigError(f"need fps > 0, speed > 0, hold_s >= 0; got {fps}, {speed}, {hold_s}")
+    checks.positive("fps", fps)
+    checks.positive("speed", speed)
+    checks.non_negative("hold_s", hold_s)
     if start_pose is not None:
         start_pose = np.asarray(start_pose, dtype=np.float64)
         if start_pose.shape != (len(JOINT_NAMES), 3):
@@ -302,9 +276,9 @@ class ReachingCfg:
         if self.reaches_per_target < 1 or self.n_subjects < 1:
             raise ConfigError("reaches_per_target and n_subjects must be >= 1")
         check_recording_numbers("ReachingCfg.", self.fps, self.noise_sigma, self.dropout_rate)
-        if not finite_number("ReachingCfg.dropout_burst", self.dropout_burst) >= 1:
+        if not checks.finite("ReachingCfg.dropout_burst", self.dropout_burst) >= 1:
             raise ConfigError(
-                f"ReachingCfg.dropout_burst must be >= 1 [frames], got {self.dropout_burst}"
+                f"expected ReachingCfg.dropout_burst >= 1 [frames], got {self.dropout_burst!r}"
             )
         if self.file_format not in ("npz", "csv"):
             raise ConfigError(f"file_format must be 'npz' or 'csv', got {self.file_format!r}")

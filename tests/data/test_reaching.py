@@ -198,19 +198,24 @@ def test_non_finite_config_values_raise(field, value, bad):
         arg = tuple(bad if v is None else v for v in value)
     else:
         arg = bad
-    with pytest.raises(ConfigError, match=rf"^ReachingCfg\.{field} must be finite, got"):
+    with pytest.raises(ConfigError, match=rf"^expected ReachingCfg\.{field} (a |>|in )"):
         ReachingCfg(**{field: arg})
 
 
 def test_bad_config_messages_name_the_field():
-    with pytest.raises(ConfigError, match=r"^ReachingCfg\.fps must be finite and > 0, got -15"):
+    with pytest.raises(ConfigError, match=r"^expected ReachingCfg\.fps > 0 and finite, got -15"):
         ReachingCfg(fps=-15)
-    with pytest.raises(ConfigError, match=r"^ReachingCfg\.fps must be a finite number, got True"):
+    with pytest.raises(ConfigError, match=r"^expected ReachingCfg\.fps > 0 and finite, got True"):
         ReachingCfg(fps=True)
-    with pytest.raises(ConfigError, match=r"^ReachingCfg\.dropout_burst must be >= 1"):
+    # text is not a number, even when float() reads it (the package's checks refuse it)
+    with pytest.raises(ConfigError, match=r"^expected ReachingCfg\.noise_sigma >= 0 and finite"):
+        ReachingCfg(noise_sigma="0.01")
+    with pytest.raises(ConfigError, match=r"^expected ReachingCfg\.hold_s a sequence of 2"):
+        ReachingCfg(hold_s=("0.1", 0.2))
+    with pytest.raises(ConfigError, match=r"^expected ReachingCfg\.dropout_burst >= 1"):
         ReachingCfg(dropout_burst=0.5)
     with pytest.raises(ConfigError, match=r"^ReachingCfg\.speeds must be a non-empty list"):
         ReachingCfg(speeds=())
-    with pytest.raises(ConfigError, match=r"^fps must be finite, got inf"):
+    with pytest.raises(ConfigError, match=r"^expected fps > 0 and finite, got inf"):
         reach_motion(sample_body(np.random.default_rng(0)), "left", np.zeros(3),
                      np.random.default_rng(0), fps=float("inf"))  # fmt: skip
