@@ -13,6 +13,15 @@ normal variables, so ``P(||X - c|| <= R)`` is its CDF at ``R^2``. Three independ
 * **Imhof's integral** (Imhof 1961): ``P(Q > x) = 1/2 + (1/pi) int_0^inf sin(theta(u)) /
   (u rho(u)) du``, one ``scipy.integrate.quad`` per case; absolute accuracy about 1e-8.
 * **Monte Carlo** with a standard error, seeded.
+
+Inputs of any dtype are converted to float64 (the reference values are float64 whatever the
+dtype of the bounds they check); empty batches give empty results.
+
+Far cases: where the ball lies more than ``FAR_SIGMAS`` standard deviations (of the widest
+direction) from the mean, ``P <= Phi(-FAR_SIGMAS)``, which is 0 in float64; Ruben's series
+and Imhof's integral return exactly 0 there without evaluating (the series overflows and the
+integral loses all accuracy for large noncentralities, returning up to 0.5 at 1e4 standard
+deviations). Distances whose squares overflow float64 count as far.
 """
 
 from __future__ import annotations
@@ -33,6 +42,25 @@ from iplanner_torch.types import check_shape, non_finite_error
 #: Ruben's series stops when the truncation bound is below ``RUBEN_RTOL * p + RUBEN_ATOL``.
 RUBEN_RTOL = 1e-12
 RUBEN_ATOL = 1e-300
+#: Cases farther than this many standard deviations have probability below Phi(-40), about
+#: 4e-350: 0 in float64.
+FAR_SIGMAS = 40.0
+
+
+def _far(s: np.ndarray, d2: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Cases beyond ``FAR_SIGMAS``: ``(||d|| - sqrt(x)) / sqrt(max s)`` over the last axis.
+
+    A squared distance that overflowed (inf, or NaN where a rotation met inf * 0) is far.
+
+    Args:
+        s: (..., n) variances [m^2]; d2: (..., n) squared offsets [m^2]; x: (...) ``R^2``.
+
+    Returns:
+        (...) bool.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        gap = np.sqrt(d2.sum(-1)) - np.sqrt(x)
+        return ~(gap <= FAR_SIGMAS * np.sqrt(s.max(-1)))
 
 
 def _check_finite(name: str, x: np.ndarray) -> None:
@@ -79,8 +107,10 @@ def _canonical(
     if s.size and not (s[:, 0] >= -(eps**0.5) * np.abs(s).max(1)).all():
         raise DataError(f"expected cov positive semidefinite, got eigenvalue {s[:, 0].min()}")
     s = np.maximum(s, 1e-300)
-    d = np.einsum("nji,nj->ni", U, m - c)
-    return s, d * d, r * r, tuple(batch)
+    with np.errstate(over="ignore", invalid="ignore"):  # overflowed distances are far cases
+        d = np.einsum("nji,nj->ni", U, m - c)
+        d2 = d * d
+    return s, d2, r * r, tuple(batch)
 
 
 def ruben_series(
@@ -96,7 +126,9 @@ def ruben_series(
 
     Returns:
         ``(lower, upper)``, each (N,): the partial sum and the partial sum plus the rigorous
-        truncation bound (up to float64 rounding).
+        truncation bound (up to float64 rounding); ``(0, 0)`` for cases beyond
+        ``FAR_SIGMAS`` standard deviations (see the module docstring). ``N = 0`` gives
+        empty arrays.
 
     Raises:
         ShapeError: on inconsistent shapes.
@@ -127,6 +159,13 @@ def _ruben_series(
     s: np.ndarray, d2: np.ndarray, x: np.ndarray, max_terms: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`ruben_series` without the argument checks."""
+    far = _far(s, d2, x)
+    if far.any():  # 0 to float64; the series would overflow
+        lower, upper = np.zeros(s.shape[0]), np.zeros(s.shape[0])
+        near = ~far
+        if near.any():
+            lower[near], upper[near] = _ruben_series(s[near], d2[near], x[near], max_terms)
+        return lower, upper
     n_dim = s.shape[1]
     beta = s.min(axis=1, keepdims=True)  # (N, 1)
     gamma = 1.0 - beta / s  # (N, 3) in [0, 1)
@@ -200,7 +239,8 @@ def imhof_cdf(s: np.ndarray, d2: np.ndarray, x: float) -> float:
         x: threshold [m^2].
 
     Returns:
-        The probability (absolute accuracy about 1e-8).
+        The probability (absolute accuracy about 1e-8); exactly 0 beyond ``FAR_SIGMAS``
+        standard deviations.
 
     Raises:
         ShapeError: when ``s`` and ``d2`` are not 1-D of one length.
@@ -218,6 +258,8 @@ def imhof_cdf(s: np.ndarray, d2: np.ndarray, x: float) -> float:
 
 def _imhof_cdf(s: np.ndarray, d2: np.ndarray, x: float) -> float:
     """:func:`imhof_cdf` without the argument checks."""
+    if _far(np.asarray(s), np.asarray(d2), np.asarray(x)):
+        return 0.0  # below Phi(-FAR_SIGMAS); the integral loses all accuracy out there
     lam = np.asarray(s, dtype=np.float64) / x  # scale so the threshold is 1
     nc = np.asarray(d2, dtype=np.float64) / np.asarray(s, dtype=np.float64)
 

@@ -48,6 +48,20 @@ to the ball) and ``s_max`` the largest variance, ``m >= gap / sqrt(s_max)``. Pai
 ``(4/3) pi R^3 (2 pi)^-1.5 det(Sigma)^-0.5 exp(-gap^2 / (2 s_max))``, which are upper bounds on
 the halfspace and volume bounds: pruning never lowers a bound; it raises the halfspace bound
 of a pruned pair to at most ``Phi(-prune_sigma)`` (about 1e-9 for 6).
+
+Inputs: every tensor is float32 or float64, all of one dtype and on one device (no
+promotion); the radii may also be Python floats. Half precision is refused: ``eigh`` does not
+take it, float16 flushes the variance floor to 0 and overflows squared distances beyond 256 m,
+and neither has the precision the solver's tolerance needs. Empty batches give empty results;
+an empty set of sphere pairs gives the bound 0 where it is maximised over
+(:func:`trajectory_collision_bound`).
+
+Far pairs: where the squared distance ``||mu - c||^2`` overflows the dtype (a distance beyond
+about 1.3e154 m in float64, 1.8e19 m in float32) the solver would return NaN. Such a pair gets
+the bounds of the Euclidean gap alone, ``m >= (sqrt(D) - R) / sqrt(s_max)`` with ``D`` a
+quarter of the dtype's largest value (below every overflowed square), as for pruning: 0 in
+practice, never below the pair's own bound, and without gradient (the gradient with respect
+to the centres is NaN only where a coordinate of ``mu - c`` itself overflows).
 """
 
 from __future__ import annotations
@@ -84,6 +98,9 @@ VAR_FLOOR = 1e-12
 #: Default pruning threshold in standard deviations (see the module docstring).
 DEFAULT_PRUNE_SIGMA = 6.0
 
+#: The dtypes the bounds compute in.
+DTYPES = (torch.float32, torch.float64)
+
 _LOG_2PI = math.log(2.0 * math.pi)
 _LOG_4PI_3 = math.log(4.0 * math.pi / 3.0)
 _METHODS = ("min", "volume", "halfspace")
@@ -95,6 +112,13 @@ def _check_choices(method: str, solver: str) -> None:
         raise ConfigError(f"expected method in {_METHODS}, got {method!r}")
     if solver not in _SOLVERS:
         raise ConfigError(f"expected solver in {_SOLVERS}, got {solver!r}")
+
+
+def _overflow_dist2(dtype: torch.dtype) -> float:
+    """A lower bound [m^2] on a squared distance that overflowed in ``dtype``: a quarter of
+    its largest value (the exact sum of the squares exceeds the largest value up to
+    rounding)."""
+    return torch.finfo(dtype).max / 4.0
 
 
 def _tolerance(dtype: torch.dtype) -> float:
@@ -227,6 +251,10 @@ def _pair_bounds(
 ) -> torch.Tensor:
     """Bound for every pair given squared eigen-coordinates ``d2`` and eigenvalues ``s``.
 
+    Pairs whose ``d2.sum(0)`` overflows skip the solver and get the bounds of the gap
+    ``sqrt(_overflow_dist2) - R`` (pruned: those of pruning); no gradient flows to their
+    ``d2``.
+
     Args:
         d2: (3, ...) squared components of ``U^T (mu - c)`` [m^2] (component first).
         s: (3, ...) covariance eigenvalues (variances) [m^2], broadcastable to ``d2``.
@@ -243,13 +271,18 @@ def _pair_bounds(
     log_vf = _log_volume_factor(R, log_det)  # (...) broadcastable
     shape = torch.broadcast_shapes(d2.shape[1:], s.shape[1:], R.shape)
     dist2 = d2.sum(0)  # (...)
+    # Overflowed squared distances (inf; NaN where a rotation met inf * 0) become a lower
+    # bound on the true ones; nan_to_num passes no gradient to them.
+    huge = ~torch.isfinite(dist2)  # (...)
+    low2 = _overflow_dist2(d2.dtype)
+    dist2 = dist2.nan_to_num(nan=low2, posinf=low2)
     outside = dist2 > R * R  # (shape)
     # Mean inside the ball: x_max = mu, m = 0, the half-space bound does not apply (1).
     if method == "halfspace":
         base = torch.ones(shape, dtype=d2.dtype, device=d2.device)
     else:
         base = torch.exp(log_vf.clamp_max(0.0)).expand(shape)
-    active = outside
+    active = outside & ~huge
     if prune_sigma is not None:
         # m >= gap / sqrt(s_max): pruned pairs get bounds that are never below their own.
         s_max = s.amax(0)
@@ -257,12 +290,22 @@ def _pair_bounds(
         near = gap <= prune_sigma * torch.sqrt(s_max)
         far = outside & ~near
         if method == "volume":
+            # the gap of far pairs only: sqrt's gradient at a mean on the centre would be NaN
+            gap = torch.sqrt(torch.where(far, dist2, R * R)) - R
             far_val = torch.exp((log_vf - 0.5 * gap.clamp_min(0.0).square() / s_max).clamp_max(0))
         else:
             far_val = torch.full((), 0.5 * math.erfc(prune_sigma * 0.5**0.5), dtype=d2.dtype)
             far_val = far_val.to(d2.device)
         base = torch.where(far, far_val, base)
-        active = outside & near
+        active = active & near
+    else:
+        # Overflowed pairs: m >= gap / sqrt(s_max) as for pruning, with their common lower
+        # bound on the distance, so on the shape of R and s only (no gradient: the bound of a
+        # pair this far is constant to rounding).
+        with torch.no_grad():
+            gap = math.sqrt(low2) - R
+            far_val = _combine(gap.square() / s.amax(0), log_vf, method)
+        base = torch.where(outside & huge, far_val, base)
     idx = active.reshape(-1).nonzero().squeeze(1)  # (N_act,) flat indices of active pairs
     if idx.numel() == 0:
         return base.expand(shape)
@@ -312,18 +355,21 @@ def _as_radius(name: str, radius: torch.Tensor | float, like: torch.Tensor) -> t
     raise ShapeError(f"expected {name} to be a torch.Tensor or a float, got {kind}")
 
 
-def _check_tensors(tensors: dict[str, torch.Tensor], same_dtype: tuple[str, ...]) -> None:
-    """Every tensor floating point on the first one's device; those named in ``same_dtype``
-    also of the first one's dtype (the others are promoted or converted)."""
+def _check_tensors(tensors: dict[str, torch.Tensor]) -> None:
+    """Every tensor of a dtype in :data:`DTYPES`, of the first one's dtype and on its device
+    (no promotion: mixed dtypes are refused, naming both)."""
     ref_name, ref = next(iter(tensors.items()))
     for name, t in tensors.items():
         if not isinstance(t, torch.Tensor):
             raise ShapeError(f"expected {name} to be a torch.Tensor, got {type(t).__name__}")
-        if not t.is_floating_point():
-            raise ShapeError(f"expected {name} of a floating dtype, got {t.dtype}")
+        if t.dtype not in DTYPES:
+            raise ShapeError(
+                f"expected {name} of a floating dtype (torch.float32 or torch.float64), "
+                f"got {t.dtype}"
+            )
         if t.device != ref.device:
             raise ShapeError(f"expected {name} on {ref.device} (as {ref_name}), got {t.device}")
-        if name in same_dtype and t.dtype != ref.dtype:
+        if t.dtype != ref.dtype:
             raise ShapeError(f"expected {name} {ref.dtype} (as {ref_name}), got {t.dtype}")
 
 
@@ -410,7 +456,7 @@ def _checked_pair_args(
         name: (value, 2 if full else 1),
         "human_radius": (human_r, 0),
     }
-    _check_tensors({n: t for n, (t, _) in args.items()}, same_dtype=("mean", name))
+    _check_tensors({n: t for n, (t, _) in args.items()})
     rank = len(_broadcast_batch(args))
     R = robot_r + human_r
     checks = [_finite(n, t) for n, (t, _) in args.items()]
@@ -436,17 +482,24 @@ def sphere_collision_bound(
     Bounds ``P(||X - c|| <= r1 + r2)``, ``X ~ N(mean, cov)``, by eq. approx_sphere_collision
     with the ball's volume ``(4/3) pi R^3`` (the paper prints ``R^2``; see the module
     docstring), by the half-space bound ``Phi(-m)``, or by their minimum. Leading dimensions
-    broadcast. Differentiable with respect to ``robot_center`` and ``mean``.
+    broadcast; an empty batch gives an empty result. Differentiable with respect to
+    ``robot_center`` and ``mean``.
+
+    A pair whose squared distance ``||mean - robot_center||^2`` overflows the dtype (a
+    distance beyond about 1.3e154 m in float64, 1.8e19 m in float32) gets the bound of the
+    Euclidean gap alone, 0 in practice, with no gradient (see the module docstring).
 
     Args:
-        robot_center: (..., 3) robot sphere centres [m].
-        robot_radius: (...) robot sphere radii [m], or a float.
+        robot_center: (..., 3) robot sphere centres [m], float32 or float64.
+        robot_radius: (...) robot sphere radii [m], dtype and device of ``robot_center``, or
+            a float.
         mean: (..., 3) mean of the human sphere centre [m], dtype and device of
             ``robot_center``.
         cov: (..., 3, 3) covariance of the human sphere centre [m^2], symmetric positive
             (semi)definite, dtype and device of ``robot_center``; eigenvalues below
             ``VAR_FLOOR`` are raised to it.
-        human_radius: (...) human sphere radii [m], or a float.
+        human_radius: (...) human sphere radii [m], dtype and device of ``robot_center``, or
+            a float.
         method: ``"min"`` (default), ``"volume"`` or ``"halfspace"``.
         solver: ``"newton"`` (default) or the paper's ``"bisection"`` (reference, no exact
             gradient through the multiplier).
@@ -458,7 +511,9 @@ def sphere_collision_bound(
 
     Raises:
         ShapeError: on wrong trailing dimensions, leading dimensions that do not broadcast,
-            a non-floating dtype, mixed devices or dtypes, or non-positive radius sums.
+            a dtype other than float32 and float64 (half precision and integers included),
+            tensors of mixed devices or dtypes (no promotion: the message names both), or
+            non-positive radius sums.
         DataError: on NaN or Inf in any argument, or a covariance with a negative eigenvalue.
         ConfigError: on an unknown method or solver, or ``prune_sigma <= 0``.
     """
@@ -488,14 +543,18 @@ def sphere_collision_bound_diag(
 ) -> torch.Tensor:
     """:func:`sphere_collision_bound` for diagonal covariances (no eigendecomposition).
 
+    Empty batches and far pairs as :func:`sphere_collision_bound`.
+
     Args:
-        robot_center: (..., 3) robot sphere centres [m].
-        robot_radius: (...) robot sphere radii [m], or a float.
+        robot_center: (..., 3) robot sphere centres [m], float32 or float64.
+        robot_radius: (...) robot sphere radii [m], dtype and device of ``robot_center``, or
+            a float.
         mean: (..., 3) mean of the human sphere centre [m], dtype and device of
             ``robot_center``.
         var: (..., 3) per-axis variances of the human sphere centre [m^2], >= 0, dtype and
             device of ``robot_center``.
-        human_radius: (...) human sphere radii [m], or a float.
+        human_radius: (...) human sphere radii [m], dtype and device of ``robot_center``, or
+            a float.
         method: ``"min"`` (default), ``"volume"`` or ``"halfspace"``.
         solver: ``"newton"`` (default) or ``"bisection"`` (reference).
         prune_sigma: see :func:`sphere_collision_bound`.
@@ -528,9 +587,15 @@ def max_density_point(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``x_max``, the point of the ball ``||x - c|| <= radius`` with the highest density.
 
+    An empty batch gives empty results. The squared distance ``||mean - robot_center||^2``
+    must not overflow the dtype (a distance up to about 1.3e154 m in float64, 1.8e19 m in
+    float32): beyond, the solver's squared distances overflow, and unlike the bounds (0 for
+    such pairs) ``x_max`` has no cheap substitute.
+
     Args:
-        robot_center: (..., 3) ball centre ``c`` [m].
-        radius: (...) ball radius ``R = r1 + r2`` [m], > 0, or a float.
+        robot_center: (..., 3) ball centre ``c`` [m], float32 or float64.
+        radius: (...) ball radius ``R = r1 + r2`` [m], > 0, dtype and device of
+            ``robot_center``, or a float.
         mean: (..., 3) Gaussian mean [m], dtype and device of ``robot_center``.
         cov: (..., 3, 3) Gaussian covariance [m^2], symmetric positive (semi)definite, dtype
             and device of ``robot_center``.
@@ -542,8 +607,10 @@ def max_density_point(
 
     Raises:
         ShapeError: on wrong trailing dimensions, leading dimensions that do not broadcast,
-            a non-floating dtype, mixed devices or dtypes, or a non-positive radius.
-        DataError: on NaN or Inf in any argument, or a covariance with a negative eigenvalue.
+            a dtype other than float32 and float64, tensors of mixed devices or dtypes, or a
+            non-positive radius.
+        DataError: on NaN or Inf in any argument, a covariance with a negative eigenvalue,
+            or a mean too far from the centre (see above).
         ConfigError: on an unknown solver.
     """
     _check_choices("min", solver)
@@ -557,7 +624,7 @@ def max_density_point(
         "mean": (mean, 1),
         "cov": (cov, 2),
     }
-    _check_tensors({n: t for n, (t, _) in args.items()}, same_dtype=("mean", "cov"))
+    _check_tensors({n: t for n, (t, _) in args.items()})
     _broadcast_batch(args)
     checks = [_finite(n, t) for n, (t, _) in args.items()]
     _run_checks(checks + [_radius_sum_positive(radius, "radius")])
@@ -569,9 +636,18 @@ def max_density_point(
     s = s.expand(batch + (3,))
     d = torch.einsum("...ji,...j->...i", U, diff.expand(batch + (3,)))  # (..., 3)
     R = radius.expand(batch)
-    outside = (d * d).sum(-1) > R * R
+    dist2 = (d * d).sum(-1)  # (...)
+    outside = dist2 > R * R
+    in_range = torch.isfinite(dist2)
+    any_outside, all_in_range = torch.stack([outside.any(), in_range.all()]).tolist()
+    if not all_in_range:
+        limit = math.sqrt(torch.finfo(d.dtype).max)
+        raise DataError(
+            f"expected ||mean - robot_center|| < {limit:.1e} m in {d.dtype} (its square "
+            f"overflows beyond), got {int((~in_range).sum())} of {dist2.numel()} pairs farther"
+        )
     lam = torch.zeros(batch, dtype=d.dtype, device=d.device)
-    if bool(outside.any()):
+    if any_outside:
         args = (d[outside].T ** 2, s[outside].T, R[outside])  # (3, N), (3, N), (N,)
         lam_a = _solve_newton(*args) if solver == "newton" else _solve_bisection(*args)
         lam = lam.masked_scatter(outside, lam_a)
@@ -605,8 +681,12 @@ def pairwise_bound_matrix(
     Entry ``[b, w, j, l]`` is ``sum_a weights[a] * bound(robot sphere j of trajectory b at
     waypoint w, human sphere l of action a at waypoint w)``.
 
+    Every tensor has the dtype and device of ``robot_centers``. Any of B, W, S_r, S_h may be
+    0 (the result is then empty); with A = 0 (no action) every entry is 0. Far pairs as
+    :func:`sphere_collision_bound`.
+
     Args:
-        robot_centers: (B, W, S_r, 3) robot sphere centres [m].
+        robot_centers: (B, W, S_r, 3) robot sphere centres [m], float32 or float64.
         robot_radii: (S_r,) robot sphere radii [m].
         human_mean: (W, A, S_h, 3) mean human sphere centres per action [m].
         human_cov: (W, A, S_h, 3, 3) covariances [m^2], or (W, A, S_h, 3) per-axis variances
@@ -622,8 +702,9 @@ def pairwise_bound_matrix(
         (B, W, S_r, S_h) mixture bounds (may exceed 1 only by rounding; each term is <= 1).
 
     Raises:
-        ShapeError: on inconsistent shapes, a non-floating dtype, mixed devices, human
-            tensors of another dtype than ``robot_centers``, or non-positive radius sums.
+        ShapeError: on inconsistent shapes, a dtype other than float32 and float64, tensors
+            of mixed devices or dtypes (no promotion: the message names both), or
+            non-positive radius sums.
         DataError: on NaN or Inf in any argument, negative variances, a covariance with a
             negative eigenvalue, or weights that are negative or sum to more than 1.
         ConfigError: on an unknown method, ``prune_sigma <= 0`` or a non-positive chunk size.
@@ -650,8 +731,8 @@ def pairwise_bound_matrix(
         "human_radii": human_radii,
         "weights": weights,
     }
-    _check_tensors(tensors, same_dtype=("human_mean", "human_cov"))
-    w = _weights_per_waypoint(weights, W, A).to(robot_centers.dtype)  # (W, A)
+    _check_tensors(tensors)
+    w = _weights_per_waypoint(weights, W, A)  # (W, A)
     R = robot_radii[:, None, None] + human_radii[None, None, :]  # (S_r, 1, S_h)
     w_tol = 1.0 + torch.finfo(w.dtype).eps ** 0.5
     w_sum = w.sum(-1)  # (W,)
@@ -695,6 +776,8 @@ def pairwise_bound_matrix(
             prune_sigma=prune_sigma,
         )  # (b, W, S_r, A, S_h)
         out.append(torch.einsum("bwral,wa->bwrl", p, w))
+    if not out:  # B = 0
+        return robot_centers.new_zeros((0, W, S_r, S_h))
     return torch.cat(out, dim=0)
 
 
@@ -714,10 +797,12 @@ def trajectory_collision_bound(
     """Collision-probability bound per trajectory and waypoint (eq. max_collision_probability).
 
     ``max_{j, l} sum_a weights[a] * bound(robot sphere j, human sphere l of action a)``: the
-    mixture over actions of the pair bounds, maximised over sphere pairs.
+    mixture over actions of the pair bounds, maximised over sphere pairs. With no sphere pair
+    (S_r = 0 or S_h = 0) the bound is 0 (nothing can collide); B = 0 or W = 0 give an empty
+    result. Inputs as :func:`pairwise_bound_matrix`.
 
     Args:
-        robot_centers: (B, W, S_r, 3) robot sphere centres [m].
+        robot_centers: (B, W, S_r, 3) robot sphere centres [m], float32 or float64.
         robot_radii: (S_r,) robot sphere radii [m].
         human_mean: (W, A, S_h, 3) mean human sphere centres per action [m].
         human_cov: (W, A, S_h, 3, 3) covariances [m^2] or (W, A, S_h, 3) variances [m^2].
@@ -754,4 +839,6 @@ def trajectory_collision_bound(
     )
     if reduce == "none":
         return pair
+    if pair.shape[2] == 0 or pair.shape[3] == 0:  # no sphere pair: the maximum of none is 0
+        return pair.new_zeros(pair.shape[:2])
     return pair.flatten(2).amax(-1).clamp(0.0, 1.0)

@@ -42,8 +42,8 @@ class HumanSphereMap:
 
     Raises:
         ShapeError: on wrong shapes or a ``names`` of another length.
-        ConfigError: on a row that is negative somewhere or does not sum to 1, or a radius
-            that is not finite and > 0.
+        ConfigError: on no sphere or no joint, a row that is negative somewhere or does not
+            sum to 1, or a radius that is not finite and > 0.
     """
 
     def __init__(
@@ -56,6 +56,8 @@ class HumanSphereMap:
         check_shape("radii", radii, (matrix.shape[0],))
         if matrix.shape[0] == 0:
             raise ConfigError("expected at least one sphere in the sphere map")
+        if matrix.shape[1] == 0:
+            raise ConfigError("expected at least one joint in the sphere map")
         if not torch.allclose(matrix.sum(-1), torch.ones_like(matrix[:, 0]), atol=1e-5):
             raise ConfigError("expected every row of the sphere map to sum to 1")
         if bool((matrix < 0).any()):

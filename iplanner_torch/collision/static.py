@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from iplanner_torch.checks import finite, finite_tuple
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.types import check_shape
 
@@ -79,7 +80,16 @@ def sphere_plane_distance(
 
 @dataclass(frozen=True, kw_only=True)
 class Box:
-    """An oriented box obstacle."""
+    """An oriented box obstacle.
+
+    The numbers are checked and stored as tuples of floats at construction.
+
+    Raises:
+        ConfigError: when ``center`` or a row of ``rotation`` is not 3 finite numbers (a
+            string, NaN, inf or a bool included), ``rotation`` has not 3 rows, or
+            ``half_extents`` are not 3 finite numbers > 0; the message names the field and
+            the box.
+    """
 
     center: tuple[float, float, float]  # box centre [m], world frame
     half_extents: tuple[float, float, float]  # half side lengths [m]
@@ -91,25 +101,46 @@ class Box:
     name: str = "box"  # label in logs
 
     def __post_init__(self) -> None:
-        if len(self.center) != 3 or len(self.half_extents) != 3:
-            raise ConfigError(f"expected 3 values for center and half_extents of {self.name}")
-        if min(self.half_extents) <= 0:
-            raise ConfigError(f"expected positive half_extents, got {self.half_extents}")
-        if len(self.rotation) != 3 or any(len(r) != 3 for r in self.rotation):
-            raise ConfigError(f"expected a 3x3 rotation for {self.name}")
+        label = f"({self.name!r})"
+        center = finite_tuple(f"Box.center {label}", self.center, 3)
+        half = finite_tuple(f"Box.half_extents {label}", self.half_extents, 3)
+        if min(half) <= 0:
+            raise ConfigError(f"expected positive Box.half_extents {label}, got {half}")
+        rows = self.rotation
+        if isinstance(rows, (str, bytes)) or not hasattr(rows, "__len__") or len(rows) != 3:
+            raise ConfigError(f"expected Box.rotation {label} a 3x3 rotation, got {rows!r}")
+        rotation = tuple(
+            finite_tuple(f"Box.rotation[{i}] {label}", row, 3) for i, row in enumerate(rows)
+        )
+        object.__setattr__(self, "center", center)
+        object.__setattr__(self, "half_extents", half)
+        object.__setattr__(self, "rotation", rotation)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Plane:
-    """A half-space obstacle ``normal . x <= offset`` (e.g. the floor)."""
+    """A half-space obstacle ``normal . x <= offset`` (e.g. the floor).
+
+    The numbers are checked and stored as floats at construction.
+
+    Raises:
+        ConfigError: when ``normal`` is not 3 finite numbers (a string, NaN, inf or a bool
+            included) or is zero, or ``offset`` is not a finite number; the message names the
+            field and the plane.
+    """
 
     normal: tuple[float, float, float]  # outward normal (normalised when used)
     offset: float  # plane offset along the normal [m]
     name: str = "plane"  # label in logs
 
     def __post_init__(self) -> None:
-        if len(self.normal) != 3 or all(v == 0 for v in self.normal):
-            raise ConfigError(f"expected a non-zero 3-vector normal, got {self.normal}")
+        label = f"({self.name!r})"
+        normal = finite_tuple(f"Plane.normal {label}", self.normal, 3)
+        if all(v == 0 for v in normal):
+            raise ConfigError(f"expected a non-zero Plane.normal {label}, got {self.normal!r}")
+        offset = finite(f"Plane.offset {label}", self.offset)
+        object.__setattr__(self, "normal", normal)
+        object.__setattr__(self, "offset", offset)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -120,6 +151,15 @@ class StaticScene:
     planes: tuple[Plane, ...] = field(default_factory=tuple)  # half-spaces
 
     def __post_init__(self) -> None:
+        for field_name, kind in (("boxes", Box), ("planes", Plane)):
+            items = getattr(self, field_name)
+            if not isinstance(items, (tuple, list)) or not all(
+                isinstance(item, kind) for item in items
+            ):
+                raise ConfigError(
+                    f"expected StaticScene.{field_name} a tuple of {kind.__name__} objects, "
+                    f"got {items!r}"
+                )
         if not self.boxes and not self.planes:
             raise ConfigError("expected at least one box or plane in a StaticScene")
 

@@ -140,3 +140,36 @@ def test_series_and_imhof_arguments_are_checked() -> None:
     with pytest.raises(ShapeError, match=r"expected s \(n,\) and d2 \(n,\)"):
         imhof_cdf(s, d2, 0.09)
     assert imhof_cdf(s[0], d2[0], 0.09) == pytest.approx(float(ruben_series(s, d2, x)[1][0]))
+
+
+@pytest.mark.parametrize("far", [1e3, 1e4, 1e20, 1e100, 1e155, 1e300])
+def test_far_cases_are_zero(far: float) -> None:
+    """Beyond FAR_SIGMAS standard deviations the probability is 0 in float64: Imhof's
+    integral returned up to 0.5 from about 1e4 standard deviations and failed with a
+    ValueError (math domain error) beyond 1e154 m; Ruben's series returned NaN beyond about
+    1e100 standard deviations."""
+    c = torch.zeros(2, 3, dtype=F64)
+    mu = torch.tensor([[0.3, 0.0, 0.0], [far, 0.0, 0.0]], dtype=F64)
+    cov = torch.eye(3, dtype=F64) * 0.01
+    near = exact_ball_probability(c[:1], 0.1, mu[:1], cov, method="ruben")
+    for method in ("imhof", "ruben", "mc"):
+        p = exact_ball_probability(c, 0.1, mu, cov, method=method, n_mc=1000)
+        assert p[1] == 0.0, method
+    lower, upper = ruben_ball_probability(c, 0.1, mu, cov)
+    assert lower[1] == 0.0 and upper[1] == 0.0
+    assert upper[0] == near[0]  # the near case keeps its value
+    d2 = np.array([min(far, 1e100) ** 2, 0.0, 0.0])  # finite: imhof_cdf checks it
+    assert imhof_cdf(np.full(3, 0.01), d2, 0.01) == 0.0
+    assert ruben_series(np.full((1, 3), 0.01), d2[None], np.full(1, 0.01))[1][0] == 0.0
+
+
+def test_far_float32_input_is_zero_and_empty_batches_are_empty() -> None:
+    """A float32 mean 1e20 m away (converted to float64) gave 0.5 by Imhof's integral."""
+    p = exact_ball_probability(
+        torch.zeros(1, 3), 0.1, torch.tensor([[1e20, 0.0, 0.0]]), torch.eye(3) * 0.01
+    )
+    assert p.dtype == F64 and p.item() == 0.0
+    empty = torch.zeros(0, 3, dtype=F64)
+    for method in ("imhof", "ruben", "mc"):
+        got = exact_ball_probability(empty, 0.1, empty, torch.eye(3, dtype=F64), method=method)
+        assert got.shape == (0,)

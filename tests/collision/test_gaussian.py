@@ -4,6 +4,7 @@ gradients, and the mixture / maximum over sphere pairs."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -463,3 +464,203 @@ def test_shared_covariance_and_radius_broadcast() -> None:
     torch.testing.assert_close(
         G.sphere_collision_bound_diag(c, radii, m, torch.diagonal(cov), 0.05), loop
     )
+
+
+def _traj_args(gen: torch.Generator, diag: bool, dtype=F64, **sizes) -> dict[str, torch.Tensor]:
+    """Arguments of trajectory_collision_bound by name, with diagonal or full covariances."""
+    rc, rr, hm, hv, hr, w = _problem(gen, dtype=dtype, **sizes)
+    return dict(
+        robot_centers=rc,
+        robot_radii=rr,
+        human_mean=hm,
+        human_cov=hv if diag else torch.diag_embed(hv),
+        human_radii=hr,
+        weights=w,
+    )
+
+
+@pytest.mark.parametrize("diag", [True, False])
+def test_empty_batch_gives_empty_results(diag: bool) -> None:
+    """B = 0 used to fail in torch.cat; every entry point returns an empty tensor."""
+    args = _traj_args(torch.Generator().manual_seed(20), diag, B=0)
+    pair = G.pairwise_bound_matrix(**args)
+    assert pair.shape == (0, 4, 5, 4) and pair.dtype == F64
+    assert G.trajectory_collision_bound(**args).shape == (0, 4)
+    assert G.trajectory_collision_bound(**args, reduce="none").shape == (0, 4, 5, 4)
+    assert G.trajectory_collision_bound(**args, prune_sigma=None).shape == (0, 4)
+    empty = torch.zeros(0, 3, dtype=F64)
+    cov = torch.eye(3, dtype=F64) * 0.01
+    assert G.sphere_collision_bound(empty, 0.05, empty, cov, 0.05).shape == (0,)
+    assert G.sphere_collision_bound_diag(empty, 0.05, empty, torch.diagonal(cov), 0.05).shape == (
+        0,
+    )
+    x, lam = G.max_density_point(empty, 0.1, empty, cov)
+    assert x.shape == (0, 3) and lam.shape == (0,)
+
+
+@pytest.mark.parametrize("diag", [True, False])
+@pytest.mark.parametrize("sizes", [{"S_r": 0}, {"S_h": 0}])
+def test_no_sphere_pair_gives_zero_bound(diag: bool, sizes: dict[str, int]) -> None:
+    """No robot or no human sphere: nothing can collide, the bound is 0 (the maximum over no
+    pair used to fail in amax)."""
+    args = _traj_args(torch.Generator().manual_seed(21), diag, **sizes)
+    B, W, S_r, _ = args["robot_centers"].shape
+    S_h = args["human_mean"].shape[2]
+    got = G.trajectory_collision_bound(**args)
+    assert got.shape == (B, W) and got.dtype == F64
+    assert torch.equal(got, torch.zeros(B, W, dtype=F64))
+    pair = G.trajectory_collision_bound(**args, reduce="none", prune_sigma=None)
+    assert pair.shape == (B, W, S_r, S_h)
+    assert torch.equal(pair, torch.zeros_like(pair))
+
+
+@pytest.mark.parametrize("diag", [True, False])
+def test_no_waypoint_or_no_action(diag: bool) -> None:
+    """No waypoint: an empty (B, 0); no action (A = 0, empty weights): 0 everywhere."""
+    gen = torch.Generator().manual_seed(25)
+    assert G.trajectory_collision_bound(**_traj_args(gen, diag, W=0)).shape == (3, 0)
+    got = G.trajectory_collision_bound(**_traj_args(gen, diag, A=0))
+    assert torch.equal(got, torch.zeros(3, 4, dtype=F64))
+
+
+@pytest.mark.parametrize(
+    "name", ["robot_radius", "human_radius", "radius", "robot_radii", "human_radii", "weights"]
+)
+def test_mixed_dtypes_raise_shape_error_naming_both(name: str) -> None:
+    """A float64 radius or weight with float32 centres used to be promoted in one entry point
+    and a raw RuntimeError in others; every entry point now refuses it by name."""
+    pattern = rf"expected {name} torch\.float32 \(as robot_centers?\), got torch\.float64"
+    if name in ("robot_radii", "human_radii", "weights"):
+        for diag in (True, False):
+            args = _traj_args(torch.Generator().manual_seed(22), diag, dtype=torch.float32)
+            args[name] = args[name].double()
+            with pytest.raises(ShapeError, match=pattern):
+                G.pairwise_bound_matrix(**args)
+            with pytest.raises(ShapeError, match=pattern):
+                G.trajectory_collision_bound(**args)
+        return
+    args = {k: v.float() for k, v in _pair().items()}
+    R = args["robot_radius"] + args["human_radius"]
+    if name == "radius":
+        with pytest.raises(ShapeError, match=pattern):
+            G.max_density_point(args["robot_center"], R.double(), args["mean"], args["cov"])
+        return
+    args[name] = args[name].double()
+    with pytest.raises(ShapeError, match=pattern):
+        G.sphere_collision_bound(**args)
+    with pytest.raises(ShapeError, match=pattern):
+        G.sphere_collision_bound_diag(**_diag(args))
+    # Python floats are converted to the dtype of the centres
+    b = G.sphere_collision_bound(**{**args, name: 0.05})
+    assert b.dtype == torch.float32
+
+
+@pytest.mark.parametrize(
+    "dtype", [torch.float16, torch.bfloat16, torch.int64, torch.int32, torch.bool]
+)
+def test_unsupported_dtypes_raise_shape_error(dtype: torch.dtype) -> None:
+    """Half precision used to fail inside eigh (NotImplementedError) or, with variances,
+    compute in half precision (float16 floors no variance: 1e-12 underflows); every entry
+    point names the two supported dtypes."""
+    pattern = r"expected robot_centers? of a floating dtype \(torch\.float32 or torch\.float64\)"
+    args = {k: v.to(dtype) for k, v in _pair().items()}
+    with pytest.raises(ShapeError, match=pattern):
+        G.sphere_collision_bound(**args)
+    with pytest.raises(ShapeError, match=pattern):
+        G.sphere_collision_bound_diag(**_diag(args))
+    with pytest.raises(ShapeError, match=pattern):
+        G.max_density_point(args["robot_center"], 0.1, args["mean"], args["cov"])
+    targs = {
+        k: v.to(dtype) for k, v in _traj_args(torch.Generator().manual_seed(23), True).items()
+    }
+    with pytest.raises(ShapeError, match=pattern):
+        G.trajectory_collision_bound(**targs)
+    with pytest.raises(ShapeError, match=pattern):
+        G.pairwise_bound_matrix(**targs)
+    # one half-precision argument among float64 ones is named
+    with pytest.raises(ShapeError, match=r"expected cov of a floating dtype"):
+        G.sphere_collision_bound(**{**_pair(), "cov": _pair()["cov"].to(dtype)})
+
+
+@pytest.mark.parametrize("method", ["min", "volume", "halfspace"])
+@pytest.mark.parametrize("prune_sigma", [None, 6.0])
+@pytest.mark.parametrize(("dtype", "far"), [(torch.float32, 1e20), (torch.float64, 1e155)])
+def test_far_means_give_zero_not_nan(
+    method: str, prune_sigma: float | None, dtype: torch.dtype, far: float
+) -> None:
+    """A mean so far that its squared distance overflows used to give NaN without pruning;
+    the bound of such a pair is that of its Euclidean gap: 0 (the pruned bound with
+    pruning), with finite gradients, and its neighbours keep their bounds."""
+    args = {k: v.to(dtype) for k, v in _pair(3).items()}
+    near = G.sphere_collision_bound(**args, method=method, prune_sigma=prune_sigma)
+    mean = args["mean"].clone()
+    mean[1, 0] = far
+    mean[2] = -far
+    mean.requires_grad_(True)
+    center = args["robot_center"].clone().requires_grad_(True)
+    kw = dict(method=method, prune_sigma=prune_sigma)
+    pruned = 0.5 * math.erfc(6.0 / math.sqrt(2.0)) if method != "volume" else 0.0
+    want = 0.0 if prune_sigma is None else pruned
+    for fn, spread in (
+        (G.sphere_collision_bound, args["cov"]),
+        (G.sphere_collision_bound_diag, _diag(args)["var"]),
+    ):
+        for solver in ("newton", "bisection"):
+            b = fn(
+                center,
+                args["robot_radius"],
+                mean,
+                spread,
+                args["human_radius"],
+                solver=solver,
+                **kw,
+            )
+            assert torch.isfinite(b).all()
+            assert b[0] == near[0]
+            torch.testing.assert_close(
+                b[1:], torch.full((2,), want, dtype=dtype), rtol=1e-6, atol=0
+            )
+            b.sum().backward()
+            assert torch.isfinite(mean.grad).all() and torch.isfinite(center.grad).all()
+            mean.grad = center.grad = None
+    gen = torch.Generator().manual_seed(24)
+    for diag in (True, False):
+        targs = _traj_args(gen, diag, dtype=dtype)
+        targs["human_mean"] = targs["human_mean"].clone()
+        targs["human_mean"][:, 0] = far  # every human sphere of action 0 far away
+        got = G.trajectory_collision_bound(**targs, **kw)
+        assert torch.isfinite(got).all() and bool(((got >= 0) & (got <= 1)).all())
+        targs["weights"] = torch.zeros_like(targs["weights"])
+        targs["weights"][:, 0] = 1.0  # only the far action
+        only_far = G.trajectory_collision_bound(**targs, **kw)
+        torch.testing.assert_close(only_far, torch.full_like(only_far, want), rtol=1e-6, atol=0)
+
+
+@pytest.mark.parametrize(
+    ("dtype", "limit"), [(torch.float32, "1.8e+19"), (torch.float64, "1.3e+154")]
+)
+def test_max_density_point_refuses_overflowing_distances(dtype: torch.dtype, limit: str) -> None:
+    """x_max of a mean whose squared distance overflows used to be NaN."""
+    args = {k: v.to(dtype) for k, v in _pair(2).items()}
+    mean = args["mean"].clone()
+    mean[1, 0] = 1e20 if dtype == torch.float32 else 1e155
+    limit_m = re.escape(f"{limit} m in {dtype}")
+    pattern = rf"expected \|\|mean - robot_center\|\| < {limit_m}.*got 1 of 2 pairs"
+    with pytest.raises(DataError, match=pattern):
+        G.max_density_point(args["robot_center"], 0.1, mean, args["cov"])
+    # just inside the limit x_max is finite, on the sphere, towards the mean
+    mean[1, 0] = 0.5 * float(limit)
+    x, lam = G.max_density_point(args["robot_center"], 0.1, mean, args["cov"])
+    assert torch.isfinite(x).all() and torch.isfinite(lam).all()
+    r = torch.linalg.vector_norm(x[1] - args["robot_center"][1])
+    torch.testing.assert_close(r, torch.tensor(0.1, dtype=dtype))
+
+
+def test_volume_bound_gradient_is_finite_with_the_mean_on_the_centre() -> None:
+    """With pruning, a mean exactly on the robot sphere's centre gave NaN gradients (the
+    far-pair gap's square root at 0, multiplied by a zero weight)."""
+    args = _pair(2)
+    mean = args["robot_center"].clone().requires_grad_(True)
+    b = G.sphere_collision_bound(**{**args, "mean": mean}, method="volume", prune_sigma=6.0)
+    b.sum().backward()
+    assert torch.isfinite(mean.grad).all()

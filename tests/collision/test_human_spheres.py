@@ -234,6 +234,12 @@ def test_map_errors() -> None:
         HumanSphereMap(eye, torch.ones(2), names=["a"])
 
 
+def test_map_without_joints_raises_config_error() -> None:
+    """A (S_h, 0) map used to fail with an IndexError."""
+    with pytest.raises(ConfigError, match="expected at least one joint in the sphere map"):
+        HumanSphereMap(torch.zeros(2, 0), torch.ones(2))
+
+
 @pytest.mark.parametrize("bad", [math.nan, math.inf])
 @pytest.mark.parametrize("name", ["mean", "cov", "var"])
 def test_non_finite_input_raises_data_error(name: str, bad: float) -> None:

@@ -77,9 +77,62 @@ def test_plane_and_scene_clearance_and_gradient() -> None:
 
 
 def test_errors() -> None:
-    with pytest.raises(ConfigError, match="positive half_extents"):
+    with pytest.raises(ConfigError, match=r"positive Box\.half_extents"):
         Box(center=(0, 0, 0), half_extents=(0.1, 0.0, 0.1))
     with pytest.raises(ConfigError, match="at least one"):
         StaticScene()
     with pytest.raises(ShapeError, match="expected box_center"):
         sphere_box_distance(torch.zeros(2, 3), torch.zeros(2), torch.zeros(2), torch.ones(3))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "pattern"),
+    [
+        ({"center": (math.nan, 0.0, 0.0)}, r"Box\.center \('table'\) a sequence of 3 finite"),
+        ({"center": "abc"}, r"Box\.center \('table'\) a sequence of 3 finite numbers, got 'abc'"),
+        ({"center": (0.0, 0.0)}, r"Box\.center \('table'\)"),
+        ({"half_extents": (0.1, math.nan, 0.1)}, r"Box\.half_extents \('table'\)"),
+        ({"half_extents": (0.1, math.inf, 0.1)}, r"Box\.half_extents \('table'\)"),
+        ({"half_extents": (0.1, -0.1, 0.1)}, r"positive Box\.half_extents \('table'\)"),
+        ({"rotation": ((1.0, 0.0, 0.0), (0.0, math.nan, 0.0), (0.0, 0.0, 1.0))}, r"rotation\[1\]"),
+        ({"rotation": ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))}, r"Box\.rotation \('table'\) a 3x3"),
+        ({"rotation": "eye"}, r"Box\.rotation \('table'\) a 3x3"),
+    ],
+)
+def test_box_refuses_non_finite_or_malformed_fields(kwargs: dict, pattern: str) -> None:
+    """NaN centres, sizes and rotations used to be accepted (and give NaN distances)."""
+    fields = {"center": (0.0, 0.0, 0.0), "half_extents": (0.1, 0.2, 0.3), "name": "table"}
+    with pytest.raises(ConfigError, match=pattern):
+        Box(**{**fields, **kwargs})
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "pattern"),
+    [
+        ({"normal": (0.0, math.nan, 1.0)}, r"Plane\.normal \('floor'\) a sequence of 3 finite"),
+        ({"normal": "xyz"}, r"Plane\.normal \('floor'\) a sequence of 3 finite .* got 'xyz'"),
+        ({"normal": (True, False, False)}, r"Plane\.normal \('floor'\)"),
+        ({"normal": (0.0, 0.0, 0.0)}, r"non-zero Plane\.normal \('floor'\)"),
+        ({"offset": math.nan}, r"Plane\.offset \('floor'\) a finite number, got nan"),
+        ({"offset": math.inf}, r"Plane\.offset \('floor'\) a finite number, got inf"),
+        ({"offset": "0.1"}, r"Plane\.offset \('floor'\) a finite number, got '0.1'"),
+    ],
+)
+def test_plane_refuses_non_finite_or_malformed_fields(kwargs: dict, pattern: str) -> None:
+    """NaN normals and offsets and a string normal used to be accepted."""
+    fields = {"normal": (0.0, 0.0, 1.0), "offset": -0.75, "name": "floor"}
+    with pytest.raises(ConfigError, match=pattern):
+        Plane(**{**fields, **kwargs})
+
+
+def test_fields_are_stored_as_floats_and_scenes_take_only_obstacles() -> None:
+    box = Box(center=[0, 0, 1], half_extents=[1, 2, 3], rotation=[[1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    assert box.center == (0.0, 0.0, 1.0) and isinstance(box.center[0], float)
+    assert box.rotation == ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    assert hash(box) == hash(Box(center=(0.0, 0.0, 1.0), half_extents=(1.0, 2.0, 3.0)))
+    plane = Plane(normal=[0, 0, 2], offset=1)
+    assert plane.normal == (0.0, 0.0, 2.0) and isinstance(plane.offset, float)
+    with pytest.raises(ConfigError, match=r"StaticScene\.boxes a tuple of Box objects"):
+        StaticScene(boxes=(plane,))
+    with pytest.raises(ConfigError, match=r"StaticScene\.planes a tuple of Plane objects"):
+        StaticScene(planes=plane)  # type: ignore[arg-type]
