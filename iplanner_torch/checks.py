@@ -3,6 +3,7 @@
 Configs (``__post_init__``) and public functions check their number arguments with these:
 
 - :func:`finite`, :func:`positive`, :func:`non_negative`: a real number (not a bool);
+- :func:`is_real`: the test they use, for fields whose range is checked by hand;
 - :func:`finite_tuple`: a sequence of a given number of finite reals;
 - :func:`integer`, :func:`seed`: an integer (not a bool), optionally bounded below;
 - :func:`flag`: ``True`` or ``False``;
@@ -32,20 +33,22 @@ from iplanner_torch.errors import ConfigError
 _T = TypeVar("_T")
 
 
-def _is_real(value: object) -> bool:
+def is_real(value: object) -> bool:
+    """Whether ``value`` is a real number and not a bool (NaN and infinities are real: range
+    checks refuse them where they must)."""
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 def finite(name: str, value: object, *, error: type[Exception] = ConfigError) -> float:
     """``value`` as a float; ``error`` unless it is a finite real number (not a bool)."""
-    if not _is_real(value) or not math.isfinite(float(value)):  # type: ignore[arg-type]
+    if not is_real(value) or not math.isfinite(float(value)):  # type: ignore[arg-type]
         raise error(f"expected {name} a finite number, got {value!r}")
     return float(value)  # type: ignore[arg-type]
 
 
 def positive(name: str, value: object, *, error: type[Exception] = ConfigError) -> float:
     """``value`` as a float; ``error`` unless it is a real number (not a bool), finite and > 0."""
-    if not _is_real(value) or not 0.0 < float(value) < math.inf:  # type: ignore[arg-type]
+    if not is_real(value) or not 0.0 < float(value) < math.inf:  # type: ignore[arg-type]
         raise error(f"expected {name} > 0 and finite, got {value!r}")
     return float(value)  # type: ignore[arg-type]
 
@@ -53,7 +56,7 @@ def positive(name: str, value: object, *, error: type[Exception] = ConfigError) 
 def non_negative(name: str, value: object, *, error: type[Exception] = ConfigError) -> float:
     """``value`` as a float; ``error`` unless it is a real number (not a bool), finite and
     >= 0."""
-    if not _is_real(value) or not 0.0 <= float(value) < math.inf:  # type: ignore[arg-type]
+    if not is_real(value) or not 0.0 <= float(value) < math.inf:  # type: ignore[arg-type]
         raise error(f"expected {name} >= 0 and finite, got {value!r}")
     return float(value)  # type: ignore[arg-type]
 
@@ -69,7 +72,7 @@ def finite_tuple(
     if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
         raise error(f"expected {name} a sequence of {n} finite numbers, got {value!r}")
     items = tuple(value)  # type: ignore[arg-type]
-    ok = len(items) == n and all(_is_real(v) and math.isfinite(float(v)) for v in items)
+    ok = len(items) == n and all(is_real(v) and math.isfinite(float(v)) for v in items)
     if not ok:
         raise error(f"expected {name} a sequence of {n} finite numbers, got {value!r}")
     return tuple(float(v) for v in items)  # type: ignore[arg-type]

@@ -11,7 +11,8 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf
+from yaml import YAMLError
 
 from iplanner_torch.errors import ConfigError, IPlannerError
 from iplanner_torch.sim.tracker import MAX_NOISE_M
@@ -52,7 +53,9 @@ def instantiate(node: Any, expected: type | None = None, name: str | None = None
     wrong = _wrong_type(node) if isinstance(node, DictConfig) else None
     if wrong:
         raise ConfigError(wrong)
-    key = name or (_full_key(node, None) if isinstance(node, DictConfig) else "")
+    key = name or (_full_key(node, None) if isinstance(node, (DictConfig, ListConfig)) else "")
+    if isinstance(node, (ListConfig, list, tuple)):  # a group file whose top level is a list
+        raise ConfigError(_list_node_text(key, expected))
     try:
         built = hydra_instantiate(node, _convert_="all")
     except InstantiationException as exc:
@@ -76,6 +79,35 @@ def instantiate(node: Any, expected: type | None = None, name: str | None = None
             "'defaults: [<that file>, _self_]'"
         )
     return built
+
+
+def _list_node_text(key: str, expected: type | None) -> str:
+    """The refusal of a config node that is a list where a mapping of fields is expected."""
+    where = repr(key or "<root>")
+    choice = _group_choice(key)
+    if choice is not None:
+        where += f" ({key}={choice})"
+    text = f"config node {where} is a list, not a mapping of keys to values"
+    if expected is None:
+        return text + " ('key: value' lines)"
+    target = f"{expected.__module__}.{expected.__qualname__}"
+    return (
+        f"{text}: its file needs '_target_: {target}' and {expected.__name__}'s fields as "
+        "'key: value' lines, or, to change only some fields of an existing file of its group, "
+        "a first line 'defaults: [<that file>, _self_]'"
+    )
+
+
+def _group_choice(key: str) -> str | None:
+    """The option this Hydra run chose for config group ``key`` (None outside a run, or when
+    ``key`` is not a group)."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        choice = HydraConfig.get().runtime.choices.get(key)
+    except Exception:  # noqa: BLE001 - not in a Hydra run
+        return None
+    return None if choice is None else str(choice)
 
 
 def _bad_value_key(node: Any, key: str, hydra_message: str, text: str) -> str:
@@ -206,8 +238,6 @@ def cfg_list(node: DictConfig, key: str, kind: type) -> list[Any]:
     Raises:
         ConfigError: naming the key when it is not a list or an item is not a ``kind``.
     """
-    from omegaconf import ListConfig
-
     value = node[key]
     if not isinstance(value, (list, tuple, ListConfig)) or not all(_fits(v, kind) for v in value):
         raise ConfigError(
@@ -486,15 +516,17 @@ def friendly_errors(
     too, with what to lower.
 
     The root keys are checked first (:func:`check_root_keys`), so ``seed=abc`` or
-    ``tracker.noise=-1`` is named as such rather than where it is interpolated. Inside a Hydra
-    job, what the command prints, the error line included, is also written to the job's log
-    file (:func:`copy_output_to`)."""
+    ``tracker.noise=-1`` is named as such rather than where it is interpolated. A YAML file
+    the command reads itself that does not parse is a config error too
+    (:func:`yaml_error_text`). Inside a Hydra job, what the command prints, the error line
+    included, is also written to the job's log file (:func:`copy_output_to`)."""
 
     if fn is None:
         return functools.partial(friendly_errors, before=before)
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
+        _task_started()
         log_path = job_log_path()
         with copy_output_to(log_path), _terminate_as_interrupt():
             try:
@@ -503,8 +535,12 @@ def friendly_errors(
                         before(args[0])
                     check_root_keys(args[0])
                 return fn(*args, **kwargs)
-            except (IPlannerError, OSError) as exc:  # OSError: a path that is a file, ...
-                line = f"error: {type(exc).__name__}: {exc}"
+            except (IPlannerError, OSError, YAMLError) as exc:  # OSError: a path that is a file
+                line = (
+                    f"error: ConfigError: {yaml_error_text(exc)}"
+                    if isinstance(exc, YAMLError)
+                    else f"error: {type(exc).__name__}: {exc}"
+                )
                 print(line, file=sys.stderr)
                 job_dir = multirun_job_dir()
                 if job_dir is None:
@@ -532,6 +568,255 @@ def friendly_errors(
                 raise SystemExit(130) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+#: Hydra's switch that makes it raise the errors it meets rather than print them and exit 1
+_HYDRA_RAISES = "HYDRA_FULL_ERROR"
+#: set in the environment with :data:`_HYDRA_RAISES` by :func:`run_app`, so that the task
+#: function unsets both, also in a launcher's worker process (joblib), which inherits them
+_SET_BY_RUN_APP = "IPLANNER_TORCH_COMPOSING"
+#: whether :func:`run_app` set :data:`_HYDRA_RAISES` and the task function has not started yet
+_composing = False
+
+
+def run_app(app: Callable[[], Any]) -> None:
+    """Run a ``@hydra.main`` app so that what is wrong in the config Hydra composes (a
+    malformed YAML file, a misspelt key, an unknown option, an override it cannot parse)
+    prints one line and exits 2, as the command's own config errors do
+    (:func:`composition_error_text`); so does an operating system error before the command
+    starts (a run folder that cannot be made).
+
+    Hydra itself prints these and exits 1, a YAML error as a long traceback. Until the task
+    function starts (:func:`friendly_errors` ends it), ``HYDRA_FULL_ERROR=1`` makes it raise
+    them here instead; an unexpected error inside the command is reported by Hydra as usual.
+    When the environment sets ``HYDRA_FULL_ERROR=1`` already, Hydra's full traceback is what
+    was asked for, and is left as it is."""
+    global _composing
+    import os
+
+    if os.environ.get(_HYDRA_RAISES) == "1":
+        app()
+        return
+    os.environ[_HYDRA_RAISES] = "1"
+    os.environ[_SET_BY_RUN_APP] = "1"  # inherited by a launcher's worker processes too
+    _composing = True
+    try:
+        app()
+    except Exception as exc:  # noqa: BLE001 - what is not a config error is raised again
+        if not _composing:  # raised by the command, after it started: Hydra's report
+            raise
+        text = composition_error_text(exc)
+        if text is not None:
+            line = f"error: ConfigError: {text}"
+        elif isinstance(exc, OSError):
+            line = f"error: {type(exc).__name__}: {exc}"
+        else:
+            raise
+        print(line, file=sys.stderr)
+        raise SystemExit(2) from None
+    finally:
+        _task_started()
+
+
+def _task_started() -> None:
+    """Give Hydra back its own report of errors: the command's task function has started."""
+    global _composing
+    import os
+
+    if os.environ.pop(_SET_BY_RUN_APP, None) is not None:
+        os.environ.pop(_HYDRA_RAISES, None)
+    _composing = False
+
+
+def yaml_error_text(err: BaseException) -> str:
+    """What is wrong in a YAML file, in one line: ``conf/robot/mine.yaml: malformed YAML at
+    line 2, column 1: expected ',' or ']', but got '<stream end>' (while parsing a flow
+    sequence from line 1, column 16)``."""
+    from yaml import MarkedYAMLError
+
+    if not isinstance(err, MarkedYAMLError):
+        return "malformed YAML: " + " ".join(str(err).split())
+    mark = err.problem_mark or err.context_mark
+    text = f"{mark.name if mark is not None else 'a YAML file'}: malformed YAML"
+    if mark is not None:
+        text += f" at line {mark.line + 1}, column {mark.column + 1}"
+    text += f": {err.problem or err.context or 'cannot be read'}"
+    if err.problem and err.context:
+        start = err.context_mark
+        if start is not None and (start.line, start.column) != (mark.line, mark.column):
+            text += f" ({err.context} from line {start.line + 1}, column {start.column + 1})"
+        else:
+            text += f" ({err.context})"
+    return text
+
+
+def composition_error_text(exc: BaseException) -> str | None:
+    """The one-line message for an error Hydra raised while composing the config, or None when
+    ``exc`` is not one.
+
+    A YAML file that does not parse is named with the line and column of the problem
+    (:func:`yaml_error_text`); a key that is not in the config is named in full, with the
+    closest key there is (:func:`unknown_key_text`); an unknown group option lists the
+    group's options; the rest is Hydra's own message on one line."""
+    from hydra.errors import (
+        ConfigCompositionException,
+        MissingConfigException,
+        OverrideParseException,
+        SearchPathException,
+    )
+
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, YAMLError):
+            return yaml_error_text(seen)
+        seen = seen.__cause__ or seen.__context__
+    if isinstance(exc, OverrideParseException):
+        reason, _, rest = exc.message.partition("\n")
+        see = re.search(r"https?://\S+", rest)
+        return f"cannot parse override {exc.override!r}: {reason.strip()}" + (
+            f" (see {see.group(0)})" if see else ""
+        )
+    if isinstance(exc, MissingConfigException):
+        return _missing_option_text(exc)
+    if not isinstance(exc, (ConfigCompositionException, SearchPathException)):
+        return None
+    unknown = unknown_key_text(exc)
+    if unknown is not None:
+        return unknown
+    text = _one_line(str(exc)) or _one_line(str(exc.__cause__ or ""))
+    found = re.match(r"In '([^']+)': ", text)
+    if found and "with ListConfig" in text:  # a @package _global_ file holding a list
+        return (
+            f"config file {found.group(1)}.yaml: its top level is a list, not a mapping of keys "
+            "to values ('key: value' lines)"
+        )
+    return text or type(exc).__name__
+
+
+def _one_line(text: str) -> str:
+    """Hydra's (and OmegaConf's) message on one line, without the config search path and
+    OmegaConf's ``full_key:`` and ``object_type=`` lines."""
+    skip = ("full_key:", "object_type=", "Config search path", "provider=")
+    lines = [s for line in text.splitlines() if (s := line.strip()) and not s.startswith(skip)]
+    return " ".join(lines)
+
+
+def _missing_option_text(exc: Any) -> str:
+    """``unknown option robot=nope (robot options: fetch, kuka_iiwa14)``, or Hydra's message
+    on one line when the missing config is not a group option."""
+    missing = str(exc.missing_cfg_file or "")
+    group, _, option = missing.rpartition("/")
+    if not group or exc.options is None:
+        return _one_line(str(exc)) or f"config not found: {missing}"
+    found = re.match(r"In '([^']+)': ", str(exc))
+    named_in = f" (named in {found.group(1)})" if found and "/" in found.group(1) else ""
+    options = ", ".join(exc.options) if exc.options else "none"
+    return f"unknown option {group}={option}{named_in}; {group} options: {options}"
+
+
+def unknown_key_text(exc: BaseException) -> str | None:
+    """``unknown key 'run.max_duraton_s' (did you mean 'run.max_duration_s'?)`` for Hydra's
+    refusal of an override whose key is not in the config (OmegaConf names only the first
+    part that is missing: ``Key 'experiment' is not in struct``), or None for another error.
+
+    The suggestion is the closest key (:mod:`difflib`) under the part of the key that exists.
+    A key of a config group that no option is chosen for (``experiment.*`` without
+    ``experiment=<option>``) is looked up in the group's options, which are named."""
+    from omegaconf.errors import ConfigAttributeError, ConfigKeyError
+
+    found = re.match(r"Could not override '([^']+)'", str(exc))
+    cause = exc.__cause__
+    if found is None or not isinstance(cause, (ConfigAttributeError, ConfigKeyError)):
+        return None
+    key = found.group(1)
+    missing = str(getattr(cause, "full_key", "") or "")
+    if not missing or not (key == missing or key.startswith(missing + ".")):
+        return f"unknown key {key!r}"
+    if "." not in missing and (Path(CONF_DIR) / missing).is_dir():
+        return _unchosen_group_key_text(key, missing)
+    prefix = missing.rpartition(".")[0]
+    parent = getattr(cause, "parent_node", None)
+    candidates = _flat_keys(parent, skip=() if key.startswith("hydra.") else ("hydra",))
+    if not prefix:
+        candidates += _group_names()
+    best = _closest(key[len(prefix) + 1 :] if prefix else key, candidates)
+    if best is None:
+        return f"unknown key {key!r} (print the config with --cfg job to see its keys)"
+    return f"unknown key {key!r} (did you mean {'.'.join(filter(None, (prefix, best)))!r}?)"
+
+
+def _unchosen_group_key_text(key: str, group: str) -> str:
+    """A key under config group ``group`` that has no option chosen: its options that hold
+    the key (or the closest), to choose one of."""
+    options: dict[str, list[str]] = {}
+    for path in sorted((Path(CONF_DIR) / group).glob("*.yaml")):
+        try:
+            node = OmegaConf.load(path)
+        except Exception:  # noqa: BLE001 - a file that does not load suggests nothing
+            continue
+        header = re.search(r"^#\s*@package\s+(\S+)", path.read_text(encoding="utf-8"), re.M)
+        package = header.group(1) if header else group
+        keys = _flat_keys(node, skip=("defaults",))
+        if package != "_global_":
+            keys = [f"{package}.{k}" for k in keys]
+        options[path.stem] = keys
+    if key in {k for keys in options.values() for k in keys}:
+        having = [name for name, keys in options.items() if key in keys]
+        return (
+            f"key {key!r} needs {group}=<option> ({', '.join(having)}): with {group}=null "
+            f"there is no {group} node"
+        )
+    start = group + "."
+    inside = [k[len(start) :] for keys in options.values() for k in keys if k.startswith(start)]
+    best = _closest(key[len(start) :], inside) if key.startswith(start) else None
+    best = None if best is None else start + best
+    if best is None:
+        names = ", ".join(options) or "none"
+        return f"unknown key {key!r} ({group}.* keys need {group}=<option>: {names})"
+    having = [name for name, keys in options.items() if best in keys]
+    return (
+        f"unknown key {key!r} (did you mean {best!r}? it needs {group}=<option>: "
+        f"{', '.join(having)})"
+    )
+
+
+def _flat_keys(node: Any, skip: Iterable[str] = ()) -> list[str]:
+    """Every dotted key under ``node`` (its nodes and their values), relative to it, leaving
+    out the top keys in ``skip``; interpolations are not resolved."""
+    if not isinstance(node, DictConfig):
+        return []
+    try:
+        tree = OmegaConf.to_container(node, resolve=False)
+    except Exception:  # noqa: BLE001 - a node OmegaConf cannot convert suggests nothing
+        return []
+    out: list[str] = []
+
+    def walk(value: Any, prefix: str) -> None:
+        for k, v in value.items():
+            key = f"{prefix}{k}"
+            out.append(key)
+            if isinstance(v, dict):
+                walk(v, key + ".")
+
+    walk({k: v for k, v in tree.items() if k not in set(skip)}, "")
+    return out
+
+
+def _group_names() -> list[str]:
+    """The config groups of ``conf/`` (``data``, ``experiment``, ...)."""
+    conf = Path(CONF_DIR)
+    return sorted(d.name for d in conf.iterdir() if d.is_dir() and d.name != "hydra")
+
+
+def _closest(key: str, candidates: list[str]) -> str | None:
+    """The candidate closest to ``key`` (:func:`difflib.get_close_matches`), among those as
+    deep as ``key`` when there are any; None when none is close."""
+    import difflib
+
+    depth = key.count(".")
+    same = [c for c in candidates if c.count(".") == depth]
+    matches = difflib.get_close_matches(key, same or candidates, n=1, cutoff=0.75)
+    return matches[0] if matches else None
 
 
 @contextlib.contextmanager

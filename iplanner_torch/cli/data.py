@@ -59,6 +59,7 @@ from iplanner_torch.cli._common import (
     print_help_if_asked,
     refuse_unread_overrides,
     repo_path,
+    run_app,
 )
 from iplanner_torch.errors import ConfigError, DataError
 
@@ -178,7 +179,7 @@ def main() -> None:
             raise SystemExit(2)
         _command = args.pop(0)
         sys.argv = [sys.argv[0], *args]
-    _app()
+    run_app(_app)
 
 
 if __name__ == "__main__":

@@ -65,6 +65,7 @@ from iplanner_torch.cli._common import (
     print_help_if_asked,
     refuse_unread_overrides,
     repo_path,
+    run_app,
 )
 from iplanner_torch.cli._common import (
     task_overrides as _task_overrides,
@@ -569,7 +570,7 @@ def main() -> None:
     """Console entry point."""
     # predictor: which checkpoint (prediction); trainer: a missing one's (noise_sweep)
     print_help_if_asked(__doc__ or "", sys.argv[1:], groups=("data", "predictor", "trainer"))
-    _app()
+    run_app(_app)
 
 
 if __name__ == "__main__":

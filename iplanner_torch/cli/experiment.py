@@ -51,6 +51,7 @@ from iplanner_torch.cli._common import (
     override_key,
     print_help_if_asked,
     repo_path,
+    run_app,
 )
 from iplanner_torch.cli._common import (
     task_overrides as _task_overrides,
@@ -367,6 +368,29 @@ def choose_planner(cfg: DictConfig, overrides: list[str]) -> None:
     node.planners = [option]
 
 
+def merged_episode_node(cfg: DictConfig) -> DictConfig:
+    """The ``EpisodeCfg`` node of this run: the scenario, sim and planner groups and the
+    ``run.*`` episode keys, with ``experiment.episode`` (when an experiment is chosen) merged
+    over them, so that an experiment file names only what it changes (e.g. one cost weight
+    of ``planner``)."""
+    node = OmegaConf.create(
+        {
+            "_target_": "iplanner_torch.eval.episode.EpisodeCfg",
+            "scenario": OmegaConf.to_container(cfg.scenario, resolve=True),
+            "sim": OmegaConf.to_container(cfg.sim, resolve=True),
+            "planner": OmegaConf.to_container(cfg.planner, resolve=True),
+            "max_duration_s": cfg_scalar(cfg.run, "max_duration_s", float),
+            "stall_fallback_s": cfg.run.stall_fallback_s,
+            "scene_hz": cfg_scalar(cfg.run, "scene_hz", float),
+            "progress_bar": cfg_scalar(cfg, "progress", bool),
+        }
+    )
+    exp_node = cfg.get("experiment")
+    if exp_node is not None and exp_node.get("episode") is not None:
+        node = OmegaConf.merge(node, exp_node.episode)
+    return node
+
+
 def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     """The :class:`~iplanner_torch.eval.experiment.ExperimentCfg` this run describes."""
     from dataclasses import replace
@@ -384,26 +408,13 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     if not cfg_scalar(cfg.run, "max_duration_s", float) > 0:
         raise ConfigError(f"run.max_duration_s: expected > 0 [s], got {cfg.run.max_duration_s}")
 
-    episode_node = OmegaConf.create(
-        {
-            "_target_": "iplanner_torch.eval.episode.EpisodeCfg",
-            "scenario": OmegaConf.to_container(cfg.scenario, resolve=True),
-            "sim": OmegaConf.to_container(cfg.sim, resolve=True),
-            "planner": OmegaConf.to_container(cfg.planner, resolve=True),
-            "max_duration_s": cfg_scalar(cfg.run, "max_duration_s", float),
-            "stall_fallback_s": cfg.run.stall_fallback_s,
-            "scene_hz": cfg_scalar(cfg.run, "scene_hz", float),
-            "progress_bar": cfg_scalar(cfg, "progress", bool),
-        }
-    )
-    exp_node = cfg.get("experiment")
-    overridden = exp_node is not None and exp_node.get("episode") is not None
-    if overridden:
-        episode_node = OmegaConf.merge(episode_node, exp_node.episode)
+    episode_node = merged_episode_node(cfg)
+    overridden = cfg.get("experiment") is not None and cfg.experiment.get("episode") is not None
     episode = instantiate(
         episode_node, EpisodeCfg, name="experiment.episode" if overridden else "run"
     )
     device = str(resolve_device(str(cfg.device)))
+    exp_node = cfg.get("experiment")
     if exp_node is None:
         scenario = replace(
             episode.scenario, confidence=cfg_scalar(cfg.planner, "confidence", float)
@@ -567,7 +578,7 @@ def main() -> None:
     groups = ("data", "experiment", "planner", "robot", "scenario", "sim")
     print_help_if_asked(__doc__ or "", sys.argv[1:], groups=groups)
     _refuse_used_run_dir(sys.argv[1:])
-    _app()
+    run_app(_app)
 
 
 def _used_run_dir(out_dir: Path) -> str | None:

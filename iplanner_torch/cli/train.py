@@ -39,6 +39,7 @@ from iplanner_torch.cli._common import (
     print_help_if_asked,
     refuse_unread_overrides,
     repo_path,
+    run_app,
 )
 from iplanner_torch.errors import ConfigError
 
@@ -172,7 +173,7 @@ def main() -> None:
         groups=("data", "predictor", "trainer"),
         root_keys="seed=<int>, progress=true|false (training runs on trainer.accelerator)",
     )
-    _app()
+    run_app(_app)
 
 
 if __name__ == "__main__":

@@ -83,7 +83,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from iplanner_torch.checks import integer, non_negative, optional, positive
+from iplanner_torch.checks import flag, integer, is_real, non_negative, optional, positive
 from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.skeleton import JOINT_INDEX, JOINT_NAMES
 from iplanner_torch.errors import ConfigError, ShapeError
@@ -198,8 +198,14 @@ class EpisodeCfg:
     still_radius: float = 0.08
 
     def __post_init__(self) -> None:
-        if not self.max_duration_s > 0:  # NaN fails too (inf: until the tasks are done)
-            raise ConfigError(f"expected max_duration_s > 0, got {self.max_duration_s}")
+        for name, kind in (("scenario", ScenarioCfg), ("sim", SimCfg), ("planner", PlannerCfg)):
+            if not isinstance(getattr(self, name), kind):
+                raise ConfigError(
+                    f"expected {name} a {kind.__name__}, got {type(getattr(self, name)).__name__}"
+                )
+        # NaN fails too (inf: until the tasks are done)
+        if not is_real(self.max_duration_s) or not self.max_duration_s > 0:
+            raise ConfigError(f"expected max_duration_s > 0, got {self.max_duration_s!r}")
         # each number by name; NaN and infinities fail (a bare "x <= 0" passes NaN)
         integer("static_forecast_frames", self.static_forecast_frames, minimum=1)
         positive("static_forecast_dt", self.static_forecast_dt)
@@ -212,12 +218,18 @@ class EpisodeCfg:
         non_negative("blocking_tail_s", self.blocking_tail_s)
         optional(integer, "torch_threads", self.torch_threads, minimum=1)
         integer("task_planner_episodes", self.task_planner_episodes, minimum=0)
-        if self.stall_fallback_s is not None and not self.stall_fallback_s > 0:
-            raise ConfigError(
-                f"expected stall_fallback_s > 0 or None, got {self.stall_fallback_s}"
-            )
-        if not self.still_radius > 0:
-            raise ConfigError(f"expected still_radius > 0, got {self.still_radius}")
+        for name in (
+            "progress_bar",
+            "direct_next_fetch",
+            "replan_on_goal_change",
+            "mask_unavailable_actions",
+            "rest_when_nothing_available",
+        ):
+            flag(name, getattr(self, name))
+        stall = self.stall_fallback_s
+        if stall is not None and (not is_real(stall) or not stall > 0):  # inf: never, as None
+            raise ConfigError(f"expected stall_fallback_s > 0 or None, got {stall!r}")
+        positive("still_radius", self.still_radius)
 
     def scene_cfg(self) -> SceneCfg:
         """The workspace of the scenario."""

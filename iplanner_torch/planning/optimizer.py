@@ -33,7 +33,7 @@ from typing import Protocol, runtime_checkable
 
 import torch
 
-from iplanner_torch.checks import finite_time, flag, non_negative, positive
+from iplanner_torch.checks import finite_time, flag, integer, is_real, non_negative, positive
 from iplanner_torch.collision.human_spheres import HumanSphereMap, SphereLayout
 from iplanner_torch.errors import ConfigError, PlanningError
 from iplanner_torch.planning import costs as C
@@ -159,35 +159,41 @@ class OptimizerCfg:
     device: str | None = None
 
     def __post_init__(self) -> None:
-        if self.num_trajectories < 1:
-            raise ConfigError(f"expected num_trajectories >= 1, got {self.num_trajectories}")
-        if self.num_waypoints < 3:
-            raise ConfigError(f"expected num_waypoints >= 3, got {self.num_waypoints}")
-        if not 0.0 < self.horizon_s <= MAX_HORIZON_S:
+        # each field by name: a wrong type (text, a float count) or NaN fails here, not
+        # with a raw Python error in the middle of a solve
+        integer("num_trajectories", self.num_trajectories, minimum=1)
+        integer("num_waypoints", self.num_waypoints, minimum=3)
+        if not is_real(self.horizon_s) or not 0.0 < self.horizon_s <= MAX_HORIZON_S:
             raise ConfigError(
-                f"expected horizon_s in (0, {MAX_HORIZON_S:g}] s, got {self.horizon_s}"
+                f"expected horizon_s in (0, {MAX_HORIZON_S:g}] s, got {self.horizon_s!r}"
             )
+        integer("iterations", self.iterations)
+        integer("warm_iterations", self.warm_iterations)
         if self.iterations < 0 or self.warm_iterations < 0:
-            raise ConfigError("expected iterations and warm_iterations >= 0")
-        positive("lr", self.lr)  # NaN and inf refused too
-        if not 0.0 < self.lr_final_ratio <= 1.0:
-            raise ConfigError(f"expected lr_final_ratio in (0, 1], got {self.lr_final_ratio}")
-        if not 0.0 <= self.perturbation_std < math.inf:
             raise ConfigError(
-                f"expected perturbation_std finite and >= 0, got {self.perturbation_std}"
+                "expected iterations and warm_iterations >= 0, got "
+                f"iterations={self.iterations}, warm_iterations={self.warm_iterations}"
             )
-        if not 0.0 < self.confidence < 1.0:
-            raise ConfigError(f"expected confidence in (0, 1), got {self.confidence}")
-        if not 0.0 < self.penalty_target <= 1.0:
-            raise ConfigError(f"expected penalty_target in (0, 1], got {self.penalty_target}")
-        if not 0.0 <= self.drop_action_mass < 1.0:
-            raise ConfigError(f"expected drop_action_mass in [0, 1), got {self.drop_action_mass}")
-        if self.acc_max is not None and not self.acc_max > 0.0:
-            raise ConfigError(f"expected acc_max > 0 or None, got {self.acc_max}")
-        if self.collision_substeps < 1:
-            raise ConfigError(f"expected collision_substeps >= 1, got {self.collision_substeps}")
-        if self.prune_every < 1:
-            raise ConfigError(f"expected prune_every >= 1, got {self.prune_every}")
+        positive("lr", self.lr)  # NaN and inf refused too
+        if not is_real(self.lr_final_ratio) or not 0.0 < self.lr_final_ratio <= 1.0:
+            raise ConfigError(f"expected lr_final_ratio in (0, 1], got {self.lr_final_ratio!r}")
+        if not is_real(self.perturbation_std) or not 0.0 <= self.perturbation_std < math.inf:
+            raise ConfigError(
+                f"expected perturbation_std finite and >= 0, got {self.perturbation_std!r}"
+            )
+        if not is_real(self.confidence) or not 0.0 < self.confidence < 1.0:
+            raise ConfigError(f"expected confidence in (0, 1), got {self.confidence!r}")
+        if not is_real(self.penalty_target) or not 0.0 < self.penalty_target <= 1.0:
+            raise ConfigError(f"expected penalty_target in (0, 1], got {self.penalty_target!r}")
+        if not is_real(self.drop_action_mass) or not 0.0 <= self.drop_action_mass < 1.0:
+            raise ConfigError(
+                f"expected drop_action_mass in [0, 1), got {self.drop_action_mass!r}"
+            )
+        # inf is no limit, as None
+        if self.acc_max is not None and (not is_real(self.acc_max) or not self.acc_max > 0.0):
+            raise ConfigError(f"expected acc_max > 0 or None, got {self.acc_max!r}")
+        integer("collision_substeps", self.collision_substeps, minimum=1)
+        integer("prune_every", self.prune_every, minimum=1)
         non_negative("prune_margin", self.prune_margin)
         non_negative("static_margin", self.static_margin)
         if not isinstance(self.weights, C.CostWeights):
@@ -197,8 +203,29 @@ class OptimizerCfg:
             raise ConfigError(
                 f"expected human_spheres 'inner' or 'cover', got {self.human_spheres!r}"
             )
-        if self.escape_within_s is not None and not self.escape_within_s >= 0.0:
-            raise ConfigError(f"expected escape_within_s >= 0 or None, got {self.escape_within_s}")
+        # inf: escape whenever holding breaks the limit anywhere in the window
+        within = self.escape_within_s
+        if within is not None and (not is_real(within) or not within >= 0.0):
+            raise ConfigError(f"expected escape_within_s >= 0 or None, got {within!r}")
+        integer("seed", self.seed)
+        _check_device(self.device)
+
+
+def _check_device(device: object) -> None:
+    """ConfigError unless ``device`` is None, a :class:`torch.device` or a device name torch
+    parses ("cpu", "cuda", "cuda:1", ...; "" follows the robot, as None). Whether the device
+    is present is not asked here: the optimiser is built on the robot model's device."""
+    if device is None or isinstance(device, torch.device):
+        return
+    accepted = "None or a torch device name such as 'cpu', 'cuda' or 'cuda:0'"
+    if not isinstance(device, str):
+        raise ConfigError(f"expected device {accepted}, got {device!r}")
+    if not device:
+        return
+    try:
+        torch.device(device)
+    except (RuntimeError, TypeError, ValueError) as exc:
+        raise ConfigError(f"expected device {accepted}, got {device!r} ({exc})") from exc
 
 
 @dataclass(kw_only=True)

@@ -32,6 +32,7 @@ from typing import Literal
 
 import numpy as np
 
+from iplanner_torch.checks import finite
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.robot.geometry import Box, Capsule, Cylinder, Geometry, Vec3
 
@@ -258,6 +259,7 @@ def fetch_description(torso_height: float = FETCH_DEFAULT_TORSO_HEIGHT) -> Robot
         ConfigError: when ``torso_height`` lies outside the joint's range [0, 0.38615] m.
     """
     lo, hi = FETCH_TORSO_RANGE
+    finite("torso_height", torso_height)
     if not lo <= torso_height <= hi:
         raise ConfigError(f"expected Fetch torso_height in [{lo}, {hi}] m, got {torso_height}")
     grey = (0.75, 0.75, 0.78, 1.0)

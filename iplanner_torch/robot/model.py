@@ -73,19 +73,33 @@ class RobotCfg:
         if self.name not in ROBOT_NAMES:
             raise ConfigError(f"unknown robot {self.name!r}; available: {', '.join(ROBOT_NAMES)}")
         if self.base_position is not None:
-            pos = tuple(float(x) for x in self.base_position)
-            if len(pos) != 3 or not all(math.isfinite(x) for x in pos):
-                raise ConfigError(f"expected base_position of 3 finite numbers, got {pos}")
-            object.__setattr__(self, "base_position", pos)
-        if self.base_yaw is not None and not math.isfinite(float(self.base_yaw)):
-            raise ConfigError(f"expected a finite base_yaw, got {self.base_yaw}")
+            object.__setattr__(self, "base_position", _base_position(self.base_position))
+        yaw = self.base_yaw
+        if yaw is not None and not (checks.is_real(yaw) and math.isfinite(yaw)):
+            raise ConfigError(f"expected a finite base_yaw, got {yaw!r}")
+        checks.optional(checks.finite, "torso_height", self.torso_height)
         if self.torso_height is not None and self.name != "fetch":
             raise ConfigError(f"{self.name} has no torso: expected torso_height=None")
-        if not 0 < self.max_sphere_excess <= MAX_SPHERE_EXCESS:  # NaN and inf fail too
+        excess = self.max_sphere_excess
+        # NaN and inf fail too
+        if not checks.is_real(excess) or not 0 < excess <= MAX_SPHERE_EXCESS:
             raise ConfigError(
-                f"expected max_sphere_excess in (0, {MAX_SPHERE_EXCESS:g}] m, got "
-                f"{self.max_sphere_excess}"
+                f"expected max_sphere_excess in (0, {MAX_SPHERE_EXCESS:g}] m, got {excess!r}"
             )
+
+
+def _base_position(value: object) -> tuple[float, float, float]:
+    """``value`` as a base position (x, y, z) [m]; ConfigError naming the key and the shape
+    unless it is 3 finite numbers (a list in ``conf/robot/*.yaml``, a tuple, an array or a
+    (3,) tensor)."""
+    items = value.tolist() if isinstance(value, torch.Tensor) else value
+    try:
+        x, y, z = checks.finite_tuple("base_position", items, 3)
+    except ConfigError:
+        raise ConfigError(
+            f"expected base_position a list of 3 finite numbers [x, y, z] in m, got {value!r}"
+        ) from None
+    return (x, y, z)
 
 
 class RobotModel:
@@ -135,7 +149,9 @@ class RobotModel:
         self.description = desc
         self.name = desc.name
         self.dtype = dtype
-        pos = desc.default_base_position if base_position is None else base_position
+        pos = (
+            desc.default_base_position if base_position is None else _base_position(base_position)
+        )
         self.base_position = torch.tensor([float(x) for x in pos], device=self.device, dtype=dtype)
         self.base_yaw = float(desc.default_base_yaw if base_yaw is None else base_yaw)
         self.torso_height = desc.torso_height
@@ -204,7 +220,7 @@ class RobotModel:
         """
         cfg = RobotCfg(
             name=name,  # type: ignore[arg-type]
-            base_position=None if base_position is None else tuple(base_position),
+            base_position=base_position,  # type: ignore[arg-type]
             base_yaw=base_yaw,
             torso_height=torso_height,
             max_sphere_excess=max_sphere_excess,

@@ -12,6 +12,7 @@ from hydra.errors import ConfigCompositionException
 from omegaconf import DictConfig, OmegaConf
 
 from iplanner_torch.cli._common import CONF_DIR, instantiate
+from iplanner_torch.cli.experiment import merged_episode_node
 from iplanner_torch.errors import ConfigError
 
 GROUPS = ("data", "predictor", "trainer", "robot", "scenario", "planner", "sim", "experiment")
@@ -50,6 +51,10 @@ def test_every_group_has_options() -> None:
 )
 def test_every_option_composes_and_instantiates(group: str, option: str) -> None:
     cfg = compose(config_name="config", overrides=[f"{group}={option}"])
+    if group == "experiment" and cfg.experiment.get("episode") is not None:
+        # as iplanner-experiment builds it: merged over the groups (speed_response changes
+        # one cost weight of the planner)
+        cfg.experiment.episode = merged_episode_node(cfg)
     node = cfg[group] if group != "experiment" else cfg.experiment
     targets = _targets(node)
     if group in ("data",):

@@ -314,6 +314,48 @@ def test_errors(tmp_path: Path) -> None:
             EpisodeCfg(**{name: bad})
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        # a text duration failed with "'>' not supported between instances of 'str' and 'int'"
+        ({"max_duration_s": "30"}, r"expected max_duration_s > 0, got '30'"),
+        ({"max_duration_s": True}, "expected max_duration_s > 0"),
+        ({"max_duration_s": None}, "expected max_duration_s > 0"),
+        ({"static_forecast_frames": "30"}, "expected static_forecast_frames an integer"),
+        ({"static_forecast_dt": "0.1"}, "expected static_forecast_dt > 0 and finite"),
+        ({"scene_hz": "5"}, "expected scene_hz >= 0 and finite"),
+        ({"torch_threads": "1"}, "expected torch_threads an integer"),
+        ({"task_planner_episodes": 300.0}, "expected task_planner_episodes an integer"),
+        ({"stall_fallback_s": "5"}, r"expected stall_fallback_s > 0 or None, got '5'"),
+        ({"stall_fallback_s": math.nan}, "expected stall_fallback_s > 0 or None"),
+        ({"still_radius": "0.08"}, "expected still_radius > 0 and finite"),
+        ({"still_radius": math.nan}, "expected still_radius > 0 and finite"),
+        ({"still_radius": math.inf}, "expected still_radius > 0 and finite"),
+        ({"progress_bar": "yes"}, "expected progress_bar True or False"),
+        ({"direct_next_fetch": 1}, "expected direct_next_fetch True or False"),
+        ({"replan_on_goal_change": "true"}, "expected replan_on_goal_change True or False"),
+        ({"mask_unavailable_actions": None}, "expected mask_unavailable_actions True or False"),
+        ({"rest_when_nothing_available": 0}, "expected rest_when_nothing_available True or"),
+        ({"scenario": {}}, "expected scenario a ScenarioCfg, got dict"),
+        ({"sim": None}, "expected sim a SimCfg, got NoneType"),
+        ({"planner": "iplanner"}, "expected planner a PlannerCfg, got str"),
+    ],
+)
+def test_wrongly_typed_settings_are_config_errors_naming_the_field(
+    kwargs: dict, match: str
+) -> None:
+    with pytest.raises(ConfigError, match=match):
+        EpisodeCfg(**kwargs)
+
+
+def test_valid_settings_keep_their_values() -> None:
+    cfg = EpisodeCfg(
+        max_duration_s=math.inf, stall_fallback_s=math.inf, torch_threads=None, scene_hz=0
+    )
+    assert cfg.max_duration_s == math.inf and cfg.stall_fallback_s == math.inf
+    assert EpisodeCfg(max_duration_s=30, stall_fallback_s=None).max_duration_s == 30
+
+
 def test_table_clearance_against_brute_force() -> None:
     import torch
 

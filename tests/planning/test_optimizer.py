@@ -236,6 +236,70 @@ def test_inputs_and_config_are_validated(point_robot: PointRobot) -> None:
         opt.solve(torch.zeros(2), torch.ones(2), q_init=torch.zeros(8, 10, 2))
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        # a float count ran (10.0) or failed mid-solve with a raw TypeError (10.5)
+        ({"iterations": 10.5}, r"expected iterations an integer, got 10\.5"),
+        ({"iterations": 10.0}, r"expected iterations an integer, got 10\.0"),
+        ({"warm_iterations": 2.0}, "expected warm_iterations an integer"),
+        ({"iterations": True}, "expected iterations an integer"),
+        ({"num_trajectories": "8"}, r"expected num_trajectories an integer >= 1, got '8'"),
+        ({"num_trajectories": 8.0}, "expected num_trajectories an integer"),
+        ({"num_waypoints": "20"}, "expected num_waypoints an integer >= 3"),
+        ({"collision_substeps": 2.0}, "expected collision_substeps an integer >= 1"),
+        ({"prune_every": "8"}, "expected prune_every an integer >= 1"),
+        ({"seed": 1.5}, "expected seed an integer"),
+        ({"horizon_s": "1"}, r"expected horizon_s in \(0, 60\] s, got '1'"),
+        ({"lr": "0.005"}, "expected lr > 0 and finite"),
+        ({"lr_final_ratio": "0.1"}, r"expected lr_final_ratio in \(0, 1\]"),
+        ({"lr_final_ratio": math.nan}, r"expected lr_final_ratio in \(0, 1\]"),
+        ({"perturbation_std": "0.3"}, "expected perturbation_std finite and >= 0"),
+        ({"confidence": "0.95"}, r"expected confidence in \(0, 1\)"),
+        ({"confidence": True}, r"expected confidence in \(0, 1\)"),
+        ({"penalty_target": "0.5"}, r"expected penalty_target in \(0, 1\]"),
+        ({"drop_action_mass": "0.01"}, r"expected drop_action_mass in \[0, 1\)"),
+        ({"drop_action_mass": math.nan}, r"expected drop_action_mass in \[0, 1\)"),
+        ({"acc_max": "6"}, "expected acc_max > 0 or None"),
+        ({"acc_max": math.nan}, "expected acc_max > 0 or None"),
+        ({"escape_within_s": "0.5"}, "expected escape_within_s >= 0 or None"),
+        ({"escape_within_s": math.nan}, "expected escape_within_s >= 0 or None"),
+        ({"static_margin": "0.02"}, "expected static_margin >= 0 and finite"),
+        ({"prune_margin": None}, "expected prune_margin >= 0 and finite"),
+        ({"safe_hold": 1}, "expected safe_hold True or False"),
+        ({"human_spheres": ["inner"]}, "expected human_spheres 'inner' or 'cover'"),
+        ({"weights": {}}, "expected weights to be CostWeights"),
+        # unknown device names were taken here and failed later with torch's RuntimeError
+        ({"device": "gpu0"}, r"expected device None or a torch device name .*'gpu0'"),
+        ({"device": "cuda:x"}, r"expected device None or a torch device name .*'cuda:x'"),
+        ({"device": 0}, "expected device None or a torch device name"),
+    ],
+)
+def test_wrongly_typed_settings_are_config_errors_naming_the_field(
+    kwargs: dict, match: str
+) -> None:
+    with pytest.raises(ConfigError, match=match):
+        OptimizerCfg(**kwargs)
+
+
+def test_valid_settings_keep_their_values() -> None:
+    """Integer-valued numpy counts, ints for floats, inf where it means no limit, and device
+    names torch parses (CUDA need not be present to name it) are all taken as given."""
+    cfg = OptimizerCfg(
+        num_trajectories=np.int64(4),
+        iterations=0,
+        horizon_s=2,
+        confidence=np.float32(0.9),
+        acc_max=math.inf,
+        escape_within_s=math.inf,
+        seed=-1,
+        device="cuda:1",
+    )
+    assert cfg.num_trajectories == 4 and cfg.horizon_s == 2 and cfg.device == "cuda:1"
+    for device in (None, "", "cpu", "cuda", "meta", torch.device("cpu")):
+        assert OptimizerCfg(device=device).device == device
+
+
 @pytest.mark.parametrize("field", ["mean", "var"])
 def test_person_on_the_robot_with_a_nan_joint_is_never_a_safe_plan(
     point_robot: PointRobot, field: str

@@ -133,6 +133,9 @@ def test_fetch_torso_height_is_a_parameter() -> None:
     np.testing.assert_allclose(np.diff(z), np.diff(heights), atol=1e-12)
     with pytest.raises(ConfigError, match="torso_height"):
         fetch_description(torso_height=0.5)
+    for bad in ("0.2", None, [0.2], math.nan):  # text failed with a raw TypeError
+        with pytest.raises(ConfigError, match="expected torso_height a finite number"):
+            fetch_description(torso_height=bad)  # type: ignore[arg-type]
 
 
 def test_iiwa_limits_velocities_efforts_masses() -> None:

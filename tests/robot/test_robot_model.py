@@ -230,6 +230,61 @@ def test_errors() -> None:
         model.ik(torch.zeros(3), model.q_home, damping=0.0)
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        # a scalar failed with Python's "'float' object is not iterable"
+        ({"base_position": 0.75}, r"expected base_position a list of 3 finite numbers .*0\.75"),
+        ({"base_position": "0.75"}, "expected base_position a list of 3 finite numbers"),
+        ({"base_position": [0.75, 0.0]}, "expected base_position a list of 3 finite numbers"),
+        ({"base_position": [0.75, 0.0, 0.0, 0.0]}, "expected base_position a list of 3"),
+        ({"base_position": [0.75, "0", 0.0]}, "expected base_position a list of 3"),
+        ({"base_position": [0.75, 0.0, math.nan]}, "expected base_position a list of 3"),
+        ({"base_position": [[0.75, 0.0, 0.0]]}, "expected base_position a list of 3"),
+        ({"base_position": {"x": 0.75}}, "expected base_position a list of 3"),
+        ({"base_yaw": "pi"}, "expected a finite base_yaw, got 'pi'"),
+        ({"base_yaw": [3.14]}, "expected a finite base_yaw"),
+        ({"max_sphere_excess": "0.02"}, r"expected max_sphere_excess in \(0, 0.2\] m"),
+        ({"name": "fetch", "torso_height": "0.2"}, "expected torso_height a finite number"),
+        ({"name": "fetch", "torso_height": [0.2]}, "expected torso_height a finite number"),
+    ],
+)
+def test_wrongly_shaped_or_typed_settings_name_the_key(kwargs: dict, match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        RobotCfg(**{"name": "kuka_iiwa14", **kwargs})
+
+
+def test_a_robot_file_with_a_scalar_base_position_names_the_key(tmp_path) -> None:
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli._common import instantiate
+
+    path = tmp_path / "my_iiwa.yaml"
+    path.write_text(
+        "_target_: iplanner_torch.robot.model.RobotCfg\n"
+        "name: kuka_iiwa14\n"
+        "base_position: 0.75\n"
+        "base_yaw: 3.141592653589793\n"
+    )
+    with pytest.raises(
+        ConfigError,
+        match=r"^robot\.base_position: expected base_position a list of 3 finite numbers",
+    ) as err:
+        instantiate(OmegaConf.load(path), RobotCfg, name="robot")
+    assert "not iterable" not in str(err.value)
+    with pytest.raises(ConfigError, match="expected base_position a list of 3"):
+        RobotModel.load("kuka_iiwa14", base_position=0.75)
+
+
+def test_base_positions_of_every_kind_are_taken() -> None:
+    for pos in ([1, 0, -0.75], (1.0, 0.0, -0.75), np.array([1.0, 0.0, -0.75])):
+        assert RobotCfg(name="fetch", base_position=pos).base_position == (1.0, 0.0, -0.75)
+    pos = torch.tensor([1.0, 0.0, -0.75], dtype=torch.float64)
+    assert RobotCfg(name="fetch", base_position=pos).base_position == (1.0, 0.0, -0.75)
+    model = RobotModel.load("fetch", dtype=torch.float64, base_position=pos)
+    assert model.base_position.tolist() == [1.0, 0.0, -0.75]
+
+
 def test_from_cfg_equals_load() -> None:
     cfg = RobotCfg(name="fetch", base_position=[1.1, 0.1, -0.75], base_yaw=3.0, torso_height=0.2)
     assert cfg.base_position == (1.1, 0.1, -0.75)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from iplanner_torch.errors import ConfigError
+from iplanner_torch.planning.replanner import PlannerCfg
 from iplanner_torch.sim.tasks import FetchCfg, ScenarioCfg, next_feasible, parse_order
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
@@ -48,10 +49,17 @@ def test_conf_option_files_instantiate() -> None:
         }
     )
     assert isinstance(instantiate(root.sim), SimCfg)
+    # an experiment's episode.planner holds only what it changes: iplanner-experiment merges
+    # it over the planner group's node (cli/experiment.build_experiment), as done here
+    planner = OmegaConf.load(CONF / "planner" / "iplanner_ni.yaml")
     for name in ("table_simulation", "speed_response"):
         node = OmegaConf.load(CONF / "experiment" / f"{name}.yaml")
+        episode = node.experiment.episode
+        episode.planner = OmegaConf.merge(planner, episode.get("planner") or {})
         exp = instantiate(node.experiment, _convert_="all")
         assert isinstance(exp, ExperimentCfg) and exp.name == name
+        assert isinstance(exp.episode.planner, PlannerCfg)
+    assert exp.episode.planner.optimizer.weights.human_lookahead_penalty == 10.0  # speed_response
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,216 @@
+"""What Hydra finds wrong while composing the config (a config file that is not valid YAML, a
+misspelt key, an unknown option) is one error line with exit code 2, before the command runs.
+
+The commands run in this process (their ``main``) and stop at composition, so nothing is
+generated, trained or run."""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+
+from iplanner_torch.errors import ConfigError
+
+
+def _main(
+    module: str, args: list[str], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> tuple[object, list[str]]:
+    """Run ``iplanner_torch.cli.<module>.main()`` with ``args``; its exit code and the lines
+    it wrote to stderr."""
+    from hydra.core.global_hydra import GlobalHydra
+
+    monkeypatch.setattr(sys, "argv", [f"iplanner-{module}", *args])
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    GlobalHydra.instance().clear()
+    try:
+        with pytest.raises(SystemExit) as stop:
+            importlib.import_module(f"iplanner_torch.cli.{module}").main()
+    finally:
+        GlobalHydra.instance().clear()
+    assert "HYDRA_FULL_ERROR" not in os.environ  # set while composing only
+    return stop.value.code, capsys.readouterr().err.strip().splitlines()
+
+
+def _user_conf(tmp_path: Path, group: str, name: str, text: str) -> str:
+    """Write ``<tmp_path>/conf/<group>/<name>.yaml``; the override that adds that folder to
+    the config search path."""
+    folder = tmp_path / "conf" / group
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{name}.yaml").write_text(text)
+    return f"hydra.searchpath=[file://{tmp_path / 'conf'}]"
+
+
+@pytest.mark.parametrize(
+    ("text", "where", "problem"),
+    [
+        ("_target_: iplanner_torch.robot.model.RobotCfg\nbase_position: [0.1, 0.2\n",
+         "line 3, column 1", "expected ',' or ']', but got '<stream end>' (while parsing a flow "
+         "sequence from line 2, column 16)"),
+        ("name: mine\nbase:\n\tyaw: 1.0\n", "line 3, column 1",
+         "found character '\\t' that cannot start any token"),
+        ("name: mine\nname: other\n", "line 2, column 1", "found duplicate key name"),
+    ],
+)  # fmt: skip
+def test_a_config_file_that_is_not_valid_yaml_is_named_in_one_line(
+    text: str,
+    where: str,
+    problem: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture,
+) -> None:
+    search = _user_conf(tmp_path, "robot", "my_robot", text)
+    args = [search, "robot=my_robot", f"hydra.run.dir={tmp_path / 'run'}"]
+    code, lines = _main("experiment", args, monkeypatch, capsys)
+    assert code == 2
+    file = tmp_path / "conf" / "robot" / "my_robot.yaml"
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"error: ConfigError: {file}: malformed YAML at {where}: {problem}")
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_config_file_whose_top_level_is_a_list_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    """In a ``@package _global_`` file (composition fails), and as a group's node (the node is
+    refused before it is built)."""
+    from iplanner_torch.cli._common import instantiate
+    from iplanner_torch.robot.model import RobotCfg
+
+    search = _user_conf(tmp_path, "experiment", "mine", "# @package _global_\n- 1\n- 2\n")
+    code, lines = _main("experiment", [search, "experiment=mine"], monkeypatch, capsys)
+    assert code == 2
+    assert lines == [
+        "error: ConfigError: config file experiment/mine.yaml: its top level is a list, not a "
+        "mapping of keys to values ('key: value' lines)"
+    ]
+    with pytest.raises(ConfigError) as err:
+        instantiate(OmegaConf.create({"robot": [1, 2]}).robot, RobotCfg)
+    assert str(err.value).startswith(
+        "config node 'robot' is a list, not a mapping of keys to values: its file needs "
+        "'_target_: iplanner_torch.robot.model.RobotCfg'"
+    )
+
+
+@pytest.mark.parametrize(
+    ("module", "args", "line"),
+    [
+        # no experiment chosen: the key is looked up in the experiment options
+        ("experiment", ["experiment.episode.max_duraton_s=5"],
+         "error: ConfigError: unknown key 'experiment.episode.max_duraton_s' (did you mean "
+         "'experiment.episode.max_duration_s'? it needs experiment=<option>: "),
+        ("experiment", ["experiment.episode.max_duration_s=5"],
+         "error: ConfigError: key 'experiment.episode.max_duration_s' needs "
+         "experiment=<option> ("),
+        ("experiment", ["experiment=table_simulation", "experiment.episode.max_duraton_s=5"],
+         "error: ConfigError: unknown key 'experiment.episode.max_duraton_s' (did you mean "
+         "'experiment.episode.max_duration_s'?)"),
+        ("experiment", ["run.max_duraton_s=5"],
+         "error: ConfigError: unknown key 'run.max_duraton_s' (did you mean "
+         "'run.max_duration_s'?)"),
+        ("experiment", ["sed=3"], "error: ConfigError: unknown key 'sed' (did you mean 'seed'?)"),
+        ("experiment", ["experimnt=table_simulation"],
+         "error: ConfigError: unknown key 'experimnt' (did you mean 'experiment'?)"),
+        ("experiment", ["typo=1"],
+         "error: ConfigError: unknown key 'typo' (print the config with --cfg job to see its "
+         "keys)"),
+        ("train", ["predictor.svgp.epochz=2"],
+         "error: ConfigError: unknown key 'predictor.svgp.epochz' (did you mean "
+         "'predictor.svgp.epochs'?)"),
+        ("train", ["predictor.svgpp.epochs=2"],
+         "error: ConfigError: unknown key 'predictor.svgpp.epochs' (did you mean "
+         "'predictor.svgp.epochs'?)"),
+        ("data", ["info", "data.windows.n_prevv=3"],
+         "error: ConfigError: unknown key 'data.windows.n_prevv' (did you mean "
+         "'data.windows.n_prev'?)"),
+        ("evaluate", ["evaluate.mod=episode"],
+         "error: ConfigError: unknown key 'evaluate.mod' (did you mean 'evaluate.mode'?)"),
+        ("experiment", ["robot=nope"],
+         "error: ConfigError: unknown option robot=nope; robot options: fetch, kuka_iiwa14"),
+        ("train", ["x=[1"], "error: ConfigError: cannot parse override 'x=[1': "),
+    ],
+)  # fmt: skip
+def test_a_misspelt_key_or_option_is_named_in_full_in_one_line(
+    module: str,
+    args: list[str],
+    line: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture,
+) -> None:
+    code, lines = _main(module, [*args, f"hydra.run.dir={tmp_path / 'run'}"], monkeypatch, capsys)
+    assert code == 2
+    assert len(lines) == 1 and lines[0].startswith(line), lines
+    assert "not in struct" not in lines[0]
+    assert not (tmp_path / "run").exists()
+
+
+def test_hydra_full_error_leaves_the_report_to_hydra(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Set in the environment, HYDRA_FULL_ERROR=1 gives Hydra's own exception."""
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import ConfigCompositionException
+
+    from iplanner_torch.cli import experiment
+
+    monkeypatch.setenv("HYDRA_FULL_ERROR", "1")
+    monkeypatch.setattr(sys, "argv", ["iplanner-experiment", "run.max_duraton_s=5"])
+    GlobalHydra.instance().clear()
+    try:
+        with pytest.raises(ConfigCompositionException):
+            experiment.main()
+    finally:
+        GlobalHydra.instance().clear()
+    assert os.environ["HYDRA_FULL_ERROR"] == "1"
+
+
+def test_an_error_inside_the_command_is_reported_as_before(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    """Once the command runs, Hydra reports an unexpected error itself (exit 1, not 2); a YAML
+    file the command reads itself that does not parse is a one-line config error."""
+    import hydra
+    from hydra.core.global_hydra import GlobalHydra
+
+    from iplanner_torch.cli._common import CONF_DIR, friendly_errors, run_app
+
+    seen: list[str | None] = []
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("a: [1\n")
+
+    @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
+    @friendly_errors
+    def app(cfg: object) -> None:
+        seen.append(os.environ.get("HYDRA_FULL_ERROR"))
+        if "+load=1" in sys.argv:
+            OmegaConf.load(bad)
+        raise ValueError("unexpected")
+
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    run = [
+        f"hydra.run.dir={tmp_path / 'run'}",
+        "hydra/job_logging=none",
+        "hydra/hydra_logging=none",
+    ]
+    for extra in ([], ["+load=1"]):
+        monkeypatch.setattr(sys, "argv", ["app", *run, *extra])
+        GlobalHydra.instance().clear()
+        try:
+            with pytest.raises((SystemExit, ValueError)) as stop:
+                run_app(app)
+        finally:
+            GlobalHydra.instance().clear()
+        assert seen[-1] is None  # Hydra's own report inside the command
+        if extra:
+            assert isinstance(stop.value, SystemExit) and stop.value.code == 2
+            line = capsys.readouterr().err.strip().splitlines()[-1]
+            assert line.startswith(
+                f"error: ConfigError: {bad}: malformed YAML at line 2, column 1"
+            )
+        else:
+            assert not isinstance(stop.value, SystemExit) or stop.value.code == 1
+    assert "HYDRA_FULL_ERROR" not in os.environ
