@@ -6,13 +6,12 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import pytest
+from tiny_settings import tiny_predictor_cfg
 
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
 from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
 from iplanner_torch.eval.prediction import SplitRecord
-from iplanner_torch.prediction.predictor import PredictorCfg
-from iplanner_torch.prediction.svgp import SVGPCfg
 
 #: the split the tiny predictor is trained on (with seed 1)
 FRACTIONS = (0.6, 0.2, 0.2)
@@ -34,11 +33,5 @@ def tiny_reaching(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
         windows=(build_windows(train, wc), build_windows(val, wc)),
         held_out=held_out,
         split=SplitRecord(seed=1, fractions=FRACTIONS, held_out=held_out),
-        cfg=PredictorCfg(
-            svgp=SVGPCfg(num_inducing=16, epochs=2, max_steps=12),
-            classifier_kernel="rbf",
-            ivm_max_import=6,
-            ivm_candidates=8,
-            min_group_size=10,
-        ),
+        cfg=tiny_predictor_cfg(),
     )

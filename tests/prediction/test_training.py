@@ -12,6 +12,7 @@ import pytest
 import torch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
+from tiny_settings import tiny_predictor_cfg
 
 from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
 from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
@@ -35,15 +36,7 @@ def _windows(joints: tuple[str, ...], n_future: int = 8):
 
 
 def _cfg(noisy_input: str = "simple") -> PredictorCfg:
-    return PredictorCfg(
-        svgp=SVGPCfg(
-            num_inducing=16, epochs=2, max_steps=12, noisy_input=noisy_input, nigp_iterations=1
-        ),
-        classifier_kernel="rbf",
-        ivm_max_import=6,
-        ivm_candidates=8,
-        min_group_size=10,
-    )
+    return tiny_predictor_cfg(noisy_input=noisy_input, nigp_iterations=1)
 
 
 def test_writes_checkpoints_logs_and_resumes(tmp_path: Path) -> None:
