@@ -1,26 +1,61 @@
-"""Shared parts of the scripts that write an ``experiments/<name>/README.md`` from a run."""
+"""Shared parts of the scripts: their error reporting (:func:`fail`, :func:`main_guard`), and
+what the scripts that write an ``experiments/<name>/README.md`` from a run have in common."""
 
 from __future__ import annotations
 
 import argparse
+import functools
 import subprocess
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any, NoReturn, TypeVar
 
 import pandas as pd
 
+from iplanner_torch.errors import IPlannerError
+from iplanner_torch.eval.report import SWEPT_SETTINGS
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: settings of an episode row besides its scenario, planner and seed (a sweep may vary them)
+SETTINGS = ("robot", *SWEPT_SETTINGS)
+
+T = TypeVar("T")
+
 
 def commit_short() -> str:
-    """The short hash of HEAD ('' outside a git checkout)."""
-    return subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
-    ).stdout.strip()
+    """The short hash of the repository's HEAD ('' outside a git checkout)."""
+    try:
+        return subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=False,
+        ).stdout.strip()
+    except OSError:
+        return ""
 
 
-def fail(message: str) -> None:
+def fail(message: str) -> NoReturn:
     """Print ``error: message`` on standard error and exit with code 2."""
     print(f"error: {message}", file=sys.stderr)
     raise SystemExit(2)
+
+
+def main_guard(main: Callable[..., T]) -> Callable[..., T]:
+    """``main`` reporting :class:`~iplanner_torch.errors.IPlannerError` and ``OSError`` as
+    ``error: <Type>: message`` on standard error with exit code 2 (no traceback)."""
+
+    @functools.wraps(main)
+    def guarded(*args: Any, **kwargs: Any) -> T:
+        try:
+            return main(*args, **kwargs)
+        except (IPlannerError, OSError) as err:
+            fail(f"{type(err).__name__}: {str(err).rstrip()}")
+
+    return guarded
 
 
 def parse_report_args(
@@ -28,7 +63,8 @@ def parse_report_args(
 ) -> argparse.Namespace:
     """The arguments every report script takes: the run folder (``run_dir``, checked to be a
     folder), the command that made the run (``--command``), a note placed above the tables
-    (``--note``), the record folder (``--out``) and ``--force`` to replace its README."""
+    (``--note``), the record folder (``--out``, checked not to be a file) and ``--force`` to
+    replace its README.md and results.csv."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("run_dir", type=Path)
     parser.add_argument("--command", default=default_command)
@@ -45,7 +81,51 @@ def parse_report_args(
     args = parser.parse_args()
     if not args.run_dir.is_dir():
         fail(f"{args.run_dir}: not a folder (give the run's output folder)")
+    if args.out.exists() and not args.out.is_dir():
+        fail(f"--out must be a folder: {args.out} is a file")
     return args
+
+
+def require_columns(df: pd.DataFrame, path: Path, columns: Sequence[str]) -> None:
+    """An error naming the ``columns`` that ``df`` (read from ``path``) lacks, if any."""
+    missing = [c for c in columns if c not in df.columns]
+    if missing:
+        fail(
+            f"{path}: no {', '.join(map(repr, missing))} column{'s' if len(missing) > 1 else ''}"
+            "; is this an episode results file?"
+        )
+
+
+def numeric_column(df: pd.DataFrame, path: Path, column: str) -> pd.DataFrame:
+    """``df`` with ``column`` (if it has one) as numbers; an error naming the rows whose cell
+    is not a number otherwise."""
+    if column not in df.columns:
+        return df
+    values = pd.to_numeric(df[column], errors="coerce")
+    bad = values.isna() & df[column].notna()
+    if bool(bad.any()):
+        rows = [int(i) + 2 for i in df.index[bad][:5]]
+        fail(
+            f"{path}: {int(bad.sum())} {column!r} value(s) are not numbers "
+            f"({list(df.loc[bad, column][:5])} in rows {rows} of the file)"
+        )
+    df[column] = values
+    return df
+
+
+def single_setting(df: pd.DataFrame, where: Path, columns: Sequence[str]) -> None:
+    """An error naming the values when any of ``columns`` (those ``df`` has) takes more than
+    one value: the report covers one setting."""
+    many = [
+        f"{c} ({', '.join(str(v) for v in sorted(df[c].dropna().unique(), key=str))})"
+        for c in columns
+        if c in df.columns and df[c].nunique(dropna=True) > 1
+    ]
+    if many:
+        fail(
+            f"{where}: episode rows of more than one {'; '.join(many)}; this report covers "
+            "one: give a run folder of one setting"
+        )
 
 
 def complete_rows(df: pd.DataFrame, path: Path, metric: str) -> pd.DataFrame:
@@ -76,13 +156,15 @@ def write_readme(
     """Write ``out/results.csv`` (the episode rows) and ``out/README.md``.
 
     The README is the title, the command, the report command, the commit and machine, the
-    episode count, the note (if any), then ``body`` (Markdown lines). An existing README is
-    replaced only with ``force``.
+    episode count, the note (if any), then ``body`` (Markdown lines). An existing README or
+    results.csv is replaced only with ``force``.
     """
-    if (out / "README.md").exists() and not force:
+    existing = [p for p in (out / "README.md", out / "results.csv") if p.exists()]
+    if existing and not force:
         fail(
-            f"{out / 'README.md'} exists and may hold hand-written sections; pass --force to "
-            "replace it, or --out <another folder>"
+            f"{' and '.join(map(str, existing))} exist{'s' if len(existing) == 1 else ''} "
+            "(a record may hold hand-written sections); pass --force to replace, or --out "
+            "<another folder>"
         )
     out.mkdir(parents=True, exist_ok=True)
     episodes.to_csv(out / "results.csv", index=False)

@@ -67,12 +67,22 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="reduced sizes (CI smoke run)")
     parser.add_argument("--json", type=Path, default=None, help="write the figures as JSON")
-    parser.add_argument("--only", default="", help="comma-separated areas: " + ",".join(AREAS))
-    parser.add_argument("--threads", type=int, default=None, help="torch.set_num_threads")
+    parser.add_argument("--only", default=None, help="comma-separated areas: " + ",".join(AREAS))
+    parser.add_argument("--threads", type=int, default=None, help="torch.set_num_threads (>= 1)")
     args = parser.parse_args(argv)
-    if args.threads:
+    areas = list(AREAS)
+    if args.only is not None:
+        areas = [a.strip() for a in args.only.split(",") if a.strip()]
+        unknown = [a for a in areas if a not in AREAS]
+        if unknown or not areas:
+            what = f"unknown area(s) {', '.join(unknown)}" if unknown else "no area"
+            parser.error(f"--only {args.only!r}: {what}; the areas are {', '.join(AREAS)}")
+    if args.threads is not None and args.threads < 1:
+        parser.error(f"--threads must be >= 1, got {args.threads}")
+    if args.json is not None and args.json.is_dir():
+        parser.error(f"--json {args.json} is a folder; give the JSON file to write")
+    if args.threads is not None:
         torch.set_num_threads(args.threads)
-    areas = [a for a in (args.only.split(",") if args.only else AREAS) if a]
     figures: dict[str, dict] = {}
     failed: list[str] = []
     for area in areas:
@@ -102,6 +112,9 @@ def main(argv: list[str] | None = None) -> int:
         value = _fmt(fig.get("value"))
         print(f"{name.ljust(width)}  {value:>12}  {str(fig.get('unit', '')):<12}  {extra}")
     if args.json is not None:
+        if not figures:
+            print(f"error: no figure was produced; {args.json} not written", file=sys.stderr)
+            return 2
         args.json.parent.mkdir(parents=True, exist_ok=True)
         meta = {
             "command": "python scripts/bench.py " + " ".join(argv or sys.argv[1:]),

@@ -9,7 +9,9 @@ torch thread (``EpisodeCfg.torch_threads``) and the planner settings of ``conf/p
 (25 cold / 8 warm iterations). ``plan.solve_ms`` is the mean wall-clock time of a replanning
 solve in those episodes, against the step m = 0.5 s.
 
-Run: ``python scripts/bench_sim.py [--full] [--predictor PATH]``.
+Run: ``python scripts/bench_sim.py [--quick | --full] [--predictor PATH]`` (``--quick``, a few
+simulated seconds, is the default here; ``scripts/bench.py`` runs the full size unless given
+``--quick``).
 """
 
 from __future__ import annotations
@@ -107,7 +109,9 @@ def run(quick: bool, predictor_path: str | None = None) -> dict[str, dict]:
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--full", action="store_true", help="longer episodes, 3 repeats")
+    size = parser.add_mutually_exclusive_group()
+    size.add_argument("--quick", action="store_true", help="a few simulated seconds (default)")
+    size.add_argument("--full", action="store_true", help="longer episodes, 3 repeats")
     parser.add_argument("--predictor", default=None, help="predictor checkpoint (I-Planner)")
     args = parser.parse_args()
     print(json.dumps(run(quick=not args.full, predictor_path=args.predictor), indent=2))

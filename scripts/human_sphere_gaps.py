@@ -17,11 +17,11 @@ Uses the noise-free joints of synthetic recordings where the files have them.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 import torch
+from _report import fail, main_guard
 
 from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.io import load_demonstrations
@@ -68,17 +68,19 @@ def gaps(frames: torch.Tensor, gen: torch.Generator, points: int = 400) -> dict[
     return out
 
 
+@main_guard
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=ROOT / "datasets" / "reaching")
-    parser.add_argument("--frames", type=int, default=200)
+    parser.add_argument("--frames", type=int, default=200, help="frames to sample (>= 1)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    if args.frames < 1:
+        fail(f"--frames must be >= 1, got {args.frames}")
+    if not args.data.exists():
+        fail(f"{args.data}: not found (generate it with `iplanner-data generate`)")
     gen = torch.Generator().manual_seed(args.seed)
-    try:
-        frames = _frames(args.data, args.frames, gen)
-    except DataError as err:
-        sys.exit(f"error: {err} (generate it with `iplanner-data generate`)")
+    frames = _frames(args.data, args.frames, gen)
     result = gaps(frames, gen)
     print(f"{frames.shape[0]} frames of {args.data}; worst point outside the spheres [cm]")
     print(f"{'segment':16s} {'inner':>8s} {'cover':>8s}")

@@ -2,12 +2,14 @@
 
 Writes ``experiments/dataset/reaches.png`` (hand paths in top and side view with the skeleton at
 the target, and hand speed against time, by target) and ``experiments/dataset/README.md`` (the
-command, and the generation time and size of the default dataset measured by this script).
+command, and the generation time and size of the default dataset measured by this script);
+``--out <folder>`` writes them there instead.
 
 Usage::
 
     python scripts/plot_dataset.py            # plots and measures the default dataset
     python scripts/plot_dataset.py --no-measure
+    python scripts/plot_dataset.py --no-measure --out /tmp/preview   # leaves the record as is
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ from iplanner_torch.data.reaching import (  # noqa: E402
 )
 from iplanner_torch.data.skeleton import BONES, JOINT_INDEX  # noqa: E402
 
-OUT = Path(__file__).resolve().parents[1] / "experiments" / "dataset"
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "experiments" / "dataset"
 
 
 def plot_reaches(path: Path, cfg: ReachingCfg) -> None:
@@ -83,9 +86,15 @@ def main() -> None:
     """Plot, then (unless ``--no-measure``) generate the default dataset to a temp folder."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-measure", action="store_true", help="skip the timing run")
+    parser.add_argument(
+        "--out", type=Path, default=OUT, help=f"folder for reaches.png and README.md ({OUT})"
+    )
     args = parser.parse_args()
-    OUT.mkdir(parents=True, exist_ok=True)
-    plot_reaches(OUT / "reaches.png", ReachingCfg())
+    if args.out.exists() and not args.out.is_dir():
+        parser.error(f"--out must be a folder: {args.out} is a file")
+    args.out.mkdir(parents=True, exist_ok=True)
+    plot_reaches(args.out / "reaches.png", ReachingCfg())
+    print(f"wrote {args.out / 'reaches.png'}")
     if args.no_measure:
         return
     rows = []
@@ -98,7 +107,7 @@ def main() -> None:
         )
     try:
         git = ["git", "rev-parse", "--short", "HEAD"]
-        out = subprocess.run(git, capture_output=True, text=True, check=False)
+        out = subprocess.run(git, cwd=ROOT, capture_output=True, text=True, check=False)
         commit = out.stdout.strip() or "uncommitted"
     except OSError:
         commit = "unknown"
@@ -123,7 +132,7 @@ seed 0), written as NPZ, generation time measured by this script:
 |---|---|---|---|---|
 {chr(10).join(rows)}
 """
-    (OUT / "README.md").write_text(text)
+    (args.out / "README.md").write_text(text)
     print(text)
 
 

@@ -15,6 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from _report import fail, main_guard  # noqa: E402
 
 from iplanner_torch.robot.model import RobotModel  # noqa: E402
 
@@ -69,10 +70,18 @@ def plot_robot(name: str, path: Path) -> None:
     plt.close(fig)
 
 
+@main_guard
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=OUT,
+        help=f"folder for kuka_iiwa14.png and fetch.png (default {OUT})",
+    )
     args = parser.parse_args()
+    if args.out.exists() and not args.out.is_dir():
+        fail(f"--out must be a folder: {args.out} is a file")
     for name, file in (("kuka_iiwa14", "kuka_iiwa14.png"), ("fetch", "fetch.png")):
         plot_robot(name, args.out / file)
         print(args.out / file)

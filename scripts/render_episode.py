@@ -20,6 +20,7 @@ installed is picked when the variable is unset.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,9 +28,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import torch
+from _report import fail, main_guard
+from matplotlib.backend_bases import FigureCanvasBase
 
 from iplanner_torch.data.skeleton import JOINT_INDEX
-from iplanner_torch.errors import DataError
 from iplanner_torch.recording import Episode, read_episode
 from iplanner_torch.robot.model import RobotModel
 from iplanner_torch.sim.human import ReachingMotionSource
@@ -44,6 +46,7 @@ from iplanner_torch.sim.scene import SceneCfg, SceneHandles, build_scene, pose_h
 
 ROOT = Path(__file__).resolve().parents[1]
 CAMERA_NAMES = ("overview", "side", "top")
+VIDEO_SUFFIXES = (".gif", ".mp4")
 
 
 @dataclass
@@ -160,15 +163,22 @@ def render_episode(
 ) -> list[Path]:
     """Contact sheet of ``frames`` snapshots of an episode log (and optionally a video)."""
     meta = ep.metadata
-    name = robot_name or meta.get("robot")
-    if name not in RobotModel.available():
-        known = RobotModel.available()
-        sys.exit(f"robot {name!r} of {ep.path} is not one of {known}; use --robot")
+    logged = meta.get("robot")
+    name = robot_name or logged
+    known = RobotModel.available()
+    if name is None:
+        fail(f"{ep.path} names no robot; use --robot (one of {known})")
+    if name not in known:
+        fail(f"robot {name!r} of {ep.path} is not one of {known}; use --robot")
+    if robot_name and logged and robot_name != logged:
+        print(
+            f"warning: --robot {robot_name} differs from the log's robot {logged}", file=sys.stderr
+        )
     ws = Workspace.build(name, meta.get("arrangement", "1x4"))
     t_q, q = (x.numpy() for x in ep.robot_q())
     t_h, h = (x.numpy() for x in ep.human_true())
     if q.shape[1] != ws.robot.num_joints:
-        sys.exit(f"{ep.path} has {q.shape[1]} joints, {name} has {ws.robot.num_joints}")
+        fail(f"{ep.path} has {q.shape[1]} joints, {name} has {ws.robot.num_joints}")
 
     def q_of_t(t: float) -> np.ndarray:
         return np.stack([np.interp(t, t_q, q[:, j]) for j in range(q.shape[1])])
@@ -250,6 +260,28 @@ def _write_video(frames: list[np.ndarray], path: Path, fps: float) -> Path:
     return path
 
 
+def _check_args(args: argparse.Namespace) -> argparse.Namespace:
+    """Refuse settings that would fail only after every frame was rendered; give ``--out``
+    without a suffix the PNG one (so the path printed is the one written)."""
+    if args.frames < 1:
+        fail(f"--frames must be >= 1, got {args.frames}")
+    for flag in ("width", "height"):
+        if getattr(args, flag) is not None and getattr(args, flag) < 1:
+            fail(f"--{flag} must be >= 1 pixel, got {getattr(args, flag)}")
+    if not (math.isfinite(args.fps) and args.fps > 0):
+        fail(f"--fps must be a finite number > 0, got {args.fps}")
+    if args.video is not None and args.video.suffix.lower() not in VIDEO_SUFFIXES:
+        fail(f"--video {args.video}: give a file ending in {' or '.join(VIDEO_SUFFIXES)}")
+    if args.out is not None:
+        if args.out.suffix == "":
+            args.out = args.out.with_suffix(".png")
+        image_types = FigureCanvasBase.get_supported_filetypes()
+        if args.out.suffix.lower().lstrip(".") not in image_types:
+            fail(f"--out {args.out}: not an image type ({', '.join(sorted(image_types))})")
+    return args
+
+
+@main_guard
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     mode = parser.add_mutually_exclusive_group(required=True)
@@ -264,23 +296,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fps", type=float, default=10.0, help="animation frame rate")
     parser.add_argument("--width", type=int, help="image width [px] (scene 480, episode 640)")
     parser.add_argument("--height", type=int, help="image height [px] (scene 360, episode 480)")
-    args = parser.parse_args(argv)
+    args = _check_args(parser.parse_args(argv))
+    ep = None if args.scene else read_episode(args.mcap)
+    if ep is not None and not ep.frames:
+        cut = "" if ep.complete else " (truncated or damaged)"
+        fail(f"{args.mcap}: the log has no messages{cut}; nothing to render")
     if not gl_available():
-        sys.exit(
+        fail(
             "no OpenGL backend loads: install libosmesa6 (MUJOCO_GL=osmesa) or libegl-mesa0 "
             "(MUJOCO_GL=egl)"
         )
-    if args.frames < 1:
-        sys.exit("--frames must be >= 1")
-    if args.scene:
+    if ep is None:
         out = args.out or ROOT / "experiments" / "scenes" / "overview.png"
         written = [render_scene_sheet(out, args.width or 480, args.height or 360)]
     else:
         out = args.out or args.mcap.with_suffix(".png")
-        try:
-            ep = read_episode(args.mcap)
-        except DataError as err:
-            sys.exit(str(err))
         written = render_episode(
             ep,
             out,

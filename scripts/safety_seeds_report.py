@@ -17,12 +17,23 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
-from _report import complete_rows, fail, parse_report_args, write_readme
+from _report import (
+    SETTINGS,
+    complete_rows,
+    fail,
+    main_guard,
+    numeric_column,
+    parse_report_args,
+    require_columns,
+    single_setting,
+    write_readme,
+)
 
-from iplanner_torch.errors import DataError
 from iplanner_torch.eval.report import gather_results, paired_table, to_markdown
 
 OUT = Path(__file__).resolve().parents[1] / "experiments" / "safety_seeds"
+#: the columns naming an episode: rows of one sweep job repeated in another are dropped
+KEYS = ("scenario", "planner", "seed")
 
 #: column -> (aggregation, header)
 COLUMNS = {
@@ -45,19 +56,26 @@ def gather(run_dir: Path) -> pd.DataFrame:
 
     Raw rows name metrics ``eval/<name>``; a summary's ``results.csv`` (a finished
     single-scenario run keeps only that one) names them ``<name>``: :func:`gather_results`
-    reads both alike."""
+    reads both alike. Rows are the same episode when their :data:`KEYS` and settings
+    (:data:`_report.SETTINGS`: robot, confidence, noise, ...) are; an error names the values
+    when rows of more than one setting remain (the report covers one)."""
     frames = []
     for f in sorted(run_dir.rglob("results.csv")):
-        try:
-            df = gather_results(f)
-        except DataError as err:
-            fail(str(err))
-        if "min_distance" in df.columns:  # episode rows
-            frames.append(complete_rows(df, f, "min_distance"))
+        df = gather_results(f)
+        if "min_distance" not in df.columns:  # not episode rows
+            continue
+        require_columns(df, f, KEYS)
+        complete_rows(df, f, "min_distance")
+        if "sim/contacts" in df.columns:  # a cell that is not a number is not a contact
+            complete_rows(df, f, "sim/contacts")
+        frames.append(numeric_column(df, f, "confidence"))
     if not frames:
         fail(f"no results.csv with episode rows under {run_dir}")
     df = pd.concat(frames, ignore_index=True)
-    return df.drop_duplicates(subset=["scenario", "planner", "seed"], keep="last")
+    same = [c for c in (*KEYS, *SETTINGS) if c in df.columns]
+    df = df.drop_duplicates(subset=same, keep="last")
+    single_setting(df, run_dir, SETTINGS)
+    return df
 
 
 def summarise(df: pd.DataFrame) -> pd.DataFrame:
@@ -79,11 +97,15 @@ def paired(df: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
+@main_guard
 def main() -> None:
     args = parse_report_args(
         __doc__.splitlines()[0], "iplanner-experiment -m experiment=safety_seeds", OUT
     )
     df = gather(args.run_dir)
+    level = ""
+    if "confidence" in df.columns and df["confidence"].notna().any():
+        level = f" (confidence {df['confidence'].dropna().iloc[0]:g})"
     table = summarise(df)
     pairs = paired(df)
     paired_body = [
@@ -97,7 +119,7 @@ def main() -> None:
     ]
     write_readme(
         args.out,
-        title="Safety and efficiency over 20 seeds per scenario (confidence 0.95)",
+        title=f"Safety and efficiency over 20 seeds per scenario{level}",
         command=args.command,
         report="python scripts/safety_seeds_report.py <multirun dir>",
         episodes=df,

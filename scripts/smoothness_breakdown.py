@@ -3,11 +3,11 @@
 
 Usage::
 
-    python scripts/smoothness_breakdown.py <run dir> [--settle 1.0] [--episodes]
+    python scripts/smoothness_breakdown.py <run dir or .mcap> [--settle 1.0] [--episodes]
 
-Reads every ``*.mcap`` episode log under the run folder and prints, per scenario, swept
-setting (speed, noise, confidence, when they vary) and planner, the means of
-:func:`iplanner_torch.eval.smoothness.episode_breakdown`:
+Reads every ``*.mcap`` episode log under the run folder (or the one log given) and prints,
+per scenario, swept setting (speed, noise, confidence, when they vary) and planner, the means
+of :func:`iplanner_torch.eval.smoothness.episode_breakdown`:
 
 - ``smoothness_log``: the paper's smoothness of the logged robot states (sampled more sparsely
   than ``eval/smoothness``, so lower; compare planners, not absolute values);
@@ -18,19 +18,23 @@ setting (speed, noise, confidence, when they vary) and planner, the means of
 - ``plan_executed``: the mean ``sum_i qdd_i^2`` of the plans' own waypoints over the parts
   that ran before the next plan took over.
 
-``--episodes`` prints one row per episode as well.
+``--episodes`` prints one row per episode as well. Logs that cannot be split, and truncated
+or damaged logs (read only up to their last complete chunk) unless ``--include-incomplete``,
+are left out and named.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+import warnings
 from pathlib import Path
 
 import pandas as pd
-from _report import fail
+from _report import fail, main_guard
 
-from iplanner_torch.errors import DataError
+from iplanner_torch.errors import DataError, DataWarning
 from iplanner_torch.eval.report import SWEPT_SETTINGS, report_groups, to_markdown
 from iplanner_torch.eval.smoothness import episode_breakdown
 from iplanner_torch.recording import read_episode
@@ -45,20 +49,37 @@ COLUMNS = {
 }
 
 
+@main_guard
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("run_dir", type=Path, help="run folder, or one .mcap episode log")
     parser.add_argument("--settle", type=float, default=1.0, help="seconds after a wait")
     parser.add_argument("--episodes", action="store_true", help="one row per episode too")
+    parser.add_argument(
+        "--include-incomplete",
+        action="store_true",
+        help="count truncated or damaged logs too (what was read of them)",
+    )
     args = parser.parse_args()
-    paths = sorted(args.run_dir.rglob("*.mcap"))
+    if not (math.isfinite(args.settle) and args.settle >= 0.0):
+        fail(f"--settle must be a number of seconds >= 0, got {args.settle}")
+    if not args.run_dir.exists():
+        fail(f"no *.mcap episode logs: {args.run_dir} not found")
+    paths = [args.run_dir] if args.run_dir.is_file() else sorted(args.run_dir.rglob("*.mcap"))
     if not paths:
         fail(f"no *.mcap episode logs under {args.run_dir}")
     rows = []
     skipped = []
     for path in paths:
         try:
-            ep = read_episode(path)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", DataWarning)
+                ep = read_episode(path)
+            if not ep.complete and not args.include_incomplete:
+                skipped.append(f"{path}: truncated or damaged (--include-incomplete counts it)")
+                continue
+            for w in caught:
+                print(f"warning: {w.message}", file=sys.stderr)
             b = episode_breakdown(ep, settle_s=args.settle)
         except DataError as exc:  # a log cut short (an interrupted run): left out, named
             skipped.append(f"{path}: {exc}")
@@ -70,7 +91,7 @@ def main() -> None:
     for line in skipped:
         print(f"skipped {line}", file=sys.stderr)
     if not rows:
-        fail(f"none of the {len(paths)} logs under {args.run_dir} could be split")
+        fail(f"none of the {len(paths)} log(s) in {args.run_dir} could be split")
     df = pd.DataFrame(rows)
     if args.episodes:
         print(to_markdown(df))

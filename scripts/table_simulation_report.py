@@ -15,9 +15,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from _report import complete_rows, fail, parse_report_args, write_readme
+from _report import (
+    SETTINGS,
+    complete_rows,
+    fail,
+    main_guard,
+    numeric_column,
+    parse_report_args,
+    require_columns,
+    single_setting,
+    write_readme,
+)
 
-from iplanner_torch.errors import DataError
 from iplanner_torch.eval.report import (
     gather_results,
     paper_table_simulation,
@@ -30,6 +39,7 @@ OUT = Path(__file__).resolve().parents[1] / "experiments" / "table_simulation"
 KEYS = ["arrangement", "task_order", "confidence", "planner"]
 
 
+@main_guard
 def main() -> None:
     args = parse_report_args(
         __doc__.splitlines()[0], "iplanner-experiment experiment=table_simulation", OUT
@@ -37,11 +47,15 @@ def main() -> None:
     path = args.run_dir / "results.csv"
     if not path.is_file():
         fail(f"{path}: not found (give the folder of an `experiment=table_simulation` run)")
-    try:
-        df = complete_rows(gather_results(path), path, "smoothness")
-    except DataError as err:
-        fail(str(err))
-    df["confidence"] = df["confidence"].astype(float).round(2)
+    df = gather_results(path)
+    if df.empty:
+        fail(f"{path}: no episode rows (a header at most; was the run stopped?)")
+    require_columns(df, path, ("scenario", *KEYS))
+    complete_rows(df, path, "smoothness")
+    df = numeric_column(df, path, "confidence")
+    # the tables average over every setting but the confidence (a key): one value of each
+    single_setting(df, path, [c for c in SETTINGS if c != "confidence"])
+    df["confidence"] = df["confidence"].round(2)
     paper = paper_table_simulation()
     paper["confidence"] = paper["confidence"].astype(float).round(2)
     table = side_by_side(df, paper, on=KEYS)

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pandas as pd
+import pytest
 
 SCRIPTS = Path(__file__).resolve().parents[2] / "scripts"
 
@@ -110,3 +111,38 @@ def test_paired_section_is_each_planner_minus_itomp_per_seed() -> None:
     assert dist.ci_low < 1.5 < dist.ci_high and dist.p_value < 0.05
     assert abs(smooth.mean_diff - 1.0) < 1e-9 and smooth.wins == 2 and smooth.p_value > 0.05
     assert mod.paired(b.rename(columns=lambda c: c.removeprefix("eval/"))).empty  # no ITOMP
+
+
+def _job(root: Path, job: str, seeds: range, **settings: object) -> None:
+    d = root / job / "s1"
+    d.mkdir(parents=True)
+    rows = _rows("itomp", seeds, [0] * len(seeds))
+    for key, value in settings.items():
+        rows.insert(2, key, value)
+    rows.to_csv(d / "results.csv", index=False)
+
+
+def test_gather_drops_repeats_of_one_setting_only(tmp_path: Path, monkeypatch, capsys) -> None:
+    """A job repeated at the same confidence is one episode per seed; rows of another
+    confidence or robot are refused (the report covers one), naming the values."""
+    ssr = _load()
+    _job(tmp_path / "a", "0", range(3), confidence=0.99)
+    _job(tmp_path / "a", "1", range(1, 4), confidence=0.99)  # seeds 1, 2 again
+    df = ssr.gather(tmp_path / "a")
+    assert sorted(df["seed"]) == [0, 1, 2, 3] and set(df["confidence"]) == {0.99}
+    out = tmp_path / "record"
+    monkeypatch.setattr(sys, "argv", ["ssr", str(tmp_path / "a"), "--out", str(out)])
+    ssr.main()
+    assert "(confidence 0.99)" in (out / "README.md").read_text().splitlines()[0]
+    for name, key, values in (
+        ("b", "confidence", (0.95, 0.99)),
+        ("c", "robot", ("fetch", "kuka_iiwa14")),
+    ):
+        _job(tmp_path / name, "0", range(3), **{key: values[0]})
+        _job(tmp_path / name, "1", range(3), **{key: values[1]})
+        capsys.readouterr()
+        with pytest.raises(SystemExit) as exc:
+            ssr.gather(tmp_path / name)
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and err.count("\n") == 1, err
+        assert f"more than one {key} ({values[0]}, {values[1]})" in err

@@ -1,0 +1,337 @@
+"""The scripts under scripts/ refuse bad input in one line (``error: ...``, exit code 2) before
+doing any work, and leave existing records and truncated logs alone."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from iplanner_torch.errors import DataError
+from iplanner_torch.recording import EpisodeWriter
+
+SCRIPTS = Path(__file__).resolve().parents[2] / "scripts"
+
+
+def _load(name: str):
+    sys.path.insert(0, str(SCRIPTS))
+    try:
+        spec = importlib.util.spec_from_file_location(f"script_{name}", SCRIPTS / f"{name}.py")
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = mod  # its dataclasses look their module up
+        spec.loader.exec_module(mod)  # type: ignore[union-attr]
+        return mod
+    finally:
+        sys.path.remove(str(SCRIPTS))
+
+
+@pytest.fixture
+def run_script(monkeypatch, capsys):
+    """``run_script(name, *args) -> (exit code, stdout, stderr)`` of ``scripts/<name>.py``'s
+    ``main`` run in this process with ``args`` as its command line."""
+    monkeypatch.setattr(sys, "path", list(sys.path))  # bench.py adds scripts/ to it
+
+    def run(name: str, *args: object, module=None) -> tuple[int, str, str]:
+        mod = module or _load(name)
+        monkeypatch.setattr(sys, "argv", [f"{name}.py", *map(str, args)])
+        try:
+            code = mod.main() or 0
+        except SystemExit as exc:
+            code = exc.code
+        out = capsys.readouterr()
+        return code, out.out, out.err
+
+    return run
+
+
+def _episodes(n: int = 3, **settings: object) -> pd.DataFrame:
+    """Episode rows of one scenario and planner, as a results.csv holds them."""
+    return pd.DataFrame(
+        {
+            "planner": "itomp",
+            "scenario": "s1",
+            "arrangement": "1x4",
+            "task_order": "(0,1)->(2,3)",
+            "confidence": 0.95,
+            **settings,
+            "seed": list(range(n)),
+            "sim/contacts": [0] * n,
+            "completed": [1.0] * n,
+            "eval/min_distance": [0.05] * n,
+            "eval/smoothness": [10.0] * n,
+        }
+    )
+
+
+def _one_error_line(err: str) -> str:
+    lines = [ln for ln in err.splitlines() if ln.startswith("error: ")]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+# --- the report scripts: results.csv columns and values ----------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("script", "drop", "message"),
+    [
+        ("safety_seeds_report", "seed", "no 'seed' column"),
+        ("safety_seeds_report", "planner", "no 'planner' column"),
+        ("table_simulation_report", "confidence", "no 'confidence' column"),
+        ("table_simulation_report", "arrangement", "no 'arrangement' column"),
+        ("table_simulation_report", "scenario", "no 'scenario' column"),
+    ],
+)
+def test_reports_name_a_missing_key_column(tmp_path, run_script, script, drop, message) -> None:
+    _episodes().drop(columns=[drop]).to_csv(tmp_path / "results.csv", index=False)
+    code, _, err = run_script(script, tmp_path, "--out", tmp_path / "record")
+    assert code == 2 and message in _one_error_line(err)
+    assert not (tmp_path / "record").exists()
+
+
+@pytest.mark.parametrize("script", ["safety_seeds_report", "table_simulation_report"])
+def test_reports_name_a_confidence_that_is_not_a_number(tmp_path, run_script, script) -> None:
+    df = _episodes()
+    df["confidence"] = df["confidence"].astype(object)
+    df.loc[1, "confidence"] = "high"
+    df.to_csv(tmp_path / "results.csv", index=False)
+    code, _, err = run_script(script, tmp_path, "--out", tmp_path / "record")
+    line = _one_error_line(err)
+    assert code == 2 and "'confidence' value(s) are not numbers" in line and "'high'" in line
+    assert "rows [3]" in line
+
+
+def test_table_report_says_a_header_only_file_has_no_rows(tmp_path, run_script) -> None:
+    _episodes().iloc[:0].to_csv(tmp_path / "results.csv", index=False)
+    code, _, err = run_script("table_simulation_report", tmp_path, "--out", tmp_path / "rec")
+    assert code == 2 and "no episode rows" in _one_error_line(err)
+
+
+def test_a_contacts_cell_that_is_not_a_number_is_not_counted_as_a_contact(
+    tmp_path, run_script
+) -> None:
+    df = _episodes()
+    df["sim/contacts"] = df["sim/contacts"].astype(object)
+    df.loc[0, "sim/contacts"] = "x"
+    df.to_csv(tmp_path / "results.csv", index=False)
+    with pytest.warns(UserWarning, match="not numbers"):
+        code, _, err = run_script("safety_seeds_report", tmp_path, "--out", tmp_path / "rec")
+    assert code == 2 and "lack 'sim/contacts'" in _one_error_line(err)
+    assert not (tmp_path / "rec").exists()
+
+
+def test_reports_keep_an_existing_results_csv_without_force(tmp_path, run_script) -> None:
+    run, out = tmp_path / "run", tmp_path / "record"
+    run.mkdir()
+    out.mkdir()
+    _episodes().to_csv(run / "results.csv", index=False)
+    (out / "results.csv").write_text("hand-made")
+    for script in ("safety_seeds_report", "table_simulation_report"):
+        code, _, err = run_script(script, run, "--out", out)
+        assert code == 2 and "pass --force" in _one_error_line(err) and "results.csv" in err
+        assert (out / "results.csv").read_text() == "hand-made"
+        assert not (out / "README.md").exists()
+    code, _, err = run_script("safety_seeds_report", run, "--out", out, "--force")
+    assert code == 0, err
+    assert len(pd.read_csv(out / "results.csv")) == 3
+
+
+def test_out_must_be_a_folder(tmp_path, run_script) -> None:
+    _episodes().to_csv(tmp_path / "results.csv", index=False)
+    out = tmp_path / "record.txt"
+    out.write_text("keep")
+    code, _, err = run_script("safety_seeds_report", tmp_path, "--out", out)
+    assert code == 2 and "--out must be a folder" in _one_error_line(err)
+    code, _, err = run_script("plot_robot_spheres", "--out", out)
+    assert code == 2 and "--out must be a folder" in _one_error_line(err)
+    assert out.read_text() == "keep"
+
+
+# --- bench.py: its arguments are checked before any benchmark runs ------------------------------
+
+
+@pytest.fixture
+def bench(monkeypatch):
+    mod = _load("bench")
+
+    def no_run(area: str):
+        raise AssertionError(f"benchmark {area} started")
+
+    monkeypatch.setattr(mod, "_load", no_run)
+    return mod
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--only", "nosuch"], "unknown area(s) nosuch"),
+        (["--only", "DTW"], "unknown area(s) DTW"),
+        (["--only", ","], "no area"),
+        (["--only", "dtw,x"], "unknown area(s) x"),
+        (["--threads", "0"], "--threads must be >= 1"),
+        (["--threads", "-1"], "--threads must be >= 1"),
+    ],
+)
+def test_bench_refuses_bad_arguments(tmp_path, run_script, bench, args, message) -> None:
+    figures = tmp_path / "cpu.json"
+    figures.write_text('{"kept": 1}\n')
+    code, _, err = run_script("bench", *args, "--json", figures, module=bench)
+    assert code == 2 and message in err
+    if "--only" in args:
+        assert "dtw, prediction, robot, collision, planning, sim" in err
+    assert figures.read_text() == '{"kept": 1}\n'
+
+
+def test_bench_refuses_a_json_folder_and_writes_no_json_without_figures(
+    tmp_path, run_script, bench, monkeypatch
+) -> None:
+    code, _, err = run_script("bench", "--only", "dtw", "--json", tmp_path, module=bench)
+    assert code == 2 and "is a folder" in err
+
+    class Failing:
+        @staticmethod
+        def run(quick: bool) -> dict:
+            raise RuntimeError("no figures")
+
+    monkeypatch.setattr(bench, "_load", lambda area: Failing)
+    figures = tmp_path / "cpu.json"
+    figures.write_text('{"kept": 1}\n')
+    code, _, err = run_script("bench", "--only", "dtw", "--json", figures, module=bench)
+    assert code == 2 and "no figure was produced" in err
+    assert figures.read_text() == '{"kept": 1}\n'
+    assert not figures.with_suffix(".meta.json").exists()
+
+
+# --- smoothness_breakdown.py: truncated logs, one log, bad numbers ------------------------------
+
+
+def _log(path: Path, seed: int) -> None:
+    """An episode log with one plan and 250 robot states in many small chunks."""
+    t = np.arange(0.0, 10.0, 0.04)
+    q = np.stack([np.sin(t), np.cos(t)], axis=1)
+    meta = {"scenario": "s1", "planner": "itomp", "seed": seed}
+    with EpisodeWriter(path, metadata=meta, chunk_size=2048) as log:
+        times = np.linspace(0.0, 3.0, 8)
+        log.plan(0.0, times, np.stack([times, times], axis=1), True, 0.0, 1.0)
+        for i in range(len(t)):
+            log.robot_state(float(t[i]), q[i], np.zeros(2), ["a", "b"])
+
+
+def _table_rows(stdout: str) -> list[list[str]]:
+    return [[c.strip() for c in ln.split("|")[1:-1]] for ln in stdout.splitlines() if "| s1" in ln]
+
+
+def test_breakdown_leaves_truncated_logs_out_and_names_them(tmp_path, run_script) -> None:
+    _log(tmp_path / "full.mcap", 0)
+    _log(tmp_path / "cut.mcap", 1)
+    data = (tmp_path / "cut.mcap").read_bytes()
+    (tmp_path / "cut.mcap").write_bytes(data[: int(0.3 * len(data))])  # some chunks remain
+    code, out, err = run_script("smoothness_breakdown", tmp_path)
+    assert code == 0, err
+    assert "skipped" in err and "cut.mcap: truncated or damaged" in err
+    assert [r[2] for r in _table_rows(out)] == ["1"]  # one episode: the full log
+    code, out, err = run_script("smoothness_breakdown", tmp_path, "--include-incomplete")
+    assert code == 0 and [r[2] for r in _table_rows(out)] == ["2"]
+    assert "warning: " in err and "truncated" in err
+
+
+def test_breakdown_reads_one_log_and_names_a_missing_path(tmp_path, run_script) -> None:
+    _log(tmp_path / "full.mcap", 0)
+    code, out, err = run_script("smoothness_breakdown", tmp_path / "full.mcap")
+    assert code == 0, err
+    assert [r[2] for r in _table_rows(out)] == ["1"]
+    code, _, err = run_script("smoothness_breakdown", tmp_path / "nope")
+    assert code == 2 and "not found" in _one_error_line(err)
+
+
+@pytest.mark.parametrize("settle", ["-1", "nan", "inf"])
+def test_breakdown_refuses_a_bad_settle_time(tmp_path, run_script, settle) -> None:
+    code, _, err = run_script("smoothness_breakdown", tmp_path, "--settle", settle)
+    assert code == 2 and "--settle must be" in _one_error_line(err)
+
+
+# --- human_sphere_gaps.py, render_episode.py and the shared error reporting ---------------------
+
+
+@pytest.mark.parametrize("frames", ["0", "-5"])
+def test_sphere_gaps_refuses_no_frames(tmp_path, run_script, frames) -> None:
+    code, _, err = run_script("human_sphere_gaps", "--data", tmp_path, "--frames", frames)
+    assert code == 2 and "--frames must be >= 1" in _one_error_line(err)
+
+
+def test_sphere_gaps_hints_at_generating_only_a_missing_dataset(tmp_path, run_script) -> None:
+    code, _, err = run_script("human_sphere_gaps", "--data", tmp_path / "nope")
+    assert code == 2 and "not found (generate it with" in _one_error_line(err)
+    code, _, err = run_script("human_sphere_gaps", "--data", tmp_path)  # a folder with no files
+    line = _one_error_line(err)
+    assert code == 2 and line.startswith("error: DataError: ") and "generate" not in line
+
+
+def test_main_guard_reports_package_and_os_errors_in_one_line(capsys) -> None:
+    report = _load("_report")
+
+    @report.main_guard
+    def broken(exc: Exception) -> None:
+        raise exc
+
+    for exc, line in (
+        (DataError("bad file\n"), "error: DataError: bad file"),
+        (FileNotFoundError(2, "No such file", "x.csv"), "error: FileNotFoundError: "),
+    ):
+        with pytest.raises(SystemExit) as info:
+            broken(exc)
+        assert info.value.code == 2
+        assert capsys.readouterr().err.startswith(line)
+    with pytest.raises(KeyError):  # other errors are bugs: their traceback stays
+        broken(KeyError("x"))
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--fps", "0", "--video", "v.gif"], "--fps must be"),
+        (["--fps", "nan"], "--fps must be"),
+        (["--video", "v.avi"], "ending in .gif or .mp4"),
+        (["--out", "sheet.xyz"], "not an image type"),
+        (["--width", "0", "--height", "0"], "--width must be >= 1"),
+        (["--height", "-2"], "--height must be >= 1"),
+        (["--frames", "0"], "--frames must be >= 1"),
+    ],
+)
+def test_render_refuses_bad_settings_before_rendering(tmp_path, run_script, args, message):
+    code, _, err = run_script("render_episode", "--mcap", tmp_path / "none.mcap", *args)
+    assert code == 2 and message in _one_error_line(err)
+
+
+def test_render_says_a_log_has_no_messages(tmp_path, run_script) -> None:
+    (tmp_path / "empty.mcap").write_bytes(b"")  # cut before anything was written
+    with pytest.warns(UserWarning, match="truncated"):
+        code, _, err = run_script("render_episode", "--mcap", tmp_path / "empty.mcap")
+    assert code == 2 and "the log has no messages (truncated" in _one_error_line(err)
+    assert "use --robot" not in err
+    with EpisodeWriter(tmp_path / "no_states.mcap", metadata={"robot": "kuka_iiwa14"}):
+        pass  # no robot state: the render finds none
+    code, _, err = run_script("render_episode", "--mcap", tmp_path / "no_states.mcap")
+    line = _one_error_line(err)
+    if "OpenGL" not in line:  # where a GL backend loads, the render itself refuses it
+        assert code == 2 and line.startswith("error: DataError: ") and "no messages on" in line
+    code, _, err = run_script("render_episode", "--mcap", tmp_path / "nope.mcap")
+    assert code == 2 and _one_error_line(err).startswith("error: DataError: ")
+
+
+def test_bench_json_written_with_figures(tmp_path, run_script, bench, monkeypatch) -> None:
+    class One:
+        @staticmethod
+        def run(quick: bool) -> dict:
+            return {"x.ms": {"value": 1.0, "unit": "ms"}}
+
+    monkeypatch.setattr(bench, "_load", lambda area: One)
+    figures = tmp_path / "cpu.json"
+    code, _, err = run_script("bench", "--only", "dtw", "--quick", "--json", figures, module=bench)
+    assert code == 0, err
+    assert json.loads(figures.read_text()) == {"x.ms": {"value": 1.0, "unit": "ms"}}
