@@ -115,7 +115,6 @@ def main(argv: list[str] | None = None) -> int:
         if not figures:
             print(f"error: no figure was produced; {args.json} not written", file=sys.stderr)
             return 2
-        args.json.parent.mkdir(parents=True, exist_ok=True)
         meta = {
             "command": "python scripts/bench.py " + " ".join(argv or sys.argv[1:]),
             "commit": _commit(),
@@ -126,9 +125,15 @@ def main(argv: list[str] | None = None) -> int:
             "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None,
             "failed_areas": failed,
         }
-        args.json.write_text(json.dumps(figures, indent=2) + "\n")
         meta_path = args.json.with_suffix(".meta.json")
-        meta_path.write_text(json.dumps(meta, indent=2) + "\n")
+        try:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(figures, indent=2) + "\n")
+            meta_path.write_text(json.dumps(meta, indent=2) + "\n")
+        except OSError as err:  # the figures of a long run are printed rather than lost
+            print(json.dumps(figures, indent=2))
+            print(f"error: {type(err).__name__}: {err} (the figures are above)", file=sys.stderr)
+            return 2
         print(f"\nwrote {args.json} and {meta_path}")
     return 1 if failed else 0
 

@@ -335,3 +335,21 @@ def test_bench_json_written_with_figures(tmp_path, run_script, bench, monkeypatc
     code, _, err = run_script("bench", "--only", "dtw", "--quick", "--json", figures, module=bench)
     assert code == 0, err
     assert json.loads(figures.read_text()) == {"x.ms": {"value": 1.0, "unit": "ms"}}
+
+
+def test_bench_prints_the_figures_when_the_json_cannot_be_written(
+    tmp_path, run_script, bench, monkeypatch
+) -> None:
+    """A long run's figures are not lost to a path it cannot write (here through a file)."""
+
+    class One:
+        @staticmethod
+        def run(quick: bool) -> dict:
+            return {"x.ms": {"value": 1.0, "unit": "ms"}}
+
+    monkeypatch.setattr(bench, "_load", lambda area: One)
+    (tmp_path / "afile").write_text("")
+    target = tmp_path / "afile" / "cpu.json"
+    code, out, err = run_script("bench", "--only", "dtw", "--json", target, module=bench)
+    assert code == 2 and "error: FileExistsError" in err and "the figures are above" in err
+    assert '"x.ms"' in out and not target.exists()
