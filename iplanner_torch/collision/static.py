@@ -78,6 +78,11 @@ def sphere_plane_distance(
     return centers @ n - offset - radii
 
 
+#: how far ``R R^T`` of a :class:`Box` rotation may be from the identity (rounding of a
+#: rotation written out to 7 digits passes)
+ROTATION_TOL = 1e-6
+
+
 @dataclass(frozen=True, kw_only=True)
 class Box:
     """An oriented box obstacle.
@@ -86,9 +91,9 @@ class Box:
 
     Raises:
         ConfigError: when ``center`` or a row of ``rotation`` is not 3 finite numbers (a
-            string, NaN, inf or a bool included), ``rotation`` has not 3 rows, or
-            ``half_extents`` are not 3 finite numbers > 0; the message names the field and
-            the box.
+            string, NaN, inf or a bool included), ``rotation`` has not 3 rows or is not
+            orthonormal (within :data:`ROTATION_TOL`), or ``half_extents`` are not 3 finite
+            numbers > 0; the message names the field and the box.
     """
 
     center: tuple[float, float, float]  # box centre [m], world frame
@@ -112,6 +117,17 @@ class Box:
         rotation = tuple(
             finite_tuple(f"Box.rotation[{i}] {label}", row, 3) for i, row in enumerate(rows)
         )
+        # the box frame must be orthonormal, or the distances are not distances
+        worst = max(
+            abs(sum(a * b for a, b in zip(rotation[i], rotation[j], strict=True)) - (i == j))
+            for i in range(3)
+            for j in range(3)
+        )
+        if worst > ROTATION_TOL:
+            raise ConfigError(
+                f"expected Box.rotation {label} orthonormal (R R^T = I within {ROTATION_TOL:g}), "
+                f"got {rotation} (off by {worst:.3g})"
+            )
         object.__setattr__(self, "center", center)
         object.__setattr__(self, "half_extents", half)
         object.__setattr__(self, "rotation", rotation)

@@ -97,6 +97,9 @@ def test_errors() -> None:
         ({"rotation": ((1.0, 0.0, 0.0), (0.0, math.nan, 0.0), (0.0, 0.0, 1.0))}, r"rotation\[1\]"),
         ({"rotation": ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))}, r"Box\.rotation \('table'\) a 3x3"),
         ({"rotation": "eye"}, r"Box\.rotation \('table'\) a 3x3"),
+        # a scaled or sheared frame: distances in it are not distances
+        ({"rotation": ((2.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))}, "orthonormal"),
+        ({"rotation": ((1.0, 0.1, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))}, "orthonormal"),
     ],
 )
 def test_box_refuses_non_finite_or_malformed_fields(kwargs: dict, pattern: str) -> None:
@@ -136,3 +139,13 @@ def test_fields_are_stored_as_floats_and_scenes_take_only_obstacles() -> None:
         StaticScene(boxes=(plane,))
     with pytest.raises(ConfigError, match=r"StaticScene\.planes a tuple of Plane objects"):
         StaticScene(planes=plane)  # type: ignore[arg-type]
+
+
+def test_box_takes_rotations_as_written_to_seven_digits() -> None:
+    c, s_ = round(math.cos(0.3), 7), round(math.sin(0.3), 7)
+    box = Box(
+        center=(0.0, 0.0, 0.0),
+        half_extents=(0.1, 0.1, 0.1),
+        rotation=((c, -s_, 0.0), (s_, c, 0.0), (0.0, 0.0, 1.0)),
+    )
+    assert box.rotation[0] == (c, -s_, 0.0)
