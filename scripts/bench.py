@@ -19,7 +19,6 @@ import argparse
 import importlib.util
 import json
 import platform
-import subprocess
 import sys
 import time
 import traceback
@@ -29,6 +28,8 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # the bench modules share scripts/_timing.py
+from _report import commit_short  # noqa: E402
+
 AREAS = ("dtw", "prediction", "robot", "collision", "planning", "sim")
 
 
@@ -42,19 +43,6 @@ def _load(area: str):
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=HERE,
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def _fmt(v: object) -> str:
@@ -117,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         meta = {
             "command": "python scripts/bench.py " + " ".join(argv or sys.argv[1:]),
-            "commit": _commit(),
+            "commit": commit_short() or "unknown",
             "quick": args.quick,
             "torch": torch.__version__,
             "threads": torch.get_num_threads(),

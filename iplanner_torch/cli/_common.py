@@ -572,11 +572,10 @@ def friendly_errors(
 
 #: Hydra's switch that makes it raise the errors it meets rather than print them and exit 1
 _HYDRA_RAISES = "HYDRA_FULL_ERROR"
-#: set in the environment with :data:`_HYDRA_RAISES` by :func:`run_app`, so that the task
-#: function unsets both, also in a launcher's worker process (joblib), which inherits them
+#: set in the environment with :data:`_HYDRA_RAISES` by :func:`run_app` while Hydra composes
+#: the config, so that the task function unsets both, also in a launcher's worker process
+#: (joblib), which inherits them; still set when an error comes: a composition error
 _SET_BY_RUN_APP = "IPLANNER_TORCH_COMPOSING"
-#: whether :func:`run_app` set :data:`_HYDRA_RAISES` and the task function has not started yet
-_composing = False
 
 
 def run_app(app: Callable[[], Any]) -> None:
@@ -591,19 +590,17 @@ def run_app(app: Callable[[], Any]) -> None:
     them here instead; an unexpected error inside the command is reported by Hydra as usual.
     When the environment sets ``HYDRA_FULL_ERROR=1`` already, Hydra's full traceback is what
     was asked for, and is left as it is."""
-    global _composing
     import os
 
     if os.environ.get(_HYDRA_RAISES) == "1":
         app()
         return
     os.environ[_HYDRA_RAISES] = "1"
-    os.environ[_SET_BY_RUN_APP] = "1"  # inherited by a launcher's worker processes too
-    _composing = True
+    os.environ[_SET_BY_RUN_APP] = "1"
     try:
         app()
     except Exception as exc:  # noqa: BLE001 - what is not a config error is raised again
-        if not _composing:  # raised by the command, after it started: Hydra's report
+        if _SET_BY_RUN_APP not in os.environ:  # raised by the command after it started
             raise
         text = composition_error_text(exc)
         if text is not None:
@@ -620,12 +617,10 @@ def run_app(app: Callable[[], Any]) -> None:
 
 def _task_started() -> None:
     """Give Hydra back its own report of errors: the command's task function has started."""
-    global _composing
     import os
 
     if os.environ.pop(_SET_BY_RUN_APP, None) is not None:
         os.environ.pop(_HYDRA_RAISES, None)
-    _composing = False
 
 
 def yaml_error_text(err: BaseException) -> str:
