@@ -452,6 +452,135 @@ _MEMORY_HINT = (
 )
 
 
+#: keys a command reads when they are set, though the default config has none:
+#: ``+data.fps=<Hz>`` (the frame rate of files that do not state theirs) and ``data.format``
+#: (``lego_assembly``, set by conf/data/lego.yaml)
+OPTIONAL_KEYS = frozenset({"data.fps", "data.format"})
+
+
+def check_added_keys(cfg: DictConfig, overrides: list[str] | None = None) -> None:
+    """Refuse a key that a ``+key=value`` or ``++key=value`` override adds where nothing reads
+    it: at the root, or in a node the command reads key by key (``tracker``, ``human``,
+    ``run``, ``paths``, ``train``, ``evaluate``, ``data``). Hydra adds such a key without a
+    word, so ``+tracker.nosie=0.05`` would run with the default noise.
+
+    A key added under a node built into a settings class (one with ``_target_``:
+    ``planner.optimizer``, ``experiment.episode``, ...) is left to that class, which refuses
+    fields it does not have; so are the keys of :data:`OPTIONAL_KEYS`, config group choices
+    (``+experiment=speed_response``) and ``hydra.*``. ``++key=value`` is refused only when
+    the key is not in the config composed without it (a key that exists is overridden);
+    when that config cannot be composed here, ``++`` overrides are left alone.
+
+    Args:
+        cfg: the composed config.
+        overrides: the command-line overrides (default: this run's, :func:`task_overrides`).
+
+    Raises:
+        ConfigError: ``unknown key 'tracker.nosie' (did you mean 'tracker.noise'?): added by
+            +tracker.nosie=0.05, which nothing reads``.
+    """
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    given = task_overrides() if overrides is None else overrides
+    if not any(o.lstrip().startswith("+") for o in given):
+        return
+    try:
+        parsed = OverridesParser.create().parse_overrides(given)
+    except Exception:  # noqa: BLE001 - Hydra has parsed them already; nothing to add here
+        return
+    added = []
+    for text, override in zip(given, parsed, strict=True):
+        key = override.key_or_group
+        if not (override.is_add() or override.is_force_add()) or override.package is not None:
+            continue
+        if key.startswith("hydra.") or key == "hydra" or "/" in key or key in OPTIONAL_KEYS:
+            continue
+        if "." not in key and (Path(CONF_DIR) / key).is_dir():  # a group choice
+            continue
+        if _under_settings_class(cfg, key):
+            continue
+        added.append((text, key, override.is_force_add()))
+    if any(force for _, _, force in added):
+        reference = _composed_without([t for t, _, force in added if force], given)
+        absent = object()
+        added = [
+            (text, key, force)
+            for text, key, force in added
+            if not force
+            or (
+                reference is not None
+                and OmegaConf.select(reference, key, default=absent) is absent
+            )
+        ]
+    if not added:
+        return
+    text, key, _ = added[0]
+    top = key.split(".", 1)[0]
+    if "." in key and (Path(CONF_DIR) / top).is_dir() and _no_option_chosen(top):
+        raise ConfigError(f"{_unchosen_group_key_text(key, top)}: added by {text}")
+    prefix, _, leaf = key.rpartition(".")
+    parent = OmegaConf.select(cfg, prefix, default=None) if prefix else cfg
+    own = {k for _, k, _ in added}
+    candidates = [
+        k
+        for k in _flat_keys(parent, skip=("hydra",))
+        if ".".join(filter(None, (prefix, k))) not in own
+    ]
+    candidates += [
+        k[len(prefix) + 1 :] if prefix else k for k in OPTIONAL_KEYS if k.startswith(prefix)
+    ]
+    best = _closest(leaf, candidates)
+    hint = "" if best is None else f" (did you mean {'.'.join(filter(None, (prefix, best)))!r}?)"
+    raise ConfigError(f"unknown key {key!r}{hint}: added by {text}, which nothing reads")
+
+
+def _no_option_chosen(group: str) -> bool:
+    """Whether this Hydra run chose no option for config group ``group`` (``experiment``
+    without ``experiment=<option>``); False outside a run."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        choices = HydraConfig.get().runtime.choices
+    except Exception:  # noqa: BLE001 - not in a Hydra run
+        return False
+    return group in choices and choices.get(group) is None
+
+
+def _under_settings_class(cfg: DictConfig, key: str) -> bool:
+    """Whether ``key`` lies under a node of ``cfg`` built into a settings class (``_target_``)."""
+    node: Any = cfg
+    for part in key.split(".")[:-1]:
+        if not isinstance(node, DictConfig) or part not in node:
+            return False
+        try:
+            node = node[part]
+        except Exception:  # noqa: BLE001 - an interpolation that does not resolve: no class
+            return False
+        if isinstance(node, DictConfig) and "_target_" in node:
+            return True
+    return False
+
+
+def _composed_without(drop: list[str], overrides: list[str]) -> DictConfig | None:
+    """The config of this run composed again without the overrides in ``drop``, or None when
+    it cannot be composed here (outside a Hydra run, or in a process without Hydra's state)."""
+    try:
+        from hydra.core.global_hydra import GlobalHydra
+        from hydra.core.hydra_config import HydraConfig
+        from hydra.types import RunMode
+
+        hydra = GlobalHydra.instance().hydra
+        if hydra is None:
+            return None
+        return hydra.compose_config(
+            HydraConfig.get().job.config_name,
+            [o for o in overrides if o not in drop],
+            RunMode.RUN,
+        )
+    except Exception:  # noqa: BLE001 - no reference: the ++ overrides are left alone
+        return None
+
+
 def multirun_job_dir() -> Path | None:
     """This job's folder when it is one job of a multirun (``-m``), else None."""
     try:
@@ -531,6 +660,7 @@ def friendly_errors(
         with copy_output_to(log_path), _terminate_as_interrupt():
             try:
                 if args and isinstance(args[0], DictConfig):
+                    check_added_keys(args[0])
                     if before is not None:
                         before(args[0])
                     check_root_keys(args[0])

@@ -186,7 +186,7 @@ def test_an_error_inside_the_command_is_reported_as_before(
     @friendly_errors
     def app(cfg: object) -> None:
         seen.append(os.environ.get("HYDRA_FULL_ERROR"))
-        if "+load=1" in sys.argv:
+        if "seed=1" in sys.argv:  # the case that reads a bad file
             OmegaConf.load(bad)
         raise ValueError("unexpected")
 
@@ -196,7 +196,7 @@ def test_an_error_inside_the_command_is_reported_as_before(
         "hydra/job_logging=none",
         "hydra/hydra_logging=none",
     ]
-    for extra in ([], ["+load=1"]):
+    for extra in ([], ["seed=1"]):
         monkeypatch.setattr(sys, "argv", ["app", *run, *extra])
         GlobalHydra.instance().clear()
         try:
@@ -214,3 +214,85 @@ def test_an_error_inside_the_command_is_reported_as_before(
         else:
             assert not isinstance(stop.value, SystemExit) or stop.value.code == 1
     assert "HYDRA_FULL_ERROR" not in os.environ
+
+
+@pytest.mark.parametrize(
+    ("module", "args", "line"),
+    [
+        ("experiment", ["+tracker.nosie=0.05"],
+         "unknown key 'tracker.nosie' (did you mean 'tracker.noise'?): added by "
+         "+tracker.nosie=0.05, which nothing reads"),
+        ("experiment", ["++run.max_duraton_s=2"],
+         "unknown key 'run.max_duraton_s' (did you mean 'run.max_duration_s'?): added by "
+         "++run.max_duraton_s=2, which nothing reads"),
+        ("experiment", ["+seeds=[1]"], "unknown key 'seeds' (did you mean 'seed'?): added by "
+         "+seeds=[1], which nothing reads"),
+        ("experiment", ["+experiment.episode.max_duration_s=1"],
+         "key 'experiment.episode.max_duration_s' needs experiment=<option> (safety_seeds, "
+         "speed_response, table_simulation): with experiment=null there is no experiment node: "
+         "added by +experiment.episode.max_duration_s=1"),
+        ("data", ["info", "data.path=nowhere", "+data.pth=x"],
+         "unknown key 'data.pth' (did you mean 'data.path'?): added by +data.pth=x, which "
+         "nothing reads"),
+        ("train", ["+train.resum=true"],
+         "unknown key 'train.resum' (did you mean 'train.resume'?): added by +train.resum=true, "
+         "which nothing reads"),
+        ("evaluate", ["+evaluate.labls=[a]"],
+         "unknown key 'evaluate.labls' (did you mean 'evaluate.labels'?): added by "
+         "+evaluate.labls=[a], which nothing reads"),
+    ],
+)  # fmt: skip
+def test_a_key_added_where_nothing_reads_it_is_refused(
+    module: str,
+    args: list[str],
+    line: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture,
+) -> None:
+    """Hydra adds ``+key=value`` (and ``++key=value`` for a key that is not there) without a
+    word; a misspelt key added so would change nothing."""
+    run = [f"hydra.run.dir={tmp_path / 'run'}", f"paths.datasets={tmp_path / 'data'}"]
+    code, lines = _main(module, [*args, *run], monkeypatch, capsys)
+    assert code == 2
+    assert lines == [f"error: ConfigError: {line}"]
+    assert not (tmp_path / "data").exists()
+
+
+def test_a_key_that_exists_may_be_force_added(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    """``++tracker.noise=...`` overrides the key that is there: it passes the check of added
+    keys and reaches the check of its value."""
+    args = ["++tracker.noise=-1", f"hydra.run.dir={tmp_path / 'run'}"]
+    code, lines = _main("experiment", args, monkeypatch, capsys)
+    assert code == 2
+    assert len(lines) == 1 and lines[0].startswith("error: ConfigError: tracker.noise:"), lines
+
+
+def test_added_keys_that_are_read_pass() -> None:
+    """Keys under a settings class (which refuses fields it lacks itself), the optional keys,
+    group choices and Hydra's own keys are not refused; outside a Hydra run ``++`` overrides
+    are left alone."""
+    from iplanner_torch.cli._common import check_added_keys
+
+    cfg = OmegaConf.create(
+        {
+            "tracker": {"noise": 0.01},
+            "planner": {"_target_": "x.PlannerCfg", "optimizer": {"iterations": 5}},
+            "data": {"path": "d"},
+        }
+    )
+    check_added_keys(
+        cfg,
+        [
+            "+planner.optimizer.foo=1",
+            "+data.fps=10",
+            "+experiment=speed_response",
+            "+hydra.job.env_set.X=1",
+            "++tracker.nosie=1",
+            "tracker.noise=0.02",
+        ],
+    )
+    with pytest.raises(ConfigError, match=r"unknown key 'data\.pth' \(did you mean 'data\.path'"):
+        check_added_keys(cfg, ["+data.pth=x"])
