@@ -24,6 +24,7 @@ from typing import Protocol
 
 import torch
 
+from iplanner_torch.checks import is_real
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.planning.trajectory import accelerations, velocities
 from iplanner_torch.prediction.forecast import Forecast
@@ -79,7 +80,7 @@ class CostWeights:
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
-            if not (isinstance(value, (int, float)) and value >= 0.0 and math.isfinite(value)):
+            if not (is_real(value) and value >= 0.0 and math.isfinite(value)):
                 raise ConfigError(f"expected weight {name} finite and >= 0, got {value!r}")
 
 

@@ -17,7 +17,7 @@ from dataclasses import replace
 
 import torch
 
-from iplanner_torch.checks import non_negative
+from iplanner_torch.checks import integer, non_negative, positive
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.planning.optimizer import PlanResult, TrajectoryOptimizer
 from iplanner_torch.prediction.forecast import Forecast
@@ -51,11 +51,12 @@ def static_human_forecast(
 
     Raises:
         ShapeError: when ``pose`` is not (K, 3) with K = len(joint_names).
-        ConfigError: when n_f < 1, dt <= 0, std <= 0, or spread is negative or not finite.
+        ConfigError: when n_f is not an integer >= 1, dt is not finite and > 0, std <= 0, or
+            spread is negative or not finite.
     """
     check_shape("pose", pose, (len(joint_names), 3))
-    if n_f < 1:
-        raise ConfigError(f"expected n_f >= 1, got {n_f}")
+    integer("n_f", n_f, minimum=1)
+    positive("dt", dt)
     spread = non_negative("spread", spread)
     path = pose.unsqueeze(0).expand(n_f, *pose.shape)
     fc = path_forecast(path, dt, joint_names, std=std, action="observed")

@@ -35,7 +35,7 @@ import torch
 
 from iplanner_torch.checks import finite_time, flag, integer, is_real, non_negative, positive
 from iplanner_torch.collision.human_spheres import HumanSphereMap, SphereLayout
-from iplanner_torch.errors import ConfigError, PlanningError
+from iplanner_torch.errors import ConfigError, PlanningError, ShapeError
 from iplanner_torch.planning import costs as C
 from iplanner_torch.planning.trajectory import Trajectory, accelerations, uniform_times
 from iplanner_torch.prediction.forecast import Forecast
@@ -234,7 +234,12 @@ class PlanResult:
 
     Attributes:
         feasible: the plan meets the confidence constraint, the static clearance and the
-            velocity limits (within ``VEL_TOL``) on its own;
+            velocity limits (within ``VEL_TOL``) on its own; the limits are checked on the
+            waypoints (each segment's mean velocity, and ``acc_max`` on their differences).
+            The cubic spline through them (:meth:`trajectory`, what ``tracking="exact"``
+            executes) can exceed them between waypoints: up to 4/3 of the segment velocity
+            where it starts or stops at rest, more acceleration where it must stop within one
+            segment. The default ``tracking="filtered"`` clips what it commands to both.
             False means it is the best trajectory cut at its last safe waypoint plus a wait,
             or (``evasive``) the trajectory with the smallest peak bound.
         q: (W, J) waypoints [rad]; after a wait, the waypoints from the hold on repeat it.
@@ -243,7 +248,9 @@ class PlanResult:
         wait_s: seconds the plan holds at its last safe pose inside the window (0 if feasible).
         hold_index: the waypoint held from, or None.
         qd_start: (J,) velocity at the first waypoint [rad/s] or None (rest).
-        candidates: (B, W, J) all optimised trajectories (warm starts of the next solve).
+        candidates: (B, W, J) all optimised trajectories (warm starts of the next solve);
+            in a wait or escape result, the row of the trajectory the plan came from holds
+            the plan ``q`` itself (the held or the escape path) instead.
         cost_terms: the accepted trajectory's unweighted cost terms and diagnostics.
         timings: milliseconds: ``predict_ms`` (forecast to human spheres at the waypoint
             times), ``collision_ms`` (bound evaluations, forward), ``optimiser_ms`` (the rest),
@@ -308,7 +315,11 @@ def smooth_stop(q: torch.Tensor, hold: int) -> torch.Tensor:
 
     Returns:
         (W, J) waypoints [rad] at the same times.
+
+    Raises:
+        ConfigError: when ``hold`` is not an integer >= 1.
     """
+    integer("hold", hold, minimum=1)
     w = q.shape[0]
     k_stop = min(2 * hold, w - 1)
     k = torch.arange(w, device=q.device, dtype=q.dtype).clamp(max=k_stop)
@@ -316,6 +327,12 @@ def smooth_stop(q: torch.Tensor, hold: int) -> torch.Tensor:
     lo = s.floor().long().clamp(max=w - 2)
     frac = (s - lo.to(q.dtype)).unsqueeze(-1)
     return (1.0 - frac) * q[lo] + frac * q[lo + 1]
+
+
+def _check_forecast(forecast: object) -> None:
+    """ShapeError unless ``forecast`` is a :class:`Forecast` or None."""
+    if forecast is not None and not isinstance(forecast, Forecast):
+        raise ShapeError(f"expected forecast a Forecast or None, got {type(forecast).__name__}")
 
 
 def _held(q: torch.Tensor, hold: int) -> torch.Tensor:
@@ -393,6 +410,21 @@ class TrajectoryOptimizer:
             )
         return self._sphere_cache[joint_names]
 
+    def _check_ends(
+        self, q_start: torch.Tensor, q_goal: torch.Tensor, qd_start: torch.Tensor | None
+    ) -> None:
+        """ShapeError unless ``q_start``, ``q_goal`` and ``qd_start`` (when given) are (J,);
+        DataError when one of them holds NaN or inf."""
+        j = self.num_joints
+        check_shape("q_start", q_start, (j,))
+        check_shape("q_goal", q_goal, (j,))
+        if qd_start is not None:
+            check_shape("qd_start", qd_start, (j,))
+        check_finite("q_start", q_start, ("joint",))
+        check_finite("q_goal", q_goal, ("joint",))
+        if qd_start is not None:
+            check_finite("qd_start", qd_start, ("joint",))
+
     def min_duration(
         self,
         q_start: torch.Tensor,
@@ -420,12 +452,9 @@ class TrajectoryOptimizer:
 
         Raises:
             ShapeError: when ``q_start``, ``q_goal`` or ``qd_start`` is not (J,).
+            DataError: when one of them holds NaN or inf.
         """
-        j = self.num_joints
-        check_shape("q_start", q_start, (j,))
-        check_shape("q_goal", q_goal, (j,))
-        if qd_start is not None:
-            check_shape("qd_start", qd_start, (j,))
+        self._check_ends(q_start, q_goal, qd_start)
         q_start = q_start.to(self.device, self.dtype)
         d = q_goal.to(q_start) - q_start  # (J,)
         t_line = float(1.5 * (d.abs() / self.v_max).max())
@@ -500,12 +529,12 @@ class TrajectoryOptimizer:
 
         Raises:
             ShapeError: when ``q_start``, ``q_goal`` or ``qd_start`` is not (J,).
+            DataError: when one of them holds NaN or inf.
+            ConfigError: when ``num`` is not an integer >= 1.
         """
         w, j = self.cfg.num_waypoints, self.num_joints
-        check_shape("q_start", q_start, (j,))
-        check_shape("q_goal", q_goal, (j,))
-        if qd_start is not None:
-            check_shape("qd_start", qd_start, (j,))
+        self._check_ends(q_start, q_goal, qd_start)
+        integer("num", num, minimum=1)
         n_a = w - 1 if arrival is None else min(max(int(arrival), 1), w - 1)
         k = torch.arange(w, device=self.device, dtype=self.dtype)
         s = (k / n_a).clamp(max=1.0)  # (W,) progress to the arrival
@@ -665,9 +694,11 @@ class TrajectoryOptimizer:
 
         Raises:
             ShapeError: on inputs of the wrong shape.
+            ShapeError: when ``forecast`` is not a :class:`Forecast` or None.
             ConfigError: when ``t0``, ``forecast_t0``, ``duration``, ``arrive`` or a bound of
-                ``window`` is not a finite number, when ``window`` ends before it starts, or
-                when ``duration <= 0``.
+                ``window`` is not a finite number, when ``window`` ends before it starts,
+                when ``duration <= 0`` or ``duration > MAX_HORIZON_S``, or when ``arrive`` is
+                before ``t0``.
             DataError: when ``q_start``, ``q_goal``, ``qd_start`` or ``q_init`` holds NaN or
                 inf.
             PlanningError: when the optimisation produces non-finite waypoints (it cannot
@@ -679,12 +710,19 @@ class TrajectoryOptimizer:
         check_shape("q_goal", q_goal, (j,))
         check_finite("q_start", q_start, ("joint",))
         check_finite("q_goal", q_goal, ("joint",))
+        _check_forecast(forecast)
         finite_time("t0", t0)
         finite_time("forecast_t0", forecast_t0)
         if duration is not None:
             finite_time("duration", duration)
+            if duration > MAX_HORIZON_S:
+                raise ConfigError(
+                    f"expected duration <= {MAX_HORIZON_S:g} s (MAX_HORIZON_S), got {duration!r}"
+                )
         if arrive is not None:
             finite_time("arrive", arrive)
+            if arrive < t0:
+                raise ConfigError(f"expected arrive >= t0, got arrive={arrive!r}, t0={t0!r}")
         if window is not None:
             try:
                 t_a, t_b = window
@@ -836,13 +874,21 @@ class TrajectoryOptimizer:
             everywhere when the human is not finite (:func:`unsafe_if_not_finite`).
 
         Raises:
-            ShapeError: on inputs of the wrong shape.
+            ShapeError: on inputs of the wrong shape, for N = 0 (no batch of the optimiser
+                is empty), or when ``forecast`` is not a :class:`Forecast`.
             ConfigError: when ``forecast_t0`` is not finite.
-            DataError: when ``times`` holds NaN or inf.
+            DataError: when ``q`` or ``times`` holds NaN or inf.
         """
         check_shape("q", q, ("N", self.num_joints))
+        if q.shape[0] == 0:
+            raise ShapeError(
+                f"expected q (N, {self.num_joints}) with N >= 1, got {tuple(q.shape)}"
+            )
         check_shape("times", times, (q.shape[0],))
+        if not isinstance(forecast, Forecast):
+            raise ShapeError(f"expected forecast a Forecast, got {type(forecast).__name__}")
         finite_time("forecast_t0", forecast_t0)
+        check_finite("q", q, ("configuration", "joint"))
         check_finite("times", times, ("configuration",))  # a NaN time indexes no frame
         q = q.to(self.device, self.dtype)
         with torch.no_grad():

@@ -47,9 +47,14 @@ from typing import Literal
 
 import torch
 
-from iplanner_torch.checks import finite, finite_time, non_negative, optional
+from iplanner_torch.checks import finite, finite_time, flag, non_negative, optional
 from iplanner_torch.errors import ConfigError, DataError
-from iplanner_torch.planning.optimizer import OptimizerCfg, PlanResult, TrajectoryOptimizer
+from iplanner_torch.planning.optimizer import (
+    MAX_HORIZON_S,
+    OptimizerCfg,
+    PlanResult,
+    TrajectoryOptimizer,
+)
 from iplanner_torch.planning.trajectory import Trajectory, resample_linear
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import check_finite, check_shape
@@ -75,7 +80,8 @@ class ReplannerCfg:
     replan_step_s: float = 0.5
     # wall-clock budget of one solve [s]; None means replan_step_s
     budget_s: float | None = None
-    # shortest span of a plan [s] (a plan near its goal still covers the window)
+    # shortest span of a plan [s] (a plan near its goal still covers the window), at most
+    # MAX_HORIZON_S
     min_duration_s: float = 1.0
     # warm-start each solve from the previous cycle's trajectories
     warm_start: bool = True
@@ -132,14 +138,18 @@ class ReplannerCfg:
             "tracking_max_gap_s",
         ):  # the fields typed float | None may be None
             optional(finite, name, getattr(self, name))
+        for name in ("warm_start", "replan_on_goal_change", "plan_from_reference"):
+            flag(name, getattr(self, name))
         if not 0.0 < self.replan_step_s <= MAX_REPLAN_STEP_S:
             raise ConfigError(
                 f"expected replan_step_s in (0, {MAX_REPLAN_STEP_S:g}] s, got {self.replan_step_s}"
             )
         if self.budget_s is not None and not self.budget_s > 0.0:
             raise ConfigError(f"expected budget_s > 0 or None, got {self.budget_s}")
-        if not self.min_duration_s > 0.0:
-            raise ConfigError(f"expected min_duration_s > 0, got {self.min_duration_s}")
+        if not 0.0 < self.min_duration_s <= MAX_HORIZON_S:
+            raise ConfigError(
+                f"expected min_duration_s in (0, {MAX_HORIZON_S:g}] s, got {self.min_duration_s}"
+            )
         if not 0.0 <= self.fresh_fraction <= 1.0:
             raise ConfigError(f"expected fresh_fraction in [0, 1], got {self.fresh_fraction}")
         if not self.resync_tol > 0.0:
@@ -193,7 +203,8 @@ class PlannerCfg:
     predictor_variant: Literal["no_ni", "ni"] | None = "ni"
     # delta_CL, the confidence level of the collision constraint
     confidence: float = 0.95
-    # m, the replanning time step [s]
+    # m, the replanning time step [s]; at least the replanner's goal_change_lead_s,
+    # emergency_lead_s and wait_lead_s
     replan_step_s: float = 0.5
     # the trajectory optimiser
     optimizer: OptimizerCfg = field(default_factory=OptimizerCfg)
@@ -209,6 +220,10 @@ class PlannerCfg:
         finite("confidence", self.confidence)
         finite("replan_step_s", self.replan_step_s)
         non_negative("itomp_spread_mps", self.itomp_spread_mps)
+        for name, kind in (("optimizer", OptimizerCfg), ("replanner", ReplannerCfg)):
+            value = getattr(self, name)
+            if not isinstance(value, kind):
+                raise ConfigError(f"expected {name} a {kind.__name__}, got {type(value).__name__}")
         if self.kind not in ("itomp", "iplanner", "oracle"):
             raise ConfigError(f"expected kind 'itomp', 'iplanner' or 'oracle', got {self.kind!r}")
         if self.kind == "iplanner" and self.predictor_variant not in ("no_ni", "ni"):
@@ -222,6 +237,13 @@ class PlannerCfg:
             raise ConfigError(
                 f"expected replan_step_s in (0, {MAX_REPLAN_STEP_S:g}] s, got {self.replan_step_s}"
             )
+        for name in ("goal_change_lead_s", "emergency_lead_s", "wait_lead_s"):
+            lead = getattr(self.replanner, name)
+            if lead is not None and lead > self.replan_step_s:
+                raise ConfigError(
+                    f"expected replanner.{name} <= replan_step_s or None, got "
+                    f"replanner.{name}={lead} with replan_step_s={self.replan_step_s}"
+                )
 
     def optimizer_cfg(self) -> OptimizerCfg:
         """The optimiser's settings with this planner's confidence; with filtered tracking
@@ -536,7 +558,8 @@ class Replanner:
             speed = (2.0 / 3.0) * opt.v_max
             ramp = float(((speed + qd_s.abs()) / self.cfg.acc_max).max())
         travel = max(self._t_goal - t_plan, opt.min_duration(q_s, self._goal, qd_s) + ramp)
-        duration = max(travel, self.cfg.min_duration_s)
+        # waits push the goal time back; the optimiser plans at most MAX_HORIZON_S ahead
+        duration = min(max(travel, self.cfg.min_duration_s), MAX_HORIZON_S)
         q_init = self._warm_start(q_s, qd_s, t_plan, duration, travel)
         t_wall = time.perf_counter()
         result = opt.solve(
@@ -645,7 +668,12 @@ class Replanner:
         return q_init
 
     def goal_reached(self, q_now: torch.Tensor, tol: float = 1e-2) -> bool:
-        """Whether ``q_now`` (J,) [rad] is within ``tol`` [rad] of the goal in every joint."""
+        """Whether ``q_now`` (J,) [rad] is within ``tol`` [rad] of the goal in every joint.
+
+        Raises:
+            ShapeError: when ``q_now`` is not (J,).
+        """
+        check_shape("q_now", q_now, (self.optimizer.num_joints,))
         if self._goal is None:
             return False
         return float((self._to(q_now) - self._goal).abs().max()) <= tol

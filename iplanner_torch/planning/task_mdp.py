@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 import math
 import numbers
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Protocol
@@ -106,6 +106,14 @@ def _bits(mask: int, n: int) -> set[int]:
     return {i for i in range(n) if mask >> i & 1}
 
 
+def _numeric_table(table: object) -> np.ndarray:
+    """``table`` as a float64 array; DataError when it is not numeric."""
+    try:
+        return np.asarray(table, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"expected h_table a numeric (n, n) table, got {exc}") from exc
+
+
 class TaskPlanner:
     """Q-learning task planner: which object the robot fetches next.
 
@@ -117,6 +125,10 @@ class TaskPlanner:
         h_table: (n, n) prior reward H[h, a] of fetching ``a`` before the human's ``Take_h``;
             None is the identity (+1 when Fetch_i precedes Take_i, else 0).
         delay_fn: the robot's motion delay for a fetch [s]; None means no delay.
+
+    Raises:
+        ConfigError: when ``h_table`` is not (n, n).
+        DataError: when ``h_table`` is not numeric or holds NaN or inf.
     """
 
     def __init__(
@@ -131,9 +143,14 @@ class TaskPlanner:
         self.cfg = cfg
         self.task_order = task_order
         self.next_action_probs = next_action_probs
-        self.h_table = np.eye(n) if h_table is None else np.asarray(h_table, dtype=np.float64)
+        self.h_table = np.eye(n) if h_table is None else _numeric_table(h_table)
         if self.h_table.shape != (n, n):
             raise ConfigError(f"expected h_table ({n}, {n}), got {self.h_table.shape}")
+        if not np.isfinite(self.h_table).all():
+            h, a = (int(i) for i in np.argwhere(~np.isfinite(self.h_table))[0])
+            raise DataError(
+                f"expected a finite h_table, got h_table[{h}, {a}] = {self.h_table[h, a]}"
+            )
         self.delay_fn = delay_fn
         self.q: dict[int, np.ndarray] = {}
 
@@ -211,8 +228,13 @@ class TaskPlanner:
 
         Returns:
             next state, reward, delay [s] (robot motion delay plus human idle time).
+
+        Raises:
+            ConfigError: when ``action`` is not an object index in [0, n).
         """
         n = self.cfg.num_objects
+        if not 0 <= checks.integer("action", action) < n:
+            raise ConfigError(f"expected action an object index in [0, {n}), got {action}")
         taken, fetched = decode_state(state, n)
         reward_prep = self.r_prep(state, action)
         delay = 0.0 if self.delay_fn is None else float(self.delay_fn(state, action, rng))
@@ -231,11 +253,16 @@ class TaskPlanner:
         """Epsilon-greedy Q-learning over simulated episodes.
 
         Args:
-            episodes: how many; None uses ``cfg.episodes``.
+            episodes: how many (>= 0); None uses ``cfg.episodes``.
 
         Returns:
             The return (sum of rewards) of each episode.
+
+        Raises:
+            ConfigError: when ``episodes`` is not an integer >= 0.
         """
+        if episodes is not None:
+            episodes = checks.integer("episodes", episodes, minimum=0)
         rng = np.random.default_rng(self.cfg.seed)
         returns = []
         for _ in range(self.cfg.episodes if episodes is None else episodes):
@@ -267,24 +294,41 @@ class TaskPlanner:
         """pi(p): the object to fetch next, or None when all are fetched.
 
         Args:
-            taken: the objects the human has taken, as a set of indices in [0, n) or a bitmask.
+            taken: the objects the human has taken, as a set of indices in [0, n) or a bitmask
+                (a Python or numpy integer).
             fetched: the objects the robot has fetched, likewise.
 
         Raises:
-            ConfigError: for an object index (or bitmask) out of range.
+            ConfigError: for an object index (or bitmask) out of range, or an argument that
+                is neither a bitmask nor a collection of indices.
+            DataError: when an object is taken but not fetched (``Take_i`` is possible only
+                after ``Fetch_i``).
         """
         n = self.cfg.num_objects
+        masks = []
         for name, objs in (("taken", taken), ("fetched", fetched)):
-            if isinstance(objs, int):
+            if isinstance(objs, numbers.Integral):
                 if not 0 <= objs < 1 << n:
                     raise ConfigError(f"expected {name} a bitmask of {n} objects, got {objs}")
+                masks.append(int(objs))
                 continue
+            if not isinstance(objs, Iterable) or isinstance(objs, (str, bytes)):
+                raise ConfigError(
+                    f"expected {name} a set of object indices or a bitmask, got {objs!r}"
+                )
             for i in objs:
                 if isinstance(i, bool) or not isinstance(i, numbers.Integral) or not 0 <= i < n:
                     raise ConfigError(
                         f"unknown object {i!r} in {name}: expected indices in [0, {n})"
                     )
-        state = encode_state(taken, fetched, n)
+            masks.append(sum(1 << int(i) for i in set(objs)))
+        t_mask, f_mask = masks
+        if t_mask & ~f_mask:
+            raise DataError(
+                f"expected every taken object fetched (Take_i only after Fetch_i), got taken "
+                f"{sorted(_bits(t_mask, n))} with fetched {sorted(_bits(f_mask, n))}"
+            )
+        state = encode_state(t_mask, f_mask, n)
         return self._greedy(state) if self.available(state) else None
 
     # ------------------------------------------------------------ persistence

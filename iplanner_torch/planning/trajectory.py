@@ -7,8 +7,9 @@ turns (so a hold does not overshoot); before the first and after
 the last waypoint the trajectory holds its end pose.
 
 Inputs are checked where it is cheap: a :class:`Trajectory` checks its waypoints and times once,
-at construction; :meth:`Trajectory.sample` checks a Python-number time, and the finite-difference
-helpers check a Python-number ``dt``. Tensors given to ``sample``, ``velocities`` and
+at construction; :meth:`Trajectory.sample` checks a Python-number time (and the rank of a
+tensor), the finite-difference helpers check a Python-number ``dt``, and
+:func:`resample_linear` its times. The values of tensors given to ``sample``, ``velocities`` and
 ``accelerations`` are not checked (the optimiser calls them every iteration): a NaN there gives
 NaN in the result.
 """
@@ -19,7 +20,7 @@ from dataclasses import dataclass, field, replace
 
 import torch
 
-from iplanner_torch.checks import finite_time, positive
+from iplanner_torch.checks import finite_time, integer, positive
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_finite, check_shape
 
@@ -99,7 +100,8 @@ class Trajectory:
         qd_start: (J,) velocity at the first waypoint [rad/s], finite; None means rest.
 
     Raises:
-        ShapeError: for mismatched shapes or fewer than 2 waypoints.
+        ShapeError: for mismatched shapes, fewer than 2 waypoints, or a dtype that is not
+            floating or differs from ``q``'s.
         DataError: for a NaN or infinite waypoint, time or start velocity.
         ConfigError: for times that are not strictly increasing.
     """
@@ -119,6 +121,12 @@ class Trajectory:
             raise ShapeError(f"expected at least 2 waypoints, got q {tuple(self.q.shape)}")
         if self.qd_start is not None:
             check_shape("qd_start", self.qd_start, (self.q.shape[1],))
+        if not self.q.is_floating_point():
+            raise ShapeError(f"expected q of a floating dtype, got {self.q.dtype}")
+        for name in ("times", "qd_start"):
+            x = getattr(self, name)
+            if x is not None and x.dtype != self.q.dtype:
+                raise ShapeError(f"expected {name} {self.q.dtype} (as q), got {x.dtype}")
         # one host synchronisation for all checks (a trajectory is built once per cycle)
         checks = [
             torch.isfinite(self.times).all(),
@@ -174,11 +182,14 @@ class Trajectory:
 
         Raises:
             DataError: when ``t`` is a NaN or infinite Python number.
+            ShapeError: when ``t`` is a tensor of more than one dimension.
         """
         if not isinstance(t, torch.Tensor):
             finite_time("t", t, error=DataError)
             scalar = True
         else:
+            if t.dim() > 1:
+                raise ShapeError(f"expected t a scalar or (N,), got {tuple(t.shape)}")
             scalar = t.dim() == 0
         tq = torch.as_tensor(t, dtype=self.times.dtype, device=self.times.device).reshape(-1)
         times, q = self.times, self.q
@@ -217,7 +228,13 @@ class Trajectory:
             t0: new start time [s].
             duration: new span [s].
             num_waypoints: W of the result.
+
+        Raises:
+            ConfigError: when ``num_waypoints`` is not an integer >= 2 (a trajectory has at
+                least 2 waypoints), or ``t0`` or ``duration`` is not valid
+                (:func:`uniform_times`).
         """
+        integer("num_waypoints", num_waypoints, minimum=2)
         times = uniform_times(t0, duration, num_waypoints, self.times)
         q, qd = self.sample(times)
         return Trajectory(q=q, times=times, qd_start=qd[0])
@@ -226,22 +243,35 @@ class Trajectory:
         """Keep waypoints ``0..index`` and hold ``q[index]`` until time ``until`` (paper sec. 5:
         a waypoint appended at the last safe pose makes the robot wait).
 
+        The robot is at rest at ``q[index]`` and stays there: holding the first waypoint
+        drops ``qd_start``.
+
         Args:
             index: last waypoint kept.
-            until: time [s] to hold the pose to; later than ``times[index]``.
+            until: time [s] to hold the pose to; later than ``times[index]`` (the hold lasts at
+                least 1 ms).
 
         Raises:
-            ConfigError: when ``index`` is out of range or ``until`` is not finite.
+            ConfigError: when ``index`` is not an integer in range, or ``until`` is not finite
+                or not later than ``times[index]``.
         """
-        if not 0 <= index < self.q.shape[0]:
-            raise ConfigError(f"expected hold index in [0, {self.q.shape[0]}), got {index}")
-        finite_time("until", float(until))
+        n = self.q.shape[0]
+        integer("hold index", index)
+        if not 0 <= index < n:
+            raise ConfigError(f"expected hold index in [0, {n}), got {index}")
+        finite_time("until", until)
         q = self.q[: index + 1]
         times = self.times[: index + 1]
+        if not float(until) > float(times[-1]):
+            raise ConfigError(
+                f"expected until later than times[{index}] = {float(times[-1])!r} s, "
+                f"got {float(until)!r}"
+            )
         t_hold = max(float(until), float(times[-1]) + 1e-3)
         q = torch.cat([q, q[-1:]], dim=0)
         times = torch.cat([times, times.new_tensor([t_hold])])
-        return replace(self, q=q, times=times)
+        qd_start = None if index == 0 else self.qd_start
+        return replace(self, q=q, times=times, qd_start=qd_start)
 
 
 def resample_linear(q: torch.Tensor, times: torch.Tensor, new_times: torch.Tensor) -> torch.Tensor:
@@ -249,12 +279,25 @@ def resample_linear(q: torch.Tensor, times: torch.Tensor, new_times: torch.Tenso
 
     Args:
         q: (B, W, J) joint positions [rad] at ``times``.
-        times: (W,) strictly increasing times [s].
+        times: (W,) strictly increasing times [s], W >= 2.
         new_times: (W',) query times [s].
 
     Returns:
         (B, W', J) joint positions [rad].
+
+    Raises:
+        ShapeError: on inputs of the wrong shape, or fewer than 2 times.
+        DataError: when ``times`` holds NaN or inf.
+        ConfigError: when ``times`` is not strictly increasing.
     """
+    check_shape("q", q, ("B", "W", "J"))
+    check_shape("times", times, (q.shape[1],))
+    check_shape("new_times", new_times, ("W'",))
+    if times.shape[0] < 2:
+        raise ShapeError(f"expected at least 2 times, got times {tuple(times.shape)}")
+    if not bool((times[1:] > times[:-1]).all()):
+        check_finite("times", times, ("waypoint",))
+        raise ConfigError("expected strictly increasing times")
     tq = new_times.clamp(times[0], times[-1])
     idx = (torch.searchsorted(times, tq, right=True) - 1).clamp(0, times.shape[0] - 2)
     a = ((tq - times[idx]) / (times[idx + 1] - times[idx])).view(1, -1, 1)  # (1, W', 1)

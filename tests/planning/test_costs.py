@@ -318,3 +318,11 @@ def test_candidate_pairs_match_brute_force_distance_list(scale: float, margin: f
     assert got == expected
     if scale >= 1.0:  # the far case prunes some pairs and keeps some
         assert 0 < len(expected) < s_r * s_h
+
+
+@pytest.mark.parametrize("value", [True, False])
+def test_cost_weights_refuse_bools(value: bool) -> None:
+    with pytest.raises(
+        ConfigError, match=f"expected weight joint_acc_l2 finite and >= 0, got {value}"
+    ):
+        C.CostWeights(joint_acc_l2=value)

@@ -24,6 +24,7 @@ from iplanner_torch.planning.costs import CostWeights, HumanObstacle
 from iplanner_torch.planning.itomp import ITOMP, path_forecast, static_human_forecast
 from iplanner_torch.planning.optimizer import (
     ACC_TOL,
+    MAX_HORIZON_S,
     KinematicModel,
     OptimizerCfg,
     TrajectoryOptimizer,
@@ -900,3 +901,107 @@ def test_optimizer_uses_the_configured_layout(point_robot) -> None:
         assert n is None or got.num_spheres == n
     with pytest.raises(ConfigError, match="human_spheres"):
         OptimizerCfg(human_spheres="outer")  # type: ignore[arg-type]
+
+
+def test_solve_refuses_a_duration_beyond_max_horizon(point_robot: PointRobot) -> None:
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg(iterations=2))
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    for duration in (MAX_HORIZON_S + 1e-6, 1e9):
+        with pytest.raises(ConfigError, match=r"expected duration <= 60 s \(MAX_HORIZON_S\)"):
+            opt.solve(q_s, q_g, duration=duration)
+    assert opt.solve(q_s, q_g, duration=MAX_HORIZON_S).times[-1] == pytest.approx(MAX_HORIZON_S)
+
+
+def test_solve_refuses_an_arrival_before_the_start(point_robot: PointRobot) -> None:
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg(iterations=2))
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    with pytest.raises(ConfigError, match=r"expected arrive >= t0, got arrive=0.0, t0=1.0"):
+        opt.solve(q_s, q_g, t0=1.0, duration=2.0, arrive=0.0)
+    assert opt.solve(q_s, q_g, t0=1.0, duration=2.0, arrive=1.0) is not None
+
+
+@pytest.mark.parametrize("forecast", ["x", 0.5, torch.zeros(1, 1, 3)])
+def test_solve_and_collision_bound_refuse_a_forecast_of_another_type(
+    point_robot: PointRobot, forecast: object
+) -> None:
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg(iterations=2))
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    kind = type(forecast).__name__
+    with pytest.raises(ShapeError, match=f"expected forecast a Forecast or None, got {kind}"):
+        opt.solve(q_s, q_g, forecast=forecast)  # type: ignore[arg-type]
+    with pytest.raises(ShapeError, match=f"expected forecast a Forecast, got {kind}"):
+        opt.collision_bound(torch.zeros(2, 2), torch.tensor([0.1, 0.2]), forecast, 0.0)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+def test_collision_bound_refuses_non_finite_configurations(
+    point_robot: PointRobot, value: float
+) -> None:
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg(), human_spheres=one_sphere_map(0.1))
+    fc = static_forecast([0.0, 0.5, 0.0], 0.05)
+    q = torch.tensor([[1.5, -1.5], [0.0, 0.5]])
+    q[1, 0] = value
+    with pytest.raises(DataError, match="q is NaN/Inf at configuration 1, joint 0"):
+        opt.collision_bound(q, torch.tensor([0.1, 0.2]), fc, 0.0)
+
+
+def test_collision_bound_refuses_no_configurations(point_robot: PointRobot) -> None:
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg(), human_spheres=one_sphere_map(0.1))
+    fc = static_forecast([0.0, 0.5, 0.0], 0.05)
+    with pytest.raises(ShapeError, match=r"expected q \(N, 2\) with N >= 1, got \(0, 2\)"):
+        opt.collision_bound(torch.zeros(0, 2), torch.zeros(0), fc, 0.0)
+
+
+@pytest.mark.parametrize("name", ["q_start", "q_goal", "qd_start"])
+@pytest.mark.parametrize("value", [math.nan, math.inf])
+def test_min_duration_refuses_non_finite_inputs(
+    point_robot: PointRobot, name: str, value: float
+) -> None:
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg())
+    args = {"q_start": torch.tensor([-1.0, 0.0]), "q_goal": torch.tensor([1.0, 0.0])}
+    args["qd_start"] = torch.zeros(2)
+    args[name][1] = value
+    with pytest.raises(DataError, match=f"{name} is NaN/Inf at joint 1"):
+        opt.min_duration(**args)
+
+
+@pytest.mark.parametrize("num", [0, -1, 2.5, True])
+def test_initial_trajectories_refuse_a_bad_count(point_robot: PointRobot, num: object) -> None:
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg())
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    with pytest.raises(ConfigError, match="expected num an integer >= 1"):
+        opt.initial_trajectories(q_s, q_g, num, 0)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", ["q_start", "q_goal", "qd_start"])
+def test_initial_trajectories_refuse_non_finite_ends(point_robot: PointRobot, name: str) -> None:
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg())
+    args = {"q_start": torch.tensor([-1.0, 0.0]), "q_goal": torch.tensor([1.0, 0.0])}
+    args["qd_start"] = torch.zeros(2)
+    args[name][0] = math.nan
+    with pytest.raises(DataError, match=f"{name} is NaN/Inf at joint 0"):
+        opt.initial_trajectories(
+            args["q_start"], args["q_goal"], 2, 0, 1.0, qd_start=args["qd_start"]
+        )
+
+
+@pytest.mark.parametrize("hold", [0, -1, 1.5, True])
+def test_smooth_stop_refuses_a_hold_below_one(hold: object) -> None:
+    with pytest.raises(ConfigError, match="expected hold an integer >= 1"):
+        smooth_stop(torch.zeros(5, 2), hold)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("n_f", "dt", "match"),
+    [
+        (2.5, 0.1, "expected n_f an integer >= 1, got 2.5"),
+        (3, "a", "expected dt > 0 and finite, got 'a'"),
+        (3, math.inf, "expected dt > 0 and finite, got inf"),
+        (3, 0.0, "expected dt > 0 and finite, got 0.0"),
+    ],
+)
+def test_static_human_forecast_refuses_bad_frames_and_steps(
+    n_f: object, dt: object, match: str
+) -> None:
+    with pytest.raises(ConfigError, match=match):
+        static_human_forecast(torch.zeros(1, 3), n_f, dt, ("j",))  # type: ignore[arg-type]

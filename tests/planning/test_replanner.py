@@ -12,11 +12,16 @@ import pytest
 import torch
 from planning_fakes import PointRobot, approaching, one_sphere_map, static_forecast
 
-from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.planning import costs as C
 from iplanner_torch.planning import replanner as replanner_module
 from iplanner_torch.planning.itomp import ITOMP
-from iplanner_torch.planning.optimizer import OptimizerCfg, PlanResult, TrajectoryOptimizer
+from iplanner_torch.planning.optimizer import (
+    MAX_HORIZON_S,
+    OptimizerCfg,
+    PlanResult,
+    TrajectoryOptimizer,
+)
 from iplanner_torch.planning.replanner import (
     PlannerCfg,
     PlanningOverrunWarning,
@@ -434,3 +439,64 @@ def test_planner_cfg_rejects_non_finite_values() -> None:
     for bad in (-0.1, math.inf, math.nan):
         with pytest.raises(ConfigError, match="itomp_spread_mps"):
             PlannerCfg(itomp_spread_mps=bad)
+
+
+@pytest.mark.parametrize("field", ["warm_start", "replan_on_goal_change", "plan_from_reference"])
+@pytest.mark.parametrize("value", ["no", 2, None, 1.0])
+def test_replanner_cfg_flags_are_true_or_false(field: str, value: object) -> None:
+    with pytest.raises(ConfigError, match=f"expected {field} True or False, got {value!r}"):
+        ReplannerCfg(**{field: value})
+
+
+def test_replanner_cfg_refuses_a_min_duration_beyond_max_horizon() -> None:
+    for bad in (60.5, 1e9):
+        match = rf"expected min_duration_s in \(0, 60\] s, got {bad}"
+        with pytest.raises(ConfigError, match=match):
+            ReplannerCfg(min_duration_s=bad)
+    assert ReplannerCfg(min_duration_s=MAX_HORIZON_S).min_duration_s == MAX_HORIZON_S
+
+
+def test_a_goal_time_beyond_max_horizon_plans_max_horizon(point_robot: PointRobot) -> None:
+    """Waits push the goal time back; the plan then spans MAX_HORIZON_S (the optimiser's
+    limit) instead of failing the cycle."""
+    opt = _spy(point_robot)
+    rp = Replanner(opt, ReplannerCfg(tracking="exact", goal_change_lead_s=None))
+    q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    rp.reset(q0, qg, t=0.0)
+    rp._t_goal = 500.0  # as after many waits
+    res = rp.step(0.0, q0, None)
+    assert res is not None and opt.calls[-1]["duration"] == MAX_HORIZON_S
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("optimizer", {"iterations": 1}), ("replanner", None)]
+)
+def test_planner_cfg_refuses_nested_configs_of_another_type(field: str, value: object) -> None:
+    kind = "OptimizerCfg" if field == "optimizer" else "ReplannerCfg"
+    got = type(value).__name__
+    with pytest.raises(ConfigError, match=f"expected {field} a {kind}, got {got}"):
+        PlannerCfg(**{field: value})
+
+
+@pytest.mark.parametrize("lead", ["goal_change_lead_s", "emergency_lead_s", "wait_lead_s"])
+def test_planner_cfg_refuses_a_step_shorter_than_the_replanner_leads(lead: str) -> None:
+    leads = {"goal_change_lead_s": None, "emergency_lead_s": None, "wait_lead_s": None}
+    replanner = ReplannerCfg(**{**leads, lead: 0.2})
+    with pytest.raises(
+        ConfigError,
+        match=rf"expected replanner.{lead} <= replan_step_s or None, got "
+        rf"replanner.{lead}=0.2 with replan_step_s=0.1",
+    ):
+        PlannerCfg(replan_step_s=0.1, replanner=replanner)
+    assert PlannerCfg(replan_step_s=0.2, replanner=replanner).replanner_cfg().replan_step_s == 0.2
+    assert PlannerCfg(replan_step_s=0.1, replanner=ReplannerCfg(**leads)) is not None
+
+
+def test_goal_reached_refuses_a_wrong_shape(point_robot: PointRobot) -> None:
+    rp = Replanner(TrajectoryOptimizer(point_robot, OptimizerCfg()), ReplannerCfg())
+    with pytest.raises(ShapeError, match=r"expected q_now \(2\), got \(3,\)"):
+        rp.goal_reached(torch.zeros(3))
+    rp.reset(torch.zeros(2), torch.ones(2), t=0.0)
+    with pytest.raises(ShapeError, match=r"expected q_now \(2\), got \(1, 2\)"):
+        rp.goal_reached(torch.ones(1, 2))
+    assert rp.goal_reached(torch.ones(2))

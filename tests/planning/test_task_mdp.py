@@ -212,3 +212,54 @@ def test_nan_next_action_probabilities_are_a_data_error() -> None:
     fn = TaskPlanner(TaskMDPCfg(num_objects=2), next_action_probs=lambda taken: [0.5, math.inf])
     with pytest.raises(DataError, match="finite next-action probabilities"):
         fn.r_prep(0, 1)
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+def test_non_finite_h_table_is_a_data_error(value: float) -> None:
+    table = np.eye(3)
+    table[1, 2] = value
+    with pytest.raises(DataError, match=r"expected a finite h_table, got h_table\[1, 2\]"):
+        TaskPlanner(TaskMDPCfg(num_objects=3), h_table=table)
+
+
+def test_non_numeric_h_table_is_a_data_error() -> None:
+    with pytest.raises(DataError, match=r"expected h_table a numeric \(n, n\) table"):
+        TaskPlanner(TaskMDPCfg(num_objects=2), h_table=[["a", "b"], ["c", "d"]])
+
+
+def test_policy_takes_numpy_integer_bitmasks() -> None:
+    planner = TaskPlanner(TaskMDPCfg(num_objects=3, episodes=50))
+    planner.train()
+    taken, fetched = 0b001, 0b011
+    assert planner.policy(np.int64(taken), np.int64(fetched)) == planner.policy(taken, fetched)
+    assert planner.policy(np.int32(0), np.int64(0)) == planner.policy(0, 0)
+
+
+@pytest.mark.parametrize(
+    ("taken", "fetched"), [({0}, set()), ({1}, {0}), (0b010, 0b001), ({0, 2}, {0, 1})]
+)
+def test_policy_refuses_an_object_taken_but_never_fetched(taken: object, fetched: object) -> None:
+    planner = TaskPlanner(TaskMDPCfg(num_objects=3))
+    with pytest.raises(DataError, match=r"expected every taken object fetched"):
+        planner.policy(taken, fetched)
+
+
+def test_policy_refuses_neither_bitmask_nor_indices() -> None:
+    planner = TaskPlanner(TaskMDPCfg(num_objects=3))
+    with pytest.raises(ConfigError, match="expected taken a set of object indices or a bitmask"):
+        planner.policy(None, set())  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("action", [3, -1, 1.5, "0"])
+def test_simulate_step_refuses_an_action_out_of_range(action: object) -> None:
+    planner = TaskPlanner(TaskMDPCfg(num_objects=3))
+    with pytest.raises(ConfigError, match="expected action an"):
+        planner.simulate_step(0, action, np.random.default_rng(0))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("episodes", [-1, 2.5, True, "3"])
+def test_train_refuses_a_bad_episode_count(episodes: object) -> None:
+    planner = TaskPlanner(TaskMDPCfg(num_objects=2))
+    with pytest.raises(ConfigError, match="expected episodes an integer >= 0"):
+        planner.train(episodes)  # type: ignore[arg-type]
+    assert planner.train(0) == []

@@ -136,3 +136,80 @@ def test_uniform_times_rejects_non_finite_or_empty_spans() -> None:
         uniform_times(0.0, 0.0, 5, like)
     with pytest.raises(ConfigError, match="duration > 0 and finite"):
         Trajectory(q=torch.zeros(3, 2), times=torch.arange(3.0)).resample(0.0, math.nan, 4)
+
+
+def test_hold_of_the_first_waypoint_holds_despite_a_start_velocity() -> None:
+    q = torch.tensor([[0.0], [0.5], [1.0]])
+    traj = Trajectory(q=q, times=torch.tensor([0.0, 0.5, 1.0]), qd_start=torch.tensor([2.0]))
+    held = traj.with_hold(0, until=1.0)
+    pos, vel = held.sample(torch.linspace(0.0, 1.0, 11))
+    assert torch.equal(pos, torch.zeros(11, 1)) and torch.equal(vel, torch.zeros(11, 1))
+    # later holds keep the start velocity, and hold all the same
+    later = traj.with_hold(1, until=2.0)
+    assert torch.equal(later.qd_start, traj.qd_start)
+    assert torch.equal(later.sample(torch.linspace(0.5, 2.0, 7))[0], q[1].expand(7, 1))
+
+
+@pytest.mark.parametrize(("index", "until"), [(2, 0.5), (2, 1.0), (0, -1.0), (1, 0.5)])
+def test_with_hold_refuses_an_until_not_after_the_held_waypoint(index: int, until: float) -> None:
+    traj = Trajectory(q=torch.zeros(3, 2), times=torch.tensor([0.0, 0.5, 1.0]))
+    with pytest.raises(ConfigError, match=rf"expected until later than times\[{index}\]"):
+        traj.with_hold(index, until)
+
+
+@pytest.mark.parametrize("index", [True, 1.5])
+def test_with_hold_refuses_a_non_integer_index(index: object) -> None:
+    traj = Trajectory(q=torch.zeros(3, 2), times=torch.arange(3.0))
+    with pytest.raises(ConfigError, match="expected hold index an integer"):
+        traj.with_hold(index, until=5.0)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("n", [0, 1, -1, 2.5, True])
+def test_resample_refuses_a_bad_waypoint_count(n: object) -> None:
+    traj = Trajectory(q=torch.zeros(3, 2), times=torch.arange(3.0))
+    with pytest.raises(ConfigError, match="expected num_waypoints an integer >= 2"):
+        traj.resample(0.0, 1.0, n)  # type: ignore[arg-type]
+
+
+def test_resample_linear_validates_its_times() -> None:
+    q = torch.zeros(1, 3, 2)
+    new_t = torch.tensor([0.5])
+    with pytest.raises(ShapeError, match=r"expected at least 2 times, got times \(1,\)"):
+        resample_linear(q[:, :1], torch.tensor([0.0]), new_t)
+    with pytest.raises(ConfigError, match="expected strictly increasing times"):
+        resample_linear(q, torch.tensor([2.0, 1.0, 0.0]), new_t)
+    with pytest.raises(ConfigError, match="expected strictly increasing times"):
+        resample_linear(q, torch.tensor([0.0, 1.0, 1.0]), new_t)
+    with pytest.raises(DataError, match="times is NaN/Inf at waypoint 1"):
+        resample_linear(q, torch.tensor([0.0, math.nan, 2.0]), new_t)
+    with pytest.raises(ShapeError, match=r"expected times \(3\), got \(2,\)"):
+        resample_linear(q, torch.tensor([0.0, 1.0]), new_t)
+
+
+@pytest.mark.parametrize("dtype", [torch.bool, torch.int64])
+def test_trajectory_refuses_non_floating_waypoints(dtype: torch.dtype) -> None:
+    with pytest.raises(ShapeError, match=f"expected q of a floating dtype, got {dtype}"):
+        Trajectory(q=torch.zeros(3, 2, dtype=dtype), times=torch.arange(3.0))
+
+
+def test_trajectory_refuses_mixed_float_dtypes() -> None:
+    q = torch.zeros(3, 2)
+    times64 = torch.arange(3.0, dtype=torch.float64)
+    with pytest.raises(
+        ShapeError, match=r"expected times torch.float32 \(as q\), got torch.float64"
+    ):
+        Trajectory(q=q, times=times64)
+    with pytest.raises(
+        ShapeError, match=r"expected times torch.float64 \(as q\), got torch.float32"
+    ):
+        Trajectory(q=q.double(), times=torch.arange(3.0))
+    with pytest.raises(ShapeError, match=r"expected qd_start torch.float32 \(as q\)"):
+        Trajectory(q=q, times=torch.arange(3.0), qd_start=torch.zeros(2, dtype=torch.float64))
+
+
+def test_sample_refuses_a_time_tensor_of_more_than_one_dimension() -> None:
+    traj = Trajectory(q=torch.zeros(3, 2), times=torch.arange(3.0))
+    with pytest.raises(ShapeError, match=r"expected t a scalar or \(N,\), got \(1, 2\)"):
+        traj.sample(torch.tensor([[0.5, 1.5]]))
+    assert traj.sample(torch.tensor(0.5))[0].shape == (2,)
+    assert traj.sample(torch.tensor([0.5, 1.5]))[0].shape == (2, 2)
