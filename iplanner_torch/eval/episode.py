@@ -52,7 +52,8 @@ on a few cores.
 
 Metrics (keys ``stage/name``): :func:`iplanner_torch.eval.metrics.episode_metrics` on the
 measured joint trajectory and on sphere models of the robot and the true human, sampled at
-``metrics_hz``; plus
+``metrics_hz`` (``eval/smoothness`` and ``eval/jerkiness`` are NaN for an episode too short to
+give 3 samples); plus
 
 * ``eval/mhd``: mean over forecasts of the MHD between the predicted mean path of the moving
   hand and its true path over the next ``mhd_horizon_s`` (1 s); a forecast counts when that
@@ -206,6 +207,12 @@ class EpisodeCfg:
         # NaN fails too (inf: until the tasks are done)
         if not is_real(self.max_duration_s) or not self.max_duration_s > 0:
             raise ConfigError(f"expected max_duration_s > 0, got {self.max_duration_s!r}")
+        period = self.sim.substeps * self.sim.physics_dt  # one control step [s]
+        if self.max_duration_s < period:  # the loop would not simulate a single step
+            raise ConfigError(
+                f"expected max_duration_s at least one control period ({period:g} s at "
+                f"sim.control_hz={self.sim.control_hz:g}), got {self.max_duration_s!r}"
+            )
         # each number by name; NaN and infinities fail (a bare "x <= 0" passes NaN)
         integer("static_forecast_frames", self.static_forecast_frames, minimum=1)
         positive("static_forecast_dt", self.static_forecast_dt)
@@ -1001,50 +1008,51 @@ def _run_episode(
                     t_goal = t
                 if t_goal is not None and t > max(t_goal, end_block) + cfg.blocking_tail_s:
                     break
+        wall = time.perf_counter() - wall0
+        metrics = _metrics(
+            cfg=cfg,
+            robot=robot,
+            human=human,
+            scene=scene,
+            t_hist=t_hist,
+            q_hist=q_hist,
+            h_hist=h_hist,
+            true_t=np.asarray(true_t),
+            true_h=np.asarray(true_h),
+            forecasts=forecasts,
+            predict_ms=predict_ms,
+            t_done=t_done,
+            blocking=blocking,
+        )
+        stats = replanner.stats
+        metrics.update(
+            {
+                "sim/duration_s": env.time,
+                "sim/realtime_factor": env.time / wall if wall > 0 else math.inf,
+                "sim/contacts": float(env.contact_onsets),
+                "sim/contact_steps": float(env.contact_steps),
+                "sim/body_distance": float(env.min_body_distance),
+                "plan/cycles": float(getattr(stats, "cycles", 0)),
+                "plan/overruns": float(getattr(stats, "overruns", 0)),
+                "plan/waits": float(getattr(stats, "waits", 0)),
+                "plan/wait_s": float(getattr(stats, "wait_s", 0.0)),
+                "plan/evasions": float(getattr(stats, "evasions", 0)),
+                "plan/escapes": float(getattr(stats, "escapes", 0)),
+                "plan/emergencies": float(getattr(stats, "emergencies", 0)),
+                "plan/stall_cycles": float(stall_cycles),
+                "plan/mean_solve_ms": float(getattr(stats, "mean_solve_ms", 0.0)),
+                "eval/completed": float(t_done is not None or (blocking and t_goal is not None)),
+            }
+        )
+        if writer is not None:
+            writer.metrics(env.time, metrics)
     except BaseException as exc:  # interrupted or failed: the log keeps what was simulated
         if writer is not None:
             writer.close(exc)
         raise
     finally:
         bar.close()
-    wall = time.perf_counter() - wall0
-    metrics = _metrics(
-        cfg=cfg,
-        robot=robot,
-        human=human,
-        scene=scene,
-        t_hist=t_hist,
-        q_hist=q_hist,
-        h_hist=h_hist,
-        true_t=np.asarray(true_t),
-        true_h=np.asarray(true_h),
-        forecasts=forecasts,
-        predict_ms=predict_ms,
-        t_done=t_done,
-        blocking=blocking,
-    )
-    stats = replanner.stats
-    metrics.update(
-        {
-            "sim/duration_s": env.time,
-            "sim/realtime_factor": env.time / wall if wall > 0 else math.inf,
-            "sim/contacts": float(env.contact_onsets),
-            "sim/contact_steps": float(env.contact_steps),
-            "sim/body_distance": float(env.min_body_distance),
-            "plan/cycles": float(getattr(stats, "cycles", 0)),
-            "plan/overruns": float(getattr(stats, "overruns", 0)),
-            "plan/waits": float(getattr(stats, "waits", 0)),
-            "plan/wait_s": float(getattr(stats, "wait_s", 0.0)),
-            "plan/evasions": float(getattr(stats, "evasions", 0)),
-            "plan/escapes": float(getattr(stats, "escapes", 0)),
-            "plan/emergencies": float(getattr(stats, "emergencies", 0)),
-            "plan/stall_cycles": float(stall_cycles),
-            "plan/mean_solve_ms": float(getattr(stats, "mean_solve_ms", 0.0)),
-            "eval/completed": float(t_done is not None or (blocking and t_goal is not None)),
-        }
-    )
     if writer is not None:
-        writer.metrics(env.time, metrics)
         writer.close()
     return EpisodeResult(
         metrics=metrics,
@@ -1072,11 +1080,13 @@ def _metrics(
     blocking: bool,
 ) -> dict[str, float]:
     ref = robot.q_home
-    q = torch.as_tensor(np.asarray(q_hist), dtype=ref.dtype, device=ref.device)  # (T, J)
+    q_np = np.asarray(q_hist, dtype=np.float64).reshape(-1, ref.shape[-1])  # (T, J); T may be 0
+    q = torch.as_tensor(q_np, dtype=ref.dtype, device=ref.device)  # (T, J)
     with torch.no_grad():
         rc = robot.sphere_centers(q)  # (T, S_r, 3)
     smap = HumanSphereMap.from_segments(JOINT_NAMES)
-    hj = torch.as_tensor(np.asarray(h_hist), dtype=torch.float64)  # (T, K, 3)
+    h_np = np.asarray(h_hist, dtype=np.float64).reshape(-1, len(JOINT_NAMES), 3)  # (T, K, 3)
+    hj = torch.as_tensor(h_np)  # (T, K, 3)
     hc = smap.centers(hj)  # (T, S_h, 3)
     t_alone = None
     if not blocking:
@@ -1086,8 +1096,8 @@ def _metrics(
     t_with = t_done  # efficiency is NaN for an unfinished episode
     mhd, mhd_count = _mean_mhd(cfg, true_t, true_h, forecasts)
     out = M.episode_metrics(
-        t=np.asarray(t_hist),
-        q=np.asarray(q_hist),
+        t=np.asarray(t_hist, dtype=np.float64),
+        q=q_np,
         robot_centers=rc.detach().cpu(),
         robot_radii=robot.sphere_radii.detach().cpu(),
         human_centers=hc,

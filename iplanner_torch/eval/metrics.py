@@ -40,8 +40,8 @@ __all__ = [
 
 #: Keys of the closed-loop metrics dict (what ``EpisodeWriter.metrics`` logs per episode).
 METRIC_KEYS: dict[str, str] = {
-    "eval/smoothness": "(1/T) int sum_i qdd_i^2 dt [rad^2/s^4]",
-    "eval/jerkiness": "max_t sum_i qdd_i^2 [rad^2/s^4]",
+    "eval/smoothness": "(1/T) int sum_i qdd_i^2 dt [rad^2/s^4] (NaN below 3 samples)",
+    "eval/jerkiness": "max_t sum_i qdd_i^2 [rad^2/s^4] (NaN below 3 samples)",
     "eval/min_distance": "closest human-robot surface distance [m] (< 0: penetration)",
     "eval/contact": "1.0 when min_distance <= 0 at some time, else 0.0",
     "eval/efficiency": "task time of the human alone / task time with the robot",
@@ -185,6 +185,13 @@ def modified_hausdorff(a: Any, b: Any) -> float:
     Args:
         a: (N, 3) points [m] (N >= 1).
         b: (M, 3) points [m] (M >= 1).
+
+    Returns:
+        The distance [m]; NaN when a point of either set has a NaN coordinate (a NaN is
+        carried through, not an error).
+
+    Raises:
+        ShapeError: for an empty set or points that are not 3-D.
     """
     pa = _f64("a", a, ("N", 3))
     pb = _f64("b", b, ("M", 3)).to(pa.device)
@@ -198,14 +205,20 @@ def modified_hausdorff(a: Any, b: Any) -> float:
 def modified_hausdorff_batch(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """:func:`modified_hausdorff` for a batch of point-set pairs (no checks: a hot path).
 
+    Distances are taken between the points themselves in the inputs' dtype, so identical
+    sets give exactly 0 in float32 as in float64.
+
     Args:
         a: (B, N, 3) points [m].
         b: (B, M, 3) points [m].
 
     Returns:
-        (B,) ``max(mean_i min_j |a_i - b_j|, mean_j min_i |a_i - b_j|)`` [m].
+        (B,) ``max(mean_i min_j |a_i - b_j|, mean_j min_i |a_i - b_j|)`` [m]; NaN for a pair
+        in which a point has a NaN coordinate.
     """
-    d = torch.cdist(a, b)  # (B, N, M)
+    # the direct difference, not the matrix-product expansion (which cancels to ~1e-4 m in
+    # float32): identical paths give exactly 0
+    d = torch.cdist(a, b, compute_mode="donot_use_mm_for_euclid_dist")  # (B, N, M)
     return torch.maximum(d.min(dim=-1).values.mean(-1), d.min(dim=-2).values.mean(-1))
 
 
@@ -215,6 +228,13 @@ def prediction_mhd(pred_mean: Any, true: Any) -> float:
     Args:
         pred_mean: (n_f, 3) predicted positions [m] of the moving hand over the horizon.
         true: (n_f, 3) its true positions at the same times [m].
+
+    Returns:
+        The distance [m] (:func:`modified_hausdorff`); NaN when a frame of either path has a
+        NaN coordinate.
+
+    Raises:
+        ShapeError: for paths of other shapes or of different lengths.
     """
     p = _f64("pred_mean", pred_mean, ("n_f", 3))
     _f64("true", true, (p.shape[0], 3))
@@ -319,6 +339,9 @@ def episode_metrics(
 ) -> dict[str, float]:
     """The closed-loop metrics of one episode, keyed as in :data:`METRIC_KEYS`.
 
+    An episode with fewer than 3 robot samples (shorter than two sampling periods) has no
+    joint acceleration: its smoothness and jerkiness are NaN.
+
     Args:
         t: (T,) robot sample times [s].
         q: (T, J) robot joint positions [rad].
@@ -330,7 +353,14 @@ def episode_metrics(
         t_with_robot: task time with the robot [s].
         mhd: mean prediction MHD over the episode [m], if predictions were made.
         prediction_ms: mean prediction time [ms], if predictions were made.
+
+    Raises:
+        ShapeError: for mismatched shapes.
+        DataError: as :func:`smoothness` (from 3 samples on).
     """
+    n_t = _f64("t", t, ("T",)).shape[0]
+    _f64("q", q, (n_t, "J"))
+    short = n_t < 3  # no interior sample: no acceleration
     dmin, _ = closest_distance(robot_centers, robot_radii, human_centers, human_radii)
     eff = (
         efficiency(t_human_alone, t_with_robot)
@@ -338,8 +368,8 @@ def episode_metrics(
         else math.nan
     )
     return {
-        "eval/smoothness": smoothness(t, q),
-        "eval/jerkiness": jerkiness(t, q),
+        "eval/smoothness": math.nan if short else smoothness(t, q),
+        "eval/jerkiness": math.nan if short else jerkiness(t, q),
         "eval/min_distance": dmin,
         "eval/contact": float(dmin <= 0.0) if not math.isnan(dmin) else math.nan,
         "eval/efficiency": eff,

@@ -11,7 +11,10 @@ Metrics, per held-out window (averaged over windows unless stated):
 * ``mhd_1s``: modified Hausdorff distance (Dubuisson and Jain 1994) between the predicted mean
   trajectory and the true trajectory of the moving hand over the first second [m]; the moving
   hand is the joint named ``*hand*`` (else any joint) with the largest true displacement in that
-  second. ``mhd_1s_moving`` averages only windows in which it moves more than 5 cm.
+  second: the largest distance of its true future positions from its position at the current
+  frame (the window's last observed frame, ``WindowSet.pose_now``), as the closed-loop
+  ``eval/mhd`` measures it. ``mhd_1s_moving`` averages only windows in which that displacement
+  (``hand_motion``) exceeds 5 cm.
 * ``coverage90/95/99``: share of held-out future joint positions inside the 90/95/99 %
   ellipsoids of the *top action's* Gaussian (diagonal covariance; squared Mahalanobis distance
   against the chi-square quantile with 3 degrees of freedom).
@@ -177,19 +180,25 @@ def held_out_demonstrations(
     return test
 
 
-def window_metrics(fc: Forecast, xi_true: torch.Tensor, current: torch.Tensor) -> dict[str, Any]:
+def window_metrics(
+    fc: Forecast, xi_true: torch.Tensor, current: torch.Tensor, pose_now: torch.Tensor
+) -> dict[str, Any]:
     """Per-window metrics of one batch of forecasts (see the module docstring).
 
     Args:
         fc: the forecasts (B windows).
         xi_true: (B, n_f, K, 3) true future positions [m].
         current: (B,) int64 true current actions.
+        pose_now: (B, K, 3) positions at the current frame, the last observed one [m]
+            (``WindowSet.pose_now``); the hands' displacements are measured from it.
 
     Returns:
         Dict of (B,) tensors: top_prob, correct, reg_precision, reg_accuracy, mhd_1s,
-        hand_motion and ``inside{90,95,99}`` (B, n_f, K) bool.
+        hand_motion (the moving hand's largest distance from ``pose_now`` within the first
+        second [m]) and ``inside{90,95,99}`` (B, n_f, K) bool.
     """
     check_shape("xi_true", xi_true, tuple(fc.mean.shape[:1]) + tuple(fc.mean.shape[2:]))
+    check_shape("pose_now", pose_now, (xi_true.shape[0], xi_true.shape[2], 3))
     w = fc.weights  # (B, A)
     mean = fc.expected_mean()  # (B, n_f, K, 3)
     second = torch.einsum("ba,bafkc->bfkc", w, fc.var + fc.mean**2)
@@ -208,7 +217,8 @@ def window_metrics(fc: Forecast, xi_true: torch.Tensor, current: torch.Tensor) -
         range(len(fc.joint_names))
     )
     true_h = xi_true[:, :n1, hands]  # (B, n1, H, 3)
-    disp = (true_h[:, -1] - true_h[:, 0]).norm(dim=-1)  # (B, H)
+    now_h = pose_now.to(xi_true)[:, hands]  # (B, H, 3)
+    disp = (true_h - now_h[:, None]).norm(dim=-1).amax(1)  # (B, H)
     hmax, which = disp.max(-1)
     j = torch.tensor(hands, device=which.device)[which]  # (B,)
     b_idx = torch.arange(xi_true.shape[0], device=which.device)
@@ -281,7 +291,8 @@ def evaluate_prediction(
         predictor: a :class:`HumanMotionPredictor`.
         data: held-out windows, or demonstrations (cut with the predictor's window settings).
         batch_size: windows per forward pass.
-        moving_threshold: hand displacement over 1 s above which a window counts as moving [m].
+        moving_threshold: the moving hand's largest distance from its current position
+            within 1 s (``hand_motion``) above which a window counts as moving [m].
         return_frame: also return a pandas DataFrame with one row per window.
 
     Returns:
@@ -319,7 +330,9 @@ def evaluate_prediction(
         for s in range(0, len(windows), batch_size):
             sl = slice(s, s + batch_size)
             fc = predictor.predict(windows.f_prev[sl], windows.progress[sl])
-            m = window_metrics(fc, windows.xi_next[sl].to(fc.mean), windows.current[sl])
+            m = window_metrics(
+                fc, windows.xi_next[sl].to(fc.mean), windows.current[sl], windows.pose_now[sl]
+            )
             for k, v in m.items():
                 parts.setdefault(k, []).append(v.cpu())
     cat = {k: torch.cat(v) for k, v in parts.items()}

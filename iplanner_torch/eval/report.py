@@ -420,13 +420,30 @@ def incomplete_logs_note(df: pd.DataFrame) -> str:
 #: episode settings a run or sweep may vary; summaries keep their values apart
 SWEPT_SETTINGS = ("speed", "noise", "dropout", "confidence")
 
+#: scenario settings that one scenario name may be run with in several ways (an override of
+#: ``scenario.arrangement`` keeps the name); summaries keep their values apart
+SCENARIO_SETTINGS = ("arrangement", "task_order")
+
+
+def _varies_within_scenario(df: pd.DataFrame, column: str) -> bool:
+    """Whether ``column`` takes more than one value within a scenario of ``df`` (within
+    ``df`` when it has no ``scenario`` column)."""
+    if "scenario" not in df.columns:
+        return df[column].nunique(dropna=True) > 1
+    per = df.groupby("scenario", sort=False, dropna=False)[column].nunique(dropna=True)
+    return bool((per > 1).any())
+
 
 def report_groups(df: pd.DataFrame) -> tuple[str, ...]:
     """Grouping columns for a summary of ``df``: ``scenario``, each of
-    :data:`SWEPT_SETTINGS` that takes more than one value (so a speed response or a sweep is
-    never averaged over its settings), then ``planner``; only the columns present."""
+    :data:`SCENARIO_SETTINGS` that takes more than one value under one scenario name (a
+    scenario run in two arrangements or task orders gives two rows; settings that come with
+    the scenario name add no column), each of :data:`SWEPT_SETTINGS` that takes more than one
+    value (so a speed response or a sweep is never averaged over its settings), then
+    ``planner``; only the columns present."""
+    layout = [c for c in SCENARIO_SETTINGS if c in df.columns and _varies_within_scenario(df, c)]
     swept = [c for c in SWEPT_SETTINGS if c in df.columns and df[c].nunique(dropna=True) > 1]
-    groups = tuple(c for c in ("scenario", *swept, "planner") if c in df.columns)
+    groups = tuple(c for c in ("scenario", *layout, *swept, "planner") if c in df.columns)
     return groups or ("planner",)
 
 

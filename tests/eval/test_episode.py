@@ -197,6 +197,42 @@ def test_short_iplanner_episode_writes_mcap(tmp_path: Path) -> None:
     assert "/scene" not in read_episode(quiet).frames
 
 
+def test_an_episode_too_short_for_smoothness_still_closes_its_log(tmp_path: Path) -> None:
+    """0.1 s at 25 Hz gives 2 metric samples: no acceleration, so NaN smoothness and
+    jerkiness; the episode's metrics are still written and its log closed."""
+    from iplanner_torch.recording.reader import read_episode
+
+    path = tmp_path / "short.mcap"
+    res = _fake_episode(tmp_path, _cfg(0.1), "iplanner_ni", fakes.LinearReplanner(speed=1.5),
+                        predictor=fakes.ConstantPredictor(), path=path)  # fmt: skip
+    m = res.metrics
+    assert math.isnan(m["eval/smoothness"]) and math.isnan(m["eval/jerkiness"])
+    assert m["sim/duration_s"] == pytest.approx(0.1) and math.isfinite(m["eval/min_distance"])
+    ep = read_episode(path)
+    assert ep.complete
+    assert math.isnan(ep.metrics()["eval/smoothness"]) and ep.metrics()["plan/cycles"] == 1.0
+    # one control step: no metric sample at all
+    res = _fake_episode(tmp_path, _cfg(0.01), "itomp", fakes.LinearReplanner(), path=path)
+    assert math.isnan(res.metrics["eval/smoothness"]) and read_episode(path).complete
+    with pytest.raises(ConfigError, match=r"expected max_duration_s at least one control period"):
+        _cfg(0.004)
+
+
+def test_a_failure_in_the_metrics_still_closes_the_log(tmp_path: Path, monkeypatch) -> None:
+    import iplanner_torch.eval.episode as episode_module
+    from iplanner_torch.recording.reader import read_episode
+
+    def broken(**kwargs):
+        raise RuntimeError("metrics failed")
+
+    monkeypatch.setattr(episode_module, "_metrics", broken)
+    path = tmp_path / "ep.mcap"
+    with pytest.raises(RuntimeError, match="metrics failed"):
+        _fake_episode(tmp_path, _cfg(0.5), "itomp", fakes.LinearReplanner(), path=path)
+    ep = read_episode(path)
+    assert ep.complete and [e["kind"] for e in ep.events()][-1] == "interrupted"
+
+
 def test_forecast_ellipsoids_match_samples_of_the_mixture() -> None:
     """The moment-matched ellipsoids against the sample mean and covariance of the action
     mixture itself (Monte Carlo)."""

@@ -20,6 +20,7 @@ from iplanner_torch.eval.metrics import (
     jerkiness,
     joint_accelerations,
     modified_hausdorff,
+    modified_hausdorff_batch,
     prediction_mhd,
     regression_accuracy,
     regression_precision,
@@ -223,3 +224,45 @@ def test_episode_metrics_keys() -> None:
     assert out["eval/min_distance"] == pytest.approx(math.sqrt(3) - 0.2)
     assert out["eval/contact"] == 0.0 and out["eval/efficiency"] == pytest.approx(1.5)
     assert math.isnan(out["eval/mhd"])
+
+
+def test_episode_metrics_of_fewer_than_three_samples_have_nan_smoothness() -> None:
+    """Two samples hold no interior sample to take an acceleration at: the smoothness and
+    jerkiness are NaN, the other metrics are computed as usual."""
+    for n in (0, 1, 2):
+        t = np.arange(n, dtype=float) * 0.04
+        out = episode_metrics(
+            t=t,
+            q=np.zeros((n, 2)),
+            robot_centers=np.zeros((n, 1, 3)),
+            robot_radii=[0.1],
+            human_centers=np.ones((n, 1, 3)),
+            human_radii=[0.1],
+        )
+        assert math.isnan(out["eval/smoothness"]) and math.isnan(out["eval/jerkiness"])
+        if n:
+            assert out["eval/min_distance"] == pytest.approx(math.sqrt(3) - 0.2)
+    with pytest.raises(ShapeError, match=r"expected q \(2, J\)"):
+        episode_metrics(
+            t=np.array([0.0, 0.04]), q=np.zeros((3, 2)), robot_centers=np.zeros((2, 1, 3)),
+            robot_radii=[0.1], human_centers=np.ones((2, 1, 3)), human_radii=[0.1],
+        )  # fmt: skip
+
+
+def test_modified_hausdorff_of_identical_paths_is_exactly_zero() -> None:
+    """More than 25 points: the distances are still taken directly (the matrix-product
+    expansion left about 2e-4 m between a float32 path and itself)."""
+    g = torch.Generator().manual_seed(0)
+    a = 1.0 + 0.3 * torch.randn(4, 30, 3, generator=g)  # (B, 30, 3) float32, about 1 m
+    assert modified_hausdorff_batch(a, a.clone()).tolist() == [0.0] * 4
+    assert modified_hausdorff(a[0].double() + 1000.0, a[0].double() + 1000.0) == 0.0
+    # a small offset is measured as such, not lost in the cancellation
+    shifted = modified_hausdorff(a[0].double() + 1000.0, a[0].double() + 1000.0 + 1e-4)
+    assert shifted == pytest.approx(math.sqrt(3) * 1e-4, rel=1e-6)
+
+
+def test_a_nan_point_gives_a_nan_distance() -> None:
+    a = np.array([[0.0, 0.0, 0.0], [np.nan, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    b = np.array([[0.0, 0.0, 0.1], [1.0, 0.0, 0.1], [2.0, 0.0, 0.0]])
+    assert math.isnan(modified_hausdorff(a, b)) and math.isnan(modified_hausdorff(b, a))
+    assert math.isnan(prediction_mhd(a, b)) and math.isnan(prediction_mhd(b, a))

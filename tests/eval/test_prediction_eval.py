@@ -12,7 +12,7 @@ from scipy.stats import chi2
 
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.windows import WindowCfg, build_windows
-from iplanner_torch.errors import DataWarning
+from iplanner_torch.errors import DataWarning, ShapeError
 from iplanner_torch.eval.prediction import evaluate_prediction, modified_hausdorff, window_metrics
 from iplanner_torch.prediction.forecast import Forecast
 
@@ -50,7 +50,7 @@ def test_coverage_matches_chi_square_levels_on_gaussian_samples() -> None:
     fc = _forecast(2000)
     g = torch.Generator().manual_seed(1)
     truth = fc.mean[:, 0] + fc.var[:, 0].sqrt() * torch.randn(fc.mean[:, 0].shape, generator=g)
-    m = window_metrics(fc, truth, torch.zeros(2000, dtype=torch.int64))
+    m = window_metrics(fc, truth, torch.zeros(2000, dtype=torch.int64), truth[:, 0])
     for q in (90, 95, 99):
         share = float(m[f"inside{q}"].float().mean())
         assert abs(share - q / 100) < 0.01, (q, share)
@@ -59,7 +59,7 @@ def test_coverage_matches_chi_square_levels_on_gaussian_samples() -> None:
     one = _forecast(1)
     t = one.mean[:, 0].clone()
     t[..., 0] += r * one.var[:, 0, ..., 0].sqrt()
-    m1 = window_metrics(one, t, torch.zeros(1, dtype=torch.int64))
+    m1 = window_metrics(one, t, torch.zeros(1, dtype=torch.int64), t[:, 0])
     assert bool(m1["inside95"].all()) and not bool(m1["inside90"].any())
 
 
@@ -68,7 +68,8 @@ def test_regression_precision_accuracy_and_classification() -> None:
     offset = 0.1
     truth = fc.expected_mean() + offset  # every coordinate off by 0.1
     current = torch.tensor([0, 1, 0])
-    m = window_metrics(fc, truth, current)
+    now = torch.zeros(3, 3, 3)  # (B, K, 3): every joint at the origin now
+    m = window_metrics(fc, truth, current, now)
     n_f, k = 15, 3
     expect_prec = n_f * k * 3 * offset**2 * fc.dt
     torch.testing.assert_close(m["reg_precision"], torch.full((3,), expect_prec))
@@ -87,17 +88,78 @@ def test_regression_precision_accuracy_and_classification() -> None:
         joint_names=JOINTS,
         action_names=("a", "b"),
     )
-    m_certain = window_metrics(certain, truth, current)  # one action: its own variance
+    m_certain = window_metrics(certain, truth, current, now)  # one action: its own variance
     torch.testing.assert_close(
         m_certain["reg_accuracy"], fc.var[:, 0].prod(-1).sum((-1, -2)) * fc.dt
     )
     assert m["correct"].tolist() == [True, False, True]
-    for b in range(3):  # moving hand = the hand with the larger true displacement over 1 s
-        disp = [float((truth[b, -1, j] - truth[b, 0, j]).norm()) for j in (1, 2)]
+    for b in range(3):  # moving hand = the hand that gets farther from where it is now
+        disp = [float(truth[b, :, j].norm(dim=-1).max()) for j in (1, 2)]
         j = (1, 2)[disp.index(max(disp))]
+        assert float(m["hand_motion"][b]) == pytest.approx(max(disp), rel=1e-6)
         ref = _mhd_brute(fc.expected_mean()[b, :, j], truth[b, :, j])
         assert math.isclose(float(m["mhd_1s"][b]), ref, rel_tol=1e-5)
         assert ref <= offset * math.sqrt(3) + 1e-6
+
+
+def _out_and_back(b: int = 1) -> tuple[Forecast, torch.Tensor, torch.Tensor]:
+    """One second at 15 fps: the right hand goes 15 cm out and comes back, the left drifts
+    2 cm away; a forecast 1 cm off both. Returns the forecast, the truth (B, 15, 3, 3) and the
+    current pose (B, 3, 3)."""
+    n_f, dt = 15, 1 / 15
+    s = torch.arange(1, n_f + 1, dtype=torch.float64) * dt  # (n_f,)
+    now = torch.tensor([[0.0, 0.0, 1.0], [0.5, 0.3, 1.0], [0.5, -0.3, 1.0]], dtype=torch.float64)
+    truth = now.expand(b, n_f, 3, 3).clone()  # (B, n_f, K, 3)
+    truth[:, :, 1, 1] += 0.02 * s  # left hand: 2 cm in the second
+    truth[:, :, 2, 0] += 0.15 * torch.sin(torch.pi * s)  # right hand: out and back
+    mean = truth[:, None].expand(b, 2, n_f, 3, 3).clone()  # (B, A, n_f, K, 3)
+    mean[..., 0] += 0.01
+    fc = Forecast(
+        weights=torch.tensor([[0.5, 0.5]], dtype=torch.float64).expand(b, 2),
+        mean=mean,
+        var=torch.full_like(mean, 1e-4),
+        dt=dt,
+        joint_names=JOINTS,
+        action_names=("a", "b"),
+    )
+    return fc, truth, now.expand(b, 3, 3).clone()
+
+
+def test_the_moving_hand_is_the_one_that_gets_farthest_from_where_it_is_now() -> None:
+    """A hand that goes out and comes back within the second moves, though it ends where it
+    started: its motion is its largest distance from the current pose (as the closed-loop
+    eval/mhd measures it), not the distance between the first and last future frames."""
+    fc, truth, now = _out_and_back()
+    m = window_metrics(fc, truth, torch.zeros(1, dtype=torch.int64), now)
+    right = truth[0, :, 2] - now[0, 2]  # (n_f, 3)
+    assert float(m["hand_motion"][0]) == pytest.approx(float(right.norm(dim=-1).max()))
+    assert float(m["hand_motion"][0]) > 0.14
+    ref = _mhd_brute(fc.expected_mean()[0, :, 2], truth[0, :, 2])
+    assert float(m["mhd_1s"][0]) == pytest.approx(ref, rel=1e-9)
+    with pytest.raises(ShapeError, match=r"expected pose_now \(1, 3, 3\)"):
+        window_metrics(fc, truth, torch.zeros(1, dtype=torch.int64), now[:, :2])
+
+
+def test_evaluate_prediction_measures_hand_motion_from_the_windows_current_pose() -> None:
+    """evaluate_prediction counts a window as moving by the distance from the window's
+    current pose (pose_now): a hand 6 cm from it in every future frame moves."""
+    predictor = _HoldPredictor(15.0, ("reach_0", "reach_1"))
+    demo = _still_demo()
+    positions = demo.positions.copy()
+    positions[10:, 2, 0] += 0.06  # the right hand steps 6 cm at frame 10 and stays there
+    demo = Demonstration(
+        positions=positions,
+        labels=demo.labels,
+        fps=demo.fps,
+        joint_names=JOINTS,
+        action_names=demo.action_names,
+    )
+    windows = build_windows([demo], WindowCfg(n_prev=4, n_future=3, feature_kinds=("position",)))
+    res, frame = evaluate_prediction(predictor, windows, return_frame=True)
+    stepped = frame["frame_index"] == 9  # current frame 9: every future frame is 6 cm off
+    assert frame.loc[stepped, "hand_motion"].item() == pytest.approx(0.06, rel=1e-5)
+    assert res["mhd_1s_moving"] == pytest.approx(float(frame.loc[frame["hand_motion"] > 0.05,
+                                                 "mhd_1s"].mean()))  # fmt: skip
 
 
 @pytest.mark.slow

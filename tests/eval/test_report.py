@@ -317,6 +317,30 @@ def test_summary_rows_follow_the_settings_natural_order() -> None:
     assert with_nan[:2] == [0.0, 0.05] and len(with_nan) == 3 and math.isnan(with_nan[2])
 
 
+def test_one_scenario_name_run_in_two_arrangements_gives_two_rows() -> None:
+    """An override of scenario.arrangement (or task_order) keeps the scenario's name: its
+    episodes are not averaged together; settings that come with the name add no column."""
+    rows = [
+        {"scenario": "s", "arrangement": arr, "task_order": "0->1->2->3", "planner": p,
+         "seed": seed, "eval/smoothness": {"1x4": 1.0, "2x2": 3.0}[arr],
+         "eval/min_distance": 0.1, "eval/contact": 0.0}
+        for arr in ("2x2", "1x4") for p in ("itomp", "iplanner_ni") for seed in (0, 1)
+    ]  # fmt: skip
+    df = gather_results(rows)
+    assert report_groups(df) == ("scenario", "arrangement", "planner")
+    s = summary_table(df, report_groups(df))
+    assert list(s["arrangement"]) == ["2x2", "2x2", "1x4", "1x4"]
+    assert list(s["smoothness_mean"]) == [3.0, 3.0, 1.0, 1.0] and (s["episodes"] == 2).all()
+    c = comparison_table(df)
+    assert list(c["arrangement"]) == ["2x2", "2x2", "1x4", "1x4"]
+    orders = gather_results([dict(r, task_order=o) for r in rows[:4] for o in ("0->1", "1->0")])
+    assert report_groups(orders) == ("scenario", "task_order", "planner")
+    # one arrangement and task order per scenario name: grouped by the name alone
+    named = gather_results([dict(r, scenario=f"s_{r['arrangement']}") for r in rows])
+    assert report_groups(named) == ("scenario", "planner")
+    assert len(summary_table(named, report_groups(named))) == 4
+
+
 def test_a_dropout_sweep_keeps_its_rows_apart(tmp_path: Path) -> None:
     from iplanner_torch.cli.callbacks import episode_report
 
