@@ -2,7 +2,8 @@
 
 :meth:`SimEnv.step` advances one control period: the robot's position actuators track the
 commanded ``q_des + qd_des * tau`` (``tau`` the time since the command, a first-order hold of
-the planned trajectory) for ``physics_dt``-sized MuJoCo steps. A MuJoCo position actuator
+the planned trajectory) for ``physics_dt``-sized MuJoCo steps, ``qd_des`` clipped to the
+robot's speed limits ``v_max``. A MuJoCo position actuator
 applies ``kp (ctrl - q) - kv qd``; its set point is advanced by ``(kv / kp) qd_des`` so that the
 force is the PD tracking law ``kp (q_des - q) + kv (qd_des - qd)`` (no velocity lag). The
 human's capsules follow the scripted human at every physics step, and robot-human contacts are
@@ -42,6 +43,8 @@ from iplanner_torch.sim.tracker import MAX_NOISE_M, Tracker, TrackerCfg
 
 #: geom pairs farther apart than this are not measured exactly; a distance is capped there [m]
 BODY_DISTANCE_MAX = 1.0
+#: how far an initial joint position may lie outside its limit (rounding of the limits) [rad]
+Q_INIT_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -145,6 +148,9 @@ class SimEnv:
         seed: seed of the environment (only the MuJoCo state here; human and tracker carry
             their own seeds).
         cfg: rates and tolerances.
+
+    Raises:
+        ConfigError: when the robot's limits (``q_min``, ``q_max``, ``v_max``) are not (J,).
     """
 
     def __init__(
@@ -174,11 +180,31 @@ class SimEnv:
         kp = -self.model.actuator_biasprm[self.handles.actuator_ids, 1]
         kv = -self.model.actuator_biasprm[self.handles.actuator_ids, 2]
         self._vel_ff_s = np.where(kp > 0, kv / np.where(kp > 0, kp, 1.0), 0.0)  # (J,) [s]
+        self._q_lo, self._q_hi = self._position_limits()  # (J,) [rad], -inf / inf if none
+        v_max = getattr(robot, "v_max", None)
+        self._v_max = (  # (J,) [rad/s]
+            np.full(self.num_joints, np.inf) if v_max is None else _numpy(v_max).reshape(-1)
+        )
+        for name, lim in (("q_min", self._q_lo), ("q_max", self._q_hi), ("v_max", self._v_max)):
+            if lim.shape != (self.num_joints,):
+                raise ConfigError(f"expected robot.{name} ({self.num_joints},), got {lim.shape}")
         # the robot geoms that can touch the person (conaffinity bit 2) and the person's geoms
         touching = self.handles.robot_geom & ((self.model.geom_conaffinity & 2) != 0)
         self._robot_geoms = np.nonzero(touching)[0]  # (R,)
         self._human_geoms = np.asarray(self.handles.human_geom_ids)  # (H,)
         self.reset()
+
+    def _position_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """(J,) lower and upper joint limits [rad]: the robot's ``q_min`` / ``q_max`` where it
+        has them, else the MJCF's joint ranges (infinite for joints without one)."""
+        q_min, q_max = getattr(self.robot, "q_min", None), getattr(self.robot, "q_max", None)
+        if q_min is not None and q_max is not None:
+            return _numpy(q_min).reshape(-1), _numpy(q_max).reshape(-1)
+        jids = self.model.dof_jntid[self.handles.dof_adr]
+        limited = self.model.jnt_limited[jids].astype(bool)
+        lo = np.where(limited, self.model.jnt_range[jids, 0], -np.inf)
+        hi = np.where(limited, self.model.jnt_range[jids, 1], np.inf)
+        return lo, hi
 
     # -- state --------------------------------------------------------------------------------
 
@@ -187,17 +213,30 @@ class SimEnv:
         positions, human at rest, tracker empty (its first frame is taken here).
 
         Args:
-            q_init: (J,) initial joint positions [rad].
+            q_init: (J,) initial joint positions [rad], within the joint limits (up to
+                ``Q_INIT_TOLERANCE``).
 
         Raises:
-            ShapeError: when ``q_init`` is not (J,).
+            ShapeError: when ``q_init`` is not (J,) real numbers.
             DataError: when ``q_init`` holds NaN or infinity.
+            ConfigError: when ``q_init`` lies outside a joint's limits.
         """
-        q0 = _numpy(self.robot.q_home) if q_init is None else np.asarray(q_init, np.float64)
+        if q_init is None:
+            q0 = _numpy(self.robot.q_home)
+        else:
+            q0 = _real_vector("q_init", q_init)
         if q0.shape != (self.num_joints,):
             raise ShapeError(f"expected q_init ({self.num_joints},), got {q0.shape}")
         if not np.isfinite(q0).all():
             raise DataError(f"expected finite q_init, got {q0}")
+        outside = (q0 < self._q_lo - Q_INIT_TOLERANCE) | (q0 > self._q_hi + Q_INIT_TOLERANCE)
+        if outside.any():
+            j = int(np.flatnonzero(outside)[0])
+            raise ConfigError(
+                f"expected q_init within the joint limits, got {float(q0[j])} rad for joint "
+                f"{self.robot.joint_names[j]!r}, outside its limits "
+                f"[{float(self._q_lo[j])}, {float(self._q_hi[j])}]"
+            )
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[self.handles.qpos_adr] = q0
         self.data.ctrl[self.handles.actuator_ids] = q0
@@ -248,8 +287,14 @@ class SimEnv:
         return self.human.joint_positions(self.time)
 
     def block_position(self, block: int) -> np.ndarray:
-        """(3,) current centre of a block [m]."""
-        return self.data.mocap_pos[self.handles.block_mocap[block]].copy()
+        """(3,) current centre of a block [m].
+
+        Raises:
+            ConfigError: when ``block`` is not one of the scene's block ids.
+        """
+        return self.data.mocap_pos[
+            self.handles.block_mocap[self.scene_cfg.check_block_id(block)]
+        ].copy()
 
     # -- actions ------------------------------------------------------------------------------
 
@@ -257,9 +302,10 @@ class SimEnv:
         """Begin ``Fetch_block`` (replaces an action in its return phase).
 
         Raises:
-            ConfigError: when the block is absent or not waiting at its far position, or
-                another fetch is still carrying.
+            ConfigError: when ``block`` is not one of the scene's block ids or not waiting at
+                its far position, or another fetch is still carrying.
         """
+        self.scene_cfg.check_block_id(block)
         if self.block_state.get(block) != "far":
             raise ConfigError(
                 f"expected block {block} at its far position, got {self.block_state.get(block)}"
@@ -274,18 +320,19 @@ class SimEnv:
 
         Args:
             q_des: (J,) commanded joint positions [rad].
-            qd_des: (J,) commanded joint velocities [rad/s].
+            qd_des: (J,) commanded joint velocities [rad/s]; each is clipped to the robot's
+                speed limit ``[-v_max, v_max]`` (a command within the limits is used as is).
 
         Returns:
             Events and contacts of the period.
 
         Raises:
-            ShapeError: when ``q_des`` or ``qd_des`` is not (J,).
+            ShapeError: when ``q_des`` or ``qd_des`` is not (J,) real numbers.
             DataError: when ``q_des`` or ``qd_des`` holds NaN or infinity (nothing is
                 simulated then).
         """
-        q_des = _numpy(q_des)
-        qd_des = _numpy(qd_des)
+        q_des = _real_vector("q_des", q_des)
+        qd_des = _real_vector("qd_des", qd_des)
         if q_des.shape != (self.num_joints,) or qd_des.shape != (self.num_joints,):
             raise ShapeError(
                 f"expected q_des and qd_des ({self.num_joints},), got {q_des.shape}, "
@@ -293,6 +340,7 @@ class SimEnv:
             )
         if not (np.isfinite(q_des).all() and np.isfinite(qd_des).all()):
             raise DataError(f"expected finite q_des and qd_des, got {q_des}, {qd_des}")
+        qd_des = np.minimum(np.maximum(qd_des, -self._v_max), self._v_max)
         m, d, h = self.model, self.data, self.handles
         dt = m.opt.timestep
         contact = False
@@ -427,6 +475,26 @@ class SimEnv:
                     d.mocap_pos[h.block_mocap[i]] = hand - np.array([0.0, 0.0, 0.02])
             elif state == "taken":
                 d.mocap_pos[h.block_mocap[i]] = sc.stash_position(i)
+
+
+def _real_vector(name: str, x: object) -> np.ndarray:
+    """A float64 numpy copy of a tensor or array-like of real numbers.
+
+    Raises:
+        ShapeError: for ragged sequences and for anything but real numbers (strings, None
+            inside, complex, bool).
+    """
+    if hasattr(x, "detach"):
+        x = x.detach().cpu().numpy()  # type: ignore[union-attr]
+    try:
+        arr = np.asarray(x)
+    except (TypeError, ValueError) as err:  # ragged nested sequences
+        raise ShapeError(
+            f"expected {name} an array of real numbers, got a ragged sequence"
+        ) from err
+    if arr.dtype.kind not in "iuf":
+        raise ShapeError(f"expected {name} an array of real numbers, got dtype {arr.dtype}")
+    return arr.astype(np.float64)
 
 
 def _numpy(x: object) -> np.ndarray:

@@ -35,6 +35,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from iplanner_torch import checks
+from iplanner_torch.data.kinematic_human import min_jerk
 from iplanner_torch.data.skeleton import JOINT_INDEX
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 
@@ -43,6 +44,8 @@ Arm = Literal["left", "right"]
 
 #: Added to every episode seed for the human's motions (keeps them out of the training seeds).
 HUMAN_SEED_SALT = 7919
+#: Seconds over which a motion's first frames are blended from the pose the person holds.
+START_BLEND_S = 0.3
 #: Speed factor of each named human speed (1 = the generator's nominal speed).
 SPEED_FACTORS: dict[str, float] = {"slow": 0.5, "medium": 1.0, "fast": 2.0}
 
@@ -78,7 +81,10 @@ class MotionSource(Protocol):
         hold_s: float,
         start_pose: np.ndarray,
     ) -> np.ndarray:
-        """(T, K, 3) joint positions [m] at ``fps``: reach ``target`` (3,), hold, return."""
+        """(T, K, 3) joint positions [m] at ``fps``: reach ``target`` (3,), hold, return.
+
+        The first frame should be ``start_pose``; the person blends what it differs by away
+        over :data:`START_BLEND_S`."""
         ...
 
 
@@ -220,6 +226,22 @@ class _Motion:
         return self.t_start + (self.frames.shape[0] - 1) / self.fps
 
 
+def _target_point(block: object, value: object) -> np.ndarray:
+    """``value`` as a (3,) float64 point; the errors name the target's ``block``."""
+    try:
+        point = np.asarray(value)
+    except (TypeError, ValueError) as err:  # ragged nested sequences
+        raise ShapeError(f"expected target {block!r} a (3,) point [m], got {value!r}") from err
+    if point.shape != (3,) or point.dtype.kind not in "iuf":
+        raise ShapeError(
+            f"expected target {block!r} a (3,) point of real numbers [m], got shape "
+            f"{point.shape} of dtype {point.dtype}"
+        )
+    if not np.isfinite(point).all():
+        raise DataError(f"expected target {block!r} a finite point [m], got {point}")
+    return point.astype(np.float64)
+
+
 class ScriptedHuman:
     """The kinematic human of the closed loop.
 
@@ -231,7 +253,10 @@ class ScriptedHuman:
         seed: episode seed (same seed -> same order, idles and motions), >= 0.
 
     Raises:
-        ConfigError: without a task order in tasks mode, or for a negative seed.
+        ConfigError: without a task order in tasks mode, for a negative seed, or for a target
+            whose block id is not an integer.
+        ShapeError: when a target is not a (3,) point of real numbers.
+        DataError: when a target holds NaN or infinity.
     """
 
     def __init__(
@@ -248,7 +273,9 @@ class ScriptedHuman:
         self.cfg = cfg
         self.motion = motion
         self.task_order = task_order
-        self.targets = {int(k): np.asarray(v, dtype=np.float64) for k, v in targets.items()}
+        self.targets = {
+            checks.integer("target block id", k): _target_point(k, v) for k, v in targets.items()
+        }
         self.seed = checks.seed(seed)
         self.reset()
 
@@ -314,14 +341,29 @@ class ScriptedHuman:
         return None
 
     def _start(self, arm: Arm, target: np.ndarray, hold_s: float, block: int, t: float) -> None:
-        frames = self.motion.reach(
-            arm,
-            target,
-            self._rng,
-            speed=self.cfg.speed_factor,
-            hold_s=hold_s,
-            start_pose=self._pose.copy(),
+        frames = np.array(
+            self.motion.reach(
+                arm,
+                target,
+                self._rng,
+                speed=self.cfg.speed_factor,
+                hold_s=hold_s,
+                start_pose=self._pose.copy(),
+            ),
+            dtype=np.float64,
         )
+        if frames.ndim != 3 or frames.shape[0] < 1 or frames.shape[1:] != self._pose.shape:
+            raise ShapeError(
+                f"expected the motion source's reach (T, {self._pose.shape[0]}, 3), "
+                f"got {frames.shape}"
+            )
+        if not np.isfinite(frames).all():
+            raise DataError("the motion source's reach holds NaN or inf joint positions")
+        # the motion starts at the pose held now: what its first frame differs by (the trunk
+        # sway's phase, an elbow placed by IK) fades out over START_BLEND_S instead of a jump
+        n = min(frames.shape[0], max(1, int(round(START_BLEND_S * self.motion.fps))))
+        fade = 1.0 - min_jerk(np.arange(n) / n)
+        frames[:n] += fade[:, None, None] * (self._pose - frames[0])
         hand = JOINT_INDEX[f"{arm}_hand"]
         dist = np.linalg.norm(frames[:, hand] - target, axis=-1)
         grasp = int(np.argmax(dist <= dist.min() + 0.005))
@@ -348,7 +390,11 @@ class ScriptedHuman:
 
         Returns:
             The events that happened since the previous call.
+
+        Raises:
+            DataError: when ``t`` is NaN, infinite or not a number (nothing changes then).
         """
+        checks.finite_time("t", t, error=DataError)
         events: list[HumanEvent] = []
         self.time = t
         for i in delivered:
@@ -391,8 +437,14 @@ class ScriptedHuman:
 
         Within the ongoing motion the frames are interpolated linearly; ``t`` must not lie
         before the motion's start (the past is not stored).
+
+        Raises:
+            DataError: when ``t`` is NaN, infinite or not a number.
         """
-        t = self.time if t is None else t
+        if t is None:
+            t = self.time
+        else:
+            checks.finite_time("t", t, error=DataError)
         m = self._motion
         if m is None:
             return self._pose.copy()

@@ -44,6 +44,7 @@ touch only the robot (never the table, the chair or each other).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, Protocol
@@ -53,7 +54,7 @@ import numpy as np
 
 from iplanner_torch import checks
 from iplanner_torch.data.skeleton import JOINT_INDEX, SEGMENTS
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 
 Arrangement = Literal["1x4", "2x2", "2x4"]
 
@@ -138,27 +139,64 @@ class SceneCfg:
         """The block ids present in this arrangement, ascending."""
         return ARRANGEMENT_IDS[self.arrangement]
 
+    def check_block_id(self, block_id: object) -> int:
+        """``block_id`` as an int.
+
+        Raises:
+            ConfigError: unless it is an integer (not a bool) among :attr:`block_ids`.
+        """
+        if (
+            isinstance(block_id, (bool, np.bool_))
+            or not isinstance(block_id, numbers.Integral)
+            or block_id not in self.block_ids
+        ):
+            raise ConfigError(
+                f"expected a block id of the {self.arrangement} scene {self.block_ids}, "
+                f"got {block_id!r}"
+            )
+        return int(block_id)
+
     def _grid_xy(self, block_id: int, rows_x: tuple[float, float]) -> tuple[float, float]:
-        row, col = divmod(block_id, 4)
+        row, col = divmod(self.check_block_id(block_id), 4)
         return float(rows_x[row]), float((1.5 - col) * self.column_pitch)
 
     def block_position(self, block_id: int) -> np.ndarray:
-        """(3,) centre of block ``block_id`` resting at its far position [m]."""
+        """(3,) centre of block ``block_id`` resting at its far position [m].
+
+        Raises:
+            ConfigError: when ``block_id`` is not one of :attr:`block_ids`.
+        """
         x, y = self._grid_xy(block_id, self.block_rows_x)
         return np.array([x, y, 0.5 * self.block_size])
 
     def delivery_position(self, block_id: int) -> np.ndarray:
-        """(3,) centre of block ``block_id`` resting on its delivery spot [m]."""
+        """(3,) centre of block ``block_id`` resting on its delivery spot [m].
+
+        Raises:
+            ConfigError: when ``block_id`` is not one of :attr:`block_ids`.
+        """
         x, y = self._grid_xy(block_id, self.delivery_rows_x)
         return np.array([x, y, 0.5 * self.block_size])
 
     def stash_position(self, block_id: int) -> np.ndarray:
-        """(3,) where a block the human has taken is put down (beside the human) [m]."""
-        side = 1.0 if self.delivery_position(block_id)[1] >= 0 else -1.0
+        """(3,) where a block the human has taken is put down (beside the human) [m].
+
+        Each block has its own spot, on the side of its delivery spot: a 2 x 2 grid per side,
+        the block's row along x (row 1 farther from the human) and its column along y (the
+        outer column farther out), one block size plus 2 cm apart. Blocks never collide, so
+        where they lie changes nothing but the picture.
+
+        Raises:
+            ConfigError: when ``block_id`` is not one of :attr:`block_ids`.
+        """
+        row, col = divmod(self.check_block_id(block_id), 4)
+        side = 1.0 if col < 2 else -1.0  # the side of the delivery spot (y > 0 for 0 and 1)
+        outer = 1 if col in (0, 3) else 0
+        pitch = self.block_size + 0.02
         return np.array(
             [
-                self.human_seat_x + 0.15,
-                side * (0.55 + 0.07 * (block_id // 4)),
+                self.human_seat_x + 0.15 + pitch * row,
+                side * (0.55 + pitch * outer),
                 0.5 * self.block_size,
             ]
         )
@@ -419,11 +457,25 @@ def pose_human(
     the joint distance (one-joint segments are spheres on their joint).
 
     Args:
-        model: the compiled scene (its ``geom_size`` / ``geom_rbound`` are updated).
+        model: the compiled scene (its ``geom_size``, ``geom_rbound`` and ``geom_aabb`` are
+            updated).
         data: the simulation state (its ``mocap_pos`` / ``mocap_quat`` are set).
         handles: ids from :meth:`SceneHandles.resolve`.
-        joints: (K, 3) true joint positions [m], table frame.
+        joints: (K, 3) true joint positions [m], table frame (K covers every joint of
+            :data:`~iplanner_torch.data.skeleton.SEGMENTS`).
+
+    Raises:
+        ShapeError: when ``joints`` is not (K, 3) real numbers with K large enough.
+        DataError: when ``joints`` holds NaN or infinity (nothing is changed then).
     """
+    joints = np.asarray(joints)
+    need = int(handles.human_joint_pairs.max()) + 1
+    if joints.ndim != 2 or joints.shape[1] != 3 or joints.shape[0] < need:
+        raise ShapeError(f"expected joints (K, 3) with K >= {need}, got {joints.shape}")
+    if joints.dtype.kind not in "iuf":
+        raise ShapeError(f"expected joints of real numbers, got dtype {joints.dtype}")
+    if not np.isfinite(joints).all():
+        raise DataError("expected finite joints, got NaN or inf joint positions")
     a = joints[handles.human_joint_pairs[:, 0]]  # (S_seg, 3)
     b = joints[handles.human_joint_pairs[:, 1]]  # (S_seg, 3)
     mid = 0.5 * (a + b)
@@ -439,3 +491,6 @@ def pose_human(
                 half = 0.5 * length[s]
                 model.geom_size[g_id, 1] = half
                 model.geom_rbound[g_id] = half + model.geom_size[g_id, 0]
+                # the broad phase tests the geom's bounding box (centre, half-sizes in the
+                # geom frame): a stale one would miss contacts with the capsule's far part
+                model.geom_aabb[g_id, 5] = half + model.geom_size[g_id, 0]

@@ -106,11 +106,11 @@ def parse_order(
         if isinstance(err, IPlannerError):
             raise
         raise ConfigError(f"task order {expr!r}: {err}") from err
-    sample = order.sample(np.random.default_rng(0))
-    unknown = sorted(set(int(i) for i in sample) - set(block_ids))
+    named = {int(i) for i in order.ids}  # Python ints: an id may exceed every integer dtype
+    unknown = sorted(named - set(block_ids))
     if unknown:
         raise ConfigError(f"task order {expr!r} names blocks {unknown}, scene has {block_ids}")
-    untouched = sorted(set(block_ids) - set(int(i) for i in sample))
+    untouched = sorted(set(block_ids) - named)
     if untouched and warn_untouched:
         import warnings
 
@@ -188,7 +188,12 @@ class FetchTask:
 
     @classmethod
     def create(cls, block: int, scene: SceneCfg, cfg: FetchCfg, t: float) -> FetchTask:
-        """A new ``Fetch_block`` in its approach phase."""
+        """A new ``Fetch_block`` in its approach phase.
+
+        Raises:
+            ConfigError: when ``block`` is not one of the scene's block ids.
+        """
+        scene.check_block_id(block)
         lift = np.array([0.0, 0.0, 0.5 * scene.block_size + cfg.grasp_clearance])
         return cls(
             block=block,

@@ -98,8 +98,8 @@ class Tracker:
         Raises:
             DataError: when ``t`` is NaN or infinite, or a true joint of the first frame (which
                 initialises the held pose) is not finite.
-            ShapeError: when ``joints`` is not (K, 3) of numbers, or K differs from the
-                stored frames'.
+            ShapeError: when ``joints`` is not (K, 3) of real numbers, or K differs from
+                the stored frames'.
         """
         try:
             joints = np.asarray(joints)
@@ -107,8 +107,10 @@ class Tracker:
             raise ShapeError(f"expected joints (K, 3), got a ragged sequence: {err}") from err
         if joints.ndim != 2 or joints.shape[1] != 3:
             raise ShapeError(f"expected joints (K, 3), got {tuple(joints.shape)}")
-        if not np.issubdtype(joints.dtype, np.number):
-            raise ShapeError(f"expected joints of a numeric dtype, got {joints.dtype}")
+        if joints.dtype.kind not in "iuf":  # bool, complex, strings, objects
+            raise ShapeError(
+                f"expected real joint positions (a real numeric dtype), got {joints.dtype}"
+            )
         if self._frames and joints.shape[0] != self._frames[-1].shape[0]:
             raise ShapeError(
                 f"expected joints ({self._frames[-1].shape[0]}, 3) like the stored frames, got "

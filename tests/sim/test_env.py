@@ -232,3 +232,106 @@ def test_step_and_reset_reject_non_finite_commands(arm, bad: float) -> None:
 def test_sim_cfg_rejects_meaningless_values(kw: dict, field: str) -> None:
     with pytest.raises(ConfigError, match=field):
         SimCfg(**kw)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [["a", "b", "c"], [0.0, [1.0, 2.0], 0.0], None, [0.0, None, 0.0], [0.0, 1j, 0.0], [True] * 3],
+)
+def test_step_and_reset_refuse_commands_that_are_no_real_numbers(arm, bad) -> None:
+    env = _env(arm)
+    q = arm.q_home.numpy()
+    with pytest.raises(ShapeError, match="q_des an array of real numbers"):
+        env.step(bad, np.zeros(3))
+    with pytest.raises(ShapeError, match="qd_des an array of real numbers"):
+        env.step(q, bad)
+    if bad is not None:  # None is the default q_init (the home pose)
+        with pytest.raises(ShapeError, match="q_init an array of real numbers"):
+            env.reset(q_init=bad)
+    assert env.time == 0.0
+    env.step(q.tolist(), [0, 0, 0])  # lists of numbers remain welcome
+
+
+def test_reset_refuses_q_init_outside_the_joint_limits(arm) -> None:
+    env = _env(arm)  # FakeArm limits: j1 [-3, 3], j2 [-2.5, 2.5], j3 [-2.8, 2.8]
+    with pytest.raises(ConfigError, match=r"joint 'j2', outside its limits \[-2.5, 2.5\]"):
+        env.reset(q_init=np.array([0.0, -2.6, 0.0]))
+    with pytest.raises(ConfigError, match=r"got 3.1 rad for joint 'j1'"):
+        env.reset(q_init=np.array([3.1, 0.0, 0.0]))
+    env.reset(q_init=np.array([3.0 + 5e-7, -2.5, 2.8]))  # on a limit, up to rounding
+    np.testing.assert_array_equal(env.robot_q(), [3.0 + 5e-7, -2.5, 2.8])
+
+
+def test_reset_leaves_continuous_joints_unlimited() -> None:
+    from iplanner_torch.robot.model import RobotModel
+
+    robot = RobotModel.load("fetch")
+    env = _env(robot)
+    q = robot.q_home.numpy().astype(np.float64)
+    q[2] = 10.0  # upperarm_roll_joint is continuous
+    env.reset(q_init=q)
+    assert env.robot_q()[2] == 10.0
+    q[0] = 3.0
+    with pytest.raises(ConfigError, match="'shoulder_pan_joint', outside its limits"):
+        env.reset(q_init=q)
+
+
+def test_commanded_speeds_are_clipped_to_the_speed_limits() -> None:
+    """A finite but absurd desired speed on a continuous joint (no control range) used to
+    reach MuJoCo, which zeroed the controls with a warning; it now acts as the limit itself,
+    while a command within the limits reaches the actuators exactly as given."""
+    from iplanner_torch.robot.model import RobotModel
+
+    robot = RobotModel.load("fetch")
+    q = robot.q_home.numpy().astype(np.float64)
+    v_max = robot.v_max.numpy().astype(np.float64)
+    envs = [_env(robot), _env(robot)]
+    for speed, env in zip((1e12, v_max[2]), envs, strict=True):
+        qd = np.zeros(7)
+        qd[2] = speed
+        for _ in range(5):
+            env.step(q, qd)
+        assert env.data.warning[mujoco.mjtWarning.mjWARN_BADCTRL].number == 0
+    np.testing.assert_array_equal(envs[0].data.qpos, envs[1].data.qpos)
+    assert envs[0].robot_qd()[2] > 0.5 * v_max[2]  # the joint did turn
+    env = _env(robot)
+    qd = np.linspace(-0.9, 0.9, 7) * v_max
+    env.step(q, qd)
+    tau = (env.cfg.substeps - 1) * env.model.opt.timestep + env._vel_ff_s
+    ids = env.handles.actuator_ids
+    expect = np.clip(q + qd * tau, env._ctrl_lo, env._ctrl_hi)
+    np.testing.assert_array_equal(env.data.ctrl[ids], expect)
+
+
+@pytest.mark.parametrize("block", [99, -1, "0", 1.5, None])
+def test_block_ids_absent_from_the_scene_are_refused(arm, block) -> None:
+    env = _env(arm)
+    with pytest.raises(ConfigError, match=rf"scene \(0, 1, 2, 3\), got {block!r}"):
+        env.block_position(block)
+    with pytest.raises(ConfigError, match=rf"scene \(0, 1, 2, 3\), got {block!r}"):
+        env.start_fetch(block)
+    assert env.fetch is None
+
+
+def test_where_a_stashed_block_lies_changes_no_physics(arm) -> None:
+    """A taken block put down inside the robot's links touches nothing: the robot moves
+    exactly as without it, and MuJoCo reports no contact with it."""
+
+    class StashOnTheRobot(SceneCfg):
+        def stash_position(self, block_id: int) -> np.ndarray:
+            return env_a.data.xpos[3].copy()  # link2 of the fake arm
+
+    env_a = _env(arm)
+    env_b = _env(arm)
+    env_b.scene_cfg = StashOnTheRobot()
+    for env in (env_a, env_b):
+        env.block_state[0] = "taken"
+    q = torch.as_tensor(env_a.robot_q(), dtype=torch.float32)
+    for q_des in _ik_path(arm, q, np.array([0.3, 0.3, 0.2]), n=60):
+        for env in (env_a, env_b):
+            env.step(q_des, np.zeros(3))
+        np.testing.assert_array_equal(env_a.data.qpos, env_b.data.qpos)
+        np.testing.assert_array_equal(env_a.data.qvel, env_b.data.qvel)
+        assert env_a.data.ncon == env_b.data.ncon
+    block = env_b.handles.block_mocap[0]
+    np.testing.assert_allclose(env_b.data.mocap_pos[block], env_a.data.xpos[3], atol=0.05)

@@ -7,7 +7,7 @@ import pytest
 from sim_fakes import FakeMotion, FakeOrder, deadline, fake_solo_duration
 
 from iplanner_torch.data.skeleton import JOINT_INDEX
-from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.sim.human import HumanCfg, ScriptedHuman
 from iplanner_torch.sim.scene import SceneCfg
 
@@ -290,3 +290,109 @@ def test_solo_duration_sums_the_reaches_of_doing_every_task_alone(speed: str) ->
     )
     assert human.solo_duration(far) == pytest.approx(expect, rel=1e-12)
     assert expect > 8 * cfg.hold_s  # eight reaches, each holding
+
+
+class _OffsetMotion(FakeMotion):
+    """FakeMotion whose reaches start 2 cm (head, neck, torso) off the pose they start from,
+    as a generator's trunk sway or IK elbow can."""
+
+    def reach(self, arm, target, rng, *, speed, hold_s, start_pose) -> np.ndarray:
+        frames = (
+            super()
+            .reach(arm, target, rng, speed=speed, hold_s=hold_s, start_pose=start_pose)
+            .copy()
+        )
+        frames[:, :3] += np.array([0.02, 0.0, 0.0])
+        return frames
+
+
+def test_a_reach_starts_at_the_pose_the_person_holds() -> None:
+    """The first frames of a reach are blended from the pose held before it, so the joints do
+    not jump when a take starts; after the blend the motion is the source's own."""
+    from iplanner_torch.sim.human import START_BLEND_S
+
+    motion = _OffsetMotion()
+    human = ScriptedHuman(
+        HumanCfg(), motion, task_order=FakeOrder((1, 0, 2, 3)), targets=TARGETS, seed=4
+    )
+    held = human.joint_positions()
+    t, dt, largest = 0.0, 0.01, 0.0
+    start = None
+    while start is None or t < start + 2 * START_BLEND_S:
+        before = human.joint_positions()
+        t += dt
+        events = human.update(t, {1})
+        if start is None and any(e.kind == "human_take_started" for e in events):
+            start = t
+            np.testing.assert_allclose(human.joint_positions(), held, atol=1e-12)
+        if start is not None:
+            step = np.linalg.norm(human.joint_positions()[:3] - before[:3], axis=-1)
+            largest = max(largest, float(step.max()))
+    # the trunk, which only the offset moves: 2 cm by min-jerk over the blend, at most
+    # 1.875 * 2 cm / 0.3 s = 1.25 mm per 10 ms step (it would be one 2 cm jump without it)
+    assert largest < 0.0015
+    late = human.joint_positions(start + 1.5 * START_BLEND_S)
+    assert late[0, 0] - held[0, 0] == pytest.approx(0.02, abs=1e-9)  # the source's own offset
+
+
+def test_a_motion_source_that_gives_bad_frames_is_refused() -> None:
+    class Bad(FakeMotion):
+        def __init__(self, frames: np.ndarray) -> None:
+            super().__init__()
+            self.frames = frames
+
+        def reach(self, arm, target, rng, *, speed, hold_s, start_pose) -> np.ndarray:
+            return self.frames
+
+    for frames, error in (
+        (np.zeros((5, 3, 3)), ShapeError),
+        (np.full((5, 10, 3), np.nan), DataError),
+    ):
+        human = ScriptedHuman(
+            HumanCfg(), Bad(frames), task_order=FakeOrder((1, 0, 2, 3)), targets=TARGETS, seed=4
+        )
+        with pytest.raises(error, match="motion source"):
+            _run(human, {1}, 10.0)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), "1.0"])
+def test_a_time_that_is_no_finite_number_is_refused(bad) -> None:
+    """update and joint_positions refuse a NaN, infinite or non-numeric time, idle and in
+    motion, and the script keeps its clock (a NaN clock would never reach a motion's end)."""
+    human = _human(order=(1, 0, 2, 3), idle_s=(0.0, 0.0))
+    for motion in (False, True):
+        if motion:
+            _run(human, {1}, 1.0)
+            assert human.action_label == "take_1"
+        before = human.time
+        with pytest.raises(DataError, match="finite time"):
+            human.update(bad, {1})
+        assert human.time == before
+        with pytest.raises(DataError, match="finite time"):
+            human.joint_positions(bad)
+    took = [e.block for e in _run(human, {1}, 20.0) if e.kind == "human_took"]
+    assert took == [1]
+
+
+@pytest.mark.parametrize(
+    ("target", "error", "match"),
+    [
+        ([0.1, 0.2], ShapeError, r"target 1 a \(3,\) point"),
+        ([[0.1, 0.2, 0.3]], ShapeError, r"target 1 a \(3,\) point"),
+        (["a", "b", "c"], ShapeError, r"target 1 a \(3,\) point"),
+        ([0.1, [0.2], 0.3], ShapeError, r"target 1 a \(3,\) point"),
+        ([0.1, 0.2, 0.3j], ShapeError, r"target 1 a \(3,\) point"),
+        ([0.1, float("nan"), 0.3], DataError, "target 1 a finite point"),
+        ([0.1, 0.2, float("inf")], DataError, "target 1 a finite point"),
+    ],
+)
+def test_targets_must_be_finite_points(target, error: type[Exception], match: str) -> None:
+    targets = {**TARGETS, 1: target}
+    with pytest.raises(error, match=match):
+        ScriptedHuman(
+            HumanCfg(), FakeMotion(), task_order=FakeOrder((1,)), targets=targets, seed=0
+        )
+    with pytest.raises(ConfigError, match="target block id"):
+        ScriptedHuman(
+            HumanCfg(), FakeMotion(), task_order=FakeOrder((1,)), targets={"1": TARGETS[1]}, seed=0
+        )

@@ -11,7 +11,7 @@ import torch
 from sim_fakes import rest_pose
 
 from iplanner_torch.data.skeleton import SEGMENTS
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.sim.scene import (
     ARRANGEMENT_IDS,
     SceneCfg,
@@ -193,3 +193,110 @@ def test_default_robot_scene_equals_the_committed_mjcf() -> None:
         robot = RobotModel.load(name)
         cfg = SceneCfg(arrangement="2x4")
         assert saved(build_scene(cfg, robot)) == saved(build_scene(cfg, FromFile(robot)))
+
+
+def test_a_long_capsule_touched_far_from_its_centre_is_a_contact() -> None:
+    """``pose_human`` stretches the capsules to their segments; MuJoCo's broad phase must see
+    the whole length (its bounding box), so an overlap near a long forearm's far end, away
+    from the hand sphere, is a contact. Reference: MuJoCo's own distance between the geoms."""
+    from iplanner_torch.data.skeleton import JOINT_INDEX
+    from iplanner_torch.robot.model import RobotModel
+
+    robot = RobotModel.load("kuka_iiwa14")
+    cfg = SceneCfg()
+    model = build_scene(cfg, robot)
+    data = mujoco.MjData(model)
+    h = SceneHandles.resolve(model, cfg, robot)
+    data.qpos[h.qpos_adr] = robot.q_home.numpy()
+    mujoco.mj_forward(model, data)
+    rg = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "robot/iiwa_link_5_geom0")
+    forearm = next(s for s, seg in enumerate(SEGMENTS) if seg.name == "right_forearm")
+    g = h.human_geom_ids[forearm]
+    y = np.array([0.0, 1.0, 0.0])
+    x = np.array([1.0, 0.0, 0.0])
+    half = 0.35  # the touch is 0.2 m from the centre, 0.15 m from the hand sphere
+
+    def pose(offset: float) -> float:
+        touch = data.geom_xpos[rg] + offset * x
+        centre = touch - 0.2 * y
+        joints = np.empty((len(JOINT_INDEX), 3))
+        for k in range(len(JOINT_INDEX)):  # the rest of the body on the line, beyond the elbow
+            joints[k] = centre - (half + 0.3 + 0.05 * k) * y
+        joints[JOINT_INDEX["right_elbow"]] = centre - half * y
+        joints[JOINT_INDEX["right_hand"]] = centre + half * y
+        pose_human(model, data, h, joints)
+        mujoco.mj_forward(model, data)
+        return mujoco.mj_geomDistance(model, data, rg, g, 1.0, None)
+
+    offset = 0.3
+    gap = pose(offset)
+    assert gap > 0.0
+    for _ in range(5):  # move in until the geoms overlap by about 1 cm
+        offset -= gap + 0.01
+        gap = pose(offset)
+        if gap < -0.005:
+            break
+    assert gap < -0.005
+    pairs = {frozenset(map(int, pair)) for pair in data.contact.geom[: data.ncon]}
+    assert frozenset((rg, int(g))) in pairs
+    hand = h.human_geom_ids[next(s for s, seg in enumerate(SEGMENTS) if seg.name == "right_hand")]
+    assert mujoco.mj_geomDistance(model, data, rg, hand, 1.0, None) > 0.05  # not the hand
+
+
+@pytest.mark.parametrize(
+    "method", ["block_position", "delivery_position", "stash_position", "check_block_id"]
+)
+@pytest.mark.parametrize("block", [99, -1, 5, "0", 1.0, True, None])
+def test_positions_of_blocks_absent_from_the_scene_are_refused(method: str, block) -> None:
+    """Block -1 used to be block 7's spot, 5 one of the 2x4 layout, 99 an IndexError."""
+    cfg = SceneCfg()
+    with pytest.raises(ConfigError, match=rf"1x4 scene \(0, 1, 2, 3\), got {block!r}"):
+        getattr(cfg, method)(block)
+    assert getattr(cfg, method)(np.int64(2)) is not None
+
+
+def test_every_block_has_its_own_stash_spot() -> None:
+    """Taken blocks are put down beside the human without overlapping one another, each on
+    the side of its delivery spot, on the table top."""
+    cfg = SceneCfg(arrangement="2x4")
+    spots = np.array([cfg.stash_position(i) for i in cfg.block_ids])  # (8, 3)
+    gap = np.abs(spots[:, None] - spots[None]).max(-1)  # (8, 8) box-to-box along the worst axis
+    np.fill_diagonal(gap, np.inf)
+    assert gap.min() >= cfg.block_size + 0.02 - 1e-12
+    for i, spot in zip(cfg.block_ids, spots, strict=True):
+        assert np.sign(spot[1]) == np.sign(cfg.delivery_position(i)[1])
+        assert spot[2] == pytest.approx(0.5 * cfg.block_size)
+        assert abs(spot[1]) + 0.5 * cfg.block_size <= 0.5 * cfg.table_size[1]
+
+
+def test_blocks_can_collide_with_nothing(arm) -> None:
+    """The block bodies are left out of MuJoCo's collision detection altogether, so where a
+    block lies (on the table, carried, stashed) cannot change the physics."""
+    cfg = SceneCfg(arrangement="2x4")
+    model = build_scene(cfg, arm)
+    for i in cfg.block_ids:
+        b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"block_{i}")
+        assert model.body_contype[b] == 0 and model.body_conaffinity[b] == 0
+        g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"block_{i}")
+        assert model.geom_contype[g] == 0 and model.geom_conaffinity[g] == 0
+
+
+def test_pose_human_refuses_joints_it_cannot_place(arm) -> None:
+    cfg = SceneCfg()
+    model = build_scene(cfg, arm)
+    data = mujoco.MjData(model)
+    h = SceneHandles.resolve(model, cfg, arm)
+    good = rest_pose()
+    pose_human(model, data, h, good)
+    mocap = data.mocap_pos.copy()
+    for joints in (good[:5], good[:, :2], good[None], good.ravel()):
+        with pytest.raises(ShapeError, match=r"expected joints \(K, 3\) with K >= 10"):
+            pose_human(model, data, h, joints)
+    with pytest.raises(ShapeError, match="real numbers"):
+        pose_human(model, data, h, good.astype(complex))
+    for bad in (np.nan, np.inf):
+        joints = good.copy()
+        joints[3, 1] = bad
+        with pytest.raises(DataError, match="finite joints"):
+            pose_human(model, data, h, joints)
+    np.testing.assert_array_equal(data.mocap_pos, mocap)  # nothing was moved

@@ -130,3 +130,23 @@ def test_parse_order_names_the_position_of_odd_digits() -> None:
 def test_fetch_cfg_rejects_meaningless_values(kw: dict, field: str) -> None:
     with pytest.raises(ConfigError, match=field):
         FetchCfg(**kw)
+
+
+@pytest.mark.parametrize("expr", ["(0,9223372036854775808)", "99999999999999999999"])
+def test_a_block_id_beyond_every_integer_type_is_named(expr: str) -> None:
+    big = expr.strip("()").split(",")[-1]
+    with pytest.raises(ConfigError, match=f"names blocks \\[{big}\\]"):
+        parse_order(expr, (0, 1, 2, 3))
+    with pytest.raises(ConfigError, match=f"names blocks \\[{big}\\]"):
+        ScenarioCfg(task_order=expr)
+
+
+@pytest.mark.parametrize("block", [99, -1, 4, "0", 1.0, True])
+def test_a_fetch_of_a_block_absent_from_the_scene_is_refused(block) -> None:
+    from iplanner_torch.sim.scene import SceneCfg
+    from iplanner_torch.sim.tasks import FetchTask
+
+    with pytest.raises(
+        ConfigError, match=rf"block id of the 1x4 scene \(0, 1, 2, 3\), got {block!r}"
+    ):
+        FetchTask.create(block, SceneCfg(), FetchCfg(), 0.0)

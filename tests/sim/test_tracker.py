@@ -170,3 +170,12 @@ def test_a_non_finite_true_joint_is_a_lost_joint() -> None:
     np.testing.assert_array_equal(win[-1, :2], want[-1, :2])
     np.testing.assert_array_equal(tr.latest_pose()[2:], held[2:])
     assert np.isfinite(tr.latest_pose()).all()
+
+
+@pytest.mark.parametrize("dtype", [complex, bool, object])
+def test_only_real_joint_positions_are_taken(dtype: type) -> None:
+    """Complex positions would lose their imaginary part when the window is read."""
+    tracker = Tracker(TrackerCfg(), seed=0)
+    with pytest.raises(ShapeError, match="real joint positions"):
+        tracker.observe(0.0, rest_pose().astype(dtype))
+    assert tracker.num_frames == 0
