@@ -19,7 +19,9 @@ Optimiser. Newton steps use Boehning's bound on the softmax Hessian,
 system ``(Phi^T Phi / 2 + lam Pen) delta = grad`` for all classes at once (coefficients keep
 sum-to-zero rows) and never increases H (a majorise-minimise step). Hence the recorded loss is
 non-increasing: adding an import vector with coefficient 0 leaves H unchanged and every later
-step only lowers it.
+step only lowers it. The bound is loose, so the steps shrink with ``lam``: the final refit
+(``10 newton_steps`` steps) reaches H's minimum on S to about 1e-5 relative at the
+predictors' ``lam = 0.03``, but can stop well above it at this class's default ``1e-3``.
 
 Greedy selection. Each import step draws ``candidates`` random not-yet-imported training
 windows (all of them when ``candidates`` is None). Each candidate is scored by
@@ -335,6 +337,12 @@ class IVMClassifier:
         self._require_fit()
         _check_windows("x", x)
         assert self.weights_ is not None and self.classes_ is not None
+        assert self.import_vectors_ is not None
+        d = self.import_vectors_.shape[-1]
+        if x.shape[-1] != d:  # before the kernel, which would name its import vectors
+            raise ShapeError(
+                f"expected x (B, T, {d}) as the classifier was trained on, got {tuple(x.shape)}"
+            )
         b, dev = x.shape[0], x.device
         out = torch.full((b, self.num_classes), -math.inf, dtype=torch.float64, device=dev)
         w = self.weights_.to(dev)

@@ -34,10 +34,15 @@ channels):
   output variance ``mean_c std_c^2``: the term of a channel of average spread, so a channel gets
   ``sigma^2 (1 + ||v||^2) std_c^2 / mean_c(std_c^2)`` in metres (the same on average);
 * ``nigp`` (McHutchon and Rasmussen 2011): fit, then
-  ``e_i = sigma_x^2 mean_c ||d g_c / d x (x_i)||^2`` with the gradient of the posterior mean with
-  respect to the raw inputs (closed form for rbf, autograd otherwise), refit; repeated
-  ``nigp_iterations`` times. Averaging over channels keeps one S; in normalised output units
-  the channels' gradients are of comparable size.
+  ``e_i = sigma^2 mean_c ||A^T d g_c / d x (x_i)||^2`` with the gradient of the posterior mean
+  with respect to the raw inputs (closed form for rbf, autograd for matern; the time-series
+  kernels give none, so they refuse nigp), refit; repeated ``nigp_iterations`` times. ``A``
+  (D_in, D_src) maps the noisy source values to the raw inputs (the input noise covariance is
+  ``sigma^2 A A^T``): the predictor's training gives the Jacobian of its window features and
+  GP inputs with respect to the observed joint positions (velocities and accelerations are
+  finite differences of the same noisy positions); without one ``A = I``, every input
+  column noisy with ``sigma^2`` on its own. Averaging over channels keeps one S; in
+  normalised output units the channels' gradients are of comparable size.
 
 Calibration (``calibrate_floor``): windows of one demonstration are strongly correlated, so a
 floor fitted on the training windows alone is overconfident on new demonstrations; when
@@ -145,6 +150,11 @@ class SVGPCfg:
         if self.noisy_input not in ("none", "simple", "nigp"):
             raise ConfigError(
                 f"noisy_input must be one of none, simple, nigp, got {self.noisy_input!r}"
+            )
+        if self.noisy_input == "nigp" and self.kernel in ("gak", "dtw"):
+            raise ConfigError(
+                f"noisy_input nigp needs the gradient of the posterior mean, which kernel "
+                f"{self.kernel} does not give: use kernel rbf or matern, or noisy_input simple"
             )
         checks.non_negative("input_noise_sigma", self.input_noise_sigma)
         checks.non_negative("velocity_limit", self.velocity_limit)
@@ -410,10 +420,13 @@ class SVGPRegressor(nn.Module):
             The initialised, untrained regressor on ``x``'s device and dtype.
 
         Raises:
-            ShapeError: when shapes disagree or N == 0.
+            ShapeError: when shapes disagree, N == 0, or x and y are not of one floating
+                dtype.
         """
         check_shape("x", x, ("N", "D_in"))
         check_shape("y", y, (x.shape[0], "C"))
+        if not x.is_floating_point() or y.dtype != x.dtype:
+            raise ShapeError(f"expected x and y of one floating dtype, got {x.dtype}, {y.dtype}")
         if x.shape[0] == 0:
             raise ShapeError("expected x (N, D_in) with N >= 1, got N = 0")
         g = torch.Generator().manual_seed(cfg.seed)
@@ -545,50 +558,81 @@ class SVGPRegressor(nn.Module):
         bound = -0.5 * (c * b * math.log(2 * math.pi) + c * logdet + quad + c * trace)
         return -bound / (b * c)
 
-    def extra_train_noise(self, x: torch.Tensor) -> torch.Tensor:
+    def extra_train_noise(
+        self, x: torch.Tensor, noise_map: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """(N,) extra observation noise ``e_i`` (normalised units) at raw x (N, D_in).
 
         ``simple`` gives the constant paper term; ``nigp`` uses the current posterior mean's
-        gradient (call after a first fit); ``none`` gives zeros.
+        gradient (call after a first fit) and ``noise_map`` ``A`` (D_in, D_src), the inputs'
+        Jacobian with respect to the values the noise ``input_noise_sigma`` is on (None: the
+        identity, see the module docstring); ``none`` gives zeros.
+
+        Raises:
+            ShapeError: when ``noise_map`` is not (D_in, D_src).
         """
         n = x.shape[0]
         if self.cfg.noisy_input == "none":
             return torch.zeros(n, dtype=x.dtype, device=x.device)
         if self.cfg.noisy_input == "simple":
             return self.extra_noise_simple().to(x).expand(n).clone()
-        return self.cfg.input_noise_sigma**2 * self.mean_grad_sq(x) / self.num_channels
+        grad_sq = self.mean_grad_sq(x, noise_map=noise_map)
+        return self.cfg.input_noise_sigma**2 * grad_sq / self.num_channels
 
     @torch.no_grad()
-    def mean_grad_sq(self, x: torch.Tensor, chunk: int = 512) -> torch.Tensor:
-        """(N,) ``sum_c ||d g_c / d x||^2`` of the normalised posterior means at raw x (N, D_in).
+    def mean_grad_sq(
+        self, x: torch.Tensor, chunk: int = 512, *, noise_map: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """(N,) ``sum_c ||A^T d g_c / d x||^2`` of the normalised posterior means at raw x
+        (N, D_in); ``A`` is ``noise_map`` (D_in, D_src), the identity when None.
 
         Closed form for rbf: with ``k_j`` the kernel to inducing input ``j``, ``W`` (M, C) the
-        mean weights, ``P = W W^T`` and ``Lam = diag(1 / (l^4 std_x^2))``, the sum is
-        ``sum_jl k_j k_l P_jl (x - z_j)^T Lam (x - z_l)`` (in float64); autograd otherwise.
+        mean weights, ``P = W W^T``, ``F = diag(1 / (l^2 std_x))`` and ``Q = F A A^T F``, the
+        sum is ``sum_jl k_j k_l P_jl (x_n - z_j)^T Q (x_n - z_l)`` (normalised ``x_n``, in
+        float64); autograd otherwise.
+
+        Raises:
+            ShapeError: when ``noise_map`` is not (D_in, D_src).
         """
+        if noise_map is not None:
+            check_shape("noise_map", noise_map, (x.shape[-1], "D_src"))
         self.refresh_cache()
         c = self._cache
         if self.cfg.kernel != "rbf":
-            return self._mean_grad_sq_autograd(x, chunk)
+            return self._mean_grad_sq_autograd(x, chunk, noise_map)
         dt = torch.float64
         ls = self.model.covar_module.base_kernel.lengthscale.detach().to(dt).reshape(-1)
-        lam_d = 1.0 / (ls.pow(4) * self.x_std.to(dt).pow(2))  # (D_in,)
         z = c["z"].to(dt)  # (M, D_in)
         w = c["w"].to(dt)  # (M, C)
         p = w @ w.T  # (M, M)
-        pq = p * ((z * lam_d) @ z.T)  # (M, M)
+        if noise_map is None:
+            lam_d = 1.0 / (ls.pow(4) * self.x_std.to(dt).pow(2))  # (D_in,) F^2
+            pq = p * ((z * lam_d) @ z.T)  # (M, M)
+        else:
+            f = 1.0 / (ls.pow(2) * self.x_std.to(dt))  # (D_in,)
+            a_map = noise_map.to(device=z.device, dtype=dt)  # (D_in, D_src)
+            v = (z * f) @ a_map  # (M, D_src)
+            pq = p * (v @ v.T)  # (M, M)
         out = []
         for s in range(0, x.shape[0], chunk):
             xn = self.normalise_x(x[s : s + chunk]).to(dt)  # (b, D_in)
             k = self.model.covar_module(xn, z).to_dense()  # (b, M)
-            a = (xn * lam_d * xn).sum(-1)  # (b,)
-            bm = (xn * lam_d) @ z.T  # (b, M)
+            if noise_map is None:
+                a = (xn * lam_d * xn).sum(-1)  # (b,)
+                bm = (xn * lam_d) @ z.T  # (b, M)
+            else:
+                u = (xn * f) @ a_map  # (b, D_src)
+                a = u.pow(2).sum(-1)  # (b,)
+                bm = u @ v.T  # (b, M)
             kp = k @ p  # (b, M)
             t = a * (kp * k).sum(-1) - 2 * (((k * bm) @ p) * k).sum(-1) + ((k @ pq) * k).sum(-1)
             out.append(t.clamp_min(0.0))
         return torch.cat(out).to(x.dtype)
 
-    def _mean_grad_sq_autograd(self, x: torch.Tensor, chunk: int) -> torch.Tensor:
+    def _mean_grad_sq_autograd(
+        self, x: torch.Tensor, chunk: int, noise_map: torch.Tensor | None
+    ) -> torch.Tensor:
+        a_map = None if noise_map is None else noise_map.to(x)  # (D_in, D_src)
         out = []
         for s in range(0, x.shape[0], chunk):
             xb = x[s : s + chunk].detach().clone().requires_grad_(True)
@@ -597,6 +641,8 @@ class SVGPRegressor(nn.Module):
                 mean = self._mean_normalised(xb)  # (b, C)
                 for ch in range(self.num_channels):
                     (g,) = torch.autograd.grad(mean[:, ch].sum(), xb, retain_graph=True)
+                    if a_map is not None:
+                        g = g @ a_map  # (b, D_src)
                     total = total + g.pow(2).sum(-1)
             out.append(total.detach())
         return torch.cat(out)
@@ -605,19 +651,29 @@ class SVGPRegressor(nn.Module):
         """Parameters given to Adam: kernel hyperparameters, Z (when learned), noise floor."""
         return [p for p in self.parameters() if p.requires_grad]
 
-    def fit(self, x: torch.Tensor, y: torch.Tensor, *, progress: bool = False) -> list[float]:
+    def fit(
+        self,
+        x: torch.Tensor,
+        y: torch.Tensor,
+        *,
+        progress: bool = False,
+        noise_map: torch.Tensor | None = None,
+    ) -> list[float]:
         """Train on (x, y) with Adam on the collapsed bound, set q; NIGP refits as configured.
 
         Args:
             x: (N, D_in) raw inputs.
             y: (N, C) raw outputs.
             progress: show a tqdm bar.
+            noise_map: (D_in, D_src) for nigp, as :meth:`extra_train_noise` takes it.
 
         Returns:
             The loss (negative ELBO per datum and channel) of every step.
         """
         check_shape("x", x, ("N", self.input_dim))
         check_shape("y", y, (x.shape[0], self.num_channels))
+        self._check_dtype(x)
+        self._check_dtype(y, "y")
         rounds = self.cfg.nigp_iterations + 1 if self.cfg.noisy_input == "nigp" else 1
         losses: list[float] = []
         extra = (
@@ -627,7 +683,7 @@ class SVGPRegressor(nn.Module):
         )
         for r in range(rounds):
             if r > 0:
-                extra = self.extra_train_noise(x)
+                extra = self.extra_train_noise(x, noise_map)
             steps = self.cfg.steps_for(x.shape[0]) if r == 0 else self.cfg.nigp_refit_steps
             losses += self.train_steps(x, y, extra, steps=steps, progress=progress)
             self.finalise(x, y, extra)
@@ -799,6 +855,13 @@ class SVGPRegressor(nn.Module):
         k = self.model.covar_module(self.normalise_x(x), c["z"]).to_dense()  # (B, M)
         return k @ c["w"]
 
+    def _check_dtype(self, t: torch.Tensor, name: str = "x") -> None:
+        """ShapeError unless ``t`` has the regressor's dtype (its normalisation's)."""
+        if t.dtype != self.x_mean.dtype:
+            raise ShapeError(
+                f"expected {name} {self.x_mean.dtype} (the regressor's), got {t.dtype}"
+            )
+
     def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Predictive mean and variance of the outputs (fast path, cached tensors).
 
@@ -807,9 +870,13 @@ class SVGPRegressor(nn.Module):
 
         Returns:
             mean: (B, C) [output units]; var: (B, C) [output units^2], including the noise floor
-            and the input-noise term (see the module docstring).
+            and the input-noise term (see the module docstring). A NaN input gives NaN.
+
+        Raises:
+            ShapeError: when ``x`` is not (B, D_in) of the regressor's dtype.
         """
         check_shape("x", x, ("B", self.input_dim))
+        self._check_dtype(x)
         if self._cache is None:
             self.refresh_cache()
         c = self._cache

@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -32,7 +33,7 @@ from torch.utils.data import DataLoader, TensorDataset
 from tqdm.auto import tqdm
 
 from iplanner_torch import checks
-from iplanner_torch.data.windows import WindowSet
+from iplanner_torch.data.windows import WindowSet, compute_features
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
 from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord, read_training_inputs
 from iplanner_torch.prediction.predictor import (
@@ -51,6 +52,7 @@ __all__ = [
     "SVGPModule",
     "SplitRecord",
     "TrainerCfg",
+    "input_noise_map",
     "train_predictor",
 ]
 
@@ -330,6 +332,7 @@ def train_svgp(
     y_val: torch.Tensor | None = None,
     progress: bool = True,
     resume: bool = False,
+    noise_map: torch.Tensor | None = None,
 ) -> SVGPRegressor:
     """Train one SVGP with Lightning (NIGP rounds included) and write ``<name>.ckpt``.
 
@@ -345,6 +348,8 @@ def train_svgp(
         y_val: (N_v, C) validation outputs, or None.
         progress: progress bars.
         resume: reuse ``<name>.ckpt`` when it exists.
+        noise_map: (D_in, D_src) Jacobian of the inputs with respect to the noisy values
+            (:func:`input_noise_map`) for nigp; None: each input column noisy on its own.
 
     Returns:
         The trained regressor (on the CPU).
@@ -362,7 +367,7 @@ def train_svgp(
     for r in range(rounds):
         if r > 0:
             reg.to(x.device)
-            extra = reg.extra_train_noise(x)
+            extra = reg.extra_train_noise(x, noise_map)
         steps = tcfg.cap_steps(
             cfg.steps_for(n, tcfg.max_epochs) if r == 0 else cfg.nigp_refit_steps
         )
@@ -396,6 +401,21 @@ def _as_train_val(data: Any) -> tuple[WindowSet, WindowSet | None]:
     raise DataError(
         f"expected a WindowSet, (train, val) WindowSets or a DataModule, got {type(data).__name__}"
     )
+
+
+def input_noise_map(
+    n_p: int, joint_names: Sequence[str], fps: float, kinds: Sequence[str], gp_input: str
+) -> torch.Tensor:
+    """(n_p D, n_p K 3) Jacobian of a window's GP inputs with respect to its observed joint
+    positions, float64: the features (positions, and velocities and accelerations as finite
+    differences of them, :func:`iplanner_torch.data.windows.compute_features`) and the GP
+    input (:func:`iplanner_torch.prediction.predictor.gp_inputs`) are linear in the positions,
+    so position noise ``sigma^2 I`` is ``sigma^2 A A^T`` on the GP inputs (NIGP). Column
+    ``i`` is the GP input of a window whose positions are zero but for coordinate ``i``."""
+    k = len(joint_names)
+    basis = torch.eye(n_p * k * 3, dtype=torch.float64).reshape(-1, n_p, k, 3)
+    f_prev = compute_features(basis, fps, kinds, joint_names=joint_names)  # (n_p K 3, n_p, D)
+    return gp_inputs(f_prev, k, gp_input).T.contiguous()  # (n_p D, n_p K 3)
 
 
 def _gp_xy(w: WindowSet, gp_input: str) -> tuple[torch.Tensor, torch.Tensor]:
@@ -571,6 +591,11 @@ def _train_predictor(
     next_model = _train_next_action(train, cfg)
 
     x_all, y_all = _gp_xy(train, cfg.gp_input)
+    noise_map = (
+        input_noise_map(n_p, train.joint_names, train.fps, train.cfg.feature_kinds, cfg.gp_input)
+        if cfg.svgp.noisy_input == "nigp"
+        else None
+    )
     xv_all, yv_all = _gp_xy(val, cfg.gp_input) if val is not None and len(val) else (None, None)
 
     def val_rows(p: int | None, c: int) -> tuple[torch.Tensor | None, torch.Tensor | None]:
@@ -598,6 +623,7 @@ def _train_predictor(
             y_val=yv,
             progress=False,
             resume=resume,
+            noise_map=noise_map,
         )
         bar.update()
         return reg

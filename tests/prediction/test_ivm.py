@@ -314,3 +314,11 @@ def test_to_cuda_matches_cpu():
     state = ActionClassifier.from_state_dict(clf.state_dict())  # a CUDA model saves CPU tensors
     assert not state.models_[1].weights_.is_cuda
     torch.testing.assert_close(state.predict_proba(x, progress), want, atol=1e-6, rtol=0)
+
+
+def test_windows_of_another_width_name_the_trained_one(data):
+    (x, y), _ = data
+    ivm = IVMClassifier(GlobalAlignmentKernel(2.0), num_classes=3, max_import=4).fit(x, y)
+    d = x.shape[-1]
+    with pytest.raises(ShapeError, match=rf"expected x \(B, T, {d}\) as the classifier was"):
+        ivm.predict_proba(torch.zeros(2, x.shape[1], d + 1, dtype=x.dtype))

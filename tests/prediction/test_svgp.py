@@ -183,7 +183,51 @@ def test_nigp_closed_form_gradient_matches_autograd() -> None:
     xs = torch.randn(12, 5, generator=g, dtype=torch.float64)
     closed = reg.mean_grad_sq(xs)
     reg.refresh_cache()
-    torch.testing.assert_close(closed, reg._mean_grad_sq_autograd(xs, 8), rtol=1e-8, atol=1e-10)
+    torch.testing.assert_close(
+        closed, reg._mean_grad_sq_autograd(xs, 8, None), rtol=1e-8, atol=1e-10
+    )
+    a_map = torch.randn(5, 3, generator=g, dtype=torch.float64)  # (D_in, D_src)
+    torch.testing.assert_close(
+        reg.mean_grad_sq(xs, noise_map=a_map),
+        reg._mean_grad_sq_autograd(xs, 8, a_map),
+        rtol=1e-8,
+        atol=1e-10,
+    )
+    eye = torch.eye(5, dtype=torch.float64)
+    torch.testing.assert_close(reg.mean_grad_sq(xs, noise_map=eye), closed, rtol=1e-10, atol=0)
+    with pytest.raises(ShapeError, match="noise_map"):
+        reg.mean_grad_sq(xs, noise_map=a_map.T)
+
+
+def test_nigp_noise_map_carries_correlated_input_noise() -> None:
+    """Inputs x = A s of sources s with independent noise sigma: a linear function w . x gets
+    output noise sigma^2 ||A^T w||^2 (here 7.25 sigma^2), not sigma^2 ||w||^2 (3.25 sigma^2)
+    as if every input column were noisy on its own."""
+    g = torch.Generator().manual_seed(6)
+    a_map = torch.tensor([[1.0, 0.0], [1.0, -1.0]], dtype=torch.float64)  # x1 = s1, x2 = s1 - s2
+    src = torch.rand(300, 2, generator=g, dtype=torch.float64) * 4 - 2
+    x = src @ a_map.T  # (N, 2)
+    w = torch.tensor([1.5, 1.0], dtype=torch.float64)
+    y = (x @ w).unsqueeze(-1) + 0.01 * torch.randn(300, 1, generator=g, dtype=torch.float64)
+    cfg = SVGPCfg(
+        num_inducing=30, noisy_input="nigp", input_noise_sigma=0.03, max_steps=80, epochs=100
+    )
+    reg = SVGPRegressor.from_data(cfg, x, y)
+    reg.fit(x, y, noise_map=a_map)
+    interior = (src.abs() < 1.5).all(-1)
+    ys2 = reg.y_std[0] ** 2
+    extra = reg.extra_train_noise(x[interior], a_map) * ys2  # (n,) [output units^2]
+    expected = 0.03**2 * float((a_map.T @ w).pow(2).sum())  # 7.25 sigma^2
+    rel = (extra / expected - 1).abs()
+    assert float(rel.median()) < 0.05
+    alone = reg.extra_train_noise(x[interior]) * ys2  # the identity map
+    assert float((alone / (0.03**2 * float(w.pow(2).sum())) - 1).abs().median()) < 0.05
+
+
+@pytest.mark.parametrize("kernel", ["gak", "dtw"])
+def test_nigp_is_refused_for_the_time_series_kernels(kernel: str) -> None:
+    with pytest.raises(ConfigError, match=f"noisy_input nigp needs .* kernel {kernel}"):
+        SVGPCfg(kernel=kernel, noisy_input="nigp")
 
 
 def test_calibration_raises_floor_to_the_validation_noise() -> None:
@@ -361,3 +405,16 @@ def test_errors() -> None:
         SVGPCfg(batch_size=1)
     with pytest.raises(ConfigError, match="nigp_refit_steps"):
         SVGPCfg(nigp_refit_steps=-1)
+
+
+def test_inputs_of_another_dtype_are_refused() -> None:
+    x, y, _ = _toy(40, 3)  # float32
+    reg = SVGPRegressor.from_data(SVGPCfg(num_inducing=8, max_steps=2), x, y)
+    with pytest.raises(ShapeError, match=r"expected x torch.float32 \(the regressor's\)"):
+        reg.predict(x.double())
+    with pytest.raises(ShapeError, match="expected y torch.float32"):
+        reg.fit(x, y.double())
+    with pytest.raises(ShapeError, match="one floating dtype"):
+        SVGPRegressor.from_data(SVGPCfg(num_inducing=8), x, y.round().long())
+    with pytest.raises(ShapeError, match="one floating dtype"):
+        SVGPRegressor.from_data(SVGPCfg(num_inducing=8), x.round().long(), y.round().long())

@@ -350,3 +350,31 @@ def test_training_runs_on_its_own_thread_count(
             assert a[key] == b[key] or a[key] != a[key], key  # NaN equals itself here
     with pytest.raises(ConfigError, match="expected num_threads an integer >= 1, got 0"):
         TrainerCfg(num_threads=0)
+
+
+@pytest.mark.parametrize("gp_input", ["relative", "window"])
+def test_input_noise_map_is_the_jacobian_of_the_gp_inputs(gp_input: str) -> None:
+    """The NIGP noise map: the Jacobian of a window's GP inputs with respect to its positions
+    (autograd through the features), and by hand the last frame's velocity (second-order
+    one-sided difference: (3 p_T - 4 p_T-1 + p_T-2) fps / 2)."""
+    from iplanner_torch.data.windows import compute_features
+    from iplanner_torch.prediction.predictor import gp_inputs
+    from iplanner_torch.prediction.training import input_noise_map
+
+    n_p, names, fps = 4, ("a", "b"), 15.0
+    kinds = ("position", "velocity", "acceleration")
+    a_map = input_noise_map(n_p, names, fps, kinds, gp_input)
+    k = len(names)
+    d = 3 * k * len(kinds)
+    assert a_map.shape == (n_p * d, n_p * k * 3)
+
+    def inputs(pos: torch.Tensor) -> torch.Tensor:
+        f = compute_features(pos.unsqueeze(0), fps, kinds, joint_names=names)
+        return gp_inputs(f, k, gp_input)[0]
+
+    ref = torch.autograd.functional.jacobian(inputs, torch.zeros(n_p, k, 3, dtype=torch.float64))
+    torch.testing.assert_close(a_map, ref.reshape(n_p * d, -1), rtol=1e-12, atol=1e-12)
+    row = (n_p - 1) * d + 3 * k  # last frame, velocity block, joint a, x
+    col = [(t * k) * 3 for t in range(n_p)]  # joint a, x, at each frame
+    expected = torch.tensor([0.0, 0.5, -2.0, 1.5], dtype=torch.float64) * fps
+    torch.testing.assert_close(a_map[row, col], expected, rtol=1e-12, atol=1e-12)
