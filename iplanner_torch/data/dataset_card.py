@@ -106,7 +106,8 @@ def read_generator_settings(folder: str | Path) -> dict[str, Any] | None:
 
     Raises:
         DataError: when the card has a settings block that does not read as a JSON object
-            (edited by hand), naming the card and what is wrong.
+            (edited by hand, or nested too deep to decode), naming the card and what is
+            wrong.
     """
     card = Path(folder) / CARD_NAME
     if not is_dataset_card(card):
@@ -129,6 +130,10 @@ def read_generator_settings(folder: str | Path) -> dict[str, Any] | None:
         raise DataError(
             f"{card}: the generator settings block is not valid JSON ({err.msg} at line "
             f"{err.lineno}, column {err.colno} of the block); {fix}"
+        ) from err
+    except RecursionError as err:
+        raise DataError(
+            f"{card}: the generator settings block is not valid JSON (nested too deep); {fix}"
         ) from err
     if not isinstance(settings, dict):
         raise DataError(

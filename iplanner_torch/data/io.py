@@ -18,6 +18,12 @@ The formats are documented in ``datasets/README.md``. In short:
   every frame is labelled -1 (unlabelled, no training windows) with a
   :class:`~iplanner_torch.errors.DataWarning`, never silently the first action.
 
+Metadata is written as strict JSON: a NaN or infinite number in it is written as the string
+``"nan"``, ``"inf"`` or ``"-inf"`` and read back as the float (so is such a string; files of
+earlier versions with bare ``NaN`` / ``Infinity`` tokens read as before). CSV numbers are
+written in the shortest form that reads back to the same value (float32 positions to the same
+float32), so a saved demonstration loads bit-identical.
+
 Field types are checked on loading: ``fps`` is one real number (not a string or a boolean),
 finite and > 0; ``metadata`` is a JSON object; names are strings; ``timestamps`` are numbers;
 ``clean_positions`` are floats. In the CSV header comment ``fps``, ``action_names`` (a JSON array
@@ -130,18 +136,123 @@ def _names_field(path: Path, key: str, value: np.ndarray) -> tuple[str, ...]:
     return tuple(str(s) for s in np.atleast_1d(arr))
 
 
+#: How metadata writes the numbers JSON has no literal for (read back by :func:`_from_json`).
+_NONFINITE_TEXT = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+
+
 def _jsonable(obj: Any) -> Any:
+    """``obj`` with numpy values, tuples and paths made JSON types, and NaN / +-inf floats
+    written as ``"nan"`` / ``"inf"`` / ``"-inf"`` (strict JSON)."""
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
+    if isinstance(obj, (np.ndarray, np.generic)):
+        return _jsonable(obj.tolist())
     if isinstance(obj, Path):
         return str(obj)
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
     return obj
+
+
+def _from_json(obj: Any) -> Any:
+    """Inverse of :func:`_jsonable` on parsed metadata: ``"nan"`` / ``"inf"`` / ``"-inf"``
+    strings back to floats, recursively."""
+    if isinstance(obj, dict):
+        return {k: _from_json(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_from_json(v) for v in obj]
+    if isinstance(obj, str):
+        return _NONFINITE_TEXT.get(obj, obj)
+    return obj
+
+
+def _parse_json(path: Path, field: str, text: str) -> Any:
+    """``text`` parsed as JSON, with metadata's NaN and infinities decoded.
+
+    Raises:
+        DataError: naming ``path`` and ``field`` when it is not valid JSON or is nested too
+            deep to decode.
+    """
+    try:
+        return _from_json(json.loads(text))
+    except json.JSONDecodeError as exc:
+        raise DataError(f"{path}: field {field} is not valid JSON ({exc})") from exc
+    except RecursionError as exc:
+        raise DataError(f"{path}: field {field} is not valid JSON (nested too deep)") from exc
+
+
+def _metadata_json(path: Path, metadata: Any) -> str:
+    """The strict JSON text of a demonstration's metadata.
+
+    Raises:
+        DataError: when it is not a dict or holds values JSON cannot hold (a set, an object,
+            a cycle, nesting too deep), naming ``path``.
+    """
+    if not isinstance(metadata, dict):
+        raise DataError(f"{path}: metadata must be a dict, got {_show(metadata)}")
+    try:
+        return json.dumps(_jsonable(metadata), allow_nan=False)
+    except (TypeError, ValueError, RecursionError) as exc:
+        why = "nested too deep" if isinstance(exc, RecursionError) else str(exc)
+        raise DataError(f"{path}: metadata is not JSON-serialisable ({why})") from exc
+
+
+def _name_problem(name: Any, suffix: str, joint: bool) -> str | None:
+    """Why the loader of ``suffix`` files could not read ``name`` back, or None.
+
+    A CSV joint name becomes the columns ``<name>_x, _y, _z``, which the loader splits on
+    commas, strips of white space, and takes for clean positions when they start with
+    ``clean_``; lines end at line breaks. An NPZ name is a numpy string, which drops
+    trailing NUL characters.
+    """
+    if not isinstance(name, str):
+        return "is not a string"
+    if suffix == ".npz":
+        return "ends in a NUL character" if name.endswith("\x00") else None
+    if not joint:
+        return None  # CSV action names are JSON strings in the header comment
+    if not name:
+        return "is empty"
+    if "," in name:
+        return "holds a comma (the CSV separator)"
+    if name != name.strip():
+        return "starts or ends with white space (stripped from CSV columns)"
+    if "".join(name.splitlines()) != name:
+        return "holds a line break"
+    if name == "clean" or name.startswith("clean_"):
+        return "is 'clean' or starts with 'clean_' (the CSV clean-position columns)"
+    return None
+
+
+def _check_names(path: Path, demo: Demonstration) -> None:
+    """Raise a DataError naming the first joint or action name the loader of ``path``'s
+    format could not read back (or a joint named twice, or no action names)."""
+    for field, names, joint in (
+        ("joint_names", demo.joint_names, True),
+        ("action_names", demo.action_names, False),
+    ):
+        for name in names:
+            problem = _name_problem(name, path.suffix, joint)
+            if problem:
+                raise DataError(
+                    f"{path}: cannot save {field} entry {_show(name)}: it {problem}; the "
+                    f"{path.suffix} loader could not read it back"
+                )
+    twice = sorted({j for j in demo.joint_names if demo.joint_names.count(j) > 1})
+    if twice:
+        raise DataError(f"{path}: cannot save joint_names {twice} named more than once")
+    if not demo.action_names:
+        raise DataError(f"{path}: cannot save empty action_names (the loader needs one)")
+
+
+def _csv_numbers(x: np.ndarray) -> np.ndarray:
+    """(T, D) cells of a float array: the shortest text that reads back to the same value of
+    its dtype (float32 or float64), empty for NaN."""
+    cells = np.asarray(x).astype(str)
+    cells[np.isnan(x)] = ""
+    return cells
 
 
 def save_demonstration(demo: Demonstration, path: str | Path) -> Path:
@@ -155,11 +266,18 @@ def save_demonstration(demo: Demonstration, path: str | Path) -> Path:
         The path written.
 
     Raises:
-        DataError: for an unknown suffix.
+        DataError: for an unknown suffix, a joint or action name the loader of that format
+            could not read back (not a string; for CSV a joint name that is empty, holds a
+            comma or a line break, starts or ends with white space, or starts with
+            ``clean_``), a joint named twice, no action names, or metadata that is not
+            JSON-serialisable; nothing is written then.
     """
     path = Path(path)
+    if path.suffix not in SUFFIXES:
+        raise DataError(f"{path}: unknown suffix {path.suffix!r}, expected one of {SUFFIXES}")
+    _check_names(path, demo)
+    meta = _metadata_json(path, demo.metadata)
     path.parent.mkdir(parents=True, exist_ok=True)
-    meta = json.dumps(_jsonable(demo.metadata))
     if path.suffix == ".npz":
         arrays: dict[str, np.ndarray] = {
             "positions": demo.positions.astype(np.float32),
@@ -182,20 +300,15 @@ def save_demonstration(demo: Demonstration, path: str | Path) -> Path:
         }
         cols = ["t", "label"] + [f"{j}_{a}" for j in demo.joint_names for a in _AXES]
         t = demo.num_frames
-        blocks = [np.asarray(demo.timestamps)[:, None], demo.labels[:, None].astype(np.float64)]
-        blocks.append(demo.positions.reshape(t, -1).astype(np.float64))
+        blocks = [demo.positions.reshape(t, -1)]  # (T, 3K)
         if demo.clean_positions is not None:
             cols += [f"clean_{j}_{a}" for j in demo.joint_names for a in _AXES]
-            blocks.append(demo.clean_positions.reshape(t, -1).astype(np.float64))
-        table = np.concatenate(blocks, axis=1)
+            blocks.append(demo.clean_positions.reshape(t, -1))
+        cells = _csv_numbers(np.concatenate(blocks, axis=1))  # (T, 3K or 6K)
         lines = ["# " + json.dumps(header), ",".join(cols)]
-        for row in table:
-            cells = [repr(float(row[0])), str(int(row[1]))]
-            cells += ["" if np.isnan(v) else f"{v:.6g}" for v in row[2:]]
-            lines.append(",".join(cells))
+        for ts, label, row in zip(np.asarray(demo.timestamps), demo.labels, cells, strict=True):
+            lines.append(",".join([repr(float(ts)), str(int(label)), *row]))
         path.write_text("\n".join(lines) + "\n")
-    else:
-        raise DataError(f"{path}: unknown suffix {path.suffix!r}, expected one of {SUFFIXES}")
     return path
 
 
@@ -255,10 +368,7 @@ def _read_npz(path: Path) -> dict[str, Any]:
                 f"{path}: field 'metadata' must be a JSON object stored as one string, got "
                 f"shape {meta.shape} and dtype {meta.dtype}"
             )
-        try:
-            parsed = json.loads(str(meta))
-        except json.JSONDecodeError as exc:
-            raise DataError(f"{path}: field 'metadata' is not valid JSON ({exc})") from exc
+        parsed = _parse_json(path, "'metadata'", str(meta))
         out["metadata"] = _metadata_field(path, parsed)
     return out
 
@@ -272,6 +382,10 @@ def _read_csv_header(path: Path, comment: list[str]) -> dict[str, Any]:
             header = json.loads("".join(comment))
         except json.JSONDecodeError as exc:
             raise DataError(f"{path}: field 'header' (# JSON comment) is invalid ({exc})") from exc
+        except RecursionError as exc:
+            raise DataError(
+                f"{path}: field 'header' (# JSON comment) is invalid (nested too deep)"
+            ) from exc
     if not isinstance(header, dict):
         raise DataError(
             f"{path}: field 'header' (# JSON comment) is invalid: the header comment must be "
@@ -280,6 +394,12 @@ def _read_csv_header(path: Path, comment: list[str]) -> dict[str, Any]:
     fps = header.get("fps")
     names = header.get("action_names")
     meta = header.get("metadata")
+    try:
+        meta = _from_json(meta)
+    except RecursionError as exc:
+        raise DataError(
+            f"{path}: field 'metadata' in the header comment is nested too deep"
+        ) from exc
     if names is not None and not (
         isinstance(names, list) and all(isinstance(n, str) for n in names)
     ):
@@ -496,6 +616,8 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
     t, k = pos.shape[:2]
     if t == 0:
         raise DataError(f"{path}: empty file (field 'positions' has 0 frames)")
+    if k == 0:
+        raise DataError(f"{path}: field 'positions' has no joints (K=0): nothing to learn from")
     if len(joints) != k:
         raise DataError(
             f"{path}: field 'joint_names' has {len(joints)} names, positions has K={k}"
@@ -656,6 +778,11 @@ def load_demonstration(
     path = Path(path)
     fps = _fps_argument(path, fps)
     joints = _joints_argument(joints)
+    if path.is_dir():
+        raise DataError(
+            f"{path}: is a folder; load_demonstration reads one .npz or .csv file "
+            "(load_demonstrations reads every file below a folder)"
+        )
     if not path.is_file():
         raise DataError(f"{path}: no such file")
     if path.suffix == ".npz":

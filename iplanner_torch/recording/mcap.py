@@ -24,8 +24,15 @@ in the frame ``"world"`` (the table frame).
 
 Checks: every argument is checked before anything of its message is written (shapes,
 numbers, strings, bools; a ``ShapeError`` or ``DataError`` naming it), and the names of a
-channel (its joint and action names) are fixed by its first message: a message with other
-names is refused, so the arrays of a channel always stack into one tensor when read.
+channel (its joint and action names) are fixed by its first message that is written: a
+message with other names is refused, so the arrays of a channel always stack into one tensor
+when read. A refused message fixes nothing.
+
+Scene spheres: a sphere row with NaN or an infinity is not drawn (Foxglove has no NaN
+sphere). When rows are left out, the entity's metadata says which rows its spheres are
+(``sphere_count`` and ``sphere_rows``, see :mod:`~iplanner_torch.recording.reader`), so
+:meth:`~iplanner_torch.recording.reader.Episode.scene_spheres` puts every row back in its slot,
+NaN where one was left out.
 
 Robustness: messages are grouped in small compressed chunks and the file is flushed whenever a
 chunk is complete, so an episode killed midway leaves a file whose complete chunks
@@ -55,6 +62,8 @@ from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.recording.codec import as_numpy, dumps, encode_array, encode_value
 from iplanner_torch.recording.reader import (
     EPISODE_METADATA_NAME,
+    SPHERE_COUNT_KEY,
+    SPHERE_ROWS_KEY,
     Episode,
     metadata_crc,
     read_episode,
@@ -68,6 +77,9 @@ __all__ = ["EpisodeWriter", "SceneEllipsoid", "Episode", "read_episode", "ellips
 ROBOT_RGBA = (1.0, 0.55, 0.1, 0.6)
 HUMAN_RGBA = (0.2, 0.5, 1.0, 0.6)
 ELLIPSOID_RGBA = (0.75, 0.2, 0.8, 0.25)
+
+#: the largest log time an MCAP record holds (an unsigned 64-bit integer) [ns]
+MAX_LOG_TIME_NS = 2**64 - 1
 
 _COMPRESSION = {
     "zstd": CompressionType.ZSTD,
@@ -109,6 +121,11 @@ def ellipsoid_pose(
     Returns:
         ``(semi_axes (..., 3) [m], quaternion (..., 4) as x, y, z, w)``; the quaternion rotates
         the x, y, z axes onto the eigenvectors (a proper rotation: det U = +1).
+
+    Raises:
+        ConfigError: when ``confidence`` is not in (0, 1).
+        ShapeError: when ``cov`` is not (..., 3, 3).
+        DataError: when ``cov`` holds NaN or an infinity (or its eigendecomposition fails).
     """
     if not 0.0 < confidence < 1.0:
         raise ConfigError(f"expected confidence in (0, 1), got {confidence}")
@@ -119,9 +136,15 @@ def _ellipsoid_axes(c: np.ndarray, k2: float) -> tuple[np.ndarray, np.ndarray]:
     """Semi-axes (..., 3) and quaternions (..., 4) of covariances c (..., 3, 3) at scale k2."""
     if c.shape[-2:] != (3, 3):
         raise ShapeError(f"expected cov (..., 3, 3), got {c.shape}")
+    if not np.isfinite(c).all():
+        raise DataError("expected cov finite, got NaN or an infinity")
     batch = c.shape[:-2]
     c = c.reshape(-1, 3, 3)  # (E, 3, 3)
-    s, u = np.linalg.eigh(0.5 * (c + np.swapaxes(c, -1, -2)))
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):
+            s, u = np.linalg.eigh(0.5 * (c + np.swapaxes(c, -1, -2)))
+    except np.linalg.LinAlgError as err:
+        raise DataError(f"cannot decompose cov (values too large?): {err}") from err
     u[np.linalg.det(u) < 0, :, 2] *= -1.0  # proper rotations
     semi = np.sqrt(k2 * np.clip(s, 0.0, None))
     quat = Rotation.from_matrix(u).as_quat() if len(u) else np.zeros((0, 4))
@@ -137,8 +160,6 @@ def _xyz(v: Sequence[float]) -> dict[str, float]:
 
 
 def _rgba(c: Sequence[float]) -> dict[str, float]:
-    if len(c) != 4 or not all(0.0 <= float(x) <= 1.0 for x in c):
-        raise ConfigError(f"expected rgba as 4 numbers in [0, 1], got {tuple(c)}")
     return {"r": float(c[0]), "g": float(c[1]), "b": float(c[2]), "a": float(c[3])}
 
 
@@ -161,14 +182,20 @@ def _sphere(center: Sequence[float], size: Sequence[float], quat: Sequence[float
 _IDENTITY_QUAT = (0.0, 0.0, 0.0, 1.0)
 
 
-def _entity(ns: int, entity_id: str, kind: str, spheres: list[dict]) -> dict[str, Any]:
+def _entity(
+    ns: int,
+    entity_id: str,
+    kind: str,
+    spheres: list[dict],
+    metadata: Sequence[tuple[str, str]] = (),
+) -> dict[str, Any]:
     return {
         "timestamp": _stamp_dict(ns),
         "frame_id": WORLD_FRAME,
         "id": entity_id,
         "lifetime": {"sec": 0, "nsec": 0},
         "frame_locked": False,
-        "metadata": [{"key": "kind", "value": kind}],
+        "metadata": [{"key": k, "value": v} for k, v in (("kind", kind), *metadata)],
         "arrows": [],
         "cubes": [],
         "spheres": spheres,
@@ -184,6 +211,20 @@ def _entity(ns: int, entity_id: str, kind: str, spheres: list[dict]) -> dict[str
 _NUMERIC_KINDS = "biufO"
 
 
+def _numbers(name: str, x: Any, pretty: str) -> torch.Tensor:
+    """``x`` as a tensor (float64 unless it is one already); a ShapeError naming ``name`` and
+    its expected shape ``pretty`` when it is not numbers (strings, ragged nested lists)."""
+    if isinstance(x, torch.Tensor):
+        return x
+    try:
+        a = np.asarray(x)
+        if a.dtype.kind not in _NUMERIC_KINDS:
+            raise TypeError(f"dtype {a.dtype}")
+        return torch.as_tensor(a.astype(np.float64, copy=False))
+    except (TypeError, ValueError) as err:
+        raise ShapeError(f"expected {name} {pretty} of numbers, got {reprlib.repr(x)}") from err
+
+
 def _as_tensor(name: str, x: Any, expected: Sequence[int | str]) -> np.ndarray:
     """Check the shape of a tensor / array argument and return it as a float64 numpy array.
 
@@ -191,19 +232,7 @@ def _as_tensor(name: str, x: Any, expected: Sequence[int | str]) -> np.ndarray:
         ShapeError: when its shape is not ``expected``, or it is not numbers (strings, nested
             lists of unequal lengths), naming the argument.
     """
-    if not isinstance(x, torch.Tensor):
-        try:
-            a = np.asarray(x)
-            if a.dtype.kind not in _NUMERIC_KINDS:
-                raise TypeError(f"dtype {a.dtype}")
-            xt = torch.as_tensor(a.astype(np.float64, copy=False))
-        except (TypeError, ValueError) as err:
-            pretty = "(" + ", ".join(str(e) for e in expected) + ")"
-            raise ShapeError(
-                f"expected {name} {pretty} of numbers, got {reprlib.repr(x)}"
-            ) from err
-    else:
-        xt = x
+    xt = _numbers(name, x, "(" + ", ".join(str(e) for e in expected) + ")")
     check_shape(name, xt, expected)
     return as_numpy(xt)
 
@@ -224,17 +253,24 @@ class EpisodeWriter:
         chunk_size: bytes of messages per chunk; a killed episode loses at most the last one.
         compression: chunk compression.
         ellipsoid_confidence: probability mass of the predicted joint ellipsoids in ``/scene``.
-        time_offset_ns: added to every log time (e.g. the wall clock at the episode start).
+        time_offset_ns: added to every log time (e.g. the wall clock at the episode start),
+            in [0, 2^64 - 1] (a log time is an unsigned 64-bit integer).
+
+    Metadata NaN and infinities survive (read back as floats); ``None`` is stored as null and
+    read back as NaN, as in metrics and task event details.
 
     Raises:
-        ConfigError: on a non-positive chunk size, unknown compression or a confidence outside
-            (0, 1).
+        ConfigError: on a non-positive chunk size, unknown compression, a confidence outside
+            (0, 1) or a time offset outside [0, 2^64 - 1].
         DataError: when ``metadata`` is not JSON-serialisable, or ``path`` cannot be written
             (a folder, below a file, no permission). The logging methods raise ``ShapeError``
             on arrays of the wrong shape or not numbers, and ``DataError`` on other arguments
-            of the wrong type (a time or number that is not one, a non-bool ``feasible``,
-            names that are not strings) and on names that differ from the earlier ones of
-            their channel; nothing of a refused message is written.
+            of the wrong type or value (a time that is not one or whose log time passes
+            2^64 - 1 ns, a number that is not one, a non-bool ``feasible``, names or frame
+            ids that are not strings, metrics or details that are not a mapping, ellipsoid
+            covariances, means or semi-axes with NaN or an infinity, colours outside [0, 1])
+            and on names that differ from the earlier ones of their channel; nothing of a
+            refused message is written.
     """
 
     def __init__(
@@ -255,8 +291,11 @@ class EpisodeWriter:
             raise ConfigError(
                 f"expected ellipsoid_confidence in (0, 1), got {ellipsoid_confidence}"
             )
-        if time_offset_ns < 0:
-            raise ConfigError(f"expected time_offset_ns >= 0, got {time_offset_ns}")
+        if not 0 <= time_offset_ns <= MAX_LOG_TIME_NS:
+            raise ConfigError(
+                f"expected time_offset_ns in [0, 2^64 - 1] (an unsigned 64-bit log time), "
+                f"got {time_offset_ns}"
+            )
         self.path = Path(path)
         try:
             meta_json = json.dumps(encode_value(dict(metadata)), allow_nan=False)
@@ -369,10 +408,25 @@ class EpisodeWriter:
             raise DataError(f"{self.path}: expected a finite time t >= 0 s, got {t!r}") from err
         if not math.isfinite(t) or t < 0.0:
             raise DataError(f"{self.path}: expected a finite time t >= 0 s, got {t}")
+        ns = int(round(t * 1e9)) + self._offset_ns
+        if ns > MAX_LOG_TIME_NS:
+            raise DataError(
+                f"{self.path}: time t = {t} s gives a log time beyond 2^64 - 1 ns (with "
+                f"time_offset_ns = {self._offset_ns}); expected t <= "
+                f"{(MAX_LOG_TIME_NS - self._offset_ns) * 1e-9:.6g} s"
+            )
         self._last_t = t
-        return int(round(t * 1e9)) + self._offset_ns
+        return ns
 
-    def _write(self, topic: str, log_time: int, message: Mapping[str, Any]) -> None:
+    def _write(
+        self,
+        topic: str,
+        log_time: int,
+        message: Mapping[str, Any],
+        names: Mapping[str, tuple[str, ...]] | None = None,
+    ) -> None:
+        """Write ``message`` on ``topic``; then ``names`` (argument -> names, from
+        :meth:`_checked_names`) become the channel's names where it has none yet."""
         self._check_open()
         try:
             data = dumps(message)
@@ -389,6 +443,8 @@ class EpisodeWriter:
             sequence=self._sequence[topic],
         )
         self._sequence[topic] += 1
+        for name, fixed in (names or {}).items():
+            self._channel_names.setdefault((topic, name), fixed)
         if self._file.tell() != before:  # a chunk was completed: get it onto the disk
             self._file.flush()
 
@@ -406,6 +462,20 @@ class EpisodeWriter:
                 pass
         raise DataError(f"{self.path}: expected {name} a number, got {reprlib.repr(x)}")
 
+    def _string(self, name: str, x: Any) -> str:
+        """``x`` when it is a string; a DataError naming the argument otherwise."""
+        if isinstance(x, str):
+            return x
+        raise DataError(f"{self.path}: expected {name} a string, got {reprlib.repr(x)}")
+
+    def _mapping(self, name: str, x: Any) -> dict[str, Any]:
+        """``x`` as a dict when it is a mapping; a DataError naming the argument otherwise."""
+        if isinstance(x, Mapping):
+            return dict(x)
+        raise DataError(
+            f"{self.path}: expected {name} a mapping of name -> value, got {reprlib.repr(x)}"
+        )
+
     def _flag(self, name: str, x: Any) -> bool:
         """``x`` as a bool: True or False (numpy's, or a one-element bool tensor, too)."""
         if isinstance(x, bool | np.bool_) or (
@@ -419,8 +489,10 @@ class EpisodeWriter:
     ) -> tuple[str, ...]:
         """The ``n`` names of argument ``name`` of a ``topic`` message.
 
-        A channel's names are fixed by its first message (a reader stacks its arrays, whose
-        rows they name). They are cached, so names equal to them cost one tuple comparison.
+        A channel's names are fixed by its first message that is written (a reader stacks
+        its arrays, whose rows they name): :meth:`_write` stores them once the message is
+        written, so a message refused for another argument fixes nothing. They are cached, so
+        names equal to them cost one tuple comparison.
 
         Raises:
             ShapeError: when there are not ``n`` names.
@@ -439,9 +511,7 @@ class EpisodeWriter:
                 f"{self.path}: {name} changed on {topic}: {list(fixed)} before, {list(got)} now "
                 "(a channel's names are fixed by its first message)"
             )
-        fixed = tuple(str(s) for s in got)
-        self._channel_names[(topic, name)] = fixed
-        return fixed
+        return tuple(str(s) for s in got)
 
     # -- channels -----------------------------------------------------------------------------
 
@@ -462,6 +532,8 @@ class EpisodeWriter:
             translation: (3,) child origin in the parent frame [m].
             rotation_xyzw: (4,) unit quaternion of the child frame in the parent frame.
         """
+        parent = self._string("parent", parent)
+        child = self._string("child", child)
         tr = _as_tensor("translation", translation, (3,))
         rot = _as_tensor("rotation_xyzw", rotation_xyzw, (4,))
         ns = self._log_time(t)
@@ -494,7 +566,7 @@ class EpisodeWriter:
         msg["joint_names"] = names
         msg["position"] = encode_array(q_np)
         msg["velocity"] = encode_array(qd_np)
-        self._write(topic, ns, msg)
+        self._write(topic, ns, msg, {"joint_names": names})
 
     def human_joints(
         self, t: float, true: Any | None, tracked: Any | None, joint_names: Sequence[str]
@@ -521,7 +593,7 @@ class EpisodeWriter:
             msg = dict(base)
             msg["joint_names"] = names
             msg["positions"] = encode_array(p)
-            self._write(topic, ns, msg)
+            self._write(topic, ns, msg, {"joint_names": names})
 
     def forecast(
         self,
@@ -561,7 +633,7 @@ class EpisodeWriter:
         msg["weights"] = encode_array(w)
         msg["mean"] = encode_array(m)
         msg["var"] = encode_array(v)
-        self._write(topic, ns, msg)
+        self._write(topic, ns, msg, {"action_names": actions, "joint_names": joints})
 
     def log_forecast(self, t: float, forecast: Forecast, index: int = 0) -> None:
         """Log item ``index`` of the batch of a :class:`Forecast` (see :meth:`forecast`)."""
@@ -628,11 +700,13 @@ class EpisodeWriter:
         Args:
             t: simulation time [s].
             kind: event name.
-            detail: JSON-able details; NaN is stored as null and read back as NaN.
+            detail: JSON-able details (a mapping, or None for none); NaN is stored as null and
+                read back as NaN.
         """
+        detail = {} if detail is None else self._mapping("detail", detail)
         ns, msg = self._stamped(t)
         msg["kind"] = str(kind)
-        msg["detail"] = encode_value(dict(detail or {}))
+        msg["detail"] = encode_value(detail)
         self._write("/task/events", ns, msg)
 
     def metrics(self, t: float, metrics: Mapping[str, Any]) -> None:
@@ -642,8 +716,9 @@ class EpisodeWriter:
             t: simulation time [s].
             metrics: name -> value (numbers, bools, strings; NaN and inf survive).
         """
+        metrics = self._mapping("metrics", metrics)
         ns, msg = self._stamped(t)
-        msg["metrics"] = encode_value(dict(metrics))
+        msg["metrics"] = encode_value(metrics)
         self._write("/episode/metrics", ns, msg)
 
     def scene(
@@ -662,25 +737,36 @@ class EpisodeWriter:
         Args:
             t: simulation time [s].
             robot_spheres: (S_r, 4) robot sphere centres and radii [x, y, z, r] [m].
-            human_spheres: (S_h, 4) human sphere centres and radii [m] (rows with NaN skipped).
+            human_spheres: (S_h, 4) human sphere centres and radii [m]. A row of either with
+                NaN or an infinity is not drawn; it reads back as a NaN row in its slot.
             ellipsoids: :class:`SceneEllipsoid` items, or tuples ``(mean, cov_or_axes)`` /
                 ``(mean, cov_or_axes, rgba)``; a (3, 3) second item is a covariance, a (3,)
-                one the semi-axes.
+                one the semi-axes. Means, covariances and semi-axes must be finite, and the
+                rgba 4 numbers in [0, 1].
         """
         rs = _as_tensor("robot_spheres", robot_spheres, ("S_r", 4))
         hs = _as_tensor("human_spheres", human_spheres, ("S_h", 4))
+        prims = self._ellipsoid_primitives(ellipsoids)
         ns = self._log_time(t)
         entities = []
         for entity_id, spheres, rgba in (("robot", rs, ROBOT_RGBA), ("human", hs, HUMAN_RGBA)):
-            prims = [
-                _sphere(s[:3], (2 * s[3],) * 3, _IDENTITY_QUAT, rgba)
-                for s in spheres
-                if np.isfinite(s).all()
-            ]
-            entities.append(_entity(ns, entity_id, f"{entity_id}_spheres", prims))
-        prims = self._ellipsoid_primitives(ellipsoids)
+            kept = np.isfinite(spheres).all(axis=1)  # (S,)
+            drawn = [_sphere(s[:3], (2 * s[3],) * 3, _IDENTITY_QUAT, rgba) for s in spheres[kept]]
+            slots: list[tuple[str, str]] = []
+            if not kept.all():  # the rows drawn, so a reader puts each back in its slot
+                rows = ",".join(str(i) for i in np.flatnonzero(kept))
+                slots = [(SPHERE_COUNT_KEY, str(len(spheres))), (SPHERE_ROWS_KEY, rows)]
+            entities.append(_entity(ns, entity_id, f"{entity_id}_spheres", drawn, slots))
         entities.append(_entity(ns, "prediction", "joint_ellipsoids", prims))
         self._write("/scene", ns, {"deletions": [], "entities": entities})
+
+    def _color(self, rgba: Any) -> np.ndarray:
+        """(4,) rgba of an ellipsoid: a ShapeError unless it is 4 numbers, a DataError unless
+        each is in [0, 1]."""
+        c = _as_tensor("ellipsoid rgba", rgba, (4,))
+        if not ((c >= 0.0) & (c <= 1.0)).all():  # NaN fails too
+            raise DataError(f"{self.path}: expected ellipsoid rgba in [0, 1], got {c.tolist()}")
+        return c
 
     def _ellipsoid_primitives(self, items: Sequence[SceneEllipsoid | tuple]) -> list[dict]:
         """Sphere primitives of the ellipsoids (covariances decomposed in one batch)."""
@@ -693,18 +779,27 @@ class EpisodeWriter:
                     )
                 second, rgba = (e.cov if e.cov is not None else e.axes), e.rgba
             else:
-                if len(e) not in (2, 3):
-                    raise ShapeError(f"expected (mean, cov_or_axes[, rgba]), got {len(e)} items")
-                second, rgba = e[1], (tuple(e[2]) if len(e) == 3 else ELLIPSOID_RGBA)
-            mean, second = as_numpy(e[0] if isinstance(e, tuple) else e.mean), as_numpy(second)
+                if not isinstance(e, Sequence) or len(e) not in (2, 3):
+                    got = f"{len(e)} items" if isinstance(e, Sequence) else reprlib.repr(e)
+                    raise ShapeError(f"expected (mean, cov_or_axes[, rgba]), got {got}")
+                second, rgba = e[1], (e[2] if len(e) == 3 else ELLIPSOID_RGBA)
+            mean = e.mean if isinstance(e, SceneEllipsoid) else e[0]
+            mean = as_numpy(_numbers("ellipsoid mean", mean, "(3)"))
+            second = as_numpy(_numbers("ellipsoid cov_or_axes", second, "(3, 3) or (3)"))
             if mean.shape != (3,) or second.shape not in ((3, 3), (3,)):
                 raise ShapeError(
                     f"expected ellipsoid mean (3,) and cov (3, 3) or axes (3,), "
                     f"got {mean.shape} and {second.shape}"
                 )
+            what = "cov" if second.shape == (3, 3) else "axes"
+            if not (np.isfinite(mean).all() and np.isfinite(second).all()):
+                raise DataError(
+                    f"{self.path}: expected ellipsoid mean and {what} finite, got mean "
+                    f"{mean.tolist()} and {what} {second.tolist()}"
+                )
             means.append(mean)
             shapes.append(second)
-            colors.append(rgba)
+            colors.append(self._color(rgba))
             is_cov.append(second.shape == (3, 3))
         semi = np.zeros((len(items), 3))
         quat = np.tile(np.array(_IDENTITY_QUAT), (len(items), 1))

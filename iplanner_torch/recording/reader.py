@@ -5,6 +5,12 @@ checksum. A file without summary or footer (an episode killed midway) or with a 
 record or summary is read sequentially up to the last complete chunk, with a
 :class:`~iplanner_torch.errors.DataWarning`. Channels of other tools are kept when they are
 JSON-encoded (one ``message`` column), and skipped, with a ``DataWarning``, when they are not.
+
+Scene spheres: the writer leaves out sphere rows with NaN or an infinity (Foxglove draws no NaN
+sphere) and then names, in the entity's metadata, the number of rows (``sphere_count``) and
+the rows of its spheres in order (``sphere_rows``, comma-separated indices), so every sphere
+is read back in its slot and the rows left out are NaN. An entity without them (every row
+drawn, or a log of an earlier writer) is read as it is.
 """
 
 from __future__ import annotations
@@ -29,10 +35,20 @@ from iplanner_torch.errors import DataError, DataWarning
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.recording.codec import decode_array, decode_scalar, loads
 
-__all__ = ["Episode", "read_episode", "EPISODE_METADATA_NAME", "metadata_crc"]
+__all__ = [
+    "Episode",
+    "read_episode",
+    "EPISODE_METADATA_NAME",
+    "SPHERE_COUNT_KEY",
+    "SPHERE_ROWS_KEY",
+    "metadata_crc",
+]
 
 #: Name of the MCAP metadata record holding the episode's metadata dict.
 EPISODE_METADATA_NAME = "iplanner.episode"
+#: Scene entity metadata keys: the number of sphere rows, and the rows its spheres are.
+SPHERE_COUNT_KEY = "sphere_count"
+SPHERE_ROWS_KEY = "sphere_rows"
 _MAGIC = b"\x89MCAP0\r\n"
 
 
@@ -43,7 +59,8 @@ def metadata_crc(json_text: str, time_offset_ns: str) -> int:
 
 
 def _decode_value(x: Any) -> Any:
-    """Recursive inverse of ``codec.encode_value`` for dicts of metrics or event details."""
+    """Recursive inverse of ``codec.encode_value`` for the episode metadata and dicts of metrics
+    or event details."""
     if isinstance(x, dict):
         return {k: _decode_value(v) for k, v in x.items()}
     if isinstance(x, list):
@@ -55,8 +72,35 @@ def _t_of_stamp(stamp: dict[str, int], offset_ns: int) -> float:
     return (stamp["sec"] * 1_000_000_000 + stamp["nsec"] - offset_ns) * 1e-9
 
 
+def _sphere_slots(entity: dict[str, Any], n_drawn: int) -> tuple[int, list[int]] | None:
+    """``(S, the rows of the drawn spheres)`` from an entity's metadata, or None when it does
+    not name them (every row was drawn)."""
+    pairs = entity.get("metadata") or []
+    meta = {kv.get("key"): kv.get("value") for kv in pairs if isinstance(kv, dict)}
+    if SPHERE_ROWS_KEY not in meta:
+        return None
+    count, rows = meta.get(SPHERE_COUNT_KEY), meta[SPHERE_ROWS_KEY]
+    if not isinstance(count, str) or not isinstance(rows, str):
+        raise ValueError(
+            f"scene entity {SPHERE_COUNT_KEY!r} and {SPHERE_ROWS_KEY!r} must be strings"
+        )
+    n = int(count)
+    idx = [int(i) for i in rows.split(",")] if rows else []
+    if (
+        len(idx) != n_drawn
+        or any(b <= a for a, b in zip(idx, idx[1:]))
+        or (idx and not (0 <= idx[0] and idx[-1] < n))
+    ):
+        raise ValueError(
+            f"scene entity {entity.get('id')!r}: {SPHERE_ROWS_KEY} {rows!r} are not "
+            f"{n_drawn} increasing rows of {SPHERE_COUNT_KEY} {count!r}"
+        )
+    return n, idx
+
+
 def _sphere_rows(entity: dict[str, Any]) -> np.ndarray:
-    """(S, 4) centres and radii of an entity's spheres (radius = size.x / 2)."""
+    """(S, 4) centres and radii of an entity's spheres (radius = size.x / 2), each in its row;
+    rows the writer left out (NaN) are NaN."""
     rows = [
         [
             s["pose"]["position"]["x"],
@@ -66,7 +110,14 @@ def _sphere_rows(entity: dict[str, Any]) -> np.ndarray:
         ]
         for s in entity["spheres"]
     ]
-    return np.array(rows, dtype=np.float64).reshape(len(rows), 4)
+    drawn = np.array(rows, dtype=np.float64).reshape(len(rows), 4)
+    slots = _sphere_slots(entity, len(rows))
+    if slots is None:
+        return drawn
+    n, idx = slots
+    out = np.full((n, 4), np.nan)
+    out[idx] = drawn
+    return out
 
 
 def _ellipsoid_rows(entity: dict[str, Any]) -> list[dict[str, np.ndarray]]:
@@ -251,7 +302,8 @@ class Episode:
 
     Attributes:
         path: the file read.
-        metadata: the dict given to ``EpisodeWriter(metadata=...)``.
+        metadata: the dict given to ``EpisodeWriter(metadata=...)`` (NaN and infinities
+            included; ``None`` reads back as NaN, as in metrics).
         frames: topic -> DataFrame with one row per message in file order, a ``t`` column
             (simulation time [s]) and array-valued columns (e.g. ``/robot/joint_state`` has
             ``q`` and ``qd``, each a (J,) array per row).
@@ -371,7 +423,11 @@ class Episode:
     def scene_spheres(
         self, dtype: torch.dtype = torch.float64
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``(t (T,), robot (T, S_r, 4), human (T, S_h, 4))`` sphere centres and radii [m]."""
+        """``(t (T,), robot (T, S_r, 4), human (T, S_h, 4))`` sphere centres and radii [m].
+
+        Each sphere is in the row it was given to ``EpisodeWriter.scene``; rows that had NaN
+        or an infinity are NaN (as are rows past a message's own count when counts differ).
+        """
         df = self._frame("/scene")
         t, robot = self._series("/scene", "robot_spheres", dtype)
         human = torch.as_tensor(_stack(list(df["human_spheres"])), dtype=dtype)
@@ -557,6 +613,7 @@ def read_episode(path: str | Path) -> Episode:
         offset_ns = int(meta_rec.get("time_offset_ns", "0"))
         if not isinstance(metadata, dict):
             raise TypeError(f"expected a JSON object, got {type(metadata).__name__}")
+        metadata = _decode_value(metadata)  # NaN and infinities, as the writer encodes them
     except (ValueError, TypeError, RecursionError) as err:
         raise DataError(f"{path}: bad episode metadata record: {err}") from err
     rows: dict[str, list[dict[str, Any]]] = {}

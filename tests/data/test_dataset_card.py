@@ -150,3 +150,20 @@ def test_loading_refuses_a_dataset_generated_with_other_settings(tmp_path):
     ):
         load_dataset(node(reaches_per_target=2, n_subjects=3), progress=False, overridden=given)
     assert len(list((tmp_path / "ds").glob("*.npz"))) == 2  # nothing was touched
+
+
+def test_a_settings_block_nested_too_deep_is_named(tmp_path):
+    """JSON nested deeper than the decoder's recursion: a DataError, not a RecursionError."""
+    from iplanner_torch.data.dataset_card import (
+        CARD_MARK,
+        SETTINGS_MARK,
+        read_generator_settings,
+    )
+
+    deep = "[" * 100_000 + "]" * 100_000
+    (tmp_path / "README.md").write_text(
+        f"# data\n\n{CARD_MARK}\n\n{SETTINGS_MARK}\n\n```json\n{deep}\n```\n"
+    )
+    broken = r"README.md: the generator settings block is not valid JSON \(nested too deep\)"
+    with pytest.raises(DataError, match=broken):
+        read_generator_settings(tmp_path)

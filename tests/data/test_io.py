@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -47,11 +48,11 @@ def test_round_trip_keeps_nan_and_metadata(tmp_path, suffix):
     d = _demo()
     save_demonstration(d, tmp_path / f"a{suffix}")
     (e,) = load_demonstrations(tmp_path / f"a{suffix}")
-    np.testing.assert_allclose(e.positions, d.positions, rtol=1e-5, atol=1e-6, equal_nan=True)
+    np.testing.assert_array_equal(e.positions, d.positions)  # bit-identical, NaN where NaN
     assert np.isnan(e.positions[3, 2]).all() and np.isnan(e.positions[4:6, 9]).all()
-    np.testing.assert_allclose(e.clean_positions, d.clean_positions, rtol=1e-5, atol=1e-6)
+    np.testing.assert_array_equal(e.clean_positions, d.clean_positions)
     np.testing.assert_array_equal(e.labels, d.labels)
-    np.testing.assert_allclose(e.timestamps, d.timestamps)
+    np.testing.assert_array_equal(e.timestamps, d.timestamps)
     assert e.joint_names == d.joint_names and e.action_names == d.action_names
     assert e.fps == 15.0 and e.metadata == d.metadata and e.name == "a"
 
@@ -663,3 +664,131 @@ def test_error_loader_joints_argument(tmp_path, joints, message):
         load_demonstration(p, joints=joints)
     with pytest.raises(ConfigError, match=rf"^joints= {message}"):  # checked before the files
         load_demonstrations(tmp_path / "absent", joints=joints)
+
+
+def test_csv_numbers_read_back_bit_identical(tmp_path):
+    """CSV cells are the shortest text of each float32 value, not 6 significant digits."""
+    g = np.random.default_rng(5)
+    bits = g.integers(0, 2**32, size=3000, dtype=np.uint64).astype(np.uint32)
+    values = bits.view(np.float32)
+    values = values[np.isfinite(values) & (np.abs(values) <= 100.0)][:600]
+    pos = np.concatenate([[1.2345678, 1e-8, -0.0, 99.999994], values]).astype(np.float32)
+    pos = pos[: len(pos) // 3 * 3].reshape(-1, 1, 3)  # (T, 1, 3)
+    d = Demonstration(
+        positions=pos, labels=np.zeros(len(pos), int), fps=10.0, joint_names=("a",),
+        action_names=("idle",),
+    )  # fmt: skip
+    path = save_demonstration(d, tmp_path / "x.csv")
+    assert path.read_text().splitlines()[2].split(",")[2:] == ["1.2345678", "1e-08", "-0.0"]
+    e = load_demonstration(path)
+    np.testing.assert_array_equal(e.positions.view(np.uint32), pos.view(np.uint32))
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_metadata_nan_and_infinities_are_strict_json(tmp_path, suffix):
+    d = _demo()
+    d.metadata = {"noise": float("nan"), "far": [np.inf, -np.inf], "a": np.float32("nan")}
+    path = save_demonstration(d, tmp_path / f"x{suffix}")
+    if suffix == ".csv":
+        text = path.read_text().splitlines()[0][1:]
+    else:
+        with np.load(path) as z:
+            text = str(z["metadata"])
+
+    def refuse(token: str) -> None:
+        raise ValueError(f"not strict JSON: {token}")
+
+    json.loads(text, parse_constant=refuse)
+    meta = load_demonstration(path).metadata
+    assert math.isnan(meta["noise"]) and meta["far"] == [math.inf, -math.inf]
+    assert math.isnan(meta["a"])
+
+
+def test_metadata_with_bare_nan_tokens_of_earlier_files_still_reads(tmp_path):
+    p = tmp_path / "old.csv"
+    p.write_text('# {"fps": 10.0, "metadata": {"noise": NaN, "far": Infinity}}\nt,a_x,a_y,a_z\n'
+                 "0,1,2,3\n")  # fmt: skip
+    meta = load_demonstration(p).metadata
+    assert math.isnan(meta["noise"]) and meta["far"] == math.inf
+    p = _npz(tmp_path / "old.npz", metadata=np.array('{"noise": NaN, "far": -Infinity}'))
+    meta = load_demonstration(p).metadata
+    assert math.isnan(meta["noise"]) and meta["far"] == -math.inf
+
+
+@pytest.mark.parametrize(
+    ("suffix", "joints", "actions", "message"),
+    [
+        (".csv", ("a,b", "c"), ("idle",), r"joint_names entry 'a,b': it holds a comma"),
+        (".csv", ("clean_hand", "c"), ("idle",),
+         r"joint_names entry 'clean_hand': it is 'clean' or starts with 'clean_'"),
+        (".csv", ("clean", "c"), ("idle",), r"joint_names entry 'clean': it is 'clean' or"),
+        (".csv", ("left hand ", "c"), ("idle",),
+         r"joint_names entry 'left hand ': it starts or ends with white space"),
+        (".csv", ("", "c"), ("idle",), r"joint_names entry '': it is empty"),
+        (".csv", ("a\nb", "c"), ("idle",), r"joint_names entry 'a\\nb': it holds a line break"),
+        (".csv", ("a", 3), ("idle",), r"joint_names entry 3: it is not a string"),
+        (".npz", ("a", "b\x00"), ("idle",),
+         r"joint_names entry 'b\\x00': it ends in a NUL character"),
+        (".npz", ("a", "b"), ("idle", None), r"action_names entry None: it is not a string"),
+        (".npz", ("a", "a"), ("idle",), r"joint_names \['a'\] named more than once"),
+        (".csv", ("a", "b"), (), r"empty action_names"),
+    ],
+)  # fmt: skip
+def test_save_refuses_names_its_loader_cannot_read_back(
+    tmp_path, suffix, joints, actions, message
+):
+    d = Demonstration(
+        positions=np.zeros((3, 2, 3)), labels=np.zeros(3, int), fps=10.0, joint_names=joints,
+        action_names=actions,
+    )  # fmt: skip
+    out = tmp_path / "new" / f"x{suffix}"
+    with pytest.raises(DataError, match=rf"x\{suffix}: cannot save {message}"):
+        save_demonstration(d, out)
+    assert not out.parent.exists()  # nothing written
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_save_refuses_metadata_that_is_not_json(tmp_path, suffix):
+    cycle: list = []
+    cycle.append(cycle)
+    deep: dict = {}
+    for _ in range(100_000):
+        deep = {"x": deep}
+    for metadata, why in (
+        ({"s": {1, 2}}, "Object of type set"),
+        ({"o": object()}, "Object of type object"),
+        ({"c": cycle}, "nested too deep|Circular reference"),
+        (deep, "nested too deep"),
+    ):
+        d = _demo()
+        d.metadata = metadata
+        with pytest.raises(
+            DataError, match=rf"x\{suffix}: metadata is not JSON-serialisable \(({why})"
+        ):
+            save_demonstration(d, tmp_path / "new" / f"x{suffix}")
+    assert not (tmp_path / "new").exists()
+
+
+def test_error_json_nested_too_deep(tmp_path):
+    deep = "[" * 100_000 + "]" * 100_000
+    p = tmp_path / "deep.csv"
+    p.write_text(f"# {deep}\nt,a_x,a_y,a_z\n0,1,2,3\n")
+    with pytest.raises(DataError, match=r"deep\.csv: field 'header' .* is invalid \(nested too"):
+        load_demonstration(p, fps=10.0)
+    p = _npz(tmp_path / "deep.npz", metadata=np.array(deep))
+    with pytest.raises(DataError, match=r"deep\.npz: field 'metadata' is not valid JSON \(nested"):
+        load_demonstration(p)
+
+
+def test_error_folder_or_no_joints_is_named(tmp_path):
+    (tmp_path / "demos").mkdir()
+    with pytest.raises(DataError, match=r"demos: is a folder; load_demonstration reads one"):
+        load_demonstration(tmp_path / "demos")
+    p = _npz(
+        tmp_path / "x.npz",
+        positions=np.zeros((5, 0, 3), np.float32),
+        labels=np.zeros(5, int),
+        joint_names=np.array([], dtype=str),
+    )
+    with pytest.raises(DataError, match=r"x\.npz: field 'positions' has no joints \(K=0\)"):
+        load_demonstration(p)

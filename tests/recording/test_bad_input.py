@@ -4,6 +4,7 @@ the path, and files of other tools read as far as they are ours."""
 from __future__ import annotations
 
 import json
+import math
 import re
 import warnings
 from pathlib import Path
@@ -13,8 +14,8 @@ import pytest
 import torch
 from mcap.writer import Writer
 
-from iplanner_torch.errors import DataError, DataWarning, ShapeError
-from iplanner_torch.recording import EpisodeWriter, read_episode
+from iplanner_torch.errors import ConfigError, DataError, DataWarning, ShapeError
+from iplanner_torch.recording import EpisodeWriter, SceneEllipsoid, ellipsoid_pose, read_episode
 
 ARM = ["shoulder", "elbow"]
 HANDS = ["left_hand", "right_hand"]
@@ -51,6 +52,10 @@ def _mcap(
             w.add_message(ids[topic], log_time=i, data=data, publish_time=i)
         w.finish()
     return path
+
+
+def _scene(log: EpisodeWriter, ellipsoid: SceneEllipsoid | tuple) -> None:
+    log.scene(0.0, np.zeros((1, 4)), np.zeros((1, 4)), [ellipsoid])
 
 
 def _state(t: float, names: list[str]) -> tuple[str, dict]:
@@ -262,11 +267,40 @@ def test_a_task_event_detail_nested_too_deep_is_a_data_error(tmp_path: Path) -> 
          r"w.mcap: expected action_names as strings, got \[None\]"),
         (lambda log: log.frame_transform(0.0, "world", "cam", ("1", 0, 0)), ShapeError,
          r"expected translation \(3\) of numbers"),
+        (lambda log: log.frame_transform(0.0, 5, "x"), DataError,
+         r"w.mcap: expected parent a string, got 5"),
+        (lambda log: log.frame_transform(0.0, "world", None), DataError,
+         r"w.mcap: expected child a string, got None"),
+        (lambda log: log.metrics(0.0, [1, 2]), DataError,
+         r"w.mcap: expected metrics a mapping of name -> value, got \[1, 2\]"),
+        (lambda log: log.task_event(0.0, "k", ["a"]), DataError,
+         r"w.mcap: expected detail a mapping of name -> value, got \['a'\]"),
+        (lambda log: log.robot_state(1.9e10, [1.0], [0.0], ["a"]), DataError,
+         r"w.mcap: time t = 19000000000.0 s gives a log time beyond 2\^64 - 1 ns"),
+        (lambda log: _scene(log, (np.zeros(3), np.full((3, 3), np.nan))), DataError,
+         r"w.mcap: expected ellipsoid mean and cov finite, got mean \[0.0, 0.0, 0.0\] and "
+         r"cov \[\[nan"),
+        (lambda log: _scene(log, SceneEllipsoid(mean=np.zeros(3), cov=np.diag([1, np.inf, 1]))),
+         DataError, r"w.mcap: expected ellipsoid mean and cov finite"),
+        (lambda log: _scene(log, (np.zeros(3), np.array([np.nan, 1, 1]))), DataError,
+         r"w.mcap: expected ellipsoid mean and axes finite"),
+        (lambda log: _scene(log, (["a", "b", "c"], np.eye(3))), ShapeError,
+         r"expected ellipsoid mean \(3\) of numbers, got \['a', 'b', 'c'\]"),
+        (lambda log: _scene(log, (np.zeros(3), np.eye(3), (1, 1, 1))), ShapeError,
+         r"expected ellipsoid rgba \(4\), got \(3,\)"),
+        (lambda log: _scene(log, (np.zeros(3), np.eye(3), (1, 1, "x", 1))), ShapeError,
+         r"expected ellipsoid rgba \(4\) of numbers"),
+        (lambda log: _scene(log, (np.zeros(3), np.eye(3), (1, 1, 1, np.nan))), DataError,
+         r"w.mcap: expected ellipsoid rgba in \[0, 1\], got \[1.0, 1.0, 1.0, nan\]"),
+        (lambda log: _scene(log, (np.zeros(3), np.eye(3), (1, 1, 1, 1.5))), DataError,
+         r"w.mcap: expected ellipsoid rgba in \[0, 1\]"),
     ],
     ids=["t_str", "t_numeric_str", "t_none", "q_str", "qd_numeric_str", "true_ragged",
          "confidence_str", "feasible_str", "feasible_int", "wait_s_none", "solve_ms_str",
          "dt_str", "joint_names_int", "joint_names_bytes", "action_names_none",
-         "translation_str"],
+         "translation_str", "parent_int", "child_none", "metrics_list", "detail_list",
+         "t_beyond_uint64_ns", "cov_nan", "cov_inf", "axes_nan", "mean_str", "rgba_3",
+         "rgba_str", "rgba_nan", "rgba_above_1"],
 )  # fmt: skip
 def test_writer_arguments_of_the_wrong_type_are_named(
     tmp_path: Path, call, error: type[Exception], match: str
@@ -278,6 +312,47 @@ def test_writer_arguments_of_the_wrong_type_are_named(
         log.robot_state(0.0, [1.0], [0.0], ["a"])  # the log goes on
     ep = read_episode(path)
     assert len(ep.frames["/robot/joint_state"]) == 1 and "/planner/plan" not in ep.frames
+
+
+def test_log_times_stop_at_the_largest_unsigned_64_bit_time(tmp_path: Path) -> None:
+    """An MCAP log time is a uint64 [ns]: a larger offset is a setting out of range, and a time
+    that passes the limit with the offset is refused before anything is written."""
+    with pytest.raises(ConfigError, match=r"expected time_offset_ns in \[0, 2\^64 - 1\]"):
+        EpisodeWriter(tmp_path / "o.mcap", metadata={}, time_offset_ns=2**64)
+    path = tmp_path / "edge.mcap"
+    with EpisodeWriter(path, metadata={}, time_offset_ns=2**64 - 2_000_000_000) as log:
+        log.robot_state(1.0, [1.0], [0.0], ["a"])
+        with pytest.raises(DataError, match=r"edge.mcap: time t = 3.0 s gives a log time beyond"):
+            log.robot_state(3.0, [2.0], [0.0], ["a"])
+    ep = read_episode(path)
+    assert ep.complete and ep.robot_q()[1].tolist() == [[1.0]]
+
+
+def test_ellipsoid_pose_refuses_covariances_with_nan() -> None:
+    with pytest.raises(DataError, match="expected cov finite, got NaN or an infinity"):
+        ellipsoid_pose(np.full((2, 3, 3), np.nan), 0.95)
+
+
+def test_a_refused_message_fixes_no_channel_names(tmp_path: Path) -> None:
+    """A channel's names come from its first message that is written: a message refused for
+    another argument (dt, t, the tracked array) leaves the channel free."""
+    path = tmp_path / "names.mcap"
+    mean = np.zeros((1, 2, 1, 3))
+    with EpisodeWriter(path, metadata={}) as log:
+        with pytest.raises(DataError, match="expected dt a number"):
+            log.forecast(0.0, [1.0], mean, mean, ["walk"], "0.1", ["head"])
+        log.forecast(0.0, [1.0], mean, mean, ["idle"], 0.1, ["hand"])
+        with pytest.raises(DataError, match="expected a finite time"):
+            log.robot_state(math.nan, [1.0], [0.0], ["x"])
+        log.robot_state(0.0, [1.0, 2.0], [0.0, 0.0], ARM)
+        with pytest.raises(ShapeError, match="expected tracked"):
+            log.human_joints(0.0, np.zeros((1, 3)), np.zeros((1, 2)), ["nose"])
+        log.human_joints(0.0, np.zeros((2, 3)), None, HANDS)
+    ep = read_episode(path)
+    _, fc = ep.forecasts()
+    assert fc.action_names == ("idle",) and fc.joint_names == ("hand",)
+    assert ep.frames["/robot/joint_state"]["joint_names"].tolist() == [tuple(ARM)]
+    assert ep.frames["/human/joints_true"]["joint_names"].tolist() == [tuple(HANDS)]
 
 
 def test_writer_takes_numpy_and_torch_scalars_and_names(tmp_path: Path) -> None:

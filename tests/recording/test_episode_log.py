@@ -214,6 +214,47 @@ def test_scene_is_a_foxglove_scene_update(log_path: Path) -> None:
     assert robot["size"]["x"] == robot["size"]["y"] == robot["size"]["z"] > 0
 
 
+def test_scene_spheres_left_out_read_back_in_their_slots(tmp_path: Path) -> None:
+    """Rows with NaN or an infinity are not drawn (Foxglove has no NaN sphere), yet every other
+    sphere reads back in its own row, with NaN rows where some were left out."""
+    g = np.random.default_rng(3)
+    human = np.concatenate([g.normal(size=(4, 3, 3)), g.uniform(0.05, 0.1, (4, 3, 1))], -1)
+    robot = np.concatenate([g.normal(size=(4, 2, 3)), g.uniform(0.05, 0.1, (4, 2, 1))], -1)
+    human[1, 1] = np.nan  # a middle row
+    human[2, 2, 3] = np.inf  # the last row
+    human[3] = np.nan  # every row
+    robot[2, 0, 0] = -np.inf
+    path = tmp_path / "scene.mcap"
+    with EpisodeWriter(path, metadata={}) as log:
+        for i in range(4):
+            log.scene(0.1 * i, robot[i], human[i])
+    _, r, h = read_episode(path).scene_spheres()
+    expected_h, expected_r = human.copy(), robot.copy()
+    expected_h[~np.isfinite(human).all(-1)] = np.nan
+    expected_r[~np.isfinite(robot).all(-1)] = np.nan
+    np.testing.assert_array_equal(h.numpy(), expected_h)
+    np.testing.assert_array_equal(r.numpy(), expected_r)
+
+    validator = jsonschema.Draft202012Validator(TOPIC_SCHEMAS["/scene"])
+    with open(path, "rb") as f:
+        scenes = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(["/scene"])]
+    for scene in scenes:
+        validator.validate(scene)
+    metadata = [{kv["key"]: kv["value"] for kv in e["metadata"]} for e in scenes[1]["entities"]]
+    assert metadata[1] == {"kind": "human_spheres", "sphere_count": "3", "sphere_rows": "0,2"}
+    assert metadata[0] == {"kind": "robot_spheres"}  # every row drawn: as before
+    assert len(scenes[3]["entities"][1]["spheres"]) == 0
+
+
+def test_metadata_nan_and_infinities_read_back(tmp_path: Path) -> None:
+    meta = {"nan": math.nan, "inf": math.inf, "ninf": -math.inf, "deep": {"x": [math.nan, 1]}}
+    with EpisodeWriter(tmp_path / "m.mcap", metadata=meta):
+        pass
+    back = read_episode(tmp_path / "m.mcap").metadata
+    assert math.isnan(back["nan"]) and back["inf"] == math.inf and back["ninf"] == -math.inf
+    assert math.isnan(back["deep"]["x"][0]) and back["deep"]["x"][1] == 1
+
+
 def test_plain_mcap_reader_reads_every_message(log_path: Path) -> None:
     ep = read_episode(log_path)
     with open(log_path, "rb") as f:
