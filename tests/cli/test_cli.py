@@ -421,7 +421,8 @@ def test_an_interrupted_experiment_keeps_what_it_wrote(tmp_path: Path, sig: str)
     cut = read_episode(second)
     assert cut.complete  # closed with a footer, nothing lost to an open chunk
     t, q = cut.robot_q()
-    assert len(t) > 5 and [e["kind"] for e in cut.events()][-1] == "interrupted"
+    # what it simulated before the signal (a busy machine may have simulated little)
+    assert len(t) >= 1 and [e["kind"] for e in cut.events()][-1] == "interrupted"
     assert "interrupted: what was written before is kept" in (run / "experiment.log").read_text()
 
 
