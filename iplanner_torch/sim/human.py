@@ -392,9 +392,19 @@ class ScriptedHuman:
             The events that happened since the previous call.
 
         Raises:
-            DataError: when ``t`` is NaN, infinite or not a number (nothing changes then).
+            DataError: when ``t`` is NaN, infinite, not a number or before the previous
+                call's, or ``delivered`` names a block without a target (nothing changes
+                then).
         """
         checks.finite_time("t", t, error=DataError)
+        if t < self.time:
+            raise DataError(f"expected t >= the previous update's {self.time} s, got {t}")
+        unknown = [i for i in delivered if i not in self.targets]
+        if unknown:
+            raise DataError(
+                f"delivered names blocks {sorted(unknown)} without a target "
+                f"(targets: {sorted(self.targets)})"
+            )
         events: list[HumanEvent] = []
         self.time = t
         for i in delivered:

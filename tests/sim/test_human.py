@@ -396,3 +396,15 @@ def test_targets_must_be_finite_points(target, error: type[Exception], match: st
         ScriptedHuman(
             HumanCfg(), FakeMotion(), task_order=FakeOrder((1,)), targets={"1": TARGETS[1]}, seed=0
         )
+
+
+def test_update_refuses_time_going_back_and_unknown_blocks() -> None:
+    human = _human()
+    _run(human, {0}, 1.0)
+    now = human.time
+    with pytest.raises(DataError, match="expected t >= the previous update's"):
+        human.update(now - 0.5, {0})
+    with pytest.raises(DataError, match=r"delivered names blocks \[9\] without a target"):
+        human.update(now + 0.01, {0, 9})
+    assert human.time == now  # nothing changed
+    human.update(now, {0})  # the same time again is fine
