@@ -9,7 +9,8 @@ Configs (``__post_init__``) and public functions check their number arguments wi
 - :func:`flag`: ``True`` or ``False``;
 - :func:`finite_time`: anything with a float value (also numpy numbers and one-element
   tensors), as :func:`math.isfinite` takes it; anything else is ``error`` too;
-- :func:`optional`: any of the above for a field that may also be None.
+- :func:`optional`: any of the above for a field that may also be None;
+- :func:`real_array`: an array-like of real numbers (not bool, complex, text or ragged).
 
 Each check raises ``error`` (:class:`~iplanner_torch.errors.ConfigError` unless the caller
 passes another exception type, e.g. :class:`~iplanner_torch.errors.DataError` for input data)
@@ -28,7 +29,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, ShapeError
 
 _T = TypeVar("_T")
 
@@ -145,3 +146,24 @@ def optional(check: Callable[..., _T], name: str, value: object, **kwargs: Any) 
     if value is None:
         return None
     return check(name, value, **kwargs)
+
+
+def real_array(name: str, value: object) -> np.ndarray:
+    """``value`` (an array, a tensor or nested sequences) as a numpy array of integers or
+    floats, its dtype kept.
+
+    Raises:
+        ShapeError: for ragged nested sequences and for anything but real numbers (bool,
+            complex, strings, None inside).
+    """
+    if hasattr(value, "detach"):
+        value = value.detach().cpu().numpy()  # type: ignore[union-attr]
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as err:  # ragged nested sequences
+        raise ShapeError(
+            f"expected {name} an array of real numbers, got a ragged sequence"
+        ) from err
+    if arr.dtype.kind not in "iuf":
+        raise ShapeError(f"expected {name} an array of real numbers, got dtype {arr.dtype}")
+    return arr

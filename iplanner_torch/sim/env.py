@@ -224,7 +224,7 @@ class SimEnv:
         if q_init is None:
             q0 = _numpy(self.robot.q_home)
         else:
-            q0 = _real_vector("q_init", q_init)
+            q0 = checks.real_array("q_init", q_init).astype(np.float64)
         if q0.shape != (self.num_joints,):
             raise ShapeError(f"expected q_init ({self.num_joints},), got {q0.shape}")
         if not np.isfinite(q0).all():
@@ -331,8 +331,8 @@ class SimEnv:
             DataError: when ``q_des`` or ``qd_des`` holds NaN or infinity (nothing is
                 simulated then).
         """
-        q_des = _real_vector("q_des", q_des)
-        qd_des = _real_vector("qd_des", qd_des)
+        q_des = checks.real_array("q_des", q_des).astype(np.float64)
+        qd_des = checks.real_array("qd_des", qd_des).astype(np.float64)
         if q_des.shape != (self.num_joints,) or qd_des.shape != (self.num_joints,):
             raise ShapeError(
                 f"expected q_des and qd_des ({self.num_joints},), got {q_des.shape}, "
@@ -475,26 +475,6 @@ class SimEnv:
                     d.mocap_pos[h.block_mocap[i]] = hand - np.array([0.0, 0.0, 0.02])
             elif state == "taken":
                 d.mocap_pos[h.block_mocap[i]] = sc.stash_position(i)
-
-
-def _real_vector(name: str, x: object) -> np.ndarray:
-    """A float64 numpy copy of a tensor or array-like of real numbers.
-
-    Raises:
-        ShapeError: for ragged sequences and for anything but real numbers (strings, None
-            inside, complex, bool).
-    """
-    if hasattr(x, "detach"):
-        x = x.detach().cpu().numpy()  # type: ignore[union-attr]
-    try:
-        arr = np.asarray(x)
-    except (TypeError, ValueError) as err:  # ragged nested sequences
-        raise ShapeError(
-            f"expected {name} an array of real numbers, got a ragged sequence"
-        ) from err
-    if arr.dtype.kind not in "iuf":
-        raise ShapeError(f"expected {name} an array of real numbers, got dtype {arr.dtype}")
-    return arr.astype(np.float64)
 
 
 def _numpy(x: object) -> np.ndarray:

@@ -468,16 +468,17 @@ def pose_human(
         ShapeError: when ``joints`` is not (K, 3) real numbers with K large enough.
         DataError: when ``joints`` holds NaN or infinity (nothing is changed then).
     """
-    joints = np.asarray(joints)
-    need = int(handles.human_joint_pairs.max()) + 1
-    if joints.ndim != 2 or joints.shape[1] != 3 or joints.shape[0] < need:
-        raise ShapeError(f"expected joints (K, 3) with K >= {need}, got {joints.shape}")
-    if joints.dtype.kind not in "iuf":
-        raise ShapeError(f"expected joints of real numbers, got dtype {joints.dtype}")
+    joints = checks.real_array("joints", joints)
+    try:  # too few joints fail the indexing: no per-step search for the largest index
+        if joints.ndim != 2 or joints.shape[1] != 3:
+            raise IndexError
+        a = joints[handles.human_joint_pairs[:, 0]]  # (S_seg, 3)
+        b = joints[handles.human_joint_pairs[:, 1]]  # (S_seg, 3)
+    except IndexError:
+        need = int(handles.human_joint_pairs.max()) + 1
+        raise ShapeError(f"expected joints (K, 3) with K >= {need}, got {joints.shape}") from None
     if not np.isfinite(joints).all():
         raise DataError("expected finite joints, got NaN or inf joint positions")
-    a = joints[handles.human_joint_pairs[:, 0]]  # (S_seg, 3)
-    b = joints[handles.human_joint_pairs[:, 1]]  # (S_seg, 3)
     mid = 0.5 * (a + b)
     vec = b - a
     length = np.linalg.norm(vec, axis=1)
