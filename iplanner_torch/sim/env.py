@@ -181,6 +181,7 @@ class SimEnv:
         kv = -self.model.actuator_biasprm[self.handles.actuator_ids, 2]
         self._vel_ff_s = np.where(kp > 0, kv / np.where(kp > 0, kp, 1.0), 0.0)  # (J,) [s]
         self._q_lo, self._q_hi = self._position_limits()  # (J,) [rad], -inf / inf if none
+        self._unlimited = ~(np.isfinite(self._q_lo) & np.isfinite(self._q_hi))  # (J,) bool
         v_max = getattr(robot, "v_max", None)
         self._v_max = (  # (J,) [rad/s]
             np.full(self.num_joints, np.inf) if v_max is None else _numpy(v_max).reshape(-1)
@@ -323,6 +324,11 @@ class SimEnv:
             qd_des: (J,) commanded joint velocities [rad/s]; each is clipped to the robot's
                 speed limit ``[-v_max, v_max]`` (a command within the limits is used as is).
 
+        On a joint without position limits (a continuous joint), ``q_des`` is clipped to within
+        half a turn (pi) of the joint's position at the start of the period: a servo target
+        farther away would only spin the joint round, and one near the float range made
+        MuJoCo zero every control. A planner's command lies far inside that window.
+
         Returns:
             Events and contacts of the period.
 
@@ -341,6 +347,10 @@ class SimEnv:
         if not (np.isfinite(q_des).all() and np.isfinite(qd_des).all()):
             raise DataError(f"expected finite q_des and qd_des, got {q_des}, {qd_des}")
         qd_des = np.minimum(np.maximum(qd_des, -self._v_max), self._v_max)
+        if self._unlimited.any():
+            q_now = self.robot_q()
+            near = np.minimum(np.maximum(q_des, q_now - np.pi), q_now + np.pi)
+            q_des = np.where(self._unlimited, near, q_des)
         m, d, h = self.model, self.data, self.handles
         dt = m.opt.timestep
         contact = False

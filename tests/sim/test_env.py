@@ -303,6 +303,30 @@ def test_commanded_speeds_are_clipped_to_the_speed_limits() -> None:
     np.testing.assert_array_equal(env.data.ctrl[ids], expect)
 
 
+@pytest.mark.parametrize("far", [1e300, -1e300, 50.0])
+def test_positions_on_continuous_joints_are_kept_within_half_a_turn(far: float) -> None:
+    """A finite but absurd position command on a continuous joint (no position limits, no
+    control range) used to reach MuJoCo, which zeroed every control with a warning; it now
+    acts as a target half a turn away from where the joint is, and joints with limits get
+    their command as before."""
+    from iplanner_torch.robot.model import RobotModel
+
+    robot = RobotModel.load("fetch")
+    q = robot.q_home.numpy().astype(np.float64)
+    envs = [_env(robot), _env(robot)]
+    for target, env in zip((far, q[2] + np.copysign(np.pi, far)), envs, strict=True):
+        for _ in range(3):
+            q_des = q.copy()
+            q_des[2] = target if target == far else env.robot_q()[2] + np.copysign(np.pi, far)
+            env.step(q_des, np.zeros(7))
+        assert env.data.warning[mujoco.mjtWarning.mjWARN_BADCTRL].number == 0
+    np.testing.assert_array_equal(envs[0].data.qpos, envs[1].data.qpos)
+    ids = envs[0].handles.actuator_ids
+    assert np.isfinite(envs[0].data.ctrl[ids]).all()
+    assert abs(envs[0].data.ctrl[ids][2] - envs[0].robot_q()[2]) < 2 * np.pi
+    np.testing.assert_array_equal(envs[0].data.ctrl[ids][[0, 1, 3, 5]], q[[0, 1, 3, 5]])
+
+
 @pytest.mark.parametrize("block", [99, -1, "0", 1.5, None])
 def test_block_ids_absent_from_the_scene_are_refused(arm, block) -> None:
     env = _env(arm)
