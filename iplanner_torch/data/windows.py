@@ -211,8 +211,11 @@ def progress_bitmask(
     """Progress states (paper sec. 3.1): which actions were completed before each frame.
 
     An action is completed at frame ``t`` when one of its segments ended before ``t`` (the
-    label changed away from it at or before ``t``). Bit ``a`` (value ``1 << a``) stands for
-    action ``a``; only ``progress_actions`` set bits.
+    label changed away from it at or before ``t``). Unlabelled frames (-1) inside an action
+    do not end it: a segment that a gap interrupts ends only when the next labelled frame
+    after the gap carries another action, or when no labelled frame follows (then it ends
+    where the gap starts). This is how :func:`next_action_labels` reads through gaps.
+    Bit ``a`` (value ``1 << a``) stands for action ``a``; only ``progress_actions`` set bits.
 
     Args:
         labels: (T,) int action labels, -1 for unlabelled.
@@ -239,6 +242,13 @@ def progress_bitmask(
     ended = torch.zeros(t_len, dtype=torch.bool, device=lab.device)
     ended[1:] = lab[1:] != lab[:-1]  # frame t starts a new segment: lab[t-1] ended
     prev = torch.cat([lab[:1], lab[:-1]])
+    # the label of the first labelled frame at or after each frame (-2: none follows)
+    labelled = torch.nonzero(lab >= 0).flatten()  # (L,) frame indices
+    ahead = torch.searchsorted(labelled, torch.arange(t_len, device=lab.device))  # (T,)
+    has = ahead < labelled.numel()
+    next_label = torch.full_like(lab, -2)
+    next_label[has] = lab[labelled[ahead[has]]]
+    ended &= next_label != prev  # a gap followed by the same action does not end it
     for a in acts:
         done = (ended & (prev == a)).long().cummax(dim=0).values
         out |= done << a

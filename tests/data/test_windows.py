@@ -140,12 +140,35 @@ def test_progress_bitmask_brute_force():
     labels = rng.integers(-1, 5, size=60)
     labels = np.repeat(labels, rng.integers(1, 4, size=60))
     got = progress_bitmask(labels, [1, 2, 4]).numpy()
+
+    def ends(s: int) -> bool:  # does the action of frame s end at frame s + 1?
+        if labels[s + 1] == labels[s]:
+            return False
+        after = [c for c in labels[s + 1 :] if c >= 0]
+        return not after or after[0] != labels[s]  # a gap inside the action does not end it
+
     for t in range(len(labels)):
         want = 0
         for a in (1, 2, 4):
-            if any(labels[s] == a and labels[s + 1] != a for s in range(t)):
+            if any(labels[s] == a and ends(s) for s in range(t)):
                 want |= 1 << a
         assert got[t] == want, t
+    assert (labels == -1).sum() > 10
+
+
+@pytest.mark.parametrize(
+    ("labels", "want"),
+    [
+        ([1, 1, -1, -1, 1, 2, 2], [0, 0, 0, 0, 0, 2, 2]),  # a gap inside action 1
+        ([1, 1, -1, -1, 2, 2], [0, 0, 2, 2, 2, 2]),  # 1 stopped where the gap starts
+        ([1, 1, -1, -1], [0, 0, 2, 2]),  # nothing follows the gap
+        ([-1, -1, 1], [0, 0, 0]),
+        ([-1, -1], [0, 0]),
+    ],
+)
+def test_progress_reads_through_unlabelled_gaps(labels, want) -> None:
+    got = progress_bitmask(np.array(labels), [1, 2]).tolist()
+    assert got == want
 
 
 def test_next_action_brute_force():
