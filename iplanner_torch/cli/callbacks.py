@@ -200,7 +200,36 @@ def failed_jobs(sweep_dir: Path) -> list[tuple[Path, str, str]]:
 
 class GatherSweepResults(Callback):
     """At the end of a multirun, write ``<sweep dir>/summary/results.{csv,md}`` and plots of
-    the jobs that ran, then name the jobs that failed, if any, and exit 2."""
+    the jobs that ran, then name the jobs that failed, if any, and exit 2.
+
+    At its start, when ``hydra.sweeper.max_batch_size`` splits the sweep into batches, every
+    job's config is composed first: Hydra composes (and checks) each batch only when it
+    comes to it, so a job of a later batch whose config fails (an unknown option, a key
+    that does not exist) stopped the sweep midway with Hydra's own report. Without batches
+    Hydra checks every job before the first runs."""
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        import sys
+
+        if config.hydra.sweeper.get("max_batch_size") is None:
+            return
+        from hydra import compose
+        from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+        from hydra.core.override_parser.overrides_parser import OverridesParser
+
+        from iplanner_torch.cli._common import composition_error_text
+
+        task = [str(o) for o in config.hydra.overrides.task]
+        jobs = BasicSweeper.split_arguments(OverridesParser.create().parse_overrides(task), None)
+        for batch in jobs:
+            for overrides in batch:
+                try:
+                    compose(config_name=str(config.hydra.job.config_name), overrides=overrides)
+                except Exception as exc:  # noqa: BLE001 - Hydra would only warn of it here
+                    text = composition_error_text(exc) or f"{type(exc).__name__}: {exc}"
+                    # Hydra turns an exception raised here into a warning; an exit is not one
+                    print(f"error: ConfigError: {text}", file=sys.stderr, flush=True)
+                    raise SystemExit(2) from None
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         import sys

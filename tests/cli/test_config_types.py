@@ -184,6 +184,32 @@ def test_sweep_with_cfg_print_is_one_line(module: str, tmp_path: Path) -> None:
     )
 
 
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [
+        ("data=reaching,nonexistent", "unknown option data=nonexistent; data options: lego"),
+        ("data=reaching,tasks", "unknown key 'data.generator.n_targets'"),  # tasks lacks it
+    ],
+)
+def test_a_batched_sweep_checks_every_job_before_the_first_runs(
+    bad: str, message: str, tmp_path: Path
+) -> None:
+    """With ``hydra.sweeper.max_batch_size`` Hydra composes each batch only when it comes to
+    it: a later job's bad config stopped the sweep midway with Hydra's own report (exit 1),
+    after the first job had written its files."""
+    res = subprocess.run(
+        [sys.executable, "-m", "iplanner_torch.cli.data", "generate", "-m",
+         "hydra.sweeper.max_batch_size=1", bad, "data.generator.n_targets=2",
+         "data.generator.reaches_per_target=1", f"data.path={tmp_path / 'd'}",
+         f"hydra.sweep.dir={tmp_path / 'sweep'}", "progress=false"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip().startswith("error: ConfigError: "), res.stderr
+    assert message in res.stderr
+    assert not (tmp_path / "d").exists()  # no job ran
+
+
 def test_help_lists_groups_options_and_defaults() -> None:
     from iplanner_torch.cli._common import command_help
 
