@@ -206,7 +206,11 @@ def training_differences(
     Read from the ``training_inputs.json`` beside ``ckpt``; a checkpoint without that record,
     or with one that records no trainer, gives no differences (it is used as it is, like one
     trained on purpose with ``iplanner-train`` into the experiment's folder). So does one whose
-    record does not read, with a warning.
+    record does not read, with a warning. A record of another training run than the
+    checkpoint's (one started in the folder since and interrupted: its
+    :func:`~iplanner_torch.eval.prediction.inputs_digest` differs from the one the checkpoint
+    keeps) is not read: ``seed`` is then compared with the checkpoint's own predictor seed,
+    and the budget goes unchecked, with a warning.
 
     Args:
         ckpt: the predictor checkpoint.
@@ -225,8 +229,10 @@ def training_differences(
     import warnings
     from dataclasses import asdict
 
+    import torch
+
     from iplanner_torch.errors import CheckpointError, DataWarning
-    from iplanner_torch.eval.prediction import read_training_inputs
+    from iplanner_torch.eval.prediction import inputs_digest, read_training_inputs
     from iplanner_torch.prediction.training import TrainerCfg
 
     if seed is None and not budget:
@@ -243,6 +249,23 @@ def training_differences(
         )
         return []
     if record is None or not isinstance(record.get("trainer_cfg"), dict):
+        return []
+    try:
+        saved = torch.load(ckpt, map_location="cpu", weights_only=False)
+        own = str(saved.get("inputs_digest") or "")
+        own_seed = saved["cfg"].get("seed")
+    except Exception:  # noqa: BLE001 - HumanMotionPredictor.load says what is wrong
+        own, own_seed = "", None
+    if own and own != inputs_digest(record):
+        warnings.warn(
+            f"the training_inputs.json beside {ckpt} records another training run than the "
+            "checkpoint's (one started in its folder since, and not finished): the "
+            "checkpoint's trainer budget is unchecked",
+            DataWarning,
+            stacklevel=2,
+        )
+        if seed is not None and own_seed is not None and own_seed != seed:
+            return [f"predictor seed: {own_seed!r} -> {seed!r}"]
         return []
     trainer = dict(record["trainer_cfg"])
     now = asdict(instantiate(trainer_node, TrainerCfg, name="trainer"))  # its seed is ${seed}

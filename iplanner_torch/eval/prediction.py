@@ -57,6 +57,42 @@ COVERAGE_LEVELS = (0.90, 0.95, 0.99)
 #: that reading it does not load Lightning)
 INPUTS_FILE = "training_inputs.json"
 
+#: the trainer settings that shape the fitted sub-models (accelerator, devices, num_threads,
+#: log_every_n_steps and tensorboard change where they are computed and what is logged, not
+#: what is fitted, save for float rounding)
+RESUME_TRAINER_FIELDS = ("max_epochs", "max_steps", "seed")
+#: the parts of an :data:`INPUTS_FILE` record that decide what the sub-models are
+_RECORD_KEYS = ("fingerprint", "action_names", "joint_names", "predictor_cfg", "window_cfg")
+
+
+def inputs_digest(record: dict[str, Any]) -> str:
+    """SHA-256 of what in a training record decides the trained model: the data fingerprint,
+    action and joint names, predictor and window settings, the trainer's
+    :data:`RESUME_TRAINER_FIELDS` and the split's seed and fractions.
+
+    ``train_predictor`` writes it into every sub-model checkpoint and into ``predictor.ckpt``,
+    so that a sub-model or a record of another training run in the same folder (one started
+    there since, say, and interrupted) is told apart from this run's.
+
+    Args:
+        record: the :data:`INPUTS_FILE` record (as ``json.loads`` reads it).
+    """
+    import hashlib
+
+    trainer = record.get("trainer_cfg")
+    split = record.get("split")
+    key = {
+        **{k: record.get(k) for k in _RECORD_KEYS},
+        "trainer_cfg": {f: trainer.get(f) for f in RESUME_TRAINER_FIELDS}
+        if isinstance(trainer, dict)
+        else None,
+        "split": {f: split.get(f) for f in ("seed", "fractions")}
+        if isinstance(split, dict)
+        else None,
+    }
+    text = json.dumps(key, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
 
 @dataclass(frozen=True, kw_only=True)
 class SplitRecord:
@@ -131,11 +167,16 @@ def recorded_split(ckpt: str | Path, fingerprint: str) -> SplitRecord | None:
         split = inputs.get("split")
         if split is None:
             return None
-        return SplitRecord(
-            seed=int(split["seed"]),
-            fractions=tuple(split["fractions"]),
-            held_out=tuple(split.get("held_out", ())),
-        )
+        if not isinstance(split, dict):
+            raise TypeError(f"split is {type(split).__name__}, not an object")
+        seed, held_out = split["seed"], split.get("held_out", [])
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise ValueError(f"split seed {seed!r} is not a non-negative integer")
+        if not isinstance(held_out, list) or not all(isinstance(n, str) for n in held_out):
+            raise TypeError(f"split held_out {held_out!r} is not a list of names")
+        if not isinstance(split["fractions"], list):
+            raise TypeError(f"split fractions {split['fractions']!r} is not a list")
+        return SplitRecord(seed=seed, fractions=tuple(split["fractions"]), held_out=held_out)
     except (CheckpointError, ConfigError, ValueError, TypeError, KeyError, AttributeError) as err:
         warnings.warn(
             f"cannot read the held-out split of {ckpt} ({type(err).__name__}: {err}); the "

@@ -238,6 +238,8 @@ class HumanMotionPredictor:
         pooled: GP per action pooled over progress states.
         fingerprint: hash of the training data.
         window_cfg: the data's window settings, kept for reference (a dict).
+        inputs_digest: :func:`~iplanner_torch.eval.prediction.inputs_digest` of the training
+            record (``training_inputs.json``) of the run that trained it; "" when unknown.
     """
 
     def __init__(
@@ -259,6 +261,7 @@ class HumanMotionPredictor:
         pooled: dict[int, SVGPRegressor] | None = None,
         fingerprint: str = "",
         window_cfg: dict[str, Any] | None = None,
+        inputs_digest: str = "",
     ) -> None:
         self.cfg = cfg
         self.joint_names = tuple(joint_names)
@@ -276,6 +279,7 @@ class HumanMotionPredictor:
         self.pooled = dict(pooled or {})
         self.fingerprint = fingerprint
         self.window_cfg = dict(window_cfg or {})
+        self.inputs_digest = str(inputs_digest)
         # progress state -> (bank of its actions' GPs or None, the actions that have a GP)
         self._banks: dict[int, tuple[SVGPBank | None, list[int]]] = {}
         k = len(self.joint_names)
@@ -646,6 +650,7 @@ class HumanMotionPredictor:
             },
             "fingerprint": self.fingerprint,
             "window_cfg": self.window_cfg,
+            "inputs_digest": self.inputs_digest,
         }
 
     def _alias(self, reg: SVGPRegressor) -> str | None:
@@ -799,6 +804,7 @@ class HumanMotionPredictor:
             pooled=pooled,
             fingerprint=d.get("fingerprint", ""),
             window_cfg=d.get("window_cfg"),
+            inputs_digest=d.get("inputs_digest", ""),
         )
 
 

@@ -14,7 +14,11 @@
   (data fingerprint, actions, joints, predictor, window and trainer settings, and the
   demonstration split when the caller gives it, which evaluation reads to score the same
   held-out demonstrations). ``resume=True`` reuses sub-model checkpoints already written, after
-  checking that record.
+  checking that record; each sub-model checkpoint keeps the record's
+  :func:`~iplanner_torch.eval.prediction.inputs_digest` and a digest of its model, so one of
+  another run (an interrupted one in the same folder) is trained anew and a changed file is
+  refused. ``predictor.ckpt`` keeps the digest too, so a record rewritten by a later,
+  unfinished run is not taken for its own.
 """
 
 from __future__ import annotations
@@ -35,10 +39,17 @@ from tqdm.auto import tqdm
 from iplanner_torch import checks
 from iplanner_torch.data.windows import WindowSet, compute_features
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
-from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord, read_training_inputs
+from iplanner_torch.eval.prediction import (
+    INPUTS_FILE,
+    RESUME_TRAINER_FIELDS,
+    SplitRecord,
+    inputs_digest,
+    read_training_inputs,
+)
 from iplanner_torch.prediction.predictor import (
     HumanMotionPredictor,
     PredictorCfg,
+    content_digest,
     dataset_fingerprint,
     gp_inputs,
 )
@@ -193,6 +204,7 @@ class SVGPModule(L.LightningModule):
 
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         checkpoint["svgp"] = self.reg.to_checkpoint()
+        _stamp(checkpoint, "svgp", getattr(self, "inputs_digest", ""))
 
 
 class _IndexBatches(torch.utils.data.Dataset):
@@ -253,6 +265,7 @@ class IVMModule(L.LightningModule):
 
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         checkpoint["classifier"] = self.classifier.state_dict()
+        _stamp(checkpoint, "classifier", getattr(self, "inputs_digest", ""))
 
 
 def _loss_history(classifier: Any) -> list[float]:
@@ -306,11 +319,43 @@ def _quiet() -> None:
         logging.getLogger(name).setLevel(logging.ERROR)
 
 
-def _resume(ckpt: Path, build: Any) -> Any:
-    """``build(torch.load(ckpt))``; a file that cannot be read or built is a CheckpointError
-    naming it and the way out (the sub-model is retrained without it)."""
+def _stamp(checkpoint: dict[str, Any], key: str, digest: str) -> None:
+    """Write into a sub-model checkpoint the :func:`inputs_digest` of the run that trained it
+    and ``model_digest``, the content digest of its model (``checkpoint[key]``) and of that:
+    torch reads a changed byte inside a tensor without complaint, and a resumed run would
+    build its predictor on it."""
+    checkpoint["inputs_digest"] = digest
+    checkpoint["model_digest"] = content_digest({key: checkpoint[key], "inputs_digest": digest})
+
+
+def _resume(ckpt: Path, key: str, build: Any, digest: str) -> Any:
+    """``build(torch.load(ckpt))`` for a sub-model checkpoint written by this run's inputs.
+
+    A file that cannot be read or built, or whose model does not match its ``model_digest``
+    (:func:`_stamp`), is a CheckpointError naming it and the way out (the sub-model is
+    retrained without it). A file stamped with another run's :func:`inputs_digest` (a
+    training run started in the folder since and interrupted before it came to this
+    sub-model) gives None with a DataWarning: the caller trains the sub-model anew. Files
+    written before the stamps are used as they are.
+    """
     try:
         d = torch.load(ckpt, map_location="cpu", weights_only=False)
+        if not isinstance(d, dict) or key not in d:
+            raise KeyError(key)
+        if "model_digest" in d and d["model_digest"] != content_digest(
+            {key: d[key], "inputs_digest": d.get("inputs_digest")}
+        ):
+            raise CheckpointError(
+                "its contents do not match the digest written with them (the file is damaged)"
+            )
+        if d.get("inputs_digest", digest) != digest:
+            warnings.warn(
+                f"{ckpt} was trained by another training run (other data or settings) than "
+                "this one: trained anew",
+                DataWarning,
+                stacklevel=3,
+            )
+            return None
         return build(d)
     except Exception as err:  # noqa: BLE001 - a broken file is an error the user must see
         raise CheckpointError(
@@ -333,6 +378,7 @@ def train_svgp(
     progress: bool = True,
     resume: bool = False,
     noise_map: torch.Tensor | None = None,
+    inputs_digest: str = "",
 ) -> SVGPRegressor:
     """Train one SVGP with Lightning (NIGP rounds included) and write ``<name>.ckpt``.
 
@@ -350,13 +396,19 @@ def train_svgp(
         resume: reuse ``<name>.ckpt`` when it exists.
         noise_map: (D_in, D_src) Jacobian of the inputs with respect to the noisy values
             (:func:`input_noise_map`) for nigp; None: each input column noisy on its own.
+        inputs_digest: the training run's :func:`inputs_digest`, written into the checkpoint;
+            with ``resume``, a checkpoint stamped with another is trained anew.
 
     Returns:
         The trained regressor (on the CPU).
     """
     ckpt = out_dir / f"{name}.ckpt"
     if resume and ckpt.is_file():
-        return _resume(ckpt, lambda d: SVGPRegressor.from_checkpoint(d["svgp"]))
+        reg = _resume(
+            ckpt, "svgp", lambda d: SVGPRegressor.from_checkpoint(d["svgp"]), inputs_digest
+        )
+        if reg is not None:
+            return reg
     L.seed_everything(tcfg.seed, verbose=False)
     reg = SVGPRegressor.from_data(cfg, x, y, window=window)
     n = x.shape[0]
@@ -373,6 +425,7 @@ def train_svgp(
         )
         # the floor is calibrated once, after the last round
         module = SVGPModule(reg, x, y, extra, steps, x_val, y_val, calibrate=r == rounds - 1)
+        module.inputs_digest = inputs_digest
         if steps > 0:
             trainer = _trainer(
                 tcfg, out_dir, name if rounds == 1 else f"{name}_r{r}", steps, progress
@@ -383,7 +436,9 @@ def train_svgp(
     if trainer is not None:
         trainer.save_checkpoint(ckpt)
     else:
-        torch.save({"svgp": reg.to_checkpoint()}, ckpt)
+        d = {"svgp": reg.to_checkpoint()}
+        _stamp(d, "svgp", inputs_digest)
+        torch.save(d, ckpt)
     reg.to("cpu")
     reg._cache = None
     return reg
@@ -559,7 +614,7 @@ def _train_predictor(
     feat_std = train.f_prev.reshape(-1, d).std(0).clamp_min(1e-6)
     progress_actions = train.cfg.progress_indices(train.action_names)
     fingerprint = dataset_fingerprint(train.f_prev, train.xi_next, train.current)
-    _record_inputs(out_dir, fingerprint, train, cfg, trainer_cfg, split, resume)
+    digest = _record_inputs(out_dir, fingerprint, train, cfg, trainer_cfg, split, resume)
 
     groups: dict[tuple[int, int], torch.Tensor] = {}
     for p in torch.unique(train.progress).tolist():
@@ -586,7 +641,9 @@ def _train_predictor(
         disable=not progress,
     )
     bar.set_postfix_str("classifier")
-    classifier = _train_classifier(train, cfg, trainer_cfg, out_dir, feat_mean, feat_std, resume)
+    classifier = _train_classifier(
+        train, cfg, trainer_cfg, out_dir, feat_mean, feat_std, resume, digest
+    )
     bar.update()
     next_model = _train_next_action(train, cfg)
 
@@ -624,6 +681,7 @@ def _train_predictor(
             progress=False,
             resume=resume,
             noise_map=noise_map,
+            inputs_digest=digest,
         )
         bar.update()
         return reg
@@ -657,9 +715,11 @@ def _train_predictor(
         pooled=pooled,
         fingerprint=fingerprint,
         window_cfg=asdict(train.cfg),
+        inputs_digest=digest,
     )
-    try:  # the assembled predictor must run on its own windows before it replaces a file
+    try:  # the assembled predictor must pass load's check before it replaces a file
         predictor.predict(train.f_prev[:4], train.progress[:4])
+        predictor.prepare()._self_check()  # every GP, the classifier, the next-action model
     except Exception as err:  # noqa: BLE001 - reported with the way out
         raise CheckpointError(
             f"the predictor assembled from the sub-models in {out_dir} fails on its own "
@@ -670,12 +730,6 @@ def _train_predictor(
     return predictor.save(out_dir / "predictor.ckpt")
 
 
-#: the trainer settings that shape the fitted sub-models, compared on resume (accelerator,
-#: devices, num_threads, log_every_n_steps and tensorboard change where they are computed and
-#: what is logged, not what is fitted, save for float rounding)
-RESUME_TRAINER_FIELDS = ("max_epochs", "max_steps", "seed")
-
-
 def _record_inputs(
     out_dir: Path,
     fingerprint: str,
@@ -684,12 +738,15 @@ def _record_inputs(
     tcfg: TrainerCfg,
     split: SplitRecord | None,
     resume: bool,
-) -> None:
+) -> str:
     """Write ``out_dir / INPUTS_FILE`` (training data fingerprint, action names, predictor,
     window and trainer settings, and the split when given). With ``resume``, first compare it
     with the file already there: sub-models trained on other data or settings must not be mixed
     into this predictor. The trainer settings (:data:`RESUME_TRAINER_FIELDS`) and the split
     (seed, fractions) are compared only where the file records them (it did not always).
+
+    Returns:
+        The record's :func:`inputs_digest`.
 
     Raises:
         CheckpointError: (``resume``) when the recorded inputs differ, naming what differs.
@@ -743,6 +800,7 @@ def _record_inputs(
             stacklevel=3,
         )
     path.write_text(json.dumps(inputs, indent=2) + "\n", encoding="utf-8")
+    return inputs_digest(inputs)
 
 
 def _train_classifier(
@@ -753,6 +811,7 @@ def _train_classifier(
     feat_mean: torch.Tensor,
     feat_std: torch.Tensor,
     resume: bool,
+    digest: str = "",
 ) -> Any:
     """Fit the action classifier with Lightning (None when the IVM module is unavailable);
     its own progress bar is off (the caller's bar counts it as one sub-model)."""
@@ -763,7 +822,11 @@ def _train_classifier(
         return None
     ckpt = out_dir / "classifier.ckpt"
     if resume and ckpt.is_file():
-        return _resume(ckpt, lambda d: ActionClassifier.from_state_dict(d["classifier"]))
+        clf = _resume(
+            ckpt, "classifier", lambda d: ActionClassifier.from_state_dict(d["classifier"]), digest
+        )
+        if clf is not None:
+            return clf
     L.seed_everything(tcfg.seed, verbose=False)
     idx = _subsample(torch.arange(len(train)), cfg.classifier_max_train, cfg.seed)
     x = (train.f_prev[idx] - feat_mean) / feat_std
@@ -792,6 +855,7 @@ def _train_classifier(
     )
     clf = ActionClassifier(feature_index=index)
     module = IVMModule(clf, x, train.progress[idx], train.current[idx], fit_kwargs)
+    module.inputs_digest = digest
     # manual optimisation never steps an optimiser, so the budget is one epoch, not one step
     trainer = _trainer(tcfg, out_dir, "classifier", -1, False, max_epochs=1)
     trainer.fit(module)

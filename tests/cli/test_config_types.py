@@ -508,6 +508,29 @@ def test_a_checkpoint_trained_with_another_trainer_or_seed_is_named(tmp_path: Pa
     (tmp_path / INPUTS_FILE).write_text("[1, 2]")
     with pytest.warns(DataWarning, match=rf"expected a JSON object, got list.*{unchecked}$"):
         assert training_differences(ckpt, default, seed=3, budget=False) == []
+    # the record of a later run (seed 3, interrupted) beside a checkpoint trained with seed 0:
+    # the checkpoint keeps the digest of its own record, so its own seed is what is compared
+    import torch
+
+    from iplanner_torch.eval.prediction import inputs_digest
+
+    ours = dict(record, split={"seed": 0, "fractions": [0.8, 0.1, 0.1]})
+    later = dict(ours, trainer_cfg=asdict(TrainerCfg(max_steps=40, seed=3)))
+    later["split"] = {"seed": 3, "fractions": [0.8, 0.1, 0.1]}
+    torch.save({"inputs_digest": inputs_digest(ours), "cfg": {"seed": 0}}, ckpt)
+    (tmp_path / INPUTS_FILE).write_text(json.dumps(later))
+    other_run = "records another training run than the checkpoint's"
+    with pytest.warns(DataWarning, match=other_run):
+        assert training_differences(ckpt, fast, seed=3, budget=True) == [
+            "predictor seed: 0 -> 3"
+        ]
+    with pytest.warns(DataWarning, match=other_run):
+        assert training_differences(ckpt, fast, seed=0, budget=False) == []
+    (tmp_path / INPUTS_FILE).write_text(json.dumps(ours))  # its own record: read as before
+    assert training_differences(ckpt, fast, seed=3, budget=False) == [
+        "trainer seed: 0 -> 3",
+        "split seed: 0 -> 3",
+    ]
     (tmp_path / INPUTS_FILE).write_text("{}")  # a record without trainer settings
     assert training_differences(ckpt, default, seed=3, budget=True) == []
     (tmp_path / INPUTS_FILE).unlink()

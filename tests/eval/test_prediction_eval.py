@@ -295,6 +295,16 @@ def test_training_inputs_record_reads_or_is_refused_by_name(tmp_path) -> None:
         ("null", "expected a JSON object, got NoneType"),
         (json.dumps(bad), r"ConfigError: fractions: expected 3 non-negative shares"),
         (json.dumps({"fingerprint": "abc", "split": {"fractions": [1, 0, 0]}}), "KeyError"),
+        # numpy refused a negative seed with a raw traceback in iplanner-evaluate; true, 1.7
+        # and "1" were read as 1, a held_out string as its letters
+        (json.dumps(bad | {"split": dict(split, seed=-5)}), "ValueError: split seed -5"),
+        (json.dumps(bad | {"split": dict(split, seed=True)}), "ValueError: split seed True"),
+        (json.dumps(bad | {"split": dict(split, seed=1.7)}), "ValueError: split seed 1.7"),
+        (json.dumps(bad | {"split": dict(split, seed="1")}), "ValueError: split seed '1'"),
+        (json.dumps(bad | {"split": dict(split, held_out="d1")}), "TypeError: split held_out"),
+        (json.dumps(bad | {"split": dict(split, held_out=[1])}), "TypeError: split held_out"),
+        (json.dumps(bad | {"split": dict(split, fractions="0.6")}), "TypeError: split fractions"),
+        (json.dumps(bad | {"split": [2]}), "TypeError: split is list"),
     ):
         (tmp_path / INPUTS_FILE).write_text(text)
         if "fingerprint" not in text:

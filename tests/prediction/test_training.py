@@ -125,13 +125,16 @@ def test_resume_never_mixes_in_sub_models_of_other_inputs(tmp_path: Path) -> Non
         with pytest.raises(CheckpointError, match=f"cannot resume in .*unreadable \\({why}"):
             train(a, broken, resume=True)
         assert (broken / "predictor.ckpt").read_bytes() == ckpt_a
-    # a folder from before the record, with one GP of b's (5 future frames) among a's
+    # a folder from before the record and the stamps, with one GP of b's (5 future frames)
+    # among a's
     mixed = tmp_path / "mixed"
     shutil.copytree(tmp_path / "a", mixed)
     (mixed / "training_inputs.json").unlink()
     gp = sorted((tmp_path / "b").glob("gp_*.ckpt"))[0]
     assert (mixed / gp.name).is_file()
-    shutil.copy(gp, mixed / gp.name)
+    old_format = torch.load(gp, weights_only=False)
+    del old_format["inputs_digest"], old_format["model_digest"]
+    torch.save(old_format, mixed / gp.name)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         with pytest.raises(CheckpointError, match="fails on its own training windows"):
@@ -378,3 +381,67 @@ def test_input_noise_map_is_the_jacobian_of_the_gp_inputs(gp_input: str) -> None
     col = [(t * k) * 3 for t in range(n_p)]  # joint a, x, at each frame
     expected = torch.tensor([0.0, 0.5, -2.0, 1.5], dtype=torch.float64) * fps
     torch.testing.assert_close(a_map[row, col], expected, rtol=1e-12, atol=1e-12)
+
+
+def _trained(out: Path, windows, noisy_input: str = "simple", resume: bool = False) -> Path:
+    tcfg = TrainerCfg(accelerator="cpu", tensorboard=False)
+    return train_predictor(
+        windows, predictor_cfg=_cfg(noisy_input), trainer_cfg=tcfg, out_dir=out,
+        progress=False, resume=resume,
+    )  # fmt: skip
+
+
+def test_resume_retrains_sub_models_of_another_run_in_the_folder(tmp_path: Path) -> None:
+    """A run started in a trained folder with other settings and interrupted after its first
+    sub-model leaves that run's record beside the earlier run's sub-models. Resuming it used
+    to take those as its own (an NI predictor under a no-NI record); each sub-model stamped
+    with another run's inputs is now trained anew, so the resumed predictor is the one an
+    uninterrupted run gives."""
+    import shutil
+    import warnings
+
+    from iplanner_torch.errors import DataWarning
+
+    windows = _windows(("torso", "left_hand", "right_hand"))
+    _trained(tmp_path / "ni", windows, "simple")
+    _trained(tmp_path / "no_ni", windows, "none")
+    cut = tmp_path / "cut"  # the NI folder after a no-NI run that trained the classifier
+    shutil.copytree(tmp_path / "ni", cut)
+    for name in ("training_inputs.json", "classifier.ckpt"):
+        shutil.copy(tmp_path / "no_ni" / name, cut / name)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _trained(cut, windows, "none", resume=True)
+    anew = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+    gps = sorted(cut.glob("gp_*.ckpt"))
+    assert len(anew) == len(gps) and all("trained anew" in m for m in anew)
+    va = windows[1]
+
+    def forecast(folder: str):
+        pred = HumanMotionPredictor.load(tmp_path / folder / "predictor.ckpt")
+        return pred.predict(va.f_prev[:3], va.progress[:3])
+
+    got, want = forecast("cut"), forecast("no_ni")
+    for field in ("weights", "mean", "var"):
+        torch.testing.assert_close(getattr(got, field), getattr(want, field), rtol=0, atol=0)
+    assert not torch.equal(forecast("ni").var, want.var)  # the settings give other GPs
+
+
+def test_resume_refuses_a_sub_model_changed_after_it_was_written(tmp_path: Path) -> None:
+    """torch reads a changed number inside a tensor without complaint: a resumed run built
+    its predictor on it (a forecast 4.8 km off, or a NaN predictor written over the good
+    one). The digest written with each sub-model now catches it, and predictor.ckpt is kept."""
+    windows = _windows(("torso", "left_hand", "right_hand"))
+    _trained(tmp_path, windows)
+    good = (tmp_path / "predictor.ckpt").read_bytes()
+    gp = sorted(tmp_path.glob("gp_*.ckpt"))[0]
+    original = gp.read_bytes()
+    for value in (1e6, math.nan):
+        d = torch.load(gp, weights_only=False)
+        mean = next(v for k, v in d["svgp"]["state_dict"].items() if "variational_mean" in k)
+        mean.view(-1)[0] = value
+        torch.save(d, gp)
+        with pytest.raises(CheckpointError, match=rf"cannot resume from {gp}: .*damaged"):
+            _trained(tmp_path, windows, resume=True)
+        assert (tmp_path / "predictor.ckpt").read_bytes() == good
+        gp.write_bytes(original)
