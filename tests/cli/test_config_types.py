@@ -521,9 +521,7 @@ def test_a_checkpoint_trained_with_another_trainer_or_seed_is_named(tmp_path: Pa
     (tmp_path / INPUTS_FILE).write_text(json.dumps(later))
     other_run = "records another training run than the checkpoint's"
     with pytest.warns(DataWarning, match=other_run):
-        assert training_differences(ckpt, fast, seed=3, budget=True) == [
-            "predictor seed: 0 -> 3"
-        ]
+        assert training_differences(ckpt, fast, seed=3, budget=True) == ["predictor seed: 0 -> 3"]
     with pytest.warns(DataWarning, match=other_run):
         assert training_differences(ckpt, fast, seed=0, budget=False) == []
     (tmp_path / INPUTS_FILE).write_text(json.dumps(ours))  # its own record: read as before
