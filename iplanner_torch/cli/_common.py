@@ -628,7 +628,10 @@ def copy_output_to(path: Path | None) -> Iterator[None]:
 
 
 def friendly_errors(
-    fn: F | None = None, *, before: Callable[[DictConfig], None] | None = None
+    fn: F | None = None,
+    *,
+    before: Callable[[DictConfig], None] | None = None,
+    kept: Callable[[DictConfig], str] | None = None,
 ) -> Any:
     """Turn library errors, and the operating system's (``OSError``: a path that is a file
     where a folder is expected, no permission, a full disk), into a one-line message and exit
@@ -648,10 +651,15 @@ def friendly_errors(
     ``tracker.noise=-1`` is named as such rather than where it is interpolated. A YAML file
     the command reads itself that does not parse is a config error too
     (:func:`yaml_error_text`). Inside a Hydra job, what the command prints, the error line
-    included, is also written to the job's log file (:func:`copy_output_to`)."""
+    included, is also written to the job's log file (:func:`copy_output_to`).
+
+    An interrupted command (Ctrl-C, or SIGTERM: :func:`_terminate_as_interrupt`) prints one
+    ``interrupted: ...`` line and exits 130, also when the signal lands inside a Lightning fit,
+    which ends the process with its own ``SystemExit(1)`` (:func:`_exit_after_interrupt`).
+    ``kept(cfg)`` says what the command keeps then (default: :func:`_kept_episodes`)."""
 
     if fn is None:
-        return functools.partial(friendly_errors, before=before)
+        return functools.partial(friendly_errors, before=before, kept=kept)
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -689,15 +697,62 @@ def friendly_errors(
                 print(f"error: out of memory ({first}); {_MEMORY_HINT}", file=sys.stderr)
                 raise SystemExit(2) from None
             except KeyboardInterrupt:
-                where = f" in {log_path.parent}" if log_path is not None else ""
-                print(
-                    f"interrupted: what was written before is kept{where} (finished episodes "
-                    "in results.csv, the interrupted episode's log up to where it stopped)",
-                    file=sys.stderr,
-                )
+                _report_interrupt(args, kept, log_path)
+                raise SystemExit(130) from None
+            except SystemExit as exc:  # Lightning ends an interrupted fit with SystemExit(1)
+                if not _exit_after_interrupt(exc):
+                    raise
+                _report_interrupt(args, kept, log_path)
                 raise SystemExit(130) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+def _exit_after_interrupt(exc: SystemExit) -> bool:
+    """Whether ``exc`` ends the process with an error code because of an interrupt: it was
+    raised while a KeyboardInterrupt was being handled (its ``__context__`` chain holds one).
+
+    Lightning's ``Trainer.fit`` catches the KeyboardInterrupt of Ctrl-C (and of SIGTERM,
+    :func:`_terminate_as_interrupt`), marks the trainer interrupted, tears it down and calls
+    ``sys.exit(1)`` inside its ``except KeyboardInterrupt`` block, so the interrupt is that
+    SystemExit's context; its log line says so at INFO, which the training silences."""
+    if exc.code in (None, 0):
+        return False
+    seen: set[int] = set()
+    link: BaseException | None = exc.__context__
+    while link is not None and id(link) not in seen:
+        if isinstance(link, KeyboardInterrupt):
+            return True
+        seen.add(id(link))
+        link = link.__cause__ or link.__context__
+    return False
+
+
+def _kept_episodes(log_path: Path | None) -> str:
+    """What an interrupted experiment keeps: its run folder's finished episodes and the
+    interrupted episode's log."""
+    where = f" in {log_path.parent}" if log_path is not None else ""
+    return (
+        f"what was written before is kept{where} (finished episodes in results.csv, the "
+        "interrupted episode's log up to where it stopped)"
+    )
+
+
+def _report_interrupt(
+    args: tuple[Any, ...],
+    kept: Callable[[DictConfig], str] | None,
+    log_path: Path | None,
+) -> None:
+    """Print the ``interrupted: ...`` line of :func:`friendly_errors`: ``kept(cfg)``, or the
+    experiment's text when there is no ``kept`` or it cannot say (a config it cannot read)."""
+    cfg = args[0] if args and isinstance(args[0], DictConfig) else None
+    text = None
+    if kept is not None and cfg is not None:
+        try:
+            text = kept(cfg)
+        except Exception:  # noqa: BLE001 - the interrupt is reported in any case
+            text = None
+    print(f"interrupted: {text or _kept_episodes(log_path)}", file=sys.stderr)
 
 
 #: Hydra's switch that makes it raise the errors it meets rather than print them and exit 1
@@ -947,8 +1002,15 @@ def _closest(key: str, candidates: list[str]) -> str | None:
 @contextlib.contextmanager
 def _terminate_as_interrupt() -> Iterator[None]:
     """Handle SIGTERM (a cluster's stop, ``kill``) like Ctrl-C while the command runs, so
-    open logs are closed with what they hold; nothing changes outside the main thread."""
+    open logs are closed with what they hold; nothing changes outside the main thread.
+
+    An interrupt that lands while a finalizer runs (a ``__del__``, whose exceptions Python
+    prints and ignores: Lightning's profiler has one, run whenever the garbage collector
+    frees a finished trainer) would be lost, and the command would go on; it is raised again
+    in the main thread an instant later instead (:data:`sys.unraisablehook`)."""
+    import _thread
     import signal
+    import threading
 
     def _raise(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt
@@ -958,9 +1020,27 @@ def _terminate_as_interrupt() -> Iterator[None]:
     except ValueError:  # not the main thread
         yield
         return
+    previous_hook = sys.unraisablehook
+    timers: list[threading.Timer] = []
+
+    def _hook(unraisable: Any) -> None:
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            # from another thread, once the finalizer is over (if the main thread is in one
+            # again then, this comes back here)
+            timer = threading.Timer(0.01, _thread.interrupt_main)
+            timer.daemon = True
+            timers.append(timer)
+            timer.start()
+            return
+        previous_hook(unraisable)
+
+    sys.unraisablehook = _hook
     try:
         yield
     finally:
+        sys.unraisablehook = previous_hook
+        for timer in timers:
+            timer.cancel()
         signal.signal(signal.SIGTERM, previous)
 
 

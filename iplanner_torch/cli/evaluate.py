@@ -22,11 +22,13 @@ held-out clean motion at each ``evaluate.noises`` level and replays it at each
 ``evaluate.speeds`` speed, for each predictor in ``evaluate.compare``, read from
 ``<paths.checkpoints>/<data folder>/<option>/predictor.ckpt`` (trained with
 ``conf/predictor/<option>.yaml`` and ``trainer`` when missing; ``evaluate.checkpoint``,
-``train.out_dir`` and ``predictor`` are not read, and refused), and writes CSV, PNG plots and a
-README; ``episode`` summarises MCAP episode logs, or the episode rows of a results CSV (an
-experiment's ``results.csv``, or rows gathered from several runs; in a run or multirun folder,
-a run made with ``run.write_mcap=false`` is read from its ``results.csv``), with one row per
-episode, a summary table and plots, and prints the table ``iplanner-experiment`` prints
+``train.out_dir`` and ``predictor`` are not read, and refused; an existing checkpoint whose
+predictor settings differ from its option's in what tells the options apart, e.g.
+``svgp.noisy_input``, is refused), and writes CSV, PNG plots and a README; ``episode``
+summarises MCAP episode logs, or the episode rows of a results CSV (an experiment's
+``results.csv``, or rows gathered from several runs; in a run or multirun folder, a run made
+with ``run.write_mcap=false`` is read from its ``results.csv``), with one row per episode, a
+summary table and plots, and prints the table ``iplanner-experiment`` prints
 (:func:`~iplanner_torch.eval.report.comparison_table`: episode counts, then the paper's metrics
 in cm and ms); an episode whose log was cut before its metrics counts in ``contact_unknown``,
 not as contact-free nor as a contact. ``evaluate.logs`` may list several sources: with
@@ -58,6 +60,7 @@ from iplanner_torch.cli._common import (
     config_split,
     differing_settings,
     friendly_errors,
+    instantiate,
     load_dataset,
     overridden_fields,
     override_group,
@@ -326,6 +329,107 @@ def _refuse_unread_sweep_overrides(cfg: DictConfig) -> None:
         )
 
 
+def _flat_settings(settings: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested settings as dotted keys: ``{"svgp.noisy_input": "simple", "seed": 0, ...}``."""
+    out: dict[str, Any] = {}
+    for key, value in settings.items():
+        if isinstance(value, dict):
+            out.update(_flat_settings(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def _follows_seed(node: DictConfig) -> set[str]:
+    """The dotted keys of a ``conf/predictor`` node whose value is ``${seed}`` (the command
+    line's ``seed``)."""
+    from omegaconf import OmegaConf
+
+    raw = OmegaConf.to_container(node, resolve=False)
+    return {k for k, v in _flat_settings(raw).items() if v == "${seed}"}
+
+
+def _option_settings(cfg: DictConfig, options: list[str]) -> dict[str, dict[str, Any]]:
+    """Option -> the predictor settings of ``conf/predictor/<option>.yaml`` (dotted keys), for
+    ``options`` and every other option of the group that builds (those that do not are left
+    out; an option of ``options`` that does not build is refused).
+
+    Raises:
+        ConfigError: when an option of ``options`` does not build a predictor config.
+    """
+    from dataclasses import asdict
+
+    from iplanner_torch.cli.experiment import option_node
+    from iplanner_torch.prediction.predictor import PredictorCfg
+
+    names = sorted(p.stem for p in (Path(CONF_DIR) / "predictor").glob("*.yaml"))
+    out: dict[str, dict[str, Any]] = {}
+    for option in [*options, *(n for n in names if n not in options)]:
+        try:
+            built = instantiate(option_node("predictor", option, cfg), PredictorCfg, "predictor")
+        except ConfigError:
+            if option in options:
+                raise
+            continue
+        out[option] = _flat_settings(asdict(built))
+    return out
+
+
+def _check_predictor_option(
+    cfg: DictConfig, option: str, predictor: Any, ckpt: Path, options: dict[str, dict[str, Any]]
+) -> None:
+    """Refuse a checkpoint whose predictor settings are not those of the option it stands for:
+    ``noise_sweep`` labels ``<option>/predictor.ckpt`` with ``option``, so an iplanner_no_ni
+    predictor in the iplanner_ni folder would swap the table's rows without a word.
+
+    The settings compared are those in which the options of ``conf/predictor`` differ from one
+    another (what tells the variants apart: ``svgp.noisy_input`` for iplanner_ni and
+    iplanner_no_ni), leaving out the ``svgp`` fields the checkpoint's and the option's
+    ``noisy_input`` both do not read; a predictor trained otherwise on purpose in the rest
+    (``iplanner-train ... predictor.svgp.epochs=5`` into the folder) is used as it is. The
+    keys that follow ``seed`` (``seed``, ``svgp.seed``) are not compared: in ``noise_sweep``
+    ``seed`` draws the noise, and a checkpoint trained with another is used, as its recorded
+    split is (:func:`_evaluation_split`).
+
+    Args:
+        cfg: the root config.
+        option: the option of ``evaluate.compare`` whose folder holds ``ckpt``.
+        predictor: the loaded checkpoint.
+        ckpt: its path.
+        options: :func:`_option_settings` (``option`` among them).
+
+    Raises:
+        ConfigError: naming the checkpoint, the option, each setting that differs
+            (recorded -> config) and the way out.
+    """
+    from dataclasses import asdict
+
+    from iplanner_torch.cli.experiment import option_node
+    from iplanner_torch.prediction.svgp import UNREAD_BY_NOISY_INPUT
+
+    now = options[option]
+    saved = _flat_settings(asdict(predictor.cfg))
+    keys = {
+        k
+        for values in options.values()
+        for k, v in values.items()
+        if any(other.get(k) != v for other in options.values())
+    }
+    keys -= _follows_seed(option_node("predictor", option, cfg))
+    unread = set(UNREAD_BY_NOISY_INPUT.get(str(saved.get("svgp.noisy_input")), ()))
+    unread &= set(UNREAD_BY_NOISY_INPUT.get(str(now.get("svgp.noisy_input")), ()))
+    keys -= {f"svgp.{k}" for k in unread}
+    differ = [f"{k}: {a!r} -> {b!r}" for k, a, b in differing_settings(saved, now, keys)]
+    if differ:
+        raise ConfigError(
+            f"{ckpt} was trained with other predictor settings than conf/predictor/"
+            f"{option}.yaml, so the sweep would report it as {option}: "
+            f"{'; '.join(differ)} (recorded -> config). Retrain it into that folder "
+            f"(`iplanner-train data.path={cfg.data.path} predictor={option} "
+            f"train.out_dir={ckpt.parent}`), or delete {ckpt.parent} to have the sweep train it"
+        )
+
+
 def _noise_sweep(cfg: DictConfig) -> None:
     from iplanner_torch.cli.experiment import option_node
     from iplanner_torch.cli.train import train_from_config
@@ -354,11 +458,14 @@ def _noise_sweep(cfg: DictConfig) -> None:
         if ckpt.is_dir():
             raise CheckpointError(f"{ckpt}: is a folder, not a checkpoint file")
     missing = [option for option, ckpt in ckpts.items() if not ckpt.exists()]
-    # the trained ones first: their windows and split are checked before anything is trained
+    # the trained ones first: their settings, windows and split are checked before anything
+    # is trained
     loaded, recorded = {}, {}
+    options = _option_settings(cfg, compare) if len(missing) < len(ckpts) else {}
     for option, ckpt in ckpts.items():
         if option not in missing:
             loaded[option] = HumanMotionPredictor.load(ckpt, map_location=device)
+            _check_predictor_option(cfg, option, loaded[option], ckpt, options)
             _check_joints(cfg, loaded[option], ckpt)
             _check_windows(cfg, loaded[option], ckpt)
             recorded[ckpt] = recorded_split(ckpt, loaded[option].fingerprint)
@@ -557,8 +664,20 @@ def _refuse_unread(mode: str) -> None:
     )
 
 
+def _kept_when_interrupted(cfg: DictConfig) -> str:
+    """What an interrupted evaluation keeps, for its ``interrupted: ...`` line."""
+    text = "no results were written (they are written when the evaluation ends)"
+    if str(cfg.evaluate.mode) == "noise_sweep":
+        folder = repo_path(Path(str(cfg.paths.checkpoints)) / Path(str(cfg.data.path)).name)
+        text += (
+            "; the sub-models of a missing predictor trained before the signal are kept in "
+            f"{folder}/<option>/ (*.ckpt)"
+        )
+    return text
+
+
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
-@friendly_errors
+@friendly_errors(kept=_kept_when_interrupted)
 def _app(cfg: DictConfig) -> None:
     mode = str(cfg.evaluate.mode)
     if mode not in MODES:

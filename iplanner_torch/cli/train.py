@@ -150,8 +150,20 @@ def _refuse_unread(cfg: DictConfig) -> None:
     )
 
 
+def _kept_when_interrupted(cfg: DictConfig) -> str:
+    """What an interrupted training keeps, for its ``interrupted: ...`` line: the sub-models
+    finished before the signal (a fit that was cut writes nothing), which ``train.resume=true``
+    reuses."""
+    out_dir = repo_path(cfg.train.out_dir)
+    return (
+        f"what was written before is kept in {out_dir} (training_inputs.json and the "
+        "sub-models trained before the signal, as *.ckpt); run the same command with "
+        "train.resume=true to go on from them"
+    )
+
+
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
-@friendly_errors(before=_refuse_unread)
+@friendly_errors(before=_refuse_unread, kept=_kept_when_interrupted)
 def _app(cfg: DictConfig) -> None:
     _refuse_unread_svgp_fields(cfg)
     out_dir = repo_path(cfg.train.out_dir)

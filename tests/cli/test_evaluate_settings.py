@@ -302,3 +302,77 @@ def test_noise_sweep_scores_the_recorded_split_and_draws_its_noise_with_seed(
     evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "seed=5"))
     out = capsys.readouterr().out
     assert "held-out split: seed=1 data.split=[0.6,0.2,0.2] (recorded in" in out
+
+
+@pytest.fixture(scope="module")
+def trained_no_ni(
+    tmp_path_factory: pytest.TempPathFactory, tiny_reaching: SimpleNamespace
+) -> Path:
+    """The folder of a tiny predictor like ``trained``'s but without the noisy-input
+    correction (``svgp.noisy_input=none``, as conf/predictor/iplanner_no_ni.yaml)."""
+    from tiny_settings import tiny_predictor_cfg
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        ckpt = train_predictor(
+            tiny_reaching.windows,
+            predictor_cfg=tiny_predictor_cfg(noisy_input="none"),
+            trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False),
+            out_dir=tmp_path_factory.mktemp("no_ni") / "iplanner_no_ni",
+            progress=False,
+            split=tiny_reaching.split,
+        )
+    finally:
+        torch.set_num_threads(threads)
+    return ckpt.parent
+
+
+def test_noise_sweep_refuses_checkpoints_of_another_option_in_an_options_folder(
+    trained: SimpleNamespace,
+    trained_no_ni: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    no_training: None,
+) -> None:
+    """Each checkpoint in the other's folder would label the table's rows the wrong way round:
+    refused before anything is trained or scored, naming the checkpoint, the option, the
+    setting that differs and the way out; in their own folders they are compared."""
+    import iplanner_torch.eval.prediction_sweep as prediction_sweep
+
+    swept: list[dict[str, str]] = []
+
+    def sweep_stub(predictors: Any, demos: Any, **kwargs: Any) -> Any:
+        import pandas as pd
+
+        swept.append({o: p.cfg.svgp.noisy_input for o, p in predictors.items()})
+        return pd.DataFrame({"predictor": list(predictors)})
+
+    monkeypatch.setattr(prediction_sweep, "prediction_vs_noise", sweep_stub)
+    monkeypatch.setattr(prediction_sweep, "write_noise_report", lambda *a, **k: [])
+    ck = tmp_path / "ck" / "ds"
+    shutil.copytree(trained.ckpt.parent, ck / "iplanner_no_ni")  # noisy_input=simple
+    shutil.copytree(trained_no_ni, ck / "iplanner_ni")  # noisy_input=none
+    sweep = _sweep_args(trained, tmp_path)
+    for option, recorded, config in (
+        ("iplanner_no_ni", "simple", "none"),
+        ("iplanner_ni", "none", "simple"),
+    ):
+        ckpt = ck / option / "predictor.ckpt"
+        with pytest.raises(ConfigError, match=(
+            rf"^{ckpt} was trained with other predictor settings than conf/predictor/"
+            rf"{option}.yaml, so the sweep would report it as {option}: svgp.noisy_input: "
+            rf"'{recorded}' -> '{config}' \(recorded -> "
+            rf"config\). Retrain it into that folder \(`iplanner-train data.path={trained.ds} "
+            rf"predictor={option} train.out_dir={ckpt.parent}`\), or delete {ckpt.parent}"
+        )):  # fmt: skip
+            evaluate._noise_sweep(_cfg(monkeypatch, *sweep, f"evaluate.compare=[{option}]"))
+    shutil.rmtree(ck / "iplanner_no_ni")  # the missing one would be trained: refused first
+    with pytest.raises(ConfigError, match=r"iplanner_ni/predictor.ckpt was trained with other"):
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "seed=1", "data.split=[0.6,0.2,0.2]"))
+    assert not swept and not (ck / "iplanner_no_ni").exists()
+    shutil.rmtree(ck / "iplanner_ni")
+    shutil.copytree(trained_no_ni, ck / "iplanner_no_ni")
+    shutil.copytree(trained.ckpt.parent, ck / "iplanner_ni")
+    evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "seed=5"))  # seed draws only the noise
+    assert swept == [{"iplanner_no_ni": "none", "iplanner_ni": "simple"}]
