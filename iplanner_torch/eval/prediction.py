@@ -61,8 +61,11 @@ INPUTS_FILE = "training_inputs.json"
 #: log_every_n_steps and tensorboard change where they are computed and what is logged, not
 #: what is fitted, save for float rounding)
 RESUME_TRAINER_FIELDS = ("max_epochs", "max_steps", "seed")
-#: the parts of an :data:`INPUTS_FILE` record that decide what the sub-models are
-_RECORD_KEYS = ("fingerprint", "action_names", "joint_names", "predictor_cfg", "window_cfg")
+#: the parts of an :data:`INPUTS_FILE` record that decide what the sub-models are, compared
+#: whole (the trainer's :data:`RESUME_TRAINER_FIELDS` and the split's
+#: :data:`RESUME_SPLIT_FIELDS` decide them too)
+RESUME_RECORD_KEYS = ("fingerprint", "action_names", "joint_names", "predictor_cfg", "window_cfg")
+RESUME_SPLIT_FIELDS = ("seed", "fractions")
 
 
 def inputs_digest(record: dict[str, Any]) -> str:
@@ -82,11 +85,11 @@ def inputs_digest(record: dict[str, Any]) -> str:
     trainer = record.get("trainer_cfg")
     split = record.get("split")
     key = {
-        **{k: record.get(k) for k in _RECORD_KEYS},
+        **{k: record.get(k) for k in RESUME_RECORD_KEYS},
         "trainer_cfg": {f: trainer.get(f) for f in RESUME_TRAINER_FIELDS}
         if isinstance(trainer, dict)
         else None,
-        "split": {f: split.get(f) for f in ("seed", "fractions")}
+        "split": {f: split.get(f) for f in RESUME_SPLIT_FIELDS}
         if isinstance(split, dict)
         else None,
     }

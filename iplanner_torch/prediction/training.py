@@ -41,6 +41,8 @@ from iplanner_torch.data.windows import WindowSet, compute_features
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
 from iplanner_torch.eval.prediction import (
     INPUTS_FILE,
+    RESUME_RECORD_KEYS,
+    RESUME_SPLIT_FIELDS,
     RESUME_TRAINER_FIELDS,
     SplitRecord,
     inputs_digest,
@@ -136,6 +138,7 @@ class SVGPModule(L.LightningModule):
         y_val: (N_v, C) validation outputs, or None.
         calibrate: raise the noise floor on the validation windows at the end
             (:meth:`SVGPRegressor.calibrate`, when ``cfg.calibrate_floor``).
+        inputs_digest: the training run's :func:`inputs_digest`, written into the checkpoint.
     """
 
     def __init__(
@@ -148,11 +151,13 @@ class SVGPModule(L.LightningModule):
         x_val: torch.Tensor | None = None,
         y_val: torch.Tensor | None = None,
         calibrate: bool = True,
+        inputs_digest: str = "",
     ) -> None:
         super().__init__()
         self.reg = reg
         self.steps = int(steps)
         self.calibrate = bool(calibrate)
+        self.inputs_digest = inputs_digest
         self.register_buffer("x", x, persistent=False)
         self.register_buffer("y", y, persistent=False)
         self.register_buffer("extra", extra, persistent=False)
@@ -204,7 +209,7 @@ class SVGPModule(L.LightningModule):
 
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         checkpoint["svgp"] = self.reg.to_checkpoint()
-        _stamp(checkpoint, "svgp", getattr(self, "inputs_digest", ""))
+        _stamp(checkpoint, "svgp", self.inputs_digest)
 
 
 class _IndexBatches(torch.utils.data.Dataset):
@@ -232,6 +237,7 @@ class IVMModule(L.LightningModule):
         progress: (N,) int64 progress bitmasks.
         current: (N,) int64 current actions.
         fit_kwargs: keyword arguments of ``classifier.fit`` (num_actions, kernel_factory, ...).
+        inputs_digest: the training run's :func:`inputs_digest`, written into the checkpoint.
     """
 
     def __init__(
@@ -241,8 +247,10 @@ class IVMModule(L.LightningModule):
         progress: torch.Tensor,
         current: torch.Tensor,
         fit_kwargs: dict[str, Any],
+        inputs_digest: str = "",
     ) -> None:
         super().__init__()
+        self.inputs_digest = inputs_digest
         self.automatic_optimization = False
         self.classifier = classifier
         self.data = (x, progress, current)
@@ -265,7 +273,7 @@ class IVMModule(L.LightningModule):
 
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         checkpoint["classifier"] = self.classifier.state_dict()
-        _stamp(checkpoint, "classifier", getattr(self, "inputs_digest", ""))
+        _stamp(checkpoint, "classifier", self.inputs_digest)
 
 
 def _loss_history(classifier: Any) -> list[float]:
@@ -424,8 +432,10 @@ def train_svgp(
             cfg.steps_for(n, tcfg.max_epochs) if r == 0 else cfg.nigp_refit_steps
         )
         # the floor is calibrated once, after the last round
-        module = SVGPModule(reg, x, y, extra, steps, x_val, y_val, calibrate=r == rounds - 1)
-        module.inputs_digest = inputs_digest
+        module = SVGPModule(
+            reg, x, y, extra, steps, x_val, y_val,
+            calibrate=r == rounds - 1, inputs_digest=inputs_digest,
+        )  # fmt: skip
         if steps > 0:
             trainer = _trainer(
                 tcfg, out_dir, name if rounds == 1 else f"{name}_r{r}", steps, progress
@@ -773,11 +783,10 @@ def _record_inputs(
             f"cannot resume in {out_dir}: {err}; run with train.resume=false"
         ) from None
     if before is not None:
-        always = ("fingerprint", "action_names", "joint_names", "predictor_cfg", "window_cfg")
-        changed = sorted(k for k in always if before.get(k) != inputs[k])
+        changed = sorted(k for k in RESUME_RECORD_KEYS if before.get(k) != inputs[k])
         for key, fields in (
             ("trainer_cfg", RESUME_TRAINER_FIELDS),
-            ("split", ("seed", "fractions")),
+            ("split", RESUME_SPLIT_FIELDS),
         ):
             was, now = before.get(key), inputs.get(key)
             if not isinstance(was, dict) or now is None:  # not recorded then, or not given now
@@ -854,8 +863,9 @@ def _train_classifier(
         else None
     )
     clf = ActionClassifier(feature_index=index)
-    module = IVMModule(clf, x, train.progress[idx], train.current[idx], fit_kwargs)
-    module.inputs_digest = digest
+    module = IVMModule(
+        clf, x, train.progress[idx], train.current[idx], fit_kwargs, inputs_digest=digest
+    )
     # manual optimisation never steps an optimiser, so the budget is one epoch, not one step
     trainer = _trainer(tcfg, out_dir, "classifier", -1, False, max_epochs=1)
     trainer.fit(module)
