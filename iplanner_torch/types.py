@@ -162,9 +162,12 @@ def default_device() -> torch.device:
 def resolve_device(device: torch.device | str) -> torch.device:
     """The usable torch device ``device`` names; ``"auto"`` is :func:`default_device`.
 
+    The project runs on ``cpu`` and ``cuda``; other types are refused (``meta`` holds no
+    numbers, ``mps`` and the rest are untested here).
+
     Raises:
-        ConfigError: for a name torch does not know, a CUDA device when CUDA is not
-            available, or a CUDA index beyond the devices present.
+        ConfigError: for a name torch does not know, a device type other than those two, a
+            CUDA device when CUDA is not available, or a CUDA index beyond the devices present.
     """
     if isinstance(device, str) and device == "auto":
         return default_device()
@@ -172,6 +175,11 @@ def resolve_device(device: torch.device | str) -> torch.device:
         dev = torch.device(device)
     except (RuntimeError, TypeError) as exc:
         raise ConfigError(f"unknown device {device!r}: {exc}") from exc
+    if dev.type not in ("cpu", "cuda"):
+        raise ConfigError(
+            f"device {str(dev)!r} is not one this project runs on: use 'cpu', 'cuda', "
+            "'cuda:<index>' or 'auto'"
+        )
     if dev.type == "cuda":
         if not torch.cuda.is_available():
             raise ConfigError(f"device {str(dev)!r} requested but CUDA is not available")

@@ -382,7 +382,7 @@ def check_root_keys(cfg: DictConfig) -> None:
         if value is not absent and (value is None or not str(value).strip()):
             got = "null" if value is None else repr(value)
             raise ConfigError(f"{key}: expected a path, got {got}")
-    if "device" in cfg:  # a device torch does not know, or CUDA where there is none
+    if "device" in cfg:  # a device torch does not know, meta or mps, or CUDA where there is none
         from iplanner_torch.types import resolve_device
 
         try:

@@ -690,17 +690,23 @@ class HumanMotionPredictor:
                 a checkpoint of another format version than ``CHECKPOINT_VERSION``, a
                 sub-model class that cannot be imported, or a checkpoint of another joint set
                 than ``expect_joints``.
-            ConfigError: when ``map_location`` is not a device, or one this machine lacks.
+            ConfigError: when ``map_location`` is not a device, is ``meta`` (no data), or is
+                one this machine lacks.
         """
         path = Path(path)
         if map_location is not None:
             try:
-                torch.device(map_location)
+                device = torch.device(map_location)
             except (RuntimeError, TypeError, ValueError) as err:
                 raise ConfigError(
                     f"expected map_location a torch device (e.g. 'cpu', 'cuda:0'), got "
                     f"{map_location!r}"
                 ) from err
+            if device.type == "meta":
+                raise ConfigError(
+                    "map_location 'meta' holds no numbers, and a predictor needs its weights "
+                    "to forecast: load it on a real device (e.g. 'cpu', 'cuda:0')"
+                )
         if path.is_dir():
             raise CheckpointError(
                 f"predictor checkpoint {path} is a directory, not a checkpoint file (a training "

@@ -66,6 +66,10 @@ def test_resolve_device_names_usable_devices_only() -> None:
     for bad in ("tpu9", "", 3.5):
         with pytest.raises(ConfigError, match="unknown device"):
             resolve_device(bad)  # type: ignore[arg-type]
+    # torch knows these types, but they hold no numbers or are untested here
+    for other in ("meta", "mps", "xpu", torch.device("meta")):
+        with pytest.raises(ConfigError, match="not one this project runs on"):
+            resolve_device(other)
     if not torch.cuda.is_available():
         with pytest.raises(ConfigError, match="CUDA is not available"):
             resolve_device("cuda")

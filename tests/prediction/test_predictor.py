@@ -384,6 +384,11 @@ def test_damaged_or_foreign_checkpoints_raise_checkpoint_errors(trained, tmp_pat
         HumanMotionPredictor.load(tmp_path)
     with pytest.raises(ConfigError, match="expected map_location a torch device.*'bogus'"):
         HumanMotionPredictor.load(path, map_location="bogus")
+    # the meta device has no data: a setting error, not a damaged file
+    with pytest.raises(ConfigError, match="map_location 'meta' holds no numbers"):
+        HumanMotionPredictor.load(path, map_location="meta")
+    with pytest.raises(ConfigError, match="map_location 'meta'"):
+        HumanMotionPredictor.load(path, map_location=torch.device("meta"))
 
 
 def test_checkpoint_roundtrip_and_errors(trained, tmp_path: Path) -> None:
