@@ -36,19 +36,30 @@ Kernels (classes with ``__call__(x1, x2) -> (B1, B2)`` and ``diag(x) -> (B,)``):
   alignments of the product of local Gaussian-like kernels; positive definite. Computed in log
   space on the same wavefront with log-sum-exp.
 * :class:`RBFKernel`: Gaussian kernel on the flattened windows, the cheap alternative.
+
+Inputs: windows are float32 or float64 (:data:`DTYPES`), both of one dtype and on one device,
+with T >= 1 frames and D >= 1 features, finite. Half precision (float16, bfloat16) is refused
+rather than computed, as in :mod:`iplanner_torch.collision.gaussian`: float16 squared frame
+distances overflow beyond 256 feature units (NaN distances), a DTW sum of up to T + T2 - 1
+costs overflows its largest value 65504 even where each distance does not, bfloat16 keeps
+fewer than 3 significant digits, and ``cdist`` does not take half precision on the CPU.
+Computing in float32 and rounding back would still overflow the float16 result, so callers
+convert (``x.float()``) and get float32 distances. Empty batches (B = 0) give empty results.
+Settings (``band``, ``max_cells``, ``sigma``, ``gamma``, ``lengthscale``) are checked when
+given, with :class:`~iplanner_torch.errors.ConfigError`.
 """
 
 from __future__ import annotations
 
 import inspect
 import math
-import numbers
 from collections.abc import Callable
 from typing import Any, Literal, Protocol
 
 import torch
 from torch import Tensor
 
+from iplanner_torch import checks
 from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.types import check_finite, check_shape
 
@@ -67,6 +78,9 @@ __all__ = [
 
 #: Default largest number of cost cells (pairs x T x T2) held by one tile.
 DEFAULT_MAX_CELLS = 2**23
+
+#: The dtypes windows may have (half precision overflows: see the module docstring).
+DTYPES = (torch.float32, torch.float64)
 
 # Entries whose squared distance is below this fraction of ||a||^2 + ||b||^2 (after centring)
 # are recomputed from explicit differences: the matrix-product form loses them to cancellation.
@@ -353,28 +367,53 @@ def _check_finite(name: str, x: Tensor) -> None:
     check_finite(name, x, ("window", "frame"), hint="impute lost frames first")
 
 
-def _check_pair(x: Tensor, y: Tensor) -> None:
-    check_shape("x", x, ("B1", "T", "D"))
-    check_shape("y", y, ("B2", "T2", x.shape[2]))
-    if x.shape[1] < 1 or y.shape[1] < 1:
+def _check_pair(x: Tensor, y: Tensor, names: tuple[str, str] = ("x", "y")) -> None:
+    """Shapes (B1, T, D) and (B2, T2, D) with T, T2, D >= 1, one dtype of :data:`DTYPES`, one
+    device, finite values (ShapeError, DataError)."""
+    nx, ny = names
+    check_shape(nx, x, ("B1", "T", "D"))
+    check_shape(ny, y, ("B2", "T2", x.shape[2]))
+    if x.shape[1] < 1 or y.shape[1] < 1 or x.shape[2] < 1:
         raise ShapeError(
-            f"expected at least one frame, got x {tuple(x.shape)}, y {tuple(y.shape)}"
+            f"expected at least one frame and one feature (T, T2, D >= 1), got {nx} "
+            f"{tuple(x.shape)}, {ny} {tuple(y.shape)}"
         )
     if x.dtype != y.dtype or x.device != y.device:
         raise ShapeError(
-            f"expected x and y with the same dtype and device, got {x.dtype}/{x.device} and "
-            f"{y.dtype}/{y.device}"
+            f"expected {nx} and {ny} with the same dtype and device, got {x.dtype}/{x.device} "
+            f"and {y.dtype}/{y.device}"
         )
-    if not x.is_floating_point():
-        raise ShapeError(f"expected floating point windows, got {x.dtype}")
-    _check_finite("x", x)
+    if x.dtype not in DTYPES:
+        half = x.is_floating_point()  # float16 overflows squared distances beyond 256
+        why = (
+            ": half precision overflows or rounds off frame distances, use x.float()"
+            if half
+            else ""
+        )
+        raise ShapeError(
+            f"expected floating point windows of dtype torch.float32 or torch.float64, got "
+            f"{x.dtype}{why}"
+        )
+    _check_finite(nx, x)
     if y is not x:
-        _check_finite("y", y)
+        _check_finite(ny, y)
 
 
-def _check_band(band: int | None) -> None:
-    if band is not None and (int(band) != band or band < 0):
+def _check_band(band: object) -> None:
+    """ConfigError unless ``band`` is None or an integer >= 0 (an integral float counts)."""
+    ok = band is None or (
+        checks.is_real(band)
+        and math.isfinite(float(band))  # type: ignore[arg-type]
+        and float(band) == int(band)  # type: ignore[arg-type, call-overload]
+        and float(band) >= 0  # type: ignore[arg-type]
+    )
+    if not ok:
         raise ConfigError(f"expected band None or an integer >= 0, got {band!r}")
+
+
+def _check_max_cells(max_cells: object) -> int:
+    """``max_cells`` as an int; ConfigError unless it is an integer >= 1."""
+    return checks.integer("max_cells", max_cells, minimum=1)
 
 
 #: Cost cells per Gram tile on CPU: about 2 MB in float64, so a tile stays in cache.
@@ -468,20 +507,23 @@ def dtw_distance(
         squared: False: sum of Euclidean local costs ``||x_i - y_j||`` along the optimal path.
             True: ``sqrt`` of the smallest sum of *squared* local costs ``||x_i - y_j||^2``
             (the definition of ``tslearn.metrics.dtw``).
-        max_cells: the largest number of cost cells (pairs x T x T2) one tile holds; peak memory
-            is about 3 x 4 bytes x ``max_cells`` in float32.
+        max_cells: the largest number of cost cells (pairs x T x T2) one tile holds, an integer
+            >= 1; peak memory is about 3 x 4 bytes x ``max_cells`` in float32.
 
     Returns:
         (B1, B2) DTW distances, same units as the features, dtype and device of ``x``. When
         ``y is x`` only the upper triangle of tiles is computed and the result is symmetric.
 
     Raises:
-        ShapeError: on wrong ranks, different D, dtypes or devices.
-        ConfigError: on a negative band.
+        ShapeError: on wrong ranks, T, T2 or D = 0, different D, dtypes or devices, or a dtype
+            other than float32 and float64 (half precision included: see the module docstring).
+        ConfigError: on a band that is not None or an integer >= 0 (NaN, inf, a string), or a
+            ``max_cells`` that is not an integer >= 1.
         DataError: when a window of ``x`` or ``y`` holds NaN or inf (naming window and frame).
     """
     _check_pair(x, y)
     _check_band(band)
+    max_cells = _check_max_cells(max_cells)
     kind = "dtw_sq" if squared else "dtw"
     return _gram(x, y, band, kind, None, max_cells, symmetric=y is x)
 
@@ -507,11 +549,13 @@ def dtw_paired(
         (B,) DTW distances.
 
     Raises:
-        ShapeError: on wrong ranks or different batch sizes.
+        ShapeError: as :func:`dtw_distance`, or on different batch sizes.
+        ConfigError: as :func:`dtw_distance`.
         DataError: as :func:`dtw_distance`.
     """
     _check_pair(x, y)
     _check_band(band)
+    max_cells = _check_max_cells(max_cells)
     if x.shape[0] != y.shape[0]:
         raise ShapeError(f"expected y with batch {x.shape[0]}, got {tuple(y.shape)}")
     return _chunked_paired(x, y, band, "dtw_sq" if squared else "dtw", None, max_cells)
@@ -543,15 +587,16 @@ def gak_log(
         (B1, B2) ``log k(x, y)``.
 
     Raises:
-        ShapeError: on wrong shapes.
-        ConfigError: on ``sigma <= 0`` or a negative band.
+        ShapeError: as :func:`dtw_distance`.
+        ConfigError: on a ``sigma`` that is not a finite number > 0, or as
+            :func:`dtw_distance` (band, max_cells).
         DataError: as :func:`dtw_distance`.
     """
     _check_pair(x, y)
     _check_band(band)
-    if not sigma > 0:
-        raise ConfigError(f"expected sigma > 0, got {sigma}")
-    return _gram(x, y, band, "gak", float(sigma), max_cells, symmetric=y is x)
+    max_cells = _check_max_cells(max_cells)
+    sigma = checks.positive("sigma", sigma)
+    return _gram(x, y, band, "gak", sigma, max_cells, symmetric=y is x)
 
 
 def gak_log_paired(
@@ -575,43 +620,45 @@ def gak_log_paired(
         (B,) log kernel values.
 
     Raises:
-        ShapeError: on wrong shapes.
-        ConfigError: on ``sigma <= 0``.
+        ShapeError: as :func:`dtw_distance`, or on different batch sizes.
+        ConfigError: as :func:`gak_log`.
         DataError: as :func:`dtw_distance`.
     """
     _check_pair(x, y)
     _check_band(band)
-    if not sigma > 0:
-        raise ConfigError(f"expected sigma > 0, got {sigma}")
+    max_cells = _check_max_cells(max_cells)
+    sigma = checks.positive("sigma", sigma)
     if x.shape[0] != y.shape[0]:
         raise ShapeError(f"expected y with batch {x.shape[0]}, got {tuple(y.shape)}")
-    return _chunked_paired(x, y, band, "gak", float(sigma), max_cells)
+    return _chunked_paired(x, y, band, "gak", sigma, max_cells)
 
 
 def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None = None) -> float:
     """Median DTW distance over random pairs of distinct windows (the ``gamma`` heuristic).
 
     Args:
-        x: (B, T, D) windows, B >= 2, finite.
+        x: (B, T, D) windows, B >= 2, float32 or float64, finite.
         n_pairs: number of random pairs, >= 1.
-        seed: seed of the pair sampler.
+        seed: seed of the pair sampler, an integer.
         band: as in :func:`dtw_distance`.
 
     Returns:
         The median distance (a positive float; 1.0 if all sampled pairs coincide).
 
     Raises:
-        ShapeError: when fewer than two windows are given.
-        ConfigError: when ``n_pairs < 1``.
+        ShapeError: when fewer than two windows are given, or as :func:`dtw_distance`.
+        ConfigError: when ``n_pairs < 1``, ``seed`` is not an integer, or as
+            :func:`dtw_distance` (band).
         DataError: when a window holds NaN or inf (naming window and frame).
     """
     check_shape("x", x, ("B", "T", "D"))
     if x.shape[0] < 2:
         raise ShapeError(f"expected x (B >= 2, T, D), got {tuple(x.shape)}")
-    if not (isinstance(n_pairs, numbers.Integral) and n_pairs >= 1):
-        raise ConfigError(f"expected n_pairs an integer >= 1, got {n_pairs!r}")
-    _check_finite("x", x)
-    g = torch.Generator().manual_seed(int(seed))
+    checks.integer("n_pairs", n_pairs, minimum=1)
+    seed = checks.integer("seed", seed)
+    _check_band(band)
+    _check_pair(x, x)  # shapes, dtype, finite values
+    g = torch.Generator().manual_seed(seed)
     i = torch.randint(0, x.shape[0], (n_pairs,), generator=g)
     j = (i + torch.randint(1, x.shape[0], (n_pairs,), generator=g)) % x.shape[0]
     d = dtw_paired(x[i.to(x.device)], x[j.to(x.device)], band=band)
@@ -630,24 +677,28 @@ class DTWKernel:
     kernel logistic regression), a GP needs jitter. ``diag`` is exactly 1 since DTW(x, x) = 0.
 
     Args:
-        gamma: length scale in the units of DTW distances (> 0); :func:`median_dtw` is a
-            common choice.
+        gamma: length scale in the units of DTW distances (> 0, finite); :func:`median_dtw`
+            is a common choice.
         band: Sakoe-Chiba half-width, as in :func:`dtw_distance`.
         max_cells: tile size, as in :func:`dtw_distance`.
+
+    Raises:
+        ConfigError: on a ``gamma`` that is not a finite number > 0, or a band or
+            ``max_cells`` that :func:`dtw_distance` refuses.
     """
 
     name = "dtw"
     positive_definite = False
+    #: windows of different lengths T may be compared
+    equal_lengths = False
 
     def __init__(
         self, gamma: float, band: int | None = None, *, max_cells: int = DEFAULT_MAX_CELLS
     ) -> None:
-        if not gamma > 0:
-            raise ConfigError(f"expected gamma > 0, got {gamma}")
+        self.gamma = checks.positive("gamma", gamma)
         _check_band(band)
-        self.gamma = float(gamma)
         self.band = band
-        self.max_cells = int(max_cells)
+        self.max_cells = _check_max_cells(max_cells)
 
     @property
     def hparams(self) -> dict[str, Any]:
@@ -655,7 +706,11 @@ class DTWKernel:
         return {"gamma": self.gamma, "band": self.band}
 
     def __call__(self, x1: Tensor, x2: Tensor) -> Tensor:
-        """(B1, T, D), (B2, T2, D) -> (B1, B2) kernel values in (0, 1]."""
+        """(B1, T, D), (B2, T2, D) -> (B1, B2) kernel values in (0, 1].
+
+        Raises:
+            ShapeError, DataError: as :func:`dtw_distance` (naming ``x1`` as ``x``).
+        """
         d = dtw_distance(x1, x2, band=self.band, max_cells=self.max_cells)
         return torch.exp(-d / self.gamma)
 
@@ -678,10 +733,16 @@ class GlobalAlignmentKernel:
         normalize: return ``k(x, y) / sqrt(k(x, x) k(y, y))`` (values in (0, 1], diag 1) instead
             of the raw kernel, whose magnitude grows exponentially with T.
         max_cells: tile size, as in :func:`dtw_distance`.
+
+    Raises:
+        ConfigError: on a ``sigma`` that is not a finite number > 0, or a band or
+            ``max_cells`` that :func:`dtw_distance` refuses.
     """
 
     name = "gak"
     positive_definite = True
+    #: windows of different lengths T may be compared
+    equal_lengths = False
 
     def __init__(
         self,
@@ -691,13 +752,11 @@ class GlobalAlignmentKernel:
         normalize: bool = True,
         max_cells: int = DEFAULT_MAX_CELLS,
     ) -> None:
-        if not sigma > 0:
-            raise ConfigError(f"expected sigma > 0, got {sigma}")
+        self.sigma = checks.positive("sigma", sigma)
         _check_band(band)
-        self.sigma = float(sigma)
         self.band = band
         self.normalize = bool(normalize)
-        self.max_cells = int(max_cells)
+        self.max_cells = _check_max_cells(max_cells)
 
     @property
     def hparams(self) -> dict[str, Any]:
@@ -710,7 +769,11 @@ class GlobalAlignmentKernel:
         return gak_log_paired(x, x, sigma=self.sigma, band=self.band, max_cells=self.max_cells)
 
     def __call__(self, x1: Tensor, x2: Tensor) -> Tensor:
-        """(B1, T, D), (B2, T2, D) -> (B1, B2) kernel values."""
+        """(B1, T, D), (B2, T2, D) -> (B1, B2) kernel values.
+
+        Raises:
+            ShapeError, DataError: as :func:`gak_log` (naming ``x1`` as ``x``).
+        """
         lk = gak_log(x1, x2, sigma=self.sigma, band=self.band, max_cells=self.max_cells)
         if self.normalize:
             d1 = self.log_diag(x1)
@@ -733,16 +796,19 @@ class RBFKernel:
     """Gaussian kernel on flattened windows: ``exp(-||x - y||^2 / (2 lengthscale^2))``.
 
     Args:
-        lengthscale: in feature units (> 0); windows must have equal T.
+        lengthscale: in feature units (> 0, finite); windows must have equal T.
+
+    Raises:
+        ConfigError: on a ``lengthscale`` that is not a finite number > 0.
     """
 
     name = "rbf"
     positive_definite = True
+    #: both windows of a pair must have the same length T
+    equal_lengths = True
 
     def __init__(self, lengthscale: float) -> None:
-        if not lengthscale > 0:
-            raise ConfigError(f"expected lengthscale > 0, got {lengthscale}")
-        self.lengthscale = float(lengthscale)
+        self.lengthscale = checks.positive("lengthscale", lengthscale)
 
     @property
     def hparams(self) -> dict[str, Any]:
@@ -750,17 +816,19 @@ class RBFKernel:
         return {"lengthscale": self.lengthscale}
 
     def __call__(self, x1: Tensor, x2: Tensor) -> Tensor:
-        """(B1, T, D), (B2, T, D) -> (B1, B2) kernel values in (0, 1].
+        """(B1, T, D), (B2, T, D) -> (B1, B2) kernel values in (0, 1]; an empty batch gives
+        an empty result.
 
         Raises:
-            ShapeError: on wrong shapes.
+            ShapeError: on wrong shapes (T or D = 0 included), different dtypes or devices, or
+                a dtype other than float32 and float64 (as :func:`dtw_distance`).
             DataError: when a window holds NaN or inf (naming window and frame).
         """
         check_shape("x1", x1, ("B1", "T", "D"))
         check_shape("x2", x2, ("B2", x1.shape[1], x1.shape[2]))
-        _check_finite("x1", x1)
-        if x2 is not x1:
-            _check_finite("x2", x2)
+        _check_pair(x1, x2, ("x1", "x2"))
+        if x1.shape[0] == 0 or x2.shape[0] == 0:
+            return x1.new_empty(x1.shape[0], x2.shape[0])
         sq = _sqdist_rows(x1.flatten(1), x2.flatten(1))  # (B1, B2)
         return torch.exp(-0.5 * sq / self.lengthscale**2)
 
@@ -784,12 +852,22 @@ def kernel_from_state(name: str, hparams: dict[str, Any]) -> KernelLike:
     """Rebuild one of this module's kernels from its ``name`` and ``hparams``.
 
     Raises:
-        ConfigError: for an unknown name or arguments the kernel does not take.
+        ConfigError: for an unknown name, ``hparams`` that is not a dict, arguments the
+            kernel does not take, required ones that are missing (named), or values the
+            kernel refuses. Checkpoint loaders turn it into a
+            :class:`~iplanner_torch.errors.CheckpointError`.
     """
-    if name not in _KERNELS:
+    if not isinstance(name, str) or name not in _KERNELS:
         raise ConfigError(f"unknown kernel {name!r}; known: {sorted(_KERNELS)}")
+    if not isinstance(hparams, dict):
+        raise ConfigError(
+            f"expected the hparams of kernel {name!r} a dict, got {type(hparams).__name__}"
+        )
     params = inspect.signature(_KERNELS[name]).parameters
     unknown = set(hparams) - set(params)
     if unknown:
         raise ConfigError(f"kernel {name!r} takes no arguments {sorted(unknown)}")
+    missing = [p for p, spec in params.items() if spec.default is spec.empty and p not in hparams]
+    if missing:
+        raise ConfigError(f"kernel {name!r} needs the arguments {missing}, missing from {hparams}")
     return _KERNELS[name](**hparams)

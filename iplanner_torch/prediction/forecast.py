@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import copy
 import math
+import numbers
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 
 from iplanner_torch.errors import DataError, ShapeError
-from iplanner_torch.types import all_finite, check_shape
+from iplanner_torch.types import MAX_POSITION_M, check_shape
 
 #: how far a row of forecast weights may sum from 1 (float32 rounding of A probabilities)
 WEIGHT_SUM_TOL = 1e-3
@@ -26,8 +28,10 @@ class Forecast:
 
     Attributes:
         weights: (B, A) p(c = a | F_prev, p): >= 0, rows sum to 1 (within
-            :data:`WEIGHT_SUM_TOL`).
-        mean: (B, A, n_f, K, 3) predicted joint positions [m], world (table) frame.
+            :data:`WEIGHT_SUM_TOL`); B >= 1 and A >= 1. ``weights``, ``mean`` and ``var`` share
+            one floating dtype and one device.
+        mean: (B, A, n_f, K, 3) predicted joint positions [m], world (table) frame, each
+            coordinate within +-:data:`~iplanner_torch.types.MAX_POSITION_M`.
         var: (B, A, n_f, K, 3) per-coordinate variances [m^2] (independent output channels).
             Negative entries (rounding in a GP's predictive variance) are not rejected here:
             the planner floors them (:func:`~iplanner_torch.planning.costs.forecast_to_obstacle`
@@ -37,13 +41,15 @@ class Forecast:
         action_names: the A action names.
 
     Raises:
-        ShapeError: when ``weights``, ``mean`` or ``var`` has the wrong shape, or
+        ShapeError: when ``weights``, ``mean`` or ``var`` has the wrong shape (B = 0 or A = 0
+            included), is not of a floating dtype, or they differ in dtype or device, or
             ``action_names`` does not name A actions.
         DataError: when ``weights``, ``mean`` or ``var`` holds NaN or inf (naming the field
-            and, for ``mean`` and ``var``, the joint), a row of ``weights`` is not
+            and, for ``mean`` and ``var``, the joint), a coordinate of ``mean`` lies beyond
+            :data:`~iplanner_torch.types.MAX_POSITION_M`, a row of ``weights`` is not
             probabilities (all 0 would hide the person), or ``dt`` is not a finite number > 0.
-            A non-finite forecast must never reach the planner, whose collision bound would
-            read it as "no human".
+            A non-finite or far-away forecast must never reach the planner, whose collision
+            bound would read it as "no human".
     """
 
     weights: torch.Tensor
@@ -56,8 +62,14 @@ class Forecast:
     def __post_init__(self) -> None:
         check_shape("weights", self.weights, ("B", "A"))
         b, a = self.weights.shape
+        if b < 1 or a < 1:
+            raise ShapeError(
+                f"expected forecast weights (B, A) with B >= 1 and A >= 1, got {(b, a)}: a "
+                "forecast needs a batch row and an action"
+            )
         check_shape("mean", self.mean, (b, a, "n_f", len(self.joint_names), 3))
         check_shape("var", self.var, tuple(self.mean.shape))
+        self._check_dtypes()
         if len(self.action_names) != a:
             raise ShapeError(
                 f"expected {a} action names (weights (B, A) = {tuple(self.weights.shape)}), "
@@ -76,19 +88,56 @@ class Forecast:
             # a planning cycle's forecast: a few numbers, checked in Python (one tolist) at a
             # fraction of the cost of a chain of tiny tensor operations
             rows = w.tolist()
-            bad = any(min(r) < 0 or abs(sum(r) - 1) > WEIGHT_SUM_TOL for r in rows if r)
-            if bad or not all_finite(self.weights, self.mean, self.var):
+            bad = any(min(r) < 0 or abs(sum(r) - 1) > WEIGHT_SUM_TOL for r in rows)
+            if bad or not self._values_ok(None):
                 self._raise_invalid()
             return
-        # a batch: a NaN flag, so that the one host sync of the finiteness check checks them
+        # a batch: a flag that joins the one host sync of the value check
         invalid = (w < 0).any() | ((w.sum(-1) - 1).abs() > WEIGHT_SUM_TOL).any()
-        flag = torch.where(invalid, math.nan, 0.0)
-        if not all_finite(self.weights, self.mean, self.var, flag):
+        if not self._values_ok(invalid):
             self._raise_invalid()
 
+    def _check_dtypes(self) -> None:
+        """ShapeError unless ``weights``, ``mean`` and ``var`` share one floating dtype and one
+        device (integer or bool tensors, or a float32 / float64 mix, would fail later, in
+        :meth:`expected_mean` or the planner, with a raw RuntimeError)."""
+        fields = {"weights": self.weights, "mean": self.mean, "var": self.var}
+        for name, t in fields.items():
+            if not t.is_floating_point():
+                raise ShapeError(f"expected forecast {name} of a floating dtype, got {t.dtype}")
+        if (
+            len({t.dtype for t in fields.values()}) > 1
+            or len({t.device for t in fields.values()}) > 1
+        ):
+            got = ", ".join(f"{n} {t.dtype}/{t.device}" for n, t in fields.items())
+            raise ShapeError(
+                f"expected forecast weights, mean and var of one dtype on one device, got {got}"
+            )
+
+    def _values_ok(self, invalid: torch.Tensor | None) -> bool:
+        """Whether ``weights``, ``mean`` and ``var`` are finite, every coordinate of ``mean``
+        lies within +-:data:`MAX_POSITION_M` and ``invalid`` (a bool flag of other failed
+        checks, or None) is not set: one host synchronisation (one ``tolist``).
+
+        ``mean``'s extremes carry a NaN or an infinity into the range test, the sums of
+        ``weights`` and ``var`` into the finiteness test. False may be a false alarm (a sum
+        that overflowed): :meth:`_raise_invalid` then tells.
+        """
+        m = self.mean
+        zero = m.new_zeros(())
+        parts = [*torch.aminmax(m)] if m.numel() else [zero, zero]  # n_f = 0: nothing to test
+        parts += [self.weights.sum(), self.var.sum()]
+        if invalid is not None:
+            parts.append(invalid.to(m.dtype))
+        lo, hi, s_w, s_v, *flag = torch.stack(parts).tolist()  # the one host sync
+        near = -MAX_POSITION_M <= lo and hi <= MAX_POSITION_M  # False on NaN
+        return near and math.isfinite(s_w) and math.isfinite(s_v) and not any(flag)
+
     def _raise_invalid(self) -> None:
-        """Raise :class:`DataError` naming the first field and entry that is NaN or inf, or
-        the first row of weights that are not probabilities."""
+        """Raise :class:`DataError` naming the first field and entry that is NaN or inf, the
+        first coordinate of ``mean`` beyond :data:`MAX_POSITION_M`, or the first row of
+        weights that are not probabilities; return when there is none (a false alarm of
+        :meth:`_values_ok`)."""
         bad_w = ~torch.isfinite(self.weights)
         if bool(bad_w.any()):
             b, a = (int(i) for i in bad_w.nonzero()[0])
@@ -103,6 +152,15 @@ class Forecast:
                     f"forecast {name} is NaN/Inf for joint {self.joint_names[k]!r} "
                     f"(batch {b}, action {self._action(a)!r}, frame {f})"
                 )
+        far = self.mean.abs() > MAX_POSITION_M
+        if bool(far.any()):
+            b, a, f, k, c = (int(i) for i in far.nonzero()[0])
+            raise DataError(
+                f"forecast mean is {float(self.mean[b, a, f, k, c]):g} m for joint "
+                f"{self.joint_names[k]!r} (batch {b}, action {self._action(a)!r}, frame {f}), "
+                f"beyond {MAX_POSITION_M:g} m; positions are metres in the world frame: check "
+                "the units"
+            )
         w = self.weights
         rows = ((w < 0).any(-1) | ((w.sum(-1) - 1).abs() > WEIGHT_SUM_TOL)).nonzero()
         if len(rows):
@@ -179,13 +237,15 @@ class Forecast:
             A forecast with the same means and variances and new weights (B, A).
 
         Raises:
-            ShapeError: when ``keep`` is not (A,) or (B, A).
+            ShapeError: when ``keep`` is not a bool tensor (A,) or (B, A).
         """
         b, a = self.weights.shape
-        if keep.dim() == 1:
+        if not isinstance(keep, torch.Tensor) or keep.dim() == 1:
             check_shape("keep", keep, (a,))
-            keep = keep.expand(b, a)
-        check_shape("keep", keep, (b, a))
+        else:
+            check_shape("keep", keep, (b, a))
+        _check_bool("keep", keep, "(A,) or (B, A)")
+        keep = keep.expand(b, a)  # (B, A)
         w = torch.where(keep.to(self.weights.device), self.weights, 0.0)
         total = w.sum(-1, keepdim=True)  # (B, 1)
         ok = total > 0.0
@@ -209,15 +269,67 @@ class Forecast:
             frame equal those of frame 0.
 
         Raises:
-            ShapeError: when ``hold`` is not (A,).
+            ShapeError: when ``hold`` is not a bool tensor (A,).
         """
         check_shape("hold", hold, (int(self.weights.shape[1]),))
+        _check_bool("hold", hold, "(A,)")
         h = hold.to(self.mean.device).view(1, -1, 1, 1, 1)
         mean = torch.where(h, self.mean[:, :, :1].expand_as(self.mean), self.mean)
         var = torch.where(h, self.var[:, :, :1].expand_as(self.var), self.var)
         return self._derive(mean=mean, var=var)
 
-    def select(self, index: int | slice) -> Forecast:
-        """The forecast for a subset of the batch (keeps the batch dimension)."""
-        idx = slice(index, index + 1) if isinstance(index, int) else index
-        return self._derive(weights=self.weights[idx], mean=self.mean[idx], var=self.var[idx])
+    def select(self, index: int | slice | torch.Tensor | list[int]) -> Forecast:
+        """The forecast for a subset of the batch (keeps the batch dimension).
+
+        Args:
+            index: which batch rows: an int (negative counts from the end, as in Python: -1 is
+                the last row; a 0-d integer tensor counts as one), a slice, or what indexes a
+                tensor's first dimension (an index tensor or list, a (B,) bool mask).
+
+        Returns:
+            A forecast of the selected rows, B' >= 1 of them.
+
+        Raises:
+            ShapeError: for an int outside [-B, B), an index that selects no row, one that
+                does not index the batch dimension alone (a bool, None, a tuple), or an index
+                tensor or list out of range.
+        """
+        b = self.batch_size
+        if isinstance(index, torch.Tensor) and index.dim() == 0 and _is_integer(index):
+            index = int(index)
+        if isinstance(index, numbers.Integral) and not isinstance(index, bool):
+            i = int(index)
+            if not -b <= i < b:
+                raise ShapeError(
+                    f"expected index in [-{b}, {b}) for a forecast of B = {b}, got {i}"
+                )
+            i %= b
+            idx: Any = slice(i, i + 1)
+        elif isinstance(index, tuple):  # would index the action or frame dimension too
+            raise ShapeError(f"expected index of the batch dimension only, got {index!r}")
+        else:
+            idx = index
+        try:
+            weights = self.weights[idx]  # (B', A)
+        except (IndexError, TypeError, RuntimeError) as err:
+            raise ShapeError(
+                f"index {index!r} does not index the batch of a forecast of B = {b}: {err}"
+            ) from err
+        if weights.dim() != 2 or weights.shape[0] == 0:
+            raise ShapeError(
+                f"expected index to select at least one row of the batch (B = {b}), got "
+                f"{index!r}, which selects weights {tuple(weights.shape)}"
+            )
+        return self._derive(weights=weights, mean=self.mean[idx], var=self.var[idx])
+
+
+def _is_integer(t: torch.Tensor) -> bool:
+    """Whether ``t`` has an integer dtype (not floating, complex or bool)."""
+    return not (t.is_floating_point() or t.is_complex() or t.dtype == torch.bool)
+
+
+def _check_bool(name: str, mask: torch.Tensor, shape: str) -> None:
+    """ShapeError unless ``mask`` is a bool tensor (a float or int mask would be read as
+    weights or indices, not as True / False)."""
+    if mask.dtype != torch.bool:
+        raise ShapeError(f"expected {name} a bool tensor {shape}, got {mask.dtype}")

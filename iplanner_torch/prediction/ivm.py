@@ -50,7 +50,7 @@ from torch import Tensor
 from iplanner_torch import checks
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.dtw import KernelLike, kernel_from_state
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_finite, check_shape
 
 __all__ = ["ActionClassifier", "IVMClassifier", "feature_columns"]
 
@@ -78,14 +78,19 @@ class IVMClassifier:
         kernel: callable ``(x1 (B1, T, D), x2 (B2, T, D)) -> (B1, B2)``, e.g.
             :class:`~iplanner_torch.prediction.dtw.DTWKernel`; an attribute
             ``positive_definite = True`` skips the eigenvalue shift (see the module docstring).
-        num_classes: C, the number of classes (labels are 0..C-1).
+        num_classes: C, the number of classes (labels are 0..C-1), an integer >= 1.
         lam: regularisation weight (> 0, finite).
-        max_import: the largest number of import vectors.
+        max_import: the largest number of import vectors, an integer >= 0.
         tol: stop when the relative decrease of H in one import step is below this (>= 0,
             finite).
-        candidates: random candidates scored per import step; None scores all.
-        newton_steps: Newton (bound) steps per candidate and per refit.
-        seed: seed of the candidate sampler.
+        candidates: random candidates scored per import step, an integer >= 1; None scores
+            all.
+        newton_steps: Newton (bound) steps per candidate and per refit, an integer >= 1.
+        seed: seed of the candidate sampler, an integer.
+
+    Raises:
+        ConfigError: when a setting is not of the type and range above (a float ``2.5`` or a
+            string ``"2"`` for an integer, NaN or inf included).
 
     Attributes (after ``fit``):
         loss_history_: H after the bias-only start, after each import, and after the final
@@ -105,24 +110,14 @@ class IVMClassifier:
         newton_steps: int = 3,
         seed: int = 0,
     ) -> None:
-        if num_classes < 1:
-            raise ConfigError(f"expected num_classes >= 1, got {num_classes}")
-        checks.positive("lam", lam)  # NaN and inf refused too
-        if max_import < 0:
-            raise ConfigError(f"expected max_import >= 0, got {max_import}")
-        checks.non_negative("tol", tol)
-        if candidates is not None and candidates < 1:
-            raise ConfigError(f"expected candidates None or >= 1, got {candidates}")
-        if newton_steps < 1:
-            raise ConfigError(f"expected newton_steps >= 1, got {newton_steps}")
         self.kernel = kernel
-        self.num_classes = int(num_classes)
-        self.lam = float(lam)
-        self.max_import = int(max_import)
-        self.tol = float(tol)
-        self.candidates = candidates
-        self.newton_steps = int(newton_steps)
-        self.seed = int(seed)
+        self.num_classes = checks.integer("num_classes", num_classes, minimum=1)
+        self.lam = checks.positive("lam", lam)  # NaN and inf refused too
+        self.max_import = checks.integer("max_import", max_import, minimum=0)
+        self.tol = checks.non_negative("tol", tol)
+        self.candidates = checks.optional(checks.integer, "candidates", candidates, minimum=1)
+        self.newton_steps = checks.integer("newton_steps", newton_steps, minimum=1)
+        self.seed = checks.integer("seed", seed)
         self.classes_: Tensor | None = None
         self.import_vectors_: Tensor | None = None
         self.import_index_: Tensor | None = None
@@ -333,15 +328,24 @@ class IVMClassifier:
 
         Returns:
             (B, C) logits, float64 on x's device; ``-inf`` for classes absent from training.
+
+        Raises:
+            ShapeError: on wrong shapes: another D than the training windows', or another T
+                for a kernel of windows of equal length (``equal_lengths``, the RBF kernel).
+            DataError: when a window holds NaN or inf (from the kernel).
+            CheckpointError: before fit.
         """
         self._require_fit()
         _check_windows("x", x)
         assert self.weights_ is not None and self.classes_ is not None
         assert self.import_vectors_ is not None
-        d = self.import_vectors_.shape[-1]
-        if x.shape[-1] != d:  # before the kernel, which would name its import vectors
+        _, t, d = self.import_vectors_.shape
+        same_t = getattr(self.kernel, "equal_lengths", False)
+        if x.shape[-1] != d or (same_t and x.shape[1] != t):
+            # before the kernel, which would name its import vectors (its x2) as the culprit
             raise ShapeError(
-                f"expected x (B, T, {d}) as the classifier was trained on, got {tuple(x.shape)}"
+                f"expected x (B, {t if same_t else 'T'}, {d}) as the classifier was trained on, "
+                f"got {tuple(x.shape)}"
             )
         b, dev = x.shape[0], x.device
         out = torch.full((b, self.num_classes), -math.inf, dtype=torch.float64, device=dev)
@@ -366,6 +370,9 @@ class IVMClassifier:
 
         Returns:
             (B, C) probabilities in x's dtype; rows sum to 1, absent classes exactly 0.
+
+        Raises:
+            ShapeError, DataError, CheckpointError: as :meth:`decision_function`.
         """
         return torch.softmax(self.decision_function(x), -1).to(x.dtype)
 
@@ -411,23 +418,61 @@ class IVMClassifier:
                 :mod:`~iplanner_torch.prediction.dtw` from the stored name and parameters.
 
         Raises:
-            CheckpointError: on a dict of another format or missing entries.
+            CheckpointError: on something other than a dict, a dict of another format, missing
+                entries (named), tensors that are None or of inconsistent shapes, or settings or
+                kernel parameters that the classifier or kernel refuses.
         """
+        if not isinstance(d, dict):
+            raise CheckpointError(
+                f"expected an IVM state dict (format ivm/1), got a {type(d).__name__}"
+            )
         if d.get("format") != "ivm/1":
             raise CheckpointError(
                 f"expected an IVM state dict (format ivm/1), got {d.get('format')!r}"
             )
+        required = ["num_classes", "classes", "import_vectors", "weights", "hparams"]
+        if kernel is None:
+            required += ["kernel_name", "kernel_hparams"]
+        missing = [k for k in required if k not in d]
+        if missing:
+            raise CheckpointError(f"incomplete IVM state dict: missing {missing}")
+        tensors = {k: d[k] for k in ("classes", "import_vectors", "weights")}
+        for name, t in tensors.items():
+            if not isinstance(t, Tensor):
+                raise CheckpointError(
+                    f"IVM state dict entry {name!r} is not a tensor, got {type(t).__name__}"
+                )
+        classes, vectors, weights = tensors.values()
+        fits = classes.dim() == 1 and vectors.dim() == 3
+        if not fits or tuple(weights.shape) != (vectors.shape[0] + 1, classes.shape[0]):
+            raise CheckpointError(
+                "IVM state dict tensors do not fit together: expected classes (C'), "
+                "import_vectors (M, T, D) and weights (M + 1, C'), got "
+                f"{tuple(classes.shape)}, {tuple(vectors.shape)}, {tuple(weights.shape)}"
+            )
+        index = d.get("import_index")
+        if index is not None and not isinstance(index, Tensor):
+            raise CheckpointError(
+                f"IVM state dict entry 'import_index' is not a tensor or None, got "
+                f"{type(index).__name__}"
+            )
+        hparams = d["hparams"]
+        known = set(inspect.signature(cls).parameters) - {"kernel", "num_classes"}
+        if not isinstance(hparams, dict) or set(hparams) - known:
+            raise CheckpointError(
+                f"expected the IVM state dict's hparams a dict of {sorted(known)}, got {hparams!r}"
+            )
         try:
             if kernel is None:
                 kernel = kernel_from_state(d["kernel_name"], d["kernel_hparams"])
-            obj = cls(kernel, num_classes=int(d["num_classes"]), **d["hparams"])
-            obj.classes_ = d["classes"].clone()
-            obj.import_vectors_ = d["import_vectors"].clone()
-            obj.import_index_ = d["import_index"]
-            obj.weights_ = d["weights"].clone()
-            obj.loss_history_ = list(d.get("loss_history", []))
-        except (KeyError, ConfigError) as err:
-            raise CheckpointError(f"incomplete IVM state dict: {err}") from err
+            obj = cls(kernel, num_classes=d["num_classes"], **hparams)
+        except ConfigError as err:
+            raise CheckpointError(f"invalid IVM state dict: {err}") from err
+        obj.classes_ = classes.clone()
+        obj.import_vectors_ = vectors.clone()
+        obj.import_index_ = index
+        obj.weights_ = weights.clone()
+        obj.loss_history_ = list(d.get("loss_history") or [])
         return obj
 
 
@@ -522,10 +567,13 @@ class ActionClassifier:
     Attributes (after ``fit``):
         models_: dict progress bitmask -> IVMClassifier or single-action model; key -1 is the
             global classifier.
+        num_features: D of the training windows (all columns, before ``feature_index``);
+            None for a checkpoint of an older version that does not tell.
     """
 
     def __init__(self, *, feature_index: Sequence[int] | None = None) -> None:
         self.num_actions = 0
+        self.num_features: int | None = None
         self.models_: dict[int, IVMClassifier | _SingleAction] = {}
         self.feature_index: list[int] | None = None
         if feature_index is not None:
@@ -590,7 +638,9 @@ class ActionClassifier:
         _check_labels("current", current, n, num_actions)
         if n == 0:
             raise DataError("expected at least one training window, got N = 0")
+        num_features = int(x.shape[2])
         x = self._select(x)
+        self.num_features = num_features
         kwargs = dict(ivm_kwargs or {})
         kwargs.pop("num_classes", None)
         self.num_actions = int(num_actions)
@@ -626,14 +676,20 @@ class ActionClassifier:
         """``p(c | F_prev, p)`` for a batch of windows with their progress states.
 
         Args:
-            x: (B, T, D) windows.
-            progress: (B,) int64 progress bitmasks.
+            x: (B, T, D) windows with the D of the training windows, finite (in the columns
+                of ``feature_index``).
+            progress: (B,) progress bitmasks of an integer dtype (int64).
 
         Returns:
             (B, A) probabilities in x's dtype, rows sum to 1.
 
         Raises:
-            ShapeError: on wrong shapes. CheckpointError: before fit.
+            ShapeError: on wrong shapes (another D than the training windows'), a ``progress``
+                of a floating, complex or bool dtype (a float would be truncated), or as the
+                per-state :meth:`IVMClassifier.predict_proba`.
+            DataError: when a window holds NaN or inf (naming window and frame), whichever
+                model its state uses (single-action states included).
+            CheckpointError: before fit.
         """
         if not self.models_:
             raise CheckpointError(
@@ -642,11 +698,27 @@ class ActionClassifier:
         _check_windows("x", x)
         b = x.shape[0]
         check_shape("progress", progress, (b,))
+        if progress.is_floating_point() or progress.is_complex() or progress.dtype == torch.bool:
+            raise ShapeError(
+                f"expected progress (B,) bitmasks of an integer dtype (int64), got "
+                f"{progress.dtype}"
+            )
+        full = x
         x = self._select(x)
+        if self.num_features is not None and full.shape[2] != self.num_features:
+            raise ShapeError(
+                f"expected x (B, T, {self.num_features}) as the classifier was trained on, got "
+                f"{tuple(full.shape)}"
+            )
+        # the bitmasks and a finiteness flag of the windows in one transfer (one host sync);
+        # x.sum() is NaN or inf when an entry is (or when the sum overflows: check_finite tells)
+        finite = torch.isfinite(x.sum()).to(device=progress.device, dtype=torch.int64)
+        prog = torch.cat([progress.to(torch.int64), finite.view(1)]).cpu()  # (B + 1,)
+        if not bool(prog[-1]):
+            check_finite("x", x, ("window", "frame"), hint="impute lost frames first")
         out = torch.empty(b, self.num_actions, dtype=x.dtype, device=x.device)
-        prog = progress.cpu()
         groups: dict[int, list[int]] = {}
-        for i, p in enumerate(prog.tolist()):
+        for i, p in enumerate(prog[:-1].tolist()):
             groups.setdefault(self.resolve(p), []).append(i)
         for key, rows in groups.items():
             idx = torch.tensor(rows, device=x.device)
@@ -662,6 +734,7 @@ class ActionClassifier:
         return {
             "format": "action_classifier/1",
             "num_actions": self.num_actions,
+            "num_features": self.num_features,
             "feature_index": self.feature_index,
             "models": {k: m.state_dict() for k, m in self.models_.items()},
         }
@@ -673,17 +746,56 @@ class ActionClassifier:
         """Rebuild; ``kernel`` (shared by all states) as in :meth:`IVMClassifier.from_state_dict`.
 
         Raises:
-            CheckpointError: on a dict of another format.
+            CheckpointError: on something other than a dict, a dict of another format, missing
+                entries (named), or per-state models that do not load (as
+                :meth:`IVMClassifier.from_state_dict`).
         """
+        if not isinstance(d, dict):
+            raise CheckpointError(
+                f"expected an action classifier state dict, got a {type(d).__name__}"
+            )
         if d.get("format") != "action_classifier/1":
             raise CheckpointError(
                 f"expected an action classifier state dict, got format {d.get('format')!r}"
             )
-        obj = cls(feature_index=d.get("feature_index"))
-        obj.num_actions = int(d["num_actions"])
-        for k, md in d["models"].items():
-            if md.get("format") == "single/1":
-                obj.models_[int(k)] = _SingleAction(md["action"], md["num_actions"])
-            else:
-                obj.models_[int(k)] = IVMClassifier.from_state_dict(md, kernel)
+        missing = [k for k in ("num_actions", "models") if k not in d]
+        if missing:
+            raise CheckpointError(f"incomplete action classifier state dict: missing {missing}")
+        if not isinstance(d["models"], dict):
+            raise CheckpointError(
+                f"expected the action classifier's models a dict, got {type(d['models']).__name__}"
+            )
+        try:
+            try:
+                obj = cls(feature_index=d.get("feature_index"))
+            except (TypeError, ValueError) as err:  # not a sequence of integers
+                raise ConfigError(f"expected feature_index None or columns, got {err}") from err
+            obj.num_actions = checks.integer("num_actions", d["num_actions"], minimum=1)
+            obj.num_features = checks.optional(
+                checks.integer, "num_features", d.get("num_features"), minimum=1
+            )
+            for k, md in d["models"].items():
+                key = checks.integer("model key (progress bitmask)", k, minimum=_GLOBAL)
+                if isinstance(md, dict) and md.get("format") == "single/1":
+                    gone = [f for f in ("action", "num_actions") if f not in md]
+                    if gone:
+                        raise CheckpointError(
+                            f"incomplete single-action model {key}: missing {gone}"
+                        )
+                    a_n = checks.integer("num_actions", md["num_actions"], minimum=1)
+                    action = checks.integer("action", md["action"], minimum=0)
+                    if action >= a_n:
+                        raise ConfigError(f"expected action in [0, {a_n}), got {action}")
+                    obj.models_[key] = _SingleAction(action, a_n)
+                else:
+                    obj.models_[key] = IVMClassifier.from_state_dict(md, kernel)
+        except ConfigError as err:
+            raise CheckpointError(f"invalid action classifier state dict: {err}") from err
+        if obj.num_features is None and obj.feature_index is None:  # an older checkpoint
+            dims = {
+                int(m.import_vectors_.shape[-1])
+                for m in obj.models_.values()
+                if isinstance(m, IVMClassifier) and m.import_vectors_ is not None
+            }
+            obj.num_features = dims.pop() if len(dims) == 1 else None
         return obj

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -296,3 +298,121 @@ def test_gram_with_uneven_tiles_matches_reference(band: int | None, squared: boo
             dtype=torch.float64,
         )
         torch.testing.assert_close(got, want, atol=1e-10, rtol=0)
+
+
+def _every_public_call(x: torch.Tensor, y: torch.Tensor) -> list[Callable[[], object]]:
+    """Each public function and kernel of dtw.py on windows x (B, T, D), y (B, T, D)."""
+    return [
+        lambda: dtw_distance(x, y),
+        lambda: dtw_paired(x, y),
+        lambda: gak_log(x, y, sigma=1.0),
+        lambda: gak_log_paired(x, y, sigma=1.0),
+        lambda: median_dtw(x, n_pairs=5),
+        lambda: DTWKernel(1.0)(x, y),
+        lambda: GlobalAlignmentKernel(1.0)(x, y),
+        lambda: RBFKernel(1.0)(x, y),
+    ]
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_half_precision_is_refused_by_every_public_function(dtype: torch.dtype):
+    """float16 squared distances overflow (dtw_distance returned NaN for features of a few
+    hundred units) and cdist refuses half precision on the CPU (a raw NotImplementedError):
+    a ShapeError naming the dtype instead, as in collision.gaussian."""
+    g = torch.Generator().manual_seed(10)
+    x = (200 * torch.randn(2, 6, 3, generator=g)).to(dtype)
+    y = (200 * torch.randn(2, 6, 3, generator=g)).to(dtype)
+    for call in _every_public_call(x, y):
+        with pytest.raises(ShapeError, match=f"got {dtype}: half precision"):
+            call()
+    # float32 gives the finite distances the float64 reference gives
+    want = dtw_distance(x.double(), y.double())
+    torch.testing.assert_close(
+        dtw_distance(x.float(), y.float()).double(), want, rtol=1e-5, atol=0
+    )
+
+
+def test_empty_batches_give_empty_results_for_every_kernel():
+    """RBFKernel()(x[:0], y) used to fail in max() of an empty tensor; the DTW kernels gave
+    empty results already."""
+    x = torch.randn(3, 5, 2, dtype=torch.float64)
+    for kernel in (DTWKernel(3.0), GlobalAlignmentKernel(1.0), RBFKernel(4.0)):
+        assert kernel(x[:0], x).shape == (0, 3)
+        assert kernel(x, x[:0]).shape == (3, 0)
+        assert kernel(x[:0], x[:0]).shape == (0, 0)
+
+
+def test_windows_without_features_are_refused():
+    """D = 0 used to fail in a reshape (DTW) or give kernel values of 1 (RBF)."""
+    x = torch.zeros(2, 4, 0)
+    match = r"one feature \(T, T2, D >= 1\), got x \(2, 4, 0\)"
+    for call in (
+        lambda: dtw_distance(x, x),
+        lambda: dtw_paired(x, x),
+        lambda: gak_log(x, x, sigma=1.0),
+        lambda: DTWKernel(1.0)(x, x),
+    ):
+        with pytest.raises(ShapeError, match=match):
+            call()
+    with pytest.raises(ShapeError, match=r"one feature .*got x1 \(2, 4, 0\), x2 \(2, 4, 0\)"):
+        RBFKernel(1.0)(x, x)
+
+
+@pytest.mark.parametrize("band", ["a", math.nan, math.inf, True])
+def test_band_that_is_not_an_integer_is_a_config_error(band: object):
+    """A string or NaN used to raise a raw ValueError, inf an OverflowError; True passed as 1."""
+    x = torch.randn(2, 4, 3)
+    match = f"expected band None or an integer >= 0, got {band!r}"
+    for call in (
+        lambda: dtw_distance(x, x, band=band),
+        lambda: dtw_paired(x, x, band=band),
+        lambda: gak_log(x, x, sigma=1.0, band=band),
+        lambda: median_dtw(x, n_pairs=3, band=band),
+        lambda: DTWKernel(1.0, band=band),
+        lambda: GlobalAlignmentKernel(1.0, band=band),
+    ):
+        with pytest.raises(ConfigError, match=re.escape(match)):
+            call()
+    # an integral float is an integer band, as before
+    torch.testing.assert_close(dtw_distance(x, x, band=2.0), dtw_distance(x, x, band=2))
+
+
+@pytest.mark.parametrize("max_cells", ["a", 0, 2.5])
+def test_max_cells_must_be_a_positive_integer(max_cells: object):
+    x = torch.randn(2, 4, 3)
+    match = f"expected max_cells an integer >= 1, got {max_cells!r}"
+    for call in (
+        lambda: dtw_distance(x, x, max_cells=max_cells),
+        lambda: dtw_paired(x, x, max_cells=max_cells),
+        lambda: gak_log(x, x, sigma=1.0, max_cells=max_cells),
+        lambda: gak_log_paired(x, x, sigma=1.0, max_cells=max_cells),
+        lambda: DTWKernel(1.0, max_cells=max_cells),
+        lambda: GlobalAlignmentKernel(1.0, max_cells=max_cells),
+    ):
+        with pytest.raises(ConfigError, match=re.escape(match)):
+            call()
+
+
+@pytest.mark.parametrize("value", ["a", math.inf])
+def test_bandwidths_must_be_finite_positive_numbers(value: object):
+    """sigma="a" used to raise a raw TypeError; an infinite bandwidth made every kernel 1."""
+    x = torch.randn(2, 4, 3)
+    for name, call in (
+        ("sigma", lambda: gak_log(x, x, sigma=value)),
+        ("sigma", lambda: gak_log_paired(x, x, sigma=value)),
+        ("sigma", lambda: GlobalAlignmentKernel(value)),
+        ("gamma", lambda: DTWKernel(value)),
+        ("lengthscale", lambda: RBFKernel(value)),
+    ):
+        with pytest.raises(ConfigError, match=re.escape(f"expected {name} > 0 and finite")):
+            call()
+    with pytest.raises(ConfigError, match="expected seed an integer, got 'a'"):
+        median_dtw(x, n_pairs=3, seed="a")
+
+
+def test_kernel_from_state_names_missing_arguments():
+    """kernel_from_state("dtw", {}) used to raise a raw TypeError."""
+    with pytest.raises(ConfigError, match=r"kernel 'dtw' needs the arguments \['gamma'\]"):
+        kernel_from_state("dtw", {})
+    with pytest.raises(ConfigError, match="hparams of kernel 'rbf' a dict, got NoneType"):
+        kernel_from_state("rbf", None)  # type: ignore[arg-type]

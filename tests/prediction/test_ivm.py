@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -322,3 +323,111 @@ def test_windows_of_another_width_name_the_trained_one(data):
     d = x.shape[-1]
     with pytest.raises(ShapeError, match=rf"expected x \(B, T, {d}\) as the classifier was"):
         ivm.predict_proba(torch.zeros(2, x.shape[1], d + 1, dtype=x.dtype))
+
+
+@pytest.mark.parametrize(
+    ("setting", "value"),
+    [
+        ("num_classes", "2"),
+        ("num_classes", 2.5),
+        ("max_import", math.nan),
+        ("max_import", 4.0),
+        ("candidates", 1.5),
+        ("newton_steps", "3"),
+        ("seed", None),
+    ],
+)
+def test_integer_settings_are_refused_unless_integers(setting: str, value: object) -> None:
+    """num_classes="2" and max_import=nan used to raise raw errors, 2.5 became 2."""
+    kwargs: dict[str, object] = {"num_classes": 3, setting: value}
+    with pytest.raises(ConfigError, match=re.escape(f"expected {setting} an integer")):
+        IVMClassifier(RBFKernel(1.0), **kwargs)  # type: ignore[arg-type]
+
+
+def test_rbf_ivm_names_the_callers_windows_and_takes_an_empty_batch(data):
+    """The RBF kernel compares windows of equal T: another T used to be reported against the
+    stored import vectors (its x2); an empty batch used to fail in max() of nothing."""
+    (x, y), _ = data
+    ivm = IVMClassifier(RBFKernel(3.0), num_classes=4, max_import=4).fit(x, y)
+    t, d = x.shape[1], x.shape[2]
+    with pytest.raises(
+        ShapeError, match=rf"expected x \(B, {t}, {d}\) as the classifier was trained on, got "
+    ):
+        ivm.predict_proba(x[:5, :6])
+    empty = ivm.predict_proba(x[:0])
+    assert empty.shape == (0, 4) and empty.dtype == x.dtype
+
+
+def test_ivm_checkpoint_errors_name_what_is_missing(data):
+    (x, y), _ = data
+    good = IVMClassifier(RBFKernel(3.0), num_classes=3, max_import=3).fit(x, y).state_dict()
+    with pytest.raises(CheckpointError, match="expected an IVM state dict .*got a NoneType"):
+        IVMClassifier.from_state_dict(None)  # type: ignore[arg-type]
+    with pytest.raises(CheckpointError, match="expected an IVM state dict .*got a list"):
+        IVMClassifier.from_state_dict([good])  # type: ignore[arg-type]
+    for field in ("weights", "classes", "import_vectors"):
+        with pytest.raises(
+            CheckpointError, match=f"entry '{field}' is not a tensor, got NoneType"
+        ):
+            IVMClassifier.from_state_dict(good | {field: None})
+    broken = {k: v for k, v in good.items() if k != "kernel_hparams"}
+    with pytest.raises(CheckpointError, match=r"missing \['kernel_hparams'\]"):
+        IVMClassifier.from_state_dict(broken)
+    with pytest.raises(CheckpointError, match=r"needs the arguments \['lengthscale'\]"):
+        IVMClassifier.from_state_dict(good | {"kernel_hparams": {}})
+    with pytest.raises(CheckpointError, match="tensors do not fit together"):
+        IVMClassifier.from_state_dict(good | {"weights": good["weights"][:2]})
+    with pytest.raises(CheckpointError, match="expected num_classes an integer >= 1"):
+        IVMClassifier.from_state_dict(good | {"num_classes": "3"})
+
+
+def test_action_classifier_checkpoint_errors_name_what_is_missing():
+    x, prog, cur = _state_data()
+    clf = ActionClassifier().fit(
+        x, prog, cur, num_actions=3, kernel_factory=lambda: RBFKernel(3.0),
+        ivm_kwargs={"max_import": 3},
+    )  # fmt: skip
+    good = clf.state_dict()
+    with pytest.raises(CheckpointError, match=r"missing \['num_actions'\]"):
+        ActionClassifier.from_state_dict({k: v for k, v in good.items() if k != "num_actions"})
+    with pytest.raises(CheckpointError, match="action classifier state dict, got a NoneType"):
+        ActionClassifier.from_state_dict(None)  # type: ignore[arg-type]
+    single = {"format": "single/1", "num_actions": 3}
+    with pytest.raises(CheckpointError, match=r"single-action model 3: missing \['action'\]"):
+        ActionClassifier.from_state_dict(good | {"models": good["models"] | {3: single}})
+    # a checkpoint written before num_features was saved: D is read off the import vectors
+    old = {k: v for k, v in good.items() if k != "num_features"}
+    assert ActionClassifier.from_state_dict(old).num_features == x.shape[2]
+
+
+def test_action_classifier_checks_progress_and_windows_of_every_state():
+    """Float progress used to be truncated (2.5 -> 2) and NaN progress raised a raw
+    ValueError; a single-action state answered 1 for NaN windows or windows of another D."""
+    x, prog, cur = _state_data()
+    clf = ActionClassifier().fit(
+        x, prog, cur, num_actions=3, kernel_factory=lambda: RBFKernel(3.0),
+        ivm_kwargs={"max_import": 3},
+    )  # fmt: skip
+    assert clf.num_features == x.shape[2]
+    for progress in (torch.tensor([1.0, 2.5]), torch.tensor([math.nan, 3.0])):
+        with pytest.raises(ShapeError, match="progress .* integer dtype .*got torch.float32"):
+            clf.predict_proba(x[:2], progress)
+    with pytest.raises(ShapeError, match="integer dtype .*got torch.bool"):
+        clf.predict_proba(x[:2], torch.tensor([True, True]))
+    state3 = torch.tensor([3, 3])  # a single-action state
+    bad = x[80:82].clone()
+    bad[1, 4, 2] = math.nan
+    with pytest.raises(DataError, match="x is NaN/Inf at window 1, frame 4"):
+        clf.predict_proba(bad, state3)
+    wide = torch.zeros(2, x.shape[1], x.shape[2] + 2)
+    with pytest.raises(ShapeError, match=r"expected x \(B, T, 3\) as the classifier was trained"):
+        clf.predict_proba(wide, state3)
+    # int32 bitmasks and the round trip keep working
+    want = clf.predict_proba(x[[0, 85]], torch.tensor([1, 3]))
+    assert torch.equal(
+        clf.predict_proba(x[[0, 85]], torch.tensor([1, 3], dtype=torch.int32)), want
+    )
+    again = ActionClassifier.from_state_dict(clf.state_dict())
+    assert again.num_features == x.shape[2]
+    with pytest.raises(DataError, match="x is NaN/Inf at window 1"):
+        again.predict_proba(bad, state3)
