@@ -2,6 +2,13 @@
 
 Distances are between the sphere's surface and the obstacle: negative values are penetration
 depths. Everything is differentiable with respect to the sphere centres.
+
+Shapes and dtypes are checked on every call (no host synchronisation). The obstacle's numbers
+are checked as :class:`Box` and :class:`Plane` check theirs: by the dataclasses at construction,
+and by :func:`sphere_box_distance` and :func:`sphere_plane_distance` when they are given tensors
+(``validate=True``, one host synchronisation); :class:`StaticScene`, whose obstacles were checked
+when they were built, checks only the spheres (it runs in every optimiser iteration, without a
+host synchronisation).
 """
 
 from __future__ import annotations
@@ -10,9 +17,36 @@ from dataclasses import dataclass, field
 
 import torch
 
-from iplanner_torch.checks import finite, finite_tuple
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.checks import finite, finite_tuple, is_real
+from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.types import check_shape
+
+
+def _check_spheres(centers: torch.Tensor, radii: torch.Tensor) -> None:
+    """ShapeError unless ``centers`` is a floating (..., 3) tensor and ``radii`` a real tensor
+    that broadcasts to ``centers[..., 0]``."""
+    check_shape("centers", centers, ("...", 3))
+    if not isinstance(radii, torch.Tensor):
+        raise ShapeError(f"expected radii to be a torch.Tensor, got {type(radii).__name__}")
+    _check_dtypes(centers, radii)
+    lead = tuple(centers.shape[:-1])
+    shape = tuple(radii.shape)
+    # broadcastable to ``lead`` (a Python test: torch.broadcast_shapes costs tens of us)
+    ok = len(shape) <= len(lead) and all(
+        s in (1, t) for s, t in zip(reversed(shape), reversed(lead), strict=False)
+    )
+    if not ok:
+        raise ShapeError(
+            f"expected radii broadcastable to centers[..., 0] {lead}, got {tuple(radii.shape)}"
+        )
+
+
+def _check_dtypes(centers: torch.Tensor, radii: torch.Tensor) -> None:
+    """ShapeError unless ``centers`` is of a floating dtype and ``radii`` of a real one."""
+    if not centers.is_floating_point():
+        raise ShapeError(f"expected centers of a floating dtype, got {centers.dtype}")
+    if radii.dtype == torch.bool or radii.is_complex():
+        raise ShapeError(f"expected radii of a real dtype, got {radii.dtype}")
 
 
 def sphere_box_distance(
@@ -21,29 +55,55 @@ def sphere_box_distance(
     box_center: torch.Tensor,
     box_half_extents: torch.Tensor,
     box_rotation: torch.Tensor | None = None,
+    *,
+    validate: bool = True,
 ) -> torch.Tensor:
     """Signed distance between sphere surfaces and an oriented box.
 
     Args:
-        centers: (..., 3) sphere centres [m], world frame.
+        centers: (..., 3) sphere centres [m], world frame, of a floating dtype.
         radii: (...) sphere radii [m], broadcastable to ``centers[..., 0]``.
         box_center: (3,) box centre [m], world frame.
-        box_half_extents: (3,) half side lengths [m], box frame.
+        box_half_extents: (3,) half side lengths [m], box frame, > 0.
         box_rotation: (3, 3) rotation ``R_world_box`` (columns: box axes in the world frame);
             identity when None.
+        validate: check the box's numbers as :class:`Box` does (one host synchronisation);
+            False skips that (for boxes taken from a :class:`Box`).
 
     Returns:
         (...) signed distance [m]: the box's signed distance at the centre minus the radius.
 
     Raises:
-        ShapeError: on wrong shapes.
+        ShapeError: on wrong shapes, ``centers`` not of a floating dtype (an integer one would
+            round the box to integers), or ``radii`` not a real tensor.
+        ConfigError: (``validate``) when the box centre or rotation is not finite, a half
+            extent is not finite and > 0, or the rotation is not orthonormal (as :class:`Box`).
     """
-    check_shape("centers", centers, ("...", 3))
+    _check_spheres(centers, radii)
     check_shape("box_center", box_center, (3,))
     check_shape("box_half_extents", box_half_extents, (3,))
-    p = centers - box_center.to(centers)  # (..., 3)
     if box_rotation is not None:
         check_shape("box_rotation", box_rotation, (3, 3))
+    if validate:
+        parts = [box_center, box_half_extents]
+        if box_rotation is not None:
+            parts.append(box_rotation.reshape(-1))
+        vals = torch.cat([x.detach().to("cpu", torch.float64) for x in parts]).tolist()
+        rows = [vals[6:9], vals[9:12], vals[12:15]] if box_rotation is not None else None
+        Box(center=vals[0:3], half_extents=vals[3:6], **({"rotation": rows} if rows else {}))
+    return _box_distance(centers, radii, box_center, box_half_extents, box_rotation)
+
+
+def _box_distance(
+    centers: torch.Tensor,
+    radii: torch.Tensor,
+    box_center: torch.Tensor,
+    box_half_extents: torch.Tensor,
+    box_rotation: torch.Tensor | None,
+) -> torch.Tensor:
+    """:func:`sphere_box_distance` without its checks."""
+    p = centers - box_center.to(centers)  # (..., 3)
+    if box_rotation is not None:
         p = p @ box_rotation.to(centers)  # (..., 3) box frame
     q = p.abs() - box_half_extents.to(centers)  # (..., 3)
     outside = torch.linalg.vector_norm(q.clamp_min(0.0), dim=-1)
@@ -52,29 +112,62 @@ def sphere_box_distance(
 
 
 def sphere_plane_distance(
-    centers: torch.Tensor, radii: torch.Tensor, normal: torch.Tensor, offset: float
+    centers: torch.Tensor,
+    radii: torch.Tensor,
+    normal: torch.Tensor,
+    offset: float | torch.Tensor,
+    *,
+    validate: bool = True,
 ) -> torch.Tensor:
     """Signed distance between sphere surfaces and the half-space ``n . x <= offset``.
 
     Args:
-        centers: (..., 3) sphere centres [m].
-        radii: (...) sphere radii [m].
-        normal: (3,) plane normal pointing out of the obstacle (normalised here).
-        offset: plane offset [m]: the plane is ``n . x = offset``.
+        centers: (..., 3) sphere centres [m], of a floating dtype.
+        radii: (...) sphere radii [m], broadcastable to ``centers[..., 0]``.
+        normal: (3,) plane normal pointing out of the obstacle (normalised here), finite and
+            non-zero.
+        offset: plane offset [m]: the plane is ``n . x = offset``; a finite number (or a
+            one-element tensor).
+        validate: check ``normal`` (and a tensor ``offset``) as :class:`Plane` does (one
+            host synchronisation); False skips that (for planes taken from a :class:`Plane`).
 
     Returns:
         (...) signed distance [m] (negative: penetration).
 
     Raises:
-        ShapeError: on wrong shapes.
-        ConfigError: on a zero normal.
+        ShapeError: on wrong shapes (``offset`` a tensor of more than one element included),
+            ``centers`` not of a floating dtype (an integer one would round the normal to
+            integers), or ``radii`` not a real tensor.
+        ConfigError: when ``offset`` is not a number or a tensor, or a number that is not
+            finite; (``validate``) when ``normal`` is zero or not finite, or a tensor
+            ``offset`` is not finite.
     """
-    check_shape("centers", centers, ("...", 3))
+    _check_spheres(centers, radii)
     check_shape("normal", normal, (3,))
-    norm = torch.linalg.vector_norm(normal)
-    if not bool(norm > 0):
-        raise ConfigError("expected a non-zero plane normal")
-    n = (normal / norm).to(centers)
+    if isinstance(offset, torch.Tensor):
+        if offset.numel() != 1:
+            raise ShapeError(
+                f"expected offset a number or a one-element tensor [m], got a tensor of shape "
+                f"{tuple(offset.shape)}"
+            )
+    elif is_real(offset):
+        finite("offset", offset)
+    else:
+        raise ConfigError(f"expected offset a finite number [m], got {offset!r}")
+    if validate:
+        # the checks of Plane: 3 finite numbers, not all zero (and no norm underflowing to 0)
+        off = float(offset) if isinstance(offset, torch.Tensor) else offset
+        Plane(normal=tuple(normal.detach().cpu().tolist()), offset=off)
+        if not bool(torch.linalg.vector_norm(normal) > 0):
+            raise ConfigError(f"expected a non-zero plane normal, got {normal.tolist()}")
+    return _plane_distance(centers, radii, normal, offset)
+
+
+def _plane_distance(
+    centers: torch.Tensor, radii: torch.Tensor, normal: torch.Tensor, offset: float | torch.Tensor
+) -> torch.Tensor:
+    """:func:`sphere_plane_distance` without its checks."""
+    n = (normal / torch.linalg.vector_norm(normal)).to(centers)
     return centers @ n - offset - radii
 
 
@@ -190,15 +283,17 @@ class StaticScene:
             (..., S, O) signed distances [m], boxes first, then planes.
 
         Raises:
-            ShapeError: on wrong shapes.
+            ShapeError: on wrong shapes, or ``centers`` not of a floating dtype, or ``radii``
+                not a real tensor.
         """
         check_shape("centers", centers, ("...", "S", 3))
         check_shape("radii", radii, (centers.shape[-2],))
+        _check_dtypes(centers, radii)
         kw = {"dtype": centers.dtype, "device": centers.device}
         out = []
         for box in self.boxes:
             out.append(
-                sphere_box_distance(
+                _box_distance(  # the box was checked by Box, the spheres above
                     centers,
                     radii,
                     torch.tensor(box.center, **kw),
@@ -208,7 +303,8 @@ class StaticScene:
             )
         for plane in self.planes:
             normal = torch.tensor(plane.normal, **kw)
-            out.append(sphere_plane_distance(centers, radii, normal, plane.offset))
+            # the plane was checked by Plane, the spheres above
+            out.append(_plane_distance(centers, radii, normal, plane.offset))
         return torch.stack(out, dim=-1)
 
     def clearance(self, centers: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
@@ -220,5 +316,8 @@ class StaticScene:
 
         Returns:
             (..., S) signed clearance [m] (negative: penetration), differentiable.
+
+        Raises:
+            ShapeError: as :meth:`distances`.
         """
         return self.distances(centers, radii).amin(-1)

@@ -14,6 +14,12 @@ found by Newton's method on the secular equation; its gradient uses the envelope
 (``d m^2 / d mu = 2 Sigma^-1 (mu - x_max)``), so the iterations are not differentiated. The
 optimiser's iterations use a cheaper isotropic bound, never below this one (see
 :func:`human_collision_bound`); acceptance uses the exact one.
+
+These functions run in every optimiser iteration, so they check only what costs no host
+synchronisation: shapes, dtypes, devices and Python numbers (``margin``, ``dt``,
+``forecast_t0``). The values of tensors are not checked here, except the times of
+:func:`forecast_to_obstacle` (once per plan, skipped by the optimiser, whose times are finite
+by construction).
 """
 
 from __future__ import annotations
@@ -24,10 +30,11 @@ from typing import Protocol
 
 import torch
 
-from iplanner_torch.checks import is_real
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.checks import finite, finite_time, integer, is_real, non_negative
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.planning.trajectory import accelerations, velocities
 from iplanner_torch.prediction.forecast import Forecast
+from iplanner_torch.types import check_shape
 
 #: Mahalanobis distance beyond which a pair is pruned: its bound is below Phi(-5) < 3e-7.
 PRUNE_SIGMAS = 5.0
@@ -95,7 +102,12 @@ def joint_acc_l2(q: torch.Tensor, dt: float, qd_start: torch.Tensor | None = Non
 
     Returns:
         (B,) [rad^2/s^3].
+
+    Raises:
+        ShapeError: when ``q`` is not (B, W, J) or ``qd_start`` does not end in J.
+        ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
+    check_shape("q", q, ("B", "W", "J"))
     acc = accelerations(q, dt, qd_start)
     return dt * acc.square().sum(dim=(-2, -1))
 
@@ -112,7 +124,13 @@ def joint_limit_violation(
 
     Returns:
         (B,) [rad^2].
+
+    Raises:
+        ShapeError: when ``q`` is not (B, W, J) or a limit is not (J,).
     """
+    check_shape("q", q, ("B", "W", "J"))
+    check_shape("q_min", q_min, (q.shape[-1],))
+    check_shape("q_max", q_max, (q.shape[-1],))
     over = torch.relu(q - q_max) + torch.relu(q_min - q)
     return over.square().sum(dim=(-2, -1))
 
@@ -127,7 +145,13 @@ def joint_vel_limit_violation(q: torch.Tensor, dt: float, v_max: torch.Tensor) -
 
     Returns:
         (B,) [(rad/s)^2].
+
+    Raises:
+        ShapeError: when ``q`` is not (B, W, J) or ``v_max`` is not (J,).
+        ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
+    check_shape("q", q, ("B", "W", "J"))
+    check_shape("v_max", v_max, (q.shape[-1],))
     return torch.relu(velocities(q, dt).abs() - v_max).square().sum(dim=(-2, -1))
 
 
@@ -145,7 +169,12 @@ def joint_acc_limit_violation(
 
     Returns:
         (B,) [(rad/s^2)^2].
+
+    Raises:
+        ShapeError: when ``q`` is not (B, W, J) or ``qd_start`` does not end in J.
+        ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
+    check_shape("q", q, ("B", "W", "J"))
     acc = accelerations(q, dt, qd_start)
     return torch.relu(acc.abs() - a_max).square().sum(dim=(-2, -1))
 
@@ -164,7 +193,13 @@ def static_clearance(
     Returns:
         cost (B,) ``sum relu(margin - clearance)^2`` [m^2] and the minimum clearance over
         spheres (B, W) [m].
+
+    Raises:
+        ShapeError: when ``centers`` is not (B, W, S_r, 3).
+        ConfigError: when ``margin`` is not a finite number.
     """
+    check_shape("centers", centers, ("B", "W", "S_r", 3))
+    finite("margin", margin)
     clear = scene.clearance(centers, radii)  # (B, W, S_r)
     cost = torch.relu(margin - clear).square().sum(dim=(-2, -1))
     return cost, clear.min(dim=-1).values
@@ -179,7 +214,12 @@ def goal_distance(q_last: torch.Tensor, q_goal: torch.Tensor) -> torch.Tensor:
 
     Returns:
         (B,) [rad^2].
+
+    Raises:
+        ShapeError: when ``q_last`` is not (B, J) or ``q_goal`` not (J,).
     """
+    check_shape("q_last", q_last, ("B", "J"))
+    check_shape("q_goal", q_goal, (q_last.shape[-1],))
     return (q_last - q_goal).square().sum(-1)
 
 
@@ -192,7 +232,12 @@ def goal_distance_ee(ee: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
     Returns:
         (B,) [m^2].
+
+    Raises:
+        ShapeError: when ``ee`` is not (B, 3) or ``target`` not (3,).
     """
+    check_shape("ee", ee, ("B", 3))
+    check_shape("target", target, (3,))
     return (ee - target).square().sum(-1)
 
 
@@ -257,6 +302,15 @@ class HumanObstacle:
         var: (W_x, A, S_h, 3) sphere-centre variances [m^2].
         radii: (S_h,) sphere radii [m].
         weights: (A,) action weights p(c | F, p), summing to 1.
+        residual: weight of the actions left out, a finite number >= 0.
+
+    Shapes, dtypes and devices are checked at construction (no host synchronisation; the
+    values are not: :meth:`all_finite` tells whether they can be trusted).
+
+    Raises:
+        ShapeError: when the tensors' shapes disagree, or they are not all of one floating
+            dtype and on one device.
+        ConfigError: when ``residual`` is not a finite number >= 0.
     """
 
     mean: torch.Tensor
@@ -271,6 +325,24 @@ class HumanObstacle:
     _pair_cache: tuple[tuple, tuple] | None = field(default=None, repr=False, compare=False)
     # () bool tensor: whether mean, var and weights are all finite (computed once)
     _finite: torch.Tensor | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        check_shape("HumanObstacle.mean", self.mean, ("W_x", "A", "S_h", 3))
+        w_x, a, s_h, _ = self.mean.shape
+        check_shape("HumanObstacle.var", self.var, (w_x, a, s_h, 3))
+        check_shape("HumanObstacle.radii", self.radii, (s_h,))
+        check_shape("HumanObstacle.weights", self.weights, (a,))
+        dtype, device = self.mean.dtype, self.mean.device
+        if not self.mean.is_floating_point():
+            raise ShapeError(f"expected HumanObstacle.mean of a floating dtype, got {dtype}")
+        for name in ("var", "radii", "weights"):
+            x = getattr(self, name)
+            if x.dtype != dtype or x.device != device:
+                raise ShapeError(
+                    f"expected HumanObstacle.{name} {dtype} on {device} (as mean), got "
+                    f"{x.dtype} on {x.device}"
+                )
+        non_negative("HumanObstacle.residual", self.residual)
 
     def all_finite(self) -> torch.Tensor:
         """() bool tensor: every mean, variance and weight is finite (computed on the first
@@ -299,9 +371,15 @@ class HumanObstacle:
         key = (id(pairs), pairs.data_ptr(), pairs.shape[0], id(robot_radii))
         if self._pair_cache is None or self._pair_cache[0] != key:
             ri, hi = pairs[:, 0], pairs[:, 1]
-            mean = self.mean.transpose(1, 2)[:, hi]  # (W_x, P, A, 3)
-            var = self.var.transpose(1, 2)[:, hi]
-            rad = (robot_radii[ri] + self.radii[hi])[:, None]
+            try:
+                mean = self.mean.transpose(1, 2)[:, hi]  # (W_x, P, A, 3)
+                var = self.var.transpose(1, 2)[:, hi]
+                rad = (robot_radii[ri] + self.radii[hi])[:, None]
+            except IndexError as err:  # (the CPU's bounds check; free)
+                raise ShapeError(
+                    f"expected pairs of (robot, human) sphere indices below "
+                    f"({robot_radii.shape[0]}, {self.radii.shape[0]}) (S_r, S_h): {err}"
+                ) from err
             self._pair_cache = (key, (mean, var, var.amax(-1).rsqrt(), rad))
         return self._pair_cache[1]
 
@@ -340,6 +418,41 @@ def drop_light_actions(human: HumanObstacle, max_mass: float) -> HumanObstacle:
     )
 
 
+def _check_robot_spheres(
+    robot_centers: torch.Tensor,
+    robot_radii: torch.Tensor,
+    human: HumanObstacle,
+    *,
+    nonempty: bool = False,
+) -> None:
+    """ShapeError unless ``human`` is a :class:`HumanObstacle`, ``robot_centers`` is
+    (B, W_x, S_r, 3) with the obstacle's W_x (and, with ``nonempty``, B >= 1 and W_x >= 1),
+    ``robot_radii`` is (S_r,), and both have the obstacle's dtype and device (no host
+    synchronisation)."""
+    if not isinstance(human, HumanObstacle):
+        raise ShapeError(f"expected human a HumanObstacle, got {type(human).__name__}")
+    check_shape("robot_centers", robot_centers, ("B", "W_x", "S_r", 3))
+    b, w_x, s_r, _ = robot_centers.shape
+    if w_x != human.mean.shape[0]:
+        raise ShapeError(
+            f"expected robot_centers (B, W_x, S_r, 3) with W_x = {human.mean.shape[0]} (the "
+            f"human obstacle's times), got {tuple(robot_centers.shape)}"
+        )
+    if nonempty and (b == 0 or w_x == 0):
+        raise ShapeError(
+            "expected robot_centers (B, W_x, S_r, 3) with B >= 1 and W_x >= 1, got "
+            f"{tuple(robot_centers.shape)}"
+        )
+    check_shape("robot_radii", robot_radii, (s_r,))
+    dtype, device = human.mean.dtype, human.mean.device
+    for name, x in (("robot_centers", robot_centers), ("robot_radii", robot_radii)):
+        if x.dtype != dtype or x.device != device:
+            raise ShapeError(
+                f"expected {name} {dtype} on {device} (as the human obstacle), got {x.dtype} "
+                f"on {x.device}"
+            )
+
+
 def candidate_pairs(
     robot_centers: torch.Tensor,
     robot_radii: torch.Tensor,
@@ -349,14 +462,24 @@ def candidate_pairs(
     """Sphere pairs whose bound can exceed Phi(-PRUNE_SIGMAS) after a move of up to ``margin``.
 
     Args:
-        robot_centers: (B, W_x, S_r, 3) robot sphere centres [m].
+        robot_centers: (B, W_x, S_r, 3) robot sphere centres [m], B >= 1, W_x >= 1 the
+            obstacle's.
         robot_radii: (S_r,) [m].
-        human: the Gaussian human spheres.
-        margin: extra distance the robot spheres may move before the pairs are refreshed [m].
+        human: the Gaussian human spheres (dtype and device of the robot's tensors).
+        margin: extra distance the robot spheres may move before the pairs are refreshed [m],
+            a finite number >= 0.
 
     Returns:
         (P, 2) long tensor of (robot sphere, human sphere) indices.
+
+    Raises:
+        ShapeError: on wrong shapes (B = 0, W_x = 0 or a W_x other than the obstacle's
+            included), dtypes or devices.
+        ConfigError: when ``margin`` is not a finite number >= 0 (a NaN margin would keep no
+            pair, a bound of 0 for a sphere inside the person).
     """
+    _check_robot_spheres(robot_centers, robot_radii, human, nonempty=True)
+    non_negative("margin", margin)
     with torch.no_grad():
         sigma = human.var.amax(dim=(-1, 1, 0)).sqrt()  # (S_h,)
         reach = robot_radii[:, None] + human.radii[None, :] + PRUNE_SIGMAS * sigma[None, :]
@@ -472,14 +595,31 @@ def human_collision_bound(
         robot_centers: (B, W_x, S_r, 3) robot sphere centres at the window's waypoints [m].
         robot_radii: (S_r,) [m].
         human: the Gaussian human spheres at the same W_x times.
-        pairs: (P, 2) (robot, human) sphere indices to evaluate (from :func:`candidate_pairs`);
-            None evaluates all S_r x S_h pairs. Pruned pairs contribute at most Phi(-5).
+        pairs: (P, 2) (robot, human) sphere indices to evaluate (from :func:`candidate_pairs`),
+            int64 or int32 on the robot's device; None evaluates all S_r x S_h pairs. Pruned
+            pairs contribute at most Phi(-5). Their values are not checked (that would cost a
+            host synchronisation per iteration), except that an index beyond S_r or S_h is
+            refused on the CPU.
         exact: refine the large pair bounds with the exact diagonal-Gaussian bound.
 
     Returns:
         bound (B, W_x) in [0, 1] and the penetration cost (B,) ``sum_a p(a) sum relu(R -
         ||c - mu||)^2`` [m^2] of robot spheres into the mean human spheres.
+
+    Raises:
+        ShapeError: when ``robot_centers`` is not (B, W_x, S_r, 3) with the obstacle's W_x,
+            ``robot_radii`` not (S_r,), either not of the obstacle's dtype and
+            device, or ``pairs`` not a (P, 2) integer tensor on that device (or, on the CPU,
+            holding an index beyond S_r or S_h).
     """
+    _check_robot_spheres(robot_centers, robot_radii, human)
+    if pairs is not None:
+        check_shape("pairs", pairs, ("P", 2))
+        if pairs.dtype not in (torch.int64, torch.int32) or pairs.device != robot_centers.device:
+            raise ShapeError(
+                f"expected pairs int64 or int32 on {robot_centers.device}, got {pairs.dtype} on "
+                f"{pairs.device}"
+            )
     b, w = robot_centers.shape[:2]
     if pairs is None:
         s_r, s_h = robot_radii.shape[0], human.radii.shape[0]
@@ -541,6 +681,8 @@ def forecast_to_obstacle(
     forecast_t0: float,
     spheres: SphereMap,
     index: int = 0,
+    *,
+    validate: bool = True,
 ) -> HumanObstacle:
     """The forecast's human spheres at given times (linear interpolation between frames).
 
@@ -549,14 +691,39 @@ def forecast_to_obstacle(
 
     Args:
         forecast: the predictor's output; batch entry ``index`` is used.
-        times: (W_x,) absolute query times [s].
-        forecast_t0: time of the last observed frame the forecast starts from [s].
+        times: (W_x,) absolute query times [s], of a floating dtype (the obstacle's); +-inf
+            takes the last or the first frame.
+        forecast_t0: time of the last observed frame the forecast starts from [s], finite.
         spheres: the joint-to-sphere map.
-        index: batch entry of the forecast.
+        index: batch entry of the forecast, in [0, B).
+        validate: test ``times`` for NaN (one host synchronisation); False skips that (the
+            optimiser's times are finite by construction).
 
     Returns:
         The Gaussian human spheres at ``times`` on the device/dtype of ``times``.
+
+    Raises:
+        ShapeError: when ``forecast`` is not a :class:`Forecast`, or ``times`` is not a (W_x,)
+            tensor of a floating dtype (integer times would round the forecast to integers).
+        ConfigError: when ``forecast_t0`` is not a finite number, or ``index`` not an integer
+            in [0, B).
+        DataError: (``validate``) when ``times`` holds NaN (it selects no frame).
     """
+    if not isinstance(forecast, Forecast):
+        raise ShapeError(f"expected forecast a Forecast, got {type(forecast).__name__}")
+    check_shape("times", times, ("W_x",))
+    if not times.is_floating_point():
+        raise ShapeError(f"expected times of a floating dtype, got {times.dtype}")
+    finite_time("forecast_t0", forecast_t0)
+    n_b = forecast.weights.shape[0]
+    integer("forecast index", index)
+    if not 0 <= index < n_b:
+        raise ConfigError(f"expected forecast index in [0, {n_b}), got {index}")
+    if validate:
+        nan = torch.isnan(times)
+        if bool(nan.any()):
+            first = int(nan.nonzero()[0, 0])
+            raise DataError(f"times is NaN at index {first}: a NaN time selects no frame")
     dev, dt_ = times.device, times.dtype
     mean = forecast.mean[index].to(device=dev, dtype=dt_).transpose(0, 1)  # (n_f, A, K, 3)
     var = forecast.var[index].to(device=dev, dtype=dt_).transpose(0, 1)  # (n_f, A, K, 3)

@@ -317,9 +317,13 @@ def smooth_stop(q: torch.Tensor, hold: int) -> torch.Tensor:
         (W, J) waypoints [rad] at the same times.
 
     Raises:
+        ShapeError: when ``q`` is not (W, J) with W >= 2.
         ConfigError: when ``hold`` is not an integer >= 1.
     """
     integer("hold", hold, minimum=1)
+    check_shape("q", q, ("W", "J"))
+    if q.shape[0] < 2:
+        raise ShapeError(f"expected q (W, J) with W >= 2, got {tuple(q.shape)}")
     w = q.shape[0]
     k_stop = min(2 * hold, w - 1)
     k = torch.arange(w, device=q.device, dtype=q.dtype).clamp(max=k_stop)
@@ -374,6 +378,13 @@ class TrajectoryOptimizer:
         human_spheres: joint-to-sphere map of the human (``centers_diag``, ``radii``); None
             builds :class:`HumanSphereMap` from the forecast's joint names (layout
             ``cfg.human_spheres``).
+
+    Raises:
+        ConfigError: when ``robot`` is not a :class:`KinematicModel` (it lacks one of its
+            attributes), ``cfg`` is neither an :class:`OptimizerCfg` nor None, or
+            ``cfg.device`` is not of the robot's device type.
+        ShapeError: when the robot's ``sphere_radii`` is not an (S_r,) tensor of a floating
+            dtype, or its ``q_min``, ``q_max`` or ``v_max`` not a (J,) tensor.
     """
 
     def __init__(
@@ -383,6 +394,21 @@ class TrajectoryOptimizer:
         static_scene: C.ClearanceScene | None = None,
         human_spheres: C.SphereMap | None = None,
     ) -> None:
+        if not isinstance(robot, KinematicModel):
+            raise ConfigError(
+                "expected robot a KinematicModel (q_min, q_max, v_max, sphere_radii, "
+                f"num_joints, sphere_centers), got {type(robot).__name__}"
+            )
+        if cfg is not None and not isinstance(cfg, OptimizerCfg):
+            raise ConfigError(f"expected cfg an OptimizerCfg or None, got {type(cfg).__name__}")
+        check_shape("robot.sphere_radii", robot.sphere_radii, ("S_r",))
+        if not robot.sphere_radii.is_floating_point():
+            raise ShapeError(
+                f"expected robot.sphere_radii of a floating dtype, got {robot.sphere_radii.dtype}"
+            )
+        j = integer("robot.num_joints", robot.num_joints, minimum=1)
+        for name in ("q_min", "q_max", "v_max"):
+            check_shape(f"robot.{name}", getattr(robot, name), (j,))
         self.robot = robot
         self.cfg = cfg or OptimizerCfg()
         self.static_scene = static_scene
@@ -522,7 +548,8 @@ class TrajectoryOptimizer:
                 velocities stay within ``INIT_VEL_FRACTION`` of the limits (the base is not
                 changed), and ``qd_start`` is used.
             qd_start: (J,) start velocity [rad/s]; None (or no ``duration``) means rest.
-            arrival: first waypoint at the goal (:meth:`arrival_index`); None: the last.
+            arrival: first waypoint at the goal (:meth:`arrival_index`), an integer (clamped
+                to [1, W - 1]); None: the last.
 
         Returns:
             (num, W, J) [rad], clamped to the joint limits, start and goal pinned.
@@ -530,11 +557,18 @@ class TrajectoryOptimizer:
         Raises:
             ShapeError: when ``q_start``, ``q_goal`` or ``qd_start`` is not (J,).
             DataError: when one of them holds NaN or inf.
-            ConfigError: when ``num`` is not an integer >= 1.
+            ConfigError: when ``num`` is not an integer >= 1, ``seed`` not an integer that
+                torch's generator takes, ``duration`` (when given) not finite and > 0, or
+                ``arrival`` (when given) not an integer.
         """
         w, j = self.cfg.num_waypoints, self.num_joints
         self._check_ends(q_start, q_goal, qd_start)
         integer("num", num, minimum=1)
+        integer("seed", seed)
+        if duration is not None:
+            positive("duration", duration)
+        if arrival is not None:
+            integer("arrival", arrival)
         n_a = w - 1 if arrival is None else min(max(int(arrival), 1), w - 1)
         k = torch.arange(w, device=self.device, dtype=self.dtype)
         s = (k / n_a).clamp(max=1.0)  # (W,) progress to the arrival
@@ -545,7 +579,10 @@ class TrajectoryOptimizer:
         if qd_start is not None and duration is not None and duration > 0.0:
             span = n_a * duration / (w - 1)  # seconds to the arrival
             base = base + h10[:, None] * span * qd_start.to(base)
-        gen = torch.Generator().manual_seed(seed)
+        try:
+            gen = torch.Generator().manual_seed(seed)
+        except (RuntimeError, ValueError, OverflowError) as err:  # beyond 64 bits
+            raise ConfigError(f"expected seed a 64-bit integer, got {seed!r}") from err
         amp = torch.randn(num, 3, j, generator=gen, dtype=torch.float64)  # (num, 3 modes, J)
         amp = (amp * self.cfg.perturbation_std / torch.arange(1, 4).view(1, 3, 1)).to(
             self.device, self.dtype
@@ -697,8 +734,10 @@ class TrajectoryOptimizer:
             ShapeError: when ``forecast`` is not a :class:`Forecast` or None.
             ConfigError: when ``t0``, ``forecast_t0``, ``duration``, ``arrive`` or a bound of
                 ``window`` is not a finite number, when ``window`` ends before it starts,
-                when ``duration <= 0`` or ``duration > MAX_HORIZON_S``, or when ``arrive`` is
-                before ``t0``.
+                when ``duration <= 0`` or ``duration > MAX_HORIZON_S``, when ``arrive`` is
+                before ``t0``, or when ``t0`` is too large for the robot's dtype to resolve
+                the waypoint spacing (a Unix timestamp in float32: pass times relative to the
+                episode start; :func:`~iplanner_torch.planning.trajectory.uniform_times`).
             DataError: when ``q_start``, ``q_goal``, ``qd_start`` or ``q_init`` holds NaN or
                 inf.
             PlanningError: when the optimisation produces non-finite waypoints (it cannot
@@ -906,7 +945,8 @@ class TrajectoryOptimizer:
         to matter at this confidence (``drop_action_mass``)."""
         cfg = self.cfg
         spheres = self._spheres_for(tuple(forecast.joint_names))
-        human = C.forecast_to_obstacle(forecast, times, forecast_t0, spheres)
+        # the times are finite: built from checked numbers (solve) or checked (collision_bound)
+        human = C.forecast_to_obstacle(forecast, times, forecast_t0, spheres, validate=False)
         return C.drop_light_actions(human, cfg.drop_action_mass * (1.0 - cfg.confidence))
 
     def _collision_points(self, q: torch.Tensor, win_idx: torch.Tensor) -> torch.Tensor:

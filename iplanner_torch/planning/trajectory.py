@@ -8,14 +8,15 @@ the last waypoint the trajectory holds its end pose.
 
 Inputs are checked where it is cheap: a :class:`Trajectory` checks its waypoints and times once,
 at construction; :meth:`Trajectory.sample` checks a Python-number time (and the rank of a
-tensor), the finite-difference helpers check a Python-number ``dt``, and
-:func:`resample_linear` its times. The values of tensors given to ``sample``, ``velocities`` and
-``accelerations`` are not checked (the optimiser calls them every iteration): a NaN there gives
-NaN in the result.
+tensor), the finite-difference helpers check a Python-number ``dt`` and the shapes of their
+tensors, :func:`uniform_times` its Python numbers, and :func:`resample_linear` its times. The
+values of tensors given to ``sample``, ``velocities`` and ``accelerations`` are not checked (the
+optimiser calls them every iteration): a NaN there gives NaN in the result.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import torch
@@ -24,11 +25,31 @@ from iplanner_torch.checks import finite_time, integer, positive
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_finite, check_shape
 
+#: Largest spacing of the floating-point numbers around the waypoint times that
+#: :func:`uniform_times` accepts, as a share of the time between waypoints: each waypoint time
+#: is rounded by up to half a spacing, so each interval is off by up to this share. In float32
+#: the spacing is 2^-10 s (about 1 ms) from 8192 s to 16384 s after the time origin, so a plan
+#: of the default 20 waypoints over at least 1 s (0.053 s apart) is accepted for the first
+#: 16384 s (4.5 h) of an episode; a Unix timestamp (1.7e9 s, spacing 128 s) is refused.
+TIME_RESOLUTION = 0.02
+
 
 def _check_positive(name: str, value: float | torch.Tensor) -> None:
     """:func:`~iplanner_torch.checks.positive` for a Python number (a tensor is not checked)."""
     if not isinstance(value, torch.Tensor):
         positive(name, value)
+
+
+def _check_waypoints(q: torch.Tensor, qd_start: torch.Tensor | None = None) -> None:
+    """ShapeError unless ``q`` is (..., W, J) and ``qd_start`` (when given) (..., J) with W >= 2
+    (the first waypoint's acceleration needs the second waypoint)."""
+    check_shape("q", q, ("...", "W", "J"))
+    if qd_start is not None:
+        check_shape("qd_start", qd_start, ("...", q.shape[-1]))
+        if q.shape[-2] < 2:
+            raise ShapeError(
+                f"expected q (..., W, J) with W >= 2 when qd_start is given, got {tuple(q.shape)}"
+            )
 
 
 def velocities(q: torch.Tensor, dt: float) -> torch.Tensor:
@@ -42,8 +63,10 @@ def velocities(q: torch.Tensor, dt: float) -> torch.Tensor:
         (..., W - 1, J) velocities [rad/s]; entry i is (q_{i+1} - q_i) / dt.
 
     Raises:
+        ShapeError: when ``q`` has fewer than 2 dimensions (no joint axis).
         ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
+    _check_waypoints(q)
     _check_positive("dt", dt)
     return (q[..., 1:, :] - q[..., :-1, :]) / dt
 
@@ -64,8 +87,11 @@ def accelerations(
         (..., W - 2, J) accelerations [rad/s^2] (``W - 1`` rows when ``qd_start`` is given).
 
     Raises:
+        ShapeError: when ``q`` has fewer than 2 dimensions (no joint axis), ``qd_start`` does
+            not end in J, or ``qd_start`` is given with fewer than 2 waypoints.
         ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
+    _check_waypoints(q, qd_start)
     _check_positive("dt", dt)
     acc = (q[..., 2:, :] - 2.0 * q[..., 1:-1, :] + q[..., :-2, :]) / (dt * dt)
     if qd_start is None:
@@ -79,14 +105,51 @@ def uniform_times(
 ) -> torch.Tensor:
     """(W,) waypoint times [s] from ``t0`` to ``t0 + duration``, on ``like``'s device/dtype.
 
+    Args:
+        t0: time of the first waypoint [s]; relative to the start of the episode (a Unix
+            timestamp is too large for float32 times, see :data:`TIME_RESOLUTION`).
+        duration: seconds from the first to the last waypoint, finite and > 0.
+        num_waypoints: W, an integer >= 2.
+        like: any tensor of a floating dtype: the device and dtype of the times.
+
     Raises:
+        ShapeError: when ``like`` is not a tensor of a floating dtype (integer times would be
+            truncated).
         ConfigError: when ``t0`` is not finite or ``duration`` not finite and > 0 (Python
-            numbers; tensors are not checked).
+            numbers; tensors are not checked), when ``num_waypoints`` is not an integer >= 2,
+            or when ``like``'s dtype cannot resolve the waypoint spacing at ``t0`` (its
+            rounding there exceeds :data:`TIME_RESOLUTION` of the spacing; Python numbers
+            only).
     """
-    if not isinstance(t0, torch.Tensor):
-        finite_time("t0", t0)
+    if not isinstance(like, torch.Tensor):
+        raise ShapeError(f"expected like to be a torch.Tensor, got {type(like).__name__}")
+    if not like.is_floating_point():
+        raise ShapeError(f"expected like of a floating dtype (the times'), got {like.dtype}")
+    integer("num_waypoints", num_waypoints, minimum=2)
     _check_positive("duration", duration)
+    if not isinstance(t0, torch.Tensor):
+        start = finite_time("t0", t0)
+        if not isinstance(duration, torch.Tensor):
+            _check_resolution(start, float(duration), num_waypoints, like.dtype)
     return t0 + torch.linspace(0.0, duration, num_waypoints, device=like.device, dtype=like.dtype)
+
+
+def _check_resolution(t0: float, duration: float, num_waypoints: int, dtype: torch.dtype) -> None:
+    """ConfigError when the spacing of ``dtype``'s numbers at the waypoint times exceeds
+    :data:`TIME_RESOLUTION` times the time between waypoints."""
+    step = duration / (num_waypoints - 1)
+    largest = max(abs(t0), abs(t0 + duration))
+    # spacing of the floats in [2^(e-1), 2^e) that holds ``largest``: eps * 2^(e-1)
+    spacing = math.inf
+    if math.isfinite(largest):  # (t0 + duration may overflow)
+        spacing = torch.finfo(dtype).eps * 2.0 ** (math.frexp(largest)[1] - 1)
+    if spacing > TIME_RESOLUTION * step:
+        raise ConfigError(
+            f"expected waypoint times that {dtype} resolves: at t0={t0!r} s its numbers are "
+            f"{spacing:.3g} s apart, too coarse for waypoints {step:.3g} s apart (at most "
+            f"{TIME_RESOLUTION:g} of it); pass times relative to the episode start, not "
+            "absolute (Unix) times"
+        )
 
 
 @dataclass(kw_only=True)
@@ -295,7 +358,10 @@ def resample_linear(q: torch.Tensor, times: torch.Tensor, new_times: torch.Tenso
     check_shape("new_times", new_times, ("W'",))
     if times.shape[0] < 2:
         raise ShapeError(f"expected at least 2 times, got times {tuple(times.shape)}")
-    if not bool((times[1:] > times[:-1]).all()):
+    # strictly increasing times hold no NaN and can only be infinite at their ends: one host
+    # synchronisation tests both
+    ends = torch.isfinite(times[0]) & torch.isfinite(times[-1])
+    if not bool((times[1:] > times[:-1]).all() & ends):
         check_finite("times", times, ("waypoint",))
         raise ConfigError("expected strictly increasing times")
     tq = new_times.clamp(times[0], times[-1])

@@ -149,3 +149,108 @@ def test_box_takes_rotations_as_written_to_seven_digits() -> None:
         rotation=((c, -s_, 0.0), (s_, c, 0.0), (0.0, 0.0, 1.0)),
     )
     assert box.rotation[0] == (c, -s_, 0.0)
+
+
+_UP = torch.tensor([[0.0, 0.0, 1.0]])  # one sphere centre 1 m above the origin
+_R = torch.tensor([0.1])
+
+
+def test_integer_centres_are_refused_not_rounded() -> None:
+    """Integer centres used to cast the half extents and the normal to integers: 0.9 instead
+    of 0.4 for the box, -0.1 instead of 0.7 for the plane."""
+    half, normal = torch.full((3,), 0.5), torch.tensor([0.6, 0.0, 0.8])
+    assert sphere_box_distance(_UP, _R, torch.zeros(3), half).tolist() == [pytest.approx(0.4)]
+    assert sphere_plane_distance(_UP, _R, normal, 0.0).tolist() == [pytest.approx(0.7)]
+    up_int = _UP.long()
+    with pytest.raises(ShapeError, match="expected centers of a floating dtype, got torch.int64"):
+        sphere_box_distance(up_int, _R, torch.zeros(3), half)
+    with pytest.raises(ShapeError, match="expected centers of a floating dtype, got torch.int64"):
+        sphere_plane_distance(up_int, _R, normal, 0.0)
+
+
+@pytest.mark.parametrize(
+    ("radii", "match"),
+    [
+        ([0.1], "expected radii to be a torch.Tensor, got list"),
+        (
+            torch.zeros(2),
+            r"expected radii broadcastable to centers\[\.\.\., 0\] \(1,\), got \(2,\)",
+        ),
+        (torch.zeros(1, 1), r"broadcastable to centers\[\.\.\., 0\] \(1,\), got \(1, 1\)"),
+        (torch.tensor([True]), "expected radii of a real dtype, got torch.bool"),
+    ],
+)
+def test_sphere_distances_refuse_bad_radii(radii: object, match: str) -> None:
+    """A list or a wrongly shaped radii tensor used to raise raw Type/RuntimeErrors (or
+    broadcast to a larger result)."""
+    with pytest.raises(ShapeError, match=match):
+        sphere_box_distance(_UP, radii, torch.zeros(3), torch.full((3,), 0.5))  # type: ignore[arg-type]
+    with pytest.raises(ShapeError, match=match):
+        sphere_plane_distance(_UP, radii, torch.tensor([0.0, 0.0, 1.0]), 0.0)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("offset", "error", "match"),
+    [
+        ("a", ConfigError, "expected offset a finite number \\[m\\], got 'a'"),
+        (math.nan, ConfigError, "expected offset a finite number, got nan"),
+        (torch.zeros(3), ShapeError, r"one-element tensor \[m\], got a tensor of shape \(3,\)"),
+        (torch.tensor(math.inf), ConfigError, r"Plane\.offset \('plane'\) a finite number"),
+    ],
+)
+def test_plane_distance_refuses_a_bad_offset(
+    offset: object, error: type[Exception], match: str
+) -> None:
+    with pytest.raises(error, match=match):
+        sphere_plane_distance(_UP, _R, torch.tensor([0.0, 0.0, 1.0]), offset)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("normal", "match"),
+    [
+        # a NaN normal used to be blamed as a zero one, an inf normal gave NaN silently
+        ([math.nan, 0.0, 1.0], r"Plane\.normal \('plane'\) a sequence of 3 finite numbers"),
+        ([math.inf, 0.0, 1.0], r"Plane\.normal \('plane'\) a sequence of 3 finite numbers"),
+        ([0.0, 0.0, 0.0], r"non-zero Plane\.normal"),
+    ],
+)
+def test_plane_distance_checks_the_normal_as_plane_does(normal: list[float], match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        sphere_plane_distance(_UP, _R, torch.tensor(normal), 0.0)
+    # a one-element tensor offset is taken as the number
+    got = sphere_plane_distance(_UP, _R, torch.tensor([0.0, 0.0, 2.0]), torch.tensor(0.5))
+    assert got.tolist() == [pytest.approx(0.4)]
+
+
+@pytest.mark.parametrize(
+    ("half", "rotation", "match"),
+    [
+        (torch.tensor([0.5, -0.5, 0.5]), None, r"positive Box\.half_extents"),
+        (torch.tensor([0.5, math.nan, 0.5]), None, r"Box\.half_extents \('box'\) a sequence"),
+        (torch.full((3,), 0.5), 2.0 * torch.eye(3), r"Box\.rotation \('box'\) orthonormal"),
+        (torch.full((3,), 0.5), torch.full((3, 3), math.nan), r"Box\.rotation\[0\]"),
+    ],
+)
+def test_box_distance_checks_the_box_as_box_does(
+    half: torch.Tensor, rotation: torch.Tensor | None, match: str
+) -> None:
+    """Negative half extents and a scaled rotation used to be accepted silently."""
+    with pytest.raises(ConfigError, match=match):
+        sphere_box_distance(_UP, _R, torch.zeros(3), half, rotation)
+    with pytest.raises(ConfigError, match=r"Box\.center \('box'\) a sequence of 3 finite"):
+        sphere_box_distance(_UP, _R, torch.tensor([math.nan, 0.0, 0.0]), torch.full((3,), 0.5))
+
+
+@pytest.mark.parametrize("dtype", [torch.int64, torch.bool])
+def test_scene_distances_refuse_non_floating_centres(dtype: torch.dtype) -> None:
+    """Integer and boolean centres used to raise raw RuntimeErrors from vector_norm."""
+    scene = StaticScene(
+        boxes=(Box(center=(0.0, 0.0, 0.0), half_extents=(0.5, 0.5, 0.5)),),
+        planes=(Plane(normal=(0.0, 0.0, 1.0), offset=0.0),),
+    )
+    got = scene.distances(_UP, _R)
+    assert got.tolist() == [[pytest.approx(0.4), pytest.approx(0.9)]]
+    with pytest.raises(ShapeError, match=f"expected centers of a floating dtype, got {dtype}"):
+        scene.distances(_UP.to(dtype), _R)
+    with pytest.raises(ShapeError, match=f"expected centers of a floating dtype, got {dtype}"):
+        scene.clearance(_UP.to(dtype), _R)

@@ -11,7 +11,7 @@ from planning_fakes import mc_ball_probability
 
 from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.skeleton import JOINT_NAMES
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.planning import costs as C
 from iplanner_torch.prediction.forecast import Forecast
 
@@ -326,3 +326,219 @@ def test_cost_weights_refuse_bools(value: bool) -> None:
         ConfigError, match=f"expected weight joint_acc_l2 finite and >= 0, got {value}"
     ):
         C.CostWeights(joint_acc_l2=value)
+
+
+def _one_sphere_human() -> C.HumanObstacle:
+    """One human sphere of radius 0.1 m at the origin, nearly certain (std 1 cm)."""
+    return C.HumanObstacle(
+        mean=torch.zeros(1, 1, 1, 3),
+        var=torch.full((1, 1, 1, 3), 1e-4),
+        radii=torch.tensor([0.1]),
+        weights=torch.ones(1),
+    )
+
+
+#: three robot spheres at one waypoint: two far away, the third on the human
+_THREE_SPHERES = torch.tensor([[[[5.0, 0.0, 0.0], [5.0, 0.0, 0.0], [0.0, 0.0, 0.0]]]])
+
+
+def test_human_bound_refuses_radii_for_fewer_robot_spheres() -> None:
+    """Two radii for three spheres used to skip the third, the one inside the person: a bound
+    of 1.8e-33 instead of 1."""
+    human = _one_sphere_human()
+    bound, _ = C.human_collision_bound(_THREE_SPHERES, torch.full((3,), 0.05), human)
+    assert bound.tolist() == [[1.0]]
+    for dtype in (torch.int64, torch.int32):  # given pairs of either index dtype
+        pair = torch.tensor([[2, 0]], dtype=dtype)
+        bound, _ = C.human_collision_bound(_THREE_SPHERES, torch.full((3,), 0.05), human, pair)
+        assert bound.tolist() == [[1.0]]
+    short = torch.full((2,), 0.05)
+    with pytest.raises(ShapeError, match=r"expected robot_radii \(3\), got \(2,\)"):
+        C.human_collision_bound(_THREE_SPHERES, short, human)
+    with pytest.raises(ShapeError, match=r"expected robot_radii \(3\), got \(2,\)"):
+        C.candidate_pairs(_THREE_SPHERES, short, human, 0.0)
+
+
+@pytest.mark.parametrize("margin", [math.nan, -0.1, math.inf])
+def test_candidate_pairs_refuse_a_bad_margin(margin: float) -> None:
+    """A NaN margin used to keep no pair: a bound of 0 for a sphere inside the person."""
+    with pytest.raises(ConfigError, match="expected margin >= 0 and finite"):
+        C.candidate_pairs(_THREE_SPHERES, torch.full((3,), 0.05), _one_sphere_human(), margin)
+
+
+def _forecast_at(value: float = 0.7) -> tuple[Forecast, HumanSphereMap]:
+    fc = Forecast(
+        weights=torch.ones(1, 1),
+        mean=torch.full((1, 1, 3, 1, 3), value),
+        var=torch.full((1, 1, 3, 1, 3), 0.04),
+        dt=0.1,
+        joint_names=("j",),
+        action_names=("a",),
+    )
+    return fc, HumanSphereMap(torch.ones(1, 1), torch.tensor([0.1]))
+
+
+def test_forecast_to_obstacle_refuses_integer_times() -> None:
+    """Integer times used to round the obstacle to integers: mean 0.7 -> 0, radius 0.1 -> 0."""
+    fc, spheres = _forecast_at()
+    obs = C.forecast_to_obstacle(fc, torch.tensor([1.0, 2.0]), 0.0, spheres)
+    assert torch.allclose(obs.mean, torch.full_like(obs.mean, 0.7))
+    with pytest.raises(ShapeError, match="expected times of a floating dtype, got torch.int64"):
+        C.forecast_to_obstacle(fc, torch.tensor([1, 2]), 0.0, spheres)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"forecast_t0": math.nan}, ConfigError, "expected forecast_t0 a finite time"),
+        ({"forecast_t0": "0"}, ConfigError, "expected forecast_t0 a finite time"),
+        ({"times": torch.tensor([1.0, math.nan])}, DataError, "times is NaN at index 1"),
+        ({"times": torch.zeros(2, 1)}, ShapeError, r"expected times \(W_x\), got \(2, 1\)"),
+        ({"index": 1}, ConfigError, r"expected forecast index in \[0, 1\), got 1"),
+        ({"index": -1}, ConfigError, r"expected forecast index in \[0, 1\), got -1"),
+        ({"index": 0.5}, ConfigError, "expected forecast index an integer"),
+        ({"forecast": None}, ShapeError, "expected forecast a Forecast, got NoneType"),
+    ],
+)
+def test_forecast_to_obstacle_refuses_bad_arguments(
+    kwargs: dict, error: type[Exception], match: str
+) -> None:
+    """These used to raise raw IndexError / AttributeError (a NaN time indexed frame -2^63)."""
+    fc, spheres = _forecast_at()
+    args = {"forecast": fc, "times": torch.tensor([1.0, 2.0]), "forecast_t0": 0.0}
+    args.update(kwargs)
+    with pytest.raises(error, match=match):
+        C.forecast_to_obstacle(spheres=spheres, **args)
+
+
+def test_forecast_to_obstacle_takes_infinite_times_and_skips_the_nan_test_on_request() -> None:
+    fc, spheres = _forecast_at()
+    times = torch.tensor([-math.inf, 0.15, math.inf])
+    obs = C.forecast_to_obstacle(fc, times, 0.0, spheres)
+    fast = C.forecast_to_obstacle(fc, times, 0.0, spheres, validate=False)
+    assert torch.equal(obs.mean, fast.mean) and torch.equal(obs.var, fast.var)
+    assert torch.allclose(obs.mean, torch.full_like(obs.mean, 0.7))
+
+
+@pytest.mark.parametrize(
+    ("centers", "radii", "match"),
+    [
+        # W_x = 2 against an obstacle of 1 time
+        (torch.zeros(1, 2, 3, 3), torch.full((3,), 0.05), r"with W_x = 1 \(the human"),
+        # no batch dimension
+        (torch.zeros(1, 3, 3), torch.full((3,), 0.05), r"expected robot_centers \(B, W_x"),
+        # float64 robot against a float32 obstacle
+        (
+            torch.zeros(1, 1, 3, 3, dtype=torch.float64),
+            torch.full((3,), 0.05, dtype=torch.float64),
+            r"expected robot_centers torch.float32 on cpu \(as the human obstacle\)",
+        ),
+        (
+            torch.zeros(1, 1, 3, 3),
+            torch.full((3,), 0.05, dtype=torch.float64),
+            r"expected robot_radii torch.float32 on cpu \(as the human obstacle\)",
+        ),
+    ],
+)
+def test_human_bound_refuses_mismatched_robot_tensors(
+    centers: torch.Tensor, radii: torch.Tensor, match: str
+) -> None:
+    """These used to raise raw RuntimeErrors or, for a wrong W_x or a missing batch axis,
+    return a bound of the wrong shape."""
+    with pytest.raises(ShapeError, match=match):
+        C.human_collision_bound(centers, radii, _one_sphere_human())
+    with pytest.raises(ShapeError, match=match):
+        C.candidate_pairs(centers, radii, _one_sphere_human(), 0.0)
+
+
+def test_candidate_pairs_refuse_an_empty_batch() -> None:
+    with pytest.raises(ShapeError, match=r"with B >= 1 and W_x >= 1, got \(0, 1, 3, 3\)"):
+        C.candidate_pairs(_THREE_SPHERES[:0], torch.full((3,), 0.05), _one_sphere_human(), 0.0)
+    # the bound of no trajectory is still empty, as before
+    bound, pen = C.human_collision_bound(
+        _THREE_SPHERES[:0], torch.full((3,), 0.05), _one_sphere_human()
+    )
+    assert bound.shape == (0, 1) and pen.shape == (0,)
+
+
+@pytest.mark.parametrize(
+    ("pairs", "match"),
+    [
+        (torch.tensor([[5, 0]]), r"sphere indices below \(3, 1\) \(S_r, S_h\)"),
+        (torch.tensor([[0, 3]]), r"sphere indices below \(3, 1\) \(S_r, S_h\)"),
+        (torch.tensor([[2.0, 0.0]]), "expected pairs int64 or int32 on cpu, got torch.float32"),
+        (torch.tensor([[True, False]]), "expected pairs int64 or int32 on cpu, got torch.bool"),
+        (torch.tensor([2, 0]), r"expected pairs \(P, 2\), got \(2,\)"),
+    ],
+)
+def test_human_bound_refuses_bad_pairs(pairs: torch.Tensor, match: str) -> None:
+    with pytest.raises(ShapeError, match=match):
+        C.human_collision_bound(_THREE_SPHERES, torch.full((3,), 0.05), _one_sphere_human(), pairs)
+
+
+@pytest.mark.parametrize(
+    ("field_name", "value", "error", "match"),
+    [
+        ("var", torch.ones(1, 1, 3), ShapeError, r"expected HumanObstacle.var \(1, 1, 1, 3\)"),
+        ("radii", torch.ones(2), ShapeError, r"expected HumanObstacle.radii \(1\)"),
+        ("weights", torch.ones(2), ShapeError, r"expected HumanObstacle.weights \(1\)"),
+        ("var", torch.ones(1, 1, 1, 3, dtype=torch.float64), ShapeError, "HumanObstacle.var"),
+        ("mean", torch.zeros(1, 1, 1, 3, dtype=torch.int64), ShapeError, "floating dtype"),
+        ("residual", math.nan, ConfigError, "HumanObstacle.residual >= 0 and finite"),
+        ("residual", -0.1, ConfigError, "HumanObstacle.residual >= 0 and finite"),
+    ],
+)
+def test_human_obstacle_checks_its_tensors(
+    field_name: str, value: object, error: type[Exception], match: str
+) -> None:
+    fields = {
+        "mean": torch.zeros(1, 1, 1, 3),
+        "var": torch.ones(1, 1, 1, 3),
+        "radii": torch.ones(1),
+        "weights": torch.ones(1),
+        field_name: value,
+    }
+    with pytest.raises(error, match=match):
+        C.HumanObstacle(**fields)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: C.joint_acc_l2(torch.zeros(1, 5), 0.1), r"expected q \(B, W, J\), got \(1, 5\)"),
+        (
+            lambda: C.joint_acc_l2(torch.zeros(1, 5, 2), 0.1, torch.zeros(3)),
+            r"expected qd_start \(\.\.\., 2\), got \(3,\)",
+        ),
+        (
+            lambda: C.joint_limit_violation(torch.zeros(1, 5, 2), torch.zeros(3), torch.ones(3)),
+            r"expected q_min \(2\), got \(3,\)",
+        ),
+        (
+            lambda: C.joint_vel_limit_violation(torch.zeros(1, 5, 2), 0.1, torch.ones(3)),
+            r"expected v_max \(2\), got \(3,\)",
+        ),
+        (
+            lambda: C.joint_acc_limit_violation(torch.zeros(5, 2), 0.1, 1.0),
+            r"expected q \(B, W, J\), got \(5, 2\)",
+        ),
+        (
+            lambda: C.goal_distance(torch.zeros(1, 2), torch.zeros(3)),
+            r"expected q_goal \(2\), got \(3,\)",
+        ),
+        (
+            lambda: C.goal_distance_ee(torch.zeros(1, 2), torch.zeros(3)),
+            r"expected ee \(B, 3\), got \(1, 2\)",
+        ),
+    ],
+)
+def test_cost_terms_refuse_mismatched_joint_axes(call, match: str) -> None:
+    """These used to return a 0-d tensor (no batch axis) or raise raw Index/RuntimeErrors."""
+    with pytest.raises(ShapeError, match=match):
+        call()
+
+
+def test_static_clearance_refuses_a_non_finite_margin() -> None:
+    centers = torch.zeros(1, 2, 1, 3)
+    with pytest.raises(ConfigError, match="expected margin a finite number, got nan"):
+        C.static_clearance(centers, torch.ones(1), _Floor(), math.nan)

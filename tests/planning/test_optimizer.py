@@ -1005,3 +1005,62 @@ def test_static_human_forecast_refuses_bad_frames_and_steps(
 ) -> None:
     with pytest.raises(ConfigError, match=match):
         static_human_forecast(torch.zeros(1, 3), n_f, dt, ("j",))  # type: ignore[arg-type]
+
+
+def test_solve_refuses_a_unix_timestamp_but_plans_hours_into_an_episode(
+    point_robot: PointRobot,
+) -> None:
+    """At t0 = 1.7e9 s the float32 waypoint times were all equal: forecast lookups collapsed,
+    the plan was reported feasible and its trajectory() raised ConfigError."""
+    opt = TrajectoryOptimizer(
+        point_robot, OptimizerCfg(iterations=2), human_spheres=one_sphere_map(0.1)
+    )
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    fc = static_forecast([0.0, 1.0, 0.0], 0.05)
+    with pytest.raises(ConfigError, match="pass times relative to the episode start"):
+        opt.solve(q_s, q_g, forecast=fc, forecast_t0=1.7e9, t0=1.7e9)
+    # four hours of simulated time (the replanner's t0 is the simulation clock) still plan
+    t0 = 4 * 3600.0
+    res = opt.solve(q_s, q_g, forecast=fc, forecast_t0=t0, t0=t0, duration=1.0)
+    traj = res.trajectory()
+    assert traj.t_start == pytest.approx(t0) and traj.t_end == pytest.approx(t0 + 1.0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"seed": 1.5}, "expected seed an integer, got 1.5"),
+        ({"seed": 2**64}, "expected seed a 64-bit integer"),
+        ({"arrival": math.nan}, "expected arrival an integer, got nan"),
+        ({"duration": math.nan}, "expected duration > 0 and finite, got nan"),
+        ({"duration": -1.0}, "expected duration > 0 and finite, got -1.0"),
+    ],
+)
+def test_initial_trajectories_refuse_bad_numbers(
+    point_robot: PointRobot, kwargs: dict, match: str
+) -> None:
+    """A float seed and a NaN arrival used to raise raw errors; a NaN duration was ignored."""
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg())
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    args = {"seed": 0, **kwargs}
+    with pytest.raises(ConfigError, match=match):
+        opt.initial_trajectories(q_s, q_g, 2, **args)
+
+
+def test_smooth_stop_refuses_a_path_without_joints_or_of_one_waypoint() -> None:
+    """A (W,) path used to give a (W, W) result; a single waypoint an IndexError."""
+    with pytest.raises(ShapeError, match=r"expected q \(W, J\), got \(5,\)"):
+        smooth_stop(torch.zeros(5), 1)
+    with pytest.raises(ShapeError, match=r"expected q \(W, J\) with W >= 2, got \(1, 2\)"):
+        smooth_stop(torch.zeros(1, 2), 1)
+
+
+def test_optimizer_refuses_a_non_robot_or_a_dict_cfg(point_robot: PointRobot) -> None:
+    """Both used to raise raw AttributeErrors."""
+    with pytest.raises(ConfigError, match="expected cfg an OptimizerCfg or None, got dict"):
+        TrajectoryOptimizer(point_robot, {"iterations": 3})  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="expected robot a KinematicModel .* got NoneType"):
+        TrajectoryOptimizer(None)  # type: ignore[arg-type]
+    point_robot.sphere_radii = point_robot.sphere_radii.long()
+    with pytest.raises(ShapeError, match="expected robot.sphere_radii of a floating dtype"):
+        TrajectoryOptimizer(point_robot)

@@ -10,6 +10,7 @@ import torch
 
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.planning.trajectory import (
+    TIME_RESOLUTION,
     Trajectory,
     accelerations,
     resample_linear,
@@ -213,3 +214,56 @@ def test_sample_refuses_a_time_tensor_of_more_than_one_dimension() -> None:
         traj.sample(torch.tensor([[0.5, 1.5]]))
     assert traj.sample(torch.tensor(0.5))[0].shape == (2,)
     assert traj.sample(torch.tensor([0.5, 1.5]))[0].shape == (2, 2)
+
+
+def test_uniform_times_refuse_a_t0_float32_cannot_resolve() -> None:
+    """A Unix timestamp in float32 (spacing 128 s at 1.7e9 s) used to give equal times."""
+    like = torch.zeros(())
+    with pytest.raises(ConfigError, match="pass times relative to the episode start"):
+        uniform_times(1.7e9, 1.0, 20, like)
+    with pytest.raises(ConfigError, match=r"numbers are 128 s apart"):
+        Trajectory(q=torch.zeros(3, 2), times=torch.arange(3.0)).resample(1.7e9, 1.0, 20)
+    # float64 resolves it
+    times = uniform_times(1.7e9, 1.0, 20, like.double())
+    assert bool((times[1:] > times[:-1]).all())
+    # episodes of hours of simulated time still plan in float32: the default plan (20
+    # waypoints over 1 s) keeps its intervals within TIME_RESOLUTION of 1/19 s
+    for t0 in (0.0, 60.0, 3600.0, 4 * 3600.0, -4 * 3600.0):
+        times = uniform_times(t0, 1.0, 20, like)
+        step = (times[1:] - times[:-1]).double()
+        assert float((step - 1.0 / 19).abs().max()) <= TIME_RESOLUTION / 19, t0
+        Trajectory(q=torch.zeros(20, 2), times=times)  # strictly increasing
+
+
+def test_uniform_times_refuse_integer_times_and_bad_counts() -> None:
+    """An integer ``like`` used to truncate the times to [0, 0, 1]; a bad count raised raw."""
+    with pytest.raises(ShapeError, match="expected like of a floating dtype.*torch.int64"):
+        uniform_times(0.0, 1.0, 3, torch.zeros((), dtype=torch.int64))
+    with pytest.raises(ShapeError, match="expected like to be a torch.Tensor, got float"):
+        uniform_times(0.0, 1.0, 3, 0.0)  # type: ignore[arg-type]
+    for n in (-1, 2.5, 1, True):
+        with pytest.raises(ConfigError, match="expected num_waypoints an integer >= 2"):
+            uniform_times(0.0, 1.0, n, torch.zeros(()))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("times", "where"),
+    [([0.0, 1.0, 2.0, 3.0, math.inf], 4), ([-math.inf, 1.0, 2.0, 3.0, 4.0], 0)],
+)
+def test_resample_linear_refuses_infinite_times(times: list[float], where: int) -> None:
+    """Increasing times ending in inf used to pass (the docstring promised DataError)."""
+    q = torch.zeros(1, 5, 2)
+    with pytest.raises(DataError, match=f"times is NaN/Inf at waypoint {where}"):
+        resample_linear(q, torch.tensor(times), torch.tensor([0.5]))
+
+
+def test_differences_refuse_waypoints_without_a_joint_axis() -> None:
+    """A (W,) path used to raise IndexError (or, with W = 1, index out of range)."""
+    with pytest.raises(ShapeError, match=r"expected q \(\.\.\., W, J\), got \(5,\)"):
+        velocities(torch.zeros(5), 0.1)
+    with pytest.raises(ShapeError, match=r"expected q \(\.\.\., W, J\), got \(5,\)"):
+        accelerations(torch.zeros(5), 0.1)
+    with pytest.raises(ShapeError, match=r"expected qd_start \(\.\.\., 2\), got \(3,\)"):
+        accelerations(torch.zeros(1, 4, 2), 0.1, torch.zeros(3))
+    with pytest.raises(ShapeError, match="with W >= 2 when qd_start is given"):
+        accelerations(torch.zeros(1, 1, 2), 0.1, torch.zeros(2))
