@@ -412,13 +412,45 @@ def _component_first(x: torch.Tensor, rank: int) -> torch.Tensor:
 
 def _eigh_psd(cov: torch.Tensor, name: str) -> tuple[torch.Tensor, torch.Tensor]:
     """Eigen-decomposition of the symmetrised ``cov`` (finite); :class:`DataError` when an
-    eigenvalue is negative beyond rounding (``sqrt(eps)`` of the largest magnitude)."""
-    s, U = torch.linalg.eigh(0.5 * (cov + cov.transpose(-1, -2)))  # (..., 3), (..., 3, 3)
-    tol = torch.finfo(s.dtype).eps ** 0.5
-    ok = (s[..., 0] >= -tol * s.abs().amax(-1)).all()  # eigenvalues ascend
-    if not bool(ok):
+    eigenvalue is negative beyond rounding (``sqrt(eps)`` of the largest magnitude) or
+    overflows the dtype.
+
+    Entries near the dtype's limit make LAPACK fail or return NaN; such matrices are solved
+    again scaled by a power of two each (exact), so only a covariance whose eigenvalues do
+    not fit in the dtype is refused. Ordinary matrices take the unscaled path only.
+    """
+    # halves first: 0.5 a + 0.5 b cannot overflow where a + b could (same bits otherwise)
+    sym = 0.5 * cov + 0.5 * cov.transpose(-1, -2)
+    tol = torch.finfo(sym.dtype).eps ** 0.5
+    try:
+        s, U = torch.linalg.eigh(sym)  # (..., 3), (..., 3, 3)
+    except RuntimeError:  # torch.linalg.LinAlgError: no convergence near the float limit
+        finite = ok = False
+    else:
+        psd = (s[..., 0] >= -tol * s.abs().amax(-1)).all()  # eigenvalues ascend
+        finite, ok = torch.stack((torch.isfinite(s).all(), psd)).tolist()  # one host sync
+    if not finite:
+        s, U = _eigh_scaled(sym, name)
+        ok = bool((s[..., 0] >= -tol * s.abs().amax(-1)).all())
+    if not ok:
         raise DataError(
             f"expected {name} positive semidefinite, got eigenvalue {float(s[..., 0].min())}"
+        )
+    return s, U
+
+
+def _eigh_scaled(sym: torch.Tensor, name: str) -> tuple[torch.Tensor, torch.Tensor]:
+    """``eigh`` of the symmetric (..., 3, 3) ``sym``, each matrix scaled by a power of two so
+    that its largest entry is below 1 in magnitude (exact scaling); :class:`DataError` when an
+    eigenvalue overflows the dtype."""
+    _, expo = torch.frexp(sym.abs().amax(dim=(-1, -2)))  # (...): amax = f 2^expo, f in [0.5, 1)
+    scale = torch.ldexp(torch.ones_like(sym[..., 0, 0]), -expo)  # (...) 2^-expo
+    sn, U = torch.linalg.eigh(sym * scale[..., None, None])
+    s = sn / scale[..., None]  # inf where an eigenvalue does not fit in the dtype
+    if not bool(torch.isfinite(s).all()):
+        raise DataError(
+            f"expected {name} whose eigenvalues fit in {s.dtype}, got entries up to "
+            f"{float(sym.abs().amax()):.3g}: its eigenvalues overflow"
         )
     return s, U
 

@@ -10,12 +10,13 @@ of shape (S_h, K). The planner, the episode metrics and the logs all use this on
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Sequence
 from typing import Literal
 
 import torch
 
-from iplanner_torch.checks import positive
+from iplanner_torch.checks import is_real, positive
 from iplanner_torch.data.skeleton import SEGMENTS, Segment
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_shape, non_finite_error
@@ -28,6 +29,10 @@ COVER_MAX_GAP = 0.01
 #: design length of the covering layout relative to the reference body (body sizes of the
 #: generated people reach about 1.19 times it)
 COVER_LENGTH_SCALE = 1.25
+#: the most spheres :meth:`HumanSphereMap.from_segments` builds (the reference body takes 22
+#: ``"inner"`` and 42 ``"cover"`` spheres; ``"cover"`` counts grow as ``1 / sqrt(max_gap)``,
+#: reaching this near ``max_gap = 1e-4`` m): every planner cost term scales with S_h
+MAX_HUMAN_SPHERES = 1000
 
 
 class HumanSphereMap:
@@ -41,7 +46,8 @@ class HumanSphereMap:
         names: S_h sphere names (default ``sphere_0`` ...).
 
     Raises:
-        ShapeError: on wrong shapes or a ``names`` of another length.
+        ShapeError: on wrong shapes, a bool or complex ``matrix`` or ``radii``, or a ``names``
+            of another length.
         ConfigError: on no sphere or no joint, a row that is negative somewhere or does not
             sum to 1, or a radius that is not finite and > 0.
     """
@@ -54,6 +60,9 @@ class HumanSphereMap:
     ) -> None:
         check_shape("matrix", matrix, ("S_h", "K"))
         check_shape("radii", radii, (matrix.shape[0],))
+        for arg_name, arg in (("matrix", matrix), ("radii", radii)):
+            if arg.dtype == torch.bool or arg.is_complex():
+                raise ShapeError(f"expected {arg_name} of real numbers, got {arg.dtype}")
         if matrix.shape[0] == 0:
             raise ConfigError("expected at least one sphere in the sphere map")
         if matrix.shape[1] == 0:
@@ -103,7 +112,7 @@ class HumanSphereMap:
           joint shared by segments keeps one sphere, the largest.
 
         Sphere names are ``<segment>_<i>``; a covering layout's sphere on a joint is named
-        after the joint.
+        after the joint. At most :data:`MAX_HUMAN_SPHERES` spheres in all.
 
         Args:
             joint_names: the K joint names of the forecast, in its order (distinct).
@@ -115,23 +124,39 @@ class HumanSphereMap:
             length_scale: ``"cover"``: design length relative to the reference body's.
 
         Raises:
-            ConfigError: when a segment names a joint that is not in ``joint_names``, on
-                duplicate joint names, an unknown layout, a ``scale``, ``max_gap`` or
+            ConfigError: when ``joint_names`` is not a sequence of distinct strings, a
+                segment is not a :class:`Segment` or names a joint that is not in
+                ``joint_names``, on an unknown layout, a ``scale``, ``max_gap`` or
                 ``length_scale`` that is not a finite number > 0, a segment radius that is
-                not, an ``"inner"`` segment with fewer than one sphere, no segment, or
-                (``"cover"``) a two-joint segment without a positive ``length``.
+                not, an ``"inner"`` segment whose ``n_spheres`` is not an integer >= 1, no
+                segment, (``"cover"``) a two-joint segment without a positive ``length``, or
+                more than :data:`MAX_HUMAN_SPHERES` spheres (raise ``max_gap``).
         """
         if layout not in ("inner", "cover"):
             raise ConfigError(f"expected layout 'inner' or 'cover', got {layout!r}")
         scale = positive("scale", scale)
         max_gap = positive("max_gap", max_gap)
         length_scale = positive("length_scale", length_scale)
-        joint_names = tuple(joint_names)
+        joint_names = _names_tuple(joint_names)
         if len(set(joint_names)) != len(joint_names):
             raise ConfigError(f"expected distinct joint names, got {joint_names}")
+        try:
+            segments = tuple(segments)
+        except TypeError:
+            raise ConfigError(
+                f"expected segments a sequence of Segment, got {segments!r}"
+            ) from None
         if not segments:
             raise ConfigError("expected at least one body segment")
         index = {name: i for i, name in enumerate(joint_names)}
+        plans = [_plan(seg, index, layout, scale, max_gap, length_scale) for seg in segments]
+        total = sum(count for _, count in plans)
+        if total > MAX_HUMAN_SPHERES:
+            fix = f"raise max_gap (got {max_gap} m)" if layout == "cover" else "lower n_spheres"
+            raise ConfigError(
+                f"the {layout!r} sphere layout would take about {total:.4g} spheres, more than "
+                f"MAX_HUMAN_SPHERES = {MAX_HUMAN_SPHERES}: {fix}"
+            )
         rows: list[torch.Tensor] = []
         radii: list[float] = []
         names: list[str] = []
@@ -153,19 +178,10 @@ class HumanSphereMap:
             radii.append(radius)
             names.append(name)
 
-        for seg in segments:
-            for name in (seg.joint_a, seg.joint_b):
-                if name not in index:
-                    raise ConfigError(f"segment {seg.name!r} needs joint {name!r}, not tracked")
-            if not 0.0 < seg.radius < math.inf:
-                raise ConfigError(
-                    f"expected radius > 0 and finite in segment {seg.name!r}, got {seg.radius}"
-                )
+        for seg, (m, _) in zip(segments, plans):
             a, b = index[seg.joint_a], index[seg.joint_b]
             r = seg.radius * scale
             if layout == "inner":
-                if seg.n_spheres < 1:
-                    raise ConfigError(f"expected n_spheres >= 1 in segment {seg.name!r}")
                 for i in range(seg.n_spheres):
                     u = 0.0 if a == b else (i + 0.5) / seg.n_spheres
                     add({a: 1.0 - u, b: u} if a != b else {a: 1.0}, r, f"{seg.name}_{i}")
@@ -173,13 +189,7 @@ class HumanSphereMap:
             if a == b:
                 add({a: 1.0}, r, seg.name)
                 continue
-            if not seg.length > 0.0:
-                raise ConfigError(
-                    f"segment {seg.name!r} needs a length > 0 for the covering layout"
-                )
             length = length_scale * scale * seg.length
-            half = math.sqrt((r + max_gap) ** 2 - r**2)  # the largest half spacing
-            m = max(1, math.ceil(length / (2.0 * half) - 1e-9))
             radius = math.sqrt(r**2 + (length / (2.0 * m)) ** 2)
             for i in range(m + 1):
                 u = i / m
@@ -297,3 +307,71 @@ class HumanSphereMap:
                 raise non_finite_error(arg_name, arg)
         if name == "var" and not spread_nonneg:
             raise DataError(f"expected var >= 0, got min {float(spread.min())}")
+
+
+def _names_tuple(joint_names: object) -> tuple[str, ...]:
+    """``joint_names`` as a tuple of strings; ConfigError for None, a single string or
+    anything else that is not an iterable of strings."""
+    bad = ConfigError(f"expected joint_names a sequence of joint names, got {joint_names!r}")
+    if joint_names is None or isinstance(joint_names, str):
+        raise bad
+    try:
+        names = tuple(joint_names)  # type: ignore[call-overload]
+    except TypeError:
+        raise bad from None
+    if not all(isinstance(name, str) for name in names):
+        raise bad
+    return names
+
+
+def _plan(
+    seg: object,
+    index: dict[str, int],
+    layout: SphereLayout,
+    scale: float,
+    max_gap: float,
+    length_scale: float,
+) -> tuple[int, float]:
+    """Check one segment for :meth:`HumanSphereMap.from_segments` and count its spheres
+    before any is built.
+
+    Returns:
+        ``(m, count)``: the ``"cover"`` intervals ``m`` (0 for ``"inner"`` and single joints)
+        and the number of spheres (an upper bound for ``"cover"``, whose joint spheres may be
+        shared; a float estimate where it exceeds :data:`MAX_HUMAN_SPHERES`).
+
+    Raises:
+        ConfigError: as :meth:`HumanSphereMap.from_segments`.
+    """
+    if not isinstance(seg, Segment):
+        raise ConfigError(f"expected segments of Segment, got {type(seg).__name__} {seg!r}")
+    for name in (seg.joint_a, seg.joint_b):
+        if name not in index:
+            raise ConfigError(f"segment {seg.name!r} needs joint {name!r}, not tracked")
+    if not (is_real(seg.radius) and 0.0 < seg.radius < math.inf):
+        raise ConfigError(
+            f"expected radius > 0 and finite in segment {seg.name!r}, got {seg.radius!r}"
+        )
+    if layout == "inner":
+        n = seg.n_spheres
+        if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 1:
+            raise ConfigError(
+                f"expected n_spheres >= 1 in segment {seg.name!r} (an integer), got {n!r}"
+            )
+        return 0, int(n)
+    if seg.joint_a == seg.joint_b:
+        return 0, 1
+    if not (is_real(seg.length) and 0.0 < seg.length < math.inf):
+        raise ConfigError(
+            f"segment {seg.name!r} needs a length > 0 (finite) for the covering layout, got "
+            f"{seg.length!r}"
+        )
+    r = seg.radius * scale
+    length = length_scale * scale * seg.length
+    half = math.sqrt((r + max_gap) ** 2 - r**2)  # the largest half spacing
+    # 0 where max_gap is below the rounding of r: inf intervals, counted before any rounding
+    intervals = math.inf if half == 0.0 else length / (2.0 * half) - 1e-9
+    if not intervals < MAX_HUMAN_SPHERES:
+        return 0, intervals + 1.0
+    m = max(1, math.ceil(intervals))
+    return m, m + 1

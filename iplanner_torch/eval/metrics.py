@@ -5,8 +5,10 @@ human-robot distance, efficiency, and the modified Hausdorff distance (MHD, Dubu
 1994) between the predicted and the true motion of the moving hand. Prediction (sec. 7.1):
 classification precision, regression precision and regression accuracy.
 
-Inputs may be tensors or numpy arrays; everything is computed in float64. Functions returning
-``float`` reduce a whole episode; the prediction integrals keep leading batch dimensions.
+Inputs may be tensors, numpy arrays or nested lists of real numbers (anything else, e.g. text,
+bools or ragged lists, is a :class:`~iplanner_torch.errors.ShapeError`); everything is
+computed in float64. Functions returning ``float`` reduce a whole episode; the prediction
+integrals keep leading batch dimensions.
 
 Metric names used in episode logs and reports (``stage/name``) are in :data:`METRIC_KEYS`.
 """
@@ -19,6 +21,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from iplanner_torch.checks import is_real, positive, real_array
 from iplanner_torch.errors import DataError, ShapeError
 from iplanner_torch.types import check_shape
 
@@ -51,10 +54,30 @@ METRIC_KEYS: dict[str, str] = {
 
 
 def _f64(name: str, x: Any, expected: tuple) -> torch.Tensor:
-    """``x`` as a float64 tensor (on its own device), its shape checked."""
-    xt = x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x, dtype=np.float64))
+    """``x`` as a float64 tensor (on its own device), its shape checked; ShapeError for
+    anything but real numbers (bools, complex, text, ragged lists)."""
+    if isinstance(x, torch.Tensor):
+        if x.dtype == torch.bool or x.is_complex():
+            raise ShapeError(f"expected {name} an array of real numbers, got dtype {x.dtype}")
+        xt = x
+    else:
+        xt = torch.as_tensor(real_array(name, x).astype(np.float64))
     check_shape(name, xt, expected)
     return xt.to(torch.float64)
+
+
+def _check_dt(dt: Any) -> float:
+    """``dt`` as a float; DataError unless it is a finite real number > 0 (NaN gave NaN)."""
+    return positive("dt", dt, error=DataError)
+
+
+def _real_scalar(value: Any) -> float:
+    """``value`` (a real number, a numpy scalar, a one-element real tensor or array) as a
+    float; NaN for anything else (text, bools, several elements)."""
+    if isinstance(value, torch.Tensor | np.ndarray):
+        arr = value.detach().cpu().numpy() if isinstance(value, torch.Tensor) else value
+        return float(arr.reshape(())) if arr.size == 1 and arr.dtype.kind in "iuf" else math.nan
+    return float(value) if is_real(value) else math.nan
 
 
 def _check_time(t: torch.Tensor, min_len: int) -> None:
@@ -157,15 +180,26 @@ def closest_distance(
 
     Returns:
         ``(min over time [m], per-step minimum (T,) [m])``; negative values mean penetration.
+
+    Raises:
+        ShapeError: for mismatched shapes or anything but real numbers.
+        DataError: for an infinite centre coordinate (it was reported as 1.8e308 m) or a
+            radius that is not finite.
     """
     rc = _f64("robot_centers", robot_centers, ("T", "S_r", 3))
     n_t, s_r = rc.shape[:2]
     rr = _f64("robot_radii", robot_radii, (s_r,)).to(rc.device)
     hc = _f64("human_centers", human_centers, (n_t, "S_h", 3)).to(rc.device)
     hr = _f64("human_radii", human_radii, (hc.shape[1],)).to(rc.device)
+    for name, x in (("robot_centers", rc), ("human_centers", hc)):
+        if bool(torch.isinf(x).any()):
+            raise DataError(f"expected finite (or NaN: untracked) {name}, got an infinite one")
+    for name, x in (("robot_radii", rr), ("human_radii", hr)):
+        if not bool(torch.isfinite(x).all()):
+            raise DataError(f"expected finite {name}, got {x.tolist()}")
     diff = rc[:, :, None, :] - hc[:, None, :, :]  # (T, S_r, S_h, 3)
     gap = diff.norm(dim=-1) - rr[None, :, None] - hr[None, None, :]  # (T, S_r, S_h)
-    gap = torch.nan_to_num(gap, nan=math.inf).flatten(1)  # (T, S_r*S_h)
+    gap = torch.nan_to_num(gap, nan=math.inf, posinf=math.inf).flatten(1)  # (T, S_r*S_h)
     per_step = (
         gap.min(dim=1).values
         if gap.shape[1]
@@ -247,12 +281,18 @@ def efficiency(t_human_alone: float, t_with_robot: float) -> float:
     Args:
         t_human_alone: completion time of all subtasks by the human alone [s].
         t_with_robot: completion time of the human-robot team [s].
+
+    Raises:
+        DataError: unless both are numbers > 0 (real numbers, numpy scalars or one-element
+            tensors).
     """
-    if not (t_human_alone > 0 and t_with_robot > 0):
+    alone, team = _real_scalar(t_human_alone), _real_scalar(t_with_robot)
+    if not (alone > 0 and team > 0):
         raise DataError(
-            f"expected positive task times, got alone={t_human_alone}, with robot={t_with_robot}"
+            f"expected positive task times, got alone={t_human_alone!r}, "
+            f"with robot={t_with_robot!r}"
         )
-    return float(t_human_alone) / float(t_with_robot)
+    return alone / team
 
 
 def regression_precision(pred_mean: Any, true: Any, dt: float) -> torch.Tensor:
@@ -264,15 +304,18 @@ def regression_precision(pred_mean: Any, true: Any, dt: float) -> torch.Tensor:
     Args:
         pred_mean: (..., n_f, K, 3) predicted mean joint positions [m].
         true: (..., n_f, K, 3) true joint positions [m].
-        dt: seconds between predicted frames.
+        dt: seconds between predicted frames, finite and > 0.
 
     Returns:
         (...) [m^2 s], float64 (a 0-d tensor without batch dimensions).
+
+    Raises:
+        ShapeError: for mismatched shapes or anything but real numbers.
+        DataError: for a ``dt`` that is not a finite number > 0.
     """
     p = _f64("pred_mean", pred_mean, ("...", "n_f", "K", 3))
     y = _f64("true", true, tuple(p.shape)).to(p.device)
-    if dt <= 0:
-        raise DataError(f"expected dt > 0, got {dt}")
+    dt = _check_dt(dt)
     return (p - y).square().sum(dim=(-1, -2, -3)) * dt
 
 
@@ -282,15 +325,18 @@ def regression_accuracy(var: Any, dt: float, *, full_cov: bool = False) -> torch
     Args:
         var: (..., n_f, K, 3) per-coordinate variances [m^2] (``det`` = their product), or
             with ``full_cov`` (..., n_f, K, 3, 3) covariances.
-        dt: seconds between predicted frames (right Riemann sum, as
+        dt: seconds between predicted frames, finite and > 0 (right Riemann sum, as
             :func:`regression_precision`).
         full_cov: whether ``var`` holds full 3x3 covariances.
 
     Returns:
         (...) [m^6 s], float64.
+
+    Raises:
+        ShapeError: for a wrong shape or anything but real numbers.
+        DataError: for a ``dt`` that is not a finite number > 0.
     """
-    if dt <= 0:
-        raise DataError(f"expected dt > 0, got {dt}")
+    dt = _check_dt(dt)
     if full_cov:
         c = _f64("cov", var, ("...", "n_f", "K", 3, 3))
         det = torch.linalg.det(c)  # (..., n_f, K)
@@ -304,17 +350,34 @@ def classification_precision(probs: Any, labels: Any, threshold: float = 0.5) ->
     """Paper sec. 7.1 classification precision on frames whose top probability > threshold.
 
     Args:
-        probs: (T, A) action probabilities per frame.
-        labels: (T,) true action index per frame.
+        probs: (T, A) action probabilities per frame, finite.
+        labels: (T,) true action index per frame, integers in [0, A).
         threshold: frames whose largest probability is not above it are not counted.
 
     Returns:
         ``(fraction of counted frames whose arg-max is the label, number of counted frames)``;
         the fraction is NaN when no frame is counted.
+
+    Raises:
+        ShapeError: for mismatched shapes or anything but real numbers.
+        DataError: for a NaN or infinite probability (such frames were dropped silently), or
+            a label that is not an integer in [0, A).
     """
     p = _f64("probs", probs, ("T", "A"))
-    lab = labels if isinstance(labels, torch.Tensor) else torch.as_tensor(np.asarray(labels))
-    check_shape("labels", lab, (p.shape[0],))
+    lab = _f64("labels", labels, (p.shape[0],)).to(p.device)
+    bad = ~torch.isfinite(p).all(dim=1)  # (T,)
+    if bool(bad.any()):
+        rows = bad.nonzero().flatten().tolist()
+        raise DataError(
+            f"expected finite probs, got NaN or inf in {len(rows)} frames, first {rows[:5]}"
+        )
+    n_a = p.shape[1]
+    bad = (lab != lab.round()) | (lab < 0) | (lab >= n_a) | torch.isnan(lab)
+    if bool(bad.any()):
+        i = int(bad.nonzero()[0])
+        raise DataError(
+            f"expected labels integers in [0, {n_a}), got {lab[i].item()!r} at frame {i}"
+        )
     top, arg = p.max(dim=1)
     keep = top > threshold
     n = int(keep.sum())

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from iplanner_torch.checks import finite, is_real, real_array
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.eval.metrics import joint_accelerations
 
@@ -36,15 +37,33 @@ from iplanner_torch.eval.metrics import joint_accelerations
 class PlanRecord:
     """One plan as the replanner logged it.
 
+    ``times`` and ``q`` may be given as lists or tensors; they are kept as float64 numpy
+    arrays, ``wait_s`` as a float.
+
     Attributes:
-        times: (W,) waypoint times [s], increasing; ``times[0]`` is when the plan takes over.
-        q: (W, J) waypoints [rad].
-        wait_s: the delay the plan reports (> 0: the plan stops and waits) [s].
+        times: (W,) waypoint times [s], increasing, W >= 1; ``times[0]`` is when the plan
+            takes over.
+        q: (W, J) waypoints [rad] (the shape is checked against the trajectory by
+            :func:`smoothness_breakdown`).
+        wait_s: the delay the plan reports (> 0: the plan stops and waits) [s], finite.
+
+    Raises:
+        ShapeError: for ``times`` or ``q`` that are not arrays of real numbers, or ``times``
+            that is not 1-D with at least one entry.
+        DataError: for a ``wait_s`` that is not a finite number.
     """
 
     times: np.ndarray
     q: np.ndarray
     wait_s: float
+
+    def __post_init__(self) -> None:
+        times = real_array("times", self.times).astype(np.float64)
+        if times.ndim != 1 or times.shape[0] == 0:
+            raise ShapeError(f"expected plan times (W,) with W >= 1, got shape {times.shape}")
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "q", real_array("q", self.q).astype(np.float64))
+        object.__setattr__(self, "wait_s", finite("wait_s", self.wait_s, error=DataError))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -80,10 +99,10 @@ def wait_windows(plans: Sequence[PlanRecord], settle_s: float = 1.0) -> list[tup
         settle_s: time after the wait within which the robot is taken to start again [s].
 
     Raises:
-        ConfigError: when ``settle_s < 0``.
+        ConfigError: when ``settle_s`` is not a number >= 0.
     """
-    if not settle_s >= 0.0:
-        raise ConfigError(f"expected settle_s >= 0, got {settle_s}")
+    if not (is_real(settle_s) and settle_s >= 0.0):
+        raise ConfigError(f"expected settle_s >= 0, got {settle_s!r}")
     out: list[tuple[float, float]] = []
     for k, plan in enumerate(plans):
         if not plan.wait_s > 0.0:
@@ -124,7 +143,7 @@ def smoothness_breakdown(
 
     Raises:
         ShapeError: when a plan's ``q`` is not (W, J) with its ``times`` (W,).
-        ConfigError: when ``settle_s < 0``.
+        ConfigError: when ``settle_s`` is not a number >= 0.
     """
     qdd, w = joint_accelerations(t, q)  # (T - 2, J), (T - 2,)
     n_j = qdd.shape[1]

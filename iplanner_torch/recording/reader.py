@@ -541,10 +541,10 @@ def read_episode(path: str | Path) -> Episode:
         The decoded :class:`Episode`.
 
     Raises:
-        DataError: when the file is missing or unreadable, is not MCAP, its metadata is not a
-            JSON object, or a message cannot be decoded (not JSON or nested too deep, a field
-            missing or of the wrong type, or an array whose size does not fit its joint or
-            action names).
+        DataError: when ``path`` is not a file path (str or os.PathLike), the file is missing
+            or unreadable, is not MCAP, its metadata is not a JSON object, or a message cannot
+            be decoded (not JSON or nested too deep, a field missing or of the wrong type, or
+            an array whose size does not fit its joint or action names).
 
     Warns:
         DataWarning: when the file is truncated or damaged (a chunk or the summary failing its
@@ -555,6 +555,11 @@ def read_episode(path: str | Path) -> Episode:
             other tools whose messages are not JSON (protobuf, raw bytes); other tools'
             JSON channels are read into frames with one ``message`` column.
     """
+    if not (isinstance(path, str) or hasattr(path, "__fspath__")):  # Path() raised TypeError
+        raise DataError(
+            f"expected path a file path (str or os.PathLike) of an .mcap episode log, got "
+            f"{type(path).__name__} {path!r}"
+        )
     path = Path(path)
     if path.is_dir():
         raise DataError(

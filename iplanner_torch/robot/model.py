@@ -74,9 +74,7 @@ class RobotCfg:
             raise ConfigError(f"unknown robot {self.name!r}; available: {', '.join(ROBOT_NAMES)}")
         if self.base_position is not None:
             object.__setattr__(self, "base_position", _base_position(self.base_position))
-        yaw = self.base_yaw
-        if yaw is not None and not (checks.is_real(yaw) and math.isfinite(yaw)):
-            raise ConfigError(f"expected a finite base_yaw, got {yaw!r}")
+        _check_base_yaw(self.base_yaw)
         checks.optional(checks.finite, "torso_height", self.torso_height)
         if self.torso_height is not None and self.name != "fetch":
             raise ConfigError(f"{self.name} has no torso: expected torso_height=None")
@@ -86,6 +84,12 @@ class RobotCfg:
             raise ConfigError(
                 f"expected max_sphere_excess in (0, {MAX_SPHERE_EXCESS:g}] m, got {excess!r}"
             )
+
+
+def _check_base_yaw(yaw: object) -> None:
+    """ConfigError unless ``yaw`` is None or a finite real number [rad]."""
+    if yaw is not None and not (checks.is_real(yaw) and math.isfinite(yaw)):  # type: ignore[arg-type]
+        raise ConfigError(f"expected a finite base_yaw, got {yaw!r}")
 
 
 def _base_position(value: object) -> tuple[float, float, float]:
@@ -114,8 +118,11 @@ class RobotModel:
     :meth:`clamp` and :meth:`ik` reject non-finite input (:class:`DataError`).
 
     Raises:
-        ConfigError: for a non-floating ``dtype``, or a CUDA ``device`` where CUDA is not
-            available.
+        ConfigError: for a non-floating ``dtype``, a CUDA ``device`` where CUDA is not
+            available, a ``base_position`` that is not 3 finite numbers, a ``base_yaw`` that
+            is not finite (NaN gave NaN kinematics), or a ``max_sphere_excess`` that is not
+            finite and > 0 or needs more than
+            :data:`~iplanner_torch.robot.spheres.MAX_LINK_SPHERES` spheres for a link.
 
     Attributes:
         name: robot name.
@@ -146,6 +153,7 @@ class RobotModel:
         max_sphere_excess: float = 0.02,
     ) -> None:
         self.device = _check_device_dtype(device, dtype)
+        _check_base_yaw(base_yaw)
         self.description = desc
         self.name = desc.name
         self.dtype = dtype
@@ -170,7 +178,10 @@ class RobotModel:
         self.q_home = vec(desc.q_home)
         centers, radii, owners = {}, [], []
         for link in desc.sphere_links:
-            c, r = fit_link_spheres(desc.link(link).geometry, max_excess=max_sphere_excess)
+            try:
+                c, r = fit_link_spheres(desc.link(link).geometry, max_excess=max_sphere_excess)
+            except ConfigError as err:
+                raise ConfigError(f"link {link!r}: {err}") from None
             centers[link] = c.numpy()
             radii.append(r)
             owners += [link] * len(r)
@@ -216,7 +227,10 @@ class RobotModel:
 
         Raises:
             ConfigError: unknown name, torso height out of range or given for the iiwa, a
-                non-floating ``dtype``, or a CUDA ``device`` where CUDA is not available.
+                non-floating ``dtype``, a CUDA ``device`` where CUDA is not available, or a
+                ``max_sphere_excess`` outside (0, 0.2] m or so small that a link would need
+                more than :data:`~iplanner_torch.robot.spheres.MAX_LINK_SPHERES` spheres
+                (the Fetch gripper does below about 0.0018 m).
         """
         cfg = RobotCfg(
             name=name,  # type: ignore[arg-type]
@@ -381,8 +395,10 @@ class RobotModel:
 
         Iterates ``dq = J^T (J J^T + damping^2 I)^-1 (target - p_ee(q))``, the step scaled to
         at most ``max_step`` [rad] and ``q`` clamped into the limits after every step. Batched:
-        leading dimensions of ``target`` and ``q_init`` must agree. Computed in ``q_init``'s
-        dtype and on its device (``target`` is converted).
+        leading dimensions of ``target`` and ``q_init`` must agree. Computed on ``q_init``'s
+        device in its dtype (``target`` is converted), or in float32 for a dtype narrower than
+        that (float16, bfloat16: ``torch.linalg.solve`` takes neither), the result converted
+        back.
 
         Args:
             target: (..., 3) tool point target in the world frame [m], finite.
@@ -393,8 +409,9 @@ class RobotModel:
             max_step: largest joint step norm per iteration [rad].
 
         Returns:
-            (..., J) joint positions [rad] within the limits. Unreachable targets return the
-            configuration closest found; check ``ee_position`` against the target.
+            (..., J) joint positions [rad] in ``q_init``'s dtype, within the limits (rounded
+            to that dtype). Unreachable targets return the configuration closest found; check
+            ``ee_position`` against the target.
 
         Raises:
             ShapeError: for mismatched shapes or a non-floating ``q_init``.
@@ -417,6 +434,9 @@ class RobotModel:
             raise ShapeError(f"expected q_init of a floating dtype, got {q_init.dtype}")
         check_finite("target", target)
         check_finite("q_init", q_init)
+        out_dtype = q_init.dtype
+        if torch.finfo(out_dtype).bits < 32:  # float16, bfloat16, float8: solve in float32
+            q_init = q_init.float()
         target = target.to(device=q_init.device, dtype=q_init.dtype)
         with torch.no_grad():
             q = self._clamp(q_init.detach().clone())
@@ -432,7 +452,7 @@ class RobotModel:
                 )  # (..., J)
                 scale = (max_step / dq.norm(dim=-1, keepdim=True).clamp_min(1e-12)).clamp(max=1.0)
                 q = self._clamp(q + scale * dq)
-        return q
+        return q.to(out_dtype)
 
     def __repr__(self) -> str:
         base = tuple(round(float(x), 4) for x in self.base_position)

@@ -16,7 +16,7 @@ from iplanner_torch.collision.exact import (
     ruben_ball_probability,
     ruben_series,
 )
-from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, NumericalWarning, ShapeError
 
 F64 = torch.float64
 
@@ -173,3 +173,159 @@ def test_far_float32_input_is_zero_and_empty_batches_are_empty() -> None:
     for method in ("imhof", "ruben", "mc"):
         got = exact_ball_probability(empty, 0.1, empty, torch.eye(3, dtype=F64), method=method)
         assert got.shape == (0,)
+
+
+def _isotropic_grid(ratios: np.ndarray, fractions: np.ndarray):
+    """Isotropic cases (sigma = 1 cm) over R / sigma x offset / R, with the ncx2 reference."""
+    sigma = 0.01
+    R, frac = (a.ravel() for a in np.meshgrid(ratios * sigma, fractions, indexing="ij"))
+    dist = R * frac
+    n = R.size
+    mu = torch.zeros(n, 3, dtype=F64)
+    mu[:, 0] = torch.from_numpy(dist)
+    cov = torch.eye(3, dtype=F64).expand(n, 3, 3) * sigma**2
+    x, nc = (R / sigma) ** 2, (dist / sigma) ** 2
+    ref = np.where(nc > 0, stats.ncx2.cdf(x, 3, np.maximum(nc, 1e-300)), stats.chi2.cdf(x, 3))
+    return torch.zeros(n, 3, dtype=F64), torch.from_numpy(R), mu, cov, ref
+
+
+def test_imhof_meets_its_accuracy_for_small_sigma() -> None:
+    """R / sigma up to 50, offsets inside and outside: Imhof's integral was off by 1.1e-4 at
+    R / sigma = 20 with the mean at the centre (plain quad over [0, inf) gave up unnoticed)."""
+    ratios = np.array([0.1, 0.5, 2.0, 8.0, 20.0, 21.0, 22.0, 50.0])
+    c, R, mu, cov, ref = _isotropic_grid(ratios, np.array([0.0, 0.5, 0.95, 1.05, 1.5]))
+    got = exact_ball_probability(c, R, mu, cov)
+    assert np.abs(got.numpy() - ref).max() <= 1e-10
+    # the audit's case: sigma = 1 cm, R = 0.2 m, the mean at the centre
+    z = torch.zeros(1, 3, dtype=F64)
+    p = exact_ball_probability(z, 0.2, z, torch.eye(3, dtype=F64)[None] * 1e-4)
+    assert abs(p.item() - stats.chi2.cdf(400.0, 3)) <= 1e-12
+
+
+@pytest.mark.slow
+def test_imhof_and_ruben_match_noncentral_chi_square_on_a_grid() -> None:
+    """60 x 9 isotropic cases, R / sigma from 0.1 to 50 (worst error about 3e-14)."""
+    ratios = np.concatenate([np.geomspace(0.1, 50.0, 60), [20.0, 21.0, 22.0]])
+    fractions = np.array([0.0, 0.3, 0.7, 0.95, 1.0, 1.05, 1.3, 2.0, 4.0])
+    c, R, mu, cov, ref = _isotropic_grid(ratios, fractions)
+    imhof = exact_ball_probability(c, R, mu, cov)
+    assert np.abs(imhof.numpy() - ref).max() <= 1e-12
+    lower, upper = ruben_ball_probability(c, R, mu, cov, max_terms=3000)
+    assert (upper - lower).max() <= 1e-12
+    assert np.abs(upper.numpy() - ref).max() <= 1e-12
+
+
+def test_imhof_small_sigma_anisotropic_matches_ruben_and_mc() -> None:
+    """Anisotropic, small sigma, the mean inside: P near 1, where Monte Carlo is sharp."""
+    gen = torch.Generator().manual_seed(11)
+    n = 4
+    q, _ = torch.linalg.qr(torch.randn(n, 3, 3, generator=gen, dtype=F64))
+    sig = torch.tensor([[0.01, 0.02, 0.05], [0.008, 0.01, 0.012], [0.01, 0.03, 0.1], [0.02] * 3])
+    cov = q @ torch.diag_embed(sig.double() ** 2) @ q.transpose(-1, -2)
+    mu = torch.tensor([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [0.0, 0.02, 0.0], [0.1, 0.1, 0.0]])
+    c, mu = torch.zeros(n, 3, dtype=F64), mu.double()
+    imhof = exact_ball_probability(c, 0.2, mu, cov)
+    lower, upper = ruben_ball_probability(c, 0.2, mu, cov, max_terms=2000)
+    assert torch.all(upper - lower <= 1e-12)
+    assert torch.all((imhof - upper).abs() <= 1e-10), (imhof - upper).abs().max()
+    p, se = mc_ball_probability(c, 0.2, mu, cov, n=200_000, seed=12)
+    assert torch.all((p - imhof).abs() <= 5 * se + 1e-5)
+
+
+def test_zero_covariance_is_the_indicator() -> None:
+    """cov = 0: the point is the mean; Imhof gave 0.73 inside, Ruben NaN."""
+    c = torch.zeros(4, 3, dtype=F64)
+    mu = torch.tensor(
+        [[0.1, 0.05, 0.0], [0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.0, 0.25, 0.0]], dtype=F64
+    )
+    cov = torch.zeros(4, 3, 3, dtype=F64)
+    for method in ("imhof", "ruben", "mc"):
+        p = exact_ball_probability(c, 0.2, mu, cov, method=method, n_mc=100)
+        assert p.tolist() == [1.0, 1.0, 1.0, 0.0], method  # inside, centre, on, outside
+    lower, upper = ruben_ball_probability(c, 0.2, mu, cov)
+    assert torch.equal(lower, upper) and upper.tolist() == [1.0, 1.0, 1.0, 0.0]
+
+
+@pytest.mark.parametrize("method", ["imhof", "ruben"])
+def test_rank_deficient_covariance_reduces_to_the_random_directions(method: str) -> None:
+    """No variance along z: the z offset comes off R^2, the rest is a 2-D (or 1-D)
+    noncentral chi-square (Ruben's series had a scale of 1e-300 and returned 1)."""
+    s = 0.05**2
+    mu = torch.tensor([[0.03, 0.04, 0.1], [0.0, 0.1, 0.12], [0.2, 0.0, 0.15]], dtype=F64)
+    R2 = 0.2**2
+    cov2 = torch.diag(torch.tensor([s, s, 0.0], dtype=F64)).expand(3, 3, 3)
+    p2 = exact_ball_probability(torch.zeros(3, 3, dtype=F64), 0.2, mu, cov2, method=method)
+    ref2 = stats.ncx2.cdf((R2 - mu[:, 2] ** 2) / s, 2, (mu[:, 0] ** 2 + mu[:, 1] ** 2) / s)
+    np.testing.assert_allclose(p2.numpy(), ref2, rtol=0, atol=1e-10)
+    cov1 = torch.diag(torch.tensor([s, 0.0, 0.0], dtype=F64)).expand(3, 3, 3)
+    p1 = exact_ball_probability(torch.zeros(3, 3, dtype=F64), 0.2, mu, cov1, method=method)
+    rest = np.sqrt(R2 - mu[:, 1] ** 2 - mu[:, 2] ** 2).numpy()
+    x0 = mu[:, 0].numpy()
+    ref1 = stats.norm.cdf((rest - x0) / 0.05) - stats.norm.cdf((-rest - x0) / 0.05)
+    np.testing.assert_allclose(p1.numpy(), ref1, rtol=0, atol=1e-10)
+
+
+def test_huge_covariances() -> None:
+    """Entries near the float64 limit: eigenvalues that overflow are refused by name (a raw
+    LinAlgError, or 'eigenvalue nan' blaming positive semidefiniteness, before); a huge but
+    representable covariance gives P about 0 (Imhof gave 0.5)."""
+    z = torch.zeros(3, dtype=F64)
+    for cov in (torch.full((3, 3), 1.7e308, dtype=F64), torch.full((3, 3), 1e308, dtype=F64)):
+        with pytest.raises(DataError, match="eigenvalues overflow"):
+            exact_ball_probability(z, 0.2, z, cov)
+    diag = torch.eye(3, dtype=F64) * 1.7e308
+    f32 = torch.full((3, 3), 3e38)  # rank one, eigenvalue 9e38
+    for cov in (diag, f32):
+        for method in ("imhof", "ruben", "mc"):
+            p = exact_ball_probability(z.to(cov.dtype), 0.2, z.to(cov.dtype), cov, method=method)
+            assert 0.0 <= p.item() <= 1e-8, method
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "a", True, 2**63])
+def test_mc_seed_is_checked(seed: object) -> None:
+    c, R, mu, cov, _ = _isotropic(2, 13)
+    with pytest.raises(ConfigError, match="expected seed an integer"):
+        mc_ball_probability(c, R, mu, cov, n=10, seed=seed)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="expected seed an integer"):
+        exact_ball_probability(c, R, mu, cov, method="mc", n_mc=10, seed=seed)  # type: ignore[arg-type]
+
+
+def test_mc_memory_is_bounded_by_cases_times_chunk() -> None:
+    """2000 cases x 2000 samples used to be drawn at once (96 MB for the normals alone; 200
+    cases with the default n_mc needed 4.5 GiB); blocks keep below MC_BLOCK points."""
+    import tracemalloc
+
+    c, R, mu, cov, _ = _isotropic(2000, 14)
+    a = mc_ball_probability(c[:3], R[:3], mu[:3], cov[:3], n=2000, seed=1)
+    tracemalloc.start()
+    try:
+        p, _ = mc_ball_probability(c, R, mu, cov, n=2000, seed=1)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 40e6, peak
+    assert torch.all((p >= 0) & (p <= 1))
+    assert torch.equal(a[0], mc_ball_probability(c[:3], R[:3], mu[:3], cov[:3], n=2000, seed=1)[0])
+
+
+def test_ruben_warns_when_its_bracket_is_open() -> None:
+    """A large noncentrality needs more terms than max_terms: the upper end of the open
+    bracket was returned silently (1 where the truth is 3e-28)."""
+    c, R, mu, cov, ref = _isotropic_grid(np.array([36.0]), np.array([1.3]))
+    with pytest.warns(NumericalWarning, match="Ruben's series did not close"):
+        p = exact_ball_probability(c, R, mu, cov, method="ruben")
+    assert p.item() == 1.0 and ref[0] < 1e-20
+    got = exact_ball_probability(c, R, mu, cov, method="ruben", max_terms=3000)
+    assert abs(got.item() - ref[0]) <= 1e-12
+
+
+def test_imhof_warns_where_it_cannot_meet_its_accuracy() -> None:
+    """A variance 1e-13 of the largest with the mean off-centre along it would need about
+    1e12 panels: NaN and a warning, not a wrong number."""
+    cov = torch.diag(torch.tensor([1.0, 1.0, 1e-13], dtype=F64))
+    mu = torch.tensor([0.2, 0.1, 0.5], dtype=F64)
+    with pytest.warns(NumericalWarning, match="missed its absolute accuracy"):
+        p = exact_ball_probability(torch.zeros(3, dtype=F64), 1.0, mu, cov)
+    assert math.isnan(p.item())
+    with pytest.warns(NumericalWarning, match="missed its absolute accuracy"):
+        imhof_cdf(np.array([1.0, 1.0, 1e-13]), np.array([0.04, 0.01, 0.25]), 1.0)

@@ -333,6 +333,25 @@ def test_covariances_nan_and_inf_identity() -> None:
             G.sphere_collision_bound(**{**args, "cov": cov})
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, F64])
+def test_covariances_near_the_float_limit(dtype: torch.dtype) -> None:
+    """Entries near the dtype's limit made eigh fail (raw LinAlgError) or return NaN ("got
+    eigenvalue nan"). A huge but representable variance now gives a bound near 0; eigenvalues
+    beyond the dtype are refused as overflowing."""
+    big = torch.finfo(dtype).max / 1.05  # eigenvalue fits; 3 x it does not
+    z = torch.zeros(3, dtype=dtype)
+    huge = torch.diag(torch.full((3,), big, dtype=dtype))
+    p = G.sphere_collision_bound(z, 0.1, z, huge, 0.1)
+    assert torch.isfinite(p) and 0.0 <= float(p) < 1e-6
+    with pytest.raises(DataError, match="eigenvalues overflow"):
+        G.sphere_collision_bound(z, 0.1, z, torch.full((3, 3), big, dtype=dtype), 0.1)
+    # not a covariance at all: named as such, not as NaN
+    bad = torch.eye(3, dtype=dtype)
+    bad[0, 1] = bad[1, 0] = big
+    with pytest.raises(DataError, match="positive semidefinite, got eigenvalue -"):
+        G.sphere_collision_bound(z, 0.1, z, bad, 0.1)
+
+
 def test_indefinite_covariance_or_negative_variance_raises_data_error() -> None:
     args = _pair()
     with pytest.raises(DataError, match="expected cov positive semidefinite"):

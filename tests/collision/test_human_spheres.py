@@ -287,3 +287,51 @@ def test_bad_shapes_and_dtypes() -> None:
         smap.centers(mean.long())
     with pytest.raises(ShapeError, match="expected cov"):
         smap.centers_full(mean, var)
+
+
+def test_sphere_count_is_capped_before_building() -> None:
+    """max_gap = 1e-12 used to build about 2.5e6 spheres (minutes); 1e-40 divided by zero."""
+    from iplanner_torch.collision.human_spheres import MAX_HUMAN_SPHERES
+
+    for gap in (1e-12, 1e-40):
+        with pytest.raises(ConfigError, match=r"more than MAX_HUMAN_SPHERES = \d+: raise max_gap"):
+            HumanSphereMap.from_segments(JOINT_NAMES, layout="cover", max_gap=gap)
+    arm = {"name": "arm", "joint_a": "left_shoulder", "joint_b": "left_elbow"}
+    many = Segment(**arm, radius=0.05, n_spheres=10**9)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="MAX_HUMAN_SPHERES.*lower n_spheres"):
+        HumanSphereMap.from_segments(JOINT_NAMES, (many,))
+    fine = HumanSphereMap.from_segments(JOINT_NAMES, layout="cover", max_gap=2e-4)
+    assert 42 < fine.num_spheres <= MAX_HUMAN_SPHERES
+
+
+@pytest.mark.parametrize("dtype", [torch.bool, torch.complex64])
+def test_bool_or_complex_maps_raise_shape_error(dtype: torch.dtype) -> None:
+    eye = torch.eye(2)
+    with pytest.raises(ShapeError, match=f"expected matrix of real numbers, got {dtype}"):
+        HumanSphereMap(eye.to(dtype), torch.ones(2))
+    with pytest.raises(ShapeError, match=f"expected radii of real numbers, got {dtype}"):
+        HumanSphereMap(eye, torch.ones(2).to(dtype))
+
+
+def test_bad_segments_and_joint_names_raise_config_error() -> None:
+    """A float n_spheres, a string radius or length, a non-Segment and joint_names=None
+    raised raw TypeError / AttributeError."""
+    arm = {"name": "arm", "joint_a": "left_shoulder", "joint_b": "left_elbow"}
+    half = Segment(**arm, radius=0.05, n_spheres=2.5)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="n_spheres >= 1 in segment 'arm' .*got 2.5"):
+        HumanSphereMap.from_segments(JOINT_NAMES, (half,))
+    text = Segment(**arm, radius="0.05", n_spheres=2)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="expected radius > 0 and finite in segment 'arm'"):
+        HumanSphereMap.from_segments(JOINT_NAMES, (text,))
+    text_len = Segment(**arm, radius=0.05, n_spheres=2, length="0.3")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="'arm' needs a length > 0"):
+        HumanSphereMap.from_segments(JOINT_NAMES, (text_len,), layout="cover")
+    with pytest.raises(ConfigError, match="expected segments of Segment, got tuple"):
+        HumanSphereMap.from_segments(JOINT_NAMES, (("arm", "left_shoulder"),))  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="expected segments a sequence of Segment"):
+        HumanSphereMap.from_segments(JOINT_NAMES, 3)  # type: ignore[arg-type]
+    for names in (None, "head", 3, ["head", 1]):
+        with pytest.raises(ConfigError, match="expected joint_names a sequence of joint names"):
+            HumanSphereMap.from_segments(names)  # type: ignore[arg-type]
+    # iterables other than tuples still work
+    assert HumanSphereMap.from_segments(list(JOINT_NAMES), iter(SEGMENTS)).num_spheres == 22

@@ -266,3 +266,64 @@ def test_a_nan_point_gives_a_nan_distance() -> None:
     b = np.array([[0.0, 0.0, 0.1], [1.0, 0.0, 0.1], [2.0, 0.0, 0.0]])
     assert math.isnan(modified_hausdorff(a, b)) and math.isnan(modified_hausdorff(b, a))
     assert math.isnan(prediction_mhd(a, b)) and math.isnan(prediction_mhd(b, a))
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "abc",  # text: a raw numpy ValueError
+        [[0.0, 0.0, 0.0], [1.0, 0.0]],  # ragged: a raw numpy ValueError
+        [[True, False, True]],  # bools are not positions
+        torch.zeros(1, 3, dtype=torch.complex64),
+    ],
+)
+def test_inputs_that_are_not_real_arrays_raise_shape_error(bad) -> None:
+    with pytest.raises(ShapeError, match="expected a an array of real numbers"):
+        modified_hausdorff(bad, np.zeros((2, 3)))
+
+
+@pytest.mark.parametrize("alone", ["a", torch.tensor([30.0, 20.0]), None, True])
+def test_efficiency_of_a_non_number_raises_data_error(alone) -> None:
+    """'a' and a two-element tensor raised raw TypeError / RuntimeError."""
+    with pytest.raises(DataError, match="expected positive task times"):
+        efficiency(alone, 1.0)
+    with pytest.raises(DataError, match="expected positive task times"):
+        efficiency(1.0, alone)
+    # numpy scalars and one-element tensors are numbers
+    assert efficiency(np.float32(3.0), torch.tensor([2.0])) == pytest.approx(1.5)
+
+
+@pytest.mark.parametrize("dt", [math.nan, math.inf, "0.1", 0.0])
+def test_regression_metrics_refuse_a_dt_that_is_not_positive_and_finite(dt) -> None:
+    """dt = NaN returned NaN (while dt <= 0 raised)."""
+    x = np.zeros((2, 1, 3))
+    with pytest.raises(DataError, match="expected dt > 0 and finite"):
+        regression_precision(x, x, dt)
+    with pytest.raises(DataError, match="expected dt > 0 and finite"):
+        regression_accuracy(x, dt)
+
+
+def test_classification_precision_refuses_nan_rows_and_bad_labels() -> None:
+    """A NaN frame was dropped silently; a label A or -1 was counted as wrong."""
+    probs = np.array([[0.9, 0.1], [np.nan, 0.6], [0.2, 0.8]])
+    with pytest.raises(DataError, match=r"expected finite probs, got NaN or inf in 1 frames"):
+        classification_precision(probs, [0, 0, 1])
+    probs = np.array([[0.9, 0.1], [0.4, 0.6], [0.2, 0.8]])
+    for labels in ([0, 2, 1], [0, -1, 1], [0, 0.5, 1]):
+        with pytest.raises(DataError, match=r"expected labels integers in \[0, 2\)"):
+            classification_precision(probs, labels)
+    assert classification_precision(probs, torch.tensor([0, 1, 1])) == (1.0, 3)
+
+
+def test_closest_distance_refuses_an_infinite_centre() -> None:
+    """An infinite centre was reported as 1.8e308 m away."""
+    rc = np.zeros((2, 1, 3))
+    hc = np.ones((2, 1, 3))
+    hc[1, 0, 0] = math.inf
+    with pytest.raises(DataError, match="expected finite .*human_centers, got an infinite"):
+        closest_distance(rc, [0.1], hc, [0.1])
+    with pytest.raises(DataError, match="expected finite robot_radii"):
+        closest_distance(rc, [math.nan], np.ones((2, 1, 3)), [0.1])
+    hc[1, 0, 0] = math.nan  # NaN (untracked) is still ignored
+    overall, per_step = closest_distance(rc, [0.1], hc, [0.1])
+    assert overall == pytest.approx(math.sqrt(3) - 0.2) and math.isnan(per_step[1])

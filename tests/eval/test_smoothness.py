@@ -156,3 +156,26 @@ def test_breakdown_script_groups_by_swept_speed(tmp_path: Path) -> None:
         [sys.executable, str(script), str(tmp_path / "none")], capture_output=True, text=True
     )
     assert res.returncode == 2 and res.stderr.startswith("error: no *.mcap episode logs")
+
+
+def test_plan_records_take_lists_and_check_their_fields() -> None:
+    """Lists raised AttributeError in smoothness_breakdown; empty times an IndexError in
+    wait_windows; settle_s = 'a' a TypeError."""
+    p = PLANS[1]
+    listed = PlanRecord(times=p.times.tolist(), q=p.q.tolist(), wait_s=p.wait_s)
+    assert isinstance(listed.times, np.ndarray) and isinstance(listed.q, np.ndarray)
+    t, q = _executed()
+    assert smoothness_breakdown(t, q, [PLANS[0], listed, PLANS[2]]) == smoothness_breakdown(
+        t, q, PLANS
+    )
+    with pytest.raises(ShapeError, match=r"expected plan times \(W,\) with W >= 1"):
+        PlanRecord(times=np.zeros(0), q=np.zeros((0, 2)), wait_s=0.5)
+    with pytest.raises(ShapeError, match="expected times an array of real numbers"):
+        PlanRecord(times=[0.0, "a"], q=np.zeros((2, 2)), wait_s=0.0)
+    with pytest.raises(ShapeError, match="expected q an array of real numbers"):
+        PlanRecord(times=[0.0, 1.0], q=[[0.0, 1.0], [0.0]], wait_s=0.0)
+    with pytest.raises(DataError, match="expected wait_s a finite number"):
+        PlanRecord(times=[0.0, 1.0], q=np.zeros((2, 2)), wait_s=float("nan"))
+    for settle in ("a", None, float("nan")):
+        with pytest.raises(ConfigError, match="expected settle_s >= 0"):
+            wait_windows(PLANS, settle)  # type: ignore[arg-type]

@@ -386,3 +386,10 @@ def test_writer_path_that_is_a_folder_or_below_a_file_is_named(tmp_path: Path) -
         ):
             EpisodeWriter(path, metadata={})
     assert (tmp_path / "notes").read_text() == "a file"
+
+
+@pytest.mark.parametrize("path", [None, 3, 1.5, b"ep.mcap", ["ep.mcap"]])
+def test_read_episode_of_something_not_a_path_is_a_data_error(path: object) -> None:
+    """None and 3 raised a raw TypeError from pathlib."""
+    with pytest.raises(DataError, match="expected path a file path .* of an .mcap episode log"):
+        read_episode(path)  # type: ignore[arg-type]

@@ -372,3 +372,23 @@ def test_load_rejects_unusable_devices_and_dtypes() -> None:
     else:
         with pytest.raises(ConfigError, match="CUDA device"):
             RobotModel.load("kuka_iiwa14", device=f"cuda:{torch.cuda.device_count()}")
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_ik_in_half_precision_solves_in_float32(dtype: torch.dtype) -> None:
+    """A half q_init raised NotImplementedError ('lu_cpu' not implemented for 'Half')."""
+    model = RobotModel.load("kuka_iiwa14")
+    target = model.ee_position(model.q_home + 0.2)
+    q = model.ik(target, model.q_home.to(dtype), iters=200)
+    assert q.dtype == dtype
+    assert torch.equal(q, model.ik(target, model.q_home.to(dtype).float(), iters=200).to(dtype))
+    assert (model.ee_position(q.float()) - target).norm() < 5e-3  # joints rounded to dtype
+    assert bool(((q >= model.q_min.to(dtype)) & (q <= model.q_max.to(dtype))).all())
+
+
+@pytest.mark.parametrize("yaw", [math.nan, math.inf, "pi"])
+def test_constructor_rejects_a_non_finite_base_yaw(yaw: object) -> None:
+    """RobotModel(desc, base_yaw=nan) built a model whose kinematics were all NaN."""
+    desc = RobotModel.load("kuka_iiwa14").description
+    with pytest.raises(ConfigError, match="expected a finite base_yaw"):
+        RobotModel(desc, base_yaw=yaw)  # type: ignore[arg-type]

@@ -179,3 +179,41 @@ def test_world_spheres_cover_links_after_fk(name: str) -> None:
             t = t_world_base @ frames[link].get_matrix()[k].numpy()
             pts = (pts_h @ t.T)[:, :3]
             assert _uncovered(pts, centers[k, mine], radii[mine]).max() <= 1e-7, (link, k)
+
+
+def test_sphere_count_is_capped_before_allocating() -> None:
+    """max_excess = 1e-5 tried to allocate 1.4 TB for the Fetch gripper's box; 3e-4 built
+    2.18 million spheres; a capsule at 1e-19 m divided by zero."""
+    from iplanner_torch.robot.spheres import MAX_LINK_SPHERES
+
+    box = Box(center=(0.0, 0.0, 0.0), half_extents=(0.075, 0.065, 0.03))
+    capsule = PRIMITIVES[0]
+    for geom, excess in ((box, 1e-5), (box, 3e-4), (capsule, 1e-19), (capsule, 1e-9)):
+        with pytest.raises(ConfigError, match=r"beyond MAX_LINK_SPHERES = \d+.*raise max_excess"):
+            fit_link_spheres(geom, max_excess=excess)
+    # the cap counts the link's primitives together
+    n_one = len(fit_link_spheres(box, max_excess=0.0022)[1])
+    assert n_one <= MAX_LINK_SPHERES < 2 * n_one
+    with pytest.raises(ConfigError, match="MAX_LINK_SPHERES"):
+        fit_link_spheres([box, box], max_excess=0.0022)
+    with pytest.raises(ConfigError, match="link 'gripper_link': .*max_sphere_excess"):
+        RobotModel.load("fetch", max_sphere_excess=1e-5)
+    assert RobotModel.load("fetch", max_sphere_excess=0.002).num_spheres == 8443
+
+
+@pytest.mark.parametrize(
+    ("geometry", "excess", "match"),
+    [
+        (PRIMITIVES[0], math.inf, "expected max_excess > 0 and finite, got inf"),
+        (PRIMITIVES[0], math.nan, "expected max_excess > 0 and finite, got nan"),
+        (PRIMITIVES[0], "0.02", "expected max_excess > 0 and finite"),
+        ("a", 0.02, "expected geometry a Capsule, Cylinder or Box or a sequence of them, got str"),
+        (None, 0.02, "expected geometry a Capsule, .* got NoneType"),
+        (3, 0.02, "expected geometry a Capsule, .* got int"),
+    ],
+)
+def test_bad_fit_arguments_raise_config_error(geometry, excess, match: str) -> None:
+    """max_excess = inf gave spheres of infinite radius; a string, None or an int geometry
+    raised raw TypeErrors."""
+    with pytest.raises(ConfigError, match=match):
+        fit_link_spheres(geometry, max_excess=excess)
