@@ -7,7 +7,9 @@ Commands:
 
     generate   write a synthetic dataset (one file per demonstration and a dataset card,
                README.md) into data.path; refuses when data.path already holds
-               demonstration files unless data.overwrite=true
+               demonstration files unless data.overwrite=true. The files are written into
+               <data.path>.partial-<pid> beside it and moved in when all are written, so a
+               failed or interrupted run leaves data.path as it was
     info       load and check every file of data.path (as training does) and summarise it:
                counts, joints, actions, fps, NaN values, joints lost in every frame
 
@@ -19,8 +21,9 @@ Config group and main options:
                                    lego = the recorded LEGO assembly set (info only) at
                                    ../shared/data/lego_assembly_3d
     data.path=<folder>             the dataset folder (relative to the current directory)
-    data.overwrite=true            generate: first delete the demonstration files (.npz, .csv)
-                                   and dataset card already in data.path, nothing else
+    data.overwrite=true            generate: replace the demonstration files (.npz, .csv) and
+                                   dataset card already in data.path, nothing else; they are
+                                   deleted only once the new set is complete
     data.generator.<field>=<value> generate: a generator setting; the main fields are
         reaching: reaches_per_target, n_targets, n_subjects, fps, noise_sigma, speeds, seed
         tasks: order, arrangement, n_demos, n_subjects, fps, noise_sigma, seed, file_format
@@ -70,26 +73,51 @@ _command = "generate"
 
 
 def _generate(cfg: DictConfig) -> None:
-    from iplanner_torch.data.dataset_card import CARD_NAME, prepare_dataset_folder
+    from iplanner_torch.data.dataset_card import CARD_NAME, check_dataset_folder
+    from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
+    from iplanner_torch.data.tasks import TaskDatasetCfg, generate_task_dataset
 
     out_dir = repo_path(cfg.data.path)
     overwrite = cfg.data.get("overwrite", False)
     if not isinstance(overwrite, bool):
         raise ConfigError(f"data.overwrite: expected true or false, got {overwrite!r}")
-    if cfg.data.get("generator") is not None:  # else generate_dataset says there is none
-        removed = prepare_dataset_folder(out_dir, overwrite=overwrite)
-        if removed:
-            had_card = out_dir / CARD_NAME in removed
-            card = " and its dataset card" if had_card else ""
-            n_demos = len(removed) - had_card
-            print(f"deleted {n_demos} earlier demonstration files{card} in {out_dir}")
+    if cfg.data.get("generator") is None:
+        generate_dataset(cfg.data, out_dir, progress=False)  # raises: nothing to generate
+    # every setting is checked before the folder is touched
+    gen_cfg = instantiate(cfg.data.generator, name="data.generator")
+    if isinstance(gen_cfg, ReachingCfg):
+        generate = generate_reaching_dataset
+    elif isinstance(gen_cfg, TaskDatasetCfg):
+        generate = generate_task_dataset
+    else:
+        raise ConfigError(f"data.generator builds {type(gen_cfg).__name__}: not a generator")
+    old = check_dataset_folder(out_dir, overwrite=overwrite)
     t0 = time.perf_counter()
     command = ("iplanner-data generate " + " ".join(sys.argv[1:])).strip()
-    summary = generate_dataset(cfg.data, out_dir, progress=bool(cfg.progress), command=command)
+    # written beside out_dir first; the earlier files go only once the new set is complete
+    summary = generate(gen_cfg, out_dir, progress=bool(cfg.progress), command=command, replace=old)
+    if old:
+        had_card = out_dir / CARD_NAME in old
+        card = " and its dataset card" if had_card else ""
+        print(f"deleted {len(old) - had_card} earlier demonstration files{card} in {out_dir}")
     mb = summary.bytes_on_disk / 1e6
     print(
         f"wrote {summary.n_demonstrations} demonstrations ({summary.n_frames} frames, {mb:.1f} MB)"
         f" to {out_dir} in {time.perf_counter() - t0:.1f} s; dataset card: {out_dir / 'README.md'}"
+    )
+
+
+def _kept_on_interrupt(cfg: DictConfig) -> str:
+    """The ``interrupted: ...`` text of an iplanner-data command."""
+    if _command != "generate":
+        return "nothing to keep: info reads files and writes none"
+    from iplanner_torch.data.dataset_card import partial_folder
+
+    out_dir = repo_path(cfg.data.path)
+    return (
+        f"{out_dir} is left as it was, an earlier dataset there included (unless the new one "
+        f"was complete and had replaced it); the unfinished files in {partial_folder(out_dir)} "
+        "were deleted"
     )
 
 
@@ -157,7 +185,7 @@ def _refuse_unread(cfg: DictConfig) -> None:
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
-@friendly_errors(before=_refuse_unread)
+@friendly_errors(before=_refuse_unread, kept=_kept_on_interrupt)
 def _app(cfg: DictConfig) -> None:
     {"generate": _generate, "info": _info}[_command](cfg)
 

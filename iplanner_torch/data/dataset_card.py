@@ -1,16 +1,20 @@
-"""What a dataset generator returns, the README (dataset card) it writes beside the files, and
-clearing a folder of an earlier generated dataset before writing a new one."""
+"""What a dataset generator returns, the README (dataset card) it writes beside the files,
+checking a folder for an earlier generated dataset, and writing a new one through a temporary
+sibling folder so that an interrupted or failed generation leaves the folder as it was."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Sequence
+import os
+import shutil
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from iplanner_torch.data.io import demonstration_files
+from iplanner_torch.data.io import PARTIAL_MARK, demonstration_files
 from iplanner_torch.errors import ConfigError, DataError
 
 #: The dataset card's file name, in the dataset folder.
@@ -153,19 +157,20 @@ def is_dataset_card(path: str | Path) -> bool:
     return path.is_file() and CARD_MARK in head
 
 
-def prepare_dataset_folder(out_dir: str | Path, *, overwrite: bool) -> tuple[Path, ...]:
-    """Make ``out_dir`` ready for a generator: refuse, or clear an earlier generated dataset.
+def check_dataset_folder(out_dir: str | Path, *, overwrite: bool) -> tuple[Path, ...]:
+    """Check that a generator may write ``out_dir``, and say what a new dataset replaces there.
 
     An earlier dataset is the demonstration files the loader would read from the folder
     (``.npz`` / ``.csv``, sub-folders included) and its dataset card (``README.md``); writing
-    a new one over it would mix old and new files. Nothing else in the folder is touched.
+    a new one over it would mix old and new files. Nothing is deleted here: pass the result as
+    ``replace=`` to the generator, which deletes them only once the new dataset is complete.
 
     Args:
         out_dir: the folder a generator is about to write (need not exist).
-        overwrite: delete the earlier demonstration files and dataset card instead of refusing.
+        overwrite: replace an earlier dataset instead of refusing.
 
     Returns:
-        The files deleted (empty when there was nothing to clear).
+        The earlier demonstration files and dataset card (empty when there are none).
 
     Raises:
         ConfigError: when the folder holds demonstration files and ``overwrite`` is false, or
@@ -191,7 +196,131 @@ def prepare_dataset_folder(out_dir: str | Path, *, overwrite: bool) -> tuple[Pat
         )
     if not files:
         return ()
-    removed = [*files, card] if card.exists() else files
+    return (*files, card) if card.exists() else tuple(files)
+
+
+def prepare_dataset_folder(out_dir: str | Path, *, overwrite: bool) -> tuple[Path, ...]:
+    """:func:`check_dataset_folder`, then delete what it returns at once.
+
+    Prefer passing :func:`check_dataset_folder`'s result as a generator's ``replace=``, which
+    keeps the earlier dataset until the new one is complete.
+
+    Returns:
+        The files deleted (empty when there was nothing to clear).
+
+    Raises:
+        ConfigError: as :func:`check_dataset_folder`.
+    """
+    removed = check_dataset_folder(out_dir, overwrite=overwrite)
     for f in removed:
         f.unlink()
-    return tuple(removed)
+    return removed
+
+
+def partial_folder(out_dir: str | Path) -> Path:
+    """The temporary sibling folder a generation of ``out_dir`` by this process writes:
+    ``<name>.partial-<pid>`` beside it (same file system, so moving its files is atomic).
+    The loader never reads it (:func:`iplanner_torch.data.io.demonstration_files`)."""
+    out_dir = Path(os.path.abspath(out_dir))  # "." and "a/.." get their real name
+    return out_dir.parent / f"{out_dir.name}{PARTIAL_MARK}{os.getpid()}"
+
+
+@contextmanager
+def staged_dataset(out_dir: str | Path) -> Iterator[Path]:
+    """A fresh :func:`partial_folder` for a generator to write a whole dataset into.
+
+    When the block raises or is interrupted, the folder is deleted (best effort) and
+    ``out_dir`` is left as it was; on success the caller moves the files into place with
+    :func:`finish_staged_dataset`.
+
+    Yields:
+        The temporary folder (created, empty).
+    """
+    staging = partial_folder(out_dir)
+    if staging.exists():  # left by an earlier process with the same id (killed outright)
+        shutil.rmtree(staging)
+    staging.mkdir(parents=True)
+    try:
+        yield staging
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+
+
+def finish_staged_dataset(
+    summary: DatasetSummary, out_dir: str | Path, *, replace: Sequence[Path] = ()
+) -> DatasetSummary:
+    """Move a complete dataset written into a :func:`staged_dataset` folder into ``out_dir``.
+
+    Every file of ``summary.out_dir`` moves into ``out_dir`` (a rename each, a same-named file
+    replaced, the dataset card last; the whole folder at once when ``out_dir`` does not
+    exist), then the files of ``replace`` (an earlier dataset's, :func:`check_dataset_folder`)
+    that were not replaced are deleted and the temporary folder is removed. Ctrl-C and SIGTERM
+    wait until this is done, so an interrupt never leaves old and new files mixed.
+
+    Args:
+        summary: the dataset as written into the temporary folder.
+        out_dir: the destination folder.
+        replace: files in ``out_dir`` to delete.
+
+    Returns:
+        ``summary`` with the files' final paths.
+    """
+    staging, out_dir = summary.out_dir, Path(out_dir)
+    moved = 0
+    with _interrupts_deferred():
+        try:
+            if not out_dir.exists() and _rename_folder(staging, out_dir):
+                moved = len(summary.files)
+            else:
+                written = set()
+                # the card last: a folder with a new card holds the whole new set
+                for f in sorted(staging.rglob("*"), key=lambda f: (f.name == CARD_NAME, f)):
+                    if f.is_file():
+                        dest = out_dir / f.relative_to(staging)
+                        dest.parent.mkdir(parents=True, exist_ok=True)
+                        shutil.move(f, dest)  # a rename replacing dest (across devices a copy)
+                        written.add(dest)
+                        moved += 1
+                for f in replace:
+                    if f not in written:
+                        f.unlink(missing_ok=True)
+                shutil.rmtree(staging)
+        except BaseException:
+            if not moved:  # out_dir untouched: the earlier dataset is kept as it was
+                shutil.rmtree(staging, ignore_errors=True)
+            raise
+    return dataclasses.replace(
+        summary,
+        out_dir=out_dir,
+        files=tuple(out_dir / f.relative_to(staging) for f in summary.files),
+    )
+
+
+def _rename_folder(src: Path, dest: Path) -> bool:
+    """Rename folder ``src`` to ``dest`` in one step; False when ``dest`` appeared meanwhile
+    (another process generating the same missing dataset finished first)."""
+    try:
+        os.replace(src, dest)
+    except OSError:
+        if dest.is_dir():
+            return False
+        raise
+    return True
+
+
+@contextmanager
+def _interrupts_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back inside the block; one that came is handled at its end
+    (where the platform can block signals; elsewhere a no-op)."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    held = {signal.SIGINT, signal.SIGTERM}
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)

@@ -30,6 +30,12 @@ finite and > 0; ``metadata`` is a JSON object; names are strings; ``timestamps``
 of strings) and ``metadata`` are each optional, and a ``null`` value counts as absent; the clean
 columns, when present, cover every joint's three axes. Without ``action_names`` the CSV labels
 name ``action_0 .. action_<largest label>``, at most :data:`MAX_IMPLICIT_ACTIONS` actions.
+
+A CSV or LEGO trial file whose last line has no line terminator may have been cut short (a
+copy or a recording stopped mid-write: ``0.841`` of ``0.8410000205``); that last row is
+dropped with a :class:`~iplanner_torch.errors.DataWarning` naming the file (every file the
+writers here and the recording write ends with a line break). A folder named
+``<name>.partial-<pid>`` is an unfinished generation's temporary folder and is never read.
 """
 
 from __future__ import annotations
@@ -38,6 +44,7 @@ import difflib
 import json
 import math
 import numbers
+import re
 import warnings
 import zipfile
 import zlib
@@ -64,6 +71,14 @@ _JSON_TYPES = {dict: "object", list: "array", str: "string", bool: "boolean", ty
 _CSV_COLUMN_FORMS = (
     "t (seconds), label (int action index), <joint>_x, <joint>_y, <joint>_z, "
     "clean_<joint>_x, clean_<joint>_y, clean_<joint>_z"
+)
+#: A generator writes a dataset folder ``<name>`` into ``<name>.partial-<pid>`` beside it first
+#: (:func:`iplanner_torch.data.dataset_card.staged_dataset`); such a folder is never read.
+PARTIAL_MARK = ".partial-"
+_PARTIAL_NAME = re.compile(r".+" + re.escape(PARTIAL_MARK) + r"\d+")
+#: Text of the warning for a last line without a line terminator.
+CUT_LAST_LINE = (
+    "last line has no line terminator: the file may be cut short; its last row is dropped"
 )
 #: Likely meanings of unknown CSV columns, offered as a hint (besides close spellings).
 _CSV_COLUMN_HINTS = {
@@ -444,12 +459,33 @@ def _check_csv_columns(path: Path, cols: list[str], header_line: int) -> None:
     )
 
 
+def _drop_cut_last_line(
+    path: Path, text: str, is_row: Any = None, *, stacklevel: int = 4
+) -> list[str]:
+    """The lines of ``text``, without the last one when it has no line terminator and holds a
+    row (not blank; ``is_row(line)`` when given), with a :class:`DataWarning` naming ``path``.
+
+    Every file our writers and the LEGO recording write ends with a line break, so a last row
+    without one may have been cut mid-number (``0.841`` of ``0.8410000205``) or after a comma
+    (an empty cell, read as NaN) and is not trusted. ``stacklevel`` is the warning's (default:
+    the caller of :func:`load_demonstration`).
+    """
+    lines = text.splitlines()
+    if not lines or text.endswith(("\n", "\r")):
+        return lines
+    last = lines[-1]
+    if not last.strip() or (is_row is not None and not is_row(last)):
+        return lines
+    warnings.warn(f"{path}: {CUT_LAST_LINE}", DataWarning, stacklevel=stacklevel)
+    return lines[:-1]
+
+
 def _read_csv(path: Path) -> dict[str, Any]:
     try:
         text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (Excel) is dropped
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: unreadable CSV file ({exc})") from exc
-    lines = text.splitlines()
+    lines = _drop_cut_last_line(path, text, is_row=lambda ln: not ln.startswith("#"))
     comment = [ln[1:] for ln in lines if ln.startswith("#")]
     body = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip() and not ln.startswith("#")]
     if not body:
@@ -775,6 +811,11 @@ def load_demonstration(
     path: str | Path, *, fps: float | None = None, joints: Sequence[str] | None = None
 ) -> Demonstration:
     """Load and validate one NPZ or CSV demonstration file (see :func:`load_demonstrations`)."""
+    if not (isinstance(path, str) or hasattr(path, "__fspath__")):  # Path() raised TypeError
+        raise DataError(
+            f"expected path a file path (str or os.PathLike) of a demonstration, got "
+            f"{type(path).__name__} {path!r}"
+        )
     path = Path(path)
     fps = _fps_argument(path, fps)
     joints = _joints_argument(joints)
@@ -816,17 +857,35 @@ def demonstration_files(path: str | Path) -> list[Path]:
 
     Returns:
         ``[path]`` for a file; a folder's ``.npz`` and ``.csv`` files in sorted path order
-        (empty when it has none).
+        (empty when it has none), except those in an unfinished generation's temporary
+        folder (``<name>.partial-<pid>``: :func:`is_partial_folder`).
 
     Raises:
-        DataError: when ``path`` does not exist.
+        DataError: when ``path`` does not exist, or is (or lies in) such a temporary folder.
     """
     path = Path(path)
+    if is_partial_folder(path) or is_partial_folder(path.parent):
+        raise DataError(
+            f"{path}: an unfinished generation's temporary folder (interrupted, or still "
+            "running), not a dataset; delete it and generate the dataset anew"
+        )
     if path.is_dir():
-        return sorted(p for p in path.rglob("*") if p.suffix in SUFFIXES and p.is_file())
+        return sorted(
+            p
+            for p in path.rglob("*")
+            if p.suffix in SUFFIXES
+            and p.is_file()
+            and not any(is_partial_folder(d) for d in p.relative_to(path).parents)
+        )
     if path.exists():
         return [path]
     raise DataError(f"{path}: no such file or folder")
+
+
+def is_partial_folder(path: str | Path) -> bool:
+    """Whether ``path`` is named as an unfinished generation's temporary folder
+    (``<name>.partial-<pid>``: :data:`PARTIAL_MARK`)."""
+    return _PARTIAL_NAME.fullmatch(Path(path).name) is not None
 
 
 def load_demonstrations(
@@ -852,14 +911,21 @@ def load_demonstrations(
             positions, every joint NaN in every frame, label out of range, non-increasing
             timestamps, unknown joint name in ``joints``, joint names differing between files,
             fps missing or contradicting ``fps``, an ``fps`` argument that is not one finite
-            number > 0, a CSV column of no accepted form (named, with the accepted forms).
+            number > 0, a CSV column of no accepted form (named, with the accepted forms);
+            also for a ``path`` that is not a str or os.PathLike.
         ConfigError: for a ``joints`` argument that is not a non-empty sequence of unique
             names (a single string included).
 
     Warns:
         DataWarning: for a CSV without a ``label`` column whose header names actions (every
-            frame is then unlabelled, -1).
+            frame is then unlabelled, -1); for a CSV whose last line has no line terminator
+            (it may be cut short: that row is dropped).
     """
+    if not (isinstance(path, str) or hasattr(path, "__fspath__")):  # Path() raised TypeError
+        raise DataError(
+            "expected path a file or folder path (str or os.PathLike) of demonstrations, got "
+            f"{type(path).__name__} {path!r}"
+        )
     path = Path(path)
     fps = _fps_argument(path, fps)
     joints = _joints_argument(joints)
@@ -916,6 +982,10 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
     Raises:
         DataError: when nothing is found, a file is not a (T, 18) table of finite numbers or
             NaN, or ``fps`` is not one finite number > 0.
+
+    Warns:
+        DataWarning: for a trial file whose last line has no line terminator (it may be cut
+            short: that row is dropped).
     """
     path = Path(path)
     if path.is_dir():
@@ -941,7 +1011,12 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
     demos = []
     for f in files:
         try:
-            table = np.loadtxt(f, dtype=np.float64, ndmin=2)
+            lines = _drop_cut_last_line(
+                f, f.read_text(encoding="utf-8", errors="replace"), stacklevel=3
+            )
+            if not any(ln.strip() for ln in lines):
+                raise DataError(f"{f}: empty file")
+            table = np.loadtxt(lines, dtype=np.float64, ndmin=2)
         except ValueError as exc:
             raise DataError(f"{f}: unreadable LEGO trial ({exc})") from exc
         if table.shape[0] == 0:

@@ -28,6 +28,7 @@ are applied on top; the clean positions are kept in ``clean_positions``.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -38,7 +39,9 @@ from tqdm.auto import tqdm
 from iplanner_torch import checks
 from iplanner_torch.data.dataset_card import (
     DatasetSummary,
+    finish_staged_dataset,
     generator_settings,
+    staged_dataset,
     write_dataset_card,
 )
 from iplanner_torch.data.demonstration import Demonstration
@@ -282,6 +285,7 @@ class ReachingCfg:
             )
         if self.file_format not in ("npz", "csv"):
             raise ConfigError(f"file_format must be 'npz' or 'csv', got {self.file_format!r}")
+        object.__setattr__(self, "seed", checks.seed(self.seed, name="ReachingCfg.seed"))
 
 
 def reaching_demonstrations(cfg: ReachingCfg, target: int, rep: int) -> list[Demonstration]:
@@ -361,60 +365,68 @@ def generate_reaching_dataset(
     *,
     progress: bool = True,
     command: str | None = None,
+    replace: Sequence[Path] = (),
 ) -> DatasetSummary:
     """Generate the reaching dataset: one file per demonstration plus ``README.md``.
 
-    Files are named ``reach_t{target}_r{rep:02d}_v{speed}.{npz|csv}``.
+    Files are named ``reach_t{target}_r{rep:02d}_v{speed}.{npz|csv}``. They are written into
+    a temporary folder beside ``out_dir`` and moved into it only when all are written, so an
+    error or interrupt leaves ``out_dir`` as it was
+    (:func:`~iplanner_torch.data.dataset_card.staged_dataset`).
 
     Args:
         cfg: the settings.
-        out_dir: destination folder (created; existing demonstration files are overwritten).
+        out_dir: destination folder (created; same-named files in it are replaced).
         progress: show a tqdm progress bar.
         command: the command line to record in the dataset card (default: the Python call).
+        replace: an earlier dataset's files in ``out_dir``
+            (:func:`~iplanner_torch.data.dataset_card.check_dataset_folder`), deleted once the
+            new dataset is complete.
 
     Returns:
         The summary (counts, files, time, size).
     """
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     files: list[Path] = []
     n_frames = 0
     jobs = [(t, r) for t in range(cfg.n_targets) for r in range(cfg.reaches_per_target)]
-    for target, rep in tqdm(jobs, desc="reaching", disable=not progress, unit="reach"):
-        for demo in reaching_demonstrations(cfg, target, rep):
-            files.append(save_demonstration(demo, out_dir / f"{demo.name}.{cfg.file_format}"))
-            n_frames += demo.num_frames
-    seconds = time.perf_counter() - t_start
-    summary = DatasetSummary(
-        out_dir=out_dir,
-        files=tuple(files),
-        n_demonstrations=len(files),
-        n_frames=n_frames,
-        seconds=seconds,
-        bytes_on_disk=sum(f.stat().st_size for f in files),
-    )
-    speeds = ", ".join(f"{s:g} ({speed_name(s)})" for s in cfg.speeds)
-    write_dataset_card(
-        summary,
-        title="Synthetic reaching dataset",
-        facts=[
-            ("targets x reaches per target", f"{cfg.n_targets} x {cfg.reaches_per_target}"),
-            ("subjects", str(cfg.n_subjects)),
-            ("actions", ", ".join(reach_action_names(cfg.n_targets))),
-            ("joints", ", ".join(JOINT_NAMES)),
-            ("fps", f"{cfg.fps:g}"),
-            ("speed factors", speeds),
-            ("noise sigma", f"{cfg.noise_sigma:g} m"),
-            ("dropout rate / burst", f"{cfg.dropout_rate:g} / {cfg.dropout_burst:g} frames"),
-            ("seed", str(cfg.seed)),
-            ("format", cfg.file_format),
-        ],
-        settings=generator_settings(cfg),
-        command=command
-        or (
-            'python -c "from iplanner_torch.data.reaching import *; '
-            f"generate_reaching_dataset({cfg!r}, '{out_dir}')\""
-        ),
-    )
-    return summary
+    with staged_dataset(out_dir) as staging:
+        for target, rep in tqdm(jobs, desc="reaching", disable=not progress, unit="reach"):
+            for demo in reaching_demonstrations(cfg, target, rep):
+                path = staging / f"{demo.name}.{cfg.file_format}"
+                files.append(save_demonstration(demo, path))
+                n_frames += demo.num_frames
+        seconds = time.perf_counter() - t_start
+        summary = DatasetSummary(
+            out_dir=staging,
+            files=tuple(files),
+            n_demonstrations=len(files),
+            n_frames=n_frames,
+            seconds=seconds,
+            bytes_on_disk=sum(f.stat().st_size for f in files),
+        )
+        speeds = ", ".join(f"{s:g} ({speed_name(s)})" for s in cfg.speeds)
+        write_dataset_card(
+            summary,
+            title="Synthetic reaching dataset",
+            facts=[
+                ("targets x reaches per target", f"{cfg.n_targets} x {cfg.reaches_per_target}"),
+                ("subjects", str(cfg.n_subjects)),
+                ("actions", ", ".join(reach_action_names(cfg.n_targets))),
+                ("joints", ", ".join(JOINT_NAMES)),
+                ("fps", f"{cfg.fps:g}"),
+                ("speed factors", speeds),
+                ("noise sigma", f"{cfg.noise_sigma:g} m"),
+                ("dropout rate / burst", f"{cfg.dropout_rate:g} / {cfg.dropout_burst:g} frames"),
+                ("seed", str(cfg.seed)),
+                ("format", cfg.file_format),
+            ],
+            settings=generator_settings(cfg),
+            command=command
+            or (
+                'python -c "from iplanner_torch.data.reaching import *; '
+                f"generate_reaching_dataset({cfg!r}, '{out_dir}')\""
+            ),
+        )
+    return finish_staged_dataset(summary, out_dir, replace=replace)

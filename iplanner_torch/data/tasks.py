@@ -25,9 +25,12 @@ from typing import Literal
 import numpy as np
 from tqdm.auto import tqdm
 
+from iplanner_torch import checks
 from iplanner_torch.data.dataset_card import (
     DatasetSummary,
+    finish_staged_dataset,
     generator_settings,
+    staged_dataset,
     write_dataset_card,
 )
 from iplanner_torch.data.demonstration import Demonstration
@@ -368,6 +371,7 @@ class TaskDatasetCfg:
         if self.file_format not in ("npz", "csv"):
             raise ConfigError(f"file_format must be 'npz' or 'csv', got {self.file_format!r}")
         object.__setattr__(self, "idle_s", finite_range("TaskDatasetCfg.idle_s", self.idle_s))
+        object.__setattr__(self, "seed", checks.seed(self.seed, name="TaskDatasetCfg.seed"))
 
     def task_order(self) -> TaskOrder:
         """The parsed order (``random`` -> one group of the arrangement's ids)."""
@@ -382,53 +386,59 @@ def generate_task_dataset(
     *,
     progress: bool = True,
     command: str | None = None,
+    replace: Sequence[Path] = (),
 ) -> DatasetSummary:
-    """Generate ``cfg.n_demos`` task demonstrations (``task_{i:03d}``) plus ``README.md``."""
+    """Generate ``cfg.n_demos`` task demonstrations (``task_{i:03d}``) plus ``README.md``.
+
+    Written into a temporary folder beside ``out_dir`` and moved into it when complete, as
+    :func:`~iplanner_torch.data.reaching.generate_reaching_dataset` does; ``replace`` (an
+    earlier dataset's files in ``out_dir``) is deleted then.
+    """
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     order = cfg.task_order()
     ids, targets = arrangement_targets(cfg.arrangement)
     files, n_frames = [], 0
-    for i in tqdm(range(cfg.n_demos), desc="tasks", disable=not progress, unit="demo"):
-        body = sample_body(np.random.default_rng([cfg.seed, 0, i % cfg.n_subjects]))
-        rng = np.random.default_rng([cfg.seed, 3, i])
-        demo = generate_task_demonstration(
-            order.sample(rng), targets, body, rng, fps=cfg.fps, object_ids=ids,
-            noise_sigma=cfg.noise_sigma, dropout_rate=cfg.dropout_rate,
-            idle_s=tuple(cfg.idle_s),
-        )  # fmt: skip
-        demo.name = f"task_{i:03d}"
-        demo.metadata.update(
-            {"subject": i % cfg.n_subjects, "seed": cfg.seed, "order_expr": str(order)}
+    with staged_dataset(out_dir) as staging:
+        for i in tqdm(range(cfg.n_demos), desc="tasks", disable=not progress, unit="demo"):
+            body = sample_body(np.random.default_rng([cfg.seed, 0, i % cfg.n_subjects]))
+            rng = np.random.default_rng([cfg.seed, 3, i])
+            demo = generate_task_demonstration(
+                order.sample(rng), targets, body, rng, fps=cfg.fps, object_ids=ids,
+                noise_sigma=cfg.noise_sigma, dropout_rate=cfg.dropout_rate,
+                idle_s=tuple(cfg.idle_s),
+            )  # fmt: skip
+            demo.name = f"task_{i:03d}"
+            demo.metadata.update(
+                {"subject": i % cfg.n_subjects, "seed": cfg.seed, "order_expr": str(order)}
+            )
+            files.append(save_demonstration(demo, staging / f"{demo.name}.{cfg.file_format}"))
+            n_frames += demo.num_frames
+        summary = DatasetSummary(
+            out_dir=staging,
+            files=tuple(files),
+            n_demonstrations=len(files),
+            n_frames=n_frames,
+            seconds=time.perf_counter() - t_start,
+            bytes_on_disk=sum(f.stat().st_size for f in files),
         )
-        files.append(save_demonstration(demo, out_dir / f"{demo.name}.{cfg.file_format}"))
-        n_frames += demo.num_frames
-    summary = DatasetSummary(
-        out_dir=out_dir,
-        files=tuple(files),
-        n_demonstrations=len(files),
-        n_frames=n_frames,
-        seconds=time.perf_counter() - t_start,
-        bytes_on_disk=sum(f.stat().st_size for f in files),
-    )
-    write_dataset_card(
-        summary,
-        title="Synthetic task dataset",
-        facts=[
-            ("task order", str(order)),
-            ("arrangement", f"{cfg.arrangement} (object ids {list(ids)})"),
-            ("actions", ", ".join(task_action_names(ids))),
-            ("fps", f"{cfg.fps:g}"),
-            ("noise sigma", f"{cfg.noise_sigma:g} m"),
-            ("dropout rate", f"{cfg.dropout_rate:g}"),
-            ("seed", str(cfg.seed)),
-        ],
-        settings=generator_settings(cfg),
-        command=command
-        or (
-            'python -c "from iplanner_torch.data.tasks import *; '
-            f"generate_task_dataset({cfg!r}, '{out_dir}')\""
-        ),
-    )
-    return summary
+        write_dataset_card(
+            summary,
+            title="Synthetic task dataset",
+            facts=[
+                ("task order", str(order)),
+                ("arrangement", f"{cfg.arrangement} (object ids {list(ids)})"),
+                ("actions", ", ".join(task_action_names(ids))),
+                ("fps", f"{cfg.fps:g}"),
+                ("noise sigma", f"{cfg.noise_sigma:g} m"),
+                ("dropout rate", f"{cfg.dropout_rate:g}"),
+                ("seed", str(cfg.seed)),
+            ],
+            settings=generator_settings(cfg),
+            command=command
+            or (
+                'python -c "from iplanner_torch.data.tasks import *; '
+                f"generate_task_dataset({cfg!r}, '{out_dir}')\""
+            ),
+        )
+    return finish_staged_dataset(summary, out_dir, replace=replace)

@@ -534,3 +534,67 @@ def test_the_robot_group_configures_every_experiment() -> None:
         with pytest.raises(ConfigError, match="no config option robot=ur5"):
             bad = ["experiment=speed_response", "experiment.robot=ur5"]
             build_experiment(compose("config", overrides=bad), {})
+
+
+def test_data_generate_checks_every_setting_before_it_touches_the_folder(tmp_path: Path) -> None:
+    """A bad generator setting with data.overwrite=true is refused with one line, exit 2, and
+    the earlier dataset is left as it was (it used to be deleted first)."""
+    out = tmp_path / "ds"
+    gen = ["iplanner-data", "generate", f"data.path={out}", "progress=false"]
+    res = _run([*gen, "data.generator.reaches_per_target=1", "data.generator.n_targets=2"],
+               tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    for bad, named in [
+        ("data.generator.fps=-1", "ReachingCfg.fps > 0"),
+        ("data.generator.seed=-1", "ReachingCfg.seed an integer >= 0, got -1"),
+        ("data.generator.file_format=xml", "file_format must be 'npz' or 'csv'"),
+    ]:
+        res = _run([*gen, "data.overwrite=true", bad], tmp_path)
+        lines = res.stderr.strip().splitlines()
+        assert res.returncode == 2 and len(lines) == 1, res.stderr
+        assert lines[0].startswith("error: ConfigError: data.generator") and named in lines[0]
+        assert "deleted" not in res.stdout
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    res = _run(["iplanner-data", "generate", "data=tasks", f"data.path={tmp_path / 't'}",
+                "data.generator.seed=-1"], tmp_path)  # fmt: skip
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert res.stderr.strip() == (
+        "error: ConfigError: data.generator: expected TaskDatasetCfg.seed an integer >= 0, got -1"
+    )
+
+
+def test_an_interrupted_generate_keeps_the_earlier_dataset(tmp_path: Path) -> None:
+    """SIGTERM during ``generate data.overwrite=true``: one ``interrupted:`` line about the
+    dataset (not episodes), exit 130, the earlier dataset as it was and no temporary folder."""
+    import signal
+    import time
+
+    out = tmp_path / "ds"
+    gen = ["iplanner-data", "generate", f"data.path={out}", "progress=false"]
+    res = _run([*gen, "data.generator.reaches_per_target=1", "data.generator.n_targets=2"],
+               tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "iplanner_torch.cli.data", *gen[1:], "data.overwrite=true",
+         "data.generator.reaches_per_target=300"],
+        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 300
+    partial: list[Path] = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        partial = list(tmp_path.glob("ds.partial-*"))
+        if partial and len(list(partial[0].iterdir())) >= 5:
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None and partial, "generate ended before it could be interrupted"
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-3000:]
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"interrupted: {out} is left as it was"), last
+    assert "episode" not in last and "results.csv" not in last
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("ds")) == ["ds"]

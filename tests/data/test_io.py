@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -792,3 +793,45 @@ def test_error_folder_or_no_joints_is_named(tmp_path):
     )
     with pytest.raises(DataError, match=r"x\.npz: field 'positions' has no joints \(K=0\)"):
         load_demonstration(p)
+
+
+@pytest.mark.parametrize("path", [None, 3, b"demo.npz", ["demo.npz"]])
+def test_a_path_argument_that_is_not_a_path_is_a_data_error(path) -> None:
+    """None raised a raw TypeError from pathlib."""
+    with pytest.raises(DataError, match="expected path a file path .* of a demonstration"):
+        load_demonstration(path)
+    with pytest.raises(DataError, match="expected path a file or folder path .* demonstrations"):
+        load_demonstrations(path)
+
+
+@pytest.mark.parametrize("where", ["mid-number", "after-a-comma"])
+def test_a_csv_cut_short_drops_its_last_row_with_a_warning(tmp_path, where):
+    """Our writer ends every file with a line break; a last row without one may be cut (mid
+    number: a wrong value; just after a comma: an empty cell read as NaN) and is dropped."""
+    d = _demo()
+    path = save_demonstration(d, tmp_path / "a.csv")
+    text = path.read_text()
+    assert text.endswith("\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert load_demonstration(path).num_frames == 12  # a whole file: no warning
+    end = len(text) - 4 if where == "mid-number" else text.rstrip("\n").rfind(",") + 1
+    path.write_text(text[:end])
+    with pytest.warns(DataWarning, match=r"a\.csv: last line has no line terminator: the file"):
+        e = load_demonstration(path)
+    assert e.num_frames == 11
+    np.testing.assert_array_equal(e.positions, d.positions[:11])
+
+
+@pytest.mark.skipif(not LEGO.is_dir(), reason="LEGO assembly recording not present")
+def test_a_lego_trial_cut_short_drops_its_last_row_with_a_warning(tmp_path):
+    src = sorted(LEGO.rglob("*.txt"))[0]
+    text = src.read_text()
+    assert text.endswith("\n")  # every trial of the recording ends with a line break
+    (whole,) = load_lego_assembly(src, fps=30.0)
+    cut = tmp_path / "trial1.txt"
+    cut.write_text(text[:-9])  # the last 8 characters and the line break: 0.8410000205 -> 0.841
+    with pytest.warns(DataWarning, match=r"trial1\.txt: last line has no line terminator"):
+        (e,) = load_lego_assembly(cut, fps=30.0)
+    assert e.num_frames == whole.num_frames - 1
+    np.testing.assert_array_equal(e.positions, whole.positions[:-1])
