@@ -348,6 +348,30 @@ PATH_KEYS = (
     "evaluate.checkpoint",
 )
 
+#: Path keys of conf/config.yaml that may be null (the command then uses its default), or else
+#: must name a path, checked before the command runs.
+OPTIONAL_PATH_KEYS = ("evaluate.out_dir", "evaluate.logs")
+#: Those of :data:`OPTIONAL_PATH_KEYS` that may also list several paths.
+PATH_LIST_KEYS = ("evaluate.logs",)
+
+
+def _plain(value: Any) -> Any:
+    """A config value as plain Python (a list for a ListConfig), for messages."""
+    if isinstance(value, (DictConfig, ListConfig)):
+        return OmegaConf.to_container(value, resolve=False)
+    return value
+
+
+def _not_a_path_text(key: str, value: Any, several: bool = False) -> str:
+    """``data.path: expected a path (a string), got 123`` (a number or a list where a path is
+    expected: Hydra reads ``data.path=2024`` as the integer 2024)."""
+    what = "a path (a string) or a list of paths" if several else "a path (a string)"
+    text = f"{key}: expected {what}, got {_plain(value)!r}"
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        text += f" (quote a path that reads as a number: {key}=\"'{value}'\")"
+    return text
+
+
 #: Keys of conf/config.yaml that feed a field under another name (the sweep aliases, and run
 #: settings), with the range each allows (checked before the command runs, so the message
 #: names the key that was typed rather than the field it feeds).
@@ -382,6 +406,19 @@ def check_root_keys(cfg: DictConfig) -> None:
         if value is not absent and (value is None or not str(value).strip()):
             got = "null" if value is None else repr(value)
             raise ConfigError(f"{key}: expected a path, got {got}")
+        if value is not absent and not isinstance(value, str):
+            raise ConfigError(_not_a_path_text(key, value))
+    for key in OPTIONAL_PATH_KEYS:
+        try:
+            value = OmegaConf.select(cfg, key, default=None)
+        except Exception:  # noqa: BLE001 - an interpolation the command that reads it reports
+            continue
+        several = key in PATH_LIST_KEYS and isinstance(value, (ListConfig, list, tuple))
+        if several and not all(isinstance(v, str) for v in value):
+            raise ConfigError(f"{key}: expected a list of paths (strings), got {_plain(value)!r}")
+        if value is not None and not several and not isinstance(value, str):
+            raise ConfigError(_not_a_path_text(key, value, key in PATH_LIST_KEYS))
+    check_run_keys(cfg)
     if "device" in cfg:  # a device torch does not know, meta or mps, or CUDA where there is none
         from iplanner_torch.types import resolve_device
 
@@ -406,6 +443,38 @@ def check_root_keys(cfg: DictConfig) -> None:
         value = cfg_scalar(node, key, float)
         if not lo <= value < hi:  # NaN and inf fail too
             raise ConfigError(f"{dotted}: expected {text}, got {value}")
+
+
+def check_run_keys(cfg: DictConfig) -> None:
+    """Check the ``run.*`` settings that a run may never come to read (a run of ``itomp``
+    alone trains nothing, so ``run.train_if_missing`` and ``run.train_trainer`` would pass
+    unseen), naming the full key: ``run.train_if_missing`` must be a bool,
+    ``run.train_trainer`` a ``conf/trainer`` option, ``run.stall_fallback_s`` null or a number
+    > 0 [s] (``EpisodeCfg.stall_fallback_s``).
+
+    Raises:
+        ConfigError: naming the key, what it expects and what it got.
+    """
+    run = cfg.get("run")
+    if not isinstance(run, DictConfig):
+        return
+    if "train_if_missing" in run:
+        cfg_scalar(run, "train_if_missing", bool)
+    if "train_trainer" in run:
+        option = run.train_trainer
+        options = sorted(f.stem for f in (Path(CONF_DIR) / "trainer").glob("*.yaml"))
+        if not isinstance(option, str) or option not in options:
+            raise ConfigError(
+                f"run.train_trainer: expected a trainer option ({', '.join(options)}), "
+                f"got {_plain(option)!r}"
+            )
+    if "stall_fallback_s" in run:
+        stall = run.stall_fallback_s
+        if stall is not None and (not _fits(stall, float) or not float(stall) > 0):
+            raise ConfigError(
+                f"run.stall_fallback_s: expected a number > 0 [s] or null (never), got "
+                f"{_plain(stall)!r}"
+            )
 
 
 class _Tee:
@@ -664,6 +733,7 @@ def friendly_errors(
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         _task_started()
+        _clear_failed_marker()
         log_path = job_log_path()
         with copy_output_to(log_path), _terminate_as_interrupt():
             try:
@@ -706,6 +776,15 @@ def friendly_errors(
                 raise SystemExit(130) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+def _clear_failed_marker() -> None:
+    """Remove the :data:`FAILED_MARKER` an earlier run of this multirun job left in its
+    folder (a sweep run again into the same ``hydra.sweep.dir``), so that the sweep reports
+    only the errors of this run; outside a multirun, nothing."""
+    job_dir = multirun_job_dir()
+    if job_dir is not None:
+        (job_dir / FAILED_MARKER).unlink(missing_ok=True)
 
 
 def _exit_after_interrupt(exc: SystemExit) -> bool:
@@ -768,7 +847,8 @@ def run_app(app: Callable[[], Any]) -> None:
     malformed YAML file, a misspelt key, an unknown option, an override it cannot parse)
     prints one line and exits 2, as the command's own config errors do
     (:func:`composition_error_text`); so does an operating system error before the command
-    starts (a run folder that cannot be made).
+    starts (a run folder that cannot be made, or a log file in it that cannot be opened,
+    which Python's logging reports as a ValueError: :func:`_os_error_of`).
 
     Hydra itself prints these and exits 1, a YAML error as a long traceback. Until the task
     function starts (:func:`friendly_errors` ends it), ``HYDRA_FULL_ERROR=1`` makes it raise
@@ -788,16 +868,36 @@ def run_app(app: Callable[[], Any]) -> None:
         if _SET_BY_RUN_APP not in os.environ:  # raised by the command after it started
             raise
         text = composition_error_text(exc)
+        os_error = _os_error_of(exc)
         if text is not None:
             line = f"error: ConfigError: {text}"
-        elif isinstance(exc, OSError):
-            line = f"error: {type(exc).__name__}: {exc}"
+        elif os_error is not None:
+            line = f"error: {type(os_error).__name__}: {os_error}"
         else:
             raise
         print(line, file=sys.stderr)
         raise SystemExit(2) from None
     finally:
         _task_started()
+
+
+def _os_error_of(exc: BaseException) -> OSError | None:
+    """``exc`` when it is an OSError; the OSError behind a ValueError (its ``__cause__`` or
+    ``__context__`` chain), as Python's logging raises ``ValueError: Unable to configure
+    handler 'file'`` when Hydra cannot open the run's log file (a run folder that is not
+    writable); else None."""
+    if isinstance(exc, OSError):
+        return exc
+    if not isinstance(exc, ValueError):
+        return None
+    seen: set[int] = set()
+    link: BaseException | None = exc.__cause__ or exc.__context__
+    while link is not None and id(link) not in seen:
+        if isinstance(link, OSError):
+            return link
+        seen.add(id(link))
+        link = link.__cause__ or link.__context__
+    return None
 
 
 def _task_started() -> None:

@@ -270,12 +270,32 @@ def _held_out(
     return test
 
 
-def _split_source(recorded: SplitRecord | None) -> str:
-    """Where the split comes from, for messages."""
+def _recorded_split(ckpt: Path, predictor: Any) -> SplitRecord | None:
+    """The split ``ckpt``'s training recorded beside it
+    (:func:`~iplanner_torch.eval.prediction.recorded_split`): a record of another training run
+    (one started in its folder since, and interrupted) is refused, unless the command line
+    gives ``seed``, which then draws the split (with a warning)."""
+    from iplanner_torch.eval.prediction import recorded_split
+
+    return recorded_split(
+        ckpt,
+        predictor.fingerprint,
+        getattr(predictor, "inputs_digest", ""),
+        split_given="seed" in _given(),
+    )
+
+
+def _split_source(recorded: SplitRecord | None, ckpts: list[Path]) -> str:
+    """Where the split comes from, for messages (``ckpts``: the evaluated checkpoints)."""
     from iplanner_torch.eval.prediction import INPUTS_FILE
 
     if recorded is not None:
         return f"recorded in {INPUTS_FILE} by the training"
+    if any((ckpt.parent / INPUTS_FILE).is_file() for ckpt in ckpts):
+        return (
+            f"from seed and data.split: the {INPUTS_FILE} beside the checkpoint does not record "
+            "its training's split"
+        )
     return f"from seed and data.split: no {INPUTS_FILE} beside the checkpoint records its split"
 
 
@@ -287,7 +307,7 @@ def _device(cfg: DictConfig) -> Any:
 
 
 def _prediction(cfg: DictConfig) -> None:
-    from iplanner_torch.eval.prediction import evaluate_prediction, recorded_split
+    from iplanner_torch.eval.prediction import evaluate_prediction
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
     _refuse_unread("prediction")
@@ -296,9 +316,9 @@ def _prediction(cfg: DictConfig) -> None:
     predictor = HumanMotionPredictor.load(ckpt, map_location=_device(cfg))
     _check_joints(cfg, predictor, ckpt)
     _check_windows(cfg, predictor, ckpt)
-    record = recorded_split(ckpt, predictor.fingerprint)
+    record = _recorded_split(ckpt, predictor)
     split = _evaluation_split(cfg, {ckpt: record}, [])
-    held_out = _held_out(cfg, split, _split_source(record), recorded=record is not None)
+    held_out = _held_out(cfg, split, _split_source(record, [ckpt]), recorded=record is not None)
     metrics = evaluate_prediction(predictor, held_out)
     out.write_text(json.dumps(metrics, indent=2, default=float))
     print(f"{ckpt} on held-out demonstrations of {cfg.data.path}:")
@@ -433,7 +453,6 @@ def _check_predictor_option(
 def _noise_sweep(cfg: DictConfig) -> None:
     from iplanner_torch.cli.experiment import option_node
     from iplanner_torch.cli.train import train_from_config
-    from iplanner_torch.eval.prediction import recorded_split
     from iplanner_torch.eval.prediction_sweep import (
         check_sweep_grid,
         prediction_vs_noise,
@@ -468,10 +487,10 @@ def _noise_sweep(cfg: DictConfig) -> None:
             _check_predictor_option(cfg, option, loaded[option], ckpt, options)
             _check_joints(cfg, loaded[option], ckpt)
             _check_windows(cfg, loaded[option], ckpt)
-            recorded[ckpt] = recorded_split(ckpt, loaded[option].fingerprint)
+            recorded[ckpt] = _recorded_split(ckpt, loaded[option])
     split = _evaluation_split(cfg, recorded, [ckpts[o] for o in missing], seed_draws_noise=True)
     record = next((r for r in recorded.values() if r is not None), None)
-    source = _split_source(record)
+    source = _split_source(record, [c for o, c in ckpts.items() if o not in missing])
     if missing:
         source = f"from seed and data.split, which {', '.join(missing)} will be trained on"
     held_out = _held_out(

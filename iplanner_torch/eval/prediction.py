@@ -145,49 +145,123 @@ def read_training_inputs(folder: str | Path) -> dict[str, Any] | None:
     return record
 
 
-def recorded_split(ckpt: str | Path, fingerprint: str) -> SplitRecord | None:
+def recorded_split(
+    ckpt: str | Path, fingerprint: str, digest: str = "", *, split_given: bool = False
+) -> SplitRecord | None:
     """The split recorded in :data:`INPUTS_FILE` beside ``ckpt``, when that file records the
-    training of this checkpoint (the same training-data ``fingerprint``).
+    training of this checkpoint: its :func:`inputs_digest` is the one the checkpoint keeps
+    (``digest``), or, for a checkpoint that keeps none, it names the same training data
+    (``fingerprint``).
+
+    A record of another training run (one started in the checkpoint's folder since, and
+    interrupted before it wrote its own ``predictor.ckpt``) does not say which
+    demonstrations this checkpoint held out, and the split ``seed`` and ``data.split`` draw
+    may include some it was trained on; it is refused, unless the caller says the split is
+    given explicitly (``split_given``: the command line sets it).
 
     Args:
         ckpt: a ``predictor.ckpt``.
         fingerprint: the checkpoint's ``HumanMotionPredictor.fingerprint``.
+        digest: the checkpoint's ``HumanMotionPredictor.inputs_digest`` ("" when it keeps
+            none: trained before checkpoints kept it).
+        split_given: the split to fall back on is given explicitly (``seed`` on the command
+            line), so a record of another run is passed over with a warning.
 
     Returns:
         The record, or None when there is none for this checkpoint: trained before the split
-        was recorded, copied away from its training folder, or the folder was trained anew
-        since (its record then names other training data).
+        was recorded, copied away from its training folder, or (without ``digest``) the
+        folder was trained anew since on other data.
+
+    Raises:
+        CheckpointError: when the record beside ``ckpt`` belongs to another training run than
+            the checkpoint's and ``split_given`` is false.
 
     Warns:
-        DataWarning: when the file is there but cannot be read.
+        DataWarning: when the file is there but cannot be read, or (``split_given``) when it
+            belongs to another training run.
     """
-    if not fingerprint:
+    if not fingerprint and not digest:
         return None
     try:
         inputs = read_training_inputs(ckpt)
-        if inputs is None or inputs.get("fingerprint") != fingerprint:
-            return None
-        split = inputs.get("split")
-        if split is None:
-            return None
-        if not isinstance(split, dict):
-            raise TypeError(f"split is {type(split).__name__}, not an object")
-        seed, held_out = split["seed"], split.get("held_out", [])
-        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-            raise ValueError(f"split seed {seed!r} is not a non-negative integer")
-        if not isinstance(held_out, list) or not all(isinstance(n, str) for n in held_out):
-            raise TypeError(f"split held_out {held_out!r} is not a list of names")
-        if not isinstance(split["fractions"], list):
-            raise TypeError(f"split fractions {split['fractions']!r} is not a list")
-        return SplitRecord(seed=seed, fractions=tuple(split["fractions"]), held_out=held_out)
-    except (CheckpointError, ConfigError, ValueError, TypeError, KeyError, AttributeError) as err:
-        warnings.warn(
-            f"cannot read the held-out split of {ckpt} ({type(err).__name__}: {err}); the "
-            "split is drawn from seed and data.split",
-            DataWarning,
-            stacklevel=2,
-        )
+    except CheckpointError as err:
+        _unreadable_split(ckpt, err)
         return None
+    if inputs is None:
+        return None
+    if digest and inputs_digest(inputs) != digest:
+        _other_run(ckpt, inputs, split_given)
+        return None
+    if not digest and inputs.get("fingerprint") != fingerprint:
+        return None
+    try:
+        return _split_of(inputs)
+    except (ConfigError, ValueError, TypeError, KeyError, AttributeError) as err:
+        _unreadable_split(ckpt, err)
+        return None
+
+
+def _split_of(inputs: dict[str, Any]) -> SplitRecord | None:
+    """The split an :data:`INPUTS_FILE` record keeps (None when it keeps none).
+
+    Raises:
+        ConfigError, ValueError, TypeError, KeyError: what is wrong with it.
+    """
+    split = inputs.get("split")
+    if split is None:
+        return None
+    if not isinstance(split, dict):
+        raise TypeError(f"split is {type(split).__name__}, not an object")
+    seed, held_out = split["seed"], split.get("held_out", [])
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"split seed {seed!r} is not a non-negative integer")
+    if not isinstance(held_out, list) or not all(isinstance(n, str) for n in held_out):
+        raise TypeError(f"split held_out {held_out!r} is not a list of names")
+    if not isinstance(split["fractions"], list):
+        raise TypeError(f"split fractions {split['fractions']!r} is not a list")
+    return SplitRecord(seed=seed, fractions=tuple(split["fractions"]), held_out=held_out)
+
+
+def _unreadable_split(ckpt: str | Path, err: Exception) -> None:
+    """Warn that the split recorded beside ``ckpt`` cannot be read (:func:`recorded_split`)."""
+    warnings.warn(
+        f"cannot read the held-out split of {ckpt} ({type(err).__name__}: {err}); the "
+        "split is drawn from seed and data.split",
+        DataWarning,
+        stacklevel=3,
+    )
+
+
+def _other_run(ckpt: str | Path, inputs: dict[str, Any], split_given: bool) -> None:
+    """Refuse (or, with ``split_given``, warn about) the :data:`INPUTS_FILE` record beside
+    ``ckpt`` that another training run than the checkpoint's wrote (:func:`recorded_split`)."""
+    path = Path(ckpt).parent / INPUTS_FILE
+    split = inputs.get("split")
+    try:
+        drawn = SplitRecord(seed=split["seed"], fractions=tuple(split["fractions"])).describe()
+        records = f" (it records the split {drawn})"
+    except Exception:  # noqa: BLE001 - what it records is only named when it reads
+        records = ""
+    text = (
+        f"{path} belongs to a later, unfinished training run, not to {ckpt}{records}: its "
+        "inputs differ from those the checkpoint was trained under (a training started in "
+        "this folder after the checkpoint was written and interrupted before it wrote its "
+        "own), so it does not say which demonstrations the checkpoint held out"
+    )
+    if split_given:
+        warnings.warn(
+            f"{text}; the held-out split is drawn from seed and data.split as the command line "
+            "gives them, unchecked against the checkpoint's training",
+            DataWarning,
+            stacklevel=3,
+        )
+        return
+    raise CheckpointError(
+        f"{text}, and the split seed and data.split draw may include demonstrations it was "
+        f"trained on; retrain it (iplanner-train ... train.out_dir={Path(ckpt).parent}), or "
+        "pass the seed and data.split it was trained with (seed=<int> data.split=[...]) to "
+        "score the demonstrations they hold out"
+    )
 
 
 def held_out_demonstrations(

@@ -143,6 +143,42 @@ def test_console_script_reports_a_wrong_type_in_one_line(tmp_path: Path) -> None
         ({"paths": {"datasets": None}}, "paths.datasets: expected a path, got null"),
         ({"data": {"path": ""}}, "data.path: expected a path, got ''"),
         ({"evaluate": {"checkpoint": None}}, "evaluate.checkpoint: expected a path, got null"),
+        # a number or a list where a path is expected ended in a TypeError traceback
+        (
+            {"data": {"path": 123}},
+            "data.path: expected a path (a string), got 123 (quote a path that reads as a "
+            "number: data.path=\"'123'\")",
+        ),
+        ({"data": {"path": ["a"]}}, "data.path: expected a path (a string), got ['a']"),
+        ({"train": {"out_dir": 123}}, "train.out_dir: expected a path (a string), got 123"),
+        ({"evaluate": {"checkpoint": 12.5}}, "evaluate.checkpoint: expected a path (a string)"),
+        ({"evaluate": {"out_dir": 123}}, "evaluate.out_dir: expected a path (a string), got 123"),
+        (
+            {"evaluate": {"logs": 123}},
+            "evaluate.logs: expected a path (a string) or a list of paths, got 123",
+        ),
+        (
+            {"evaluate": {"logs": ["a.csv", 1]}},
+            "evaluate.logs: expected a list of paths (strings), got ['a.csv', 1]",
+        ),
+        # run.* settings a run of itomp alone never read: refused up front by their full key
+        (
+            {"run": {"train_if_missing": "maybe"}},
+            "run.train_if_missing: expected bool, got 'maybe'",
+        ),
+        ({"run": {"train_if_missing": 0}}, "run.train_if_missing: expected bool, got 0"),
+        (
+            {"run": {"train_trainer": "nope"}},
+            "run.train_trainer: expected a trainer option (default, fast), got 'nope'",
+        ),
+        (
+            {"run": {"stall_fallback_s": "abc"}},
+            "run.stall_fallback_s: expected a number > 0 [s] or null (never), got 'abc'",
+        ),
+        (
+            {"run": {"stall_fallback_s": 0}},
+            "run.stall_fallback_s: expected a number > 0 [s] or null (never), got 0",
+        ),
     ],
 )
 def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
@@ -154,11 +190,17 @@ def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
     check_root_keys(OmegaConf.create({"tracker": {"noise": 1.0}, "human": {"speed": "slow"}}))
     # a path key that interpolates a resolver it cannot resolve here is left to its command
     check_root_keys(OmegaConf.create({"train": {"out_dir": "${hydra:runtime.choices.x}"}}))
+    # the optional paths may be null, and evaluate.logs a list; the run.* defaults pass
+    check_root_keys(OmegaConf.create({"evaluate": {"out_dir": None, "logs": ["a", "b"]}}))
+    run = {"train_if_missing": False, "train_trainer": "fast", "stall_fallback_s": None}
+    check_root_keys(OmegaConf.create({"run": run}))
     with pytest.raises(ConfigError) as err:
         check_root_keys(OmegaConf.create(root))
-    assert str(err.value) == message or (
-        "device" in root and str(err.value).startswith(message)  # then torch's own reason
-    )
+    text = str(err.value)
+    assert text == message or (
+        text.startswith(message)  # then torch's own reason, or how to quote a number
+        and ("device" in root or "(quote a path that reads as a number: " in text)
+    ), text
 
 
 def test_unknown_training_data_source_is_refused(tmp_path: Path) -> None:
@@ -328,6 +370,99 @@ def test_library_errors_and_running_out_of_memory_are_one_line(capsys) -> None:
         assert err.startswith("error: out of memory (") and "num_trajectories" in err
     with pytest.raises(RuntimeError, match="something else"):
         raising(RuntimeError("something else"))()
+
+
+def test_a_log_file_that_cannot_be_opened_is_one_line(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Hydra opens the run's log file before the command starts; Python's logging reports a
+    run folder that is not writable as ``ValueError: Unable to configure handler 'file'``
+    (a 56-line traceback, exit 1): the PermissionError behind it is the one line, exit 2."""
+    from iplanner_torch.cli._common import run_app
+
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+
+    def app() -> None:
+        try:
+            raise PermissionError(13, "Permission denied", "/r/data.log")
+        except PermissionError as exc:
+            raise ValueError("Unable to configure handler 'file'") from exc
+
+    with pytest.raises(SystemExit) as stop:
+        run_app(app)
+    assert stop.value.code == 2
+    line = "error: PermissionError: [Errno 13] Permission denied: '/r/data.log'"
+    assert capsys.readouterr().err.strip() == line
+
+    def other() -> None:
+        raise ValueError("a ValueError of its own")
+
+    with pytest.raises(ValueError, match="of its own"):  # not an operating system error
+        run_app(other)
+
+
+def test_a_run_folder_without_write_permission_is_one_line(tmp_path: Path) -> None:
+    """End to end, where the operating system refuses the write (as root, without the
+    capability that overrides file permissions: setpriv)."""
+    import shutil
+
+    run = tmp_path / "r"
+    run.mkdir()
+    prefix: list[str] = []
+    if os.geteuid() == 0:
+        setpriv = shutil.which("setpriv")
+        if setpriv is None:
+            pytest.skip("root without setpriv: file permissions are not enforced")
+        prefix = [setpriv, "--bounding-set=-dac_override,-dac_read_search,-fowner", "--"]
+    run.chmod(0o555)
+    try:
+        probe = subprocess.run(
+            [*prefix, sys.executable, "-c", f"open({str(run / 'x')!r}, 'w')"],
+            capture_output=True, timeout=60,
+        )  # fmt: skip
+        if probe.returncode == 0:
+            pytest.skip("file permissions are not enforced here")
+        env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+        env.pop("HYDRA_FULL_ERROR", None)
+        res = subprocess.run(
+            [*prefix, sys.executable, "-m", "iplanner_torch.cli.data", "info",
+             f"data.path={tmp_path / 'nowhere'}", f"hydra.run.dir={run}", "progress=false"],
+            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+    finally:
+        run.chmod(0o755)
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: PermissionError: "), res.stderr
+    assert str(run) in lines[0]
+
+
+def test_a_sweep_job_removes_the_failed_marker_of_its_earlier_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A sweep run again into the same folder: a job that failed before and runs fine now no
+    longer leaves the earlier FAILED file, which the sweep reported as this run's error; a
+    job that fails again writes its new line."""
+    import iplanner_torch.cli._common as common
+
+    job = tmp_path / "1"
+    job.mkdir()
+    (job / common.FAILED_MARKER).write_text("error: ConfigError: an earlier run's\n")
+    monkeypatch.setattr(common, "multirun_job_dir", lambda: job)
+
+    @common.friendly_errors
+    def fine() -> str:
+        return "ran"
+
+    assert fine() == "ran"
+    assert not (job / common.FAILED_MARKER).exists()
+
+    @common.friendly_errors
+    def failing() -> None:
+        raise ConfigError("this run's")
+
+    assert failing() is None
+    assert (job / common.FAILED_MARKER).read_text() == "error: ConfigError: this run's\n"
 
 
 @pytest.mark.parametrize(
@@ -612,6 +747,16 @@ def test_the_planner_group_option_narrows_the_run_to_that_planner() -> None:
          "error: NotADirectoryError: [Errno 20] Not a directory: "),
         ("evaluate", ["evaluate.checkpoint=null"],
          "error: ConfigError: evaluate.checkpoint: expected a path, got null"),
+        # a number where a path is expected: a TypeError traceback, exit 1
+        ("train", ["data.path=2024"],
+         "error: ConfigError: data.path: expected a path (a string), got 2024"),
+        ("data", ["info", "data.path=123"],
+         "error: ConfigError: data.path: expected a path (a string), got 123"),
+        ("evaluate", ["evaluate.mode=episode", "evaluate.logs=r.csv", "evaluate.out_dir=123"],
+         "error: ConfigError: evaluate.out_dir: expected a path (a string), got 123"),
+        # a run of itomp alone never read them
+        ("experiment", ["run.planners=[itomp]", "run.train_trainer=nope"],
+         "error: ConfigError: run.train_trainer: expected a trainer option"),
     ],
 )  # fmt: skip
 def test_bad_values_get_one_line_before_any_work(

@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -25,7 +27,7 @@ import iplanner_torch.eval.prediction as eval_prediction
 from iplanner_torch.cli._common import CONF_DIR
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.data.windows import split_by_demonstration
-from iplanner_torch.errors import ConfigError, DataWarning
+from iplanner_torch.errors import CheckpointError, ConfigError, DataWarning
 from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord, held_out_demonstrations
 from iplanner_torch.prediction.predictor import HumanMotionPredictor
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
@@ -95,7 +97,9 @@ def test_prediction_scores_the_split_its_checkpoint_recorded(
 ) -> None:  # fmt: skip
     """Trained with seed 1, evaluated with the default seed 0: the recorded split is scored
     (seed 0 would score training demonstrations); a checkpoint without its record (copied
-    away, or its folder trained anew since) keeps drawing the split from seed and data.split."""
+    away) keeps drawing the split from seed and data.split, and one whose folder holds the
+    record of another training run (trained anew since on other data) draws it from the seed
+    the command line gives, and is refused without one."""
     seed0 = sorted(d.name for d in split_by_demonstration(
         load_demonstrations(trained.ds), FRACTIONS, 0)[2])  # fmt: skip
     assert seed0 != sorted(trained.held_out)
@@ -114,14 +118,70 @@ def test_prediction_scores_the_split_its_checkpoint_recorded(
     alone = tmp_path / "alone"
     alone.mkdir()
     shutil.copy(trained.ckpt, alone / "predictor.ckpt")
-    for ckpt in (other / "predictor.ckpt", alone / "predictor.ckpt"):
+    for ckpt, source in (
+        (other / "predictor.ckpt", f"the {INPUTS_FILE} beside the checkpoint does not record"),
+        (alone / "predictor.ckpt", f"no {INPUTS_FILE} beside the checkpoint"),
+    ):
         args = _prediction_args(trained, tmp_path, ckpt)
-        evaluate._prediction(_cfg(monkeypatch, *args, split))
+        seed = ["seed=0"] if ckpt.parent == other else []
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataWarning)  # other: the record is another run's
+            evaluate._prediction(_cfg(monkeypatch, *args, *seed, split))
         assert scored[-1].names == seed0, ckpt
-        assert "no training_inputs.json beside the checkpoint" in capsys.readouterr().out
+        assert source in capsys.readouterr().out
         empty = r"seed=0 data.split=\[0.8,0.1,0.1\] \(from seed and data.split.*leaves no held-out"
-        with pytest.raises(ConfigError, match=empty):
-            evaluate._prediction(_cfg(monkeypatch, *args))
+        with pytest.raises(ConfigError, match=empty), warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataWarning)
+            evaluate._prediction(_cfg(monkeypatch, *args, *seed))
+    args = _prediction_args(trained, tmp_path, other / "predictor.ckpt")
+    with pytest.raises(CheckpointError, match="belongs to a later, unfinished training run"):
+        evaluate._prediction(_cfg(monkeypatch, *args, split))
+
+
+def _interrupted_retrain(trained: SimpleNamespace, folder: Path, seed: int) -> list[str]:
+    """``folder``: a copy of the trained checkpoint's folder in which ``iplanner-train ...
+    seed=<seed>`` started again and was interrupted: it wrote its training_inputs.json (the
+    same data and settings, another seed and split) at its start, as training does, and no
+    predictor.ckpt. Returns the demonstrations its split holds out."""
+    shutil.copytree(trained.ckpt.parent, folder)
+    record = json.loads((folder / INPUTS_FILE).read_text())
+    demos = load_demonstrations(trained.ds)
+    held_out = sorted(d.name for d in split_by_demonstration(demos, FRACTIONS, seed)[2])
+    record["trainer_cfg"]["seed"] = seed
+    record["split"] = {"seed": seed, "fractions": list(FRACTIONS), "held_out": held_out}
+    (folder / INPUTS_FILE).write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
+    return held_out
+
+
+def test_prediction_refuses_the_record_of_a_later_unfinished_training(
+    trained: SimpleNamespace, scored: list, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture,
+) -> None:  # fmt: skip
+    """The checkpoint was trained with seed 1; an interrupted retrain with seed 0 replaced the
+    record beside it. Its split (seed 0) holds out demonstrations the checkpoint was trained
+    on: it was scored, and the message said no record was there. Now the record is refused
+    (the checkpoint keeps the digest of its own), or, with seed given, the split is drawn from
+    the command line's seed and data.split with a warning that says so."""
+    folder = tmp_path / "ck" / "ds" / "iplanner_ni"
+    seed0 = _interrupted_retrain(trained, folder, seed=0)
+    assert seed0 != sorted(trained.held_out)
+    args = _prediction_args(trained, tmp_path / "out", folder / "predictor.ckpt")
+    refusal = (rf"^{re.escape(str(folder / INPUTS_FILE))} belongs to a later, unfinished "
+               r"training run, not to .*predictor.ckpt \(it records the split seed=0 "
+               r"data.split=\[0.6,0.2,0.2\]\).*may include demonstrations it was trained on; "
+               r"retrain it .*, or pass the seed and data.split it was trained with")  # fmt: skip
+    for given in ([], ["data.split=[0.6,0.2,0.2]"]):
+        with pytest.raises(CheckpointError, match=refusal):
+            evaluate._prediction(_cfg(monkeypatch, *args, *given))
+    assert not scored
+    warned = (r"belongs to a later, unfinished training run.*the held-out split is drawn from "
+              r"seed and data.split as the command line gives them")  # fmt: skip
+    with pytest.warns(DataWarning, match=warned):
+        evaluate._prediction(_cfg(monkeypatch, *args, "seed=1", "data.split=[0.6,0.2,0.2]"))
+    assert scored[-1].names == sorted(trained.held_out)
+    out = capsys.readouterr().out
+    assert "held-out split: seed=1 data.split=[0.6,0.2,0.2] (from seed and data.split: the " in out
+    assert "no training_inputs.json" not in out
 
 
 def test_prediction_refuses_another_split_on_the_command_line(
@@ -302,6 +362,17 @@ def test_noise_sweep_scores_the_recorded_split_and_draws_its_noise_with_seed(
     evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "seed=5"))
     out = capsys.readouterr().out
     assert "held-out split: seed=1 data.split=[0.6,0.2,0.2] (recorded in" in out
+
+
+def test_noise_sweep_refuses_the_record_of_a_later_unfinished_training(
+    trained: SimpleNamespace, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_training: None
+) -> None:
+    """As ``prediction`` does (the record beside the checkpoint is an interrupted retrain's)."""
+    _interrupted_retrain(trained, tmp_path / "ck" / "ds" / "iplanner_ni", seed=0)
+    sweep = [*_sweep_args(trained, tmp_path), "evaluate.compare=[iplanner_ni]",
+             "evaluate.noises=[0.0,0.02]", "evaluate.speeds=[medium]"]  # fmt: skip
+    with pytest.raises(CheckpointError, match="belongs to a later, unfinished training run"):
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
 
 
 @pytest.fixture(scope="module")

@@ -312,3 +312,36 @@ def test_training_inputs_record_reads_or_is_refused_by_name(tmp_path) -> None:
                 read_training_inputs(ckpt)
         with pytest.warns(DataWarning, match=f"cannot read the held-out split of .*{why}"):
             assert recorded_split(ckpt, "abc") is None
+
+
+def test_recorded_split_takes_only_the_record_of_the_checkpoints_training(tmp_path) -> None:
+    """A checkpoint keeps the inputs_digest of its record: another run's record beside it (a
+    retrain started since and interrupted, which wrote its record at its start) is refused, or
+    passed over with a warning when the split is given; with the same fingerprint it was read
+    as the checkpoint's, so evaluation scored a split that held out other demonstrations."""
+    import json
+
+    from iplanner_torch.errors import CheckpointError
+    from iplanner_torch.eval.prediction import (
+        INPUTS_FILE,
+        SplitRecord,
+        inputs_digest,
+        recorded_split,
+    )
+
+    ckpt = tmp_path / "predictor.ckpt"
+    own = {"fingerprint": "abc", "split": {"seed": 1, "fractions": [0.6, 0.2, 0.2]}}
+    later = {"fingerprint": "abc", "split": {"seed": 0, "fractions": [0.6, 0.2, 0.2]}}
+    digest = inputs_digest(own)
+    (tmp_path / INPUTS_FILE).write_text(json.dumps(own))
+    assert recorded_split(ckpt, "abc", digest) == SplitRecord(seed=1, fractions=(0.6, 0.2, 0.2))
+    (tmp_path / INPUTS_FILE).write_text(json.dumps(later))
+    assert recorded_split(ckpt, "abc").seed == 0  # a checkpoint without a digest: as before
+    with pytest.raises(
+        CheckpointError,
+        match=rf"{INPUTS_FILE} belongs to a later, unfinished training run, not to .*"
+        r"predictor.ckpt \(it records the split seed=0 data.split=\[0.6,0.2,0.2\]\).*retrain",
+    ):
+        recorded_split(ckpt, "abc", digest)
+    with pytest.warns(DataWarning, match="later, unfinished training run.*drawn from seed"):
+        assert recorded_split(ckpt, "abc", digest, split_given=True) is None
