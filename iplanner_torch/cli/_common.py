@@ -1191,7 +1191,7 @@ def load_dataset(
     Raises:
         DataError: when the folder is absent and cannot (or may not) be generated.
         ConfigError: when a generated folder's card keeps other generator settings than the
-            command line gives.
+            command line gives, or ``data.windows.joints`` is a single string.
     """
     from iplanner_torch.data.io import load_demonstrations, load_lego_assembly
     from iplanner_torch.errors import DataError
@@ -1211,6 +1211,11 @@ def load_dataset(
     else:
         _check_generator_settings(data_cfg, path, overridden)
     joints = data_cfg.windows.get("joints", None) if "windows" in data_cfg else None
+    if isinstance(joints, str):  # list() would split it into letters
+        raise ConfigError(
+            f"data.windows.joints: expected a list of joint names, got the single string "
+            f"{joints!r}; pass data.windows.joints=[{joints}]"
+        )
     return load_demonstrations(path, fps=fps, joints=list(joints) if joints else None)
 
 

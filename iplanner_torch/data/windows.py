@@ -28,6 +28,7 @@ from typing import Literal
 import numpy as np
 import torch
 
+from iplanner_torch.checks import integer
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.skeleton import BONES
 from iplanner_torch.errors import ConfigError, DataError, DataWarning, ShapeError
@@ -298,6 +299,8 @@ class WindowCfg:
         object.__setattr__(
             self, "feature_kinds", (kinds,) if isinstance(kinds, str) else tuple(kinds)
         )
+        for name in ("n_prev", "n_future", "stride"):  # null or 1.5 failed in the comparison
+            integer(f"WindowCfg.{name}", getattr(self, name))
         if self.n_prev < 3 or self.n_future < 1 or self.stride < 1:
             raise ConfigError(
                 f"need n_prev >= 3, n_future >= 1, stride >= 1; got {self.n_prev}, "

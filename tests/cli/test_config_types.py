@@ -777,3 +777,24 @@ def test_bad_values_get_one_line_before_any_work(
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(line), res.stderr
     assert not (tmp_path / "ck").exists() and not (tmp_path / "datasets").exists()
+
+
+def test_window_settings_of_the_wrong_kind_are_named(tmp_path: Path) -> None:
+    """``data.windows.joints=right_hand`` (a string) was split into letters ("names joint(s)
+    ['h'] more than once"), and ``data.windows.n_prev=null`` failed in a comparison of None."""
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli._common import load_dataset
+    from iplanner_torch.data.io import save_demonstration
+    from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
+    from iplanner_torch.data.windows import WindowCfg
+
+    demo = reaching_demonstrations(ReachingCfg(n_targets=2, reaches_per_target=1), 0, 0)[0]
+    save_demonstration(demo, tmp_path / "d.npz")
+    node = OmegaConf.create({"path": str(tmp_path), "windows": {"joints": "right_hand"}})
+    with pytest.raises(ConfigError, match=r"data\.windows\.joints: expected a list of joint "
+                       r"names, got the single string 'right_hand'"):  # fmt: skip
+        load_dataset(node)
+    for key, value in (("n_prev", None), ("n_future", 1.5), ("stride", "2")):
+        with pytest.raises(ConfigError, match=rf"WindowCfg\.{key} an integer, got"):
+            WindowCfg(**{key: value})
