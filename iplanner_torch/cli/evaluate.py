@@ -577,6 +577,12 @@ def _episode(cfg: DictConfig) -> None:
             )
     baseline = cfg.evaluate.get("baseline")
     out_dir = _out_dir(cfg)
+    if (out_dir / "episodes").is_dir():  # its results.csv would be replaced by this report
+        raise ConfigError(
+            f"evaluate.out_dir={out_dir} is the folder of an iplanner-experiment run (it holds "
+            "episodes/), whose results.csv and results.md this report would replace; choose "
+            "another evaluate.out_dir (or leave it unset: a new run folder)"
+        )
     frames, swept = [], []
     for i, path in enumerate(paths):
         df = _episode_rows(path)

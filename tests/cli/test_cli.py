@@ -293,6 +293,17 @@ def test_evaluate_episode_reports_a_results_csv(tmp_path: Path) -> None:
                 f"evaluate.logs={tmp_path / 'header.csv'}",
                 f"evaluate.out_dir={tmp_path / 'out3'}"], tmp_path)  # fmt: skip
     assert res.returncode == 2 and "header.csv: no episode rows; nothing to report" in res.stderr
+    # an experiment's run folder as the report folder: its results.csv was replaced
+    run = tmp_path / "run"
+    (run / "episodes").mkdir(parents=True)
+    rows.to_csv(run / "results.csv", index=False)
+    before = (run / "results.csv").read_bytes()
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode",
+                f"evaluate.logs={run / 'results.csv'}", f"evaluate.out_dir={run}"],
+               tmp_path)  # fmt: skip
+    assert res.returncode == 2, res.stderr[-3000:]
+    assert "is the folder of an iplanner-experiment run (it holds episodes/)" in res.stderr
+    assert (run / "results.csv").read_bytes() == before and not (run / "results.md").exists()
 
 
 def test_evaluate_episode_compares_labelled_runs_seed_by_seed(tmp_path: Path) -> None:
