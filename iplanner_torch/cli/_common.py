@@ -26,6 +26,7 @@ if not OmegaConf.has_resolver("basename"):
     OmegaConf.register_new_resolver("basename", lambda p: Path(str(p)).name)
 
 F = TypeVar("F", bound=Callable[..., Any])
+_E = TypeVar("_E", bound=BaseException)
 
 
 def instantiate(node: Any, expected: type | None = None, name: str | None = None) -> Any:
@@ -797,14 +798,20 @@ def _exit_after_interrupt(exc: SystemExit) -> bool:
     SystemExit's context; its log line says so at INFO, which the training silences."""
     if exc.code in (None, 0):
         return False
+    return _in_chain(exc.__context__, KeyboardInterrupt) is not None
+
+
+def _in_chain(link: BaseException | None, kind: type[_E]) -> _E | None:
+    """The first exception of type ``kind`` along the chain from ``link`` (``link`` itself,
+    then each one's ``__cause__`` or else ``__context__``), or None; a chain that loops back
+    on itself ends there."""
     seen: set[int] = set()
-    link: BaseException | None = exc.__context__
     while link is not None and id(link) not in seen:
-        if isinstance(link, KeyboardInterrupt):
-            return True
+        if isinstance(link, kind):
+            return link
         seen.add(id(link))
         link = link.__cause__ or link.__context__
-    return False
+    return None
 
 
 def _kept_episodes(log_path: Path | None) -> str:
@@ -890,14 +897,7 @@ def _os_error_of(exc: BaseException) -> OSError | None:
         return exc
     if not isinstance(exc, ValueError):
         return None
-    seen: set[int] = set()
-    link: BaseException | None = exc.__cause__ or exc.__context__
-    while link is not None and id(link) not in seen:
-        if isinstance(link, OSError):
-            return link
-        seen.add(id(link))
-        link = link.__cause__ or link.__context__
-    return None
+    return _in_chain(exc.__cause__ or exc.__context__, OSError)
 
 
 def _task_started() -> None:
@@ -945,11 +945,9 @@ def composition_error_text(exc: BaseException) -> str | None:
         SearchPathException,
     )
 
-    seen: BaseException | None = exc
-    while seen is not None:
-        if isinstance(seen, YAMLError):
-            return yaml_error_text(seen)
-        seen = seen.__cause__ or seen.__context__
+    yaml_error = _in_chain(exc, YAMLError)
+    if yaml_error is not None:
+        return yaml_error_text(yaml_error)
     if isinstance(exc, OverrideParseException):
         reason, _, rest = exc.message.partition("\n")
         see = re.search(r"https?://\S+", rest)
