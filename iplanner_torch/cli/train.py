@@ -85,6 +85,18 @@ def train_from_config(
     # recorded beside the checkpoint: iplanner-evaluate scores the same held-out demonstrations
     split = replace(drawn, held_out=tuple(d.name for d in test))
     train_w = build_windows(train, window_cfg)
+    if len(train_w) == 0:
+        from iplanner_torch.errors import DataError
+
+        longest = max(d.num_frames for d in train)
+        labelled = max(int((d.labels >= 0).sum()) for d in train)
+        raise DataError(
+            f"the {len(train)} training demonstrations give no training windows: a window "
+            f"needs data.windows.n_prev + n_future = "
+            f"{window_cfg.n_prev + window_cfg.n_future} frames, its n_prev-th labelled, "
+            f"and the longest demonstration has {longest} frames ({labelled} labelled); "
+            "lower data.windows.n_prev or n_future"
+        )
     val_w = build_windows(val, window_cfg) if val else None
     t0 = time.perf_counter()
     ckpt = train_predictor(

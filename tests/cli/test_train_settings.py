@@ -19,7 +19,7 @@ from iplanner_torch.cli._common import CONF_DIR, config_split
 from iplanner_torch.cli.train import train_from_config
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.data.windows import split_by_demonstration
-from iplanner_torch.errors import CheckpointError, ConfigError
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError
 from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
@@ -167,3 +167,18 @@ def test_a_split_that_holds_out_nothing_is_said(
             cfg, cfg.predictor, tmp_path / "ck", trainer_node=cfg.trainer
         )
     assert "mhd_1s" not in metrics and metrics["train_windows"] > 0
+
+
+def test_windows_longer_than_every_demonstration_are_named(
+    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """n_prev + n_future beyond the longest demonstration gives no window: the error names
+    the two settings and the longest demonstration, before training starts."""
+    called = []
+    monkeypatch.setattr(training, "train_predictor", lambda *a, **k: called.append(1))
+    longest = max(d.num_frames for d in load_demonstrations(dataset))
+    cfg = _config(f"data.path={dataset}", f"data.windows.n_prev={longest}")
+    with pytest.raises(DataError, match=rf"n_prev \+ n_future = {longest + 15} frames.*"
+                       r"the longest demonstration has \d+ frames"):  # fmt: skip
+        train_from_config(cfg, cfg.predictor, tmp_path / "ck", trainer_node=cfg.trainer)
+    assert not called
