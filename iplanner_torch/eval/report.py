@@ -21,6 +21,8 @@ except in :func:`comparison_table`, which shows the paper's units (cm, ms).
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import math
 import re
@@ -224,15 +226,52 @@ def _row_of_path(p: Path) -> dict[str, Any]:
     return row
 
 
+def _short_rows(p: Path, text: str) -> str:
+    """``text`` of the results CSV ``p``, checked for rows with fewer cells than its header
+    (which pandas would fill with NaN unsaid): a last row cut short (no line end: the writer
+    stopped inside it, so even its last cell may be cut) is left out, other short rows are
+    kept with their missing cells read as missing; each with a :class:`DataWarning`."""
+    reader = csv.reader(io.StringIO(text))
+    try:
+        records = [(reader.line_num, row) for row in reader]
+    except csv.Error:
+        return text  # pandas names the fault
+    records = [(n, row) for n, row in records if row]  # blank lines are skipped
+    if len(records) < 2:
+        return text
+    width = len(records[0][1])
+    short = [(n, len(row)) for n, row in records[1:] if len(row) < width]
+    if short and short[-1][0] == records[-1][0] and not text.endswith(("\n", "\r")):
+        line, cells = short.pop()
+        warnings.warn(
+            f"{p}: the last row (file row {line}) is cut short ({cells} of {width} cells and "
+            "no line end: the file was being written); left out",
+            DataWarning,
+            stacklevel=4,
+        )
+        text = "".join(io.StringIO(text).readlines()[: records[-2][0]])
+    if short:
+        warnings.warn(
+            f"{p}: {len(short)} row(s) have fewer cells than the header's {width} (file rows "
+            f"{[n for n, _ in short[:5]]}); their missing cells are read as missing",
+            DataWarning,
+            stacklevel=4,
+        )
+    return text
+
+
 def _rows_of_csv(p: Path) -> list[dict[str, Any]]:
     """The rows of a results CSV (an experiment's episode rows, ``eval/<name>`` columns, or a
     gathered table, ``<name>`` columns), in file order, named as :func:`gather_results`
     names them; an empty cell is NaN, and so is a metric cell (a ``stage/name`` column or one
     of :data:`DEFAULT_METRICS`) that is not a number, with a :class:`DataWarning` naming the
-    file rows. No ``path`` column is added (a row is not the CSV's
-    episode; the CSV's own ``path`` column, if any, is kept)."""
+    file rows; so are the cells missing from a row shorter than the header, while a last row
+    cut short by a stopped writer is left out (:func:`_short_rows`). No ``path`` column is
+    added (a row is not the CSV's episode; the CSV's own ``path`` column, if any, is kept)."""
     try:
-        df = pd.read_csv(p)
+        text = p.read_text(encoding="utf-8-sig")
+        text = _short_rows(p, text)
+        df = pd.read_csv(io.StringIO(text))
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
         raise DataError(f"{p}: not a readable results CSV: {err}") from err
     for col in df.columns:  # metric columns: a cell that is not a number is read as missing

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import warnings
 from pathlib import Path
 
 import matplotlib.image
@@ -150,6 +151,36 @@ def test_gather_results_reads_results_csv_with_or_without_the_prefix(tmp_path: P
     (tmp_path / "empty.csv").write_text("")
     with pytest.raises(DataError, match="empty.csv: not a readable results CSV"):
         gather_results(tmp_path / "empty.csv")
+
+
+def test_gather_results_leaves_out_a_cut_short_last_row(tmp_path: Path) -> None:
+    """A results CSV whose writer stopped inside its last row ends without a line end and
+    with fewer cells than the header: that row (whose last cell may be cut, "42." of
+    "42.75") is left out, with a warning; a short row elsewhere is kept, its missing cells
+    NaN, also with a warning; a full last row without a line end is read as it is."""
+    header = "planner,seed,eval/smoothness,eval/min_distance\n"
+    cut = tmp_path / "cut.csv"
+    cut.write_text(header + "itomp,0,41.5,0.06\nitomp,1,42.")
+    with pytest.warns(DataWarning, match=r"cut.csv: the last row \(file row 3\) is cut short "
+                      r"\(3 of 4 cells and no line end"):  # fmt: skip
+        df = gather_results(cut)
+    assert df["seed"].tolist() == [0] and df["smoothness"].tolist() == [41.5]
+    only = tmp_path / "only.csv"
+    only.write_text(header + "itomp,1,4")
+    with pytest.warns(DataWarning, match="cut short"):
+        assert gather_results(only).empty
+    short = tmp_path / "short.csv"
+    short.write_text(header + "itomp,0,41.5\nitomp,1,42.75,0.1\n")
+    with pytest.warns(DataWarning, match=r"1 row\(s\) have fewer cells than the header's 4 "
+                      r"\(file rows \[2\]\)"):  # fmt: skip
+        df = gather_results(short)
+    assert df["smoothness"].tolist() == [41.5, 42.75]
+    assert math.isnan(df["min_distance"].iloc[0]) and df["min_distance"].iloc[1] == 0.1
+    whole = tmp_path / "whole.csv"
+    whole.write_text(header + "itomp,0,41.5,0.06\nitomp,1,42.75,0.1")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert gather_results(whole)["smoothness"].tolist() == [41.5, 42.75]
 
 
 def test_summary_table_means_stds_and_counts(results: pd.DataFrame) -> None:
