@@ -454,6 +454,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
     from iplanner_torch.cli.experiment import option_node
     from iplanner_torch.cli.train import train_from_config
     from iplanner_torch.eval.prediction_sweep import (
+        check_clean_positions,
         check_sweep_grid,
         prediction_vs_noise,
         write_noise_report,
@@ -496,6 +497,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
     held_out = _held_out(
         cfg, split, source, recorded=record is not None and not missing, generate=bool(missing)
     )
+    check_clean_positions(held_out)  # before any missing predictor is trained
     for option in missing:
         print(f"training missing predictor {option} ...", flush=True)
         train_from_config(

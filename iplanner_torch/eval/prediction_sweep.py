@@ -94,6 +94,23 @@ def check_sweep_grid(
         raise ConfigError(f"speeds: unknown {bad}; expected some of {sorted(SPEEDS)}")
 
 
+def check_clean_positions(demos: Sequence[Demonstration]) -> None:
+    """Check that every demonstration has ``clean_positions`` to re-noise.
+
+    Raises:
+        DataError: naming how many lack them and the first few; recorded data (such as the
+            LEGO recording) has only the tracked positions, with their own noise.
+    """
+    lacking = [d.name for d in demos if getattr(d, "clean_positions", None) is None]
+    if lacking:
+        raise DataError(
+            f"{len(lacking)} of the {len(demos)} held-out demonstrations have no "
+            f"clean_positions to re-noise (first: {lacking[:3]}); the noise sweep needs "
+            "noise-free motion, which synthetic datasets (data=reaching, data=tasks) record "
+            "and recordings do not"
+        )
+
+
 def prediction_vs_noise(
     predictors: Mapping[str, Any],
     demos: Sequence[Demonstration],
@@ -120,7 +137,7 @@ def prediction_vs_noise(
 
     Raises:
         ConfigError: for an empty or bad grid (:func:`check_sweep_grid`).
-        DataError: without held-out demonstrations.
+        DataError: without held-out demonstrations, or when one has no ``clean_positions``.
     """
     from tqdm.auto import tqdm
 
@@ -129,6 +146,7 @@ def prediction_vs_noise(
     check_sweep_grid(list(predictors), noises, speeds)
     if not demos:
         raise DataError("no held-out demonstrations to evaluate")
+    check_clean_positions(demos)
     rows: list[dict[str, Any]] = []
     grid = [(s, n) for s in speeds for n in noises]
     for speed, noise in tqdm(grid, desc="noise sweep", disable=not progress):

@@ -447,3 +447,25 @@ def test_noise_sweep_refuses_checkpoints_of_another_option_in_an_options_folder(
     shutil.copytree(trained.ckpt.parent, ck / "iplanner_ni")
     evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "seed=5"))  # seed draws only the noise
     assert swept == [{"iplanner_no_ni": "none", "iplanner_ni": "simple"}]
+
+
+def test_noise_sweep_refuses_motion_without_clean_positions_before_training(
+    trained: SimpleNamespace, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_training: None
+) -> None:
+    """Held-out demonstrations without clean_positions (a recording) cannot be re-noised:
+    refused before the missing predictor is trained (it failed after the training)."""
+    from dataclasses import replace
+
+    from iplanner_torch.errors import DataError
+
+    shutil.copytree(trained.ckpt.parent, tmp_path / "ck" / "ds" / "iplanner_ni")
+    real = evaluate._held_out
+
+    def recorded(*args: Any, **kwargs: Any) -> list[Any]:
+        return [replace(d, clean_positions=None) for d in real(*args, **kwargs)]
+
+    monkeypatch.setattr(evaluate, "_held_out", recorded)
+    sweep = [*_sweep_args(trained, tmp_path), "seed=1", "data.split=[0.6,0.2,0.2]"]
+    with pytest.raises(DataError, match=r"^2 of the 2 held-out demonstrations have no "
+                       r"clean_positions to re-noise"):  # fmt: skip
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
