@@ -981,7 +981,7 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
 
     Raises:
         DataError: when nothing is found, a file is not a (T, 18) table of finite numbers or
-            NaN, or ``fps`` is not one finite number > 0.
+            NaN or has no joint observed in any frame, or ``fps`` is not one finite number > 0.
 
     Warns:
         DataWarning: for a trial file whose last line has no line terminator (it may be cut
@@ -1025,6 +1025,11 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
             raise DataError(f"{f}: field 'positions' must have 18 columns, got {table.shape[1]}")
         pos = table.reshape(-1, 6, 3)[:, order]  # (T, 6, 3)
         _check_coordinates(f, "positions", pos, LEGO_OUTPUT_JOINTS)
+        if np.isnan(pos).any(axis=-1).all():  # as load_demonstrations refuses such a file
+            raise DataError(
+                f"{f}: field 'positions' is NaN in every frame for every joint "
+                f"{list(LEGO_OUTPUT_JOINTS)}: nothing observed to learn from"
+            )
         rel = f.relative_to(root).with_suffix("")
         parts = rel.parts
         demos.append(

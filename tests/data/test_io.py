@@ -334,6 +334,14 @@ def test_lego_loader_errors_give_a_hint(tmp_path):
         DataError, match=r"trial1\.txt: .* 1 Inf .*frame 1, joint 'right_shoulder'"
     ):
         load_lego_assembly(tmp_path / "trial1.txt")
+    blind = " ".join(["nan"] * 18)
+    (tmp_path / "trial2.txt").write_text(f"{blind}\n{blind}\n")
+    with pytest.raises(DataError, match=r"trial2\.txt: field 'positions' is NaN in every frame "
+                       r"for every joint \['left_shoulder'"):  # fmt: skip
+        load_lego_assembly(tmp_path / "trial2.txt")
+    lost = " ".join(["0.1"] * 15 + ["nan"] * 3)  # the right shoulder alone is never seen
+    (tmp_path / "trial3.txt").write_text(f"{lost}\n{lost}\n")
+    assert len(load_lego_assembly(tmp_path / "trial3.txt")) == 1
 
 
 def test_error_missing_key(tmp_path):
