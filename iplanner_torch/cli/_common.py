@@ -1190,6 +1190,10 @@ def load_dataset(
         DataError: when the folder is absent and cannot (or may not) be generated.
         ConfigError: when a generated folder's card keeps other generator settings than the
             command line gives, or ``data.windows.joints`` is a single string.
+
+    A generated folder whose files no longer add up to the demonstration and frame counts its
+    card records (files removed or added by hand) is read as it is, with a
+    :class:`~iplanner_torch.errors.DataWarning`.
     """
     from iplanner_torch.data.io import load_demonstrations, load_lego_assembly
     from iplanner_torch.errors import DataError
@@ -1214,7 +1218,17 @@ def load_dataset(
             f"data.windows.joints: expected a list of joint names, got the single string "
             f"{joints!r}; pass data.windows.joints=[{joints}]"
         )
-    return load_demonstrations(path, fps=fps, joints=list(joints) if joints else None)
+    demos = load_demonstrations(path, fps=fps, joints=list(joints) if joints else None)
+    if path.is_dir():
+        import warnings
+
+        from iplanner_torch.data.dataset_card import card_mismatch
+        from iplanner_torch.errors import DataWarning
+
+        differ = card_mismatch(path, len(demos), sum(d.num_frames for d in demos))
+        if differ:
+            warnings.warn(f"{differ}; using the files as they are", DataWarning, stacklevel=2)
+    return demos
 
 
 def config_split(cfg: DictConfig, data_node: DictConfig | None = None) -> Any:

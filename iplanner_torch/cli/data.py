@@ -11,7 +11,8 @@ Commands:
                <data.path>.partial-<pid> beside it and moved in when all are written, so a
                failed or interrupted run leaves data.path as it was
     info       load and check every file of data.path (as training does) and summarise it:
-               counts, joints, actions, fps, NaN values, joints lost in every frame
+               counts, joints, actions, fps, NaN values, joints lost in every frame,
+               and whether the counts agree with a generated folder's card (README.md)
 
 Config group and main options:
 
@@ -162,6 +163,16 @@ def _info(cfg: DictConfig) -> None:
     print(f"  joints ({len(joints)}): {', '.join(joints)}")
     print(f"  actions ({len(actions)}): {', '.join(actions)}")
     print(f"  fps: {sorted({d.fps for d in demos})}; NaN values: {nan}")
+    if path.is_dir():
+        from iplanner_torch.data.dataset_card import CARD_NAME, card_mismatch, read_card_counts
+
+        counts = read_card_counts(path)
+        differ = card_mismatch(path, len(demos), frames)
+        if differ:
+            print(f"  dataset card: {differ}")
+        elif counts:
+            print(f"  dataset card: {CARD_NAME} agrees ({len(demos)} demonstrations, {frames} "
+                  "frames)")  # fmt: skip
     lost = [(f, names) for f, d in zip(files, demos, strict=True) if (names := lost_joints(d))]
     if lost:
         print(

@@ -147,6 +147,43 @@ def read_generator_settings(folder: str | Path) -> dict[str, Any] | None:
     return settings
 
 
+def read_card_counts(folder: str | Path) -> dict[str, int] | None:
+    """The demonstration and frame counts a dataset folder's card records, or None.
+
+    Returns:
+        ``{"demonstrations": n, "frames": t}`` from the card's table (a count the card lacks,
+        or one edited into something other than an integer, is left out); None without a
+        generated dataset card.
+    """
+    card = Path(folder) / CARD_NAME
+    if not is_dataset_card(card):
+        return None
+    counts: dict[str, int] = {}
+    for line in card.read_text(errors="replace").splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 2 and cells[0] in ("demonstrations", "frames") and cells[1].isdigit():
+            counts.setdefault(cells[0], int(cells[1]))
+    return counts
+
+
+def card_mismatch(folder: str | Path, n_demonstrations: int, n_frames: int) -> str | None:
+    """How the demonstrations read from ``folder`` differ from what its card records (files
+    removed, added or replaced since generation), or None when they agree or there is no
+    card to compare with."""
+    counts = read_card_counts(folder)
+    if not counts:
+        return None
+    found = {"demonstrations": n_demonstrations, "frames": n_frames}
+    if all(counts[k] == found[k] for k in counts):
+        return None
+    card = ", ".join(f"{v} {k}" for k, v in counts.items())
+    read = ", ".join(f"{found[k]} {k}" for k in counts)
+    return (
+        f"{Path(folder) / CARD_NAME} records {card} but the folder holds {read}: files were "
+        "removed, added or replaced since it was generated"
+    )
+
+
 def is_dataset_card(path: str | Path) -> bool:
     """Whether ``path`` is a file written by :func:`write_dataset_card`."""
     path = Path(path)

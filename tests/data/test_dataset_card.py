@@ -167,3 +167,52 @@ def test_a_settings_block_nested_too_deep_is_named(tmp_path):
     broken = r"README.md: the generator settings block is not valid JSON \(nested too deep\)"
     with pytest.raises(DataError, match=broken):
         read_generator_settings(tmp_path)
+
+
+def test_a_folder_that_no_longer_matches_its_card_is_said(tmp_path):
+    """Loading a generated folder from which a file was removed by hand warns with the card's
+    counts and the folder's, and reads what is there; iplanner-data info says the same, or
+    that the card agrees."""
+    import subprocess
+    import sys
+    import warnings
+
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli._common import load_dataset
+    from iplanner_torch.data.dataset_card import card_mismatch, read_card_counts
+    from iplanner_torch.data.io import load_demonstrations
+    from iplanner_torch.errors import DataWarning
+
+    out = tmp_path / "ds"
+    summary = generate_reaching_dataset(SMALL, out, progress=False)
+    counts = read_card_counts(out)
+    assert counts == {"demonstrations": 4, "frames": summary.n_frames}
+    assert summary.n_frames == sum(d.num_frames for d in load_demonstrations(out))
+    assert card_mismatch(out, 4, summary.n_frames) is None
+    node = OmegaConf.create({"path": str(out), "windows": {"joints": None}})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert len(load_dataset(node, progress=False)) == 4
+
+    def info() -> str:
+        res = subprocess.run(
+            [sys.executable, "-m", "iplanner_torch.cli.data", "info", f"data.path={out}",
+             f"hydra.run.dir={tmp_path / 'run'}"],
+            capture_output=True, text=True, timeout=120, cwd=tmp_path,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        return res.stdout
+
+    assert f"dataset card: README.md agrees (4 demonstrations, {summary.n_frames} frames)" in (
+        info()
+    )
+    gone = sorted(out.glob("*.npz"))[0]
+    left = summary.n_frames - load_demonstrations(gone)[0].num_frames
+    gone.unlink()
+    said = (f"README.md records 4 demonstrations, {summary.n_frames} frames but the folder "
+            f"holds 3 demonstrations, {left} frames: files were removed")  # fmt: skip
+    with pytest.warns(DataWarning, match=said.replace("(", r"\(")):
+        assert len(load_dataset(node, progress=False)) == 3
+    assert said in info()
+    assert read_card_counts(tmp_path / "absent") is None
