@@ -388,8 +388,9 @@ def check_data_matches(predictor: Any, fps: float, action_names: Sequence[str]) 
         warnings.warn(
             f"the data has {_names(tuple(action_names))} but the predictor was trained on "
             f"{_names(p_actions)}: the class_* metrics compare unrelated labels and the "
-            "progress states stand for other actions; only the position metrics compare "
-            "like with like",
+            "progress states stand for other actions (bits of actions the predictor has no "
+            "progress state for are dropped); only the position metrics compare like with "
+            "like",
             DataWarning,
             stacklevel=3,
         )
@@ -443,11 +444,18 @@ def evaluate_prediction(
         windows = build_windows(demos, WindowCfg(**wc))
     if len(windows) == 0:
         raise DataError("no held-out windows to evaluate")
+    progress = windows.progress
+    p_actions = tuple(getattr(predictor, "action_names", ()) or ())
+    p_progress = getattr(predictor, "progress_actions", None)
+    if p_actions and p_actions != tuple(windows.action_names) and p_progress is not None:
+        # warned (other actions): the data's progress bits name its own actions; keep those
+        # the predictor has a progress state for, as predict() refuses any other bit
+        progress = progress & sum(1 << a for a in p_progress)
     parts: dict[str, list[torch.Tensor]] = {}
     with torch.no_grad():
         for s in range(0, len(windows), batch_size):
             sl = slice(s, s + batch_size)
-            fc = predictor.predict(windows.f_prev[sl], windows.progress[sl])
+            fc = predictor.predict(windows.f_prev[sl], progress[sl])
             m = window_metrics(
                 fc, windows.xi_next[sl].to(fc.mean), windows.current[sl], windows.pose_now[sl]
             )

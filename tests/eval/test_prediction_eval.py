@@ -266,6 +266,38 @@ def test_action_name_mismatch_warns_on_demonstrations_and_windows() -> None:
     assert res["n_windows"] == len(windows)
 
 
+def test_action_mismatch_drops_progress_bits_the_predictor_has_no_state_for() -> None:
+    """Data whose actions outnumber the predictor's: the progress bit of its action 2 has no
+    state in a predictor whose progress actions are (1,), and its predict() refuses such a
+    bit; evaluation drops it (said in the warning) instead of failing on the bitmask."""
+    seen: list[torch.Tensor] = []
+
+    class Strict(_HoldPredictor):
+        progress_actions = (1,)
+
+        def predict(self, f_prev: torch.Tensor, progress: torch.Tensor) -> Forecast:
+            assert not bool((progress & ~0b10).any()), "a bit of no progress action"
+            seen.append(progress)
+            return super().predict(f_prev, progress)
+
+    demo = _still_demo(actions=("idle", "reach_0", "reach_1"))
+    demo = Demonstration(
+        positions=demo.positions,
+        labels=np.array([2] * 6 + [1] * 6 + [0] * 8),  # reach_1, then reach_0 done
+        fps=demo.fps,
+        joint_names=JOINTS,
+        action_names=demo.action_names,
+    )
+    with pytest.warns(DataWarning, match=r"bits of actions the predictor has no progress "
+                      r"state for are dropped"):  # fmt: skip
+        res = evaluate_prediction(Strict(15.0, ("idle", "take_0")), [demo])
+    got = torch.cat(seen)
+    assert res["n_windows"] == len(got) == 14
+    windows = build_windows([demo], WindowCfg(n_prev=4, n_future=3, feature_kinds=("position",)))
+    assert set(windows.progress.tolist()) == {0, 0b100, 0b110}  # the data's own bits
+    assert torch.equal(got, windows.progress & 0b10)
+
+
 def test_training_inputs_record_reads_or_is_refused_by_name(tmp_path) -> None:
     """One reader of training_inputs.json: None without it, the record beside a checkpoint or
     in a folder, a CheckpointError naming the file when it is no JSON object; the recorded
