@@ -1343,6 +1343,14 @@ def differing_settings(
     ]
 
 
+def setting_changes(
+    saved: dict[str, Any], now: dict[str, Any], keys: set[str], prefix: str = ""
+) -> list[str]:
+    """``"<prefix><key>: <saved> -> <now>"`` for each :func:`differing_settings` entry, the
+    lines the refusals of other settings list."""
+    return [f"{prefix}{k}: {a!r} -> {b!r}" for k, a, b in differing_settings(saved, now, keys)]
+
+
 def _check_generator_settings(
     data_cfg: DictConfig, path: Path, overridden: set[str] | None = None
 ) -> None:
@@ -1373,7 +1381,7 @@ def _check_generator_settings(
     if saved is None:
         return
     now = generator_settings(instantiate(data_cfg.generator, name="data.generator"))
-    differ = [f"{k}: {a!r} -> {b!r}" for k, a, b in differing_settings(saved, now, keys)]
+    differ = setting_changes(saved, now, keys)
     if differ:
         raise ConfigError(
             f"{path} was generated with other settings than data.generator: "

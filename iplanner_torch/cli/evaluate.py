@@ -69,6 +69,7 @@ from iplanner_torch.cli._common import (
     refuse_unread_overrides,
     repo_path,
     run_app,
+    setting_changes,
 )
 from iplanner_torch.cli._common import (
     task_overrides as _task_overrides,
@@ -439,7 +440,7 @@ def _check_predictor_option(
     unread = set(UNREAD_BY_NOISY_INPUT.get(str(saved.get("svgp.noisy_input")), ()))
     unread &= set(UNREAD_BY_NOISY_INPUT.get(str(now.get("svgp.noisy_input")), ()))
     keys -= {f"svgp.{k}" for k in unread}
-    differ = [f"{k}: {a!r} -> {b!r}" for k, a, b in differing_settings(saved, now, keys)]
+    differ = setting_changes(saved, now, keys)
     if differ:
         raise ConfigError(
             f"{ckpt} was trained with other predictor settings than conf/predictor/"

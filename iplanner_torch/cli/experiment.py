@@ -42,7 +42,6 @@ from iplanner_torch.cli._common import (
     CONF_DIR,
     cfg_list,
     cfg_scalar,
-    differing_settings,
     dump_config,
     friendly_errors,
     instantiate,
@@ -52,6 +51,7 @@ from iplanner_torch.cli._common import (
     print_help_if_asked,
     repo_path,
     run_app,
+    setting_changes,
 )
 from iplanner_torch.cli._common import (
     task_overrides as _task_overrides,
@@ -195,7 +195,7 @@ def checkpoint_differences(ckpt: Path, data_node: DictConfig, keys: set[str]) ->
     except Exception:  # noqa: BLE001 - HumanMotionPredictor.load says what is wrong
         return []
     now = asdict(instantiate(data_node.windows, WindowCfg, name="data.windows"))
-    return [f"{k}: {a!r} -> {b!r}" for k, a, b in differing_settings(saved, now, keys)]
+    return setting_changes(saved, now, keys)
 
 
 def training_differences(
@@ -272,7 +272,7 @@ def training_differences(
     keys = {"max_epochs", "max_steps"} if budget else set()
     if seed is not None:
         keys.add("seed")
-    out = [f"trainer {k}: {a!r} -> {b!r}" for k, a, b in differing_settings(trainer, now, keys)]
+    out = setting_changes(trainer, now, keys, prefix="trainer ")
     split = record.get("split")
     if seed is not None and isinstance(split, dict) and split.get("seed", seed) != seed:
         out.append(f"split seed: {split['seed']!r} -> {seed!r}")
