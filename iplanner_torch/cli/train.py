@@ -93,7 +93,7 @@ def train_from_config(
         raise DataError(
             f"the {len(train)} training demonstrations give no training windows: a window "
             f"needs data.windows.n_prev + n_future = "
-            f"{window_cfg.n_prev + window_cfg.n_future} frames, its n_prev-th labelled, "
+            f"{window_cfg.n_prev + window_cfg.n_future} frames, the n_prev-th of them labelled, "
             f"and the longest demonstration has {longest} frames ({labelled} labelled); "
             "lower data.windows.n_prev or n_future"
         )
