@@ -715,7 +715,11 @@ def friendly_errors(
     In one job of a multirun the job ends with that line instead, leaving a
     :data:`FAILED_MARKER` file in its folder, so the sweep's other jobs still run; the sweep
     lists the failed jobs at its end and exits 2. Running out of memory is a one-line error
-    too, with what to lower.
+    too, with what to lower. An unexpected exception (a bug) keeps its traceback outside a
+    multirun (Hydra prints it, exit 1); in one job of a multirun it ends that job like a
+    library error, its traceback kept in the ``FAILED`` file and the job's log
+    (:func:`_record_unexpected_error`), since Hydra would otherwise stop the sweep with it,
+    before the summary.
 
     The root keys are checked first (:func:`check_root_keys`), so ``seed=abc`` or
     ``tracker.noise=-1`` is named as such rather than where it is interpolated. A YAML file
@@ -751,22 +755,21 @@ def friendly_errors(
                     else f"error: {type(exc).__name__}: {exc}"
                 )
                 print(line, file=sys.stderr)
-                job_dir = multirun_job_dir()
-                if job_dir is None:
-                    raise SystemExit(2) from None
-                # one job of a sweep: the others still run; the sweep names the failed jobs
-                # when it ends and exits 2 (cli.callbacks.GatherSweepResults)
-                (job_dir / FAILED_MARKER).write_text(line + "\n", encoding="utf-8")
+                _end_job(line)
                 return None
             except (MemoryError, RuntimeError) as exc:  # torch's allocators: RuntimeError
                 text = str(exc).strip()
                 if not isinstance(exc, MemoryError) and not (
                     "out of memory" in text or "can't allocate memory" in text
                 ):
+                    if _record_unexpected_error(exc, log_path):
+                        return None
                     raise
                 first = text.splitlines()[0][:200] if text else type(exc).__name__
-                print(f"error: out of memory ({first}); {_MEMORY_HINT}", file=sys.stderr)
-                raise SystemExit(2) from None
+                line = f"error: out of memory ({first}); {_MEMORY_HINT}"
+                print(line, file=sys.stderr)
+                _end_job(line)
+                return None
             except KeyboardInterrupt:
                 _report_interrupt(args, kept, log_path)
                 raise SystemExit(130) from None
@@ -775,8 +778,55 @@ def friendly_errors(
                     raise
                 _report_interrupt(args, kept, log_path)
                 raise SystemExit(130) from None
+            except Exception as exc:  # a bug; outside a multirun Hydra prints its traceback
+                if _record_unexpected_error(exc, log_path):
+                    return None
+                raise
 
     return wrapper  # type: ignore[return-value]
+
+
+def _end_job(line: str) -> None:
+    """End the command on its error ``line`` (printed already): exit 2, or in one job of a
+    multirun leave the line in the job's :data:`FAILED_MARKER` file and return, so the
+    sweep's other jobs still run; the sweep names the failed jobs when it ends and exits 2
+    (:class:`~iplanner_torch.cli.callbacks.GatherSweepResults`)."""
+    job_dir = multirun_job_dir()
+    if job_dir is None:
+        raise SystemExit(2) from None
+    (job_dir / FAILED_MARKER).write_text(line + "\n", encoding="utf-8")
+
+
+def _record_unexpected_error(exc: BaseException, log_path: Path | None) -> bool:
+    """In one job of a multirun, end the job on ``exc``, an exception that is none of the
+    library's (a bug): print one ``error: ...`` line naming the job and where its traceback
+    is, and write that line, then the traceback, into the job's :data:`FAILED_MARKER` file;
+    the traceback goes to the job's log (``log_path``) too, not to the console. Hydra's
+    sweeper would raise it again once the jobs ran, which ends the sweep before its summary
+    and its list of failed jobs.
+
+    Returns:
+        Whether it was recorded: False outside a multirun, where the caller raises it again
+        and Hydra prints its traceback as usual.
+    """
+    import traceback
+
+    job_dir = multirun_job_dir()
+    if job_dir is None:
+        return False
+    marker = job_dir / FAILED_MARKER
+    trace = "".join(traceback.format_exception(exc))
+    message = _one_line(str(exc))
+    line = (
+        f"error: {type(exc).__name__}{': ' + message if message else ''} (unexpected: job "
+        f"{job_dir} stopped, traceback in {marker})"
+    )
+    print(line, file=sys.stderr, flush=True)
+    marker.write_text(f"{line}\n{trace}", encoding="utf-8")
+    if log_path is not None:
+        with contextlib.suppress(OSError), log_path.open("a", encoding="utf-8") as fh:
+            fh.write(trace)
+    return True
 
 
 def _clear_failed_marker() -> None:

@@ -76,7 +76,7 @@ def sweep_overrides(df: Any, root: Path) -> tuple[Any, list[str]]:
 REPEAT_KEYS = ("seed", "seeds")
 
 
-def _split_by(df: Any, groups: tuple[str, ...], extra: list[str]) -> list[str]:
+def split_columns(df: Any, groups: tuple[str, ...], extra: list[str]) -> list[str]:
     """The columns of ``extra`` that take several values within a group of ``groups``: those a
     summary by ``groups`` would average over. Seeds (:data:`REPEAT_KEYS`, e.g.
     ``experiment.seeds`` split over two jobs) are repeats and never kept apart."""
@@ -119,7 +119,7 @@ def episode_report(
         None,
     )
     groups = report_groups(df)
-    extra = _split_by(df, groups, list(split_by or []))
+    extra = split_columns(df, groups, list(split_by or []))
     if extra:  # ("scenario", swept settings, ..., "planner"): the overrides go before planner
         groups = (*groups[:-1], *extra, groups[-1])
     return write_sweep_report(df, out_dir, group_by=groups, sweep=sweep, baseline=baseline)
@@ -194,23 +194,79 @@ def failed_jobs(sweep_dir: Path) -> list[tuple[Path, str, str]]:
             text = " ".join(str(o) for o in items)  # type: ignore[union-attr]
         except Exception:  # noqa: BLE001 - a damaged overrides file still names the job
             text = "?"
-        out.append((job, text, marker.read_text(encoding="utf-8").strip()))
+        try:  # the error line; an unexpected error's traceback follows it
+            lines = marker.read_text(encoding="utf-8").strip().splitlines()
+            error = lines[0] if lines else "?"
+        except (OSError, UnicodeDecodeError) as exc:  # the job is named all the same
+            error = f"? ({marker} does not read: {exc})"
+        out.append((job, text, error))
     return out
+
+
+#: what a run folder holds once it has results: an experiment's (or an episode report's)
+#: table and its episode logs
+RESULT_FILES = ("results.csv", "episodes")
+
+
+def used_job_dirs(sweep_dir: Path) -> list[Path]:
+    """The job folders of the multirun folder ``sweep_dir`` that hold an earlier sweep's
+    results: each folder directly below it with Hydra's ``.hydra/`` record and one of
+    :data:`RESULT_FILES`, in numbered order. A job that failed before writing any (only its
+    :data:`~iplanner_torch.cli._common.FAILED_MARKER`) is not one."""
+    from iplanner_torch.eval.report import natural_key
+
+    root = Path(sweep_dir)
+    if not root.is_dir():
+        return []
+    jobs = [
+        d
+        for d in root.iterdir()
+        if (d / ".hydra").is_dir() and any((d / name).exists() for name in RESULT_FILES)
+    ]
+    return sorted(jobs, key=natural_key)
+
+
+def used_sweep_dir_text(sweep_dir: Path) -> str | None:
+    """The refusal of a multirun into ``sweep_dir`` when its job folders hold an earlier
+    sweep's results (:func:`used_job_dirs`), or None. Hydra would rewrite each job's
+    ``.hydra/`` record (its config and overrides) before the job itself refuses to replace
+    the results, and the summary would then label the old episodes with the new overrides."""
+    used = used_job_dirs(sweep_dir)
+    if not used:
+        return None
+    names = ", ".join(d.name for d in used[:5]) + (", ..." if len(used) > 5 else "")
+    return (
+        f"{sweep_dir} already holds the results of an earlier sweep (job folder(s) {names}), "
+        "whose .hydra/ records this sweep would overwrite; choose another hydra.sweep.dir "
+        "(or delete it)"
+    )
 
 
 class GatherSweepResults(Callback):
     """At the end of a multirun, write ``<sweep dir>/summary/results.{csv,md}`` and plots of
-    the jobs that ran, then name the jobs that failed, if any, and exit 2.
+    the jobs that ran, then name the jobs that failed, if any, and exit 2. When the summary
+    cannot be written (``summary`` is a file, a disk is full, a report error), that is one
+    ``error:`` line, the failed jobs are named all the same, and the sweep exits 2: Hydra
+    would turn the exception into a warning and exit 0.
 
-    At its start, when ``hydra.sweeper.max_batch_size`` splits the sweep into batches, every
-    job's config is composed first: Hydra composes (and checks) each batch only when it
-    comes to it, so a job of a later batch whose config fails (an unknown option, a key
-    that does not exist) stopped the sweep midway with Hydra's own report. Without batches
-    Hydra checks every job before the first runs."""
+    At its start, a sweep folder whose job folders hold an earlier sweep's results is refused
+    (:func:`used_sweep_dir_text`), before Hydra rewrites their records. When
+    ``hydra.sweeper.max_batch_size`` splits the sweep into batches, every job's config is
+    composed first: Hydra composes (and checks) each batch only when it comes to it, so a
+    job of a later batch whose config fails (an unknown option, a key that does not exist)
+    stopped the sweep midway with Hydra's own report. Without batches Hydra checks every job
+    before the first runs.
+
+    Hydra turns an exception raised in these methods into a warning; they end the process
+    with ``SystemExit(2)`` instead, which it lets through."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         import sys
 
+        used = used_sweep_dir_text(Path(str(config.hydra.sweep.dir)))
+        if used:
+            print(f"error: ConfigError: {used}", file=sys.stderr, flush=True)
+            raise SystemExit(2)
         if config.hydra.sweeper.get("max_batch_size") is None:
             return
         from hydra import compose
@@ -235,9 +291,22 @@ class GatherSweepResults(Callback):
         import sys
 
         sweep_dir = Path(str(config.hydra.sweep.dir))
-        written = gather_episode_logs(sweep_dir, sweep_dir / "summary")
-        if written:
-            print(f"sweep summary: {sweep_dir / 'summary' / 'results.md'} ({len(written)} files)")
+        summary = sweep_dir / "summary"
+        gathered = True
+        try:
+            written = gather_episode_logs(sweep_dir, summary)
+        except Exception as exc:  # noqa: BLE001 - Hydra would only warn of it, and exit 0
+            gathered = False
+            text = " ".join(t for line in str(exc).splitlines() if (t := line.strip()))
+            print(
+                f"error: {type(exc).__name__}: {text} (the sweep summary in {summary} is not "
+                "written; each job's results are in its folder)",
+                file=sys.stderr,
+                flush=True,
+            )
+        else:
+            if written:
+                print(f"sweep summary: {summary / 'results.md'} ({len(written)} files)")
         failed = failed_jobs(sweep_dir)
         if failed:
             jobs = sum(1 for _ in sweep_dir.rglob("overrides.yaml"))
@@ -245,4 +314,5 @@ class GatherSweepResults(Callback):
             for job, overrides, error in failed:
                 lines.append(f"  {job} [{overrides}]: {error}")
             print("\n".join(lines), file=sys.stderr, flush=True)
+        if failed or not gathered:
             raise SystemExit(2)

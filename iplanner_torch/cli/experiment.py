@@ -619,7 +619,9 @@ def _refuse_used_run_dir(argv: list[str]) -> None:
     """Exit 2 before Hydra starts when ``hydra.run.dir=<folder>`` on the command line names a
     folder with an earlier run's results: Hydra would first rewrite that run's ``.hydra/``
     files and add to its log. (A folder set in a config file is refused inside the run, after
-    Hydra has done so.)"""
+    Hydra has done so.) A multirun (``-m``) is checked by its callback instead, before any
+    job starts, against the results in the job folders of ``hydra.sweep.dir``
+    (:meth:`~iplanner_torch.cli.callbacks.GatherSweepResults.on_multirun_start`)."""
     if any(a in ("-m", "--multirun", "-c", "--cfg") or a.startswith("--cfg=") for a in argv):
         return
     for arg in argv:
