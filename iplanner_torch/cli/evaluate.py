@@ -31,10 +31,17 @@ with ``run.write_mcap=false`` is read from its ``results.csv``), with one row pe
 summary table and plots, and prints the table ``iplanner-experiment`` prints
 (:func:`~iplanner_torch.eval.report.comparison_table`: episode counts, then the paper's metrics
 in cm and ms); an episode whose log was cut before its metrics counts in ``contact_unknown``,
-not as contact-free nor as a contact. ``evaluate.logs`` may list several sources: with
-``evaluate.labels`` each source's planners are renamed ``<planner>@<label>``, so two runs of
-one planner (with and without an option) stay apart, and ``evaluate.baseline`` names the
-planner that ``results.md`` compares the others with, seed by seed.
+not as contact-free nor as a contact. In a folder, an ``.mcap`` file that is not a readable
+episode log (not MCAP, e.g. a Git LFS pointer never fetched, or another program's MCAP file)
+is left out, named in one ``DataWarning``; one given by its path is refused. The settings a
+multirun's jobs differ in (its overrides, e.g. ``planner.itomp_spread_mps``) are kept apart in
+the summary, read from the jobs' ``.hydra/overrides.yaml`` for a folder and from the dotted
+override columns of a sweep's ``summary/results.csv``. ``evaluate.logs`` may list several
+sources: with ``evaluate.labels`` each source's planners are renamed ``<planner>@<label>``, so
+two runs of one planner (with and without an option) stay apart, and ``evaluate.baseline``
+names the planner that ``results.md`` compares the others with, seed by seed. Without labels,
+episodes that repeat another's settings (a run given twice, or reached twice below one folder)
+are counted as more episodes, with a ``DataWarning``.
 
 Each mode refuses the overrides it does not read (:data:`MODE_READS`): ``prediction`` the
 ``trainer`` group and ``predictor.*`` keys (the checkpoint defines them), ``episode``
@@ -527,12 +534,20 @@ def _noise_sweep(cfg: DictConfig) -> None:
 def _episode_rows(path: Path) -> Any:
     """The episode rows of one source of ``evaluate.logs`` (an .mcap file, a folder of them or
     a results .csv; in a run or multirun folder, the ``results.csv`` of a run that wrote no
-    log stands for it), refused with a clear error when it holds none."""
+    log stands for it), refused with a clear error when it holds none. In a folder, an .mcap
+    file that is not a readable episode log (not MCAP, e.g. a Git LFS pointer, or another
+    program's MCAP file) is left out with a DataWarning naming it; given by its path, it is
+    refused."""
     from iplanner_torch.cli.callbacks import run_rows
     from iplanner_torch.eval.report import gather_results
 
     if path.is_dir():
         df = run_rows(path)  # every log below it, in numbered order, then log-less runs
+        if df.empty and any(path.rglob("*.mcap")):  # each named in gather_results' warning
+            raise DataError(
+                f"{path}: none of its .mcap files is a readable episode log, and it holds no "
+                "results.csv of a run folder; nothing to report"
+            )
         if df.empty:
             raise ConfigError(
                 f"{path}: no .mcap episode logs found, nor the results.csv of a run folder"
@@ -555,8 +570,13 @@ def _episode(cfg: DictConfig) -> None:
     import pandas as pd
     from omegaconf import ListConfig
 
-    from iplanner_torch.cli.callbacks import episode_report, sweep_overrides
-    from iplanner_torch.eval.report import comparison_table, incomplete_logs_note, print_table
+    from iplanner_torch.cli.callbacks import episode_report, split_columns, sweep_overrides
+    from iplanner_torch.eval.report import (
+        comparison_table,
+        incomplete_logs_note,
+        print_table,
+        report_groups,
+    )
 
     _refuse_unread("episode")
     logs = cfg.evaluate.logs
@@ -591,13 +611,15 @@ def _episode(cfg: DictConfig) -> None:
         df = _episode_rows(path)
         if path.is_dir():  # a multirun folder: the overrides its jobs differ in
             df, keys = sweep_overrides(df, path)
-            swept += [k for k in keys if k not in swept]
+        else:  # a sweep's gathered rows: the override columns sweep_overrides named
+            keys = _override_columns(df)
+        swept += [k for k in keys if k not in swept]
         if labels is not None:  # keep the runs apart: itomp@held, itomp@spread, ...
             named = df["planner"].notna()  # a log cut before its metadata has none
             df = df.assign(planner=df["planner"].where(~named, df["planner"] + "@" + labels[i]))
         frames.append(df)
     df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
-    if labels is None and len(paths) > 1:
+    if labels is None and (len(paths) > 1 or paths[0].is_dir()):
         _warn_repeated_episodes(df, swept)
     if baseline is None:
         baseline = "itomp"
@@ -610,7 +632,12 @@ def _episode(cfg: DictConfig) -> None:
                 f"are {names}"
             )
     written = episode_report(df, out_dir, baseline=baseline, split_by=swept)
-    print_table(comparison_table(df))  # the columns and units of iplanner-experiment's table
+    # the columns and units of iplanner-experiment's table, in the rows of results.md (the
+    # swept overrides kept apart, as episode_report keeps them)
+    groups = report_groups(df)
+    extra = split_columns(df, groups, swept)
+    groups = (*groups[:-1], *extra, groups[-1]) if extra else groups
+    print_table(comparison_table(df, groups))
     note = incomplete_logs_note(df)
     if note:
         print(note)
@@ -624,10 +651,25 @@ EPISODE_SETTINGS = (
 )  # fmt: skip
 
 
+def _override_columns(df: Any) -> list[str]:
+    """The columns of rows read from a results CSV that hold a sweep's overrides, as
+    :func:`~iplanner_torch.cli.callbacks.sweep_overrides` names them in a summary's
+    ``results.csv``: dotted keys (``planner.itomp_spread_mps``, ``override.seed``), not metrics
+    (``stage/name``) nor the ``path``."""
+    from iplanner_torch.eval.report import DEFAULT_METRICS
+
+    return [
+        str(c)
+        for c in df.columns
+        if "." in str(c) and "/" not in str(c) and str(c) not in DEFAULT_METRICS
+    ]
+
+
 def _warn_repeated_episodes(df: Any, swept: list[str]) -> None:
     """Warn when sources given without ``evaluate.labels`` hold episodes with the same settings
-    (the same run given twice, or as its results.csv and its episodes folder): their rows
-    would be counted as more episodes."""
+    (the same run given twice, or as its results.csv and its episodes folder, or reached twice
+    below one folder): their rows would be counted as more episodes. Episodes of jobs of a
+    multirun that differ in an override (``swept``) are not repeats."""
     import warnings
 
     from iplanner_torch.errors import DataWarning
@@ -638,8 +680,8 @@ def _warn_repeated_episodes(df: Any, swept: list[str]) -> None:
         warnings.warn(
             f"{int(repeated.sum())} of the {len(df)} episodes repeat the settings "
             f"({', '.join(keys)}) of another: is a run given twice (or as its results.csv and "
-            "its episodes folder)? They are counted as more episodes; give evaluate.labels to "
-            "keep different runs of the same settings apart",
+            "its episodes folder, or copied twice below one folder)? They are counted as more "
+            "episodes; give evaluate.labels to keep different runs of the same settings apart",
             DataWarning,
             stacklevel=2,
         )

@@ -36,7 +36,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from iplanner_torch.errors import ConfigError, DataError, DataWarning
-from iplanner_torch.recording.reader import read_episode
+from iplanner_torch.recording.reader import EPISODE_METADATA_NAME, Episode, read_episode
 
 __all__ = [
     "DEFAULT_METRICS",
@@ -197,9 +197,26 @@ def _row_of_dict(d: Mapping[str, Any]) -> dict[str, Any]:
     return {_metric_name(k): v for k, v in _flatten(d).items()}
 
 
+def _read_log(p: Path) -> Episode:
+    """:func:`read_episode` of ``p``, refusing another program's MCAP file
+    (:attr:`Episode.foreign <iplanner_torch.recording.reader.Episode>`) with a DataError instead
+    of its warning; the reader's other warnings are passed on."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ep = read_episode(p)
+    if ep.foreign:
+        raise DataError(
+            f"{p}: not an iplanner episode log (a valid MCAP file with no "
+            f"{EPISODE_METADATA_NAME} metadata record: written by another program?)"
+        )
+    for w in caught:
+        warnings.warn(w.message, w.category, stacklevel=3)
+    return ep
+
+
 def _row_of_path(p: Path) -> dict[str, Any]:
     if p.suffix == ".mcap":
-        ep = read_episode(p)
+        ep = _read_log(p)
         row = _flatten(ep.metadata)
         row.update({_metric_name(k): v for k, v in _flatten(ep.metrics()).items()})
         row["complete"] = ep.complete
@@ -227,19 +244,47 @@ def _row_of_path(p: Path) -> dict[str, Any]:
 
 
 def _short_rows(p: Path, text: str) -> str:
-    """``text`` of the results CSV ``p``, checked for rows with fewer cells than its header
-    (which pandas would fill with NaN unsaid): a last row cut short (no line end: the writer
-    stopped inside it, so even its last cell may be cut) is left out, other short rows are
-    kept with their missing cells read as missing; each with a :class:`DataWarning`."""
+    """``text`` of the results CSV ``p``, checked for rows whose cells do not match its header.
+
+    Rows with fewer cells than the header (which pandas would fill with NaN unsaid): a last
+    row cut short (no line end: the writer stopped inside it, so even its last cell may be
+    cut) is left out, other short rows are kept with their missing cells read as missing;
+    each with a :class:`DataWarning`. Rows with more cells than the header (a note typed after
+    the last cell) cannot be assigned to columns, and pandas would read the first column as
+    the index and shift every other one place left: they are refused, unless their extra
+    cells are all empty (a trailing separator, which loses nothing).
+
+    Raises:
+        DataError: on a row with more non-empty cells than the header, naming the file rows,
+            or a header of one cell holding ``;`` or a tab (a file saved with another
+            separator than ``,``).
+    """
     reader = csv.reader(io.StringIO(text))
     try:
         records = [(reader.line_num, row) for row in reader]
     except csv.Error:
         return text  # pandas names the fault
     records = [(n, row) for n, row in records if row]  # blank lines are skipped
+    if not records:
+        return text
+    header = records[0][1]
+    if len(header) == 1 and any(sep in header[0] for sep in (";", "\t")):
+        sep = "';'" if ";" in header[0] else "a tab"
+        raise DataError(
+            f"{p}: not a comma-separated results CSV: its header is one cell holding {sep} "
+            "(saved by a spreadsheet with another separator?); save it with ',' as the "
+            "separator and '.' as the decimal point"
+        )
     if len(records) < 2:
         return text
-    width = len(records[0][1])
+    width = len(header)
+    long = [n for n, row in records[1:] if len(row) > width and any(c for c in row[width:])]
+    if long:
+        raise DataError(
+            f"{p}: {len(long)} row(s) have more cells than the header's {width} (file rows "
+            f"{long[:5]}{' ...' if len(long) > 5 else ''}), so their cells cannot be assigned "
+            "to columns; remove the extra cells (e.g. a note typed after the last one)"
+        )
     short = [(n, len(row)) for n, row in records[1:] if len(row) < width]
     if short and short[-1][0] == records[-1][0] and not text.endswith(("\n", "\r")):
         line, cells = short.pop()
@@ -266,12 +311,14 @@ def _rows_of_csv(p: Path) -> list[dict[str, Any]]:
     names them; an empty cell is NaN, and so is a metric cell (a ``stage/name`` column or one
     of :data:`DEFAULT_METRICS`) that is not a number, with a :class:`DataWarning` naming the
     file rows; so are the cells missing from a row shorter than the header, while a last row
-    cut short by a stopped writer is left out (:func:`_short_rows`). No ``path`` column is
-    added (a row is not the CSV's episode; the CSV's own ``path`` column, if any, is kept)."""
+    cut short by a stopped writer is left out, and a row longer than the header is refused
+    (:func:`_short_rows`). No ``path`` column is added (a row is not the CSV's episode; the
+    CSV's own ``path`` column, if any, is kept)."""
     try:
         text = p.read_text(encoding="utf-8-sig")
         text = _short_rows(p, text)
-        df = pd.read_csv(io.StringIO(text))
+        # index_col=False: never take the first column as the index (which shifts the others)
+        df = pd.read_csv(io.StringIO(text), index_col=False)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
         raise DataError(f"{p}: not a readable results CSV: {err}") from err
     for col in df.columns:  # metric columns: a cell that is not a number is read as missing
@@ -290,6 +337,29 @@ def _rows_of_csv(p: Path) -> list[dict[str, Any]]:
             )
         df[col] = values
     return [_row_of_dict(r) for r in df.to_dict("records")]
+
+
+def _rows_of_folder(folder: Path) -> list[dict[str, Any]]:
+    """The rows of every ``*.mcap`` below ``folder``, in numbered order (:func:`natural_key`);
+    a file that cannot be read or is not an episode log is left out, and all such files are
+    named in one :class:`DataWarning`."""
+    rows, skipped = [], []
+    for f in sorted(folder.rglob("*.mcap"), key=natural_key):
+        try:
+            rows.append(_row_of_path(f))
+        except DataError as err:
+            skipped.append(str(err))
+    if skipped:
+        listed = "; ".join(skipped[:5]) + (
+            f"; and {len(skipped) - 5} more" if len(skipped) > 5 else ""
+        )
+        warnings.warn(
+            f"{folder}: left out {len(skipped)} of its {len(rows) + len(skipped)} .mcap "
+            f"file(s), which are not readable episode logs: {listed}",
+            DataWarning,
+            stacklevel=3,
+        )
+    return rows
 
 
 def natural_key(path: str | Path) -> tuple[Any, ...]:
@@ -313,7 +383,16 @@ def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path)
         episode logs and JSON files have a ``path`` column.
 
     Raises:
-        DataError: on a missing or unreadable file.
+        DataError: on a missing or unreadable file given by its path, an ``.mcap`` file that
+            is not an episode log (not MCAP, or another program's MCAP file), or a results CSV
+            with rows longer than its header or another separator than ``,``.
+
+    Warns:
+        DataWarning: for the ``*.mcap`` files found in a folder that cannot be read or are not
+            episode logs (e.g. a Git LFS pointer never fetched, another program's MCAP file):
+            they are left out, named in one warning per folder. A truncated episode log is
+            still read (what it holds; see
+            :func:`~iplanner_torch.recording.reader.read_episode`).
     """
     if isinstance(items, str | Path):
         items = [items]
@@ -324,7 +403,7 @@ def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path)
             continue
         p = Path(item)
         if p.is_dir():
-            rows.extend(_row_of_path(f) for f in sorted(p.rglob("*.mcap"), key=natural_key))
+            rows.extend(_rows_of_folder(p))
         elif p.is_file() and p.suffix == ".csv":
             rows.extend(_rows_of_csv(p))
         elif p.is_file():

@@ -5,6 +5,9 @@ checksum. A file without summary or footer (an episode killed midway) or with a 
 record or summary is read sequentially up to the last complete chunk, with a
 :class:`~iplanner_torch.errors.DataWarning`. Channels of other tools are kept when they are
 JSON-encoded (one ``message`` column), and skipped, with a ``DataWarning``, when they are not.
+A complete MCAP file with no ``iplanner.episode`` metadata record is another program's file,
+not an episode log: it is read, marked ``Episode.foreign`` (and incomplete), with a
+``DataWarning`` saying so (not one saying it is truncated).
 
 Scene spheres: the writer leaves out sphere rows with NaN or an infinity (Foxglove draws no NaN
 sphere) and then names, in the entity's metadata, the number of rows (``sphere_count``) and
@@ -311,12 +314,17 @@ class Episode:
             damaged before the end of its data section (it is then read up to its last
             complete chunk), or its episode metadata record is missing. A file cut or damaged
             only in its summary section is complete (and read with a warning).
+        foreign: whether the file is another program's MCAP file rather than an episode log:
+            every data record is there but no ``iplanner.episode`` metadata record
+            (:data:`EPISODE_METADATA_NAME`) is (``complete`` is then False: which episode it
+            is, is unknown). A file cut before that record is not foreign but incomplete.
     """
 
     path: Path
     metadata: dict[str, Any]
     frames: dict[str, pd.DataFrame] = field(default_factory=dict)
     complete: bool = True
+    foreign: bool = False
 
     def _frame(self, topic: str) -> pd.DataFrame:
         df = self.frames.get(topic)
@@ -548,10 +556,12 @@ def read_episode(path: str | Path) -> Episode:
 
     Warns:
         DataWarning: when the file is truncated or damaged (a chunk or the summary failing its
-            checksum, a missing footer or episode metadata record); the episode then holds
-            the messages of every chunk before the damage (a prefix of what was written). A
-            file cut within its first 8 bytes (empty included) is an empty, incomplete
-            episode. Also (one warning naming them) when channels are skipped: those of
+            checksum, a missing footer, an episode metadata record failing its checksum); the
+            episode then holds the messages of every chunk before the damage (a prefix of what
+            was written). A file cut within its first 8 bytes (empty included) is an empty,
+            incomplete episode. A complete MCAP file with no episode metadata record is not an
+            episode log (another program's): it is read, ``foreign`` and incomplete, with a
+            warning saying so. Also (one warning naming them) when channels are skipped: those of
             other tools whose messages are not JSON (protobuf, raw bytes); other tools'
             JSON channels are read into frames with one ``message`` column.
     """
@@ -596,10 +606,18 @@ def read_episode(path: str | Path) -> Episode:
             p for p in (raw.problem, "episode metadata fails its checksum") if p
         )
         raw.complete = False
-    elif raw.complete and EPISODE_METADATA_NAME not in raw.metadata:
-        raw.complete = False  # which episode it is is lost: counted with the incomplete ones
-        raw.problem = raw.problem or f"no {EPISODE_METADATA_NAME} metadata record"
-    if not raw.complete or raw.problem:
+    foreign = raw.complete and EPISODE_METADATA_NAME not in raw.metadata
+    if foreign:  # every record read, none of them ours: another program's MCAP file
+        raw.complete = False  # which episode it is is unknown: counted with the incomplete ones
+        warnings.warn(
+            f"{path}: not an iplanner episode log: a valid MCAP file with no "
+            f"{EPISODE_METADATA_NAME} metadata record (written by another program?)"
+            + (f"; also {raw.problem}" if raw.problem else "")
+            + f"; read {len(raw.messages)} messages of its channels",
+            DataWarning,
+            stacklevel=2,
+        )
+    elif not raw.complete or raw.problem:
         warnings.warn(
             f"{path}: episode log is truncated or damaged ({raw.problem or 'no footer'}); "
             f"read {len(raw.messages)} messages from its complete chunks",
@@ -635,4 +653,6 @@ def read_episode(path: str | Path) -> Episode:
             raise DataError(f"{path}: cannot decode a message on {topic}: {err!r}") from err
         rows.setdefault(topic, []).append(row)
     frames = {topic: pd.DataFrame.from_records(r) for topic, r in rows.items()}
-    return Episode(path=path, metadata=metadata, frames=frames, complete=raw.complete)
+    return Episode(
+        path=path, metadata=metadata, frames=frames, complete=raw.complete, foreign=foreign
+    )

@@ -183,6 +183,103 @@ def test_gather_results_leaves_out_a_cut_short_last_row(tmp_path: Path) -> None:
         assert gather_results(whole)["smoothness"].tolist() == [41.5, 42.75]
 
 
+def test_gather_results_refuses_rows_longer_than_the_header(tmp_path: Path) -> None:
+    """A note typed after the last cell of one row made pandas read the first column as the
+    index and shift every other column one place left, silently: such rows are refused,
+    named; extra cells that are all empty (a trailing separator) lose nothing and are read
+    with the columns in place."""
+    header = "planner,seed,eval/smoothness,eval/min_distance\n"
+    noted = tmp_path / "noted.csv"
+    noted.write_text(header + "itomp,0,41.5,0.06\nitomp,1,42.75,0.1,rerun\n")
+    with pytest.raises(DataError, match=r"noted.csv: 1 row\(s\) have more cells than the "
+                       r"header's 4 \(file rows \[3\]\)"):  # fmt: skip
+        gather_results(noted)
+    every = tmp_path / "every.csv"
+    every.write_text(header + "itomp,0,41.5,0.06,ok\nitomp,1,42.75,0.1,ok\n")
+    with pytest.raises(DataError, match=r"every.csv: 2 row\(s\) .* \(file rows \[2, 3\]\)"):
+        gather_results(every)
+    trailing = tmp_path / "trailing.csv"
+    trailing.write_text(header + "itomp,0,41.5,0.06,\nitomp,1,42.75,0.1,\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        df = gather_results(trailing)
+    assert df["planner"].tolist() == ["itomp", "itomp"] and df["seed"].tolist() == [0, 1]
+    assert df["smoothness"].tolist() == [41.5, 42.75]
+
+
+def test_gather_results_refuses_a_csv_with_another_separator(tmp_path: Path) -> None:
+    """A results CSV re-saved with ';' separators (a spreadsheet in a European locale; the
+    commas inside a quoted task order split its rows) ended in a raw TypeError: a DataError
+    saying it is not comma-separated."""
+    rows = ["planner,task_order,seed,eval/smoothness", 'itomp,"(0,1)->(2,3)",0,41.5',
+            'itomp,"(0,1)->(2,3)",1,42.75']  # fmt: skip
+    for sep, name in ((";", "';'"), ("\t", "a tab")):
+        path = tmp_path / "semi.csv"
+        path.write_text("\n".join(r.replace(",", sep) for r in rows) + "\n")
+        with pytest.raises(DataError, match=f"semi.csv: not a comma-separated results CSV: "
+                           f"its header is one cell holding {name}"):  # fmt: skip
+            gather_results(path)
+
+
+def _foreign_mcap(path: Path) -> Path:
+    """A complete MCAP file of another program (the mcap package's own writer): a JSON
+    channel, and no iplanner.episode metadata record."""
+    import json
+
+    from mcap.writer import Writer
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        schema = w.register_schema("pose", "jsonschema", b"{}")
+        channel = w.register_channel("/odom", "json", schema)
+        for i in range(3):
+            w.add_message(channel, log_time=i, data=json.dumps({"x": i}).encode(), publish_time=i)
+        w.add_metadata("camera", {"model": "x"})
+        w.finish()
+    return path
+
+
+def test_a_folder_leaves_out_mcap_files_that_are_not_episode_logs(tmp_path: Path) -> None:
+    """An unfetched Git LFS pointer and another program's MCAP file below a folder aborted
+    the whole gathering: they are left out, named in one warning, while a log cut short is
+    still read (an incomplete episode) and a good log as it is. Given by its path, either
+    is refused."""
+    runs = tmp_path / "runs"
+    for name in ("good", "cut"):
+        with EpisodeWriter(
+            runs / f"{name}.mcap", metadata={"scenario": "s", "planner": name}
+        ) as log:
+            log.robot_state(0.0, [0.0] * 7, [0.0] * 7, list("abcdefg"))
+            log.metrics(1.0, {"eval/smoothness": 2.0, "eval/min_distance": 0.1})
+    data = (runs / "cut.mcap").read_bytes()  # cut before its data end record (13 bytes)
+    summary_start = int.from_bytes(data[-8 - 29 + 9 : -8 - 29 + 17], "little")
+    (runs / "cut.mcap").write_bytes(data[: summary_start - 13])
+    pointer = runs / "sub" / "lfs.mcap"
+    pointer.parent.mkdir()
+    pointer.write_text("version https://git-lfs.github.com/spec/v1\noid sha256:ab\nsize 9\n")
+    foreign = _foreign_mcap(runs / "other.mcap")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        df = gather_results(runs)
+    assert sorted(df["planner"].dropna()) == ["cut", "good"]
+    assert df.set_index("planner")["complete"].to_dict() == {"good": True, "cut": False}
+    left_out = [str(w.message) for w in caught if "left out" in str(w.message)]
+    assert len(left_out) == 1 and left_out[0].startswith(
+        f"{runs}: left out 2 of its 4 .mcap file(s), which are not readable episode logs: "
+    )
+    assert f"{foreign}: not an iplanner episode log (a valid MCAP file with no " in left_out[0]
+    assert f"{pointer} is not an MCAP file (bad magic bytes)" in left_out[0]
+    assert not any(
+        "truncated or damaged" in str(w.message) for w in caught if foreign.name in str(w.message)
+    )
+    with pytest.raises(DataError, match="other.mcap: not an iplanner episode log"):
+        gather_results(foreign)
+    with pytest.raises(DataError, match="lfs.mcap is not an MCAP file"):
+        gather_results(pointer)
+
+
 def test_summary_table_means_stds_and_counts(results: pd.DataFrame) -> None:
     s = summary_table(results)
     assert len(s) == 6 and list(s.columns[:4]) == [

@@ -202,6 +202,47 @@ def test_our_topics_and_json_channels_with_bad_data_still_raise(tmp_path: Path) 
         read_episode(path)
 
 
+def test_a_complete_mcap_of_another_program_is_named_not_an_episode_log(tmp_path: Path) -> None:
+    """A complete MCAP file written by another program (the mcap package's writer: no
+    iplanner.episode metadata record) was reported as truncated or damaged: it is read,
+    marked ``foreign``, with one warning saying it is not an iplanner episode log. The same
+    file cut before its end is not foreign (our log cut before its metadata looks the
+    same): truncated, as before."""
+    path = tmp_path / "other.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        schema = w.register_schema("pose", "jsonschema", b"{}")
+        channel = w.register_channel("/odom", "json", schema)
+        for i in range(3):
+            w.add_message(channel, log_time=i, data=json.dumps({"x": i}).encode(), publish_time=i)
+        w.add_metadata("camera", {"model": "x"})
+        w.finish()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ep = read_episode(path)
+    assert [str(w.message) for w in caught] == [
+        f"{path}: not an iplanner episode log: a valid MCAP file with no iplanner.episode "
+        "metadata record (written by another program?); read 3 messages of its channels"
+    ]
+    assert caught[0].category is DataWarning
+    assert ep.foreign and not ep.complete and ep.metadata == {}
+    assert len(ep.frames["/odom"]) == 3
+    blob = path.read_bytes()
+    summary_start = int.from_bytes(blob[-8 - 29 + 9 : -8 - 29 + 17], "little")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(blob[: summary_start - 13])  # without its data end record
+    with pytest.warns(DataWarning, match="cut.mcap: episode log is truncated or damaged"):
+        ep = read_episode(cut)
+    assert not ep.foreign and not ep.complete
+    with EpisodeWriter(tmp_path / "ours.mcap", metadata={"planner": "itomp"}) as log:
+        log.metrics(1.0, {"eval/contact": 0.0})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ep = read_episode(tmp_path / "ours.mcap")
+    assert not ep.foreign and ep.complete
+
+
 # -- 3. messages nested too deep ---------------------------------------------------------------
 
 
