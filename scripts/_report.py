@@ -44,6 +44,28 @@ def fail(message: str) -> NoReturn:
     raise SystemExit(2)
 
 
+def read_results(path: Path) -> pd.DataFrame:
+    """The rows of one results CSV (:func:`~iplanner_torch.eval.report.gather_results`), all
+    of them: a row the reader would leave out or fill in (a last row cut short by an
+    interrupted run, a row with fewer cells than the header) ends the script with
+    :func:`fail` instead of its warning, since a record must not lose an episode. Other
+    warnings are passed on."""
+    import warnings
+
+    from iplanner_torch.errors import DataWarning
+    from iplanner_torch.eval.report import gather_results
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        df = gather_results(path)
+    for w in caught:
+        text = str(w.message)
+        if issubclass(w.category, DataWarning) and ("cut short" in text or "fewer cells" in text):
+            fail(f"DataError: {text.rsplit(';', 1)[0]}; a record needs every row whole")
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return df
+
+
 def main_guard(main: Callable[..., T]) -> Callable[..., T]:
     """``main`` reporting :class:`~iplanner_torch.errors.IPlannerError` and ``OSError`` as
     ``error: <Type>: message`` on standard error with exit code 2 (no traceback)."""

@@ -9,8 +9,11 @@ Usage::
 
     python scripts/bench.py                       # full run, prints a table
     python scripts/bench.py --quick               # reduced sizes (CI smoke)
-    python scripts/bench.py --json experiments/bench/cpu.json
+    python scripts/bench.py --json experiments/bench/cpu.json --force  # replace the record
     python scripts/bench.py --only collision,robot
+
+``--json`` refuses a file that exists (and its ``.meta.json``), before any benchmark runs,
+unless ``--force`` is given: a stored record is replaced only on purpose.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # the bench modules share scripts/_timing.py
-from _report import commit_short  # noqa: E402
+from _report import commit_short, fail  # noqa: E402
 
 AREAS = ("dtw", "prediction", "robot", "collision", "planning", "sim")
 
@@ -55,6 +58,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="reduced sizes (CI smoke run)")
     parser.add_argument("--json", type=Path, default=None, help="write the figures as JSON")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --json file and its .meta.json (stored results)",
+    )
     parser.add_argument("--only", default=None, help="comma-separated areas: " + ",".join(AREAS))
     parser.add_argument("--threads", type=int, default=None, help="torch.set_num_threads (>= 1)")
     args = parser.parse_args(argv)
@@ -69,6 +77,13 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--threads must be >= 1, got {args.threads}")
     if args.json is not None and args.json.is_dir():
         parser.error(f"--json {args.json} is a folder; give the JSON file to write")
+    if args.json is not None and not args.force:
+        existing = [p for p in (args.json, args.json.with_suffix(".meta.json")) if p.exists()]
+        if existing:
+            fail(
+                f"{' and '.join(map(str, existing))} exist{'s' if len(existing) == 1 else ''} "
+                "(stored benchmark results); pass --force to replace, or --json <another file>"
+            )
     if args.threads is not None:
         torch.set_num_threads(args.threads)
     figures: dict[str, dict] = {}

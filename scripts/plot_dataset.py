@@ -25,6 +25,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from _report import fail, main_guard  # noqa: E402
 
 from iplanner_torch.data.reaching import (  # noqa: E402
     ReachingCfg,
@@ -82,6 +83,7 @@ def plot_reaches(path: Path, cfg: ReachingCfg) -> None:
     plt.close(fig)
 
 
+@main_guard
 def main() -> None:
     """Plot, then (unless ``--no-measure``) generate the default dataset to a temp folder."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -91,7 +93,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     if args.out.exists() and not args.out.is_dir():
-        parser.error(f"--out must be a folder: {args.out} is a file")
+        fail(f"--out must be a folder: {args.out} is a file")
     args.out.mkdir(parents=True, exist_ok=True)
     plot_reaches(args.out / "reaches.png", ReachingCfg())
     print(f"wrote {args.out / 'reaches.png'}")

@@ -8,8 +8,9 @@ Usage::
         hydra.launcher.n_jobs=2 'experiment.seeds=[0,...,9],[10,...,19]'
     python scripts/safety_seeds_report.py multirun/experiment/<time> --command "<the command>"
 
-Reads every ``results.csv`` under the run folder (one row per episode; the sweep's jobs and
-their scenario sub-folders), and writes the per-scenario table and the episode rows.
+Reads the ``results.csv`` files of the run folder (one row per episode: its own, the sweep's
+jobs and their scenario sub-folders; not the sweep's gathered ``summary/results.csv``), and
+writes the per-scenario table and the episode rows.
 """
 
 from __future__ import annotations
@@ -24,12 +25,13 @@ from _report import (
     main_guard,
     numeric_column,
     parse_report_args,
+    read_results,
     require_columns,
     single_setting,
     write_readme,
 )
 
-from iplanner_torch.eval.report import gather_results, paired_table, to_markdown
+from iplanner_torch.eval.report import paired_table, to_markdown
 
 OUT = Path(__file__).resolve().parents[1] / "experiments" / "safety_seeds"
 #: the columns naming an episode: rows of one sweep job repeated in another are dropped
@@ -51,17 +53,33 @@ COLUMNS = {
 }
 
 
+def results_files(run_dir: Path) -> list[Path]:
+    """The ``results.csv`` files of ``run_dir``: its own, and each one below it that lies in a
+    run folder (a folder with ``.hydra/``: a sweep's job) or a sub-folder of one (the job's
+    scenarios). A sweep's gathered summary (``summary/results.csv``, no ``.hydra/``) is never
+    read back, as in :func:`~iplanner_torch.cli.callbacks.run_rows`: it repeats the jobs'
+    episodes with other columns (``robot``, ``path``), so its rows would count twice."""
+    run_dir = Path(run_dir)
+
+    def in_run(f: Path) -> bool:
+        folders = f.relative_to(run_dir).parents  # the file's folder, ..., run_dir ('.')
+        return f.parent == run_dir or any((run_dir / d / ".hydra").is_dir() for d in folders)
+
+    return [f for f in sorted(run_dir.rglob("results.csv")) if in_run(f)]
+
+
 def gather(run_dir: Path) -> pd.DataFrame:
-    """Every episode row under ``run_dir`` (duplicates of the sweep summary dropped).
+    """Every episode row of ``run_dir`` (:func:`results_files`; a job's rows repeated in its
+    scenario sub-folders dropped).
 
     Raw rows name metrics ``eval/<name>``; a summary's ``results.csv`` (a finished
-    single-scenario run keeps only that one) names them ``<name>``: :func:`gather_results`
+    single-scenario run keeps only that one) names them ``<name>``: :func:`read_results`
     reads both alike. Rows are the same episode when their :data:`KEYS` and settings
     (:data:`_report.SETTINGS`: robot, confidence, noise, ...) are; an error names the values
     when rows of more than one setting remain (the report covers one)."""
     frames = []
-    for f in sorted(run_dir.rglob("results.csv")):
-        df = gather_results(f)
+    for f in results_files(run_dir):
+        df = read_results(f)
         if "min_distance" not in df.columns:  # not episode rows
             continue
         require_columns(df, f, KEYS)
@@ -70,7 +88,10 @@ def gather(run_dir: Path) -> pd.DataFrame:
             complete_rows(df, f, "sim/contacts")
         frames.append(numeric_column(df, f, "confidence"))
     if not frames:
-        fail(f"no results.csv with episode rows under {run_dir}")
+        fail(
+            f"no results.csv with episode rows in {run_dir} or its jobs' folders (those with "
+            ".hydra/)"
+        )
     df = pd.concat(frames, ignore_index=True)
     same = [c for c in (*KEYS, *SETTINGS) if c in df.columns]
     df = df.drop_duplicates(subset=same, keep="last")

@@ -6,8 +6,10 @@ Usage::
     python scripts/smoothness_breakdown.py <run dir or .mcap> [--settle 1.0] [--episodes]
 
 Reads every ``*.mcap`` episode log under the run folder (or the one log given) and prints,
-per scenario, swept setting (speed, noise, confidence, when they vary) and planner, the means
-of :func:`iplanner_torch.eval.smoothness.episode_breakdown`:
+per scenario, swept setting (speed, noise, confidence, when they vary, and in a multirun
+folder each command-line override its jobs differ in, e.g. ``planner.itomp_spread_mps``, as
+``iplanner-evaluate evaluate.mode=episode`` keeps them apart) and planner, the means of
+:func:`iplanner_torch.eval.smoothness.episode_breakdown`:
 
 - ``smoothness_log``: the paper's smoothness of the logged robot states (sampled more sparsely
   than ``eval/smoothness``, so lower; compare planners, not absolute values);
@@ -34,6 +36,7 @@ from pathlib import Path
 import pandas as pd
 from _report import fail, main_guard
 
+from iplanner_torch.cli.callbacks import split_columns, sweep_overrides
 from iplanner_torch.errors import DataError, DataWarning
 from iplanner_torch.eval.report import SWEPT_SETTINGS, report_groups, to_markdown
 from iplanner_torch.eval.smoothness import episode_breakdown
@@ -86,6 +89,7 @@ def main() -> None:
             continue
         meta = ep.metadata
         row = {key: meta.get(key) for key in ("scenario", *SWEPT_SETTINGS, "planner", "seed")}
+        row["path"] = str(path)  # places the episode in its sweep job (sweep_overrides)
         row.update({col: getattr(b, attr) for col, attr in COLUMNS.items()})
         rows.append(row)
     for line in skipped:
@@ -93,13 +97,20 @@ def main() -> None:
     if not rows:
         fail(f"none of the {len(paths)} log(s) in {args.run_dir} could be split")
     df = pd.DataFrame(rows)
+    swept: list[str] = []
+    if args.run_dir.is_dir():  # a multirun folder: the overrides its jobs differ in
+        df, swept = sweep_overrides(df, args.run_dir)
+    df = df.drop(columns="path")
     if args.episodes:
         print(to_markdown(df))
         print()
     df = df.dropna(axis=1, how="all")
     groups = list(report_groups(df))  # swept speeds, noises, confidences are kept apart
-    means = df.groupby(groups, sort=False)[list(COLUMNS)].mean().reset_index()
-    means.insert(len(groups), "episodes", df.groupby(groups, sort=False).size().values)
+    extra = split_columns(df, tuple(groups), swept)  # as episode_report: before the planner
+    groups = [*groups[:-1], *extra, groups[-1]]
+    by = df.groupby(groups, sort=False, dropna=False)  # a log outside the jobs is kept too
+    means = by[list(COLUMNS)].mean().reset_index()
+    means.insert(len(groups), "episodes", by.size().values)
     print(to_markdown(means))
 
 

@@ -22,13 +22,13 @@ from _report import (
     main_guard,
     numeric_column,
     parse_report_args,
+    read_results,
     require_columns,
     single_setting,
     write_readme,
 )
 
 from iplanner_torch.eval.report import (
-    gather_results,
     paper_table_simulation,
     side_by_side,
     summary_table,
@@ -47,7 +47,7 @@ def main() -> None:
     path = args.run_dir / "results.csv"
     if not path.is_file():
         fail(f"{path}: not found (give the folder of an `experiment=table_simulation` run)")
-    df = gather_results(path)
+    df = read_results(path)
     if df.empty:
         fail(f"{path}: no episode rows (a header at most; was the run stopped?)")
     require_columns(df, path, ("scenario", *KEYS))

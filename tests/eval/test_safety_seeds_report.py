@@ -49,6 +49,7 @@ def test_gather_reads_every_job_and_skips_summaries(tmp_path: Path) -> None:
     for job, seeds, contacts in (("0", range(0, 3), [0, 1, 0]), ("1", range(3, 5), [0, 0])):
         d = tmp_path / job / "s1"
         d.mkdir(parents=True)
+        (tmp_path / job / ".hydra").mkdir()
         _rows("iplanner_ni", seeds, contacts).to_csv(d / "results.csv", index=False)
     # a gathered summary (renamed columns) must not be counted twice
     (tmp_path / "summary").mkdir()
@@ -83,9 +84,17 @@ def test_reports_refuse_cut_rows_and_existing_records(tmp_path: Path) -> None:
     out = tmp_path / "record"
     script = [sys.executable, str(SCRIPTS / "safety_seeds_report.py")]
     res = subprocess.run([*script, str(run), "--out", str(out)], capture_output=True, text=True)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert "results.csv: the last row (file row 4) is cut short" in res.stderr
+    assert res.stderr.rstrip().endswith("a record needs every row whole")
+    assert not out.exists()  # nothing written from a cut file
+    rows = _rows("itomp", range(3), [0, 0, 0])
+    rows.loc[1, "eval/min_distance"] = None  # an empty cell
+    rows.to_csv(run / "results.csv", index=False)
+    res = subprocess.run([*script, str(run), "--out", str(out)], capture_output=True, text=True)
     assert res.returncode == 2
     assert "1 of 3 episode row(s) lack 'min_distance'" in res.stderr
-    assert not out.exists()  # nothing written from a cut file
+    assert not out.exists()  # nothing written from an incomplete file
     _rows("itomp", range(3), [0, 0, 0]).to_csv(run / "results.csv", index=False)
     res = subprocess.run([*script, str(run), "--out", str(out)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
@@ -116,6 +125,7 @@ def test_paired_section_is_each_planner_minus_itomp_per_seed() -> None:
 def _job(root: Path, job: str, seeds: range, **settings: object) -> None:
     d = root / job / "s1"
     d.mkdir(parents=True)
+    (root / job / ".hydra").mkdir()
     rows = _rows("itomp", seeds, [0] * len(seeds))
     for key, value in settings.items():
         rows.insert(2, key, value)
@@ -146,3 +156,36 @@ def test_gather_drops_repeats_of_one_setting_only(tmp_path: Path, monkeypatch, c
         err = capsys.readouterr().err
         assert exc.value.code == 2 and err.count("\n") == 1, err
         assert f"more than one {key} ({values[0]}, {values[1]})" in err
+
+
+def test_gather_skips_the_sweep_summary_of_a_real_sweep(tmp_path: Path, monkeypatch) -> None:
+    """A multirun folder as iplanner-experiment -m leaves it: jobs with .hydra/, their
+    results.csv (no robot column) and scenario sub-folders, and the gathered
+    summary/results.csv (with robot and path columns, no .hydra/) that repeats every episode:
+    each episode is counted once, and the paired section pairs them."""
+    ssr = _load()
+    episodes = []
+    for job, seed in (("0", 0), ("1", 1)):
+        rows = pd.concat([_rows(p, range(seed, seed + 1), [0]) for p in ("itomp", "oracle")])
+        rows = rows.rename(columns=lambda c: c.removeprefix("eval/"))
+        (tmp_path / job / ".hydra").mkdir(parents=True)
+        (tmp_path / job / ".hydra" / "overrides.yaml").write_text(f"- run.seeds=[{seed}]\n")
+        (tmp_path / job / "s1").mkdir()
+        rows.to_csv(tmp_path / job / "results.csv", index=False)
+        rows.to_csv(tmp_path / job / "s1" / "results.csv", index=False)
+        episodes.append(rows.assign(robot="kuka_iiwa14", path=str(tmp_path / job / "x.mcap")))
+    (tmp_path / "summary").mkdir()
+    pd.concat(episodes).to_csv(tmp_path / "summary" / "results.csv", index=False)
+    df = ssr.gather(tmp_path)
+    assert len(df) == 4 and "robot" not in df.columns
+    assert list(ssr.summarise(df)["episodes"]) == [2, 2]
+    assert ssr.results_files(tmp_path) == [
+        tmp_path / "0" / "results.csv",
+        tmp_path / "0" / "s1" / "results.csv",
+        tmp_path / "1" / "results.csv",
+        tmp_path / "1" / "s1" / "results.csv",
+    ]
+    out = tmp_path / "record"
+    monkeypatch.setattr(sys, "argv", ["ssr", str(tmp_path), "--out", str(out)])
+    ssr.main()  # pairs one episode per planner and seed
+    assert "| s1 | oracle | distance cm | 2 |" in (out / "README.md").read_text()

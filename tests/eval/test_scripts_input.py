@@ -106,6 +106,29 @@ def test_reports_name_a_confidence_that_is_not_a_number(tmp_path, run_script, sc
     assert "rows [3]" in line
 
 
+@pytest.mark.parametrize("script", ["safety_seeds_report", "table_simulation_report"])
+@pytest.mark.parametrize("damage", ["cut", "short"])
+def test_reports_refuse_rows_the_reader_would_drop_or_fill(
+    tmp_path, run_script, script, damage
+) -> None:
+    """gather_results leaves out a last row cut short and fills a short row's missing cells,
+    with a warning; a record must not lose or invent an episode, so the scripts refuse."""
+    text = _episodes().to_csv(index=False)
+    if damage == "cut":
+        text = text[: text.rindex(",0.05")]  # the writer stopped inside the last row
+        said = "the last row (file row 4) is cut short"
+    else:
+        lines = text.splitlines(keepends=True)
+        lines[2] = lines[2][: lines[2].rindex(",0.05")] + "\n"
+        text = "".join(lines)
+        said = "1 row(s) have fewer cells than the header's"
+    (tmp_path / "results.csv").write_text(text)
+    code, _, err = run_script(script, tmp_path, "--out", tmp_path / "record")
+    line = _one_error_line(err)
+    assert code == 2 and said in line and "a record needs every row whole" in line
+    assert not (tmp_path / "record").exists()
+
+
 def test_table_report_says_a_header_only_file_has_no_rows(tmp_path, run_script) -> None:
     _episodes().iloc[:0].to_csv(tmp_path / "results.csv", index=False)
     code, _, err = run_script("table_simulation_report", tmp_path, "--out", tmp_path / "rec")
@@ -150,6 +173,19 @@ def test_out_must_be_a_folder(tmp_path, run_script) -> None:
     code, _, err = run_script("plot_robot_spheres", "--out", out)
     assert code == 2 and "--out must be a folder" in _one_error_line(err)
     assert out.read_text() == "keep"
+
+
+def test_plot_dataset_refuses_an_out_it_cannot_make_in_one_line(tmp_path, run_script) -> None:
+    """--out through a regular file (or naming one) is an error line with exit code 2, not a
+    traceback, and nothing is plotted (main_guard)."""
+    afile = tmp_path / "afile"
+    afile.write_text("keep")
+    code, out, err = run_script("plot_dataset", "--no-measure", "--out", afile / "sub")
+    line = _one_error_line(err)
+    assert code == 2 and line.startswith("error: NotADirectoryError: ") and "afile" in line
+    assert "wrote" not in out and afile.read_text() == "keep"
+    code, _, err = run_script("plot_dataset", "--no-measure", "--out", afile)
+    assert code == 2 and "--out must be a folder" in _one_error_line(err)
 
 
 # --- bench.py: its arguments are checked before any benchmark runs ------------------------------
@@ -201,7 +237,8 @@ def test_bench_refuses_a_json_folder_and_writes_no_json_without_figures(
     monkeypatch.setattr(bench, "_load", lambda area: Failing)
     figures = tmp_path / "cpu.json"
     figures.write_text('{"kept": 1}\n')
-    code, _, err = run_script("bench", "--only", "dtw", "--json", figures, module=bench)
+    args = ("--only", "dtw", "--json", figures, "--force")  # kept even with --force
+    code, _, err = run_script("bench", *args, module=bench)
     assert code == 2 and "no figure was produced" in err
     assert figures.read_text() == '{"kept": 1}\n'
     assert not figures.with_suffix(".meta.json").exists()
@@ -322,6 +359,37 @@ def test_render_says_a_log_has_no_messages(tmp_path, run_script) -> None:
         assert code == 2 and line.startswith("error: DataError: ") and "no messages on" in line
     code, _, err = run_script("render_episode", "--mcap", tmp_path / "nope.mcap")
     assert code == 2 and _one_error_line(err).startswith("error: DataError: ")
+
+
+def test_bench_refuses_to_replace_stored_results_without_force(
+    tmp_path, run_script, bench, monkeypatch
+) -> None:
+    """An existing --json file (or its .meta.json) is refused in one line naming it and
+    --force, before any benchmark runs (the ``bench`` fixture fails any that starts);
+    --force replaces both."""
+    figures = tmp_path / "cpu.json"
+    meta = tmp_path / "cpu.meta.json"
+    for existing in ((figures,), (meta,), (figures, meta)):
+        for p in (figures, meta):
+            p.unlink(missing_ok=True)
+        for p in existing:
+            p.write_text('{"kept": 1}\n')
+        code, out, err = run_script("bench", "--only", "dtw", "--json", figures, module=bench)
+        line = _one_error_line(err)
+        assert code == 2 and "pass --force to replace" in line and "[dtw]" not in out
+        assert all(str(p) in line for p in existing)
+        assert all(p.read_text() == '{"kept": 1}\n' for p in existing)
+
+    class One:
+        @staticmethod
+        def run(quick: bool) -> dict:
+            return {"x.ms": {"value": 1.0, "unit": "ms"}}
+
+    monkeypatch.setattr(bench, "_load", lambda area: One)
+    code, _, err = run_script("bench", "--only", "dtw", "--json", figures, "--force", module=bench)
+    assert code == 0, err
+    assert json.loads(figures.read_text()) == {"x.ms": {"value": 1.0, "unit": "ms"}}
+    assert "--force" in json.loads(meta.read_text())["command"]
 
 
 def test_bench_json_written_with_figures(tmp_path, run_script, bench, monkeypatch) -> None:
