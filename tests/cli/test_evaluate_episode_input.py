@@ -5,16 +5,15 @@ folder (named) and refused when given by their path."""
 
 from __future__ import annotations
 
-import json
 import shutil
 import warnings
 from pathlib import Path
 from typing import Any
 
 import pytest
+from foreign_mcap import write_foreign_mcap
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
-from mcap.writer import Writer
 
 import iplanner_torch.cli.evaluate as evaluate
 from iplanner_torch.cli._common import CONF_DIR
@@ -120,18 +119,6 @@ def test_a_run_reached_twice_below_one_folder_is_said_to_repeat(
     assert len(_summary_rows(tmp_path / "out_split")) == 2
 
 
-def _foreign_mcap(path: Path) -> Path:
-    """A complete MCAP file of another program: the mcap package's own writer, a JSON channel
-    and no iplanner.episode metadata record."""
-    with open(path, "wb") as f:
-        w = Writer(f)
-        w.start()
-        channel = w.register_channel("/odom", "json", w.register_schema("p", "jsonschema", b"{}"))
-        w.add_message(channel, log_time=0, data=json.dumps({"x": 1}).encode(), publish_time=0)
-        w.finish()
-    return path
-
-
 def test_mcap_files_that_are_not_episode_logs_are_left_out_of_a_folder(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -144,7 +131,7 @@ def test_mcap_files_that_are_not_episode_logs_are_left_out_of_a_folder(
         _log(logs / f"s{seed}.mcap", seed, 40.0 + seed)
     text = logs / "text.mcap"
     text.write_text("version https://git-lfs.github.com/spec/v1\noid sha256:ab\nsize 9\n")
-    foreign = _foreign_mcap(logs / "foreign.mcap")
+    foreign = write_foreign_mcap(logs / "foreign.mcap")
     caught = _evaluate(monkeypatch, logs, tmp_path / "out")
     left_out = [w for w in caught if "left out" in str(w.message)]
     assert len(left_out) == 1 and left_out[0].category is DataWarning

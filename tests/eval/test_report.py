@@ -12,6 +12,7 @@ import matplotlib.image
 import numpy as np
 import pandas as pd
 import pytest
+from foreign_mcap import write_foreign_mcap
 
 from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.eval.report import (
@@ -221,26 +222,6 @@ def test_gather_results_refuses_a_csv_with_another_separator(tmp_path: Path) -> 
             gather_results(path)
 
 
-def _foreign_mcap(path: Path) -> Path:
-    """A complete MCAP file of another program (the mcap package's own writer): a JSON
-    channel, and no iplanner.episode metadata record."""
-    import json
-
-    from mcap.writer import Writer
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "wb") as f:
-        w = Writer(f)
-        w.start()
-        schema = w.register_schema("pose", "jsonschema", b"{}")
-        channel = w.register_channel("/odom", "json", schema)
-        for i in range(3):
-            w.add_message(channel, log_time=i, data=json.dumps({"x": i}).encode(), publish_time=i)
-        w.add_metadata("camera", {"model": "x"})
-        w.finish()
-    return path
-
-
 def test_a_folder_leaves_out_mcap_files_that_are_not_episode_logs(tmp_path: Path) -> None:
     """An unfetched Git LFS pointer and another program's MCAP file below a folder aborted
     the whole gathering: they are left out, named in one warning, while a log cut short is
@@ -259,7 +240,7 @@ def test_a_folder_leaves_out_mcap_files_that_are_not_episode_logs(tmp_path: Path
     pointer = runs / "sub" / "lfs.mcap"
     pointer.parent.mkdir()
     pointer.write_text("version https://git-lfs.github.com/spec/v1\noid sha256:ab\nsize 9\n")
-    foreign = _foreign_mcap(runs / "other.mcap")
+    foreign = write_foreign_mcap(runs / "other.mcap")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         df = gather_results(runs)

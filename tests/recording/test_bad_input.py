@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from foreign_mcap import write_foreign_mcap
 from mcap.writer import Writer
 
 from iplanner_torch.errors import ConfigError, DataError, DataWarning, ShapeError
@@ -208,16 +209,7 @@ def test_a_complete_mcap_of_another_program_is_named_not_an_episode_log(tmp_path
     marked ``foreign``, with one warning saying it is not an iplanner episode log. The same
     file cut before its end is not foreign (our log cut before its metadata looks the
     same): truncated, as before."""
-    path = tmp_path / "other.mcap"
-    with open(path, "wb") as f:
-        w = Writer(f)
-        w.start()
-        schema = w.register_schema("pose", "jsonschema", b"{}")
-        channel = w.register_channel("/odom", "json", schema)
-        for i in range(3):
-            w.add_message(channel, log_time=i, data=json.dumps({"x": i}).encode(), publish_time=i)
-        w.add_metadata("camera", {"model": "x"})
-        w.finish()
+    path = write_foreign_mcap(tmp_path / "other.mcap")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         ep = read_episode(path)
