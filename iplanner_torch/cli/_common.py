@@ -715,7 +715,9 @@ def friendly_errors(
     In one job of a multirun the job ends with that line instead, leaving a
     :data:`FAILED_MARKER` file in its folder, so the sweep's other jobs still run; the sweep
     lists the failed jobs at its end and exits 2. Running out of memory is a one-line error
-    too, with what to lower. An unexpected exception (a bug) keeps its traceback outside a
+    too, with what to lower. An exception raised while an interrupt was being handled (say by
+    Lightning's teardown of a fit cut by Ctrl-C) is reported as that interrupt (exit 130).
+    An unexpected exception (a bug) keeps its traceback outside a
     multirun (Hydra prints it, exit 1); in one job of a multirun it ends that job like a
     library error, its traceback kept in the ``FAILED`` file and the job's log
     (:func:`_record_unexpected_error`), since Hydra would otherwise stop the sweep with it,
@@ -758,6 +760,11 @@ def friendly_errors(
                 _end_job(line)
                 return None
             except (MemoryError, RuntimeError) as exc:  # torch's allocators: RuntimeError
+                if _in_chain(exc.__context__, KeyboardInterrupt) is not None:
+                    # raised while an interrupt was handled (Lightning's teardown of a fit
+                    # cut by Ctrl-C or SIGTERM): the interrupt is what happened
+                    _report_interrupt(args, kept, log_path)
+                    raise SystemExit(130) from None
                 text = str(exc).strip()
                 if not isinstance(exc, MemoryError) and not (
                     "out of memory" in text or "can't allocate memory" in text
@@ -779,6 +786,9 @@ def friendly_errors(
                 _report_interrupt(args, kept, log_path)
                 raise SystemExit(130) from None
             except Exception as exc:  # a bug; outside a multirun Hydra prints its traceback
+                if _in_chain(exc.__context__, KeyboardInterrupt) is not None:
+                    _report_interrupt(args, kept, log_path)  # raised while one was handled
+                    raise SystemExit(130) from None
                 if _record_unexpected_error(exc, log_path):
                     return None
                 raise

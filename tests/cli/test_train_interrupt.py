@@ -77,7 +77,9 @@ def test_an_exit_that_follows_an_interrupt_is_an_interrupt(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     """Lightning's ``sys.exit(1)`` in its ``except KeyboardInterrupt`` block is reported as
-    the interrupt; another ``SystemExit`` passes through as it is."""
+    the interrupt, and so is an error its teardown raises while handling the interrupt (a race
+    seen in CI: ``RuntimeError: Please call iter(combined_loader) first``, exit 1); another
+    ``SystemExit`` passes through as it is."""
 
     @friendly_errors
     def fit_interrupted() -> None:
@@ -90,10 +92,23 @@ def test_an_exit_that_follows_an_interrupt_is_an_interrupt(
     def exits(code: int) -> None:
         raise SystemExit(code)
 
+    @friendly_errors
+    def teardown_fails(kind: type[Exception]) -> None:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:  # Lightning's teardown of a cut fit may fail in turn
+            raise kind("Please call `iter(combined_loader)` first.") from None
+
     with pytest.raises(SystemExit) as stop:
         fit_interrupted()
     assert stop.value.code == 130
     assert capsys.readouterr().err.startswith("interrupted: ")
+    for kind in (RuntimeError, ValueError):  # raised while the interrupt was handled
+        with pytest.raises(SystemExit) as stop:
+            teardown_fails(kind)
+        assert stop.value.code == 130
+        err = capsys.readouterr().err
+        assert err.startswith("interrupted: ") and "Traceback" not in err
     for code in (0, 1, 3):
         with pytest.raises(SystemExit) as stop:
             exits(code)
