@@ -45,6 +45,21 @@ class DatasetSummary:
     seconds: float
     bytes_on_disk: int
 
+    @classmethod
+    def of_files(
+        cls, out_dir: Path, files: Sequence[Path], n_frames: int, seconds: float
+    ) -> DatasetSummary:
+        """The summary of the demonstration ``files`` just written into ``out_dir``: their
+        count and total size are read from the list and the disk."""
+        return cls(
+            out_dir=out_dir,
+            files=tuple(files),
+            n_demonstrations=len(files),
+            n_frames=n_frames,
+            seconds=seconds,
+            bytes_on_disk=sum(f.stat().st_size for f in files),
+        )
+
 
 def generator_settings(cfg: Any) -> dict[str, Any]:
     """A generator config dataclass as the JSON-plain dict the card keeps (tuples as lists)."""

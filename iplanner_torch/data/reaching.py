@@ -398,14 +398,7 @@ def generate_reaching_dataset(
                 files.append(save_demonstration(demo, path))
                 n_frames += demo.num_frames
         seconds = time.perf_counter() - t_start
-        summary = DatasetSummary(
-            out_dir=staging,
-            files=tuple(files),
-            n_demonstrations=len(files),
-            n_frames=n_frames,
-            seconds=seconds,
-            bytes_on_disk=sum(f.stat().st_size for f in files),
-        )
+        summary = DatasetSummary.of_files(staging, files, n_frames, seconds)
         speeds = ", ".join(f"{s:g} ({speed_name(s)})" for s in cfg.speeds)
         write_dataset_card(
             summary,

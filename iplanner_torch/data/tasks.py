@@ -414,14 +414,7 @@ def generate_task_dataset(
             )
             files.append(save_demonstration(demo, staging / f"{demo.name}.{cfg.file_format}"))
             n_frames += demo.num_frames
-        summary = DatasetSummary(
-            out_dir=staging,
-            files=tuple(files),
-            n_demonstrations=len(files),
-            n_frames=n_frames,
-            seconds=time.perf_counter() - t_start,
-            bytes_on_disk=sum(f.stat().st_size for f in files),
-        )
+        summary = DatasetSummary.of_files(staging, files, n_frames, time.perf_counter() - t_start)
         write_dataset_card(
             summary,
             title="Synthetic task dataset",
