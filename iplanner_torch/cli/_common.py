@@ -1451,16 +1451,23 @@ def _check_generator_settings(
         )
 
 
-def generate_dataset(
-    data_cfg: DictConfig, path: Path, *, progress: bool, command: str | None = None
-) -> Any:
-    """Run the generator a ``data`` node names (reaching or task demonstrations) into ``path``.
+def dataset_generator(data_cfg: DictConfig, name: str | None = None) -> tuple[Any, Any]:
+    """The generator settings a ``data`` node builds, checked, and the function that generates
+    that kind of dataset (reaching or task demonstrations).
+
+    Args:
+        data_cfg: the ``data`` node.
+        name: the generator node's key in messages (default: its full key).
 
     Returns:
-        The generator's :class:`~iplanner_torch.data.dataset_card.DatasetSummary`.
+        ``(settings, generate)``: a :class:`~iplanner_torch.data.reaching.ReachingCfg` with
+        :func:`~iplanner_torch.data.reaching.generate_reaching_dataset`, or a
+        :class:`~iplanner_torch.data.tasks.TaskDatasetCfg` with
+        :func:`~iplanner_torch.data.tasks.generate_task_dataset`.
 
     Raises:
-        ConfigError: when the node has no generator or it builds something else.
+        ConfigError: when the node has no generator, it builds something else, or a setting
+            is bad.
     """
     from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
     from iplanner_torch.data.tasks import TaskDatasetCfg, generate_task_dataset
@@ -1470,9 +1477,24 @@ def generate_dataset(
             f"data config has no generator (a recorded dataset at {data_cfg.path}): "
             "nothing to generate; use `iplanner-data info` to check it"
         )
-    gen_cfg = instantiate(data_cfg.generator)
+    gen_cfg = instantiate(data_cfg.generator, name=name)
     if isinstance(gen_cfg, ReachingCfg):
-        return generate_reaching_dataset(gen_cfg, path, progress=progress, command=command)
+        return gen_cfg, generate_reaching_dataset
     if isinstance(gen_cfg, TaskDatasetCfg):
-        return generate_task_dataset(gen_cfg, path, progress=progress, command=command)
+        return gen_cfg, generate_task_dataset
     raise ConfigError(f"data.generator builds {type(gen_cfg).__name__}: not a generator")
+
+
+def generate_dataset(
+    data_cfg: DictConfig, path: Path, *, progress: bool, command: str | None = None
+) -> Any:
+    """Run the generator a ``data`` node names (:func:`dataset_generator`) into ``path``.
+
+    Returns:
+        The generator's :class:`~iplanner_torch.data.dataset_card.DatasetSummary`.
+
+    Raises:
+        ConfigError: when the node has no generator or it builds something else.
+    """
+    gen_cfg, generate = dataset_generator(data_cfg)
+    return generate(gen_cfg, path, progress=progress, command=command)

@@ -57,8 +57,8 @@ from iplanner_torch.cli._common import (
     CONF_DIR,
     LEGO_FPS,
     data_fps,
+    dataset_generator,
     friendly_errors,
-    generate_dataset,
     instantiate,
     print_help_if_asked,
     refuse_unread_overrides,
@@ -75,23 +75,13 @@ _command = "generate"
 
 def _generate(cfg: DictConfig) -> None:
     from iplanner_torch.data.dataset_card import CARD_NAME, check_dataset_folder
-    from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
-    from iplanner_torch.data.tasks import TaskDatasetCfg, generate_task_dataset
 
     out_dir = repo_path(cfg.data.path)
     overwrite = cfg.data.get("overwrite", False)
     if not isinstance(overwrite, bool):
         raise ConfigError(f"data.overwrite: expected true or false, got {overwrite!r}")
-    if cfg.data.get("generator") is None:
-        generate_dataset(cfg.data, out_dir, progress=False)  # raises: nothing to generate
     # every setting is checked before the folder is touched
-    gen_cfg = instantiate(cfg.data.generator, name="data.generator")
-    if isinstance(gen_cfg, ReachingCfg):
-        generate = generate_reaching_dataset
-    elif isinstance(gen_cfg, TaskDatasetCfg):
-        generate = generate_task_dataset
-    else:
-        raise ConfigError(f"data.generator builds {type(gen_cfg).__name__}: not a generator")
+    gen_cfg, generate = dataset_generator(cfg.data, name="data.generator")
     old = check_dataset_folder(out_dir, overwrite=overwrite)
     t0 = time.perf_counter()
     command = ("iplanner-data generate " + " ".join(sys.argv[1:])).strip()
