@@ -55,6 +55,7 @@ __all__ = [
     "format_table",
     "print_table",
     "plot_comparison",
+    "spread_note",
     "plot_sweep",
     "write_sweep_report",
     "report_groups",
@@ -828,6 +829,27 @@ def _label(metric: str) -> str:
     return DEFAULT_METRICS.get(metric, metric)
 
 
+def spread_note(counts: Sequence[int] | np.ndarray) -> str:
+    """The line under a bar chart's title saying what a bar and its whisker are.
+
+    Args:
+        counts: episodes with a value behind each bar (any order).
+
+    Returns:
+        e.g. ``"mean of 3 episodes per bar, whiskers ± 1 std"``; a bar of one episode has no
+        whisker (a standard deviation of one value is undefined, not 0), which the note says.
+    """
+    n = [int(c) for c in np.asarray(counts).ravel() if int(c) > 0]
+    if not n:
+        return "no values"
+    lo, hi = min(n), max(n)
+    many = f"{lo}-{hi}" if lo != hi else f"{lo}"
+    if hi == 1:
+        return "one episode per bar (no spread to show)"
+    note = f"mean of {many} episodes per bar, whiskers ± 1 std"
+    return note + (" (none for a bar of one episode)" if lo == 1 else "")
+
+
 def plot_comparison(
     df: pd.DataFrame,
     out_dir: str | Path,
@@ -835,6 +857,9 @@ def plot_comparison(
     group_by: tuple[str, str] = ("scenario", "planner"),
 ) -> list[Path]:
     """Grouped bar charts (mean ± std) of each metric: groups on x, one bar per planner.
+
+    The title's second line says how many episodes a bar averages (:func:`spread_note`); a
+    bar of one episode has no whisker.
 
     Args:
         df: per-episode results.
@@ -856,7 +881,7 @@ def plot_comparison(
         if m not in df.columns:
             continue
         v = df.assign(_v=pd.to_numeric(df[m], errors="coerce"))
-        stats = v.groupby([x_col, bar_col], sort=False)["_v"].agg(["mean", "std"])
+        stats = v.groupby([x_col, bar_col], sort=False)["_v"].agg(["mean", "std", "count"])
         fig = Figure(figsize=(max(6.0, 1.1 * len(xs) * max(1, len(bars)) * 0.45 + 2), 4.2))
         ax = fig.add_subplot()
         width = 0.8 / max(1, len(bars))
@@ -868,7 +893,7 @@ def plot_comparison(
                 pos,
                 means,
                 width,
-                yerr=np.nan_to_num(stds),
+                yerr=np.asarray(stds, dtype=float),  # NaN (one episode): no whisker
                 capsize=3,
                 label=PLANNERS.get(str(b), str(b)),
                 color=f"C{j}",
@@ -880,7 +905,11 @@ def plot_comparison(
             ha="right" if len(xs) > 3 else "center",
         )
         ax.set_ylabel(_label(m))
-        ax.set_title(f"{_label(m).split(' [')[0]} by {x_col} and {bar_col}")
+        ax.set_title(
+            f"{_label(m).split(' [')[0]} by {x_col} and {bar_col}\n"
+            + spread_note(stats["count"].to_numpy()),
+            fontsize="medium",
+        )
         ax.grid(axis="y", alpha=0.3)
         ax.legend(title=bar_col, fontsize="small")
         fig.tight_layout()

@@ -32,6 +32,7 @@ from iplanner_torch.eval.report import (
     plot_sweep,
     report_groups,
     side_by_side,
+    spread_note,
     summary_table,
     to_markdown,
     write_sweep_report,
@@ -368,6 +369,47 @@ def test_plots_are_written(results: pd.DataFrame, tmp_path: Path) -> None:
         assert img.ndim == 3 and img.shape[0] > 300 and img.std() > 0.01
     sweep = plot_sweep(results, "confidence", "min_distance", "planner", tmp_path / "s.png")
     assert matplotlib.image.imread(sweep).shape[1] > 500
+
+
+def test_spread_note_says_what_a_bar_and_whisker_are() -> None:
+    assert spread_note([3, 3]) == "mean of 3 episodes per bar, whiskers ± 1 std"
+    assert spread_note([1, 1, 1]) == "one episode per bar (no spread to show)"
+    assert spread_note([1, 3, 2]) == (
+        "mean of 1-3 episodes per bar, whiskers ± 1 std (none for a bar of one episode)"
+    )
+    assert spread_note([0, 2]) == "mean of 2 episodes per bar, whiskers ± 1 std"
+    assert spread_note([]) == "no values"
+
+
+def test_a_bar_of_one_episode_has_no_whisker(
+    results: pd.DataFrame, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A standard deviation of one value is undefined: the chart used to draw it as a flat
+    # whisker of 0, which reads as "no spread". Now such a bar has no whisker at all.
+    import iplanner_torch.eval.report as report
+
+    figures = []
+
+    class Recorded(report.Figure):
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            figures.append(self)
+
+    monkeypatch.setattr(report, "Figure", Recorded)
+    keep = results.groupby(["scenario", "planner"], sort=False).cumcount() < 2
+    two_or_one = results[keep & ~((results.planner == "itomp") & (results.index % 2 == 1))]
+    counts = two_or_one.groupby(["scenario", "planner"], sort=False).size()
+    assert set(counts) == {1, 2}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        plot_comparison(two_or_one, tmp_path, metrics=("smoothness",))
+    (ax,) = figures[-1].axes
+    whiskers = 0
+    for bars in (c for c in ax.containers if hasattr(c, "errorbar")):
+        segments = bars.errorbar.lines[2][0].get_segments()
+        whiskers += sum(seg.size > 0 and bool(np.isfinite(seg).all()) for seg in segments)
+    assert whiskers == int((counts >= 2).sum())
+    assert ax.get_title().endswith("(none for a bar of one episode)")
 
 
 def test_write_sweep_report(results: pd.DataFrame, tmp_path: Path) -> None:
