@@ -21,8 +21,9 @@ scenario's from the reaching set), kept in ``checkpoints/<dataset>/iplanner_{ni,
 missing ones are trained first on a small budget (``run.train_trainer``) when
 ``run.train_if_missing`` is true; an existing one is used as it is, but a command-line
 ``run.train_trainer``, ``seed`` or ``data.windows.*`` value it was not trained with is refused.
-Results: ``results.csv``, ``results.md``, plots and
-``episodes/*.mcap`` in the run folder.
+Results: ``results.csv``, ``results.md``, plots, ``episodes/*.mcap`` and, unless
+``run.timeline_plots=false``, one timeline plot per log (``episodes/<episode>.png``, see
+:mod:`iplanner_torch.eval.timeline`) in the run folder.
 """
 
 from __future__ import annotations
@@ -551,6 +552,7 @@ def _app(cfg: DictConfig) -> None:
         )
     variants = sorted({v for p in planners if (v := PLANNER_KINDS[p]) is not None})
     experiment = build_experiment(cfg, {})
+    timeline_plots = cfg_scalar(cfg.run, "timeline_plots", bool)  # checked before any episode
     n = len(experiment.scenarios) * len(experiment.planners) * len(experiment.seeds)
     n *= max(1, len(experiment.speeds)) * max(1, len(experiment.noises))
     print(f"experiment {experiment.name!r}: {n} episode(s)", flush=True)
@@ -579,12 +581,53 @@ def _app(cfg: DictConfig) -> None:
     print_table(table)
     print()
     mcaps = sorted((out_dir / "episodes").glob("*.mcap"))
+    timelines = (
+        write_timelines(mcaps, progress=cfg_scalar(cfg, "progress", bool))
+        if timeline_plots
+        else []
+    )
     print(f"results: {out_dir / 'results.md'} and {out_dir / 'results.csv'}")
     pngs = [p for p in written if str(p).endswith(".png")]
     print(f"plots:   {', '.join(str(p) for p in pngs) if pngs else '(none)'}")
     print(f"logs:    {len(mcaps)} MCAP episode log(s) in {out_dir / 'episodes'}")
     print("         read one with iplanner_torch.recording.read_episode, or open it in Foxglove")
+    if timelines:
+        print(
+            f"         and {len(timelines)} timeline plot(s) beside them "
+            "(<episode>.png: distance, collision bound, action probabilities, waits)"
+        )
     print(f"done in {time.perf_counter() - t0:.0f} s")
+
+
+def write_timelines(logs: list[Path], progress: bool = True) -> list[Path]:
+    """Draw the timeline of each episode log beside it (``<log stem>.png``).
+
+    A log that cannot be drawn (cut short before its first messages, say) is named in a
+    warning and left out; the others are drawn.
+
+    Returns:
+        The written PNG paths.
+    """
+    import warnings
+
+    from tqdm.auto import tqdm
+
+    from iplanner_torch.errors import DataError, DataWarning
+    from iplanner_torch.eval.timeline import plot_episode_timeline, timeline_path
+
+    written, failed = [], []
+    for log in tqdm(logs, desc="timeline plots", disable=not progress or len(logs) < 2):
+        try:
+            written.append(plot_episode_timeline(log, timeline_path(log)))
+        except DataError as exc:
+            failed.append(f"{log.name} ({exc})")
+    if failed:
+        warnings.warn(
+            f"no timeline plot for {len(failed)} log(s): {'; '.join(failed)}",
+            DataWarning,
+            stacklevel=2,
+        )
+    return written
 
 
 def dump_config_safe(cfg: DictConfig) -> str:

@@ -737,6 +737,9 @@ def test_the_planner_group_option_narrows_the_run_to_that_planner() -> None:
     [
         ("experiment", ["run.train_if_missing=no"],
          "error: ConfigError: run.train_if_missing: expected bool, got 'no'"),
+        # read after the episodes: checked before the first
+        ("experiment", ["run.planners=[itomp]", "run.timeline_plots=yes"],
+         "error: ConfigError: run.timeline_plots: expected bool, got 'yes'"),
         ("data", ["info", "data.path=nowhere", "+data.fps=0"],
          "error: ConfigError: data.fps: expected a frame rate > 0 [Hz], got 0"),
         ("data", ["info", "data.path=nowhere", "+data.fps=abc"],
@@ -777,6 +780,7 @@ def test_bad_values_get_one_line_before_any_work(
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(line), res.stderr
     assert not (tmp_path / "ck").exists() and not (tmp_path / "datasets").exists()
+    assert not (tmp_path / "run" / "episodes").exists()  # no episode ran
 
 
 def test_window_settings_of_the_wrong_kind_are_named(tmp_path: Path) -> None:

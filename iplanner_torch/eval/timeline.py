@@ -1,0 +1,421 @@
+"""One episode over time, from its log: how close the robot came to the person, how near the
+planner's collision bound came to its limit, what the predictor believed the person was doing,
+and how fast the arm moved, with the waits and task events marked.
+
+:func:`episode_timeline` reads the series out of an :class:`~iplanner_torch.recording.Episode`
+(plain numpy arrays, for your own plots); :func:`plot_episode_timeline` draws them as one
+figure of four panels sharing the time axis. ``iplanner-experiment`` writes one such figure
+beside each episode log (``episodes/<episode>.png``), and ``scripts/plot_episode.py`` draws
+them for logs already written.
+
+Sources (channels of the log):
+
+- closest distance: ``/scene`` (the robot's and the person's spheres, a few times a second),
+  the least ``|c_r - c_h| - r_r - r_h`` over all sphere pairs: the sphere-model distance of
+  ``eval/min_distance``, sampled at the scene channel's rate, so its least value is at or above
+  that metric (measured every simulation sample);
+- collision bound: ``/planner/plan`` and ``/planner/bound`` (each plan's largest per-waypoint
+  bound, and ``1 - confidence``, the most it may be);
+- action probabilities: ``/prediction/forecast`` (absent for ``itomp``, which has no
+  predictor), with the person's real reaches from the ``/task/events``
+  ``human_take_started`` .. ``human_took`` of each block;
+- arm speed: ``/robot/joint_state`` (the norm of the joint velocities).
+
+A log cut short (``episode.complete`` False) is drawn as far as it goes, and says so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from matplotlib.ticker import LogFormatter
+
+from iplanner_torch.errors import DataError
+from iplanner_torch.recording.reader import Episode, read_episode
+
+__all__ = ["Timeline", "episode_timeline", "plot_episode_timeline", "timeline_path"]
+
+#: colours of the actions (red is kept for the waits)
+ACTION_COLOURS = ("C0", "C1", "C2", "C4", "C5", "C6", "C7", "C8", "C9")
+
+#: robot task events drawn as vertical lines, with their line style
+ROBOT_EVENTS: dict[str, str] = {"picked": ":", "delivered": "--"}
+
+
+@dataclass
+class Timeline:
+    """The series of one episode (all times in seconds of simulation time).
+
+    Attributes:
+        scene_t: (T_s,) times of the ``/scene`` messages.
+        gap_m: (T_s,) closest surface distance between the robot's and the person's spheres
+            [m] (< 0: the sphere models overlap; NaN: no finite sphere on a side).
+        plan_t: (T_p,) times of the plans.
+        max_bound: (T_p,) each plan's largest per-waypoint collision bound (NaN: none logged).
+        limit: (T_p,) ``1 - confidence`` of each plan's bound (NaN: none logged).
+        feasible: (T_p,) whether each plan was feasible (met the bound, the static clearance
+            and the velocity limits; see ``PlanResult.feasible``).
+        waits: ``(start, end)`` of each wait the planner chose [s].
+        forecast_t: (T_f,) times of the forecasts (empty for ``itomp``).
+        weights: (T_f, A) the forecast action probabilities.
+        action_names: (A,) their names.
+        reaches: ``(start, end, action name)`` of each of the person's reaches for a block
+            (``end`` NaN: not finished when the log ends).
+        robot_events: ``(t, kind, block)`` of the robot's pick and delivery events.
+        robot_t: (T_r,) times of the robot joint states.
+        speed: (T_r,) the norm of the joint velocities [rad/s].
+        end_t: the last time in the log [s].
+        title: planner, scenario, speed and seed, as the metadata says.
+        complete: whether the log holds every record (``Episode.complete``).
+        notes: what is missing, in words (e.g. "no forecasts: itomp has no predictor").
+    """
+
+    scene_t: np.ndarray
+    gap_m: np.ndarray
+    plan_t: np.ndarray
+    max_bound: np.ndarray
+    limit: np.ndarray
+    feasible: np.ndarray
+    waits: list[tuple[float, float]]
+    forecast_t: np.ndarray
+    weights: np.ndarray
+    action_names: tuple[str, ...]
+    reaches: list[tuple[float, float, str]]
+    robot_events: list[tuple[float, str, int]]
+    robot_t: np.ndarray
+    speed: np.ndarray
+    end_t: float
+    title: str
+    complete: bool = True
+    notes: list[str] = field(default_factory=list)
+
+
+def _frame(episode: Episode, topic: str) -> pd.DataFrame:
+    df = episode.frames.get(topic)
+    return df if df is not None else pd.DataFrame({"t": []})
+
+
+def closest_gaps(robot: np.ndarray, human: np.ndarray) -> np.ndarray:
+    """The closest surface distance between two sets of spheres, frame by frame.
+
+    Args:
+        robot: (T, S_r, 4) sphere centres and radii [m] (rows with NaN are left out).
+        human: (T, S_h, 4) the same for the person.
+
+    Returns:
+        (T,) ``min |c_r - c_h| - r_r - r_h`` over the pairs of finite spheres [m]; NaN in a
+        frame with no finite sphere on one side.
+
+    Raises:
+        DataError: when the arrays are not (T, S, 4) with the same T.
+    """
+    robot = np.asarray(robot, dtype=np.float64)
+    human = np.asarray(human, dtype=np.float64)
+    if robot.ndim != 3 or human.ndim != 3 or robot.shape[-1] != 4 or human.shape[-1] != 4:
+        raise DataError(
+            f"expected spheres (T, S, 4), got robot {robot.shape} and human {human.shape}"
+        )
+    if robot.shape[0] != human.shape[0]:
+        raise DataError(
+            f"expected as many robot as human frames, got {robot.shape[0]} and {human.shape[0]}"
+        )
+    d = np.linalg.norm(robot[:, :, None, :3] - human[:, None, :, :3], axis=-1)
+    gap = d - robot[:, :, None, 3] - human[:, None, :, 3]  # (T, S_r, S_h), NaN where any NaN
+    out = np.full(gap.shape[0], np.nan)
+    flat = gap.reshape(gap.shape[0], -1)
+    has = np.isfinite(flat).any(axis=1)
+    out[has] = np.nanmin(flat[has], axis=1)
+    return out
+
+
+def _stack(values: pd.Series, width: int) -> np.ndarray:
+    rows = [np.asarray(v, dtype=np.float64).reshape(-1) for v in values]
+    out = np.full((len(rows), width), np.nan)
+    for i, r in enumerate(rows):
+        out[i, : min(width, r.size)] = r[:width]
+    return out
+
+
+def episode_timeline(episode: Episode | str | Path) -> Timeline:
+    """The series to draw of one episode.
+
+    Args:
+        episode: an episode read with :func:`~iplanner_torch.recording.read_episode`, or the
+            path of its ``.mcap`` log.
+
+    Returns:
+        The :class:`Timeline`; a channel with no messages gives empty arrays (and a note).
+
+    Raises:
+        DataError: when the path is not a readable episode log (see ``read_episode``), the
+            file is another program's MCAP file, or it holds nothing to draw (no robot, scene,
+            plan or forecast message: a log cut before its first complete chunk).
+    """
+    if not isinstance(episode, Episode):
+        episode = read_episode(episode)
+    if episode.foreign:
+        raise DataError(f"{episode.path}: not an episode log (another program's MCAP file)")
+    notes: list[str] = []
+
+    scene = _frame(episode, "/scene")
+    scene_t = scene["t"].to_numpy(dtype=np.float64)
+    if len(scene):
+        _, robot, human = episode.scene_spheres()
+        gap = closest_gaps(robot.numpy(), human.numpy())
+    else:
+        gap = np.zeros(0)
+        notes.append("no /scene messages: no distances")
+
+    plans = _frame(episode, "/planner/plan")
+    plan_t = plans["t"].to_numpy(dtype=np.float64)
+    feasible = plans["feasible"].to_numpy(dtype=bool) if len(plans) else np.zeros(0, dtype=bool)
+    waits = []
+    if len(plans):
+        wait_s = plans["wait_s"].to_numpy(dtype=np.float64)
+        waits = [(float(t), float(t + w)) for t, w in zip(plan_t, wait_s) if w > 0]
+    bounds = _frame(episode, "/planner/bound")
+    by_t = {}
+    for row in bounds.itertuples(index=False):
+        b = np.asarray(row.bound, dtype=np.float64)
+        finite = b[np.isfinite(b)]
+        by_t[float(row.t)] = (
+            float(finite.max()) if finite.size else np.nan,
+            1.0 - float(row.confidence),
+        )
+    max_bound = np.array([by_t.get(float(t), (np.nan, np.nan))[0] for t in plan_t])
+    limit = np.array([by_t.get(float(t), (np.nan, np.nan))[1] for t in plan_t])
+
+    fc = _frame(episode, "/prediction/forecast")
+    if len(fc):
+        action_names = tuple(str(a) for a in fc["action_names"].iloc[0])
+        weights = _stack(fc["weights"], len(action_names))
+        forecast_t = fc["t"].to_numpy(dtype=np.float64)
+    else:
+        action_names, weights, forecast_t = (), np.zeros((0, 0)), np.zeros(0)
+
+    reaches: list[tuple[float, float, str]] = []
+    robot_events: list[tuple[float, str, int]] = []
+    started: dict[int, float] = {}
+    for ev in episode.events():
+        kind, t = str(ev.get("kind")), float(ev.get("t", np.nan))
+        detail = ev.get("detail") if isinstance(ev.get("detail"), dict) else {}
+        block = int(detail.get("block", -1)) if isinstance(detail, dict) else -1
+        if kind == "human_take_started":
+            started[block] = t
+        elif kind == "human_took" and block in started:
+            reaches.append((started.pop(block), t, f"take_{block}"))
+        elif kind in ROBOT_EVENTS:
+            robot_events.append((t, kind, block))
+    reaches += [(s, np.nan, f"take_{b}") for b, s in started.items()]
+
+    joints = _frame(episode, "/robot/joint_state")
+    robot_t = joints["t"].to_numpy(dtype=np.float64)
+    if len(joints):
+        _, qd = episode.robot_qd()
+        speed = np.linalg.norm(qd.numpy(), axis=-1)
+    else:
+        speed = np.zeros(0)
+        notes.append("no /robot/joint_state messages: no arm speed")
+
+    ends = [a[-1] for a in (scene_t, plan_t, forecast_t, robot_t) if a.size]
+    if not ends:
+        raise DataError(
+            f"{episode.path}: no robot, scene, plan or forecast messages to draw"
+            + ("" if episode.complete else " (the log was cut before its first complete chunk)")
+        )
+    planner = str(episode.metadata.get("planner", ""))
+    if not len(fc):
+        notes.append(
+            "no forecasts: itomp has no predictor" if planner == "itomp" else "no forecasts logged"
+        )
+    end_t = float(max(ends))
+    meta = episode.metadata
+    title = (
+        " · ".join(
+            str(v)
+            for v in (
+                meta.get("planner"),
+                meta.get("scenario"),
+                meta.get("speed"),
+                f"seed {meta['seed']}" if "seed" in meta else None,
+            )
+            if v is not None and v == v
+        )
+        or Path(episode.path).stem
+    )
+    return Timeline(
+        scene_t=scene_t,
+        gap_m=gap,
+        plan_t=plan_t,
+        max_bound=max_bound,
+        limit=limit,
+        feasible=feasible,
+        waits=waits,
+        forecast_t=forecast_t,
+        weights=weights,
+        action_names=action_names,
+        reaches=reaches,
+        robot_events=robot_events,
+        robot_t=robot_t,
+        speed=speed,
+        end_t=end_t,
+        title=title,
+        complete=bool(episode.complete),
+        notes=notes,
+    )
+
+
+def timeline_path(log: str | Path) -> Path:
+    """Where the timeline figure of an episode log goes: beside it, ``<log stem>.png``."""
+    return Path(log).with_suffix(".png")
+
+
+def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: str | Path) -> Path:
+    """Draw one episode as four panels sharing the time axis.
+
+    1. closest distance between the robot's and the person's spheres [cm];
+    2. each plan's largest collision bound against ``1 - confidence`` (log scale, values below
+       1e-12 drawn at 1e-12; plans that were not feasible, cut short by a wait or evasive,
+       as crosses: the bound, the static clearance or the velocity limits stopped them);
+    3. the forecast action probabilities, with the person's real reaches shaded in the colour
+       of their action;
+    4. the arm's joint speed [rad/s].
+
+    The planner's waits are shaded red in every panel and the robot's picks and deliveries
+    are vertical lines.
+
+    Args:
+        episode: an :class:`~iplanner_torch.recording.Episode`, the path of its log, or a
+            :class:`Timeline` already made.
+        out_path: the PNG to write (its folder is created).
+
+    Returns:
+        ``out_path`` as a Path.
+
+    Raises:
+        DataError: see :func:`episode_timeline`.
+    """
+    tl = episode if isinstance(episode, Timeline) else episode_timeline(episode)
+    fig = Figure(figsize=(9.0, 8.0))
+    axes = fig.subplots(4, 1, sharex=True, height_ratios=[1.2, 1.0, 1.2, 0.8])
+    dist, bound, act, speed = axes
+    end = max(tl.end_t, 1e-3)
+    for ax in axes:
+        for i, (s, e) in enumerate(tl.waits):
+            ax.axvspan(
+                s,
+                e,
+                color="tab:red",
+                alpha=0.15,
+                lw=0,
+                label="wait" if i == 0 and ax is dist else None,
+            )
+        for t, kind, _ in tl.robot_events:
+            ax.axvline(t, color="0.55", lw=0.8, ls=ROBOT_EVENTS[kind])
+        ax.grid(alpha=0.3)
+
+    # 1. distance
+    if tl.gap_m.size:
+        dist.plot(tl.scene_t, 100.0 * tl.gap_m, color="k", lw=1.3, label="closest distance")
+        dist.axhline(0.0, color="tab:red", lw=1.0)
+        if np.isfinite(tl.gap_m).any():
+            i = int(np.nanargmin(tl.gap_m))
+            dist.plot(
+                tl.scene_t[i],
+                100.0 * tl.gap_m[i],
+                "o",
+                color="tab:red",
+                ms=5,
+                label=f"least {100.0 * tl.gap_m[i]:.1f} cm at {tl.scene_t[i]:.1f} s "
+                "(scene samples)",
+            )
+    else:
+        _empty(dist, "no scene messages")
+    dist.set_ylabel("robot-person\ndistance [cm]")
+    for s, e, _ in tl.reaches:
+        dist.axvspan(s, e if e == e else end, color="tab:blue", alpha=0.08, lw=0)
+    handles, labels = dist.get_legend_handles_labels()
+    if handles:
+        dist.legend(fontsize="x-small", loc="best")
+
+    # 2. collision bound
+    if tl.plan_t.size and np.isfinite(tl.max_bound).any():
+        floor = 1e-12
+        b = np.clip(tl.max_bound, floor, None)
+        ok = tl.feasible & np.isfinite(b)
+        bound.semilogy(tl.plan_t[ok], b[ok], "o", ms=3, color="tab:green", label="plan")
+        bad = ~tl.feasible & np.isfinite(b)
+        if bad.any():
+            bound.semilogy(
+                tl.plan_t[bad],
+                b[bad],
+                "x",
+                ms=5,
+                color="tab:red",
+                label="plan cut short (wait or evasion)",
+            )
+        if np.isfinite(tl.limit).any():
+            bound.step(
+                tl.plan_t, tl.limit, where="post", color="k", lw=1.0, label="limit 1 - confidence"
+            )
+        bound.legend(fontsize="x-small", loc="lower right")
+    else:
+        _empty(bound, "no collision bounds logged")
+    bound.set_ylabel("collision bound\n(floor 1e-12)")
+    # plain "1e-05" labels: the default ones are mathtext, which needs fonts a stripped
+    # matplotlib may lack (it then prints a page of findfont warnings)
+    bound.yaxis.set_major_formatter(LogFormatter())
+
+    # 3. action probabilities
+    if tl.forecast_t.size:
+        for j, name in enumerate(tl.action_names):
+            colour = ACTION_COLOURS[j % len(ACTION_COLOURS)]
+            act.plot(tl.forecast_t, tl.weights[:, j], color=colour, lw=1.2, label=name)
+            for s, e, real in tl.reaches:
+                if real == name:
+                    act.axvspan(s, e if e == e else end, color=colour, alpha=0.15, lw=0)
+        act.set_ylim(-0.03, 1.03)
+        act.legend(fontsize="x-small", loc="best", ncol=min(6, len(tl.action_names)))
+    else:
+        _empty(act, next((n for n in tl.notes if n.startswith("no forecasts")), "no forecasts"))
+        for s, e, _ in tl.reaches:
+            act.axvspan(s, e if e == e else end, color="tab:blue", alpha=0.08, lw=0)
+    act.set_ylabel("action\nprobability")
+
+    # 4. arm speed
+    if tl.speed.size:
+        speed.plot(tl.robot_t, tl.speed, color="tab:purple", lw=1.0)
+    else:
+        _empty(speed, "no joint states")
+    speed.set_ylabel("arm speed\n[rad/s]")
+    speed.set_xlabel(
+        "time [s]   (shaded: red waits, the person's reaches; lines: "
+        "robot picks ··· and deliveries - -)",
+        fontsize="small",
+    )
+    speed.set_xlim(0.0, end)
+
+    title = tl.title + ("" if tl.complete else "  (log cut short: drawn as far as it goes)")
+    fig.suptitle(title, fontsize="medium")
+    fig.tight_layout()
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    return out
+
+
+def _empty(ax, text: str) -> None:
+    ax.text(
+        0.5,
+        0.5,
+        text,
+        transform=ax.transAxes,
+        ha="center",
+        va="center",
+        color="0.4",
+        fontsize="small",
+    )

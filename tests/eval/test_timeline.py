@@ -1,0 +1,222 @@
+"""Episode timelines: the series read out of a log against the values written into it, the
+sphere distances against a brute-force loop, the figure, and the script for logs on disk."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+import warnings
+from pathlib import Path
+
+import matplotlib.image
+import numpy as np
+import pytest
+from foreign_mcap import write_foreign_mcap
+
+from iplanner_torch.errors import DataError
+from iplanner_torch.eval.timeline import (
+    closest_gaps,
+    episode_timeline,
+    plot_episode_timeline,
+    timeline_path,
+)
+from iplanner_torch.recording import EpisodeWriter
+
+SCRIPTS = Path(__file__).resolve().parents[2] / "scripts"
+ACTIONS = ["idle", "take_0", "take_1"]
+
+
+def _brute_gap(robot: np.ndarray, human: np.ndarray) -> float:
+    best = math.inf
+    for r in robot:
+        for h in human:
+            if not (np.isfinite(r).all() and np.isfinite(h).all()):
+                continue
+            d = math.sqrt(sum((float(r[i]) - float(h[i])) ** 2 for i in range(3)))
+            best = min(best, d - float(r[3]) - float(h[3]))
+    return best if best < math.inf else math.nan
+
+
+def test_closest_gaps_match_a_loop_over_all_pairs() -> None:
+    rng = np.random.default_rng(3)
+    robot = np.concatenate([rng.normal(size=(6, 5, 3)), rng.uniform(0.01, 0.3, (6, 5, 1))], -1)
+    human = np.concatenate([rng.normal(size=(6, 4, 3)), rng.uniform(0.01, 0.3, (6, 4, 1))], -1)
+    robot[1, 2] = np.nan  # a sphere dropped in one frame
+    human[4, :] = np.nan  # no person sphere at all in another
+    got = closest_gaps(robot, human)
+    want = [_brute_gap(robot[t], human[t]) for t in range(6)]
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+    assert np.isnan(got[4]) and np.isfinite(got[1])
+    # overlapping spheres give a negative gap
+    two = np.array([[[0.0, 0.0, 0.0, 0.2]]])
+    assert closest_gaps(two, two + np.array([0.1, 0.0, 0.0, 0.0]))[0] == pytest.approx(-0.3)
+    with pytest.raises(DataError, match=r"\(T, S, 4\)"):
+        closest_gaps(np.zeros((2, 3, 3)), np.zeros((2, 3, 4)))
+    with pytest.raises(DataError, match="as many robot as human frames"):
+        closest_gaps(np.zeros((2, 3, 4)), np.zeros((3, 3, 4)))
+
+
+def _write(path: Path, planner: str = "iplanner_ni", forecasts: bool = True) -> dict:
+    """A short log with known values; returns them."""
+    meta = {"scenario": "s1", "planner": planner, "speed": "medium", "seed": 4}
+    t_robot = np.round(np.arange(0.0, 3.0 + 1e-9, 0.1), 10)
+    qd = np.stack([np.sin(t_robot), np.cos(t_robot), 0.5 * t_robot], 1)  # (T, 3)
+    plans = [  # t, feasible, wait_s, bound per waypoint, confidence
+        (0.0, True, 0.0, [1e-4, 3e-3, 0.0], 0.95),
+        (0.5, False, 0.4, [0.2, 0.01, np.nan], 0.95),
+        (1.0, True, 0.0, [1e-30, 2e-7, 1e-8], 0.99),
+    ]
+    events = [
+        (0.2, "fetch_started", {"block": 0}),
+        (0.8, "picked", {"block": 0}),
+        (1.1, "human_take_started", {"block": 1}),
+        (1.6, "delivered", {"block": 0}),
+        (2.2, "human_took", {"block": 1}),
+        (2.5, "human_take_started", {"block": 0}),  # not finished when the log ends
+    ]
+    weights = [[1.0, 0.0, 0.0], [0.2, 0.1, 0.7], [0.0, 0.9, 0.1]]
+    with EpisodeWriter(path, metadata=meta) as log:
+        for i, t in enumerate(t_robot):
+            log.robot_state(float(t), np.zeros(3), qd[i], ["a", "b", "c"])
+            if i % 5 == 0:
+                robot = np.array([[0.0, 0.0, 0.1 * t, 0.05], [0.3, 0.0, 0.0, 0.05]])
+                human = np.array([[0.5, 0.0, 0.0, 0.1], [0.0, 0.4, 0.3 * t, 0.1]])
+                log.scene(float(t), robot, human)
+        for t, feasible, wait_s, bound, conf in plans:
+            times = t + np.array([0.0, 0.5, 1.0])
+            log.plan(t, times, np.zeros((3, 3)), feasible, wait_s, 10.0)
+            log.collision_bound(t, times, np.array(bound), conf)
+        if forecasts:
+            for k, w in enumerate(weights):
+                mean = np.zeros((3, 2, 2, 3))
+                log.forecast(0.5 * k, np.array(w), mean, np.ones_like(mean) * 1e-3, ACTIONS, 0.1)
+        for t, kind, detail in events:
+            log.task_event(t, kind, detail)
+    return {"t_robot": t_robot, "qd": qd, "plans": plans, "weights": weights, "meta": meta}
+
+
+def test_the_timeline_holds_what_the_log_was_given(tmp_path: Path) -> None:
+    path = tmp_path / "ep.mcap"
+    given = _write(path)
+    tl = episode_timeline(path)
+    np.testing.assert_allclose(tl.robot_t, given["t_robot"])
+    np.testing.assert_allclose(tl.speed, np.linalg.norm(given["qd"], axis=1), rtol=1e-12)
+    np.testing.assert_allclose(tl.plan_t, [0.0, 0.5, 1.0])
+    np.testing.assert_allclose(tl.max_bound, [3e-3, 0.2, 2e-7])  # NaN waypoint left out
+    np.testing.assert_allclose(tl.limit, [0.05, 0.05, 0.01], rtol=1e-12)
+    assert tl.feasible.tolist() == [True, False, True]
+    assert tl.waits == [(0.5, pytest.approx(0.9))]
+    assert tl.action_names == tuple(ACTIONS)
+    np.testing.assert_allclose(tl.weights, given["weights"])
+    np.testing.assert_allclose(tl.forecast_t, [0.0, 0.5, 1.0])
+    assert tl.reaches[0] == (1.1, 2.2, "take_1")
+    assert tl.reaches[1][0] == 2.5 and math.isnan(tl.reaches[1][1])
+    assert tl.robot_events == [(0.8, "picked", 0), (1.6, "delivered", 0)]
+    # the scene's sphere gap, computed here by hand for t = 0 (robot sphere 2 at x 0.3 and
+    # the person's sphere 1 at x 0.5: 0.2 - 0.05 - 0.1) and t = 0.5
+    assert tl.gap_m[0] == pytest.approx(0.05)
+    assert tl.gap_m[1] == pytest.approx(
+        min(
+            0.2 - 0.15,
+            math.dist((0.0, 0.0, 0.05), (0.0, 0.4, 0.15)) - 0.15,
+        )
+    )
+    assert tl.end_t == pytest.approx(3.0)
+    assert tl.title == "iplanner_ni · s1 · medium · seed 4"
+    assert tl.complete and not tl.notes
+
+
+def test_the_figure_is_drawn_and_itomp_says_why_it_has_no_forecasts(tmp_path: Path) -> None:
+    path = tmp_path / "ep.mcap"
+    _write(path, planner="itomp", forecasts=False)
+    tl = episode_timeline(path)
+    assert tl.forecast_t.size == 0 and tl.notes == ["no forecasts: itomp has no predictor"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = plot_episode_timeline(tl, tmp_path / "plots" / "ep.png")
+    img = matplotlib.image.imread(out)
+    assert img.shape[0] >= 700 and img.shape[1] >= 800 and img[..., :3].std() > 0.05
+    assert timeline_path(path) == tmp_path / "ep.png"
+
+
+def test_logs_with_nothing_to_draw_are_refused(tmp_path: Path) -> None:
+    full = tmp_path / "ep.mcap"
+    _write(full)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(full.read_bytes()[:200])  # before the first chunk closes
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(DataError, match="nothing|no robot, scene, plan or forecast"):
+            episode_timeline(cut)
+    foreign = write_foreign_mcap(tmp_path / "other.mcap")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(DataError, match="not an episode log"):
+            plot_episode_timeline(foreign, tmp_path / "other.png")
+    assert not (tmp_path / "other.png").exists()
+
+
+def test_a_log_cut_short_is_drawn_as_far_as_it_goes(tmp_path: Path) -> None:
+    full = tmp_path / "ep.mcap"
+    with EpisodeWriter(full, metadata={"planner": "iplanner_ni"}, chunk_size=512) as log:
+        for i in range(200):
+            log.robot_state(0.04 * i, np.zeros(2), np.ones(2) * i, ["a", "b"])
+    data = full.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 4])  # within the data section
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tl = episode_timeline(cut)
+    assert not tl.complete and 0 < tl.robot_t.size < 200
+    np.testing.assert_allclose(tl.speed, np.sqrt(2) * np.arange(tl.robot_t.size), rtol=1e-12)
+    plot_episode_timeline(tl, tmp_path / "cut.png")
+    assert (tmp_path / "cut.png").stat().st_size > 0
+
+
+def _script():
+    sys.path.insert(0, str(SCRIPTS))
+    try:
+        spec = importlib.util.spec_from_file_location("plot_episode", SCRIPTS / "plot_episode.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)  # type: ignore[union-attr]
+        return mod
+    finally:
+        sys.path.remove(str(SCRIPTS))
+
+
+def test_the_script_draws_beside_the_logs_and_keeps_what_exists(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    run = tmp_path / "run" / "episodes"
+    run.mkdir(parents=True)
+    _write(run / "a.mcap")
+    _write(run / "b.mcap", planner="itomp", forecasts=False)
+    (run / "notes.mcap").write_text("version https://git-lfs.github.com/spec/v1\n")
+    main = _script().main
+    monkeypatch.setattr(sys, "argv", ["plot_episode.py", str(tmp_path / "run")])
+    main()
+    out = capsys.readouterr()
+    assert (run / "a.png").is_file() and (run / "b.png").is_file()
+    assert "left out 1" in out.err and "notes.mcap" in out.err
+    before = (run / "a.png").read_bytes()
+    with pytest.raises(SystemExit) as exc:
+        main()
+    assert exc.value.code == 2 and "--force" in capsys.readouterr().err
+    assert (run / "a.png").read_bytes() == before
+    monkeypatch.setattr(sys, "argv", ["plot_episode.py", str(run / "notes.mcap")])
+    with pytest.raises(SystemExit) as exc:
+        main()
+    assert exc.value.code == 2 and "no timeline plot drawn" in capsys.readouterr().err
+
+
+@pytest.mark.filterwarnings("ignore:.*not an iplanner episode log")
+def test_the_experiment_draws_each_log_and_names_those_it_cannot(tmp_path: Path) -> None:
+    from iplanner_torch.cli.experiment import write_timelines
+    from iplanner_torch.errors import DataWarning
+
+    _write(tmp_path / "a.mcap")
+    write_foreign_mcap(tmp_path / "b.mcap")
+    with pytest.warns(DataWarning, match=r"no timeline plot for 1 log\(s\): b.mcap"):
+        written = write_timelines(sorted(tmp_path.glob("*.mcap")), progress=False)
+    assert written == [tmp_path / "a.png"] and not (tmp_path / "b.png").exists()
