@@ -165,7 +165,9 @@ class EpisodeCfg:
     mhd_min_motion: float = 0.05
     # sampling rate of the metric trajectories (smoothness, distance) [Hz]
     metrics_hz: float = 25.0
-    # rate of robot / human messages in the MCAP log [Hz]
+    # rate of the robot state and true human joints in the MCAP log [Hz], as a whole number
+    # of control steps (15 Hz at 0.01 s: every 7th step, 14.3 Hz); the tracked joints are
+    # logged frame by frame at the tracker's own times
     log_hz: float = 15.0
     # rate of the log's 3D scene (/scene: robot and human spheres, the latest forecast's
     # joint ellipsoids at SCENE_HORIZONS_S) for Foxglove's 3D panel [Hz]; 0: none
@@ -847,6 +849,7 @@ def _run_episode(
     next_cycle = 0.0
     n_sub_metrics = max(1, round(1.0 / (cfg.metrics_hz * env.control_dt)))
     n_sub_log = max(1, round(1.0 / (cfg.log_hz * env.control_dt)))
+    logged_frames = 0  # tracker frames written to /human/joints_tracked
     n_sub_scene = max(1, round(1.0 / (cfg.scene_hz * env.control_dt))) if cfg.scene_hz else 0
     scene_map = HumanSphereMap.from_segments(JOINT_NAMES) if n_sub_scene else None
     drawn: list[tuple[np.ndarray, np.ndarray]] = []  # the latest forecast's ellipsoids
@@ -974,7 +977,13 @@ def _run_episode(
                 h_hist.append(true_h[-1])
             if writer is not None and step % n_sub_log == 0:
                 writer.robot_state(t, env.robot_q(), env.robot_qd(), robot.joint_names)
-                writer.human_joints(t, true_h[-1], tracker.window()[-1], JOINT_NAMES)
+                writer.human_joints(t, true_h[-1], None, JOINT_NAMES)
+            if writer is not None and tracker.num_frames != logged_frames:
+                # each tracker frame once, at the time it was taken (stamping the newest
+                # frame with the log grid's time made it look up to a frame period late)
+                logged_frames = tracker.num_frames
+                times = tracker.times()
+                writer.human_joints(float(times[-1]), None, tracker.window()[-1], JOINT_NAMES)
             if writer is not None and scene_map is not None and step % n_sub_scene == 0:
                 _log_scene(writer, t, robot, env.robot_q(), scene_map, true_h[-1], drawn)
             goal_changed = False

@@ -4,6 +4,10 @@ JSON has no NaN or infinity. In every message of an episode log a NaN number is 
 ``null`` and an infinity as the string ``"inf"`` or ``"-inf"``; :func:`decode_array` maps them
 back. Finite numbers are written with Python's shortest round-trip ``repr`` of the float64
 value, so float32 and float64 inputs come back bit-identical (as float64).
+
+The price, in the free-form dicts (episode metadata, metrics, event details): a value that
+was itself the string ``"inf"`` or ``"-inf"``, or ``None``, reads back as the float
+infinity or NaN. Store such text under another spelling (``"infinite"``).
 """
 
 from __future__ import annotations

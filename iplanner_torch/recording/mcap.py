@@ -620,6 +620,11 @@ class EpisodeWriter:
         w = _as_tensor("weights", weights, ("A",))
         m = _as_tensor("mean", mean, (w.shape[0], "n_f", "K", 3))
         v = _as_tensor("var", var, m.shape)
+        if 0 in m.shape:  # the reader could not size its arrays: the whole log would be lost
+            raise ShapeError(
+                f"expected a forecast with at least one action, frame and joint, got mean "
+                f"(A, n_f, K, 3) = {tuple(m.shape)}"
+            )
         k = m.shape[2]
         names = joint_names if joint_names is not None else [f"joint_{i}" for i in range(k)]
         topic = "/prediction/forecast"
@@ -704,9 +709,10 @@ class EpisodeWriter:
                 read back as NaN.
         """
         detail = {} if detail is None else self._mapping("detail", detail)
+        encoded = self._encoded("detail", detail)  # before the time is taken as logged
         ns, msg = self._stamped(t)
         msg["kind"] = str(kind)
-        msg["detail"] = encode_value(detail)
+        msg["detail"] = encoded
         self._write("/task/events", ns, msg)
 
     def metrics(self, t: float, metrics: Mapping[str, Any]) -> None:
@@ -717,9 +723,20 @@ class EpisodeWriter:
             metrics: name -> value (numbers, bools, strings; NaN and inf survive).
         """
         metrics = self._mapping("metrics", metrics)
+        encoded = self._encoded("metrics", metrics)
         ns, msg = self._stamped(t)
-        msg["metrics"] = encode_value(metrics)
+        msg["metrics"] = encoded
         self._write("/episode/metrics", ns, msg)
+
+    def _encoded(self, name: str, value: dict[str, Any]) -> Any:
+        """``encode_value(value)``; a DataError naming ``name`` when it holds something JSON
+        cannot carry (a numpy array of strings, an object)."""
+        try:
+            return encode_value(value)
+        except (TypeError, ValueError) as err:
+            raise DataError(
+                f"{self.path}: {name} is not JSON-serialisable: {type(err).__name__}: {err}"
+            ) from err
 
     def scene(
         self,
@@ -746,6 +763,13 @@ class EpisodeWriter:
         """
         rs = _as_tensor("robot_spheres", robot_spheres, ("S_r", 4))
         hs = _as_tensor("human_spheres", human_spheres, ("S_h", 4))
+        for name, spheres in (("robot_spheres", rs), ("human_spheres", hs)):
+            radii = np.asarray(spheres[:, 3])
+            if (radii < 0).any():  # NaN rows are dropped below, not refused
+                raise DataError(
+                    f"{self.path}: expected {name} radii >= 0 [m], got "
+                    f"{radii[radii < 0].tolist()} (rows {np.flatnonzero(radii < 0).tolist()})"
+                )
         prims = self._ellipsoid_primitives(ellipsoids)
         ns = self._log_time(t)
         entities = []
@@ -796,6 +820,10 @@ class EpisodeWriter:
                 raise DataError(
                     f"{self.path}: expected ellipsoid mean and {what} finite, got mean "
                     f"{mean.tolist()} and {what} {second.tolist()}"
+                )
+            if what == "axes" and (second < 0).any():
+                raise DataError(
+                    f"{self.path}: expected ellipsoid semi-axes >= 0 [m], got {second.tolist()}"
                 )
             means.append(mean)
             shapes.append(second)

@@ -278,7 +278,9 @@ _ROW_DECODERS: dict[str, Callable[[dict[str, Any], int], dict[str, Any]]] = {
 
 def _is_read(channel: Channel) -> bool:
     """Whether the messages of ``channel`` are decoded: those of an episode-log topic (which
-    must then be JSON) and JSON messages of any other topic (kept as dicts)."""
+    must then be JSON in an episode log) and JSON messages of any other topic (kept as dicts).
+    In another program's file (no episode metadata record) our topic names are not ours:
+    see :meth:`_Raw.drop_foreign_topics`."""
     return channel.topic in _ROW_DECODERS or channel.message_encoding == "json"
 
 
@@ -463,10 +465,31 @@ class _Raw:
     complete: bool = False
     problem: str = ""
 
+    #: topic -> message encoding of the channels read
+    encodings: dict[str, str] = field(default_factory=dict)
+
     def skip(self, channel: Channel) -> None:
         """Count a message of a channel that is not read."""
         key = f"{channel.topic} (message encoding {channel.message_encoding!r})"
         self.skipped[key] = self.skipped.get(key, 0) + 1
+
+    def keep(self, channel: Channel, log_time: int, data: bytes) -> None:
+        """Keep a message of a channel that is read."""
+        self.messages.append((channel.topic, log_time, data))
+        self.encodings[channel.topic] = channel.message_encoding
+
+    def drop_foreign_topics(self) -> None:
+        """In another program's file, a topic that shares an episode-log name (``/tf`` is
+        common) is that program's: skipped unless JSON (then kept as dicts)."""
+        kept = []
+        for topic, log_time, data in self.messages:
+            encoding = self.encodings.get(topic, "json")
+            if topic in _ROW_DECODERS and encoding != "json":
+                key = f"{topic} (message encoding {encoding!r})"
+                self.skipped[key] = self.skipped.get(key, 0) + 1
+            else:
+                kept.append((topic, log_time, data))
+        self.messages = kept
 
 
 #: bytes of the footer record (opcode, length, summary_start, summary_offset_start, crc)
@@ -504,7 +527,7 @@ def _read_indexed(f: Any) -> _Raw:
     raw = _Raw(complete=True)
     for _, channel, message in reader.iter_messages(log_time_order=False):
         if _is_read(channel):
-            raw.messages.append((channel.topic, message.log_time, message.data))
+            raw.keep(channel, message.log_time, message.data)
         else:
             raw.skip(channel)
     for m in reader.iter_metadata():
@@ -529,7 +552,7 @@ def _read_stream(f: Any, size: int) -> _Raw:
         elif isinstance(record, Message):
             ch = channels.get(record.channel_id)
             if ch is not None and _is_read(ch):
-                raw.messages.append((ch.topic, record.log_time, record.data))
+                raw.keep(ch, record.log_time, record.data)
             elif ch is not None:
                 raw.skip(ch)
         elif isinstance(record, Metadata):
@@ -597,6 +620,11 @@ def read_episode(path: str | Path) -> Episode:
                     raw.problem = f"{first}; then {raw.problem}" if raw.problem else first
     except OSError as err:
         raise DataError(f"{path}: cannot read the episode log: {err}") from err
+    # the episode metadata record is written before any message: a file without it is
+    # another program's, whose topics may share our names (/tf) but not our layouts
+    ours = EPISODE_METADATA_NAME in raw.metadata
+    if not ours:
+        raw.drop_foreign_topics()
     meta_rec = raw.metadata.get(EPISODE_METADATA_NAME, {})
     if "crc32" in meta_rec and meta_rec["crc32"] != str(
         metadata_crc(meta_rec.get("json", ""), meta_rec.get("time_offset_ns", "0"))
@@ -643,7 +671,7 @@ def read_episode(path: str | Path) -> Episode:
     for topic, log_time, data in raw.messages:
         try:
             msg = loads(data)
-            decoder = _ROW_DECODERS.get(topic)
+            decoder = _ROW_DECODERS.get(topic) if ours else None
             if decoder is None:
                 row = {"t": (log_time - offset_ns) * 1e-9, "message": msg}
             else:

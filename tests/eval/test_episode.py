@@ -197,6 +197,37 @@ def test_short_iplanner_episode_writes_mcap(tmp_path: Path) -> None:
     assert "/scene" not in read_episode(quiet).frames
 
 
+def test_tracked_joints_are_logged_frame_by_frame_at_their_own_times(tmp_path: Path) -> None:
+    """Each tracker frame once, stamped with the time it was taken: the k-th at the first
+    control step at or after k / 15 s. They used to be sampled on the robot's log grid (every
+    7th step) and stamped with its time, up to 60 ms after the frame, and 1 in 20 was never
+    logged."""
+    from iplanner_torch.recording.reader import read_episode
+
+    path = tmp_path / "ep.mcap"
+    cfg = _cfg(3.0)
+    cfg = replace(cfg, sim=replace(cfg.sim, tracker_noise=0.0, tracker_dropout=0.0))
+    _fake_episode(tmp_path, cfg, "iplanner_ni", fakes.LinearReplanner(),
+                  predictor=fakes.ConstantPredictor(), path=path)  # fmt: skip
+    ep = read_episode(path)
+    t_k, tracked = ep.human_tracked()
+    k = np.arange(len(t_k))
+    assert len(t_k) == math.floor(3.0 * 15 + 1e-6) + 1  # frames at 0, 1/15, ..., 3 s
+    offset = t_k.numpy() - k / 15.0  # the frame waits for the first 0.01 s step
+    assert offset.min() >= -1e-9 and offset.max() < 0.01 + 1e-9
+    # no noise, no dropout: a frame is the true pose at its own time, wherever the true
+    # joints were logged at that time too
+    t_h, true = ep.human_true()
+    both = [(i, j) for i, ti in enumerate(t_k) for j, tj in enumerate(t_h) if abs(ti - tj) < 1e-9]
+    assert len(both) >= 5
+    for i, j in both:
+        torch.testing.assert_close(tracked[i], true[j], atol=1e-6, rtol=0)
+    # the robot state and the true joints stay on the log grid (every 7th 0.01 s step)
+    t_r, _ = ep.robot_q()
+    np.testing.assert_allclose(np.diff(t_r.numpy()), 0.07, atol=1e-9)
+    torch.testing.assert_close(t_h, t_r)
+
+
 def test_an_episode_too_short_for_smoothness_still_closes_its_log(tmp_path: Path) -> None:
     """0.1 s at 25 Hz gives 2 metric samples: no acceleration, so NaN smoothness and
     jerkiness; the episode's metrics are still written and its log closed."""

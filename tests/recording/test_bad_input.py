@@ -426,3 +426,75 @@ def test_read_episode_of_something_not_a_path_is_a_data_error(path: object) -> N
     """None and 3 raised a raw TypeError from pathlib."""
     with pytest.raises(DataError, match="expected path a file path .* of an .mcap episode log"):
         read_episode(path)  # type: ignore[arg-type]
+
+
+def test_another_programs_tf_channel_is_read_as_theirs(tmp_path: Path) -> None:
+    """``/tf`` is a common topic name (ROS bags, Foxglove's FrameTransforms). In a file with no
+    episode metadata record it is that program's: a protobuf one is skipped with the warning,
+    a JSON one of another layout kept as dicts. Both used to end the read with a DataError
+    ("cannot decode a message on /tf")."""
+    path = tmp_path / "bag.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        proto = w.register_schema("foxglove.FrameTransforms", "protobuf", b"\x0a\x01x")
+        tf = w.register_channel("/tf", "protobuf", proto)
+        js = w.register_schema("foxglove.FrameTransforms", "jsonschema", b"{}")
+        tf_json = w.register_channel("/tf_static", "json", js)
+        scene = w.register_channel("/scene", "json", js)
+        for i in range(2):
+            w.add_message(tf, log_time=i, data=b"\x08\x96\x01", publish_time=i)
+            w.add_message(tf_json, log_time=i, data=b'{"transforms": []}', publish_time=i)
+            w.add_message(scene, log_time=i, data=b'{"transforms": [1]}', publish_time=i)
+        w.finish()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ep = read_episode(path)
+    text = " | ".join(str(w.message) for w in caught)
+    assert "not an iplanner episode log" in text and "/tf (message encoding 'protobuf')" in text
+    assert ep.foreign and set(ep.frames) == {"/tf_static", "/scene"}
+    assert ep.frames["/scene"]["message"].tolist() == [{"transforms": [1]}] * 2
+
+
+def test_an_empty_forecast_is_refused_before_it_makes_the_log_unreadable(tmp_path: Path) -> None:
+    """A forecast with no action, frame or joint was written, and the reader then refused the
+    whole log ("not a multiple of 0")."""
+    path = tmp_path / "f.mcap"
+    with EpisodeWriter(path, metadata={}) as log:
+        log.robot_state(0.0, [0.0, 0.0], [0.0, 0.0], ARM)
+        for a, n_f, k in ((0, 2, 1), (1, 0, 1), (1, 2, 0)):
+            with pytest.raises(ShapeError, match="at least one action, frame and joint"):
+                log.forecast(0.1, np.ones(a) / max(a, 1), np.zeros((a, n_f, k, 3)),
+                             np.ones((a, n_f, k, 3)), ["a"] * a, 0.1)  # fmt: skip
+        log.forecast(0.2, [1.0], np.zeros((1, 2, 1, 3)), np.ones((1, 2, 1, 3)), ["a"], 0.1)
+    ep = read_episode(path)
+    assert ep.forecasts()[1].mean.shape == (1, 1, 2, 1, 3) and len(ep.robot_q()[0]) == 1
+
+
+def test_unencodable_metrics_and_event_details_are_data_errors(tmp_path: Path) -> None:
+    """A numpy array of strings in a metric or event detail escaped as a bare ValueError, and
+    the refused call had already moved the log's last time (where an interruption is put)."""
+    path = tmp_path / "m.mcap"
+    with pytest.raises(RuntimeError, match="stop"):
+        with EpisodeWriter(path, metadata={}) as log:
+            log.task_event(0.5, "picked", {"block": 1})
+            with pytest.raises(DataError, match=r"m.mcap: metrics is not JSON-serialisable"):
+                log.metrics(3.0, {"names": np.array(["a", "b"])})
+            with pytest.raises(DataError, match=r"m.mcap: detail is not JSON-serialisable"):
+                log.task_event(4.0, "picked", {"who": np.array(["a"])})
+            raise RuntimeError("stop")
+    events = read_episode(path).events()
+    assert [(e["t"], e["kind"]) for e in events] == [(0.5, "picked"), (0.5, "interrupted")]
+
+
+def test_negative_sphere_radii_and_semi_axes_are_refused(tmp_path: Path) -> None:
+    with EpisodeWriter(tmp_path / "s.mcap", metadata={}) as log:
+        good = np.array([[0.0, 0.0, 0.0, 0.1]])
+        with pytest.raises(DataError, match=r"robot_spheres radii >= 0 \[m\], got \[-0.1\]"):
+            log.scene(0.0, np.array([[0.0, 0.0, 0.0, 0.1], [1.0, 0.0, 0.0, -0.1]]), good)
+        with pytest.raises(DataError, match=r"human_spheres radii >= 0"):
+            log.scene(0.0, good, -good)
+        with pytest.raises(DataError, match=r"semi-axes >= 0 \[m\], got \[-0.1, 0.2, 0.3\]"):
+            log.scene(0.0, good, good, [(np.zeros(3), np.array([-0.1, 0.2, 0.3]))])
+        nan_row = np.array([[np.nan, 0.0, 0.0, np.nan]])
+        log.scene(0.0, good, nan_row)  # a NaN row is not drawn, as before
