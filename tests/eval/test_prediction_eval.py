@@ -13,7 +13,12 @@ from scipy.stats import chi2
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.windows import WindowCfg, build_windows
 from iplanner_torch.errors import DataWarning, ShapeError
-from iplanner_torch.eval.prediction import evaluate_prediction, modified_hausdorff, window_metrics
+from iplanner_torch.eval.prediction import (
+    evaluate_prediction,
+    modified_hausdorff,
+    short_horizon,
+    window_metrics,
+)
 from iplanner_torch.prediction.forecast import Forecast
 
 JOINTS = ("torso", "left_hand", "right_hand")
@@ -223,12 +228,14 @@ class _HoldPredictor:
         )
 
 
-def _still_demo(fps: float = 15.0, actions: tuple[str, ...] = ("reach_0", "reach_1")):
-    """A person standing still for 20 frames while doing action 0."""
+def _still_demo(
+    fps: float = 15.0, actions: tuple[str, ...] = ("reach_0", "reach_1"), frames: int = 20
+):
+    """A person standing still for ``frames`` frames while doing action 0."""
     pose = np.array([[0.0, 0.0, 1.0], [0.3, 0.2, 1.0], [0.3, -0.2, 1.0]])
     return Demonstration(
-        positions=np.repeat(pose[None], 20, axis=0),
-        labels=np.zeros(20),
+        positions=np.repeat(pose[None], frames, axis=0),
+        labels=np.zeros(frames),
         fps=fps,
         joint_names=JOINTS,
         action_names=actions,
@@ -237,11 +244,27 @@ def _still_demo(fps: float = 15.0, actions: tuple[str, ...] = ("reach_0", "reach
 
 def test_matching_data_evaluates_without_warning() -> None:
     predictor = _HoldPredictor(15.0, ("reach_0", "reach_1"))
+    predictor.n_future = 15  # a 1 s horizon: no warning about a shorter one
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         res = evaluate_prediction(predictor, [_still_demo()])
-    assert res["n_windows"] == 20 - 4 - 3 + 1
+    assert res["n_windows"] == 20 - 4 - 15 + 1
     assert res["class_accuracy"] == 1.0 and res["reg_precision"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_horizon_shorter_than_a_second_is_said_to_shorten_mhd_1s() -> None:
+    """A 30 Hz recording cut with the 15 Hz defaults (n_future 15) forecasts 0.5 s: mhd_1s
+    was then the MHD over 0.5 s under its 1 s name, without a word."""
+    predictor = _HoldPredictor(30.0, ("reach_0", "reach_1"))
+    predictor.n_future = 15
+    match = (r"forecasts 15 frames at 30 Hz, 0\.5 s: mhd_1s, mhd_1s_moving and the 'moving' "
+             r"test cover those 0\.5 s, not 1 s; .* data\.windows\.n_future=30")  # fmt: skip
+    with pytest.warns(DataWarning, match=match):
+        res = evaluate_prediction(predictor, [_still_demo(fps=30.0, frames=40)])
+    assert res["n_windows"] == 40 - 4 - 15 + 1
+    assert short_horizon(predictor) == pytest.approx(0.5)
+    predictor.n_future = 30
+    assert short_horizon(predictor) is None
 
 
 def test_frame_rate_mismatch_warns_and_still_evaluates() -> None:
