@@ -109,8 +109,8 @@ def run_experiment(cfg: ExperimentCfg, out_dir: Path) -> pd.DataFrame:
         out_dir: results folder: ``results.csv`` and ``episodes/*.mcap``.
 
     Returns:
-        One row per episode: planner, scenario, arrangement, task_order, confidence, noise,
-        dropout, speed, seed, then the episode's metrics.
+        One row per episode: planner, robot, scenario, arrangement, task_order, confidence,
+        noise, dropout, speed, seed, then the episode's metrics.
 
     Raises:
         ConfigError: when an I-Planner variant has no predictor checkpoint.
@@ -158,6 +158,7 @@ def run_experiment(cfg: ExperimentCfg, out_dir: Path) -> pd.DataFrame:
                         rows.append(
                             {
                                 "planner": kind,
+                                "robot": cfg.robot.name,
                                 "scenario": scenario.name,
                                 "arrangement": scenario.arrangement,
                                 "task_order": scenario.task_order,

@@ -539,6 +539,14 @@ def incomplete_logs_note(df: pd.DataFrame) -> str:
 #: episode settings a run or sweep may vary; summaries keep their values apart
 SWEPT_SETTINGS = ("speed", "noise", "dropout", "confidence")
 
+#: axis labels of the swept settings, with units
+SETTING_LABELS: dict[str, str] = {
+    "noise": "tracker noise [m]",
+    "dropout": "tracker dropout (share of joint-frames lost)",
+    "confidence": "confidence level",
+    "speed": "human speed",
+}
+
 #: scenario settings that one scenario name may be run with in several ways (an override of
 #: ``scenario.arrangement`` keeps the name); summaries keep their values apart
 SCENARIO_SETTINGS = ("arrangement", "task_order")
@@ -557,11 +565,13 @@ def report_groups(df: pd.DataFrame) -> tuple[str, ...]:
     """Grouping columns for a summary of ``df``: ``scenario``, each of
     :data:`SCENARIO_SETTINGS` that takes more than one value under one scenario name (a
     scenario run in two arrangements or task orders gives two rows; settings that come with
-    the scenario name add no column), each of :data:`SWEPT_SETTINGS` that takes more than one
-    value (so a speed response or a sweep is never averaged over its settings), then
-    ``planner``; only the columns present."""
+    the scenario name add no column), ``robot`` and each of :data:`SWEPT_SETTINGS` that takes
+    more than one value (so results of two robots, a speed response or a sweep are never
+    averaged over their settings), then ``planner``; only the columns present."""
     layout = [c for c in SCENARIO_SETTINGS if c in df.columns and _varies_within_scenario(df, c)]
-    swept = [c for c in SWEPT_SETTINGS if c in df.columns and df[c].nunique(dropna=True) > 1]
+    swept = [
+        c for c in ("robot", *SWEPT_SETTINGS) if c in df.columns and df[c].nunique(dropna=True) > 1
+    ]
     groups = tuple(c for c in ("scenario", *layout, *swept, "planner") if c in df.columns)
     return groups or ("planner",)
 
@@ -855,6 +865,7 @@ def plot_comparison(
     out_dir: str | Path,
     metrics: Sequence[str] = ("smoothness", "jerkiness", "min_distance", "efficiency"),
     group_by: tuple[str, str] = ("scenario", "planner"),
+    pooled: Sequence[str] = (),
 ) -> list[Path]:
     """Grouped bar charts (mean ± std) of each metric: groups on x, one bar per planner.
 
@@ -866,6 +877,8 @@ def plot_comparison(
         out_dir: folder for ``compare_<metric>.png`` (created).
         metrics: metrics to plot; those absent from ``df`` are skipped.
         group_by: ``(x-axis column, bar column)``.
+        pooled: other columns whose values a bar averages over (e.g. the speeds and noises of
+            a sweep charted by confidence); the title says so.
 
     Returns:
         The written PNG paths.
@@ -907,7 +920,8 @@ def plot_comparison(
         ax.set_ylabel(_label(m))
         ax.set_title(
             f"{_label(m).split(' [')[0]} by {x_col} and {bar_col}\n"
-            + spread_note(stats["count"].to_numpy()),
+            + spread_note(stats["count"].to_numpy())
+            + (f"; averaged over {', '.join(pooled)}" if pooled else ""),
             fontsize="medium",
         )
         ax.grid(axis="y", alpha=0.3)
@@ -972,6 +986,7 @@ def plot_sweep(
     *,
     facet_col: str | None = None,
     facet_row: str | None = None,
+    pooled: Sequence[str] = (),
 ) -> Path:
     """Line plot of ``y`` (mean, ± std band) against a swept parameter ``x``, one line per hue.
 
@@ -988,6 +1003,7 @@ def plot_sweep(
         out_path: PNG to write (parent created).
         facet_col: column whose values lay out the panels left to right, or None.
         facet_row: column whose values lay out the panels top to bottom, or None.
+        pooled: other columns whose values a point averages over; the title says so.
 
     Returns:
         ``out_path``.
@@ -1016,7 +1032,7 @@ def plot_sweep(
                 panel = panel[panel[facet_col].map(_hashable) == _hashable(cv)]
             for j, h in enumerate(hues):
                 g = panel[panel[hue] == h]
-                if g.empty:
+                if not g["_y"].notna().any():  # no value (ITOMP has no MHD): no line, no label
                     continue
                 s = g.groupby(x)["_y"].agg(["mean", "std"]).sort_index()
                 xs = s.index.to_numpy(dtype=float)
@@ -1031,11 +1047,17 @@ def plot_sweep(
                 ax.set_title(title, fontsize="medium")
             ax.grid(alpha=0.3)
             if i == len(rows) - 1:
-                ax.set_xlabel(x)
+                ax.set_xlabel(SETTING_LABELS.get(x, x))
             if k == 0:
                 ax.set_ylabel(_label(y))
     axes[0][0].legend(title=hue, fontsize="small")
-    fig.suptitle(f"{name} against {x}" + (f" by {' and '.join(facets)}" if facets else ""))
+    fig.suptitle(
+        f"{name} against {x}"
+        + (f" by {' and '.join(facets)}" if facets else "")
+        + "\nlines: mean over episodes, bands ± 1 std"
+        + (f"; averaged over {', '.join(pooled)}" if pooled else ""),
+        fontsize="medium",
+    )
     fig.tight_layout()
     fig.savefig(out_path, dpi=110)
     return out_path
@@ -1172,14 +1194,19 @@ def write_sweep_report(
     md += paired_md
     written[1].write_text("\n".join(md))
     written += paired_png
+
+    def varies(c: str) -> bool:
+        return c in df.columns and df[c].nunique(dropna=True) > 1
+
     if len(group_by) >= 2:
-        written += plot_comparison(df, out_dir, group_by=(group_by[-2], group_by[-1]))
+        pooled = [c for c in group_by[:-2] if varies(c)]
+        written += plot_comparison(
+            df, out_dir, group_by=(group_by[-2], group_by[-1]), pooled=pooled
+        )
     if sweep is not None:
-        facets = [
-            c
-            for c in group_by[:-1]
-            if c != sweep and c in df.columns and df[c].nunique(dropna=True) > 1
-        ][-2:]
+        others = [c for c in group_by[:-1] if c != sweep and varies(c)]
+        facets = others[-2:]
+        pooled = [c for c in others if c not in facets]
         row, col = ([None, *facets])[-2:] if facets else (None, None)
         panels = df.groupby(facets, dropna=False)[sweep] if facets else [(None, df[sweep])]
         if max(x.nunique() for _, x in panels) < 2:
@@ -1187,6 +1214,8 @@ def write_sweep_report(
             # scenario): no line to draw
             return written
         for m in _default_metrics(df, list(group_by) + [sweep]):
+            if not pd.to_numeric(df[m], errors="coerce").notna().any():
+                continue  # no value to draw (e.g. efficiency when no episode finished)
             written.append(
                 plot_sweep(
                     df,
@@ -1196,6 +1225,7 @@ def write_sweep_report(
                     out_dir / f"sweep_{m}.png",
                     facet_col=col,
                     facet_row=row,
+                    pooled=pooled,
                 )
             )
     return written

@@ -553,7 +553,7 @@ def test_sweep_report_lays_out_the_other_settings_and_skips_flat_sweeps(
     df = _sweep_rows()
     written = write_sweep_report(df, tmp_path / "a", report_groups(df), sweep="noise")
     assert "sweep_smoothness.png" in {p.name for p in written}
-    assert calls and calls[0] == {"facet_col": "confidence", "facet_row": "speed"}
+    assert calls and calls[0] == {"facet_col": "confidence", "facet_row": "speed", "pooled": []}
     # one confidence per scenario (the table_simulation layout): no line to draw over it
     calls.clear()
     flat = gather_results(
@@ -566,6 +566,66 @@ def test_sweep_report_lays_out_the_other_settings_and_skips_flat_sweeps(
     written = write_sweep_report(flat, tmp_path / "b", report_groups(flat), sweep="confidence")
     assert not calls and not any(p.name.startswith("sweep_") for p in written)
     assert "compare_smoothness.png" in {p.name for p in written}
+
+
+def test_charts_say_what_they_average_over_and_draw_only_what_has_values(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A speed x noise x confidence sweep charted by confidence pooled the speeds and noises
+    into each bar without a word; a metric with no value got an empty sweep plot, and a
+    planner with no value (ITOMP's MHD) a legend entry."""
+    import iplanner_torch.eval.report as report
+
+    seen: dict[str, list] = {"bars": [], "lines": []}
+    real_bars, real_lines = report.plot_comparison, report.plot_sweep
+    figures = []
+
+    class Recorded(report.Figure):
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            figures.append(self)
+
+    def bars(*args, **kwargs):
+        seen["bars"].append(kwargs.get("pooled"))
+        return real_bars(*args, **kwargs)
+
+    def lines(*args, **kwargs):
+        seen["lines"].append((args[2], kwargs.get("pooled")))
+        return real_lines(*args, **kwargs)
+
+    monkeypatch.setattr(report, "plot_comparison", bars)
+    monkeypatch.setattr(report, "plot_sweep", lines)
+    monkeypatch.setattr(report, "Figure", Recorded)
+    df = _sweep_rows().assign(efficiency=np.nan, mhd=0.05)
+    df.loc[df.planner == "itomp", "mhd"] = np.nan
+    groups = report_groups(df)
+    assert groups == ("scenario", "speed", "noise", "confidence", "planner")
+    written = {p.name for p in write_sweep_report(df, tmp_path, groups, sweep="noise")}
+    assert seen["bars"] == [["speed", "noise"]]
+    titles = [f.axes[0].get_title() for f in figures if f.axes and f.axes[0].get_title()]
+    assert any(t.endswith("; averaged over speed, noise") for t in titles)
+    # the lines over noise: speed and confidence lay out the panels, nothing is pooled
+    assert {m for m, _ in seen["lines"]} >= {"smoothness", "mhd"}
+    assert all(pooled == [] for _, pooled in seen["lines"])
+    assert "sweep_efficiency.png" not in written and "sweep_mhd.png" in written
+    mhd = figures[[m for m, _ in seen["lines"]].index("mhd") - len(seen["lines"])]
+    labels = mhd.axes[0].get_legend_handles_labels()[1]
+    assert "ITOMP" not in labels and labels
+    assert mhd.axes[-1].get_xlabel() == "tracker noise [m]"
+    assert "bands ± 1 std" in mhd._suptitle.get_text()
+
+
+def test_results_of_two_robots_stay_apart() -> None:
+    """run_experiment rows had no robot column, and report_groups pooled a Fetch and an iiwa
+    run given together (with a warning that one was a repeat of the other)."""
+    rows = [
+        {"scenario": "s", "planner": "itomp", "robot": r, "seed": 0, "eval/smoothness": v}
+        for r, v in (("kuka_iiwa14", 1.0), ("fetch", 3.0))
+    ]
+    df = gather_results(rows)
+    assert report_groups(df) == ("scenario", "robot", "planner")
+    table = summary_table(df, report_groups(df))
+    assert sorted(table["smoothness_mean"]) == [1.0, 3.0]
 
 
 def _episode_log(path: Path, metrics: dict, planner: str = "itomp", steps: int = 2000) -> Path:
