@@ -310,7 +310,11 @@ class GatherSweepResults(Callback):
         failed = failed_jobs(sweep_dir)
         if failed:
             jobs = sum(1 for _ in sweep_dir.rglob("overrides.yaml"))
-            lines = [f"{len(failed)} of {jobs} sweep job(s) failed (the others ran):"]
+            lines = [
+                f"all {jobs} sweep job(s) failed:"
+                if len(failed) >= jobs
+                else f"{len(failed)} of {jobs} sweep job(s) failed (the others ran):"
+            ]
             for job, overrides, error in failed:
                 lines.append(f"  {job} [{overrides}]: {error}")
             print("\n".join(lines), file=sys.stderr, flush=True)

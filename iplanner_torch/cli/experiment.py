@@ -28,10 +28,12 @@ Results: ``results.csv``, ``results.md``, plots, ``episodes/*.mcap`` and, unless
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -116,60 +118,108 @@ def ensure_predictors(
     """Checkpoint path per predictor variant; trains the missing ones when allowed.
 
     Checkpoints live in ``<paths.checkpoints>/<dataset folder name>/<predictor option>/``.
+    Missing ones are trained under :func:`training_lock`, so that parallel jobs train them once.
     """
-    from iplanner_torch.cli.train import train_from_config
-    from iplanner_torch.errors import CheckpointError
-
     if not variants:  # no predicting planner: run.train_trainer is not read
         return {}
     trainer_node = option_node("trainer", str(cfg.run.train_trainer), cfg)
     given = {override_key(o) for o in _task_overrides()}
     windows_given = overridden_fields("data.windows")
     paths: dict[str, str] = {}
-    for variant in variants:
-        option = VARIANT_OPTION[variant]
-        out_dir = repo_path(Path(cfg.paths.checkpoints) / Path(data_node.path).name / option)
-        ckpt = out_dir / "predictor.ckpt"
-        if ckpt.is_dir():
-            raise CheckpointError(f"{ckpt}: is a folder, not a checkpoint file")
-        if not ckpt.exists():
-            if not cfg_scalar(cfg.run, "train_if_missing", bool):
-                raise CheckpointError(
-                    f"{ckpt}: no trained predictor; run `iplanner-train predictor={option} "
-                    f"train.out_dir={out_dir}` on {data_node.path}"
-                )
-            print(
-                f"training predictor {option} on {data_node.path} "
-                f"(trainer={cfg.run.train_trainer}) ...",
-                flush=True,
+    folder = repo_path(Path(cfg.paths.checkpoints) / Path(data_node.path).name)
+    missing = [v for v in variants if not (folder / VARIANT_OPTION[v] / "predictor.ckpt").exists()]
+    trains = bool(missing) and cfg_scalar(cfg.run, "train_if_missing", bool)
+    with training_lock(folder) if trains else contextlib.nullcontext():
+        for variant in variants:
+            paths[variant] = _ensure_predictor(
+                cfg, variant, data_node, folder, trainer_node, given, windows_given
             )
-            t0 = time.perf_counter()
-            train_from_config(
-                cfg,
-                option_node("predictor", option, cfg),
-                out_dir,
-                trainer_node=trainer_node,
-                data_node=data_node,
-            )
-            print(f"  trained in {time.perf_counter() - t0:.0f} s -> {ckpt}", flush=True)
-        else:
-            stale = checkpoint_differences(ckpt, data_node, windows_given)
-            stale += training_differences(
-                ckpt,
-                trainer_node,
-                seed=cfg_scalar(cfg, "seed", int) if "seed" in given else None,
-                budget="run.train_trainer" in given,
-            )
-            if stale:
-                from iplanner_torch.errors import ConfigError
-
-                raise ConfigError(
-                    f"{ckpt} was trained with other settings than the command line gives: "
-                    f"{'; '.join(stale)} (checkpoint -> now). Delete {out_dir} to train it "
-                    "anew with them, or set paths.checkpoints=<another folder>"
-                )
-        paths[variant] = str(ckpt)
     return paths
+
+
+@contextlib.contextmanager
+def training_lock(folder: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``folder/.training.lock`` (created) while the predictors of
+    one dataset are checked and, when missing, trained: the parallel jobs of a sweep that all
+    lack them then train them once (the first job) and use them (the others, once it is
+    done), instead of generating the same dataset and training the same checkpoints at the
+    same time. A file system without ``flock`` (or Windows) gets no lock."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX
+        yield
+        return
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / ".training.lock", "a") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            print(f"waiting for another run training the predictors in {folder} ...", flush=True)
+            fcntl.flock(handle, fcntl.LOCK_EX)
+        except OSError:  # a file system without locks: go on without one
+            yield
+            return
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def _ensure_predictor(
+    cfg: DictConfig,
+    variant: str,
+    data_node: DictConfig,
+    folder: Path,
+    trainer_node: DictConfig,
+    given: set[str],
+    windows_given: Any,
+) -> str:
+    """The checkpoint of one variant (see :func:`ensure_predictors`), trained when missing."""
+    from iplanner_torch.cli.train import train_from_config
+    from iplanner_torch.errors import CheckpointError
+
+    option = VARIANT_OPTION[variant]
+    out_dir = folder / option
+    ckpt = out_dir / "predictor.ckpt"
+    if ckpt.is_dir():
+        raise CheckpointError(f"{ckpt}: is a folder, not a checkpoint file")
+    if not ckpt.exists():
+        if not cfg_scalar(cfg.run, "train_if_missing", bool):
+            raise CheckpointError(
+                f"{ckpt}: no trained predictor; run `iplanner-train predictor={option} "
+                f"train.out_dir={out_dir}` on {data_node.path}"
+            )
+        print(
+            f"training predictor {option} on {data_node.path} "
+            f"(trainer={cfg.run.train_trainer}) ...",
+            flush=True,
+        )
+        t0 = time.perf_counter()
+        train_from_config(
+            cfg,
+            option_node("predictor", option, cfg),
+            out_dir,
+            trainer_node=trainer_node,
+            data_node=data_node,
+        )
+        print(f"  trained in {time.perf_counter() - t0:.0f} s -> {ckpt}", flush=True)
+    else:
+        stale = checkpoint_differences(ckpt, data_node, windows_given)
+        stale += training_differences(
+            ckpt,
+            trainer_node,
+            seed=cfg_scalar(cfg, "seed", int) if "seed" in given else None,
+            budget="run.train_trainer" in given,
+        )
+        if stale:
+            from iplanner_torch.errors import ConfigError
+
+            raise ConfigError(
+                f"{ckpt} was trained with other settings than the command line gives: "
+                f"{'; '.join(stale)} (checkpoint -> now). Delete {out_dir} to train it "
+                "anew with them, or set paths.checkpoints=<another folder>"
+            )
+    return str(ckpt)
 
 
 def checkpoint_differences(ckpt: Path, data_node: DictConfig, keys: set[str]) -> list[str]:

@@ -186,3 +186,18 @@ def test_a_sweep_folder_with_failed_jobs_alone_may_be_run_again(tmp_path: Path) 
     (sweep / "0" / "episodes").mkdir()
     with pytest.raises(SystemExit, match="2"):
         GatherSweepResults().on_multirun_start(config=config)
+
+
+def test_a_sweep_whose_jobs_all_failed_does_not_say_the_others_ran(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    sweep = tmp_path / "sweep"
+    for num, value in enumerate(("-1", "-2")):
+        failed = f"error: ConfigError: tracker.noise: expected in [0, 1] m, got {value}"
+        (_job(sweep, num, f"tracker.noise={value}") / "FAILED").write_text(failed + "\n")
+    config = OmegaConf.create({"hydra": {"sweep": {"dir": str(sweep)}}})
+    with pytest.raises(SystemExit) as stop:
+        GatherSweepResults().on_multirun_end(config=config)
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert "all 2 sweep job(s) failed:" in err and "the others ran" not in err
