@@ -1225,6 +1225,170 @@ def data_fps(data_cfg: DictConfig) -> float | None:
     return float(fps)
 
 
+#: values of ``data.format``: demonstration files (``.npz``, ``.csv``; the default, also when
+#: the key is absent) or the LEGO assembly recording's trial ``.txt`` files (conf/data/lego.yaml)
+DATA_FORMATS = ("native", "lego_assembly")
+
+
+def data_format(data_cfg: DictConfig) -> str:
+    """``data.format``: ``native`` when unset (or null), else one of :data:`DATA_FORMATS`.
+
+    Raises:
+        ConfigError: for any other value (``+data.format=lego`` was read as ``native``).
+    """
+    fmt = data_cfg.get("format", None)
+    if fmt is None:
+        return "native"
+    if not isinstance(fmt, str) or fmt not in DATA_FORMATS:
+        raise ConfigError(
+            f"data.format: expected one of {', '.join(DATA_FORMATS)}, got {fmt!r} (native: "
+            ".npz / .csv demonstration files; lego_assembly: the LEGO assembly recording's "
+            "trial .txt files, as data=lego sets it)"
+        )
+    return fmt
+
+
+def data_joints(data_cfg: DictConfig) -> tuple[str, ...] | None:
+    """The joints ``data.windows.joints`` selects (None: every joint), checked by
+    :class:`~iplanner_torch.data.windows.WindowCfg` as training checks them.
+
+    Raises:
+        ConfigError: naming ``data.windows.joints`` for a single string (``right_hand``, not
+            ``[right_hand]``), an empty list or a name given twice.
+    """
+    from iplanner_torch.data.windows import WindowCfg
+
+    windows = data_cfg.get("windows", None)
+    joints = windows.get("joints", None) if isinstance(windows, DictConfig) else None
+    if OmegaConf.is_config(joints):
+        joints = OmegaConf.to_container(joints)
+    try:
+        return WindowCfg(joints=joints).joints
+    except ConfigError as err:  # "joints: ..." -> "data.windows.joints: ...", as instantiate
+        text = str(err).removeprefix("joints: ")
+        raise ConfigError(f"data.windows.joints: {text}") from None
+
+
+def read_demonstrations(data_cfg: DictConfig, path: Path) -> list[Any]:
+    """The demonstrations at ``path`` as ``data.format`` reads them, each holding the joints
+    ``data.windows.joints`` selects: every command reads a dataset through here.
+
+    Args:
+        data_cfg: the ``data`` node (``format``, ``fps``, ``windows.joints``, ``path`` as
+            typed, for messages).
+        path: its folder (or file), resolved.
+
+    Raises:
+        ConfigError: from :func:`data_format`, :func:`data_fps` and :func:`data_joints`.
+        DataError: from the loaders; for a LEGO recording, a selected joint it lacks. A
+            folder with no demonstration files but ``.txt`` files says how to read them as
+            the LEGO recording.
+    """
+    from iplanner_torch.data.io import load_demonstrations, load_lego_assembly
+    from iplanner_torch.errors import DataError
+
+    fmt = data_format(data_cfg)
+    fps = data_fps(data_cfg)
+    joints = data_joints(data_cfg)
+    if fmt == "lego_assembly":
+        demos = load_lego_assembly(path, fps=LEGO_FPS if fps is None else fps)
+        return _select_recorded_joints(demos, joints, path)
+    try:
+        return load_demonstrations(path, fps=fps, joints=joints)
+    except DataError as err:
+        hint = _trial_files_hint(path, data_cfg.path)
+        if hint is None:
+            raise
+        raise DataError(f"{err}; {hint}") from None
+
+
+def _select_recorded_joints(
+    demos: list[Any], joints: tuple[str, ...] | None, path: Path
+) -> list[Any]:
+    """``demos`` (a LEGO recording's trials) holding only ``joints`` (all when None), as
+    :func:`~iplanner_torch.data.io.load_demonstrations` selects them from native files.
+
+    Raises:
+        DataError: for a joint the recording lacks, or a trial in which every selected joint
+            is NaN in every frame.
+    """
+    from iplanner_torch.data.io import lost_joints
+    from iplanner_torch.errors import DataError
+
+    if not joints or not demos:
+        return demos
+    have = demos[0].joint_names
+    missing = [j for j in joints if j not in have]
+    if missing:
+        raise DataError(
+            f"{path}: data.windows.joints names {missing}, which the LEGO assembly recording "
+            f"lacks; its joints: {list(have)}"
+        )
+    out = [d.select_joints(joints) for d in demos]
+    for d in out:
+        if len(lost_joints(d)) == d.num_joints:
+            raise DataError(
+                f"{path}: trial {d.name}: every selected joint {list(joints)} is NaN in every "
+                "frame: nothing observed to learn from"
+            )
+    return out
+
+
+def _trial_files_hint(path: Path, typed: Any) -> str | None:
+    """For a folder without demonstration files that holds ``.txt`` files (the LEGO recording
+    read as native files): how to read it as the recording; None otherwise."""
+    from iplanner_torch.data.io import demonstration_files
+    from iplanner_torch.errors import DataError
+
+    if not path.is_dir():
+        return None
+    try:
+        if demonstration_files(path):
+            return None
+    except DataError:  # an unfinished generation's folder: its own message says it
+        return None
+    n = sum(1 for p in path.rglob("*.txt") if p.is_file())
+    if not n:
+        return None
+    files = "1 .txt file" if n == 1 else f"{n} .txt files"
+    return f"it holds {files}: for LEGO-assembly trials use data=lego data.path={typed}"
+
+
+def _command_line_path(data_cfg: DictConfig) -> bool:
+    """Whether ``data_cfg`` is this run's ``data`` node and the command line sets its path
+    (``data.path=...``, ``++data.path=...``) to a folder outside ``paths.datasets``; not the
+    datasets a command picks itself (``iplanner-experiment``'s task sets), nor a folder in
+    the generated-data home (``data.path=datasets/tasks_1x4_...``, as the README trains one)."""
+    if _full_key(data_cfg, None) != "data":
+        return False
+    given = (o for o in task_overrides() if not o.startswith("~"))
+    if not any(override_key(o) == "data.path" for o in given):
+        return False
+    home = OmegaConf.select(data_cfg._get_root(), "paths.datasets", default=None)
+    if isinstance(home, str) and repo_path(data_cfg.path).is_relative_to(repo_path(home)):
+        return False
+    return True
+
+
+def _generate_command(data_cfg: DictConfig) -> str:
+    """The ``iplanner-data generate`` command that writes the dataset this run's command line
+    asks for: its ``data=<option>`` and ``data.generator.*`` overrides, and ``data.path``."""
+    import shlex
+
+    def quoted(override: str) -> str:  # "data.generator.order='(0,1)->(2,3)'" as typed
+        if shlex.quote(override) == override or re.search(r'["$`\\!]', override):
+            return shlex.quote(override)
+        return f'"{override}"'
+
+    given = [
+        quoted(o)
+        for o in task_overrides()
+        if not o.startswith("~")
+        and (override_key(o) == "data" or override_key(o).startswith("data.generator."))
+    ]
+    return " ".join(["iplanner-data generate", *given, f"data.path={data_cfg.path}"])
+
+
 def load_dataset(
     data_cfg: DictConfig,
     *,
@@ -1232,12 +1396,15 @@ def load_dataset(
     progress: bool = True,
     overridden: set[str] | None = None,
 ) -> list[Any]:
-    """Load the demonstrations a ``data`` config node describes.
+    """Load the demonstrations a ``data`` config node describes (:func:`read_demonstrations`).
 
     Args:
         data_cfg: the ``data`` node (``path``, optional ``format``, ``fps``, ``generator``,
             ``windows``).
-        generate_if_missing: generate the dataset with its generator when the folder is absent.
+        generate_if_missing: generate the dataset with its generator when the folder is absent
+            or empty, unless the command line gives that folder (``data.path=...``) outside
+            ``paths.datasets``: a mistyped path to one's own data must not become a
+            synthetic dataset.
         progress: progress bars.
         overridden: the ``data.generator`` fields compared with an existing generated
             dataset's card (default: those this run's command line sets; see
@@ -1247,23 +1414,35 @@ def load_dataset(
         The list of :class:`~iplanner_torch.data.demonstration.Demonstration`.
 
     Raises:
-        DataError: when the folder is absent and cannot (or may not) be generated.
+        DataError: when the folder is absent (or empty) and cannot (or may not) be
+            generated.
         ConfigError: when a generated folder's card keeps other generator settings than the
-            command line gives, or ``data.windows.joints`` is a single string.
+            command line gives, for a ``data.format`` other than :data:`DATA_FORMATS`, or a
+            ``data.windows.joints`` that is not a list of unique names (a single string).
 
     A generated folder whose files no longer add up to the demonstration and frame counts its
     card records (files removed or added by hand) is read as it is, with a
     :class:`~iplanner_torch.errors.DataWarning`.
     """
-    from iplanner_torch.data.io import load_demonstrations, load_lego_assembly
     from iplanner_torch.errors import DataError
 
     path = repo_path(data_cfg.path)
-    fps = data_fps(data_cfg)
-    if data_cfg.get("format", "native") == "lego_assembly":
-        return load_lego_assembly(path, fps=LEGO_FPS if fps is None else fps)
+    # the settings every format reads, before anything is generated
+    fmt = data_format(data_cfg)
+    data_fps(data_cfg)
+    data_joints(data_cfg)
+    if fmt == "lego_assembly":
+        return read_demonstrations(data_cfg, path)
     if not path.exists() or (path.is_dir() and not any(path.iterdir())):
-        if not generate_if_missing or data_cfg.get("generator") is None:
+        can_generate = generate_if_missing and data_cfg.get("generator") is not None
+        if can_generate and _command_line_path(data_cfg):
+            option = _group_choice("data")
+            kind = f"synthetic {option} set" if option else "synthetic set"
+            raise DataError(
+                f"{path}: no such dataset folder (or empty); to generate the {kind} there, "
+                f"run `{_generate_command(data_cfg)}`"
+            )
+        if not can_generate:
             raise DataError(
                 f"{path}: dataset not found; generate it with `iplanner-data generate "
                 f"data.path={data_cfg.path}`"
@@ -1272,13 +1451,7 @@ def load_dataset(
         generate_dataset(data_cfg, path, progress=progress)
     else:
         _check_generator_settings(data_cfg, path, overridden)
-    joints = data_cfg.windows.get("joints", None) if "windows" in data_cfg else None
-    if isinstance(joints, str):  # list() would split it into letters
-        raise ConfigError(
-            f"data.windows.joints: expected a list of joint names, got the single string "
-            f"{joints!r}; pass data.windows.joints=[{joints}]"
-        )
-    demos = load_demonstrations(path, fps=fps, joints=list(joints) if joints else None)
+    demos = read_demonstrations(data_cfg, path)
     if path.is_dir():
         import warnings
 

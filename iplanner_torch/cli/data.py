@@ -21,7 +21,10 @@ Config group and main options:
                                    tasks = synthetic task demonstrations -> datasets/tasks,
                                    lego = the recorded LEGO assembly set (info only) at
                                    ../shared/data/lego_assembly_3d
-    data.path=<folder>             the dataset folder (relative to the current directory)
+    data.path=<folder>             the dataset folder (relative to the current directory);
+                                   iplanner-train and the other commands never generate
+                                   one given this way outside paths.datasets: generate
+                                   writes it
     data.overwrite=true            generate: replace the demonstration files (.npz, .csv) and
                                    dataset card already in data.path, nothing else; they are
                                    deleted only once the new set is complete
@@ -29,6 +32,7 @@ Config group and main options:
         reaching: reaches_per_target, n_targets, n_subjects, fps, noise_sigma, speeds, seed
         tasks: order, arrangement, n_demos, n_subjects, fps, noise_sigma, seed, file_format
     data.windows.joints=[a,b]      info: check only these joints, as training selects them
+                                   (a list, also of one: [right_hand]; any format)
     progress=false                 generate: no progress bar
 
 Other overrides (seed, trainer, ...) are refused: neither command reads them; the generator
@@ -55,12 +59,13 @@ from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
-    LEGO_FPS,
+    data_format,
     data_fps,
     dataset_generator,
     friendly_errors,
     instantiate,
     print_help_if_asked,
+    read_demonstrations,
     refuse_unread_overrides,
     repo_path,
     run_app,
@@ -113,38 +118,34 @@ def _kept_on_interrupt(cfg: DictConfig) -> str:
 
 
 def _info(cfg: DictConfig) -> None:
-    from iplanner_torch.data.io import (
-        demonstration_files,
-        load_demonstrations,
-        load_lego_assembly,
-        lost_joints,
-    )
+    from iplanner_torch.data.io import demonstration_files, lost_joints
 
     path = repo_path(cfg.data.path)
-    fps = data_fps(cfg.data)
-    # the joints training selects (data.windows.joints), so info accepts what it accepts
+    fmt = data_format(cfg.data)
+    data_fps(cfg.data)
+    # the window settings training reads (data.windows.joints selects the joints), so info
+    # accepts what it accepts
     selected = None
     if "windows" in cfg.data:
         from iplanner_torch.data.windows import WindowCfg
 
         selected = instantiate(cfg.data.windows, WindowCfg, name="data.windows").joints
-    if cfg.data.get("format", "native") == "lego_assembly":
-        demos = load_lego_assembly(path, fps=LEGO_FPS if fps is None else fps)
+    if fmt == "native" and not path.exists():
+        hint = "set data.path=<folder>"
+        if cfg.data.get("generator") is not None:
+            gen = f"iplanner-data generate data.path={cfg.data.path}"
+            hint = f"generate it with `{gen}` or {hint}"
+        raise DataError(f"{path}: no such file or folder; {hint}")
+    demos = read_demonstrations(cfg.data, path)
+    if fmt == "lego_assembly":
         root = path if path.is_dir() else path.parent
         files = [root / f"{d.name}.txt" for d in demos]
     else:
-        if not path.exists():
-            hint = "set data.path=<folder>"
-            if cfg.data.get("generator") is not None:
-                gen = f"iplanner-data generate data.path={cfg.data.path}"
-                hint = f"generate it with `{gen}` or {hint}"
-            raise DataError(f"{path}: no such file or folder; {hint}")
-        demos = load_demonstrations(path, fps=fps, joints=list(selected) if selected else None)
         files = demonstration_files(path)
     if demos:  # the cross-file checks training makes (action names, fps, joints)
         from iplanner_torch.data.windows import compatible_demonstrations
 
-        compatible_demonstrations(demos, tuple(selected) if selected else None)
+        compatible_demonstrations(demos, selected)
     frames = sum(d.num_frames for d in demos)
     joints = demos[0].joint_names if demos else ()
     actions = demos[0].action_names if demos else ()

@@ -14,7 +14,10 @@ demonstration, ``seed`` and ``data.split``, with the names of the held-out demon
 which ``iplanner-evaluate`` scores; a resume on other data or settings is refused), then
 prints held-out metrics. It reads ``data``, ``predictor``, ``trainer``, ``train``, ``seed``,
 ``paths`` and ``progress``; any other override (``device``: training runs on
-``trainer.accelerator``) is refused.
+``trainer.accelerator``) is refused. A missing or empty dataset folder is generated only when
+it is the data option's own (``datasets/reaching``) or lies under ``paths.datasets``; a folder
+given with ``data.path=<folder>`` elsewhere is read, never generated (``iplanner-data
+generate`` writes one).
 """
 
 from __future__ import annotations
@@ -59,7 +62,9 @@ def train_from_config(
         predictor_node: a ``conf/predictor`` node.
         out_dir: where ``predictor.ckpt``, sub-model checkpoints and logs go.
         trainer_node: a ``conf/trainer`` node.
-        data_node: a ``conf/data`` node (default ``cfg.data``); generated when absent.
+        data_node: a ``conf/data`` node (default ``cfg.data``); generated when absent or
+            empty, unless the command line gives its folder (``data.path=...``) outside
+            ``paths.datasets``.
     """
     data_node = cfg.data if data_node is None else data_node
     from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration

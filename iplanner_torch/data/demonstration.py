@@ -22,7 +22,8 @@ class Demonstration:
         action_names: the A action names; label ``a`` means ``action_names[a]``.
         timestamps: (T,) float64 seconds, strictly increasing; ``arange(T) / fps`` when the
             file gives none.
-        name: an identifier (file stem or generated id).
+        name: an identifier (a loaded file's path relative to its folder, without the suffix;
+            a generated id).
         metadata: free-form provenance (subject, target, speed factor, noise sigma, seed ...).
         clean_positions: (T, K, 3) noise-free joint positions [m], float32, when the recording
             is synthetic (ground truth for evaluations); None for real recordings.

@@ -7,11 +7,13 @@ The formats are documented in ``datasets/README.md``. In short:
   ``timestamps`` (T,) float seconds, optional ``clean_positions`` (T, K, 3) float, optional
   ``metadata`` (a JSON object as a string). Saved without pickling.
 * **CSV** (one demonstration per file): optional header comment lines starting with ``#``
-  whose text after the ``#`` joined together is a JSON object with ``fps``, ``action_names``
-  and ``metadata``; then a column header row ``t,label,<joint>_x,<joint>_y,<joint>_z,...``
-  (joint-major), optionally followed by ``clean_<joint>_x,...`` columns; then one row per
-  frame. Those are the only column forms: any other column (``time``, a misspelt ``lable``)
-  is an error, never dropped silently. An empty cell is NaN (a lost joint). Without the JSON
+  at the top, whose text after the ``#`` joined together is a JSON object with ``fps``,
+  ``action_names`` and ``metadata``; then a column header row
+  ``t,label,<joint>_x,<joint>_y,<joint>_z,...`` (joint-major; a first row of numbers is
+  refused), optionally followed by ``clean_<joint>_x,...`` columns; then one row per frame (a
+  ``#`` line among them is an error naming its line, never joined into the header). Those
+  are the only column forms: any other column (``time``, a misspelt ``lable``) is an error,
+  never dropped silently. An empty cell is NaN (a lost joint). Without the JSON
   header, ``fps`` must be given to the loader and actions are named ``action_0 ...``; ``t`` is
   optional. Without a ``label`` column every frame is labelled 0 with the single action name
   ``unlabelled`` when the header names no actions; when it names actions (``action_names``),
@@ -30,6 +32,11 @@ finite and > 0; ``metadata`` is a JSON object; names are strings; ``timestamps``
 of strings) and ``metadata`` are each optional, and a ``null`` value counts as absent; the clean
 columns, when present, cover every joint's three axes. Without ``action_names`` the CSV labels
 name ``action_0 .. action_<largest label>``, at most :data:`MAX_IMPLICIT_ACTIONS` actions.
+
+A demonstration read from a folder is named by its path there without the suffix
+(``Task1/Human1/trial2``, as LEGO trials are; a file directly in the folder by its stem), so
+files of one stem in different sub-folders stay apart; two files of one name (``a.csv``
+beside ``a.npz``) are an error. LEGO trial errors name the file line a text editor shows.
 
 A CSV or LEGO trial file whose last line has no line terminator may have been cut short (a
 copy or a recording stopped mid-write: ``0.841`` of ``0.8410000205``); that last row is
@@ -388,15 +395,40 @@ def _read_npz(path: Path) -> dict[str, Any]:
     return out
 
 
-def _read_csv_header(path: Path, comment: list[str]) -> dict[str, Any]:
+def _header_json_error(
+    path: Path, comment: list[tuple[int, str]], exc: json.JSONDecodeError
+) -> str:
+    """The message for a CSV header comment that is not JSON: with several ``#`` lines, which
+    of them the JSON breaks on (a note line among them, say)."""
+    if len(comment) == 1:
+        return f"{path}: field 'header' (# JSON comment) is invalid ({exc})"
+    start = 0
+    for n, text in comment:  # the line holding the error's position (the last at the end)
+        if exc.pos < start + len(text) or n == comment[-1][0]:
+            break
+        start += len(text)
+    return (
+        f"{path}: field 'header' (# JSON comment) is invalid: line {n} {_show('#' + text)} is "
+        f"not JSON ({exc.msg} at column {exc.pos - start + 2}); the {len(comment)} '#' lines "
+        f"at the top (lines {comment[0][0]}-{comment[-1][0]}) are joined into one JSON object, "
+        "so a note among them must go (or move into the object's 'metadata')"
+    )
+
+
+def _read_csv_header(path: Path, comment: list[tuple[int, str]]) -> dict[str, Any]:
     """The CSV header comment as a dict with ``fps`` (float or None), ``action_names`` (a list
-    of str or None) and ``metadata`` (a dict); ``null`` values count as absent."""
+    of str or None) and ``metadata`` (a dict); ``null`` values count as absent.
+
+    Args:
+        path: the file (for messages).
+        comment: (line number, text after the ``#``) of each ``#`` line at the top of the file.
+    """
     header: Any = {}
     if comment:
         try:
-            header = json.loads("".join(comment))
+            header = json.loads("".join(text for _, text in comment))
         except json.JSONDecodeError as exc:
-            raise DataError(f"{path}: field 'header' (# JSON comment) is invalid ({exc})") from exc
+            raise DataError(_header_json_error(path, comment, exc)) from exc
         except RecursionError as exc:
             raise DataError(
                 f"{path}: field 'header' (# JSON comment) is invalid (nested too deep)"
@@ -459,6 +491,25 @@ def _check_csv_columns(path: Path, cols: list[str], header_line: int) -> None:
     )
 
 
+def _is_number(text: str) -> bool:
+    """Whether ``text`` is one number as the loaders read it: a decimal or ``nan`` / ``inf``
+    / ``infinity`` of ASCII characters (no ``1_000``, no other scripts' digits), white space
+    around it allowed."""
+    if not text.isascii() or "_" in text:
+        return False
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _is_infinity(text: str) -> bool:
+    """Whether ``text`` spells an infinity (``inf``, ``-Infinity`` ...) rather than a number
+    too large for a float (``1e400``)."""
+    return text.strip().lstrip("+-").lower() in ("inf", "infinity")
+
+
 def _drop_cut_last_line(
     path: Path, text: str, is_row: Any = None, *, stacklevel: int = 4
 ) -> list[str]:
@@ -486,15 +537,30 @@ def _read_csv(path: Path) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: unreadable CSV file ({exc})") from exc
     lines = _drop_cut_last_line(path, text, is_row=lambda ln: not ln.startswith("#"))
-    comment = [ln[1:] for ln in lines if ln.startswith("#")]
-    body = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip() and not ln.startswith("#")]
+    body = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip()]  # blank lines skipped
+    top = next((i for i, (_, ln) in enumerate(body) if not ln.startswith("#")), len(body))
+    comment = [(n, ln[1:]) for n, ln in body[:top]]  # the '#' lines at the top: the header
+    body = body[top:]
     if not body:
         raise DataError(f"{path}: empty file (no header row, no frames)")
     header = _read_csv_header(path, comment)
     header_line, header_row = body[0]
     cols = [c.strip() for c in header_row.split(",")]
+    if any(cols) and all(not c or _is_number(c) for c in cols):
+        raise DataError(
+            f"{path}: line {header_line} holds numbers, not column names: the first line "
+            f"{'after the # header comment ' if comment else ''}must name the columns (see "
+            "datasets/README.md)"
+        )
     _check_csv_columns(path, cols, header_line)
     rows = body[1:]
+    late = next((n for n, ln in rows if ln.startswith("#")), None)
+    if late is not None:
+        raise DataError(
+            f"{path}: line {late}: a '#' line after the header row (line {header_line}); '#' "
+            "lines are read only at the top of the file, as the JSON header comment: remove "
+            "it (a note belongs in the header comment's 'metadata')"
+        )
     if not rows:
         raise DataError(f"{path}: empty file (a header row but no frames)")
     table = np.empty((len(rows), len(cols)), dtype=np.float64)
@@ -509,6 +575,14 @@ def _read_csv(path: Path) -> dict[str, Any]:
             table[i] = [float(c) if c.strip() else np.nan for c in cells]
         except ValueError as exc:
             raise DataError(f"{path}: line {n}: unreadable or corrupt CSV row ({exc})") from exc
+    for i, j in zip(*np.nonzero(np.isinf(table)), strict=True):
+        text = rows[i][1].split(",")[j].strip()
+        if not _is_infinity(text):
+            raise DataError(
+                f"{path}: line {rows[i][0]}, column {cols[j]!r}: {_show(text)} overflows: it "
+                f"is beyond the largest float (+-{np.finfo(np.float64).max:.4g}), a corrupted "
+                "number (positions are metres, times seconds)"
+            )
     col: dict[str, int] = {}
     for i, c in enumerate(cols):
         if c in col:
@@ -615,15 +689,27 @@ def _read_csv(path: Path) -> dict[str, Any]:
 TIMESTAMP_TOLERANCE = 0.05
 
 
+#: How each file format marks a lost joint (for the message refusing an Inf).
+_LOST_JOINT_MARK = {
+    ".csv": "NaN (an empty CSV cell)",
+    ".npz": "NaN",
+}
+
+
 def _check_coordinates(path: Path, field: str, pos: np.ndarray, joints: Sequence[str]) -> None:
     """Raise when ``pos`` ((T, K, 3) [m]) holds +-Inf (a lost joint is NaN, never Inf) or a
-    coordinate beyond :data:`~iplanner_torch.types.MAX_POSITION_M` (other units, or junk)."""
+    coordinate beyond :data:`~iplanner_torch.types.MAX_POSITION_M` (other units, or junk).
+
+    Check the values as the file holds them, before any cast to float32 (which would turn a
+    value beyond float32's range into an Inf the file does not hold).
+    """
     inf = np.isinf(pos)
     if inf.any():
         t, k, _ = np.argwhere(inf)[0]
+        mark = _LOST_JOINT_MARK.get(path.suffix, "NaN")
         raise DataError(
             f"{path}: field {field!r} has {int(inf.sum())} Inf value(s), the first at frame {t}, "
-            f"joint {joints[k]!r}; mark a lost joint with NaN (an empty CSV cell)"
+            f"joint {joints[k]!r}; mark a lost joint with {mark}, never Inf"
         )
     with np.errstate(invalid="ignore"):  # NaN compares False: lost joints pass
         huge = np.abs(pos) > MAX_POSITION_M
@@ -705,12 +791,12 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
         raise DataError(
             f"{path}: field 'clean_positions' must be float, got {np.asarray(clean).dtype}"
         )
-    with np.errstate(over="ignore"):  # values beyond float32's range become Inf: rejected
-        pos = pos.astype(np.float32)
-        clean = None if clean is None else np.asarray(clean).astype(np.float32)
-    _check_coordinates(path, "positions", pos, joints)
+    _check_coordinates(path, "positions", pos, joints)  # before the cast: 1e39 is no Inf
+    pos = pos.astype(np.float32)  # within MAX_POSITION_M now: no overflow
     if clean is not None:
+        clean = np.asarray(clean)
         _check_coordinates(path, "clean_positions", clean, joints)
+        clean = clean.astype(np.float32)
         nan = np.isnan(clean)
         if nan.any():  # the noise-free training targets: nothing to impute them from
             t_nan, k_nan, _ = np.argwhere(nan)[0]
@@ -882,6 +968,34 @@ def demonstration_files(path: str | Path) -> list[Path]:
     raise DataError(f"{path}: no such file or folder")
 
 
+def demonstration_names(path: str | Path, files: Sequence[Path]) -> list[str]:
+    """The name of each demonstration file :func:`load_demonstrations` reads from ``path``:
+    its path relative to the folder, without the suffix, with ``/`` between folders
+    (``Task1/Human1/trial2``), as :func:`load_lego_assembly` names trials; a file directly in
+    the folder (or ``path`` itself) is named by its stem.
+
+    Args:
+        path: the folder (or file) loaded.
+        files: its demonstration files (:func:`demonstration_files`).
+
+    Raises:
+        DataError: naming both files when two would get the same name (``a.csv`` beside
+            ``a.npz``): splits and held-out records refer to demonstrations by name.
+    """
+    root = Path(path) if Path(path).is_dir() else Path(path).parent
+    seen: dict[str, Path] = {}
+    for f in files:
+        name = "/".join(f.relative_to(root).with_suffix("").parts)
+        if name in seen:
+            raise DataError(
+                f"{path}: {seen[name]} and {f} would both be demonstration {name!r} (splits "
+                "and held-out records name demonstrations by path without the suffix); keep "
+                "one of them, or rename the other"
+            )
+        seen[name] = f
+    return list(seen)
+
+
 def is_partial_folder(path: str | Path) -> bool:
     """Whether ``path`` is named as an unfinished generation's temporary folder
     (``<name>.partial-<pid>``: :data:`PARTIAL_MARK`)."""
@@ -903,7 +1017,9 @@ def load_demonstrations(
             have the same joint names in the same order.
 
     Returns:
-        The demonstrations; NaN joints are kept as NaN.
+        The demonstrations; NaN joints are kept as NaN. Each is named by its file's path
+        relative to ``path`` (its parent for a file), without the suffix:
+        ``Task1/Human1/trial2`` (:func:`demonstration_names`).
 
     Raises:
         DataError: naming the file and the field: no files, unreadable or corrupt file, empty
@@ -911,8 +1027,11 @@ def load_demonstrations(
             positions, every joint NaN in every frame, label out of range, non-increasing
             timestamps, unknown joint name in ``joints``, joint names differing between files,
             fps missing or contradicting ``fps``, an ``fps`` argument that is not one finite
-            number > 0, a CSV column of no accepted form (named, with the accepted forms);
-            also for a ``path`` that is not a str or os.PathLike.
+            number > 0, a CSV column of no accepted form (named, with the accepted forms), a
+            CSV whose first row holds numbers rather than column names, a ``#`` line after a
+            CSV's column header row, a CSV cell overflowing a float (``1e400``), two files
+            that would get the same name (both named); also for a ``path`` that is not a
+            str or os.PathLike.
         ConfigError: for a ``joints`` argument that is not a non-empty sequence of unique
             names (a single string included).
 
@@ -932,7 +1051,10 @@ def load_demonstrations(
     files = demonstration_files(path)
     if not files:
         raise DataError(f"{path}: no .npz or .csv demonstration files in this folder")
+    names = demonstration_names(path, files)
     demos = [load_demonstration(f, fps=fps, joints=joints) for f in files]
+    for d, name in zip(demos, names, strict=True):
+        d.name = name
     for f, d in zip(files, demos, strict=True):
         if d.joint_names != demos[0].joint_names:
             raise DataError(
@@ -963,6 +1085,95 @@ LEGO_OUTPUT_JOINTS: tuple[str, ...] = (
 )
 
 
+#: Numbers in a row of the LEGO assembly recording: x, y, z of each of :data:`LEGO_JOINTS`.
+_LEGO_NUMBERS = 3 * len(LEGO_JOINTS)
+
+
+def _check_lego_row(path: Path, line: int, row: list[str]) -> None:
+    """Raise a DataError for the first entry of ``row`` (the white-space separated entries of
+    file line ``line``) that is not a number, else for a count other than 18."""
+    for m, text in enumerate(row, 1):
+        if not _is_number(text):
+            sep = "," in text or ";" in text
+            raise DataError(
+                f"{path}: line {line}, number {m}: {_show(text)} is not a number"
+                + (" (numbers are separated by spaces or tabs, not , or ;)" if sep else "")
+            )
+    if len(row) != _LEGO_NUMBERS:
+        raise DataError(
+            f"{path}: line {line}: {len(row)} number{'s' if len(row) != 1 else ''}, expected "
+            f"{_LEGO_NUMBERS} (x, y, z of {', '.join(LEGO_JOINTS)})"
+        )
+
+
+def _read_lego_trial(path: Path) -> np.ndarray:
+    """The numbers of one LEGO trial file, (T, 18) float64 (x, y, z of :data:`LEGO_JOINTS`).
+
+    Read as ``numpy.loadtxt`` read it: entries separated by white space, blank lines skipped,
+    ``#`` starts a comment to the end of the line, ``nan`` for a lost joint; a last line
+    without a line terminator is dropped with a :class:`DataWarning`. Errors name the file
+    line a text editor shows and the entry's place in it.
+
+    Raises:
+        DataError: for an unreadable file, an entry that is not a number (``abc``, ``1,2``),
+            a line of other than 18 numbers, no rows at all, or a value that is infinite or
+            beyond :data:`~iplanner_torch.types.MAX_POSITION_M` (other units, or junk).
+    """
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise DataError(f"{path}: unreadable LEGO trial ({exc})") from exc
+    tokens: list[str] = []
+    line_of: list[int] = []  # the file line (1-based) of each row
+    lines = _drop_cut_last_line(  # stacklevel 4: the caller of load_lego_assembly
+        path, text, is_row=lambda ln: bool(ln.partition("#")[0].strip()), stacklevel=4
+    )
+    for n, ln in enumerate(lines, 1):
+        if "#" in ln:
+            ln = ln[: ln.index("#")]
+        row = ln.split()
+        if not row:
+            continue
+        if len(row) != _LEGO_NUMBERS or "_" in ln or not ln.isascii():
+            _check_lego_row(path, n, row)  # float() reads 1_0 and other scripts' digits
+        tokens.extend(row)
+        line_of.append(n)
+    if not line_of:
+        raise DataError(f"{path}: empty file (no rows of numbers)")
+    try:
+        flat = np.fromiter(map(float, tokens), dtype=np.float64, count=len(tokens))
+    except ValueError:
+        for i, n in enumerate(line_of):  # find the entry float() refused
+            _check_lego_row(path, n, tokens[i * _LEGO_NUMBERS : (i + 1) * _LEGO_NUMBERS])
+        raise
+    table = flat.reshape(-1, _LEGO_NUMBERS)  # (T, 18)
+    with np.errstate(invalid="ignore"):  # NaN compares False: lost joints pass
+        bad = np.abs(table) > MAX_POSITION_M  # Inf included
+    if bad.any():
+        i, j = divmod(int(np.argmax(bad)), _LEGO_NUMBERS)  # the first in file order
+        entry = tokens[i * _LEGO_NUMBERS + j]
+        where = (
+            f"{path}: line {line_of[i]}, number {j + 1} ({LEGO_JOINTS[j // 3]} "
+            f"{_AXES[j % 3]}): {_show(entry)}"
+        )
+        count = (
+            f"{int(bad.sum())} such value(s) in the trial: infinite or beyond {MAX_POSITION_M:g} m"
+        )
+        if not np.isinf(table[i, j]):
+            why = (
+                f"is beyond {MAX_POSITION_M:g} m: positions are metres (convert other units first)"
+            )
+        elif _is_infinity(entry):
+            why = "is infinite: mark a lost joint with NaN ('nan' in the text), never Inf"
+        else:
+            why = (
+                f"overflows: it is beyond the largest float (+-{np.finfo(np.float64).max:.4g}), "
+                "a corrupted number"
+            )
+        raise DataError(f"{where} {why} ({count})")
+    return table
+
+
 def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstration]:
     """Load the real LEGO assembly recording (``Task*/Human*/trial*.txt``, 18 numbers a row).
 
@@ -979,9 +1190,15 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
     Returns:
         One demonstration per trial, named ``Task1/Human1/trial1`` etc., in sorted order.
 
+    A trial is read line by line: numbers separated by spaces or tabs, blank lines skipped,
+    ``#`` starting a comment, ``nan`` for a lost joint. Errors name the file line a text editor
+    shows: ``line 7, number 6: 'abc' is not a number``, ``line 5: 17 numbers, expected 18``.
+
     Raises:
-        DataError: when nothing is found, a file is not a (T, 18) table of finite numbers or
-            NaN or has no joint observed in any frame, or ``fps`` is not one finite number > 0.
+        DataError: when nothing is found, a file is empty or not a (T, 18) table of numbers
+            (text, commas or semicolons, another count on a line), holds an infinite value or
+            one beyond :data:`~iplanner_torch.types.MAX_POSITION_M` (other units), has no
+            joint observed in any frame, or ``fps`` is not one finite number > 0.
 
     Warns:
         DataWarning: for a trial file whose last line has no line terminator (it may be cut
@@ -1010,21 +1227,8 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
     order = [LEGO_JOINTS.index(j) for j in LEGO_OUTPUT_JOINTS]
     demos = []
     for f in files:
-        try:
-            lines = _drop_cut_last_line(
-                f, f.read_text(encoding="utf-8", errors="replace"), stacklevel=3
-            )
-            if not any(ln.strip() for ln in lines):
-                raise DataError(f"{f}: empty file")
-            table = np.loadtxt(lines, dtype=np.float64, ndmin=2)
-        except ValueError as exc:
-            raise DataError(f"{f}: unreadable LEGO trial ({exc})") from exc
-        if table.shape[0] == 0:
-            raise DataError(f"{f}: empty file")
-        if table.shape[1] != 18:
-            raise DataError(f"{f}: field 'positions' must have 18 columns, got {table.shape[1]}")
+        table = _read_lego_trial(f)  # (T, 18)
         pos = table.reshape(-1, 6, 3)[:, order]  # (T, 6, 3)
-        _check_coordinates(f, "positions", pos, LEGO_OUTPUT_JOINTS)
         if np.isnan(pos).any(axis=-1).all():  # as load_demonstrations refuses such a file
             raise DataError(
                 f"{f}: field 'positions' is NaN in every frame for every joint "

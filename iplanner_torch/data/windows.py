@@ -20,6 +20,7 @@ training tuple is ``(F_prev, p, c, n, xi_next)``:
 from __future__ import annotations
 
 import math
+import numbers
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -28,7 +29,7 @@ from typing import Literal
 import numpy as np
 import torch
 
-from iplanner_torch.checks import integer
+from iplanner_torch.checks import is_real
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.skeleton import BONES
 from iplanner_torch.errors import ConfigError, DataError, DataWarning, ShapeError
@@ -289,6 +290,14 @@ class WindowCfg:
     progress_actions: tuple[str, ...] | None = None  # None: all but idle/return/unlabelled
 
     def __post_init__(self) -> None:
+        # every command's joint selection is checked here, for every data format: a single
+        # string is refused (it was read as a list of one here, and refused or split into
+        # letters elsewhere)
+        if isinstance(self.joints, str):
+            raise ConfigError(
+                f"joints: expected a list of joint names, got the single string "
+                f"{self.joints!r}; write it as a list: [{self.joints}]"
+            )
         for name in ("joints", "progress_actions"):
             val = getattr(self, name)
             if val is not None:
@@ -299,13 +308,12 @@ class WindowCfg:
         object.__setattr__(
             self, "feature_kinds", (kinds,) if isinstance(kinds, str) else tuple(kinds)
         )
-        for name in ("n_prev", "n_future", "stride"):  # null or 1.5 failed in the comparison
-            integer(f"WindowCfg.{name}", getattr(self, name))
-        if self.n_prev < 3 or self.n_future < 1 or self.stride < 1:
-            raise ConfigError(
-                f"need n_prev >= 3, n_future >= 1, stride >= 1; got {self.n_prev}, "
-                f"{self.n_future}, {self.stride}"
-            )
+        # each field on its own, so the message names the one that is wrong (null or 1.5
+        # failed in the comparison)
+        for name, least in (("n_prev", 3), ("n_future", 1), ("stride", 1)):
+            value = getattr(self, name)
+            if not (is_real(value) and isinstance(value, numbers.Integral) and value >= least):
+                raise ConfigError(f"{name}: expected an integer >= {least}, got {value!r}")
         kinds = self.feature_kinds
         if not kinds or kinds[0] != "position" or any(k not in FEATURE_KINDS for k in kinds):
             raise ConfigError(f"feature_kinds must start with 'position', got {kinds}")

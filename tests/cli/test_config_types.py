@@ -746,6 +746,14 @@ def test_the_planner_group_option_narrows_the_run_to_that_planner() -> None:
          "error: ConfigError: data.fps: expected a frame rate > 0 [Hz], got 'abc'"),
         ("data", ["info", "data.path=nowhere", "data.windows.joints=[]"],
          "error: ConfigError: data.windows.joints: joints must be non-empty and unique"),
+        # each window setting under its own key (n_future=0 was named data.windows.n_prev)
+        ("data", ["info", "data.path=nowhere", "data.windows.n_future=0"],
+         "error: ConfigError: data.windows.n_future: expected an integer >= 1, got 0"),
+        ("train", ["data.windows.stride=0"],
+         "error: ConfigError: data.windows.stride: expected an integer >= 1, got 0"),
+        # an unknown format was read as native files
+        ("train", ["+data.format=lego"],
+         "error: ConfigError: data.format: expected one of native, lego_assembly, got 'lego'"),
         ("data", ["generate", "data.path=a_file/sub"],
          "error: NotADirectoryError: [Errno 20] Not a directory: "),
         ("evaluate", ["evaluate.checkpoint=null"],
@@ -799,6 +807,6 @@ def test_window_settings_of_the_wrong_kind_are_named(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"data\.windows\.joints: expected a list of joint "
                        r"names, got the single string 'right_hand'"):  # fmt: skip
         load_dataset(node)
-    for key, value in (("n_prev", None), ("n_future", 1.5), ("stride", "2")):
-        with pytest.raises(ConfigError, match=rf"WindowCfg\.{key} an integer, got"):
+    for key, value, least in (("n_prev", None, 3), ("n_future", 1.5, 1), ("stride", "2", 1)):
+        with pytest.raises(ConfigError, match=rf"^{key}: expected an integer >= {least}, got"):
             WindowCfg(**{key: value})

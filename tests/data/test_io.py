@@ -13,6 +13,7 @@ import pytest
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.io import (
     demonstration_files,
+    demonstration_names,
     load_demonstration,
     load_demonstrations,
     load_lego_assembly,
@@ -63,7 +64,7 @@ def test_folder_is_sorted_and_readme_ignored(tmp_path):
         save_demonstration(_demo(), tmp_path / name)
     (tmp_path / "README.md").write_text("hello")
     names = [d.name for d in load_demonstrations(tmp_path)]
-    assert names == ["a", "b", "c"]
+    assert names == ["a", "b", "sub/c"]  # named by path in the folder, without the suffix
 
 
 def test_joint_subset_one_wrist(tmp_path):
@@ -240,11 +241,15 @@ def test_error_inf_positions(tmp_path):
                        r"joint 'right_hand'"):  # fmt: skip
         load_demonstrations(p)
     c = tmp_path / "z.csv"
-    c.write_text("a_x,a_y,a_z\n1,2,3\n1,inf,3\n1,2,1e39\n")  # 1e39 overflows float32
+    c.write_text("a_x,a_y,a_z\n1,2,3\n1,inf,3\n-inf,2,3\n")
     with pytest.raises(
-        DataError, match=r"z\.csv: field 'positions' has 2 Inf .*frame 1, joint 'a'"
+        DataError,
+        match=r"z\.csv: field 'positions' has 2 Inf .*frame 1, joint 'a'; mark a lost joint "
+        r"with NaN \(an empty CSV cell\), never Inf",
     ):
         load_demonstrations(c, fps=10)
+    with pytest.raises(DataError, match=r"x\.npz: .*joint 'waist'; mark a lost joint with NaN, "):
+        load_demonstrations(tmp_path / "x.npz")  # no CSV cell in an NPZ file
 
 
 def test_error_coordinates_beyond_the_limit(tmp_path):
@@ -314,7 +319,9 @@ def test_demonstration_files_match_the_loader(tmp_path):
     (tmp_path / "README.md").write_text("hello")
     files = demonstration_files(tmp_path)
     assert files == [tmp_path / "a.csv", tmp_path / "b.npz", tmp_path / "sub" / "c.npz"]
-    assert [d.name for d in load_demonstrations(tmp_path)] == [f.stem for f in files]
+    names = [f.relative_to(tmp_path).with_suffix("").as_posix() for f in files]
+    assert [d.name for d in load_demonstrations(tmp_path)] == names
+    assert demonstration_names(tmp_path, files) == names
     assert demonstration_files(tmp_path / "b.npz") == [tmp_path / "b.npz"]
     (tmp_path / "none").mkdir()
     assert demonstration_files(tmp_path / "none") == []
@@ -331,7 +338,9 @@ def test_lego_loader_errors_give_a_hint(tmp_path):
     row = " ".join(["0.1"] * 17 + ["inf"])
     (tmp_path / "trial1.txt").write_text(f"{' '.join(['0.1'] * 18)}\n{row}\n")
     with pytest.raises(
-        DataError, match=r"trial1\.txt: .* 1 Inf .*frame 1, joint 'right_shoulder'"
+        DataError,
+        match=r"trial1\.txt: line 2, number 18 \(right_shoulder z\): 'inf' is infinite: mark a "
+        r"lost joint with NaN \('nan' in the text\), never Inf \(1 such value",
     ):
         load_lego_assembly(tmp_path / "trial1.txt")
     blind = " ".join(["nan"] * 18)
@@ -843,3 +852,184 @@ def test_a_lego_trial_cut_short_drops_its_last_row_with_a_warning(tmp_path):
         (e,) = load_lego_assembly(cut, fps=30.0)
     assert e.num_frames == whole.num_frames - 1
     np.testing.assert_array_equal(e.positions, whole.positions[:-1])
+
+
+def _lego_row(value: str = "0.1", at: int = 0, count: int = 18) -> str:
+    """A LEGO trial line of ``count`` entries, ``value`` at ``at`` (0-based), 0.1 elsewhere."""
+    return " ".join(value if i == at else "0.1" for i in range(count))
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"])
+def test_lego_trial_errors_name_the_file_line(tmp_path, newline):
+    """Errors counted numpy's data rows from 0 (blank and '#' lines left out): text on file
+    line 7 was 'row 6', a short line 5 'row 5' after two comment lines."""
+    good = _lego_row()
+    head = ["# recorded with a Kinect", "# camera frame", good, "", good, "\t" + good]
+    p = tmp_path / "trial1.txt"
+    p.write_text(newline.join([*head, _lego_row("abc", at=5), good]) + newline)
+    with pytest.raises(DataError, match=r"trial1\.txt: line 7, number 6: 'abc' is not a number$"):
+        load_lego_assembly(p)
+    p.write_text(newline.join([*head, _lego_row(count=17), good]) + newline)
+    with pytest.raises(DataError, match=r"trial1\.txt: line 7: 17 numbers, expected 18 \(x, y, z"):
+        load_lego_assembly(p)
+    p.write_text(newline.join([good, "0.1 " + _lego_row(count=18)]) + newline)
+    with pytest.raises(DataError, match=r"trial1\.txt: line 2: 19 numbers, expected 18"):
+        load_lego_assembly(p)
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        (
+            ",".join(["0.1"] * 18),
+            r"line 2, number 1: '0\.1,0\.1,.*\.\.\. is not a number \(numbers",
+        ),
+        (_lego_row("0.1;", at=3), r"line 2, number 4: '0\.1;' is not a number \(numbers are sep"),
+        (_lego_row("1_0", at=2), r"line 2, number 3: '1_0' is not a number$"),  # float() reads it
+        (_lego_row("\u0661", at=0), r"line 2, number 1: '\u0661' is not a number$"),
+        ("0.1", r"line 2: 1 number, expected 18"),
+        (_lego_row("-inf", at=4), r"line 2, number 5 \(right_hand y\): '-inf' is infinite: mark"),
+        (_lego_row("1e400", at=0), r"line 2, number 1 \(left_hand x\): '1e400' overflows: it is"),
+        (_lego_row("512.3", at=17), r"line 2, number 18 \(right_shoulder z\): '512\.3' is beyond"),
+    ],
+)
+def test_lego_trial_refuses_what_it_refused(tmp_path, line, message):
+    """Commas, semicolons, text, wrong counts, Inf and millimetres stay refused, each with the
+    file line and the entry's place in it."""
+    p = tmp_path / "trial1.txt"
+    p.write_text(f"{_lego_row()}\n{line}\n")
+    with pytest.raises(DataError, match=rf"trial1\.txt: {message}"):
+        load_lego_assembly(p)
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"])
+def test_lego_trial_reads_what_numpy_read(tmp_path, newline):
+    """Tabs and spaces, blank lines, '#' comments (whole lines and line ends), NaN and any line
+    ending: the table numpy.loadtxt (the reference) reads from the same text."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(scale=0.5, size=(6, 18))
+    x[2, 3:6] = np.nan
+    rows = ["\t".join(repr(float(v)) for v in r) for r in x]
+    lines = ["# trial 1", rows[0], "", rows[1] + "  # note", *rows[2:4], "   ", *rows[4:]]
+    p = tmp_path / "trial1.txt"
+    p.write_text(newline.join(lines) + newline)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        (d,) = load_lego_assembly(p)
+    ref = np.loadtxt(p, ndmin=2).reshape(-1, 6, 3)  # (T, 6, 3) in LEGO_JOINTS order
+    order = [4, 2, 0, 5, 3, 1]  # LEGO_JOINTS (left hand ...) -> left shoulder, left elbow ...
+    np.testing.assert_array_equal(d.positions, ref[:, order].astype(np.float32))
+    assert d.num_frames == 6 and np.isnan(d.positions).sum() == 3
+
+
+@pytest.mark.parametrize("text", ["", "\n\n", "# only a comment\n"])
+def test_an_empty_lego_trial_names_itself_once(tmp_path, text):
+    """It read '.../b_bad.txt: unreadable LEGO trial (.../b_bad.txt: empty file)'."""
+    p = tmp_path / "b_bad.txt"
+    p.write_text(text)
+    with pytest.raises(DataError, match=r"b_bad\.txt: empty file \(no rows of numbers\)") as info:
+        load_lego_assembly(p)
+    assert str(info.value).count("b_bad.txt") == 1 and "unreadable" not in str(info.value)
+
+
+def test_a_lego_trial_cut_after_a_comment_loses_no_row(tmp_path):
+    p = tmp_path / "trial1.txt"
+    p.write_text(f"{_lego_row()}\n{_lego_row()}\n# end")  # a comment is no row to distrust
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        (d,) = load_lego_assembly(p)
+    assert d.num_frames == 2
+    p.write_text(f"{_lego_row()}\n{_lego_row()}")
+    with pytest.warns(DataWarning, match=r"trial1\.txt: last line has no line terminator"):
+        (d,) = load_lego_assembly(p)
+    assert d.num_frames == 1
+
+
+@pytest.mark.skipif(not LEGO.is_dir(), reason="LEGO assembly recording not present")
+def test_lego_recording_reads_as_numpy_reads_it():
+    """The line parser gives numpy.loadtxt's numbers, bit for bit, on every trial."""
+    demos = load_lego_assembly(LEGO, fps=30.0)
+    for f, d in zip(sorted(LEGO.rglob("*.txt")), demos, strict=True):
+        raw = np.loadtxt(f, ndmin=2).reshape(-1, 6, 3)  # (T, 6, 3)
+        np.testing.assert_array_equal(d.positions, raw[:, [4, 2, 0, 5, 3, 1]].astype(np.float32))
+
+
+def test_csv_overflowing_cell_says_it_overflows(tmp_path):
+    """'1e400' read as Inf and was told to use an empty cell, as if it were a lost joint."""
+    c = tmp_path / "z.csv"
+    c.write_text("t,a_x,a_y,a_z\n0,1,2,3\n0.1,1,1e400,3\n")
+    with pytest.raises(
+        DataError,
+        match=r"z\.csv: line 3, column 'a_y': '1e400' overflows: it is beyond the largest float",
+    ):
+        load_demonstrations(c, fps=10)
+    c.write_text("t,a_x,a_y,a_z\n0,1,2,3\n0.1,1,2,1e39\n")  # beyond float32: was an Inf
+    with pytest.raises(DataError, match=r"z\.csv: field 'positions' has 1 coordinate\(s\) beyond"):
+        load_demonstrations(c, fps=10)
+
+
+def test_demonstrations_in_sub_folders_are_named_by_their_path(tmp_path):
+    """Task1/Human1/trial2.csv and Task5/Human1/trial2.csv were both 'trial2'."""
+    for name in ("Task1/Human1/trial2.csv", "Task5/Human1/trial2.npz", "flat.csv"):
+        save_demonstration(_demo(), tmp_path / name)
+    names = [d.name for d in load_demonstrations(tmp_path)]
+    assert names == ["Task1/Human1/trial2", "Task5/Human1/trial2", "flat"]
+    assert [d.name for d in load_demonstrations(tmp_path / "Task1")] == ["Human1/trial2"]
+    assert load_demonstrations(tmp_path / "Task1/Human1/trial2.csv")[0].name == "trial2"
+    assert load_demonstration(tmp_path / "Task1/Human1/trial2.csv").name == "trial2"
+    lego = tmp_path / "lego" / "Task1" / "Human1"
+    lego.mkdir(parents=True)
+    (lego / "trial2.txt").write_text(_lego_row() + "\n")
+    assert load_lego_assembly(tmp_path / "lego")[0].name == "Task1/Human1/trial2"  # the same
+
+
+def test_two_files_of_one_name_are_refused(tmp_path):
+    save_demonstration(_demo(), tmp_path / "sub" / "a.csv")
+    save_demonstration(_demo(), tmp_path / "sub" / "a.npz")
+    with pytest.raises(
+        DataError, match=r"sub[/\\]a\.csv and .*sub[/\\]a\.npz would both be demonstration 'sub/a'"
+    ):
+        load_demonstrations(tmp_path)
+
+
+def test_csv_hash_line_after_the_header_row_is_refused(tmp_path):
+    """A '# pause' note among the frames was joined into the JSON header ('Extra data')."""
+    p = tmp_path / "x.csv"
+    p.write_text('# {"fps": 10}\nt,a_x,a_y,a_z\n0,1,2,3\n# pause\n0.1,1,2,3\n')
+    with pytest.raises(
+        DataError,
+        match=r"x\.csv: line 4: a '#' line after the header row \(line 2\); '#' lines are read "
+        "only at the top",
+    ):
+        load_demonstrations(p)
+
+
+def test_csv_header_names_the_comment_line_that_is_not_json(tmp_path):
+    p = tmp_path / "x.csv"
+    p.write_text('# {"fps": 10}\n\n# recorded by Bob\nt,a_x,a_y,a_z\n0,1,2,3\n0.1,1,2,3\n')
+    with pytest.raises(
+        DataError,
+        match=r"x\.csv: field 'header' \(# JSON comment\) is invalid: line 3 '# recorded by "
+        r"Bob' is not JSON \(Extra data at column 3\); the 2 '#' lines at the top \(lines 1-3\)",
+    ):
+        load_demonstrations(p)
+    p.write_text('# exported by hand\n# {"fps": 10}\nt,a_x,a_y,a_z\n0,1,2,3\n')
+    with pytest.raises(DataError, match=r"is invalid: line 1 '# exported by hand' is not JSON"):
+        load_demonstrations(p)
+    p.write_text('# {"fps": 10,\n#  "metadata": {"subject": 3}}\nt,a_x,a_y,a_z\n0,1,2,3\n')
+    (d,) = load_demonstrations(p)  # a JSON object over several lines still reads
+    assert d.fps == 10 and d.metadata == {"subject": 3}
+
+
+@pytest.mark.parametrize(("header", "line"), [("", 1), ('# {"fps": 10}\n', 2)])
+def test_csv_without_a_column_header_row_says_so(tmp_path, header, line):
+    """A first row of numbers was listed, number by number, as unknown columns."""
+    p = tmp_path / "x.csv"
+    p.write_text(header + "\n".join(",".join(["0.1"] * 30) for _ in range(3)) + "\n")
+    with pytest.raises(
+        DataError,
+        match=rf"x\.csv: line {line} holds numbers, not column names: the first line .*must "
+        r"name the columns \(see datasets/README\.md\)$",
+    ) as info:
+        load_demonstrations(p, fps=10)
+    assert len(str(info.value)) < len(str(p)) + 160

@@ -310,3 +310,30 @@ def test_progress_indices_default_and_explicit() -> None:
     assert cfg.progress_indices(names) == (5, 1)
     with pytest.raises(ConfigError, match=r"progress_actions \['reach_9'\] are not among"):
         WindowCfg(progress_actions=("reach_0", "reach_9")).progress_indices(names)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "least"),
+    [
+        ("n_prev", 2, 3),
+        ("n_future", 0, 1),
+        ("n_future", -5, 1),
+        ("stride", 0, 1),
+        ("stride", True, 1),
+        ("n_prev", 15.0, 3),
+    ],
+)
+def test_window_settings_are_checked_one_field_at_a_time(field: str, value: object, least: int):
+    """Each count names itself: ``n_future=0`` was refused as ``need n_prev >= 3, n_future
+    >= 1, stride >= 1; got 30, 0, 2``, which the command line reported under n_prev."""
+    with pytest.raises(ConfigError, match=rf"^{field}: expected an integer >= {least}, got "):
+        WindowCfg(**{field: value})
+
+
+def test_window_joints_must_be_a_list_not_one_string():
+    """A single string was taken as a list of one; every format and command now refuses it
+    (a list of one joint is the way to select one)."""
+    single = r"^joints: expected a list of joint names, got the single string 'right_hand'; "
+    with pytest.raises(ConfigError, match=single + r"write it as a list: \[right_hand\]$"):
+        WindowCfg(joints="right_hand")
+    assert WindowCfg(joints=["right_hand"]).joints == ("right_hand",)
