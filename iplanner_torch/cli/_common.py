@@ -1039,11 +1039,32 @@ def _one_line(text: str) -> str:
     return " ".join(lines)
 
 
+#: Hydra launcher configs of plugins that are optional extras: the plugin and how to install it
+PLUGIN_LAUNCHERS = {
+    "submitit_slurm": ("hydra-submitit-launcher", 'pip install -e ".[slurm]"'),
+    "submitit_local": ("hydra-submitit-launcher", 'pip install -e ".[slurm]"'),
+    "joblib": ("hydra-joblib-launcher", "pip install -e ."),
+}
+
+
+def _launcher_option(exc: Any) -> str | None:
+    """The ``conf/hydra/launcher`` option whose defaults name a missing plugin config
+    (``slurm`` for ``In 'hydra/launcher/slurm': Could not load ...``), or None."""
+    found = re.match(r"In 'hydra/launcher/([^']+)': ", str(exc))
+    return found.group(1) if found else None
+
+
 def _missing_option_text(exc: Any) -> str:
     """``unknown option robot=nope (robot options: fetch, kuka_iiwa14)``, or Hydra's message
     on one line when the missing config is not a group option."""
     missing = str(exc.missing_cfg_file or "")
     group, _, option = missing.rpartition("/")
+    if group == "hydra/launcher" and option in PLUGIN_LAUNCHERS:
+        plugin, install = PLUGIN_LAUNCHERS[option]
+        return (
+            f"hydra/launcher={_launcher_option(exc) or option} needs the Hydra plugin {plugin}, "
+            f"which is not installed: {install}"
+        )
     if not group or exc.options is None:
         return _one_line(str(exc)) or f"config not found: {missing}"
     found = re.match(r"In '([^']+)': ", str(exc))

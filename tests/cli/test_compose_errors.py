@@ -150,6 +150,28 @@ def test_a_misspelt_key_or_option_is_named_in_full_in_one_line(
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize("launcher", ["slurm", "submitit_slurm"])
+def test_the_slurm_launcher_without_its_plugin_says_how_to_install_it(
+    launcher: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    """``hydra/launcher=slurm`` without the optional ``slurm`` extra was Hydra's "Could not
+    load 'hydra/launcher/submitit_slurm'"; it now names the plugin and the install command."""
+    import importlib.util
+
+    if importlib.util.find_spec("hydra_plugins.hydra_submitit_launcher") is not None:
+        pytest.skip("hydra-submitit-launcher is installed here")
+    sweep = f"hydra.sweep.dir={tmp_path / 'sweep'}"
+    code, lines = _main(
+        "experiment", ["-m", f"hydra/launcher={launcher}", sweep], monkeypatch, capsys
+    )
+    assert code == 2
+    assert lines == [
+        f"error: ConfigError: hydra/launcher={launcher} needs the Hydra plugin "
+        'hydra-submitit-launcher, which is not installed: pip install -e ".[slurm]"'
+    ]
+    assert not (tmp_path / "sweep").exists()
+
+
 def test_hydra_full_error_leaves_the_report_to_hydra(monkeypatch: pytest.MonkeyPatch) -> None:
     """Set in the environment, HYDRA_FULL_ERROR=1 gives Hydra's own exception."""
     from hydra.core.global_hydra import GlobalHydra
