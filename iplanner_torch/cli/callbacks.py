@@ -242,6 +242,101 @@ def used_sweep_dir_text(sweep_dir: Path) -> str | None:
     )
 
 
+#: per command (``hydra.job.name``): the function that checks one job's composed config
+#: before a sweep starts, as ``module:function``; it raises an
+#: :class:`~iplanner_torch.errors.IPlannerError` for a bad setting
+JOB_CHECKS = {"experiment": "iplanner_torch.cli.experiment:check_job"}
+
+
+def sweep_job_overrides(config: DictConfig) -> list[list[str]] | None:
+    """The overrides of each job of the multirun ``config`` describes, in job order, as
+    Hydra's basic sweeper splits them (``hydra.sweeper.params`` first, then the command
+    line); None for another sweeper."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    sweeper = config.hydra.get("sweeper")
+    if sweeper is None or not str(sweeper.get("_target_", "")).endswith(".BasicSweeper"):
+        return None
+    params = sweeper.get("params") or {}
+    given = [f"{k}={v}" for k, v in params.items()] + [str(o) for o in config.hydra.overrides.task]
+    batches = BasicSweeper.split_arguments(OverridesParser.create().parse_overrides(given), None)
+    return [list(job) for batch in batches for job in batch]
+
+
+def check_sweep_jobs(config: DictConfig) -> None:
+    """Compose every job of the multirun ``config`` describes and check its settings as the
+    job will (:data:`JOB_CHECKS`), before the first job runs; exit 2 naming what is wrong.
+
+    Hydra composes each batch of jobs (``hydra.sweeper.max_batch_size``) only when it comes
+    to it, so a job of a later batch with an unknown option or key stopped the sweep midway
+    with Hydra's own report: that is one ``error: ConfigError:`` line now. A value that is
+    wrong in one job (``planner.confidence=0.95,1.5``) was found only when that job started,
+    after the jobs before it had run: every such job is named now, with its overrides, and
+    no job runs. A check that fails other than on a bad setting (a bug) is left to the job,
+    which reports it with its traceback.
+
+    Raises:
+        SystemExit: with code 2, after printing the error lines (Hydra turns an exception
+            raised in a callback into a warning; an exit is not one).
+    """
+    import copy
+    import importlib
+    import sys
+
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.hydra_config import HydraConfig
+    from omegaconf import open_dict
+
+    from iplanner_torch.cli._common import composition_error_text
+    from iplanner_torch.errors import IPlannerError
+
+    jobs = sweep_job_overrides(config)
+    if not jobs:
+        return
+    target = JOB_CHECKS.get(str(config.hydra.job.get("name", "")))
+    check = None
+    if target is not None:
+        module, _, name = target.partition(":")
+        check = getattr(importlib.import_module(module), name)
+    loader = GlobalHydra.instance().config_loader()
+    hydra_config = HydraConfig.instance()
+    saved = hydra_config.cfg
+    bad: list[str] = []
+    try:
+        for num, overrides in enumerate(jobs):
+            try:
+                job_cfg = loader.load_sweep_config(config, overrides)
+            except Exception as exc:  # noqa: BLE001 - Hydra would only warn of it here
+                text = composition_error_text(exc) or f"{type(exc).__name__}: {exc}"
+                print(f"error: ConfigError: {text}", file=sys.stderr, flush=True)
+                raise SystemExit(2) from None
+            if check is None:
+                continue
+            with open_dict(job_cfg.hydra):
+                job_cfg.hydra.job.num = num
+            hydra_config.set_config(job_cfg)  # the job's overrides, as the job reads them
+            task_cfg = copy.deepcopy(job_cfg)
+            with open_dict(task_cfg):
+                del task_cfg["hydra"]
+            try:
+                check(task_cfg)
+            except IPlannerError as exc:
+                bad.append(f"  job {num} [{' '.join(overrides)}]: {type(exc).__name__}: {exc}")
+            except Exception:  # noqa: BLE001 - a bug: the job reports it with its traceback
+                continue
+    finally:
+        hydra_config.cfg = saved
+    if bad:
+        print(
+            f"error: ConfigError: {len(bad)} of {len(jobs)} sweep job(s) would stop on a bad "
+            "setting; no job was run:\n" + "\n".join(bad),
+            file=sys.stderr,
+            flush=True,
+        )
+        raise SystemExit(2)
+
+
 class GatherSweepResults(Callback):
     """At the end of a multirun, write ``<sweep dir>/summary/results.{csv,md}`` and plots of
     the jobs that ran, then name the jobs that failed, if any, and exit 2. When the summary
@@ -250,12 +345,9 @@ class GatherSweepResults(Callback):
     would turn the exception into a warning and exit 0.
 
     At its start, a sweep folder whose job folders hold an earlier sweep's results is refused
-    (:func:`used_sweep_dir_text`), before Hydra rewrites their records. When
-    ``hydra.sweeper.max_batch_size`` splits the sweep into batches, every job's config is
-    composed first: Hydra composes (and checks) each batch only when it comes to it, so a
-    job of a later batch whose config fails (an unknown option, a key that does not exist)
-    stopped the sweep midway with Hydra's own report. Without batches Hydra checks every job
-    before the first runs.
+    (:func:`used_sweep_dir_text`), before Hydra rewrites their records; then every job's
+    config is composed and its settings checked (:func:`check_sweep_jobs`), so that a bad
+    value in one job stops the sweep before any job runs.
 
     Hydra turns an exception raised in these methods into a warning; they end the process
     with ``SystemExit(2)`` instead, which it lets through."""
@@ -267,25 +359,7 @@ class GatherSweepResults(Callback):
         if used:
             print(f"error: ConfigError: {used}", file=sys.stderr, flush=True)
             raise SystemExit(2)
-        if config.hydra.sweeper.get("max_batch_size") is None:
-            return
-        from hydra import compose
-        from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
-        from hydra.core.override_parser.overrides_parser import OverridesParser
-
-        from iplanner_torch.cli._common import composition_error_text
-
-        task = [str(o) for o in config.hydra.overrides.task]
-        jobs = BasicSweeper.split_arguments(OverridesParser.create().parse_overrides(task), None)
-        for batch in jobs:
-            for overrides in batch:
-                try:
-                    compose(config_name=str(config.hydra.job.config_name), overrides=overrides)
-                except Exception as exc:  # noqa: BLE001 - Hydra would only warn of it here
-                    text = composition_error_text(exc) or f"{type(exc).__name__}: {exc}"
-                    # Hydra turns an exception raised here into a warning; an exit is not one
-                    print(f"error: ConfigError: {text}", file=sys.stderr, flush=True)
-                    raise SystemExit(2) from None
+        check_sweep_jobs(config)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         import sys

@@ -45,6 +45,8 @@ from iplanner_torch.cli._common import (
     CONF_DIR,
     cfg_list,
     cfg_scalar,
+    check_added_keys,
+    check_root_keys,
     dump_config,
     friendly_errors,
     instantiate,
@@ -528,36 +530,25 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     return replace(exp, robot=robot, episode=episode)
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
-@friendly_errors
-def _app(cfg: DictConfig) -> None:
-    import warnings
-    from dataclasses import replace
+def check_run(cfg: DictConfig) -> tuple[Any, list[str], bool]:
+    """The checks of a run's settings before anything runs: the overrides it does not read or
+    that another setting would replace, the planners, every group's values and
+    ``run.timeline_plots``. A sweep makes them for every job before the first one starts
+    (:meth:`~iplanner_torch.cli.callbacks.GatherSweepResults.on_multirun_start`).
 
-    import pandas as pd
+    Args:
+        cfg: the run's composed config (without its ``hydra`` node); narrowed to the planner
+            a ``planner=<option>`` override names (:func:`choose_planner`).
 
+    Returns:
+        The :class:`~iplanner_torch.eval.experiment.ExperimentCfg` (without predictor
+        paths), the predictor variants its planners need, and whether to draw timeline plots.
+
+    Raises:
+        ConfigError: naming the key, for the first setting that is wrong.
+    """
     from iplanner_torch.eval.episode import PLANNER_KINDS
-    from iplanner_torch.eval.experiment import run_experiment
-    from iplanner_torch.eval.report import (
-        comparison_table,  # the table iplanner-evaluate evaluate.mode=episode prints too
-        gather_results,
-        print_table,
-        report_groups,
-        write_sweep_report,
-    )
-    from iplanner_torch.planning.replanner import PlanningOverrunWarning
 
-    # overruns are counted per episode (plan/overruns in results.csv); one line each would
-    # drown the console
-    warnings.simplefilter("ignore", PlanningOverrunWarning)
-    t0 = time.perf_counter()
-    out_dir = Path(HydraConfig.get().runtime.output_dir)
-    message = _used_run_dir(out_dir)
-    if message:
-        from iplanner_torch.errors import ConfigError
-
-        raise ConfigError(message)
-    (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
     overrides = _task_overrides()
     unused = unused_overrides(overrides, str(cfg.run.train_data))
     if unused:
@@ -603,6 +594,52 @@ def _app(cfg: DictConfig) -> None:
     variants = sorted({v for p in planners if (v := PLANNER_KINDS[p]) is not None})
     experiment = build_experiment(cfg, {})
     timeline_plots = cfg_scalar(cfg.run, "timeline_plots", bool)  # checked before any episode
+    return experiment, variants, timeline_plots
+
+
+def check_job(cfg: DictConfig) -> None:
+    """What a sweep checks of each job before the first starts: the checks
+    :func:`~iplanner_torch.cli._common.friendly_errors` makes of every command's config, then
+    :func:`check_run`.
+
+    Raises:
+        ConfigError: naming the key, for the first setting that is wrong.
+    """
+    check_added_keys(cfg)
+    check_root_keys(cfg)
+    check_run(cfg)
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
+@friendly_errors
+def _app(cfg: DictConfig) -> None:
+    import warnings
+    from dataclasses import replace
+
+    import pandas as pd
+
+    from iplanner_torch.eval.experiment import run_experiment
+    from iplanner_torch.eval.report import (
+        comparison_table,  # the table iplanner-evaluate evaluate.mode=episode prints too
+        gather_results,
+        print_table,
+        report_groups,
+        write_sweep_report,
+    )
+    from iplanner_torch.planning.replanner import PlanningOverrunWarning
+
+    # overruns are counted per episode (plan/overruns in results.csv); one line each would
+    # drown the console
+    warnings.simplefilter("ignore", PlanningOverrunWarning)
+    t0 = time.perf_counter()
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    message = _used_run_dir(out_dir)
+    if message:
+        from iplanner_torch.errors import ConfigError
+
+        raise ConfigError(message)
+    (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
+    experiment, variants, timeline_plots = check_run(cfg)
     n = len(experiment.scenarios) * len(experiment.planners) * len(experiment.seeds)
     n *= max(1, len(experiment.speeds)) * max(1, len(experiment.noises))
     print(f"experiment {experiment.name!r}: {n} episode(s)", flush=True)

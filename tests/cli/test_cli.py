@@ -502,24 +502,48 @@ def test_train_writes_a_checkpoint_and_held_out_metrics_and_resumes(tmp_path: Pa
     torch.testing.assert_close(after.weights, before.weights)
 
 
-def test_a_failed_sweep_job_leaves_the_others_running_and_is_named(tmp_path: Path) -> None:
-    """``-m`` with one bad value among good ones: the good jobs run and are summarised, the bad
-    job leaves its error line in a FAILED file, and the sweep names it and exits 2."""
+def test_a_sweep_with_bad_values_is_refused_before_any_job_runs(tmp_path: Path) -> None:
+    """``-m`` with bad values among good ones: every job's settings are checked before the
+    first job starts (a bad value was found only when its job started, after the jobs before
+    it had run); each bad job is named with its overrides and nothing runs."""
     sweep = tmp_path / "sweep"
-    args = ["iplanner-experiment", "-m", f"hydra.sweep.dir={sweep}", "tracker.noise=0,-1,0.02",
-            "run.planners=[itomp]", "run.max_duration_s=2", "progress=false"]  # fmt: skip
+    args = ["iplanner-experiment", "-m", f"hydra.sweep.dir={sweep}", "tracker.noise=0,-1",
+            "planner.confidence=0.95,1.5", "run.planners=[itomp]", "run.max_duration_s=2",
+            "progress=false"]  # fmt: skip
+    res = _run(args, tmp_path)
+    assert res.returncode == 2, res.stderr[-2000:]
+    noise = "ConfigError: tracker.noise: expected in [0, 1] m, got -1.0"
+    confidence = "ConfigError: planner.confidence: expected confidence in (0, 1), got 1.5"
+    rest = "run.planners=[itomp] run.max_duration_s=2 progress=False"
+    assert res.stderr.strip().splitlines() == [
+        "error: ConfigError: 3 of 4 sweep job(s) would stop on a bad setting; no job was run:",
+        f"  job 1 [tracker.noise=0 planner.confidence=1.5 {rest}]: {confidence}",
+        f"  job 2 [tracker.noise=-1 planner.confidence=0.95 {rest}]: {noise}",
+        f"  job 3 [tracker.noise=-1 planner.confidence=1.5 {rest}]: {noise}",
+    ]
+    assert not sweep.exists()
+
+
+def test_a_failed_sweep_job_leaves_the_others_running_and_is_named(tmp_path: Path) -> None:
+    """A job that fails on what only running it finds (here a predictor checkpoint that is
+    missing, with run.train_if_missing=false): the good jobs run and are summarised, the
+    failed job leaves its error line in a FAILED file, and the sweep names it and exits 2."""
+    sweep, ck = tmp_path / "sweep", tmp_path / "ck"
+    args = ["iplanner-experiment", "-m", f"hydra.sweep.dir={sweep}",
+            "run.planners=[itomp],[iplanner_ni],[itomp]", "tracker.noise=0",
+            "run.train_if_missing=false", f"paths.checkpoints={ck}", "run.max_duration_s=2",
+            "progress=false"]  # fmt: skip
     res = _run(args, tmp_path)
     assert res.returncode == 2, res.stderr[-2000:]
     assert (sweep / "0" / "results.csv").exists() and (sweep / "2" / "results.csv").exists()
     assert not (sweep / "1" / "results.csv").exists()
-    line = "error: ConfigError: tracker.noise: expected in [0, 1] m, got -1.0"
-    assert (sweep / "1" / "FAILED").read_text().strip() == line
+    line = (sweep / "1" / "FAILED").read_text().strip()
+    assert line.startswith("error: CheckpointError: ") and "no trained predictor" in line
     assert (sweep / "summary" / "results.csv").exists()
     err = res.stderr.strip().splitlines()
     at = err.index("1 of 3 sweep job(s) failed (the others ran):")
-    assert err[at + 1].startswith(f"  {sweep / '1'} [tracker.noise=-1 ") and err[at + 1].endswith(
-        line
-    )
+    assert err[at + 1].startswith(f"  {sweep / '1'} [run.planners=[iplanner_ni] ")
+    assert err[at + 1].endswith(line)
 
 
 def test_the_robot_group_configures_every_experiment() -> None:
