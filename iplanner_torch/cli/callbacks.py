@@ -1,4 +1,5 @@
-"""Hydra callbacks: gather a sweep's episode logs into one table and plots when it ends."""
+"""Hydra callbacks: check every job of a sweep before the first runs, and gather the sweep's
+episode logs into one table and plots when it ends."""
 
 from __future__ import annotations
 
