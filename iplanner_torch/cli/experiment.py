@@ -547,13 +547,12 @@ def check_run(cfg: DictConfig) -> tuple[Any, list[str], bool]:
     Raises:
         ConfigError: naming the key, for the first setting that is wrong.
     """
+    from iplanner_torch.errors import ConfigError
     from iplanner_torch.eval.episode import PLANNER_KINDS
 
     overrides = _task_overrides()
     unused = unused_overrides(overrides, str(cfg.run.train_data))
     if unused:
-        from iplanner_torch.errors import ConfigError
-
         raise ConfigError(
             f"iplanner-experiment does not read {' '.join(unused)}: it trains a missing "
             "predictor with conf/predictor/<variant>.yaml, the run.train_trainer option and, "
@@ -569,8 +568,6 @@ def check_run(cfg: DictConfig) -> tuple[Any, list[str], bool]:
         )
     replaced = replaced_overrides(overrides, cfg.get("experiment"))
     if replaced:
-        from iplanner_torch.errors import ConfigError
-
         raise ConfigError(
             "another setting of this run would replace "
             f"{'this override' if len(replaced) == 1 else 'these overrides'}: "
@@ -585,8 +582,6 @@ def check_run(cfg: DictConfig) -> tuple[Any, list[str], bool]:
     )
     unknown = [p for p in planners if p not in PLANNER_KINDS]
     if unknown:
-        from iplanner_torch.errors import ConfigError
-
         key = "experiment.planners" if exp_node is not None else "run.planners"
         raise ConfigError(
             f"{key}: unknown planners {unknown}; expected some of {sorted(PLANNER_KINDS)}"

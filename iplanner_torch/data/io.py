@@ -504,6 +504,13 @@ def _is_number(text: str) -> bool:
     return True
 
 
+#: why a number read as an infinity that does not spell one (``1e400``) is refused
+_OVERFLOWS = (
+    f"overflows: it is beyond the largest float (+-{np.finfo(np.float64).max:.4g}), a "
+    "corrupted number"
+)
+
+
 def _is_infinity(text: str) -> bool:
     """Whether ``text`` spells an infinity (``inf``, ``-Infinity`` ...) rather than a number
     too large for a float (``1e400``)."""
@@ -579,9 +586,8 @@ def _read_csv(path: Path) -> dict[str, Any]:
         text = rows[i][1].split(",")[j].strip()
         if not _is_infinity(text):
             raise DataError(
-                f"{path}: line {rows[i][0]}, column {cols[j]!r}: {_show(text)} overflows: it "
-                f"is beyond the largest float (+-{np.finfo(np.float64).max:.4g}), a corrupted "
-                "number (positions are metres, times seconds)"
+                f"{path}: line {rows[i][0]}, column {cols[j]!r}: {_show(text)} {_OVERFLOWS} "
+                "(positions are metres, times seconds)"
             )
     col: dict[str, int] = {}
     for i, c in enumerate(cols):
@@ -1166,10 +1172,7 @@ def _read_lego_trial(path: Path) -> np.ndarray:
         elif _is_infinity(entry):
             why = "is infinite: mark a lost joint with NaN ('nan' in the text), never Inf"
         else:
-            why = (
-                f"overflows: it is beyond the largest float (+-{np.finfo(np.float64).max:.4g}), "
-                "a corrupted number"
-            )
+            why = _OVERFLOWS
         raise DataError(f"{where} {why} ({count})")
     return table
 
