@@ -174,6 +174,121 @@ def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
     return episode_report(df, out_dir, split_by=swept)
 
 
+#: per-job metrics files a sweep of iplanner-train (held-out metrics of the trained predictor)
+#: or iplanner-evaluate evaluate.mode=prediction writes into its job folder
+JOB_METRICS_FILES = ("heldout_metrics.json", "prediction_metrics.json")
+
+#: metrics drawn in a metrics sweep's plot, when the jobs report them, with their titles
+#: (see :mod:`iplanner_torch.eval.prediction`)
+PLOTTED_METRICS = {
+    "mhd_1s": "hand MHD over 1 s [m]",
+    "class_accuracy": "action accuracy",
+    "coverage95": "95% ellipsoid coverage",
+    "reg_precision": "regression precision [m^2 s]",
+    "train_seconds": "training time [s]",
+}
+
+
+def job_metrics_rows(root: Path) -> Any:
+    """One row per job folder of the multirun folder ``root`` that holds a metrics file
+    (:data:`JOB_METRICS_FILES`): ``job`` (the folder's name), the file's numbers and ``path``.
+
+    Returns:
+        A DataFrame in job order; empty when no job wrote one.
+    """
+    import json
+
+    import pandas as pd
+
+    from iplanner_torch.eval.report import natural_key
+
+    root = Path(root)
+    if not root.is_dir():
+        return pd.DataFrame()
+    rows = []
+    for job in sorted((d for d in root.iterdir() if (d / ".hydra").is_dir()), key=natural_key):
+        file = next((job / n for n in JOB_METRICS_FILES if (job / n).is_file()), None)
+        if file is None:
+            continue
+        try:
+            record = json.loads(file.read_text(encoding="utf-8"))
+        except (OSError, ValueError):  # a damaged file only loses its row
+            continue
+        if not isinstance(record, dict):
+            continue
+        values = {k: v for k, v in record.items() if isinstance(v, int | float | str)}
+        rows.append({"job": job.name, **values, "path": str(file)})
+    return pd.DataFrame.from_records(rows)
+
+
+def gather_job_metrics(root: Path, out_dir: Path) -> list[Path]:
+    """Report the per-job metrics of a multirun folder (:func:`job_metrics_rows`) into
+    ``out_dir``: ``results.csv`` and ``results.md`` with a row per job and the overrides that
+    differ between the jobs as columns (:func:`sweep_overrides`), and ``metrics.png``: the
+    metrics of :data:`PLOTTED_METRICS` against the first swept override (its values in job
+    order when they are not numbers).
+
+    Returns:
+        The written files, or [] when no job wrote metrics.
+    """
+    from iplanner_torch.eval.report import to_markdown
+
+    df = job_metrics_rows(root)
+    if df.empty:
+        return []
+    df, swept = sweep_overrides(df, root)
+    front = ["job", *swept]
+    df = df[front + [c for c in df.columns if c not in front and c != "path"] + ["path"]]
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    csv, md = out_dir / "results.csv", out_dir / "results.md"
+    df.to_csv(csv, index=False)
+    md.write_text(
+        f"# Sweep of {Path(root).resolve()}\n\nOne row per job; `path` is the job's metrics "
+        "file.\n\n" + to_markdown(df.drop(columns="path")),
+        encoding="utf-8",
+    )
+    written = [csv, md]
+    plot = _plot_job_metrics(df, swept, out_dir / "metrics.png")
+    if plot is not None:
+        written.append(plot)
+    return written
+
+
+def _plot_job_metrics(df: Any, swept: list[str], path: Path) -> Path | None:
+    """One panel per metric of :data:`PLOTTED_METRICS` in ``df``, against ``swept[0]`` (a
+    line over numeric values, else the jobs' values as categories); None when there is no
+    swept override or no such metric."""
+    import numpy as np
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    metrics = [m for m in PLOTTED_METRICS if m in df.columns]
+    if not swept or not metrics:
+        return None
+    x_col = swept[0]
+    numeric = pd.api.types.is_numeric_dtype(df[x_col])
+    fig = Figure(figsize=(3.4 * len(metrics) + 0.6, 3.4))
+    for i, m in enumerate(metrics):
+        ax = fig.add_subplot(1, len(metrics), i + 1)
+        y = pd.to_numeric(df[m], errors="coerce")
+        if numeric:
+            order = np.argsort(df[x_col].to_numpy(dtype=float), kind="stable")
+            ax.plot(df[x_col].to_numpy(dtype=float)[order], y.to_numpy()[order], "o-")
+        else:
+            ax.plot(np.arange(len(df)), y.to_numpy(), "o")
+            ax.set_xticks(np.arange(len(df)))
+            ax.set_xticklabels([str(v) for v in df[x_col]], rotation=25, ha="right")
+        ax.set_xlabel(x_col, fontsize="small")
+        ax.set_title(f"{PLOTTED_METRICS[m]}\n({m})", fontsize="medium")
+        ax.grid(alpha=0.3)
+    if len(swept) > 1:
+        fig.suptitle(f"one point per job; also varied: {', '.join(swept[1:])}", fontsize="small")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return path
+
+
 def failed_jobs(sweep_dir: Path) -> list[tuple[Path, str, str]]:
     """The jobs of a multirun folder that failed: ``(job folder, its overrides, its error
     line)`` for each job folder holding a :data:`~iplanner_torch.cli._common.FAILED_MARKER`,
@@ -205,8 +320,8 @@ def failed_jobs(sweep_dir: Path) -> list[tuple[Path, str, str]]:
 
 
 #: what a run folder holds once it has results: an experiment's (or an episode report's)
-#: table and its episode logs
-RESULT_FILES = ("results.csv", "episodes")
+#: table and its episode logs, or a training or evaluation job's metrics
+RESULT_FILES = ("results.csv", "episodes", *JOB_METRICS_FILES)
 
 
 def used_job_dirs(sweep_dir: Path) -> list[Path]:
@@ -244,9 +359,34 @@ def used_sweep_dir_text(sweep_dir: Path) -> str | None:
 
 
 #: per command (``hydra.job.name``): the function that checks one job's composed config
-#: before a sweep starts, as ``module:function``; it raises an
-#: :class:`~iplanner_torch.errors.IPlannerError` for a bad setting
-JOB_CHECKS = {"experiment": "iplanner_torch.cli.experiment:check_job"}
+#: before a sweep starts, as ``module:function``. It raises an
+#: :class:`~iplanner_torch.errors.IPlannerError` for a bad setting, and returns the places
+#: the job writes outside its own job folder (``{"train.out_dir": folder}``), or None
+JOB_CHECKS = {
+    "experiment": "iplanner_torch.cli.experiment:check_job",
+    "train": "iplanner_torch.cli.train:check_job",
+    "evaluate": "iplanner_torch.cli.evaluate:check_job",
+    "data": "iplanner_torch.cli.data:check_job",
+}
+
+
+def shared_outputs(
+    written: list[tuple[int, dict[str, Path]]],
+) -> list[tuple[str, Path, list[int]]]:
+    """The places that several jobs of a sweep would write: the later job would replace (or,
+    run in parallel, mix into) what the earlier one wrote.
+
+    Args:
+        written: per job, ``(job number, {key: path it writes})``.
+
+    Returns:
+        ``(key, path, job numbers)`` for each path written by more than one job, in job order.
+    """
+    by_place: dict[tuple[str, Path], list[int]] = {}
+    for num, places in written:
+        for key, path in places.items():
+            by_place.setdefault((key, Path(path)), []).append(num)
+    return [(key, path, nums) for (key, path), nums in by_place.items() if len(nums) > 1]
 
 
 def sweep_job_overrides(config: DictConfig) -> list[list[str]] | None:
@@ -255,14 +395,26 @@ def sweep_job_overrides(config: DictConfig) -> list[list[str]] | None:
     line); None for another sweeper."""
     from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.override_parser.overrides_parser import OverridesParser
+    from omegaconf import OmegaConf
 
     sweeper = config.hydra.get("sweeper")
     if sweeper is None or not str(sweeper.get("_target_", "")).endswith(".BasicSweeper"):
         return None
-    params = sweeper.get("params") or {}
-    given = [f"{k}={v}" for k, v in params.items()] + [str(o) for o in config.hydra.overrides.task]
+    # as typed: an override's ${...} (train.out_dir=ck/${hydra:job.num}) is the job's to resolve
+    params = sweeper.get("params")
+    params = OmegaConf.to_container(params, resolve=False) if params is not None else {}
+    task = OmegaConf.to_container(config.hydra.overrides.task, resolve=False)
+    given = [f"{k}={v}" for k, v in params.items()] + [str(o) for o in task]
     batches = BasicSweeper.split_arguments(OverridesParser.create().parse_overrides(given), None)
     return [list(job) for batch in batches for job in batch]
+
+
+def _unescaped(override: str) -> str:
+    """A job's override as typed: Hydra's sweeper hands it over with the characters of an
+    interpolation escaped (``ck/$\\{hydra\\:job.num\\}``)."""
+    import re
+
+    return re.sub(r"\\([\\{}:=,\[\]()'\" ])", r"\1", override)
 
 
 def check_sweep_jobs(config: DictConfig) -> None:
@@ -274,8 +426,11 @@ def check_sweep_jobs(config: DictConfig) -> None:
     with Hydra's own report: that is one ``error: ConfigError:`` line now. A value that is
     wrong in one job (``planner.confidence=0.95,1.5``) was found only when that job started,
     after the jobs before it had run: every such job is named now, with its overrides, and
-    no job runs. A check that fails other than on a bad setting (a bug) is left to the job,
-    which reports it with its traceback.
+    no job runs. Two jobs that would write the same folder outside their job folders
+    (``iplanner-train -m predictor.svgp.num_inducing=16,32`` both into the default
+    ``train.out_dir``) are refused too: the later would replace the earlier's predictor, or
+    mix with it when they run in parallel. A check that fails other than on a bad setting (a
+    bug) is left to the job, which reports it with its traceback.
 
     Raises:
         SystemExit: with code 2, after printing the error lines (Hydra turns an exception
@@ -304,6 +459,7 @@ def check_sweep_jobs(config: DictConfig) -> None:
     hydra_config = HydraConfig.instance()
     saved = hydra_config.cfg
     bad: list[str] = []
+    written: list[tuple[int, dict[str, Path]]] = []
     try:
         for num, overrides in enumerate(jobs):
             try:
@@ -321,11 +477,14 @@ def check_sweep_jobs(config: DictConfig) -> None:
             with open_dict(task_cfg):
                 del task_cfg["hydra"]
             try:
-                check(task_cfg)
+                places = check(task_cfg)
             except IPlannerError as exc:
-                bad.append(f"  job {num} [{' '.join(overrides)}]: {type(exc).__name__}: {exc}")
+                typed = " ".join(_unescaped(o) for o in overrides)
+                bad.append(f"  job {num} [{typed}]: {type(exc).__name__}: {exc}")
             except Exception:  # noqa: BLE001 - a bug: the job reports it with its traceback
                 continue
+            else:
+                written.append((num, dict(places or {})))
     finally:
         hydra_config.cfg = saved
     if bad:
@@ -336,19 +495,40 @@ def check_sweep_jobs(config: DictConfig) -> None:
             flush=True,
         )
         raise SystemExit(2)
+    shared = shared_outputs(written)
+    if shared:
+        lines = [
+            f"  jobs {', '.join(str(n) for n in nums[:8])}{', ...' if len(nums) > 8 else ''} "
+            f"would all write {key}={path}"
+            for key, path, nums in shared
+        ]
+        keys = dict.fromkeys(key for key, _, _ in shared)
+        print(
+            "error: ConfigError: sweep jobs would write into the same place, each replacing "
+            "what the one before wrote (or mixing with it when they run in parallel); no job "
+            "was run:\n"
+            + "\n".join(lines)
+            + "\n  give each job its own, e.g. "
+            + " ".join(f"'{key}=<folder>/${{hydra:job.num}}'" for key in keys),
+            file=sys.stderr,
+            flush=True,
+        )
+        raise SystemExit(2)
 
 
 class GatherSweepResults(Callback):
     """At the end of a multirun, write ``<sweep dir>/summary/results.{csv,md}`` and plots of
-    the jobs that ran, then name the jobs that failed, if any, and exit 2. When the summary
-    cannot be written (``summary`` is a file, a disk is full, a report error), that is one
-    ``error:`` line, the failed jobs are named all the same, and the sweep exits 2: Hydra
-    would turn the exception into a warning and exit 0.
+    the jobs that ran (their episodes; for a training or evaluation sweep, each job's
+    metrics: :func:`gather_job_metrics`), then name the jobs that failed, if any, and exit 2.
+    When the summary cannot be written (``summary`` is a file, a disk is full, a report
+    error), that is one ``error:`` line, the failed jobs are named all the same, and the
+    sweep exits 2: Hydra would turn the exception into a warning and exit 0.
 
     At its start, a sweep folder whose job folders hold an earlier sweep's results is refused
     (:func:`used_sweep_dir_text`), before Hydra rewrites their records; then every job's
     config is composed and its settings checked (:func:`check_sweep_jobs`), so that a bad
-    value in one job stops the sweep before any job runs.
+    value in one job, or two jobs writing the same folder, stop the sweep before any job
+    runs.
 
     Hydra turns an exception raised in these methods into a warning; they end the process
     with ``SystemExit(2)`` instead, which it lets through."""
@@ -369,7 +549,10 @@ class GatherSweepResults(Callback):
         summary = sweep_dir / "summary"
         gathered = True
         try:
-            written = gather_episode_logs(sweep_dir, summary)
+            # a closed-loop sweep's episodes, else a training or evaluation sweep's metrics
+            written = gather_episode_logs(sweep_dir, summary) or gather_job_metrics(
+                sweep_dir, summary
+            )
         except Exception as exc:  # noqa: BLE001 - Hydra would only warn of it, and exit 0
             gathered = False
             text = " ".join(t for line in str(exc).splitlines() if (t := line.strip()))

@@ -52,6 +52,8 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
+from typing import Any
 
 import hydra
 import numpy as np
@@ -59,6 +61,8 @@ from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
+    check_added_keys,
+    check_root_keys,
     data_format,
     data_fps,
     dataset_generator,
@@ -78,15 +82,46 @@ _MAX_LISTED = 10
 _command = "generate"
 
 
+def _generate_settings(cfg: DictConfig) -> tuple[bool, Any, Any]:
+    """``data.overwrite`` and the generator settings with their function
+    (:func:`~iplanner_torch.cli._common.dataset_generator`), checked.
+
+    Raises:
+        ConfigError: naming the key, for the first setting that is wrong.
+    """
+    overwrite = cfg.data.get("overwrite", False)
+    if not isinstance(overwrite, bool):
+        raise ConfigError(f"data.overwrite: expected true or false, got {overwrite!r}")
+    gen_cfg, generate = dataset_generator(cfg.data, name="data.generator")
+    return overwrite, gen_cfg, generate
+
+
+def check_job(cfg: DictConfig) -> dict[str, Path]:
+    """What a sweep checks of each ``iplanner-data`` job before the first starts: the overrides
+    it does not read and, for ``generate``, every setting of the set.
+
+    Returns:
+        ``{"data.path": folder}`` for ``generate`` (two jobs would write the same set), ``{}``
+        for ``info``, which writes nothing.
+
+    Raises:
+        ConfigError: naming the key, for the first setting that is wrong.
+    """
+    check_added_keys(cfg)
+    _refuse_unread(cfg)
+    check_root_keys(cfg)
+    if _command != "generate":
+        return {}
+    _generate_settings(cfg)
+    return {"data.path": repo_path(cfg.data.path)}
+
+
 def _generate(cfg: DictConfig) -> None:
     from iplanner_torch.data.dataset_card import CARD_NAME, check_dataset_folder
 
     out_dir = repo_path(cfg.data.path)
-    overwrite = cfg.data.get("overwrite", False)
-    if not isinstance(overwrite, bool):
-        raise ConfigError(f"data.overwrite: expected true or false, got {overwrite!r}")
     # every setting is checked before the folder is touched
-    gen_cfg, generate = dataset_generator(cfg.data, name="data.generator")
+    overwrite, gen_cfg, generate = _generate_settings(cfg)
     old = check_dataset_folder(out_dir, overwrite=overwrite)
     t0 = time.perf_counter()
     command = ("iplanner-data generate " + " ".join(sys.argv[1:])).strip()

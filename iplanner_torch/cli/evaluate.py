@@ -51,6 +51,7 @@ closed-loop groups of ``iplanner-experiment``.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 from pathlib import Path
@@ -64,6 +65,8 @@ from iplanner_torch.cli._common import (
     CONF_DIR,
     cfg_list,
     cfg_scalar,
+    check_added_keys,
+    check_root_keys,
     config_split,
     differing_settings,
     friendly_errors,
@@ -458,16 +461,14 @@ def _check_predictor_option(
         )
 
 
-def _noise_sweep(cfg: DictConfig) -> None:
-    from iplanner_torch.cli.experiment import option_node
-    from iplanner_torch.cli.train import train_from_config
-    from iplanner_torch.eval.prediction_sweep import (
-        check_clean_positions,
-        check_sweep_grid,
-        prediction_vs_noise,
-        write_noise_report,
-    )
-    from iplanner_torch.prediction.predictor import HumanMotionPredictor
+def _noise_sweep_grid(cfg: DictConfig) -> tuple[list[str], list[float], list[str]]:
+    """``evaluate.compare``, ``noises`` and ``speeds`` of a noise sweep, checked, after the
+    overrides it does not read are refused.
+
+    Raises:
+        ConfigError: naming the key, for the first setting that is wrong.
+    """
+    from iplanner_torch.eval.prediction_sweep import check_sweep_grid
 
     _refuse_unread_sweep_overrides(cfg)  # the more specific message first
     _refuse_unread("noise_sweep")
@@ -478,6 +479,20 @@ def _noise_sweep(cfg: DictConfig) -> None:
         check_sweep_grid(compare, noises, speeds)
     except ConfigError as err:
         raise ConfigError(f"evaluate.{err}") from None
+    return compare, noises, speeds
+
+
+def _noise_sweep(cfg: DictConfig) -> None:
+    from iplanner_torch.cli.experiment import option_node, training_lock
+    from iplanner_torch.cli.train import train_from_config
+    from iplanner_torch.eval.prediction_sweep import (
+        check_clean_positions,
+        prediction_vs_noise,
+        write_noise_report,
+    )
+    from iplanner_torch.prediction.predictor import HumanMotionPredictor
+
+    compare, noises, speeds = _noise_sweep_grid(cfg)
     report_dir = _out_dir(cfg)
     device = _device(cfg)
     folder = Path(cfg.paths.checkpoints) / Path(cfg.data.path).name
@@ -506,16 +521,19 @@ def _noise_sweep(cfg: DictConfig) -> None:
         cfg, split, source, recorded=record is not None and not missing, generate=bool(missing)
     )
     check_clean_positions(held_out)  # before any missing predictor is trained
-    for option in missing:
-        print(f"training missing predictor {option} ...", flush=True)
-        train_from_config(
-            cfg,
-            option_node("predictor", option, cfg),
-            ckpts[option].parent,
-            trainer_node=cfg.trainer,
-        )
-        loaded[option] = HumanMotionPredictor.load(ckpts[option], map_location=device)
-        _check_joints(cfg, loaded[option], ckpts[option])
+    # the parallel jobs of a sweep that lack the same predictor train it once
+    with training_lock(repo_path(folder)) if missing else contextlib.nullcontext():
+        for option in missing:
+            if not ckpts[option].exists():  # else another job trained it meanwhile
+                print(f"training missing predictor {option} ...", flush=True)
+                train_from_config(
+                    cfg,
+                    option_node("predictor", option, cfg),
+                    ckpts[option].parent,
+                    trainer_node=cfg.trainer,
+                )
+            loaded[option] = HumanMotionPredictor.load(ckpts[option], map_location=device)
+            _check_joints(cfg, loaded[option], ckpts[option])
     predictors = {option: loaded[option] for option in ckpts}  # in evaluate.compare's order
     df = prediction_vs_noise(
         predictors,
@@ -746,12 +764,39 @@ def _kept_when_interrupted(cfg: DictConfig) -> str:
     return text
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
-@friendly_errors(kept=_kept_when_interrupted)
-def _app(cfg: DictConfig) -> None:
+def _mode(cfg: DictConfig) -> str:
+    """``evaluate.mode``, one of :data:`MODES`."""
     mode = str(cfg.evaluate.mode)
     if mode not in MODES:
         raise ConfigError(f"evaluate.mode must be one of {MODES}, got {mode!r}")
+    return mode
+
+
+def check_job(cfg: DictConfig) -> dict[str, Path]:
+    """What a sweep checks of each ``iplanner-evaluate`` job before the first starts: the mode,
+    the overrides it does not read and, for ``noise_sweep``, its grid.
+
+    Returns:
+        ``{"evaluate.out_dir": folder}`` when ``evaluate.out_dir`` is set (two jobs would
+        write their tables into the same folder), else ``{}`` (each job writes its own).
+
+    Raises:
+        ConfigError: naming the key, for the first setting that is wrong.
+    """
+    check_added_keys(cfg)
+    check_root_keys(cfg)
+    mode = _mode(cfg)
+    if mode == "noise_sweep":
+        _noise_sweep_grid(cfg)
+    else:
+        _refuse_unread(mode)
+    return {"evaluate.out_dir": repo_path(cfg.evaluate.out_dir)} if cfg.evaluate.out_dir else {}
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
+@friendly_errors(kept=_kept_when_interrupted)
+def _app(cfg: DictConfig) -> None:
+    mode = _mode(cfg)
     {"prediction": _prediction, "noise_sweep": _noise_sweep, "episode": _episode}[mode](cfg)
 
 

@@ -27,14 +27,22 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import hydra
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
     cfg_scalar,
+    check_added_keys,
+    check_root_keys,
     config_split,
+    data_format,
+    data_fps,
+    data_joints,
+    dataset_generator,
     friendly_errors,
     instantiate,
     load_dataset,
@@ -67,15 +75,14 @@ def train_from_config(
             ``paths.datasets``.
     """
     data_node = cfg.data if data_node is None else data_node
-    from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
+    from iplanner_torch.data.windows import build_windows, split_by_demonstration
     from iplanner_torch.eval.prediction import evaluate_prediction
-    from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
-    from iplanner_torch.prediction.training import TrainerCfg, train_predictor
+    from iplanner_torch.prediction.predictor import HumanMotionPredictor
+    from iplanner_torch.prediction.training import train_predictor
 
-    predictor_cfg = instantiate(predictor_node, PredictorCfg)
-    trainer_cfg = instantiate(trainer_node, TrainerCfg)
-    window_cfg = instantiate(data_node.windows, WindowCfg)
-    drawn = config_split(cfg, data_node)
+    predictor_cfg, trainer_cfg, window_cfg, drawn = check_training(
+        cfg, predictor_node, trainer_node, data_node
+    )
     demos = load_dataset(
         data_node, generate_if_missing=True, progress=cfg_scalar(cfg, "progress", bool)
     )
@@ -134,6 +141,67 @@ def train_from_config(
     return ckpt, metrics
 
 
+def check_training(
+    cfg: DictConfig,
+    predictor_node: DictConfig,
+    trainer_node: DictConfig,
+    data_node: DictConfig,
+) -> tuple[Any, Any, Any, Any]:
+    """The settings of one training, checked before any data is read or generated (a sweep
+    checks every job's before the first one starts: :func:`check_job`).
+
+    Args:
+        cfg: the root config (``seed``, ``progress``, ``train.resume``).
+        predictor_node, trainer_node, data_node: as :func:`train_from_config` takes them.
+
+    Returns:
+        ``(predictor settings, trainer settings, window settings, split)``: a
+        :class:`~iplanner_torch.prediction.predictor.PredictorCfg`, a
+        :class:`~iplanner_torch.prediction.training.TrainerCfg`, a
+        :class:`~iplanner_torch.data.windows.WindowCfg` and the
+        :class:`~iplanner_torch.eval.prediction.SplitRecord` that ``seed`` and ``data.split``
+        draw.
+
+    Raises:
+        ConfigError: naming the key, for the first setting that is wrong.
+    """
+    from iplanner_torch.data.windows import WindowCfg
+    from iplanner_torch.prediction.predictor import PredictorCfg
+    from iplanner_torch.prediction.training import TrainerCfg
+
+    predictor_cfg = instantiate(predictor_node, PredictorCfg)
+    trainer_cfg = instantiate(trainer_node, TrainerCfg)
+    window_cfg = instantiate(data_node.windows, WindowCfg)
+    drawn = config_split(cfg, data_node)
+    data_format(data_node)  # what load_dataset checks first, before it reads or generates
+    data_fps(data_node)
+    data_joints(data_node)
+    if data_node.get("generator") is not None:  # used when the folder is missing
+        dataset_generator(data_node, name="data.generator")
+    cfg_scalar(cfg, "progress", bool)
+    cfg_scalar(cfg.train, "resume", bool)
+    return predictor_cfg, trainer_cfg, window_cfg, drawn
+
+
+def check_job(cfg: DictConfig) -> dict[str, Path]:
+    """What a sweep checks of each ``iplanner-train`` job before the first starts: the checks
+    the job makes before it trains (:func:`check_training` and the overrides it refuses).
+
+    Returns:
+        ``{"train.out_dir": folder}``: where the job writes its predictor, outside its job
+        folder (a sweep refuses two jobs that would write the same).
+
+    Raises:
+        ConfigError: naming the key, for the first setting that is wrong.
+    """
+    check_added_keys(cfg)
+    _refuse_unread(cfg)
+    check_root_keys(cfg)
+    _refuse_unread_svgp_fields(cfg)
+    check_training(cfg, cfg.predictor, cfg.trainer, cfg.data)
+    return {"train.out_dir": repo_path(cfg.train.out_dir)}
+
+
 def _refuse_unread_svgp_fields(cfg: DictConfig) -> None:
     """Refuse a command-line ``predictor.svgp`` field that the chosen ``noisy_input`` does not
     read (:data:`~iplanner_torch.prediction.svgp.UNREAD_BY_NOISY_INPUT`):
@@ -185,6 +253,10 @@ def _app(cfg: DictConfig) -> None:
     _refuse_unread_svgp_fields(cfg)
     out_dir = repo_path(cfg.train.out_dir)
     ckpt, metrics = train_from_config(cfg, cfg.predictor, out_dir, trainer_node=cfg.trainer)
+    # a copy in the run's own folder, which a sweep gathers into its summary
+    job_dir = Path(HydraConfig.get().runtime.output_dir)
+    record = {"checkpoint": str(ckpt), **metrics}
+    (job_dir / "heldout_metrics.json").write_text(json.dumps(record, indent=2, default=float))
     print(f"predictor checkpoint: {ckpt}")
     print(f"logs: {out_dir / 'logs'}")
     for key, value in metrics.items():

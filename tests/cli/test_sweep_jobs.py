@@ -1,0 +1,187 @@
+"""Sweeps of iplanner-train, iplanner-evaluate and iplanner-data: every job is checked before
+the first runs (a bad value, or two jobs writing one folder), and a training sweep ends with
+one table of its jobs' held-out metrics."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from iplanner_torch.cli.callbacks import gather_job_metrics, shared_outputs
+
+MODULES = {
+    "iplanner-data": "iplanner_torch.cli.data",
+    "iplanner-train": "iplanner_torch.cli.train",
+    "iplanner-evaluate": "iplanner_torch.cli.evaluate",
+}
+
+
+def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+    return subprocess.run(
+        [sys.executable, "-m", MODULES[args[0]], *args[1:]],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def test_shared_outputs_names_each_place_several_jobs_write() -> None:
+    a, b = Path("/x/a"), Path("/x/b")
+    written = [(0, {"train.out_dir": a}), (1, {"train.out_dir": b}), (2, {"train.out_dir": a}),
+               (3, {}), (4, {"train.out_dir": a, "data.path": b})]  # fmt: skip
+    assert shared_outputs(written) == [("train.out_dir", a, [0, 2, 4])]
+    assert shared_outputs([(0, {"data.path": a}), (1, {"data.path": b})]) == []
+
+
+@pytest.mark.parametrize(
+    ("command", "args", "line"),
+    [
+        ("iplanner-train", ["predictor.svgp.num_inducing=16,32"],
+         "  jobs 0, 1 would all write train.out_dir={cwd}/checkpoints/reaching/iplanner_ni"),
+        ("iplanner-data", ["generate", "data.generator.seed=0,1,2"],
+         "  jobs 0, 1, 2 would all write data.path={cwd}/datasets/reaching"),
+        ("iplanner-evaluate", ["evaluate.noises=[0.0],[0.02]", "evaluate.mode=noise_sweep",
+                               "evaluate.out_dir=tables"],
+         "  jobs 0, 1 would all write evaluate.out_dir={cwd}/tables"),
+    ],
+)  # fmt: skip
+def test_a_sweep_whose_jobs_would_write_one_folder_is_refused_before_any_runs(
+    tmp_path: Path, command: str, args: list[str], line: str
+) -> None:
+    """Two jobs into one folder: the later would replace the earlier's predictor (dataset,
+    tables), or mix with it when they run in parallel. Refused with the key and folder, and
+    how to give each job its own; nothing is written."""
+    sweep = tmp_path / "sweep"
+    first, rest = (args[:1], args[1:]) if command == "iplanner-data" else ([], args)
+    res = _run([command, *first, "-m", *rest, f"hydra.sweep.dir={sweep}", "progress=false"],
+               tmp_path)  # fmt: skip
+    assert res.returncode == 2, res.stderr[-2000:]
+    key = line.split(" would all write ")[1].split("=")[0]
+    assert res.stderr.strip().splitlines() == [
+        "error: ConfigError: sweep jobs would write into the same place, each replacing what "
+        "the one before wrote (or mixing with it when they run in parallel); no job was run:",
+        line.format(cwd=tmp_path.resolve()),
+        f"  give each job its own, e.g. '{key}=<folder>/${{hydra:job.num}}'",
+    ]
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no sweep folder, no data
+
+
+@pytest.mark.parametrize(
+    ("command", "args", "bad", "error"),
+    [
+        ("iplanner-train", ["predictor.svgp.num_inducing=16,-2",
+                            "train.out_dir=ck/${hydra:job.num}"],
+         "predictor.svgp.num_inducing=-2",
+         "predictor.svgp.num_inducing: expected num_inducing an integer >= 1, got -2"),
+        ("iplanner-train", ["data.split=[0.6,0.2,0.2],[0.9,0.2,0.2]",
+                            "train.out_dir=ck/${hydra:job.num}"],
+         "data.split=[0.9,0.2,0.2]", "data.split: "),
+        ("iplanner-data", ["generate", "data.generator.n_targets=2,0",
+                           "data.path=ds/${hydra:job.num}"],
+         "data.generator.n_targets=0", "data.generator.n_targets: "),
+        ("iplanner-evaluate", ["evaluate.mode=prediction,noise", "seed=0"],
+         "evaluate.mode=noise",
+         "evaluate.mode must be one of ('prediction', 'noise_sweep', 'episode'), got 'noise'"),
+        ("iplanner-evaluate", ["evaluate.mode=noise_sweep", "evaluate.noises=[0.0],[-1.0]"],
+         "evaluate.noises=[-1.0]", "evaluate."),
+    ],
+)  # fmt: skip
+def test_a_bad_value_in_one_job_of_a_sweep_is_named_before_any_job_runs(
+    tmp_path: Path, command: str, args: list[str], bad: str, error: str
+) -> None:
+    """As iplanner-experiment's sweeps: the job with the bad value is named with its
+    overrides and the error its run would have stopped on; no job runs."""
+    sweep = tmp_path / "sweep"
+    first, rest = (args[:1], args[1:]) if command == "iplanner-data" else ([], args)
+    res = _run([command, *first, "-m", *rest, f"hydra.sweep.dir={sweep}", "progress=false"],
+               tmp_path)  # fmt: skip
+    assert res.returncode == 2, res.stderr[-2000:]
+    lines = res.stderr.strip().splitlines()
+    assert lines[0] == (
+        "error: ConfigError: 1 of 2 sweep job(s) would stop on a bad setting; no job was run:"
+    )
+    assert len(lines) == 2 and lines[1].startswith("  job 1 [") and bad in lines[1]
+    assert f"]: ConfigError: {error}" in lines[1]
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def _job(sweep: Path, name: str, overrides: list[str], metrics: dict | None) -> None:
+    job = sweep / name
+    (job / ".hydra").mkdir(parents=True)
+    (job / ".hydra" / "overrides.yaml").write_text("".join(f"- {o}\n" for o in overrides))
+    if metrics is not None:
+        (job / "heldout_metrics.json").write_text(json.dumps(metrics))
+
+
+def test_the_metrics_of_a_training_sweep_are_gathered_into_one_table(tmp_path: Path) -> None:
+    """One row per job that wrote metrics, in job order (10 after 2), with the swept
+    overrides as columns; a plot against the swept value."""
+    sweep = tmp_path / "sweep"
+    _job(
+        sweep,
+        "0",
+        ["predictor.svgp.num_inducing=64", "trainer=fast"],
+        {"checkpoint": "a", "mhd_1s": 0.05, "coverage95": 0.9, "train_seconds": 3.0},
+    )
+    _job(
+        sweep,
+        "10",
+        ["predictor.svgp.num_inducing=8", "trainer=fast"],
+        {"checkpoint": "c", "mhd_1s": 0.09, "coverage95": 0.8, "train_seconds": 1.0},
+    )
+    _job(
+        sweep,
+        "2",
+        ["predictor.svgp.num_inducing=16", "trainer=fast"],
+        {"checkpoint": "b", "mhd_1s": 0.07, "coverage95": 0.85, "train_seconds": 2.0},
+    )
+    _job(sweep, "3", ["predictor.svgp.num_inducing=32", "trainer=fast"], None)  # failed job
+    written = gather_job_metrics(sweep, tmp_path / "summary")
+    assert [p.name for p in written] == ["results.csv", "results.md", "metrics.png"]
+    df = pd.read_csv(tmp_path / "summary" / "results.csv")
+    assert list(df["job"]) == [0, 2, 10]
+    assert list(df["predictor.svgp.num_inducing"]) == [64, 16, 8]
+    assert list(df["mhd_1s"]) == [0.05, 0.07, 0.09]
+    assert "trainer" not in df.columns  # the same in every job
+    md = (tmp_path / "summary" / "results.md").read_text()
+    assert "| job | predictor.svgp.num_inducing |" in md and "path" not in md.splitlines()[4]
+    assert (tmp_path / "summary" / "metrics.png").stat().st_size > 0
+    assert gather_job_metrics(tmp_path / "nothing", tmp_path / "s2") == []
+
+
+def test_a_training_sweep_trains_one_predictor_per_job_and_summarises_them(
+    tmp_path: Path,
+) -> None:
+    """A real two-job training sweep, each job into its own folder
+    (``train.out_dir=<folder>/${hydra:job.num}``): two checkpoints trained with the job's
+    setting, and ``summary/results.csv`` with each job's held-out metrics, as they are in its
+    checkpoint folder."""
+    ds, ck, sweep = tmp_path / "ds", tmp_path / "ck", tmp_path / "sweep"
+    gen = ["iplanner-data", "generate", f"data.path={ds}", "progress=false",
+           "data.generator.n_targets=2", "data.generator.reaches_per_target=5"]  # fmt: skip
+    res = _run(gen, tmp_path)
+    assert res.returncode == 0, res.stderr
+    train = ["iplanner-train", "-m", "trainer=fast", f"data.path={ds}", "data.split=[0.6,0.2,0.2]",
+             "predictor.svgp.num_inducing=8,16", f"train.out_dir={ck}/${{hydra:job.num}}",
+             f"hydra.sweep.dir={sweep}", "progress=false"]  # fmt: skip
+    res = _run(train, tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert f"sweep summary: {sweep / 'summary' / 'results.md'}" in res.stdout
+    df = pd.read_csv(sweep / "summary" / "results.csv")
+    assert list(df["predictor.svgp.num_inducing"]) == [8, 16]
+    for job, row in df.iterrows():
+        inputs = json.loads((ck / str(job) / "training_inputs.json").read_text())
+        assert f'"num_inducing": {row["predictor.svgp.num_inducing"]}' in json.dumps(inputs)
+        held_out = json.loads((ck / str(job) / "heldout_metrics.json").read_text())
+        assert row["checkpoint"] == str(ck / str(job) / "predictor.ckpt")
+        assert row["mhd_1s"] == pytest.approx(held_out["mhd_1s"])
+    assert (sweep / "summary" / "metrics.png").exists()
