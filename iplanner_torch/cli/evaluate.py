@@ -517,12 +517,12 @@ def _noise_sweep(cfg: DictConfig) -> None:
     source = _split_source(record, [c for o, c in ckpts.items() if o not in missing])
     if missing:
         source = f"from seed and data.split, which {', '.join(missing)} will be trained on"
-    held_out = _held_out(
-        cfg, split, source, recorded=record is not None and not missing, generate=bool(missing)
-    )
-    check_clean_positions(held_out)  # before any missing predictor is trained
-    # the parallel jobs of a sweep that lack the same predictor train it once
+    # the parallel jobs of a sweep that lack the same dataset or predictor make it once
     with training_lock(repo_path(folder)) if missing else contextlib.nullcontext():
+        held_out = _held_out(
+            cfg, split, source, recorded=record is not None and not missing, generate=bool(missing)
+        )
+        check_clean_positions(held_out)  # before any missing predictor is trained
         for option in missing:
             if not ckpts[option].exists():  # else another job trained it meanwhile
                 print(f"training missing predictor {option} ...", flush=True)
