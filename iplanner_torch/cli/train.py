@@ -6,6 +6,8 @@ Examples::
     iplanner-train predictor=iplanner_no_ni trainer=fast
     iplanner-train train.resume=true                 # skip sub-models already trained
     iplanner-train data=lego 'data.windows.joints=[right_hand]'
+    # a sweep: one predictor per job, each in its own folder (ck/0, ck/1, ck/2)
+    iplanner-train -m predictor.svgp.num_inducing=8,16,32 'train.out_dir=ck/${hydra:job.num}'
 
 Writes ``<train.out_dir>/predictor.ckpt`` (default ``checkpoints/<dataset>/<predictor>/``), the
 sub-models' Lightning checkpoints, CSV / TensorBoard logs and ``training_inputs.json`` (what
@@ -17,7 +19,9 @@ prints held-out metrics. It reads ``data``, ``predictor``, ``trainer``, ``train`
 ``trainer.accelerator``) is refused. A missing or empty dataset folder is generated only when
 it is the data option's own (``datasets/reaching``) or lies under ``paths.datasets``; a folder
 given with ``data.path=<folder>`` elsewhere is read, never generated (``iplanner-data
-generate`` writes one).
+generate`` writes one). A sweep (``-m``) checks every job before the first runs, refuses jobs
+that would train into one ``train.out_dir``, and ends with ``summary/results.csv``, ``.md`` and
+``metrics.png``: each job's held-out metrics beside the settings the jobs differ in.
 """
 
 from __future__ import annotations
