@@ -185,3 +185,34 @@ def test_a_training_sweep_trains_one_predictor_per_job_and_summarises_them(
         assert row["checkpoint"] == str(ck / str(job) / "predictor.ckpt")
         assert row["mhd_1s"] == pytest.approx(held_out["mhd_1s"])
     assert (sweep / "summary" / "metrics.png").exists()
+
+
+@pytest.mark.parametrize(
+    ("target", "preset", "expected"),
+    [
+        ("hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher", None, "PASSIVE"),
+        ("hydra_plugins.hydra_submitit_launcher.submitit_launcher.LocalLauncher", None,
+         "PASSIVE"),
+        ("hydra._internal.core_plugins.basic_launcher.BasicLauncher", None, None),
+        ("hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher", None, None),
+        ("hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher", "ACTIVE",
+         "ACTIVE"),
+    ],
+)  # fmt: skip
+def test_parallel_local_jobs_get_passive_openmp_waits(
+    monkeypatch: pytest.MonkeyPatch, target: str, preset: str | None, expected: str | None
+) -> None:
+    """Jobs side by side on this machine wait passively (two 2-thread trainings on 2 cores
+    took 25x longer with spinning waits); jobs one after another, or on a cluster's nodes,
+    and a policy the user set are left alone."""
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli.callbacks import passive_omp_waits
+
+    if preset is None:
+        monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    else:
+        monkeypatch.setenv("OMP_WAIT_POLICY", preset)
+    config = OmegaConf.create({"hydra": {"launcher": {"_target_": target}}})
+    assert passive_omp_waits(config) is (expected == "PASSIVE" and preset is None)
+    assert os.environ.get("OMP_WAIT_POLICY") == expected
