@@ -279,6 +279,7 @@ def _plot_job_metrics(df: Any, swept: list[str], path: Path) -> Path | None:
             ax.plot(np.arange(len(df)), y.to_numpy(), "o")
             ax.set_xticks(np.arange(len(df)))
             ax.set_xticklabels([str(v) for v in df[x_col]], rotation=25, ha="right")
+            ax.set_xlim(-0.5, len(df) - 0.5)
         ax.set_xlabel(x_col, fontsize="small")
         ax.set_title(f"{PLOTTED_METRICS[m]}\n({m})", fontsize="medium")
         ax.grid(alpha=0.3)
