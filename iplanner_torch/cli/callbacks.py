@@ -308,7 +308,7 @@ def failed_jobs(sweep_dir: Path) -> list[tuple[Path, str, str]]:
         overrides = job / ".hydra" / "overrides.yaml"
         try:
             items = OmegaConf.load(overrides) if overrides.exists() else []
-            text = " ".join(str(o) for o in items)  # type: ignore[union-attr]
+            text = " ".join(_unescaped(str(o)) for o in items)  # type: ignore[union-attr]
         except Exception:  # noqa: BLE001 - a damaged overrides file still names the job
             text = "?"
         try:  # the error line; an unexpected error's traceback follows it

@@ -216,3 +216,17 @@ def test_parallel_local_jobs_get_passive_openmp_waits(
     config = OmegaConf.create({"hydra": {"launcher": {"_target_": target}}})
     assert passive_omp_waits(config) is (expected == "PASSIVE" and preset is None)
     assert os.environ.get("OMP_WAIT_POLICY") == expected
+
+
+def test_a_failed_job_is_named_with_its_overrides_as_typed(tmp_path: Path) -> None:
+    """Hydra records a job's ``${...}`` override escaped (``ck/$\\{hydra\\:job.num\\}``); the
+    failed-job line shows it as it was typed."""
+    from iplanner_torch.cli._common import FAILED_MARKER
+    from iplanner_torch.cli.callbacks import failed_jobs
+
+    _job(tmp_path, "1", ["data.path=nope", r"train.out_dir=ck/$\{hydra\:job.num\}",
+                         "data.split=[0.6,0.2,0.2]"], None)  # fmt: skip
+    (tmp_path / "1" / FAILED_MARKER).write_text("error: DataError: nope\n")
+    [(job, overrides, error)] = failed_jobs(tmp_path)
+    assert job == tmp_path / "1" and error == "error: DataError: nope"
+    assert overrides == "data.path=nope train.out_dir=ck/${hydra:job.num} data.split=[0.6,0.2,0.2]"
