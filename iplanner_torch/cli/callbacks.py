@@ -46,7 +46,7 @@ def sweep_overrides(df: Any, root: Path) -> tuple[Any, list[str]]:
             continue
         if not isinstance(items, list):
             continue
-        pairs = [str(x).lstrip("+~").split("=", 1) for x in items if "=" in str(x)]
+        pairs = [_unescaped(str(x)).lstrip("+~").split("=", 1) for x in items if "=" in str(x)]
         jobs[file.parent.parent.name] = {k: v for k, v in pairs if not k.startswith("hydra")}
     if len(jobs) < 2:
         return df, []
