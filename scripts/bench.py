@@ -33,7 +33,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # the bench modules share scripts/_timing.py
 from _report import commit_short, fail  # noqa: E402
 
-AREAS = ("dtw", "prediction", "robot", "collision", "planning", "sim")
+AREAS = ("dtw", "prediction", "robot", "collision", "planning", "sim", "sweep")
 
 
 def _load(area: str):

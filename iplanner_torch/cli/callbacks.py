@@ -542,7 +542,8 @@ class GatherSweepResults(Callback):
             print(f"error: ConfigError: {used}", file=sys.stderr, flush=True)
             raise SystemExit(2)
         check_sweep_jobs(config)
-        passive_omp_waits(config)
+        jobs = sweep_job_overrides(config)
+        passive_omp_waits(config, len(jobs) if jobs is not None else None)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         import sys
@@ -586,25 +587,52 @@ class GatherSweepResults(Callback):
 LOCAL_PARALLEL_LAUNCHERS = ("JoblibLauncher", "submitit_launcher.LocalLauncher")
 
 
-def passive_omp_waits(config: DictConfig) -> bool:
-    """Set ``OMP_WAIT_POLICY=PASSIVE`` for the job processes of a sweep that runs them side by
-    side on this machine (:data:`LOCAL_PARALLEL_LAUNCHERS`), unless the environment sets it.
+def jobs_at_once(config: DictConfig, n_jobs: int | None) -> int:
+    """How many of the sweep's ``n_jobs`` jobs (None: unknown) run at the same time on this
+    machine: joblib's ``hydra.launcher.n_jobs`` (-1 all cores, -k all but k - 1) or
+    Submitit's local ``array_parallelism``; 1 for the basic launcher (one after another) and
+    for a cluster's."""
+    import os
 
-    Each job computes on ``trainer.num_threads`` (2) OpenMP threads; two such jobs on two
-    cores made OpenMP's waiting threads spin against the working ones, and a training that
-    takes 1 s alone took 25 s (measured: ``iplanner-train -m hydra/launcher=joblib
-    hydra.launcher.n_jobs=2 ...``; 1.4 s with passive waits). The policy changes how threads
-    wait, not what they compute: the trained predictors are the same to the bit. The job
-    processes are started after this and inherit the environment; this process's OpenMP,
-    already started, is left as it is.
+    launcher = config.hydra.get("launcher", {})
+    target = str(launcher.get("_target_", ""))
+    if not target.endswith(LOCAL_PARALLEL_LAUNCHERS):
+        return 1
+    cores = os.cpu_count() or 1
+    if target.endswith("JoblibLauncher"):
+        n = int(launcher.get("n_jobs", -1) or 1)
+        at_once = n if n > 0 else max(1, cores + 1 + n)
+    else:
+        at_once = int(launcher.get("array_parallelism", 0) or 0) or (n_jobs or cores)
+    return max(1, min(at_once, n_jobs) if n_jobs else at_once)
+
+
+def passive_omp_waits(config: DictConfig, n_jobs: int | None = None) -> bool:
+    """Set ``OMP_WAIT_POLICY=PASSIVE`` for the job processes of a sweep whose jobs, run side
+    by side on this machine (:func:`jobs_at_once`), would start more OpenMP threads than it
+    has cores (``trainer.num_threads`` each, 2 by default), unless the environment sets it.
+
+    OpenMP's waiting threads then spin against the working ones: two small trainings at once
+    on 2 cores took 77-133 s each with the default policy and 5.1-5.6 s with passive waits,
+    where one alone takes 3.6-4.1 s (``python scripts/bench.py --only sweep``). A lone
+    training is slower with passive waits (7.7-8.6 s), so jobs that have the cores to
+    themselves keep the default. The policy changes how threads wait, not what they
+    compute: the trained predictors are the same to the bit. The job processes start after
+    this and inherit the environment.
 
     Returns:
         Whether it was set.
     """
     import os
 
-    target = str(config.hydra.get("launcher", {}).get("_target_", ""))
-    if not target.endswith(LOCAL_PARALLEL_LAUNCHERS) or "OMP_WAIT_POLICY" in os.environ:
+    if "OMP_WAIT_POLICY" in os.environ:
+        return False
+    at_once = jobs_at_once(config, n_jobs)
+    cores = os.cpu_count() or 1
+    trainer = config.get("trainer")
+    threads = trainer.get("num_threads", 2) if trainer is not None else 2
+    threads = cores if threads is None else max(1, int(threads))
+    if at_once < 2 or at_once * threads <= cores:
         return False
     os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
     return True

@@ -187,34 +187,55 @@ def test_a_training_sweep_trains_one_predictor_per_job_and_summarises_them(
     assert (sweep / "summary" / "metrics.png").exists()
 
 
+JOBLIB = "hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher"
+LOCAL = "hydra_plugins.hydra_submitit_launcher.submitit_launcher.LocalLauncher"
+SLURM = "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher"
+BASIC = "hydra._internal.core_plugins.basic_launcher.BasicLauncher"
+
+
 @pytest.mark.parametrize(
-    ("target", "preset", "expected"),
+    ("launcher", "trainer", "cores", "n_jobs", "preset", "expected"),
     [
-        ("hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher", None, "PASSIVE"),
-        ("hydra_plugins.hydra_submitit_launcher.submitit_launcher.LocalLauncher", None,
-         "PASSIVE"),
-        ("hydra._internal.core_plugins.basic_launcher.BasicLauncher", None, None),
-        ("hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher", None, None),
-        ("hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher", "ACTIVE",
-         "ACTIVE"),
+        ({"_target_": JOBLIB}, {}, 2, 4, None, "PASSIVE"),  # n_jobs -1: both cores
+        ({"_target_": JOBLIB, "n_jobs": 2}, {"num_threads": 2}, 2, 4, None, "PASSIVE"),
+        ({"_target_": JOBLIB, "n_jobs": 2}, {"num_threads": 1}, 2, 4, None, None),  # 2 threads
+        ({"_target_": JOBLIB, "n_jobs": 1}, {}, 2, 4, None, None),  # one after another
+        ({"_target_": JOBLIB, "n_jobs": 2}, {}, 2, 1, None, None),  # a single job
+        ({"_target_": JOBLIB, "n_jobs": 2}, {}, 16, 4, None, None),  # 4 threads on 16 cores
+        ({"_target_": JOBLIB, "n_jobs": -9}, {}, 16, 20, None, None),  # 8 at once x 2 = 16
+        ({"_target_": JOBLIB, "n_jobs": -8}, {}, 16, 20, None, "PASSIVE"),  # 9 x 2 > 16
+        ({"_target_": JOBLIB, "n_jobs": 2}, {"num_threads": None}, 16, 4, None, "PASSIVE"),
+        ({"_target_": LOCAL}, {}, 2, 2, None, "PASSIVE"),
+        ({"_target_": LOCAL, "array_parallelism": 1}, {}, 2, 2, None, None),
+        ({"_target_": BASIC}, {}, 2, 4, None, None),
+        ({"_target_": SLURM}, {}, 2, 4, None, None),  # each job on its own node
+        ({"_target_": JOBLIB}, {}, 2, 4, "ACTIVE", "ACTIVE"),  # the user's setting stays
     ],
-)  # fmt: skip
-def test_parallel_local_jobs_get_passive_openmp_waits(
-    monkeypatch: pytest.MonkeyPatch, target: str, preset: str | None, expected: str | None
+)
+def test_jobs_side_by_side_with_more_threads_than_cores_get_passive_openmp_waits(
+    monkeypatch: pytest.MonkeyPatch,
+    launcher: dict,
+    trainer: dict,
+    cores: int,
+    n_jobs: int,
+    preset: str | None,
+    expected: str | None,
 ) -> None:
-    """Jobs side by side on this machine wait passively (two 2-thread trainings on 2 cores
-    took 25x longer with spinning waits); jobs one after another, or on a cluster's nodes,
-    and a policy the user set are left alone."""
+    """Two 2-thread trainings at once on 2 cores took 15-25x longer with OpenMP's spinning
+    waits (scripts/bench_sweep.py); a lone training is slower with passive ones, so jobs
+    that have the cores to themselves, jobs one after another or on a cluster's nodes, and a
+    policy the user set are left alone."""
     from omegaconf import OmegaConf
 
     from iplanner_torch.cli.callbacks import passive_omp_waits
 
+    monkeypatch.setattr(os, "cpu_count", lambda: cores)
     if preset is None:
         monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
     else:
         monkeypatch.setenv("OMP_WAIT_POLICY", preset)
-    config = OmegaConf.create({"hydra": {"launcher": {"_target_": target}}})
-    assert passive_omp_waits(config) is (expected == "PASSIVE" and preset is None)
+    config = OmegaConf.create({"hydra": {"launcher": launcher}, "trainer": trainer})
+    assert passive_omp_waits(config, n_jobs) is (expected == "PASSIVE" and preset is None)
     assert os.environ.get("OMP_WAIT_POLICY") == expected
 
 

@@ -1,0 +1,128 @@
+#!/usr/bin/env python
+"""Benchmark of a sweep's training jobs run side by side on this machine.
+
+A sweep with ``hydra/launcher=joblib hydra.launcher.n_jobs=2`` trains two predictors at once,
+each on ``trainer.num_threads`` = 2 OpenMP threads. The sweep gives its job processes
+``OMP_WAIT_POLICY=PASSIVE`` (``iplanner_torch.cli.callbacks.passive_omp_waits``); this
+measures why.
+
+Figures (``run(quick) -> dict``):
+
+* ``sweep.parallel_train_s``: the slower of two trainings run at the same time, in two
+  processes with passive OpenMP waits; reference: the same two with OpenMP's default
+  waits (``OMP_WAIT_POLICY`` unset), measured in the same run. The training time is
+  measured inside each process, without its start and imports.
+* ``sweep.single_train_s``: one such training alone, default waits, for scale.
+* ``sweep.single_train_passive_s``: the same with passive waits, against it: why a sweep
+  whose jobs have the cores to themselves keeps the default.
+
+Each training is the quick predictor of ``bench_prediction`` (8 targets x 4 reaches, 40 SVGP
+steps) with ``TrainerCfg(num_threads=2)``.
+
+Usage::
+
+    python scripts/bench_sweep.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+#: one training, printed as {"train_s": ...}; run in a fresh process per measurement
+_TRAIN = r"""
+import json, sys, tempfile, time
+from dataclasses import replace
+from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
+from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
+from iplanner_torch.prediction.predictor import PredictorCfg
+from iplanner_torch.prediction.training import TrainerCfg, train_predictor
+
+rc = ReachingCfg(reaches_per_target=4)
+demos = [d for t in range(rc.n_targets) for r in range(rc.reaches_per_target)
+         for d in reaching_demonstrations(rc, t, r)]
+train, val, _ = split_by_demonstration(demos, (0.5, 0.25, 0.25), seed=0)
+wc = WindowCfg()
+cfg = PredictorCfg()
+cfg = replace(cfg, svgp=replace(cfg.svgp, max_steps=40), classifier_max_train=400,
+              ivm_max_import=20, ivm_candidates=32)
+windows = (build_windows(train, wc), build_windows(val, wc))
+with tempfile.TemporaryDirectory() as tmp:
+    t0 = time.perf_counter()
+    train_predictor(windows, predictor_cfg=cfg, trainer_cfg=TrainerCfg(num_threads=2),
+                    out_dir=tmp, progress=False)
+    print(json.dumps({"train_s": time.perf_counter() - t0}))
+"""
+
+
+def _trainings(n: int, policy: str | None) -> list[float]:
+    """Run ``n`` trainings at the same time, each in its own process with
+    ``OMP_WAIT_POLICY=policy`` (None: unset, OpenMP's default); their training seconds."""
+    env = dict(os.environ, PYTHONWARNINGS="ignore")
+    env.pop("OMP_WAIT_POLICY", None)
+    if policy is not None:
+        env["OMP_WAIT_POLICY"] = policy
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", _TRAIN],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+        )
+        for _ in range(n)
+    ]
+    out = []
+    for proc in procs:
+        stdout, _ = proc.communicate(timeout=900)
+        if proc.returncode != 0:
+            raise RuntimeError(f"training process failed with exit code {proc.returncode}")
+        out.append(float(json.loads(stdout.strip().splitlines()[-1])["train_s"]))
+    return out
+
+
+def run(quick: bool = False) -> dict[str, dict]:
+    """Time one training alone (after a warm-up one), with the default and with passive
+    waits, then two side by side with each (``quick`` changes nothing: the trainings are
+    small already)."""
+    _trainings(1, None)  # warm-up: the first process compiles (and caches) numba's DTW
+    single = _trainings(1, None)[0]
+    single_passive = _trainings(1, "PASSIVE")[0]
+    passive = max(_trainings(2, "PASSIVE"))
+    default = max(_trainings(2, None))
+    cores = os.cpu_count()
+    return {
+        "sweep.single_train_s": {"value": single, "unit": "s", "cores": cores},
+        "sweep.single_train_passive_s": {
+            "value": single_passive,
+            "unit": "s",
+            "reference": single,
+            "reference_name": "sweep.single_train_s (OpenMP's default waits)",
+            "ratio": single_passive / single,
+            "cores": cores,
+        },
+        "sweep.parallel_train_s": {
+            "value": passive,
+            "unit": "s",
+            "reference": default,
+            "reference_name": "the same two trainings with OpenMP's default waits",
+            "ratio": passive / default,
+            "cores": cores,
+        },
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="same as the full run")
+    args = parser.parse_args()
+    print(json.dumps(run(args.quick), indent=2))
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    main()
