@@ -613,12 +613,12 @@ def passive_omp_waits(config: DictConfig, n_jobs: int | None = None) -> bool:
     has cores (``trainer.num_threads`` each, 2 by default), unless the environment sets it.
 
     OpenMP's waiting threads then spin against the working ones: two small trainings at once
-    on 2 cores took 77-133 s each with the default policy and 5.1-5.6 s with passive waits,
-    where one alone takes 3.6-4.1 s (``python scripts/bench.py --only sweep``). A lone
-    training is slower with passive waits (7.7-8.6 s), so jobs that have the cores to
-    themselves keep the default. The policy changes how threads wait, not what they
-    compute: the trained predictors are the same to the bit. The job processes start after
-    this and inherit the environment.
+    on 2 cores took 17-133 s each with the default policy (four runs) and 4.9-5.6 s with
+    passive waits, where one alone takes 3.6-4.9 s (``python scripts/bench.py --only
+    sweep``; ``experiments/bench/README.md``). A lone training is slower with passive waits
+    (7.7-8.7 s), so jobs that have the cores to themselves keep the default. The policy
+    changes how threads wait, not what they compute: the trained predictors are the same to
+    the bit. The job processes start after this and inherit the environment.
 
     Returns:
         Whether it was set.
