@@ -372,13 +372,15 @@ JOB_CHECKS = {
 
 
 def shared_outputs(
-    written: list[tuple[int, dict[str, Path]]],
+    written: list[tuple[int, dict[str, Any]]],
 ) -> list[tuple[str, Path, list[int]]]:
     """The places that several jobs of a sweep would write: the later job would replace (or,
     run in parallel, mix into) what the earlier one wrote.
 
     Args:
-        written: per job, ``(job number, {key: path it writes})``.
+        written: per job, ``(job number, {key: path it writes})``; a ``(path, settings)``
+            value (a folder of predictors an experiment trains when missing) is shared only
+            by jobs that ask for other settings there (:func:`shared_trainings`).
 
     Returns:
         ``(key, path, job numbers)`` for each path written by more than one job, in job order.
@@ -386,8 +388,41 @@ def shared_outputs(
     by_place: dict[tuple[str, Path], list[int]] = {}
     for num, places in written:
         for key, path in places.items():
-            by_place.setdefault((key, Path(path)), []).append(num)
+            if not isinstance(path, tuple):
+                by_place.setdefault((key, Path(path)), []).append(num)
     return [(key, path, nums) for (key, path), nums in by_place.items() if len(nums) > 1]
+
+
+def shared_trainings(
+    written: list[tuple[int, dict[str, Any]]],
+) -> list[tuple[Path, dict[str, list[int]]]]:
+    """The folders of predictors that jobs of a sweep would train with different settings:
+    the first job to get there trains them, and a later one stops on the difference (or,
+    without those settings on its command line, uses them unchecked).
+
+    Args:
+        written: per job, ``(job number, {key: value})``; the ``(path, settings)`` values
+            count (:func:`~iplanner_torch.cli.experiment.check_job`).
+
+    Returns:
+        ``(folder, {settings: job numbers})`` for each folder asked for with more than one
+        setting, in job order.
+    """
+    by_folder: dict[Path, dict[str, list[int]]] = {}
+    for num, places in written:
+        for value in places.values():
+            if isinstance(value, tuple):
+                folder, settings = value
+                jobs = by_folder.setdefault(Path(folder), {}).setdefault(str(settings), [])
+                if num not in jobs:
+                    jobs.append(num)
+    return [(folder, asks) for folder, asks in by_folder.items() if len(asks) > 1]
+
+
+def _job_numbers(nums: list[int]) -> str:
+    """``job 3``, ``jobs 0, 2, 4`` (the first eight, then ``...``)."""
+    listed = ", ".join(str(n) for n in nums[:8]) + (", ..." if len(nums) > 8 else "")
+    return f"job {listed}" if len(nums) == 1 else f"jobs {listed}"
 
 
 def sweep_job_overrides(config: DictConfig) -> list[list[str]] | None:
@@ -460,7 +495,7 @@ def check_sweep_jobs(config: DictConfig) -> None:
     hydra_config = HydraConfig.instance()
     saved = hydra_config.cfg
     bad: list[str] = []
-    written: list[tuple[int, dict[str, Path]]] = []
+    written: list[tuple[int, dict[str, Any]]] = []
     try:
         for num, overrides in enumerate(jobs):
             try:
@@ -496,12 +531,29 @@ def check_sweep_jobs(config: DictConfig) -> None:
             flush=True,
         )
         raise SystemExit(2)
+    trainings = shared_trainings(written)
+    if trainings:
+        lines = [
+            f"  {folder}: "
+            + "; ".join(f"{_job_numbers(nums)} with {ask}" for ask, nums in asks.items())
+            for folder, asks in trainings
+        ]
+        print(
+            "error: ConfigError: sweep jobs would train predictors into the same folder with "
+            "different settings (the first trains them, the others stop on the difference or "
+            "use them unchecked); no job was run:\n"
+            + "\n".join(lines)
+            + "\n  give each setting its own folder, e.g. "
+            "'paths.checkpoints=checkpoints/seed${seed}' for a sweep of seed, or "
+            "'paths.checkpoints=checkpoints/${hydra:job.num}'",
+            file=sys.stderr,
+            flush=True,
+        )
+        raise SystemExit(2)
     shared = shared_outputs(written)
     if shared:
         lines = [
-            f"  jobs {', '.join(str(n) for n in nums[:8])}{', ...' if len(nums) > 8 else ''} "
-            f"would all write {key}={path}"
-            for key, path, nums in shared
+            f"  {_job_numbers(nums)} would all write {key}={path}" for key, path, nums in shared
         ]
         keys = dict.fromkeys(key for key, _, _ in shared)
         print(

@@ -592,17 +592,33 @@ def check_run(cfg: DictConfig) -> tuple[Any, list[str], bool]:
     return experiment, variants, timeline_plots
 
 
-def check_job(cfg: DictConfig) -> None:
+def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
     """What a sweep checks of each job before the first starts: the checks
     :func:`~iplanner_torch.cli._common.friendly_errors` makes of every command's config, then
     :func:`check_run`.
+
+    Returns:
+        For each folder of predictors the job reads, and trains when they are missing
+        (``<paths.checkpoints>/<dataset folder>``), the folder with the training settings it
+        asks for (``seed=0 run.train_trainer=fast``): jobs may share a folder with the same
+        settings (the first trains, the others wait and use it), not with others (a sweep
+        refuses them). Empty when no planner of the job predicts.
 
     Raises:
         ConfigError: naming the key, for the first setting that is wrong.
     """
     check_added_keys(cfg)
     check_root_keys(cfg)
-    check_run(cfg)
+    experiment, variants, _ = check_run(cfg)
+    if not variants:
+        return {}
+    settings = f"seed={cfg_scalar(cfg, 'seed', int)} run.train_trainer={cfg.run.train_trainer}"
+    out = {}
+    for scenario in experiment.scenarios:
+        data_node = scenario_data_node(cfg, scenario)
+        folder = repo_path(Path(cfg.paths.checkpoints) / Path(str(data_node.path)).name)
+        out[f"predictors of {scenario.name}"] = (folder, settings)
+    return out
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")

@@ -16,6 +16,7 @@ import pytest
 from iplanner_torch.cli.callbacks import gather_job_metrics, shared_outputs
 
 MODULES = {
+    "iplanner-experiment": "iplanner_torch.cli.experiment",
     "iplanner-data": "iplanner_torch.cli.data",
     "iplanner-train": "iplanner_torch.cli.train",
     "iplanner-evaluate": "iplanner_torch.cli.evaluate",
@@ -73,6 +74,38 @@ def test_a_sweep_whose_jobs_would_write_one_folder_is_refused_before_any_runs(
         f"  give each job its own, e.g. '{key}=<folder>/${{hydra:job.num}}'",
     ]
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no sweep folder, no data
+
+
+def test_an_experiment_sweep_training_one_folder_with_different_settings_is_refused(
+    tmp_path: Path,
+) -> None:
+    """``iplanner-experiment -m seed=0,1``: both jobs would train the scenario's predictors
+    into one folder, and the second would stop on the first's seed after the first had run.
+    Refused before any job runs. Jobs that ask the same of a folder (a noise sweep), and one
+    folder per seed, pass this check (here a bad confidence in two jobs then stops them)."""
+    sweep = tmp_path / "sweep"
+    rest = [f"hydra.sweep.dir={sweep}", "progress=false"]
+    res = _run(["iplanner-experiment", "-m", "seed=0,1", "run.train_trainer=fast,default",
+                *rest], tmp_path)  # fmt: skip
+    assert res.returncode == 2, res.stderr[-2000:]
+    folder = tmp_path.resolve() / "checkpoints" / "tasks_1x4_any0-1_then_any2-3"
+    assert res.stderr.strip().splitlines() == [
+        "error: ConfigError: sweep jobs would train predictors into the same folder with "
+        "different settings (the first trains them, the others stop on the difference or use "
+        "them unchecked); no job was run:",
+        f"  {folder}: job 0 with seed=0 run.train_trainer=fast; job 1 with seed=0 "
+        "run.train_trainer=default; job 2 with seed=1 run.train_trainer=fast; job 3 with "
+        "seed=1 run.train_trainer=default",
+        "  give each setting its own folder, e.g. 'paths.checkpoints=checkpoints/seed${seed}' "
+        "for a sweep of seed, or 'paths.checkpoints=checkpoints/${hydra:job.num}'",
+    ]
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    bad_confidence = "2 of 4 sweep job(s) would stop on a bad setting"
+    for sweep_args in (["tracker.noise=0,0.02"], ["seed=0,1", "paths.checkpoints=ck/s${seed}"]):
+        res = _run(["iplanner-experiment", "-m", *sweep_args, "planner.confidence=0.95,2",
+                    *rest], tmp_path)  # fmt: skip
+        assert res.returncode == 2 and bad_confidence in res.stderr, res.stderr[-2000:]
+        assert "would train predictors" not in res.stderr
 
 
 @pytest.mark.parametrize(
