@@ -1,6 +1,7 @@
 """Sweeps of iplanner-train, iplanner-evaluate and iplanner-data: every job is checked before
-the first runs (a bad value, or two jobs writing one folder), and a training sweep ends with
-one table of its jobs' held-out metrics."""
+the first runs (a bad value, or two jobs writing one folder; for iplanner-experiment, two jobs
+training one folder of predictors with different settings), a training sweep ends with one
+table of its jobs' held-out metrics, and jobs side by side get passive OpenMP waits."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from iplanner_torch.cli.callbacks import gather_job_metrics, shared_outputs
+from iplanner_torch.cli.callbacks import gather_job_metrics, shared_outputs, shared_trainings
 
 MODULES = {
     "iplanner-experiment": "iplanner_torch.cli.experiment",
@@ -41,6 +42,15 @@ def test_shared_outputs_names_each_place_several_jobs_write() -> None:
                (3, {}), (4, {"train.out_dir": a, "data.path": b})]  # fmt: skip
     assert shared_outputs(written) == [("train.out_dir", a, [0, 2, 4])]
     assert shared_outputs([(0, {"data.path": a}), (1, {"data.path": b})]) == []
+    tagged = [(0, {"s1": (a, "seed=0")}), (1, {"s1": (a, "seed=0")})]
+    assert shared_outputs(tagged) == []  # a folder of predictors: shared_trainings' to judge
+
+
+def test_shared_trainings_names_folders_asked_for_with_different_settings() -> None:
+    a, b = Path("/ck/a"), Path("/ck/b")
+    written = [(0, {"x": (a, "seed=0"), "y": (b, "seed=0")}), (1, {"x": (a, "seed=0")}),
+               (2, {}), (3, {"x": (a, "seed=1"), "y": (b, "seed=0")})]  # fmt: skip
+    assert shared_trainings(written) == [(a, {"seed=0": [0, 1], "seed=1": [3]})]
 
 
 @pytest.mark.parametrize(
