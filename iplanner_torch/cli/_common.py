@@ -1290,6 +1290,17 @@ def data_joints(data_cfg: DictConfig) -> tuple[str, ...] | None:
         raise ConfigError(f"data.windows.joints: {text}") from None
 
 
+def data_settings(data_cfg: DictConfig) -> tuple[str, float | None, tuple[str, ...] | None]:
+    """The settings every format reads, checked before anything is read or generated:
+    ``(data.format, data.fps, data.windows.joints)`` (:func:`data_format`, :func:`data_fps`,
+    :func:`data_joints`).
+
+    Raises:
+        ConfigError: naming the key of the first that is wrong.
+    """
+    return data_format(data_cfg), data_fps(data_cfg), data_joints(data_cfg)
+
+
 def read_demonstrations(data_cfg: DictConfig, path: Path) -> list[Any]:
     """The demonstrations at ``path`` as ``data.format`` reads them, each holding the joints
     ``data.windows.joints`` selects: every command reads a dataset through here.
@@ -1300,7 +1311,7 @@ def read_demonstrations(data_cfg: DictConfig, path: Path) -> list[Any]:
         path: its folder (or file), resolved.
 
     Raises:
-        ConfigError: from :func:`data_format`, :func:`data_fps` and :func:`data_joints`.
+        ConfigError: from :func:`data_settings`.
         DataError: from the loaders; for a LEGO recording, a selected joint it lacks. A
             folder with no demonstration files but ``.txt`` files says how to read them as
             the LEGO recording.
@@ -1308,9 +1319,7 @@ def read_demonstrations(data_cfg: DictConfig, path: Path) -> list[Any]:
     from iplanner_torch.data.io import load_demonstrations, load_lego_assembly
     from iplanner_torch.errors import DataError
 
-    fmt = data_format(data_cfg)
-    fps = data_fps(data_cfg)
-    joints = data_joints(data_cfg)
+    fmt, fps, joints = data_settings(data_cfg)
     if fmt == "lego_assembly":
         demos = load_lego_assembly(path, fps=LEGO_FPS if fps is None else fps)
         return _select_recorded_joints(demos, joints, path)
@@ -1448,10 +1457,7 @@ def load_dataset(
     from iplanner_torch.errors import DataError
 
     path = repo_path(data_cfg.path)
-    # the settings every format reads, before anything is generated
-    fmt = data_format(data_cfg)
-    data_fps(data_cfg)
-    data_joints(data_cfg)
+    fmt, _, _ = data_settings(data_cfg)  # before anything is generated
     if fmt == "lego_assembly":
         return read_demonstrations(data_cfg, path)
     if not path.exists() or (path.is_dir() and not any(path.iterdir())):

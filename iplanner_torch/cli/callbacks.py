@@ -453,7 +453,7 @@ def _unescaped(override: str) -> str:
     return re.sub(r"\\([\\{}:=,\[\]()'\" ])", r"\1", override)
 
 
-def check_sweep_jobs(config: DictConfig) -> None:
+def check_sweep_jobs(config: DictConfig) -> int | None:
     """Compose every job of the multirun ``config`` describes and check its settings as the
     job will (:data:`JOB_CHECKS`), before the first job runs; exit 2 naming what is wrong.
 
@@ -467,6 +467,9 @@ def check_sweep_jobs(config: DictConfig) -> None:
     ``train.out_dir``) are refused too: the later would replace the earlier's predictor, or
     mix with it when they run in parallel. A check that fails other than on a bad setting (a
     bug) is left to the job, which reports it with its traceback.
+
+    Returns:
+        The number of jobs; None for a sweeper other than Hydra's basic one (not checked).
 
     Raises:
         SystemExit: with code 2, after printing the error lines (Hydra turns an exception
@@ -485,7 +488,7 @@ def check_sweep_jobs(config: DictConfig) -> None:
 
     jobs = sweep_job_overrides(config)
     if not jobs:
-        return
+        return None if jobs is None else 0
     target = JOB_CHECKS.get(str(config.hydra.job.get("name", "")))
     check = None
     if target is not None:
@@ -567,6 +570,7 @@ def check_sweep_jobs(config: DictConfig) -> None:
             flush=True,
         )
         raise SystemExit(2)
+    return len(jobs)
 
 
 class GatherSweepResults(Callback):
@@ -593,9 +597,7 @@ class GatherSweepResults(Callback):
         if used:
             print(f"error: ConfigError: {used}", file=sys.stderr, flush=True)
             raise SystemExit(2)
-        check_sweep_jobs(config)
-        jobs = sweep_job_overrides(config)
-        passive_omp_waits(config, len(jobs) if jobs is not None else None)
+        passive_omp_waits(config, check_sweep_jobs(config))
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         import sys

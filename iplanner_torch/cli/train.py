@@ -43,9 +43,7 @@ from iplanner_torch.cli._common import (
     check_added_keys,
     check_root_keys,
     config_split,
-    data_format,
-    data_fps,
-    data_joints,
+    data_settings,
     dataset_generator,
     friendly_errors,
     instantiate,
@@ -177,9 +175,7 @@ def check_training(
     trainer_cfg = instantiate(trainer_node, TrainerCfg)
     window_cfg = instantiate(data_node.windows, WindowCfg)
     drawn = config_split(cfg, data_node)
-    data_format(data_node)  # what load_dataset checks first, before it reads or generates
-    data_fps(data_node)
-    data_joints(data_node)
+    data_settings(data_node)  # what load_dataset checks first, before it reads or generates
     if data_node.get("generator") is not None:  # used when the folder is missing
         dataset_generator(data_node, name="data.generator")
     cfg_scalar(cfg, "progress", bool)
