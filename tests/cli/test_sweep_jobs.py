@@ -294,3 +294,21 @@ def test_a_failed_job_is_named_with_its_overrides_as_typed(tmp_path: Path) -> No
     [(job, overrides, error)] = failed_jobs(tmp_path)
     assert job == tmp_path / "1" and error == "error: DataError: nope"
     assert overrides == "data.path=nope train.out_dir=ck/${hydra:job.num} data.split=[0.6,0.2,0.2]"
+
+
+def test_the_metrics_of_a_prediction_evaluation_sweep_are_gathered(tmp_path: Path) -> None:
+    """``iplanner-evaluate -m predictor=iplanner_ni,iplanner_no_ni``: each job's
+    ``prediction_metrics.json``, one row per job, the option as a column, the plot's x axis
+    the options in job order; a damaged file loses only its row."""
+    sweep = tmp_path / "sweep"
+    for num, (option, mhd) in enumerate([("iplanner_ni", 0.047), ("iplanner_no_ni", 0.048)]):
+        _job(sweep, str(num), [f"predictor={option}"], None)
+        record = {"n_windows": 868, "mhd_1s": mhd, "class_accuracy": 0.81}
+        (sweep / str(num) / "prediction_metrics.json").write_text(json.dumps(record))
+    _job(sweep, "2", ["predictor=other"], None)
+    (sweep / "2" / "prediction_metrics.json").write_text("{not json")
+    written = gather_job_metrics(sweep, tmp_path / "summary")
+    assert [p.name for p in written] == ["results.csv", "results.md", "metrics.png"]
+    df = pd.read_csv(tmp_path / "summary" / "results.csv")
+    assert list(df["predictor"]) == ["iplanner_ni", "iplanner_no_ni"]
+    assert list(df["mhd_1s"]) == [0.047, 0.048]
