@@ -600,7 +600,8 @@ def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
     Returns:
         For each folder of predictors the job reads, and trains when they are missing
         (``<paths.checkpoints>/<dataset folder>``), the folder with the training settings it
-        asks for (``seed=0 run.train_trainer=fast``): jobs may share a folder with the same
+        asks for (``seed=0 run.train_trainer=fast``, and with ``run.train_data=data`` the
+        ``data.windows`` fields its command line sets): jobs may share a folder with the same
         settings (the first trains, the others wait and use it), not with others (a sweep
         refuses them). Empty when no planner of the job predicts.
 
@@ -613,6 +614,11 @@ def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
     if not variants:
         return {}
     settings = f"seed={cfg_scalar(cfg, 'seed', int)} run.train_trainer={cfg.run.train_trainer}"
+    if str(cfg.run.train_data) == "data":  # the window settings a checkpoint is compared on
+        for field in sorted(overridden_fields("data.windows")):
+            value = cfg.data.windows.get(field)
+            value = OmegaConf.to_container(value) if OmegaConf.is_config(value) else value
+            settings += f" data.windows.{field}={value}"
     out = {}
     for scenario in experiment.scenarios:
         data_node = scenario_data_node(cfg, scenario)

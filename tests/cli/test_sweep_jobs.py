@@ -110,6 +110,15 @@ def test_an_experiment_sweep_training_one_folder_with_different_settings_is_refu
         "for a sweep of seed, or 'paths.checkpoints=checkpoints/${hydra:job.num}'",
     ]
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+    # with run.train_data=data, the window settings a checkpoint is compared on count too
+    res = _run(["iplanner-experiment", "-m", "run.train_data=data", "data.windows.n_prev=10,15",
+                *rest], tmp_path)  # fmt: skip
+    assert res.returncode == 2, res.stderr[-2000:]
+    assert res.stderr.strip().splitlines()[1] == (
+        f"  {tmp_path.resolve() / 'checkpoints' / 'reaching'}: job 0 with seed=0 "
+        "run.train_trainer=fast data.windows.n_prev=10; job 1 with seed=0 "
+        "run.train_trainer=fast data.windows.n_prev=15"
+    )
     bad_confidence = "2 of 4 sweep job(s) would stop on a bad setting"
     for sweep_args in (["tracker.noise=0,0.02"], ["seed=0,1", "paths.checkpoints=ck/s${seed}"]):
         res = _run(["iplanner-experiment", "-m", *sweep_args, "planner.confidence=0.95,2",
