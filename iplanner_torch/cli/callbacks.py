@@ -4,7 +4,7 @@ episode logs into one table and plots when it ends."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
@@ -453,6 +453,15 @@ def _unescaped(override: str) -> str:
     return re.sub(r"\\([\\{}:=,\[\]()'\" ])", r"\1", override)
 
 
+def _refuse_sweep(text: str) -> NoReturn:
+    """Print ``error: ConfigError: <text>`` and end the sweep with exit code 2 before any job
+    runs (Hydra turns an exception raised in a callback into a warning; an exit is not one)."""
+    import sys
+
+    print(f"error: ConfigError: {text}", file=sys.stderr, flush=True)
+    raise SystemExit(2)
+
+
 def check_sweep_jobs(config: DictConfig) -> int | None:
     """Compose every job of the multirun ``config`` describes and check its settings as the
     job will (:data:`JOB_CHECKS`), before the first job runs; exit 2 naming what is wrong.
@@ -477,7 +486,6 @@ def check_sweep_jobs(config: DictConfig) -> int | None:
     """
     import copy
     import importlib
-    import sys
 
     from hydra.core.global_hydra import GlobalHydra
     from hydra.core.hydra_config import HydraConfig
@@ -505,8 +513,7 @@ def check_sweep_jobs(config: DictConfig) -> int | None:
                 job_cfg = loader.load_sweep_config(config, overrides)
             except Exception as exc:  # noqa: BLE001 - Hydra would only warn of it here
                 text = composition_error_text(exc) or f"{type(exc).__name__}: {exc}"
-                print(f"error: ConfigError: {text}", file=sys.stderr, flush=True)
-                raise SystemExit(2) from None
+                _refuse_sweep(text)
             if check is None:
                 continue
             with open_dict(job_cfg.hydra):
@@ -527,13 +534,10 @@ def check_sweep_jobs(config: DictConfig) -> int | None:
     finally:
         hydra_config.cfg = saved
     if bad:
-        print(
-            f"error: ConfigError: {len(bad)} of {len(jobs)} sweep job(s) would stop on a bad "
-            "setting; no job was run:\n" + "\n".join(bad),
-            file=sys.stderr,
-            flush=True,
+        _refuse_sweep(
+            f"{len(bad)} of {len(jobs)} sweep job(s) would stop on a bad setting; no job was "
+            "run:\n" + "\n".join(bad)
         )
-        raise SystemExit(2)
     trainings = shared_trainings(written)
     if trainings:
         lines = [
@@ -541,35 +545,28 @@ def check_sweep_jobs(config: DictConfig) -> int | None:
             + "; ".join(f"{_job_numbers(nums)} with {ask}" for ask, nums in asks.items())
             for folder, asks in trainings
         ]
-        print(
-            "error: ConfigError: sweep jobs would train predictors into the same folder with "
-            "different settings (the first trains them, the others stop on the difference or "
-            "use them unchecked); no job was run:\n"
+        _refuse_sweep(
+            "sweep jobs would train predictors into the same folder with different settings "
+            "(the first trains them, the others stop on the difference or use them "
+            "unchecked); no job was run:\n"
             + "\n".join(lines)
             + "\n  give each setting its own folder, e.g. "
             "'paths.checkpoints=checkpoints/seed${seed}' for a sweep of seed, or "
-            "'paths.checkpoints=checkpoints/${hydra:job.num}'",
-            file=sys.stderr,
-            flush=True,
+            "'paths.checkpoints=checkpoints/${hydra:job.num}'"
         )
-        raise SystemExit(2)
     shared = shared_outputs(written)
     if shared:
         lines = [
             f"  {_job_numbers(nums)} would all write {key}={path}" for key, path, nums in shared
         ]
         keys = dict.fromkeys(key for key, _, _ in shared)
-        print(
-            "error: ConfigError: sweep jobs would write into the same place, each replacing "
-            "what the one before wrote (or mixing with it when they run in parallel); no job "
-            "was run:\n"
+        _refuse_sweep(
+            "sweep jobs would write into the same place, each replacing what the one before "
+            "wrote (or mixing with it when they run in parallel); no job was run:\n"
             + "\n".join(lines)
             + "\n  give each job its own, e.g. "
-            + " ".join(f"'{key}=<folder>/${{hydra:job.num}}'" for key in keys),
-            file=sys.stderr,
-            flush=True,
+            + " ".join(f"'{key}=<folder>/${{hydra:job.num}}'" for key in keys)
         )
-        raise SystemExit(2)
     return len(jobs)
 
 
@@ -591,12 +588,9 @@ class GatherSweepResults(Callback):
     with ``SystemExit(2)`` instead, which it lets through."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        import sys
-
         used = used_sweep_dir_text(Path(str(config.hydra.sweep.dir)))
         if used:
-            print(f"error: ConfigError: {used}", file=sys.stderr, flush=True)
-            raise SystemExit(2)
+            _refuse_sweep(used)
         passive_omp_waits(config, check_sweep_jobs(config))
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
