@@ -52,9 +52,11 @@ def _gpytorch_forecast(
                 reg.predict_gpytorch(x[s : s + 32])
 
 
-def run(quick: bool = False, *, predictor_cfg: PredictorCfg | None = None) -> dict[str, dict]:
-    """Train, time and evaluate the predictor on synthetic reaching data (one torch thread)."""
-    torch.set_num_threads(1)
+def training_inputs(quick: bool, predictor_cfg: PredictorCfg | None = None) -> tuple:
+    """What the benchmark trains on: ``(training windows, validation windows, held-out
+    demonstrations, window settings, predictor settings)``, from the synthetic reaching set
+    (8 targets x 30 reaches; ``quick``: 8 x 4 and a smaller predictor budget). Also the
+    trainings of ``bench_sweep.py``."""
     rc = ReachingCfg(reaches_per_target=4 if quick else 30)
     demos = [
         d
@@ -75,6 +77,13 @@ def run(quick: bool = False, *, predictor_cfg: PredictorCfg | None = None) -> di
             ivm_max_import=20,
             ivm_candidates=32,
         )
+    return w_train, w_val, test, wc, cfg
+
+
+def run(quick: bool = False, *, predictor_cfg: PredictorCfg | None = None) -> dict[str, dict]:
+    """Train, time and evaluate the predictor on synthetic reaching data (one torch thread)."""
+    torch.set_num_threads(1)
+    w_train, w_val, test, wc, cfg = training_inputs(quick, predictor_cfg)
     out: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()

@@ -16,8 +16,8 @@ Figures (``run(quick) -> dict``):
 * ``sweep.single_train_passive_s``: the same with passive waits, against it: why a sweep
   whose jobs have the cores to themselves keeps the default.
 
-Each training is the quick predictor of ``bench_prediction`` (8 targets x 4 reaches, 40 SVGP
-steps) with ``TrainerCfg(num_threads=2)``.
+Each training is the quick predictor of ``bench_prediction`` (its ``training_inputs``: 8
+targets x 4 reaches, 40 SVGP steps) with ``TrainerCfg(num_threads=2)``.
 
 Usage::
 
@@ -36,24 +36,14 @@ from pathlib import Path
 #: one training, printed as {"train_s": ...}; run in a fresh process per measurement
 _TRAIN = r"""
 import json, sys, tempfile, time
-from dataclasses import replace
-from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
-from iplanner_torch.data.windows import WindowCfg, build_windows, split_by_demonstration
-from iplanner_torch.prediction.predictor import PredictorCfg
+sys.path.insert(0, sys.argv[1])
+from bench_prediction import training_inputs
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
-rc = ReachingCfg(reaches_per_target=4)
-demos = [d for t in range(rc.n_targets) for r in range(rc.reaches_per_target)
-         for d in reaching_demonstrations(rc, t, r)]
-train, val, _ = split_by_demonstration(demos, (0.5, 0.25, 0.25), seed=0)
-wc = WindowCfg()
-cfg = PredictorCfg()
-cfg = replace(cfg, svgp=replace(cfg.svgp, max_steps=40), classifier_max_train=400,
-              ivm_max_import=20, ivm_candidates=32)
-windows = (build_windows(train, wc), build_windows(val, wc))
+w_train, w_val, _, _, cfg = training_inputs(quick=True)
 with tempfile.TemporaryDirectory() as tmp:
     t0 = time.perf_counter()
-    train_predictor(windows, predictor_cfg=cfg, trainer_cfg=TrainerCfg(num_threads=2),
+    train_predictor((w_train, w_val), predictor_cfg=cfg, trainer_cfg=TrainerCfg(num_threads=2),
                     out_dir=tmp, progress=False)
     print(json.dumps({"train_s": time.perf_counter() - t0}))
 """
@@ -68,7 +58,7 @@ def _trainings(n: int, policy: str | None) -> list[float]:
         env["OMP_WAIT_POLICY"] = policy
     procs = [
         subprocess.Popen(
-            [sys.executable, "-c", _TRAIN],
+            [sys.executable, "-c", _TRAIN, str(Path(__file__).resolve().parent)],
             env=env,
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL,
