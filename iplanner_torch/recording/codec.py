@@ -1,13 +1,23 @@
-"""JSON encoding of numeric arrays for MCAP messages, lossless for NaN and infinities.
+"""JSON encoding of numeric arrays and free-form values for MCAP messages, lossless for NaN
+and infinities.
 
-JSON has no NaN or infinity. In every message of an episode log a NaN number is written as
-``null`` and an infinity as the string ``"inf"`` or ``"-inf"``; :func:`decode_array` maps them
-back. Finite numbers are written with Python's shortest round-trip ``repr`` of the float64
-value, so float32 and float64 inputs come back bit-identical (as float64).
+JSON has no NaN or infinity.
 
-The price, in the free-form dicts (episode metadata, metrics, event details): a value that
-was itself the string ``"inf"`` or ``"-inf"``, or ``None``, reads back as the float
-infinity or NaN. Store such text under another spelling (``"infinite"``).
+- Numeric arrays and numeric fields (:func:`encode_array`): a NaN is written as ``null`` and
+  an infinity as the string ``"inf"`` or ``"-inf"``; :func:`decode_array` maps them back.
+- Free-form values (the episode metadata, metrics and event details; :func:`encode_value`,
+  value codec ``"2"``): a NaN is written as the string ``"nan"``, an infinity as ``"inf"`` or
+  ``"-inf"``, ``None`` as ``null``, and a string that would read as one of them (``"nan"``,
+  ``"inf"``, ``"-inf"``) or that starts with ``~`` gets a ``~`` in front. So
+  :func:`decode_value` gives back every value as it was: ``None`` stays ``None`` and the
+  string ``"inf"`` stays a string.
+
+Logs written before the value codec was recorded (value codec ``"1"``) wrote a free-form NaN
+as ``null`` and strings as they were; :func:`decode_value` with ``codec="1"`` reads them as
+then: ``null`` and the strings ``"inf"`` / ``"-inf"`` as floats.
+
+Finite numbers are written with Python's shortest round-trip ``repr`` of the float64 value, so
+float32 and float64 inputs come back bit-identical (as float64).
 """
 
 from __future__ import annotations
@@ -69,14 +79,38 @@ def encode_scalar(x: Any) -> Any:
     return x
 
 
+#: The value codec :func:`encode_value` writes (see the module docstring); episode logs record
+#: it beside their metadata.
+VALUE_CODEC = "2"
+#: The value codecs :func:`decode_value` reads.
+VALUE_CODECS = ("1", "2")
+
+#: Free-form strings that would read as a number, so they are written with ``~`` in front.
+_NUMBER_WORDS = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+
+
+def _free_scalar(x: Any) -> Any:
+    """One free-form scalar as :func:`encode_value` writes it."""
+    if isinstance(x, str):
+        return "~" + x if x in _NUMBER_WORDS or x.startswith("~") else x
+    if isinstance(x, float) and math.isnan(x):
+        return "nan"
+    return encode_scalar(x)  # bool, None, int, finite float, +-inf
+
+
 def encode_value(x: Any) -> Any:
-    """Recursively make dicts, lists, tensors and numbers JSON-safe (see module docstring)."""
+    """Recursively make dicts, lists, tensors and numbers JSON-safe, losslessly (value codec
+    ``"2"`` of the module docstring: NaN as ``"nan"``, ``None`` as ``null``, strings that
+    would read as numbers escaped with ``~``)."""
     if isinstance(x, Mapping):
         return {str(k): encode_value(v) for k, v in x.items()}
     if isinstance(x, torch.Tensor | np.ndarray):
         if x.dtype == torch.bool or (isinstance(x, np.ndarray) and x.dtype == np.bool_):
             return as_numpy(x, dtype=bool).tolist()
-        return encode_array(x)
+        a = as_numpy(x)
+        if np.isfinite(a).all():
+            return a.tolist()
+        return np.vectorize(_free_scalar, otypes=[object])(a.astype(object)).tolist()
     if isinstance(x, Sequence) and not isinstance(x, str | bytes):
         return [encode_value(v) for v in x]
     if isinstance(x, np.bool_):
@@ -84,12 +118,40 @@ def encode_value(x: Any) -> Any:
     if isinstance(x, np.integer):
         return int(x)
     if isinstance(x, np.floating):
-        return encode_scalar(float(x))
-    return encode_scalar(x)
+        return _free_scalar(float(x))
+    return _free_scalar(x)
+
+
+def decode_value(x: Any, codec: str = VALUE_CODEC) -> Any:
+    """Recursive inverse of :func:`encode_value` (``codec="2"``), or the reading of a log
+    written before the value codec was recorded (``codec="1"``: ``null`` and the strings
+    ``"inf"`` / ``"-inf"`` as floats, other strings as they are).
+
+    Raises:
+        ValueError: on a codec other than those in :data:`VALUE_CODECS`.
+    """
+    if codec not in VALUE_CODECS:
+        raise ValueError(f"unknown value codec {codec!r}, expected one of {VALUE_CODECS}")
+    return _decode(x, codec == "1")
+
+
+def _decode(x: Any, legacy: bool) -> Any:
+    if isinstance(x, dict):
+        return {k: _decode(v, legacy) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_decode(v, legacy) for v in x]
+    if legacy:
+        return decode_scalar(x)
+    if isinstance(x, str):
+        if x in _NUMBER_WORDS:
+            return _NUMBER_WORDS[x]
+        return x[1:] if x.startswith("~") else x
+    return x
 
 
 def decode_scalar(x: Any) -> Any:
-    """Inverse of :func:`encode_scalar` for values of a metrics or detail dict."""
+    """Inverse of :func:`encode_scalar`: ``null`` -> NaN, ``"inf"`` / ``"-inf"`` -> floats,
+    others unchanged (the numeric fields of a message, and free-form values of codec "1")."""
     if x is None:
         return math.nan
     if x == "inf":

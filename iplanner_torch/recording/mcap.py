@@ -59,7 +59,13 @@ from scipy.stats import chi2
 
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
-from iplanner_torch.recording.codec import as_numpy, dumps, encode_array, encode_value
+from iplanner_torch.recording.codec import (
+    VALUE_CODEC,
+    as_numpy,
+    dumps,
+    encode_array,
+    encode_value,
+)
 from iplanner_torch.recording.reader import (
     EPISODE_METADATA_NAME,
     SPHERE_COUNT_KEY,
@@ -256,8 +262,9 @@ class EpisodeWriter:
         time_offset_ns: added to every log time (e.g. the wall clock at the episode start),
             in [0, 2^64 - 1] (a log time is an unsigned 64-bit integer).
 
-    Metadata NaN and infinities survive (read back as floats); ``None`` is stored as null and
-    read back as NaN, as in metrics and task event details.
+    Metadata, metrics and task event details read back as they were given: NaN and
+    infinities as floats, ``None`` as ``None``, strings as strings (even ``"inf"``; see
+    :mod:`~iplanner_torch.recording.codec`). Tensors and arrays in them read back as lists.
 
     Raises:
         ConfigError: on a non-positive chunk size, unknown compression, a confidence outside
@@ -315,7 +322,8 @@ class EpisodeWriter:
             {
                 "json": meta_json,
                 "time_offset_ns": str(self._offset_ns),
-                "crc32": str(metadata_crc(meta_json, str(self._offset_ns))),
+                "value_codec": VALUE_CODEC,
+                "crc32": str(metadata_crc(meta_json, str(self._offset_ns), VALUE_CODEC)),
             },
         )
         self._channels: dict[str, int] = {}
@@ -705,8 +713,8 @@ class EpisodeWriter:
         Args:
             t: simulation time [s].
             kind: event name.
-            detail: JSON-able details (a mapping, or None for none); NaN is stored as null and
-                read back as NaN.
+            detail: JSON-able details (a mapping, or None for none); they read back as given
+                (NaN, infinities and None included).
         """
         detail = {} if detail is None else self._mapping("detail", detail)
         encoded = self._encoded("detail", detail)  # before the time is taken as logged

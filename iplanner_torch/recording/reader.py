@@ -18,6 +18,7 @@ drawn, or a log of an earlier writer) is read as it is.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import warnings
@@ -36,7 +37,14 @@ from mcap.stream_reader import StreamReader
 
 from iplanner_torch.errors import DataError, DataWarning
 from iplanner_torch.prediction.forecast import Forecast
-from iplanner_torch.recording.codec import decode_array, decode_scalar, loads
+from iplanner_torch.recording.codec import (
+    VALUE_CODEC,
+    VALUE_CODECS,
+    decode_array,
+    decode_scalar,
+    decode_value,
+    loads,
+)
 
 __all__ = [
     "Episode",
@@ -55,20 +63,14 @@ SPHERE_ROWS_KEY = "sphere_rows"
 _MAGIC = b"\x89MCAP0\r\n"
 
 
-def metadata_crc(json_text: str, time_offset_ns: str) -> int:
-    """CRC-32 of the episode metadata record's ``json`` and ``time_offset_ns`` values, stored
-    beside them as ``crc32`` (MCAP metadata records have no checksum of their own)."""
-    return zlib.crc32(f"{time_offset_ns}\n{json_text}".encode())
-
-
-def _decode_value(x: Any) -> Any:
-    """Recursive inverse of ``codec.encode_value`` for the episode metadata and dicts of metrics
-    or event details."""
-    if isinstance(x, dict):
-        return {k: _decode_value(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_decode_value(v) for v in x]
-    return decode_scalar(x)
+def metadata_crc(json_text: str, time_offset_ns: str, value_codec: str | None = None) -> int:
+    """CRC-32 of the episode metadata record's ``json``, ``time_offset_ns`` and (in logs that
+    record it) ``value_codec`` values, stored beside them as ``crc32`` (MCAP metadata records
+    have no checksum of their own)."""
+    text = f"{time_offset_ns}\n{json_text}"
+    if value_codec is not None:
+        text = f"{value_codec}\n{text}"
+    return zlib.crc32(text.encode())
 
 
 def _t_of_stamp(stamp: dict[str, int], offset_ns: int) -> float:
@@ -227,16 +229,20 @@ def _row_plan(m: dict[str, Any], _: int) -> dict[str, Any]:
     }
 
 
-def _row_event(m: dict[str, Any], _: int) -> dict[str, Any]:
+def _row_event(m: dict[str, Any], _: int, codec: str = VALUE_CODEC) -> dict[str, Any]:
     if not isinstance(m["kind"], str):
         raise ValueError(f"field 'kind' must be a string, got {m['kind']!r}")
-    return {"t": _number(m, "t"), "kind": m["kind"], "detail": _decode_value(m["detail"])}
+    return {"t": _number(m, "t"), "kind": m["kind"], "detail": decode_value(m["detail"], codec)}
 
 
-def _row_metrics(m: dict[str, Any], _: int) -> dict[str, Any]:
+def _row_metrics(m: dict[str, Any], _: int, codec: str = VALUE_CODEC) -> dict[str, Any]:
     if not isinstance(m["metrics"], dict):
         raise ValueError(f"field 'metrics' must be an object, got {m['metrics']!r}")
-    return {"t": _number(m, "t"), "metrics": _decode_value(m["metrics"])}
+    return {"t": _number(m, "t"), "metrics": decode_value(m["metrics"], codec)}
+
+
+#: Decoders whose free-form values depend on the log's value codec (passed as ``codec``).
+_CODEC_TOPICS = ("/task/events", "/episode/metrics")
 
 
 def _row_scene(m: dict[str, Any], offset_ns: int) -> dict[str, Any]:
@@ -626,10 +632,18 @@ def read_episode(path: str | Path) -> Episode:
     if not ours:
         raw.drop_foreign_topics()
     meta_rec = raw.metadata.get(EPISODE_METADATA_NAME, {})
+    # logs before the value codec was recorded wrote free-form values with codec "1"
+    codec = meta_rec.get("value_codec", "1")
     if "crc32" in meta_rec and meta_rec["crc32"] != str(
-        metadata_crc(meta_rec.get("json", ""), meta_rec.get("time_offset_ns", "0"))
+        metadata_crc(
+            meta_rec.get("json", ""),
+            meta_rec.get("time_offset_ns", "0"),
+            meta_rec.get("value_codec"),
+        )
     ):
         meta_rec = {}  # its values cannot be trusted
+        # the best guess left: only writers of codec "2" record one
+        codec = VALUE_CODEC if "value_codec" in raw.metadata[EPISODE_METADATA_NAME] else "1"
         raw.problem = "; ".join(
             p for p in (raw.problem, "episode metadata fails its checksum") if p
         )
@@ -664,14 +678,23 @@ def read_episode(path: str | Path) -> Episode:
         offset_ns = int(meta_rec.get("time_offset_ns", "0"))
         if not isinstance(metadata, dict):
             raise TypeError(f"expected a JSON object, got {type(metadata).__name__}")
-        metadata = _decode_value(metadata)  # NaN and infinities, as the writer encodes them
+        if codec not in VALUE_CODECS:
+            raise ValueError(
+                f"value codec {codec!r} is not one this version reads "
+                f"({', '.join(VALUE_CODECS)}): written by a newer iplanner_torch?"
+            )
+        metadata = decode_value(metadata, codec)  # NaN, infinities and None as written
     except (ValueError, TypeError, RecursionError) as err:
         raise DataError(f"{path}: bad episode metadata record: {err}") from err
+    decoders = {
+        **_ROW_DECODERS,
+        **{t: functools.partial(_ROW_DECODERS[t], codec=codec) for t in _CODEC_TOPICS},
+    }
     rows: dict[str, list[dict[str, Any]]] = {}
     for topic, log_time, data in raw.messages:
         try:
             msg = loads(data)
-            decoder = _ROW_DECODERS.get(topic) if ours else None
+            decoder = decoders.get(topic) if ours else None
             if decoder is None:
                 row = {"t": (log_time - offset_ns) * 1e-9, "message": msg}
             else:

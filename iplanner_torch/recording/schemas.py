@@ -373,7 +373,8 @@ TASK_EVENT = _object(
 
 EPISODE_METRICS = _object(
     "iplanner.EpisodeMetrics",
-    "Metric values (NaN as null, infinities as strings)",
+    'Metric values (NaN as "nan", infinities as "inf" / "-inf", None as null; a string '
+    "that would read as one of them, or starts with ~, has a ~ in front)",
     {
         **_STAMP,
         "metrics": {

@@ -27,15 +27,17 @@ def _mcap(
     messages: list[tuple[str, dict | bytes]],
     encodings: dict[str, str] | None = None,
     metadata: dict | None = None,
+    record: dict[str, str] | None = None,
 ) -> Path:
     """An MCAP file written with the plain mcap writer: the episode metadata record and
     ``messages`` on their topics, each JSON-encoded unless it is bytes already; a topic's
-    channel has the message encoding ``encodings[topic]`` ("json" when not given)."""
+    channel has the message encoding ``encodings[topic]`` ("json" when not given). ``record``
+    replaces the whole metadata record (``metadata`` is then not used)."""
     encodings = encodings or {}
     with open(path, "wb") as f:
         w = Writer(f)
         w.start()
-        w.add_metadata("iplanner.episode", {"json": json.dumps(metadata or {})})
+        w.add_metadata("iplanner.episode", record or {"json": json.dumps(metadata or {})})
         ids: dict[str, int] = {}
         for i, (topic, msg) in enumerate(messages):
             if topic not in ids:
@@ -498,3 +500,53 @@ def test_negative_sphere_radii_and_semi_axes_are_refused(tmp_path: Path) -> None
             log.scene(0.0, good, good, [(np.zeros(3), np.array([-0.1, 0.2, 0.3]))])
         nan_row = np.array([[np.nan, 0.0, 0.0, np.nan]])
         log.scene(0.0, good, nan_row)  # a NaN row is not drawn, as before
+
+
+# -- free-form values of logs written before the value codec was recorded ------------------------
+
+
+def test_a_log_without_a_value_codec_reads_null_and_inf_as_numbers(tmp_path: Path) -> None:
+    """Such logs wrote a free-form NaN as null: metadata, metrics and details read as then."""
+    path = _mcap(
+        tmp_path / "old.mcap",
+        [
+            ("/task/events", {"t": 0.5, "kind": "k", "detail": {"gap": None, "d": "-inf"}}),
+            ("/episode/metrics", {"t": 1.0, "metrics": {"mhd": None, "x": "inf", "s": "~a"}}),
+        ],
+        metadata={"nan": None, "inf": "inf"},
+    )
+    ep = read_episode(path)
+    assert math.isnan(ep.metadata["nan"]) and ep.metadata["inf"] == math.inf
+    detail = ep.events()[0]["detail"]
+    assert math.isnan(detail["gap"]) and detail["d"] == -math.inf
+    m = ep.metrics()
+    assert math.isnan(m["mhd"]) and m["x"] == math.inf and m["s"] == "~a"
+
+
+def test_a_value_codec_this_version_does_not_read_is_named(tmp_path: Path) -> None:
+    from iplanner_torch.recording.reader import metadata_crc
+
+    text = json.dumps({"a": 1})
+    record = {"json": text, "time_offset_ns": "0", "value_codec": "9"}
+    record["crc32"] = str(metadata_crc(text, "0", "9"))
+    path = _mcap(tmp_path / "new.mcap", [], record=record)
+    with pytest.raises(DataError, match=r"value codec '9' is not one this version reads"):
+        read_episode(path)
+
+
+def test_a_changed_value_codec_fails_the_metadata_checksum(tmp_path: Path) -> None:
+    """The codec is part of the record's checksum: a log whose codec was changed is read as
+    damaged (its metadata dropped, with a warning), and its values as the codec this version
+    writes (the only one that records itself)."""
+    path = tmp_path / "ours.mcap"
+    with EpisodeWriter(path, metadata={"planner": "itomp"}) as log:
+        log.metrics(1.0, {"x": "inf"})
+    data = path.read_bytes()
+    assert data.count(b"value_codec") == 1
+    i = data.index(b"value_codec") + len(b"value_codec") + 4  # the u32 length of the value
+    assert data[i : i + 1] == b"2"
+    path.write_bytes(data[:i] + b"1" + data[i + 1 :])
+    with pytest.warns(DataWarning, match="episode metadata fails its checksum"):
+        ep = read_episode(path)
+    assert ep.metadata == {} and not ep.complete
+    assert ep.metrics()["x"] == "inf"  # the string, as written

@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 import torch
 
-from iplanner_torch.recording.codec import decode_array, dumps, encode_array, encode_value, loads
+from iplanner_torch.recording.codec import (
+    decode_array,
+    decode_value,
+    dumps,
+    encode_array,
+    encode_value,
+    loads,
+)
 
 
 def test_arrays_round_trip_with_nan_and_inf() -> None:
@@ -32,6 +39,38 @@ def test_float32_values_come_back_exactly() -> None:
 def test_encode_value_makes_nested_dicts_json_safe() -> None:
     v = {"a": math.nan, "b": [1.0, math.inf], "c": {"d": np.float32(2.5), "e": np.int64(3)}}
     enc = encode_value(v)
-    assert enc == {"a": None, "b": [1.0, "inf"], "c": {"d": 2.5, "e": 3}}
+    assert enc == {"a": "nan", "b": [1.0, "inf"], "c": {"d": 2.5, "e": 3}}
     with pytest.raises(ValueError, match="Out of range float"):
         dumps({"x": math.nan})  # raw NaN is refused, never written
+
+
+@pytest.mark.parametrize(
+    ("value", "written"),
+    [
+        (None, None),
+        (math.nan, "nan"),
+        (-math.inf, "-inf"),
+        ("inf", "~inf"),
+        ("nan", "~nan"),
+        ("~", "~~"),
+        ("~inf", "~~inf"),
+        ("infinite", "infinite"),
+        ("", ""),
+        ([None, "x", np.float64(math.nan)], [None, "x", "nan"]),
+        (np.array([[math.nan, 2.0]]), [["nan", 2.0]]),
+    ],
+)
+def test_free_form_values_are_written_apart_and_read_back(value: object, written: object) -> None:
+    """Value codec "2": what is written for each case, and that decoding gives it back."""
+    assert loads(dumps({"v": encode_value(value)}))["v"] == written
+    back = decode_value(written)
+    expected = value.tolist() if isinstance(value, np.ndarray) else value
+    assert json.dumps(back) == json.dumps(expected)  # NaN as the token NaN: equal as text
+
+
+def test_codec_1_reads_null_and_inf_strings_as_floats() -> None:
+    """Logs written before the codec was recorded: null was NaN and "inf" the infinity."""
+    back = decode_value({"a": None, "b": ["inf", "-inf"], "c": "~x"}, "1")
+    assert math.isnan(back["a"]) and back["b"] == [math.inf, -math.inf] and back["c"] == "~x"
+    with pytest.raises(ValueError, match="unknown value codec '3'"):
+        decode_value({}, "3")

@@ -148,7 +148,7 @@ def test_round_trip_every_channel(log_path: Path, data: dict) -> None:
     assert math.isnan(events[0]["detail"]["gap"])
 
     m = ep.metrics()
-    assert m["eval/smoothness"] == 1.5 and m["eval/x"] == math.inf and math.isnan(m["n"])
+    assert m["eval/smoothness"] == 1.5 and m["eval/x"] == math.inf and m["n"] is None
 
     ts, robot, human = ep.scene_spheres()
     np.testing.assert_allclose(ts.numpy(), data["t"], atol=1e-9)  # from the ns log time
@@ -253,6 +253,54 @@ def test_metadata_nan_and_infinities_read_back(tmp_path: Path) -> None:
     back = read_episode(tmp_path / "m.mcap").metadata
     assert math.isnan(back["nan"]) and back["inf"] == math.inf and back["ninf"] == -math.inf
     assert math.isnan(back["deep"]["x"][0]) and back["deep"]["x"][1] == 1
+
+
+#: Free-form values that a JSON codec could confuse: None against NaN, and strings that spell
+#: the numbers JSON cannot carry, or the escape itself.
+TRICKY = {
+    "none": None,
+    "nan": math.nan,
+    "inf": math.inf,
+    "ninf": -math.inf,
+    "s_nan": "nan",
+    "s_inf": "inf",
+    "s_ninf": "-inf",
+    "s_tilde": "~",
+    "s_tilde_inf": "~inf",
+    "s_tilde2": "~~x",
+    "s_empty": "",
+    "s_null": "null",
+    "list": [None, "inf", math.nan, -math.inf, "~nan", 1, True],
+    "array": np.array([1.5, np.nan, np.inf]),
+}
+
+
+def _same(a: object, b: object) -> bool:
+    """Equality where NaN equals NaN and a float is not taken for a string or None."""
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, list | tuple | np.ndarray):
+        return isinstance(b, list) and len(a) == len(b) and all(map(_same, a, b))
+    if isinstance(a, float) and math.isnan(a):
+        return isinstance(b, float) and math.isnan(b)
+    return type(a) is type(b) and a == b
+
+
+def test_free_form_values_read_back_as_written(tmp_path: Path) -> None:
+    """Metadata, metrics and event details keep None, NaN, infinities and number-like strings
+    apart (each checked value by value, the array as a list of floats)."""
+    expected = {**TRICKY, "array": [1.5, math.nan, math.inf]}
+    with EpisodeWriter(tmp_path / "v.mcap", metadata=TRICKY) as log:
+        log.task_event(0.1, "note", TRICKY)
+        log.metrics(0.2, TRICKY)
+    ep = read_episode(tmp_path / "v.mcap")
+    for name, back in [
+        ("metadata", ep.metadata),
+        ("detail", ep.events()[0]["detail"]),
+        ("metrics", ep.metrics()),
+    ]:
+        for key, value in expected.items():
+            assert _same(value, back[key]), (name, key, value, back[key])
 
 
 def test_plain_mcap_reader_reads_every_message(log_path: Path) -> None:
