@@ -1400,18 +1400,28 @@ def _command_line_path(data_cfg: DictConfig) -> bool:
     return True
 
 
+def shell_word(word: str) -> str:
+    """``word`` quoted for a POSIX shell so that pasting it gives the program ``word`` again:
+    as it is when nothing needs quoting, in double quotes when that is enough (an override
+    such as ``"data.generator.order='(0,1)->(2,3)'"`` reads as typed), else in single quotes."""
+    import shlex
+
+    if shlex.quote(word) == word or re.search(r'["$`\\!]', word):
+        return shlex.quote(word)
+    return f'"{word}"'
+
+
+def shell_command(*words: str) -> str:
+    """A command line that a POSIX shell splits back into ``words`` (see :func:`shell_word`);
+    for the "run with" / "regenerate with" lines the commands write into their records."""
+    return " ".join(shell_word(w) for w in words)
+
+
 def _generate_command(data_cfg: DictConfig) -> str:
     """The ``iplanner-data generate`` command that writes the dataset this run's command line
     asks for: its ``data=<option>`` and ``data.generator.*`` overrides, and ``data.path``."""
-    import shlex
-
-    def quoted(override: str) -> str:  # "data.generator.order='(0,1)->(2,3)'" as typed
-        if shlex.quote(override) == override or re.search(r'["$`\\!]', override):
-            return shlex.quote(override)
-        return f'"{override}"'
-
     given = [
-        quoted(o)
+        shell_word(o)
         for o in task_overrides()
         if not o.startswith("~")
         and (override_key(o) == "data" or override_key(o).startswith("data.generator."))

@@ -73,6 +73,7 @@ from iplanner_torch.cli._common import (
     refuse_unread_overrides,
     repo_path,
     run_app,
+    shell_command,
 )
 from iplanner_torch.errors import ConfigError, DataError
 
@@ -124,7 +125,7 @@ def _generate(cfg: DictConfig) -> None:
     overwrite, gen_cfg, generate = _generate_settings(cfg)
     old = check_dataset_folder(out_dir, overwrite=overwrite)
     t0 = time.perf_counter()
-    command = ("iplanner-data generate " + " ".join(sys.argv[1:])).strip()
+    command = shell_command("iplanner-data", "generate", *sys.argv[1:])
     # written beside out_dir first; the earlier files go only once the new set is complete
     summary = generate(gen_cfg, out_dir, progress=bool(cfg.progress), command=command, replace=old)
     if old:

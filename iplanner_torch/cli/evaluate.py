@@ -80,6 +80,7 @@ from iplanner_torch.cli._common import (
     repo_path,
     run_app,
     setting_changes,
+    shell_command,
 )
 from iplanner_torch.cli._common import (
     task_overrides as _task_overrides,
@@ -543,7 +544,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
         seed=cfg_scalar(cfg, "seed", int),
         progress=cfg_scalar(cfg, "progress", bool),
     )
-    command = " ".join(["iplanner-evaluate", *_task_overrides()])
+    command = shell_command("iplanner-evaluate", *_task_overrides())
     written = write_noise_report(df, report_dir, command=command)
     print(df.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     print("wrote " + ", ".join(str(p) for p in written))

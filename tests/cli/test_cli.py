@@ -32,21 +32,25 @@ def _run(args: list[str], cwd: Path, timeout: float = 300) -> subprocess.Complet
 
 
 def test_data_generate_and_info(tmp_path: Path) -> None:
+    import shlex
+
     out = tmp_path / "ds"
-    res = _run(
-        [
-            "iplanner-data",
-            "generate",
-            f"data.path={out}",
-            "data.generator.reaches_per_target=1",
-            "progress=false",
-        ],
-        tmp_path,
-    )
+    args = [
+        "iplanner-data",
+        "generate",
+        f"data.path={out}",
+        "data.generator.reaches_per_target=1",
+        "data.generator.speeds=[1.0]",  # a shell glob unless quoted
+        "progress=false",
+    ]
+    res = _run(args, tmp_path)
     assert res.returncode == 0, res.stderr
     assert "wrote 8 demonstrations" in res.stdout
     assert len(load_demonstrations(out)) == 8
-    assert (out / "README.md").exists()
+    # the card's command, pasted into a shell, gives the same arguments
+    card = (out / "README.md").read_text().splitlines()
+    command = card[card.index("Regenerate with:") + 3]
+    assert shlex.split(command) == args, command
     res = _run(["iplanner-data", "info", f"data.path={out}"], tmp_path)
     assert res.returncode == 0, res.stderr
     assert "8 demonstrations" in res.stdout and "reach_7" in res.stdout

@@ -298,3 +298,33 @@ def test_a_folder_of_txt_trials_read_as_files_says_to_use_data_lego(lego: Path) 
     with pytest.raises(DataError, match=r"no \.npz or \.csv demonstration files") as err:
         load_dataset(_config(f"data.path={empty}").data, progress=False)
     assert ".txt" not in str(err.value)  # no hint without .txt files
+
+
+@pytest.mark.parametrize(
+    "word",
+    [
+        "data.path=datasets/x",
+        "data.generator.order='(0,1)->(2,3)'",
+        "data.generator.speeds=[0.5,1.0]",
+        "data.path=/tmp/with space",
+        'data.note=say "hi" $HOME `x` !',
+        "data.note=it's",
+        "",
+    ],
+)
+def test_shell_command_splits_back_into_its_words(word: str) -> None:
+    """What the commands write as "regenerate with" / "run with" reads back through the
+    shell's own word splitting (bash -c, printf of each argument) as the arguments given."""
+    import shlex
+
+    from iplanner_torch.cli._common import shell_command
+
+    line = shell_command("prog", word, "progress=false")
+    assert shlex.split(line) == ["prog", word, "progress=false"]
+    shown = subprocess.run(
+        ["bash", "-c", line.replace("prog", "printf '%s\\n'", 1)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert shown == f"{word}\nprogress=false\n"
