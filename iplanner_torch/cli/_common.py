@@ -1088,6 +1088,10 @@ def unknown_key_text(exc: BaseException) -> str | None:
     if found is None or not isinstance(cause, (ConfigAttributeError, ConfigKeyError)):
         return None
     key = found.group(1)
+    if key in OPTIONAL_KEYS:  # read when set, absent from the default config
+        return (
+            f"key {key!r} is not in this config (it is read when set): add it with +{key}=<value>"
+        )
     missing = str(getattr(cause, "full_key", "") or "")
     if not missing or not (key == missing or key.startswith(missing + ".")):
         return f"unknown key {key!r}"

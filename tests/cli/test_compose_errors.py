@@ -133,6 +133,13 @@ def test_a_config_file_whose_top_level_is_a_list_is_refused(
         ("experiment", ["robot=nope"],
          "error: ConfigError: unknown option robot=nope; robot options: fetch, kuka_iiwa14"),
         ("train", ["x=[1"], "error: ConfigError: cannot parse override 'x=[1': "),
+        # keys read when set but absent from the default data options: the + is the fix
+        ("data", ["info", "data.format=native"],
+         "error: ConfigError: key 'data.format' is not in this config (it is read when set): "
+         "add it with +data.format=<value>"),
+        ("train", ["data.fps=15"],
+         "error: ConfigError: key 'data.fps' is not in this config (it is read when set): "
+         "add it with +data.fps=<value>"),
     ],
 )  # fmt: skip
 def test_a_misspelt_key_or_option_is_named_in_full_in_one_line(
