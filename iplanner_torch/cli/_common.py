@@ -241,9 +241,15 @@ def cfg_list(node: DictConfig, key: str, kind: type) -> list[Any]:
     """
     value = node[key]
     if not isinstance(value, (list, tuple, ListConfig)) or not all(_fits(v, kind) for v in value):
+        name = _full_key(node, key)
+        example = {int: "[0,1,2]", float: "[0.0,0.5]", bool: "[true,false]"}.get(kind, "[a,b]")
+        if isinstance(value, str) or (
+            not isinstance(value, (list, tuple, ListConfig, bool)) and _fits(value, kind)
+        ):  # one value where a list was asked for: that value in a list
+            example = f"[{value}]"
         raise ConfigError(
-            f"{_full_key(node, key)}: expected a list of {kind.__name__}, got {value!r} "
-            f"(e.g. {key}=[0,1,2])"
+            f"{name}: expected a list of {kind.__name__}, got {value!r} (e.g. "
+            f"{shell_word(f'{name}={example}')})"
         )
     return [kind(v) for v in value]
 
@@ -1415,6 +1421,27 @@ def shell_word(word: str) -> str:
     return f'"{word}"'
 
 
+def override_word(key: str, value: Any) -> str:
+    """``key=value`` as an override that Hydra reads back as ``value`` (a string value that
+    Hydra would take for a number, a bool, null, a list or a sweep, such as the folder
+    ``2024``, is put in Hydra's quotes) and the shell passes as one word (:func:`shell_word`):
+    for the commands that hints and records suggest."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    text = str(value)
+    if isinstance(value, str | Path):
+        try:
+            parsed = OverridesParser.create().parse_overrides([f"{key}={text}"])[0].value()
+        except Exception:  # noqa: BLE001 - a value Hydra does not parse bare
+            parsed = None
+        if parsed != text:
+            # Hydra's quoted strings: \' is a quote; backslashes before one, or before the
+            # closing quote, are doubled; others are literal
+            text = re.sub(r"(\\+)(?='|$)", lambda m: m.group(1) * 2, text)
+            text = "'" + text.replace("'", "\\'") + "'"
+    return shell_word(f"{key}={text}")
+
+
 def shell_command(*words: str) -> str:
     """A command line that a POSIX shell splits back into ``words`` (see :func:`shell_word`);
     for the "run with" / "regenerate with" lines the commands write into their records."""
@@ -1430,7 +1457,7 @@ def _generate_command(data_cfg: DictConfig) -> str:
         if not o.startswith("~")
         and (override_key(o) == "data" or override_key(o).startswith("data.generator."))
     ]
-    return " ".join(["iplanner-data generate", *given, f"data.path={data_cfg.path}"])
+    return " ".join(["iplanner-data generate", *given, override_word("data.path", data_cfg.path)])
 
 
 def load_dataset(
@@ -1486,7 +1513,7 @@ def load_dataset(
         if not can_generate:
             raise DataError(
                 f"{path}: dataset not found; generate it with `iplanner-data generate "
-                f"data.path={data_cfg.path}`"
+                f"{override_word('data.path', data_cfg.path)}`"
             )
         print(f"dataset {path} missing: generating it", flush=True)
         generate_dataset(data_cfg, path, progress=progress)

@@ -68,6 +68,7 @@ from iplanner_torch.cli._common import (
     dataset_generator,
     friendly_errors,
     instantiate,
+    override_word,
     print_help_if_asked,
     read_demonstrations,
     refuse_unread_overrides,
@@ -169,7 +170,7 @@ def _info(cfg: DictConfig) -> None:
     if fmt == "native" and not path.exists():
         hint = "set data.path=<folder>"
         if cfg.data.get("generator") is not None:
-            gen = f"iplanner-data generate data.path={cfg.data.path}"
+            gen = f"iplanner-data generate {override_word('data.path', cfg.data.path)}"
             hint = f"generate it with `{gen}` or {hint}"
         raise DataError(f"{path}: no such file or folder; {hint}")
     demos = read_demonstrations(cfg.data, path)

@@ -75,6 +75,7 @@ from iplanner_torch.cli._common import (
     overridden_fields,
     override_group,
     override_key,
+    override_word,
     print_help_if_asked,
     refuse_unread_overrides,
     repo_path,
@@ -125,9 +126,21 @@ def _checkpoint(path: Path, cfg: DictConfig) -> Path:
         raise CheckpointError(f"{path}: is a folder, not a checkpoint file (predictor.ckpt)")
     if not path.exists():
         predictor = HydraConfig.get().runtime.choices.get("predictor", "iplanner_ni")
+        # iplanner-train writes <train.out_dir>/predictor.ckpt
+        out_dir = path.parent if path.name == "predictor.ckpt" else path.with_suffix("")
+        train = shell_command("iplanner-train", f"predictor={predictor}")
+        train += f" {override_word('data.path', cfg.data.path)}"
+        train += f" {override_word('train.out_dir', out_dir)}"
+        use = (
+            ""
+            if out_dir == path.parent
+            else (
+                f", then run with {override_word('evaluate.checkpoint', out_dir / 'predictor.ckpt')}"
+            )
+        )
         raise CheckpointError(
-            f"{path}: no checkpoint; train one with `iplanner-train data.path={cfg.data.path} "
-            f"predictor={predictor} train.out_dir={path.parent}`"
+            f"{path}: no such checkpoint file; train one with `{train}` (it writes "
+            f"{out_dir / 'predictor.ckpt'}){use}"
         )
     return path
 
@@ -593,6 +606,7 @@ def _episode(cfg: DictConfig) -> None:
     from iplanner_torch.eval.report import (
         comparison_table,
         incomplete_logs_note,
+        paired_skip_note,
         print_table,
         report_groups,
     )
@@ -660,6 +674,9 @@ def _episode(cfg: DictConfig) -> None:
     note = incomplete_logs_note(df)
     if note:
         print(note)
+    skipped = paired_skip_note(df, groups, baseline)  # results.md says it too
+    if skipped:
+        print(skipped)
     print(f"{len(df)} episode(s); wrote " + ", ".join(str(p) for p in written))
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -325,3 +326,42 @@ def test_added_keys_that_are_read_pass() -> None:
     )
     with pytest.raises(ConfigError, match=r"unknown key 'data\.pth' \(did you mean 'data\.path'"):
         check_added_keys(cfg, ["+data.pth=x"])
+
+
+def test_the_commands_that_errors_suggest_run_as_suggested(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    """A hint's command, pasted into a shell, reaches Hydra as meant: a folder named 2024 stays
+    a string, a missing checkpoint named other than predictor.ckpt gets the training folder
+    and the evaluate.checkpoint that reads it, and a list key is named in full."""
+    import shlex
+
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    monkeypatch.chdir(tmp_path)
+    run = f"hydra.run.dir={tmp_path / 'run'}"
+    code, lines = _main("data", ["info", "data.path='2024'", run], monkeypatch, capsys)
+    assert code == 2 and len(lines) == 1, lines
+    command = re.search(r"generate it with `([^`]+)`", lines[0]).group(1)
+    words = shlex.split(command)
+    assert words[:2] == ["iplanner-data", "generate"]
+    (path,) = OverridesParser.create().parse_overrides(words[2:])
+    assert path.key_or_group == "data.path" and path.value() == "2024"
+
+    missing = tmp_path / "ck" / "mine.ckpt"
+    args = [f"evaluate.checkpoint={missing}", f"hydra.run.dir={tmp_path / 'run2'}"]
+    code, lines = _main("evaluate", args, monkeypatch, capsys)
+    assert code == 2 and len(lines) == 1, lines
+    assert lines[0].startswith(f"error: CheckpointError: {missing}: no such checkpoint file; ")
+    train = shlex.split(re.search(r"train one with `([^`]+)`", lines[0]).group(1))
+    assert train[0] == "iplanner-train" and f"train.out_dir={tmp_path / 'ck' / 'mine'}" in train
+    assert lines[0].endswith(
+        f"then run with evaluate.checkpoint={tmp_path / 'ck' / 'mine' / 'predictor.ckpt'}"
+    )
+
+    code, lines = _main("experiment", ["run.seeds=3", f"hydra.run.dir={tmp_path / 'r3'}"],
+                        monkeypatch, capsys)  # fmt: skip
+    assert code == 2
+    assert lines == [
+        'error: ConfigError: run.seeds: expected a list of int, got 3 (e.g. "run.seeds=[3]")'
+    ]

@@ -328,3 +328,33 @@ def test_shell_command_splits_back_into_its_words(word: str) -> None:
         check=True,
     ).stdout
     assert shown == f"{word}\nprogress=false\n"
+
+
+@pytest.mark.parametrize(
+    "value",
+    [
+        "datasets/x",
+        "2024",
+        "1.5",
+        "true",
+        "null",
+        "a,b",
+        "x[1]",
+        "it's",
+        "k=v",
+        "a b",
+        "e\\",
+        "q\\'x",
+    ],
+)
+def test_override_word_reaches_hydra_as_the_string_given(value: str) -> None:
+    """The shell splits the word back (shlex) and Hydra's override parser reads the string."""
+    import shlex
+
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from iplanner_torch.cli._common import override_word
+
+    (word,) = shlex.split(override_word("data.path", value))
+    (parsed,) = OverridesParser.create().parse_overrides([word])
+    assert parsed.key_or_group == "data.path" and parsed.value() == value
