@@ -746,6 +746,7 @@ def friendly_errors(
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         _task_started()
+        one_line_warnings()  # also in the processes of a parallel sweep's jobs
         _clear_failed_marker()
         log_path = job_log_path()
         with copy_output_to(log_path), _terminate_as_interrupt():
@@ -915,6 +916,26 @@ _HYDRA_RAISES = "HYDRA_FULL_ERROR"
 _SET_BY_RUN_APP = "IPLANNER_TORCH_COMPOSING"
 
 
+def one_line_warnings() -> None:
+    """Show the project's own warnings (``DataWarning``, ``ConfigWarning``,
+    ``NumericalWarning``, ``PlanningOverrunWarning``) as one ``warning: DataWarning: ...``
+    line, without the file and source line Python adds (which would point into the package,
+    not at the user's input); other libraries' warnings keep Python's format. Idempotent."""
+    import warnings
+
+    shown = warnings.formatwarning
+    if getattr(shown, "_iplanner_one_line", False):
+        return
+
+    def formatwarning(message, category, filename, lineno, line=None):  # type: ignore[no-untyped-def]
+        if getattr(category, "__module__", "").startswith("iplanner_torch."):
+            return f"warning: {category.__name__}: {message}\n"
+        return shown(message, category, filename, lineno, line)
+
+    formatwarning._iplanner_one_line = True  # type: ignore[attr-defined]
+    warnings.formatwarning = formatwarning
+
+
 def run_app(app: Callable[[], Any]) -> None:
     """Run a ``@hydra.main`` app so that what is wrong in the config Hydra composes (a
     malformed YAML file, a misspelt key, an unknown option, an override it cannot parse)
@@ -930,6 +951,7 @@ def run_app(app: Callable[[], Any]) -> None:
     was asked for, and is left as it is."""
     import os
 
+    one_line_warnings()
     if os.environ.get(_HYDRA_RAISES) == "1":
         app()
         return

@@ -61,6 +61,8 @@ EPISODE_METADATA_NAME = "iplanner.episode"
 SPHERE_COUNT_KEY = "sphere_count"
 SPHERE_ROWS_KEY = "sphere_rows"
 _MAGIC = b"\x89MCAP0\r\n"
+#: how a Git LFS pointer file (left where a file was never fetched) begins
+_LFS_POINTER = b"version https://git-lfs.github.com/spec/"
 
 
 def metadata_crc(json_text: str, time_offset_ns: str, value_codec: str | None = None) -> int:
@@ -612,6 +614,12 @@ def read_episode(path: str | Path) -> Episode:
         with open(path, "rb") as f:
             head = f.read(len(_MAGIC))
             if head != _MAGIC and not (len(head) < len(_MAGIC) and _MAGIC.startswith(head)):
+                f.seek(0)
+                if f.read(len(_LFS_POINTER)) == _LFS_POINTER:
+                    raise DataError(
+                        f"{path} is not an MCAP file (bad magic bytes); it is a Git LFS "
+                        "pointer, the log never fetched: run `git lfs pull`"
+                    )
                 raise DataError(f"{path} is not an MCAP file (bad magic bytes)")
             if head != _MAGIC:  # cut within the opening magic bytes: nothing was written
                 raw = _Raw(problem=f"{size} bytes, cut within the opening magic bytes")

@@ -640,3 +640,42 @@ def test_an_interrupted_generate_keeps_the_earlier_dataset(tmp_path: Path) -> No
     assert "episode" not in last and "results.csv" not in last
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("ds")) == ["ds"]
+
+
+def test_the_projects_warnings_are_one_line_without_source(tmp_path: Path) -> None:
+    """A DataWarning (here a CSV cut short) prints as ``warning: DataWarning: ...``, not with
+    the package file and source line Python's default format adds."""
+    out = tmp_path / "ds"
+    res = _run(
+        ["iplanner-data", "generate", f"data.path={out}", "data.generator.reaches_per_target=1",
+         "data.generator.file_format=csv", "progress=false"],
+        tmp_path,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    first = sorted(out.glob("*.csv"))[0]
+    first.write_text(first.read_text().rstrip("\n"))
+    res = _run(["iplanner-data", "info", f"data.path={out}"], tmp_path)
+    assert res.returncode == 0, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert lines == [
+        f"warning: DataWarning: {first}: last line has no line terminator: the file may be cut "
+        "short; its last row is dropped"
+    ]
+
+
+def test_one_line_warnings_leaves_other_libraries_format(monkeypatch: pytest.MonkeyPatch) -> None:
+    import warnings
+
+    from iplanner_torch.cli._common import one_line_warnings
+    from iplanner_torch.errors import DataWarning
+    from iplanner_torch.planning.replanner import PlanningOverrunWarning
+
+    monkeypatch.setattr(warnings, "formatwarning", warnings.formatwarning)
+    one_line_warnings()
+    one_line_warnings()  # idempotent: not wrapped twice
+    assert warnings.formatwarning("m", DataWarning, "/x/io.py", 3) == "warning: DataWarning: m\n"
+    text = warnings.formatwarning("late", PlanningOverrunWarning, "/x/r.py", 9)
+    assert text == "warning: PlanningOverrunWarning: late\n"
+    assert warnings.formatwarning("u", UserWarning, "/x/lib.py", 7).startswith(
+        "/x/lib.py:7: UserWarning: u"
+    )

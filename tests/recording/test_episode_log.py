@@ -393,6 +393,10 @@ def test_not_an_mcap_file_raises_naming_it(tmp_path: Path) -> None:
     bad.write_text("hello, this is not MCAP")
     with pytest.raises(DataError, match="notes.mcap is not an MCAP file"):
         read_episode(bad)
+    pointer = tmp_path / "lfs.mcap"
+    pointer.write_text("version https://git-lfs.github.com/spec/v1\noid sha256:ab\nsize 9\n")
+    with pytest.raises(DataError, match="lfs.mcap is not an MCAP file .* Git LFS pointer"):
+        read_episode(pointer)
     with pytest.raises(DataError, match="missing.mcap: no such episode log"):
         read_episode(tmp_path / "missing.mcap")
     with pytest.raises(DataError, match="is a folder; read_episode reads one .mcap file"):
