@@ -14,7 +14,10 @@ Without ``experiment=...`` the run uses the ``scenario`` group at the confidence
 ``planner.confidence`` (which follows ``scenario.confidence`` unless set), the planners in
 ``run.planners`` and the seeds in ``run.seeds``. With it, the experiment file lists its own
 scenarios, planners, seeds, speeds and noises; the ``sim`` and ``planner`` groups give the
-episode settings it does not override. The I-Planner variants need predictors: by default
+episode settings it does not override. The ``planner`` group holds the settings (confidence,
+optimiser) every planner of the run is built with, each as its kind (the default option's
+settings serve all three planners of the main job); ``planner=<option>`` runs that planner
+alone. The I-Planner variants need predictors: by default
 (``run.train_data=tasks``) each scenario's predictors learn from task demonstrations of its
 arrangement and task order (``datasets/tasks_<...>``, generated when absent; a blocking
 scenario's from the reaching set), kept in ``checkpoints/<dataset>/iplanner_{ni,no_ni}/``;
