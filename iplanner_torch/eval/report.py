@@ -47,6 +47,7 @@ __all__ = [
     "comparison_table",
     "paired_differences",
     "paired_table",
+    "paired_skip_note",
     "plot_paired",
     "TABLE_COLUMNS",
     "episode_contact",
@@ -381,7 +382,9 @@ def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path)
     Returns:
         DataFrame, one row per episode, metric columns without the ``eval/`` prefix (so an
         experiment's ``results.csv`` and a table gathered from it read alike); rows read from
-        episode logs and JSON files have a ``path`` column.
+        episode logs and JSON files have a ``path`` column. The log metadata's
+        ``tracker_noise`` and ``human_speed`` repeat ``noise`` and ``speed``
+        (:data:`METADATA_ALIASES`) and are left out where they agree with them.
 
     Raises:
         DataError: on a missing or unreadable file given by its path, an ``.mcap`` file that
@@ -411,7 +414,26 @@ def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path)
             rows.append(_row_of_path(p))
         else:
             raise DataError(f"{p}: no such result file or folder")
-    return pd.DataFrame.from_records(rows)
+    return _drop_aliases(pd.DataFrame.from_records(rows))
+
+
+#: metadata keys an episode log also holds under a second name, with the same value (alias ->
+#: the name the tables use); :func:`gather_results` keeps one column of each pair
+METADATA_ALIASES: dict[str, str] = {"tracker_noise": "noise", "human_speed": "speed"}
+
+
+def _drop_aliases(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` without the :data:`METADATA_ALIASES` columns that repeat their named column (a
+    value in every row where both have one, and the same); an alias that differs is kept."""
+    for alias, name in METADATA_ALIASES.items():
+        if alias not in df.columns or name not in df.columns:
+            continue
+        a, n = df[alias], df[name]
+        both = a.notna() & n.notna()
+        same = [x == y for x, y in zip(a[both], n[both])]
+        if all(same):
+            df = df.assign(**{name: n.where(n.notna(), a)}).drop(columns=alias)
+    return df
 
 
 # ---------------------------------------------------------------------------------------------
@@ -846,8 +868,10 @@ def spread_note(counts: Sequence[int] | np.ndarray) -> str:
         counts: episodes with a value behind each bar (any order).
 
     Returns:
-        e.g. ``"mean of 3 episodes per bar, whiskers ± 1 std"``; a bar of one episode has no
-        whisker (a standard deviation of one value is undefined, not 0), which the note says.
+        e.g. ``"mean of 3 episodes per bar, whiskers ± 1 std within min-max"`` (the whiskers of
+        :func:`plot_comparison`: one standard deviation each way, cut at the least and the
+        largest value of the bar's episodes); a bar of one episode has no whisker (a standard
+        deviation of one value is undefined, not 0), which the note says.
     """
     n = [int(c) for c in np.asarray(counts).ravel() if int(c) > 0]
     if not n:
@@ -856,8 +880,31 @@ def spread_note(counts: Sequence[int] | np.ndarray) -> str:
     many = f"{lo}-{hi}" if lo != hi else f"{lo}"
     if hi == 1:
         return "one episode per bar (no spread to show)"
-    note = f"mean of {many} episodes per bar, whiskers ± 1 std"
+    note = f"mean of {many} episodes per bar, whiskers ± 1 std within min-max"
     return note + (" (none for a bar of one episode)" if lo == 1 else "")
+
+
+def _spread(values: pd.Series) -> tuple[float, float, float]:
+    """``(mean, lower, upper)`` of ``values`` (NaN left out): the mean and one sample standard
+    deviation below and above it, cut at the least and largest value (so the spread of a
+    metric that cannot be negative never reaches below 0, nor below any episode's value);
+    ``lower``/``upper`` NaN for fewer than two values."""
+    v = values.dropna().to_numpy(dtype=float)
+    if v.size == 0:
+        return math.nan, math.nan, math.nan
+    mean = float(v.mean())
+    if v.size < 2:
+        return mean, math.nan, math.nan
+    std = float(v.std(ddof=1))
+    # min(..., mean): the mean of equal values may round a hair below their least value
+    low = min(max(mean - std, float(v.min())), mean)
+    return mean, low, max(min(mean + std, float(v.max())), mean)
+
+
+def _legend_outside(ax: Any, **kwargs: Any) -> Any:
+    """A legend to the right of ``ax``, outside its plotting area (so it covers no bar, line
+    or marker); ``fig.tight_layout()`` then makes room for it."""
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
 
 
 def plot_comparison(
@@ -867,26 +914,33 @@ def plot_comparison(
     group_by: tuple[str, str] = ("scenario", "planner"),
     pooled: Sequence[str] = (),
 ) -> list[Path]:
-    """Grouped bar charts (mean ± std) of each metric: groups on x, one bar per planner.
+    """Grouped bar charts of each metric: groups on x, one bar per planner.
 
-    The title's second line says how many episodes a bar averages (:func:`spread_note`); a
-    bar of one episode has no whisker.
+    A bar is the mean over its episodes; its whisker spans one sample standard deviation
+    below and above the mean, cut at the least and the largest value of those episodes, so
+    the whisker of a metric that cannot be negative (smoothness, jerkiness, efficiency, MHD)
+    never reaches below 0, and a closest distance's reaches below 0 only when an episode's
+    did. The title's second line says how many episodes a bar averages (:func:`spread_note`);
+    a bar of one episode has no whisker. The x axis is labelled with the grouping column
+    (its unit for a swept setting, :data:`SETTING_LABELS`) and the legend stands outside the
+    plotting area.
 
     Args:
         df: per-episode results.
         out_dir: folder for ``compare_<metric>.png`` (created).
-        metrics: metrics to plot; those absent from ``df`` are skipped.
+        metrics: metrics to plot; those absent from ``df``, or without a value in any
+            episode (e.g. efficiency when no episode finished its tasks), are skipped: no
+            file is written for them.
         group_by: ``(x-axis column, bar column)``.
         pooled: other columns whose values a bar averages over (e.g. the speeds and noises of
             a sweep charted by confidence); the title says so.
 
     Returns:
-        The written PNG paths.
+        The written PNG paths (only those written).
     """
     x_col, bar_col = group_by
     _check_columns(df, [x_col, bar_col], "group columns")
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     xs = ordered_values(x_col, df[x_col])
     bars = ordered_values(bar_col, df[bar_col])
     paths = []
@@ -894,19 +948,29 @@ def plot_comparison(
         if m not in df.columns:
             continue
         v = df.assign(_v=pd.to_numeric(df[m], errors="coerce"))
-        stats = v.groupby([x_col, bar_col], sort=False)["_v"].agg(["mean", "std", "count"])
+        if not v["_v"].notna().any():
+            continue  # nothing to draw: no empty chart
+        groups = {
+            (_hashable(x), _hashable(b)): g["_v"]
+            for (x, b), g in v.groupby([x_col, bar_col], sort=False, dropna=False)
+        }
         fig = Figure(figsize=(max(6.0, 1.1 * len(xs) * max(1, len(bars)) * 0.45 + 2), 4.2))
         ax = fig.add_subplot()
         width = 0.8 / max(1, len(bars))
+        counts = []
         for j, b in enumerate(bars):
-            means = [stats["mean"].get((x, b), np.nan) for x in xs]
-            stds = [stats["std"].get((x, b), np.nan) for x in xs]
+            spreads = []
+            for x in xs:
+                g = groups.get((_hashable(x), _hashable(b)))
+                spreads.append(_spread(g) if g is not None else (math.nan,) * 3)
+                counts.append(int(g.notna().sum()) if g is not None else 0)
+            means, lows, highs = (np.asarray(c, dtype=float) for c in zip(*spreads))
             pos = np.arange(len(xs)) - 0.4 + width * (j + 0.5)
             ax.bar(
                 pos,
                 means,
                 width,
-                yerr=np.asarray(stds, dtype=float),  # NaN (one episode): no whisker
+                yerr=np.vstack([means - lows, highs - means]),  # NaN (one episode): none
                 capsize=3,
                 label=PLANNERS.get(str(b), str(b)),
                 color=f"C{j}",
@@ -917,16 +981,18 @@ def plot_comparison(
             rotation=25 if len(xs) > 3 else 0,
             ha="right" if len(xs) > 3 else "center",
         )
+        ax.set_xlabel(SETTING_LABELS.get(x_col, x_col))
         ax.set_ylabel(_label(m))
         ax.set_title(
             f"{_label(m).split(' [')[0]} by {x_col} and {bar_col}\n"
-            + spread_note(stats["count"].to_numpy())
+            + spread_note(counts)
             + (f"; averaged over {', '.join(pooled)}" if pooled else ""),
             fontsize="medium",
         )
         ax.grid(axis="y", alpha=0.3)
-        ax.legend(title=bar_col, fontsize="small")
+        _legend_outside(ax, title=bar_col, fontsize="small")
         fig.tight_layout()
+        out_dir.mkdir(parents=True, exist_ok=True)
         path = out_dir / f"compare_{m}.png"
         fig.savefig(path, dpi=110)
         paths.append(path)
@@ -934,7 +1000,11 @@ def plot_comparison(
 
 
 def plot_paired(
-    table: pd.DataFrame, metric: str, out_path: str | Path, level: float = 0.95
+    table: pd.DataFrame,
+    metric: str,
+    out_path: str | Path,
+    level: float = 0.95,
+    baseline: str = "itomp",
 ) -> Path:
     """Forest plot of :func:`paired_differences`: one row per group and planner, the mean
     difference from the baseline with its interval, and a line at 0 (no difference).
@@ -945,6 +1015,8 @@ def plot_paired(
         metric: the metric it compares (for the axis label).
         out_path: PNG path (its folder is created).
         level: the intervals' confidence level (for the axis label).
+        baseline: the planner the differences are taken from (named in the axis label, e.g.
+            "planner minus ITOMP").
 
     Returns:
         ``out_path``.
@@ -968,7 +1040,8 @@ def plot_paired(
     ax.axvline(0.0, color="0.4", lw=1, ls="--")
     ax.set_yticks(y)
     ax.set_yticklabels(labels, fontsize="small")
-    ax.set_xlabel(f"{_label(metric)}: planner minus baseline, {100 * level:g}% interval")
+    base = PLANNERS.get(baseline, baseline)
+    ax.set_xlabel(f"{_label(metric)}: planner minus {base}, {100 * level:g}% interval")
     ax.grid(axis="x", alpha=0.3)
     fig.tight_layout()
     out_path = Path(out_path)
@@ -988,7 +1061,12 @@ def plot_sweep(
     facet_row: str | None = None,
     pooled: Sequence[str] = (),
 ) -> Path:
-    """Line plot of ``y`` (mean, ± std band) against a swept parameter ``x``, one line per hue.
+    """Line plot of ``y`` against a swept parameter ``x``, one line per hue.
+
+    A line joins the means over the episodes at each ``x``; its band spans one sample
+    standard deviation below and above, cut at the least and the largest episode value (so a
+    metric that cannot be negative never gets a band below 0). The legend stands to the right
+    of the top-right panel, outside the plotting area.
 
     With ``facet_col`` (and ``facet_row``) the figure holds one panel per value (pair of
     values) of those columns, sharing both axes, so a sweep over several settings is shown
@@ -1034,12 +1112,16 @@ def plot_sweep(
                 g = panel[panel[hue] == h]
                 if not g["_y"].notna().any():  # no value (ITOMP has no MHD): no line, no label
                     continue
-                s = g.groupby(x)["_y"].agg(["mean", "std"]).sort_index()
-                xs = s.index.to_numpy(dtype=float)
-                mean, std = s["mean"].to_numpy(), np.nan_to_num(s["std"].to_numpy())
+                points = sorted(
+                    ((float(xv), *_spread(gy)) for xv, gy in g.groupby(x)["_y"]),
+                    key=lambda p: p[0],
+                )
+                xs, mean, low, high = (np.asarray(c, dtype=float) for c in zip(*points))
+                low = np.where(np.isnan(low), mean, low)  # one episode: no band
+                high = np.where(np.isnan(high), mean, high)
                 label = PLANNERS.get(str(h), str(h))
                 ax.plot(xs, mean, marker="o", color=f"C{j}", label=label)
-                ax.fill_between(xs, mean - std, mean + std, color=f"C{j}", alpha=0.2, lw=0)
+                ax.fill_between(xs, low, high, color=f"C{j}", alpha=0.2, lw=0)
             title = ", ".join(
                 f"{c} {val}" for c, val in ((facet_row, rv), (facet_col, cv)) if c is not None
             )
@@ -1050,11 +1132,11 @@ def plot_sweep(
                 ax.set_xlabel(SETTING_LABELS.get(x, x))
             if k == 0:
                 ax.set_ylabel(_label(y))
-    axes[0][0].legend(title=hue, fontsize="small")
+    _legend_outside(axes[0][-1], title=hue, fontsize="small")
     fig.suptitle(
         f"{name} against {x}"
         + (f" by {' and '.join(facets)}" if facets else "")
-        + "\nlines: mean over episodes, bands ± 1 std"
+        + "\nlines: mean over episodes, bands ± 1 std within min-max"
         + (f"; averaged over {', '.join(pooled)}" if pooled else ""),
         fontsize="medium",
     )
@@ -1096,6 +1178,48 @@ def paired_table(
     return pd.concat(parts, ignore_index=True)[cols]
 
 
+def paired_skip_note(df: pd.DataFrame, group_by: Sequence[str], baseline: str = "itomp") -> str:
+    """Why a report has no seed-by-seed comparison although it could have one ('' if it has
+    one, or has nothing to compare).
+
+    A report compares each planner with ``baseline`` seed by seed when ``group_by`` holds
+    ``planner`` and ``df`` holds the baseline and another planner; the comparison needs at
+    least two seeds shared by the baseline and another planner in one group (one seed gives
+    a difference but no interval).
+
+    Args:
+        df: per-episode results.
+        group_by: the report's groups (those other than ``planner`` define a comparison).
+        baseline: the planner the others are compared with.
+
+    Returns:
+        One line, e.g. ``"paired comparison skipped: needs at least 2 seeds shared by
+        itomp@spread and another planner in one setting; found 1"``, or ''.
+    """
+    if (
+        "planner" not in group_by
+        or "planner" not in df.columns
+        or not (df["planner"] == baseline).any()
+        or df["planner"].dropna().nunique() < 2
+    ):
+        return ""
+    head = "paired comparison skipped: "
+    if "seed" not in df.columns:
+        return head + "the results have no seed column to pair episodes on"
+    keys = [c for c in group_by if c != "planner" and c in df.columns]
+    rows = df[df["planner"].notna() & df["seed"].notna()]
+    base = rows[rows["planner"] == baseline][[*keys, "seed"]].drop_duplicates()
+    others = rows[rows["planner"] != baseline][[*keys, "planner", "seed"]].drop_duplicates()
+    shared = others.merge(base, on=[*keys, "seed"])
+    most = int(shared.groupby([*keys, "planner"], dropna=False).size().max()) if len(shared) else 0
+    if most >= 2:
+        return ""
+    where = "in one setting" if keys else "in the results"
+    return head + (
+        f"needs at least 2 seeds shared by {baseline} and another planner {where}; found {most}"
+    )
+
+
 def _paired_section(
     df: pd.DataFrame,
     group_by: Sequence[str],
@@ -1105,13 +1229,16 @@ def _paired_section(
     """Markdown lines comparing each planner with ``baseline`` seed by seed
     (:func:`paired_table`), grouped like the summary, and, with ``out_dir``, a
     ``paired_<metric>.png`` forest plot of each metric (:func:`plot_paired`); nothing without
-    the baseline, another planner and two seeds."""
+    the baseline and another planner, and a line saying why (:func:`paired_skip_note`) when
+    they share fewer than two seeds."""
+    skipped = paired_skip_note(df, group_by, baseline)
+    if skipped:
+        return ["", "## Paired by seed", "", skipped[0].upper() + skipped[1:] + "."], []
     if (
         "planner" not in group_by
         or "seed" not in df.columns
         or not (df["planner"] == baseline).any()
         or df["planner"].nunique() < 2
-        or df["seed"].nunique() < 2
     ):
         return [], []
     lines = ["", "## Paired by seed", ""]
@@ -1127,19 +1254,31 @@ def _paired_section(
     if out_dir is not None:
         for m in dict.fromkeys(table["metric"]):
             part = table[table["metric"] == m].drop(columns="metric")
-            plots.append(plot_paired(part, str(m), out_dir / f"paired_{m}.png"))
+            png = out_dir / f"paired_{m}.png"
+            plots.append(plot_paired(part, str(m), png, baseline=baseline))
     name = "ITOMP" if baseline == "itomp" else f"`{baseline}`"
     lines += [
         f"Each planner minus {name} in the same setting and seed (same person, noise and task "
-        "order), in the units above: mean difference with its 95% Student-t interval, the "
-        "paired t-test's p-value, and `wins`, the seeds where the difference is > 0 (a "
-        "larger distance, or a rougher trajectory).",
+        "order), in the units of the mean ± std table: mean difference with its 95% "
+        "Student-t interval, the paired t-test's p-value, and `wins`, the seeds where the "
+        "difference is > 0 (a larger distance, or a rougher trajectory).",
         "",
         to_markdown(table),
     ]
     if plots:
         lines += ["", "Plots: " + ", ".join(f"`{p.name}`" for p in plots) + "."]
     return lines, plots
+
+
+#: what the columns of :func:`comparison_table` are, as ``results.md`` says above the table
+COMPARISON_NOTE = (
+    "The table the run printed: episode counts, then means over episodes in the paper's "
+    "units: `pred. ms` prediction time [ms]; `MHD cm` prediction MHD [cm]; `smoothness`, "
+    "`jerkiness` [rad²/s⁴]; `distance cm` the closest distance of the sphere models [cm] "
+    "(`min_distance`); `body cm` the closest of the robot's MuJoCo geoms to the person's "
+    "capsules [cm]; `efficiency` (alone / with robot; finished episodes only); `waits` the "
+    "planner's waits per episode; – where no episode has a value."
+)
 
 
 def write_sweep_report(
@@ -1151,9 +1290,14 @@ def write_sweep_report(
 ) -> list[Path]:
     """Write ``results.csv`` (per episode), ``results.md`` (summary) and the PNGs.
 
-    ``results.md`` also compares each planner with ``baseline`` seed by seed ("Paired by
-    seed", :func:`paired_differences`, with ``paired_<metric>.png`` forest plots) when the
-    results hold the baseline, another planner and two seeds.
+    ``results.md`` holds, under "Comparison", the table the console of ``iplanner-experiment``
+    and ``iplanner-evaluate evaluate.mode=episode`` prints (:func:`comparison_table` by
+    ``group_by``: the same columns, in the paper's units), then, under "Mean ± std", the
+    :func:`summary_table` (SI units, with standard deviations). It also compares each planner
+    with ``baseline`` seed by seed ("Paired by seed", :func:`paired_differences`, with
+    ``paired_<metric>.png`` forest plots) when the results hold the baseline, another planner
+    and two seeds they share, and says why not when they hold the baseline and another
+    planner but share fewer seeds (:func:`paired_skip_note`).
 
     Args:
         df: per-episode results.
@@ -1188,7 +1332,9 @@ def write_sweep_report(
         legend.append("`touched`: episodes with a MuJoCo robot-human contact")
     units = [DEFAULT_METRICS[m] for m in DEFAULT_METRICS if f"{m}_mean" in summary.columns]
     md += ["; ".join(legend) + ".", ""]
-    md += ["Means over episodes: " + "; ".join(units) + ".", ""] if units else []
+    md += ["## Comparison", "", COMPARISON_NOTE, "", to_markdown(comparison_table(df, group_by))]
+    md += ["## Mean ± std", ""]
+    md += ["Means over episodes ± sample std: " + "; ".join(units) + ".", ""] if units else []
     md += [to_markdown(summary)]
     paired_md, paired_png = _paired_section(df, group_by, out_dir, baseline)
     md += paired_md

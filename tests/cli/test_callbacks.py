@@ -67,7 +67,8 @@ def test_a_swept_override_is_kept_apart_and_seed_splits_are_not(tmp_path: Path) 
     cols = [c.strip() for c in header.strip("|").split("|")]
     assert cols[:3] == ["scenario", "planner.itomp_spread_mps", "planner"]
     assert "experiment.seeds" not in cols
-    rows = [ln for ln in md.splitlines() if ln.startswith("| s |")]
+    summary = md.split("## Mean ± std")[1]  # after the printed table, mean ± std per group
+    rows = [ln for ln in summary.splitlines() if ln.startswith("| s |")]
     assert len(rows) == 2
     assert "| 42 ± 2.83 |" in rows[0] and "| 65 ± 7.07 |" in rows[1]
 

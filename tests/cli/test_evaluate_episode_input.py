@@ -65,11 +65,36 @@ def _sweep(root: Path) -> Path:
 
 
 def _summary_rows(out: Path) -> list[str]:
-    return [ln for ln in (out / "results.md").read_text().splitlines() if ln.startswith("| s |")]
+    """The rows of results.md's mean ± std table."""
+    summary = (out / "results.md").read_text().split("## Mean ± std")[1]
+    return [ln for ln in summary.splitlines() if ln.startswith("| s |")]
 
 
 def _repeats(caught: list[warnings.WarningMessage]) -> list[str]:
     return [str(w.message) for w in caught if "episodes repeat the settings" in str(w.message)]
+
+
+def test_a_baseline_without_two_shared_seeds_is_said_to_be_unpaired(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    """``evaluate.logs=[a,b] evaluate.labels=[held,spread] evaluate.baseline=itomp@spread``
+    with one seed per run wrote no "Paired by seed" section and printed nothing about it."""
+    for run in ("a", "b"):
+        for planner in ("itomp", "iplanner_ni"):
+            _log(tmp_path / run / "episodes" / f"{planner}.mcap", 0, 40.0, planner=planner)
+    logs = f"[{tmp_path / 'a' / 'episodes'},{tmp_path / 'b' / 'episodes'}]"
+    overrides = ["evaluate.mode=episode", f"evaluate.logs={logs}",
+                 "evaluate.labels=[held,spread]", "evaluate.baseline=itomp@spread",
+                 f"evaluate.out_dir={tmp_path / 'out'}"]  # fmt: skip
+    monkeypatch.setattr(evaluate, "_task_overrides", lambda: list(overrides))
+    evaluate._episode(compose(config_name="config", overrides=["progress=false", *overrides]))
+    said = (
+        "paired comparison skipped: needs at least 2 seeds shared by itomp@spread and another "
+        "planner in one setting; found 1"
+    )
+    assert said in capsys.readouterr().out.splitlines()
+    md = (tmp_path / "out" / "results.md").read_text()
+    assert "## Paired by seed\n\nP" + said[1:] + "." in md
 
 
 def test_a_sweep_summary_csv_keeps_its_swept_override_apart(

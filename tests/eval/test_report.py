@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from foreign_mcap import write_foreign_mcap
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.eval.report import (
@@ -372,13 +373,134 @@ def test_plots_are_written(results: pd.DataFrame, tmp_path: Path) -> None:
 
 
 def test_spread_note_says_what_a_bar_and_whisker_are() -> None:
-    assert spread_note([3, 3]) == "mean of 3 episodes per bar, whiskers ± 1 std"
+    assert spread_note([3, 3]) == "mean of 3 episodes per bar, whiskers ± 1 std within min-max"
     assert spread_note([1, 1, 1]) == "one episode per bar (no spread to show)"
     assert spread_note([1, 3, 2]) == (
-        "mean of 1-3 episodes per bar, whiskers ± 1 std (none for a bar of one episode)"
+        "mean of 1-3 episodes per bar, whiskers ± 1 std within min-max (none for a bar of one "
+        "episode)"
     )
-    assert spread_note([0, 2]) == "mean of 2 episodes per bar, whiskers ± 1 std"
+    assert spread_note([0, 2]) == "mean of 2 episodes per bar, whiskers ± 1 std within min-max"
     assert spread_note([]) == "no values"
+
+
+def _recorded_figures(monkeypatch: pytest.MonkeyPatch) -> list:
+    """The matplotlib Figures the report module makes from now on."""
+    import iplanner_torch.eval.report as report
+
+    figures = []
+
+    class Recorded(report.Figure):
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            figures.append(self)
+
+    monkeypatch.setattr(report, "Figure", Recorded)
+    return figures
+
+
+def _whisker_ends(ax) -> list[tuple[float, float]]:
+    """``(low, high)`` of every drawn whisker of a bar chart, in data units."""
+    ends = []
+    for bars in (c for c in ax.containers if hasattr(c, "errorbar")):
+        if bars.errorbar is None:
+            continue
+        for seg in bars.errorbar.lines[2][0].get_segments():
+            if seg.size and np.isfinite(seg).all():
+                ends.append((float(seg[:, 1].min()), float(seg[:, 1].max())))
+    return ends
+
+
+def test_whiskers_stay_within_the_episodes_values(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Jerkiness of [0, 0, 0, 8] has mean 2 and std 4: the whisker went to -2, a value no
+    episode can have. Whiskers are cut at the least and largest episode value, so a metric
+    that cannot be negative never gets one below 0, and a signed distance goes below 0 only
+    where an episode did."""
+    figures = _recorded_figures(monkeypatch)
+    rows = [
+        {"scenario": "s", "planner": p, "seed": i, "jerkiness": j, "min_distance": d}
+        for p, js, ds in (
+            ("itomp", (0.0, 0.0, 0.0, 8.0), (0.01, 0.01, 0.01, 0.2)),
+            ("iplanner_ni", (5.0, 6.0, 7.0, 8.0), (-0.05, 0.1, 0.12, 0.14)),
+        )
+        for i, (j, d) in enumerate(zip(js, ds))
+    ]
+    df = pd.DataFrame(rows)
+    plot_comparison(df, tmp_path, metrics=("jerkiness", "min_distance"))
+    jerk, dist = (f.axes[0] for f in figures)
+    ends = _whisker_ends(jerk)
+    assert len(ends) == 2
+    lows = sorted(lo for lo, _ in ends)
+    assert lows[0] == pytest.approx(0.0)  # itomp: mean 2 - std 4 cut at its least value, 0
+    assert min(lo for lo, _ in ends) >= 0.0
+    itomp = next(e for e in ends if e[0] == pytest.approx(0.0))
+    assert itomp[1] == pytest.approx(2.0 + 4.0)  # the upper end is within the values: kept
+    d_ends = sorted(_whisker_ends(dist))
+    assert d_ends[0][0] >= -0.05 - 1e-12 and d_ends[0][0] < 0.0  # an episode overlapped
+    assert min(lo for lo, _ in d_ends[1:]) >= 0.01 - 1e-12  # itomp never went below 0.01
+    assert "whiskers ± 1 std within min-max" in jerk.get_title()
+
+
+def test_sweep_bands_stay_within_the_episodes_values(tmp_path: Path) -> None:
+    """The ± 1 std band of a sweep plot went below 0 for a metric that cannot be negative."""
+    import iplanner_torch.eval.report as report
+
+    figures = []
+
+    class Recorded(report.Figure):
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            figures.append(self)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(report, "Figure", Recorded)
+        rows = [
+            {"planner": "itomp", "noise": n, "seed": i, "jerkiness": v}
+            for n in (0.0, 0.02)
+            for i, v in enumerate((0.0, 0.0, 0.0, 8.0))
+        ]
+        plot_sweep(pd.DataFrame(rows), "noise", "jerkiness", "planner", tmp_path / "s.png")
+    (ax,) = figures[0].axes
+    (band,) = [c for c in ax.collections if c.get_paths()]
+    ys = band.get_paths()[0].vertices[:, 1]
+    assert ys.min() == pytest.approx(0.0) and ys.max() == pytest.approx(6.0)  # 2 ± 4, cut
+    assert "within min-max" in figures[0]._suptitle.get_text()
+    renderer = FigureCanvasAgg(figures[0]).get_renderer()
+    legend = ax.get_legend().get_window_extent(renderer)
+    assert legend.x0 >= ax.get_window_extent(renderer).x1
+
+
+def test_comparison_charts_name_their_axes_keep_the_legend_off_the_bars_and_skip_empty_metrics(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``-m tracker.noise=0,0.02``: the charts' x axis had ticks 0.0 and 0.02 and no label; the
+    legend stood inside the axes over the tallest bar; a metric with no value in any episode
+    (efficiency of a run where none finished) was written as an empty chart and listed."""
+    figures = _recorded_figures(monkeypatch)
+    rows = [
+        {"scenario": "s", "planner": p, "noise": n, "seed": i, "smoothness": v + i,
+         "efficiency": math.nan}
+        for n in (0.0, 0.02) for p, v in (("itomp", 3.0), ("iplanner_ni", 9.0))
+        for i in range(2)
+    ]  # fmt: skip
+    df = pd.DataFrame(rows)
+    written = write_sweep_report(df, tmp_path, report_groups(df))
+    names = [p.name for p in written]
+    assert "compare_smoothness.png" in names
+    assert "compare_efficiency.png" not in names
+    assert not (tmp_path / "compare_efficiency.png").exists()
+    (fig,) = [f for f in figures if f.axes and f.axes[0].get_ylabel().startswith("smoothness")]
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "tracker noise [m]"
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["0.0", "0.02"]
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    legend = ax.get_legend().get_window_extent(renderer)
+    plot_area = ax.get_window_extent(renderer)
+    assert legend.x0 >= plot_area.x1  # beside the plotting area, covering no bar
+    assert legend.x1 <= fig.bbox.x1 + 1  # and inside the figure
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == ["ITOMP", "I-Planner, NI"]
 
 
 def test_a_bar_of_one_episode_has_no_whisker(
@@ -750,6 +872,61 @@ def test_comparison_table_shows_the_paper_units_and_completed_episodes() -> None
     assert "completed" not in comparison_table(gather_results([{"planner": "a", "x": 1.0}]))
 
 
+def test_results_md_holds_the_table_the_console_prints(tmp_path: Path) -> None:
+    """results.md lacked the console's `body cm` and `waits` and gave the distances and the
+    MHD in metres; its "Comparison" section is now the printed table, cell for cell, and the
+    mean ± std summary follows it."""
+    rows = [
+        {"scenario": "s1", "planner": p, "seed": seed, "eval/min_distance": d,
+         "sim/body_distance": d + 0.02, "eval/mhd": 0.04, "eval/contact": 0.0,
+         "eval/completed": 1.0, "eval/efficiency": 1.5, "eval/smoothness": 2.0,
+         "plan/waits": w}
+        for p, d, w in (("itomp", 0.0504, 1.0), ("iplanner_ni", 0.109, 5.0))
+        for seed in (0, 1)
+    ]  # fmt: skip
+    df = gather_results(rows)
+    groups = report_groups(df)
+    write_sweep_report(df, tmp_path, groups)
+    md = (tmp_path / "results.md").read_text()
+    section = md.split("## Comparison")[1].split("## Mean ± std")[0]
+    table = [ln for ln in section.splitlines() if ln.startswith("|")]
+    printed = format_table(comparison_table(df)).splitlines()
+    header = [c.strip() for c in table[0].strip("|").split("|")]
+    assert header == re.split(r"\s{2,}", printed[0].strip())
+    assert {"distance cm", "body cm", "MHD cm", "waits"} <= set(header)
+    for md_row, console_row in zip(table[2:], printed[2:], strict=True):
+        cells = [c.strip() for c in md_row.strip("|").split("|")]
+        assert cells == re.split(r"\s{2,}", console_row.strip())
+    row = dict(zip(header, [c.strip() for c in table[3].strip("|").split("|")]))
+    assert (row["distance cm"], row["body cm"], row["MHD cm"], row["waits"]) == (
+        "10.9", "12.9", "4", "5",
+    )  # fmt: skip
+    # the summary with standard deviations is still there, after it, in SI units
+    assert md.index("## Comparison") < md.index("## Mean ± std")
+    assert "| s1 | iplanner_ni | 2 | 2 | 0 | 2 | 2 ± 0 | 0.109 ± 0 |" in md
+
+
+def test_the_log_metadatas_second_names_give_no_second_column(tmp_path: Path) -> None:
+    """A sweep summary had both `noise` and `tracker_noise`, and `speed` and `human_speed`:
+    the episode log records each setting under both names."""
+    for seed in (0, 1):
+        meta = {"scenario": "s", "planner": "itomp", "seed": seed, "speed": "fast",
+                "human_speed": "fast", "noise": 0.02 * seed,
+                "tracker_noise": 0.02 * seed}  # fmt: skip
+        with EpisodeWriter(tmp_path / "logs" / f"{seed}.mcap", metadata=meta) as log:
+            log.metrics(1.0, {"eval/smoothness": 1.0, "eval/min_distance": 0.1})
+    df = gather_results(tmp_path / "logs")
+    assert {"noise", "speed"} <= set(df.columns)
+    assert not {"tracker_noise", "human_speed"} & set(df.columns)
+    assert list(df["noise"]) == [0.0, 0.02] and list(df["speed"]) == ["fast", "fast"]
+    write_sweep_report(df, tmp_path / "report", report_groups(df))
+    header = (tmp_path / "report" / "results.csv").read_text().splitlines()[0].split(",")
+    assert "tracker_noise" not in header and "human_speed" not in header
+    # a second name that disagrees is kept: it says something the first does not
+    odd = gather_results([{"noise": 0.01, "tracker_noise": 0.05, "speed": "slow"}])
+    assert odd.loc[0, "tracker_noise"] == 0.05 and odd.loc[0, "noise"] == 0.01
+
+
 def test_paired_differences_match_a_paired_t_test() -> None:
     from scipy import stats
 
@@ -839,14 +1016,76 @@ def test_sweep_report_pairs_planners_with_itomp_by_seed(tmp_path: Path) -> None:
     assert cells[:4] == ["s", "iplanner_ni", "min_distance", "6"]
     assert float(cells[4]) == pytest.approx(table.loc[0, "mean_diff"], rel=2e-3)
     assert cells[-1] == "6" and float(cells[5]) > 0  # all six larger, interval above 0
-    # one seed, or no ITOMP: nothing to pair
+    # one seed: nothing to pair, which the section says (it was left out without a word)
     write_sweep_report(df[df.seed == 0], tmp_path / "b", ["scenario", "planner"])
-    assert "Paired by seed" not in (tmp_path / "b" / "results.md").read_text()
+    section = (tmp_path / "b" / "results.md").read_text().split("## Paired by seed")[1]
+    assert section.strip() == (
+        "Paired comparison skipped: needs at least 2 seeds shared by itomp and another "
+        "planner in one setting; found 1."
+    )
+    assert not (tmp_path / "b" / "paired_min_distance.png").exists()
+    # no ITOMP: nothing to compare with, nothing said
     write_sweep_report(df[df.planner != "itomp"], tmp_path / "c", ["scenario", "planner"])
     assert "Paired by seed" not in (tmp_path / "c" / "results.md").read_text()
     # an episode twice in a group (a setting the groups do not keep apart): said, not raised
     write_sweep_report(pd.concat([df, df.iloc[:1]]), tmp_path / "d", ["scenario", "planner"])
     assert "Not computed: episode" in (tmp_path / "d" / "results.md").read_text()
+
+
+def test_paired_skip_note_counts_the_seeds_a_baseline_shares(tmp_path: Path) -> None:
+    """``evaluate.logs=[a,b] evaluate.labels=[held,spread] evaluate.baseline=itomp@spread``
+    with one seed per run wrote no "Paired by seed" section and said nothing."""
+    from iplanner_torch.eval.report import paired_skip_note
+
+    def runs(seeds_a: list[int], seeds_b: list[int]) -> pd.DataFrame:
+        return pd.DataFrame(
+            [
+                {"scenario": "s", "planner": f"{p}@{label}", "seed": seed,
+                 "min_distance": 0.1, "smoothness": 1.0}
+                for label, seeds in (("held", seeds_a), ("spread", seeds_b))
+                for p in ("itomp", "iplanner_ni") for seed in seeds
+            ]
+        )  # fmt: skip
+
+    groups = ("scenario", "planner")
+    one = runs([0], [0])
+    note = paired_skip_note(one, groups, "itomp@spread")
+    assert note == (
+        "paired comparison skipped: needs at least 2 seeds shared by itomp@spread and another "
+        "planner in one setting; found 1"
+    )
+    write_sweep_report(one, tmp_path / "one", groups, baseline="itomp@spread")
+    md = (tmp_path / "one" / "results.md").read_text()
+    assert "## Paired by seed" in md and "Paired comparison skipped: needs at least 2" in md
+    # seeds 0, 1 and 2, 3, the spread run of the baseline alone: two seeds a planner, none
+    # shared with the baseline
+    apart = runs([0, 1], [2, 3])
+    apart = apart[apart.planner != "iplanner_ni@spread"]
+    assert paired_skip_note(apart, groups, "itomp@spread").endswith("; found 0")
+    # two shared seeds: the comparison is made, nothing to say
+    assert paired_skip_note(runs([0, 1], [0, 1]), groups, "itomp@spread") == ""
+    # the baseline alone, or absent, or a summary not by planner: nothing to compare
+    alone = one[one.planner == "itomp@spread"]
+    assert paired_skip_note(alone, groups, "itomp@spread") == ""
+    assert paired_skip_note(one, groups, "oracle") == ""
+    assert paired_skip_note(one, ("scenario",), "itomp@spread") == ""
+    assert "no seed column" in paired_skip_note(one.drop(columns="seed"), groups, "itomp@held")
+
+
+def test_plot_paired_names_the_baseline(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The axis said "planner minus baseline" without naming the baseline."""
+    figures = _recorded_figures(monkeypatch)
+    table = pd.DataFrame(
+        {"scenario": ["a"], "planner": ["iplanner_ni"], "pairs": [5], "mean_diff": [0.02],
+         "ci_low": [0.01], "ci_high": [0.03]}
+    )  # fmt: skip
+    plot_paired(table, "min_distance", tmp_path / "p.png")
+    plot_paired(table, "min_distance", tmp_path / "q.png", baseline="itomp@spread")
+    labels = [f.axes[0].get_xlabel() for f in figures]
+    assert labels == [
+        "closest distance [m]: planner minus ITOMP, 95% interval",
+        "closest distance [m]: planner minus itomp@spread, 95% interval",
+    ]
 
 
 def test_plot_paired_draws_rows_without_an_interval(tmp_path: Path) -> None:
