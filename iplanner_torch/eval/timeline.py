@@ -13,7 +13,8 @@ Sources (channels of the log):
 - closest distance: ``/scene`` (the robot's and the person's spheres, a few times a second),
   the least ``|c_r - c_h| - r_r - r_h`` over all sphere pairs: the sphere-model distance of
   ``eval/min_distance``, sampled at the scene channel's rate, so its least value is at or above
-  that metric (measured every simulation sample);
+  that metric (measured every simulation sample), which the figure states beside it (the
+  episode's ``/metrics`` message);
 - collision bound: ``/planner/plan`` and ``/planner/bound`` (each plan's largest per-waypoint
   bound, and ``1 - confidence``, the most it may be);
 - action probabilities: ``/prediction/forecast`` (absent for ``itomp``, which has no
@@ -37,10 +38,32 @@ from matplotlib.ticker import LogFormatter
 from iplanner_torch.errors import DataError
 from iplanner_torch.recording.reader import Episode, read_episode
 
-__all__ = ["Timeline", "episode_timeline", "plot_episode_timeline", "timeline_path"]
+__all__ = [
+    "Timeline",
+    "action_colours",
+    "episode_timeline",
+    "plot_episode_timeline",
+    "timeline_path",
+]
 
-#: colours of the actions (red is kept for the waits)
-ACTION_COLOURS = ("C0", "C1", "C2", "C4", "C5", "C6", "C7", "C8", "C9")
+
+def action_colours(n: int) -> list[tuple[float, ...]]:
+    """``n`` different colours for the actions, by index, none of them red (kept for the
+    waits): the tab20 palette's dark colours, then its light ones (18 in all); more actions
+    than that get evenly spaced colours of the ``turbo`` map.
+
+    Returns:
+        ``n`` RGB(A) tuples, no two the same.
+    """
+    from matplotlib import colormaps
+
+    tab20 = colormaps["tab20"].colors  # (dark, light) pairs of the tab10 colours; 3 is red
+    palette = [c for i, c in enumerate(tab20[0::2]) if i != 3]
+    palette += [c for i, c in enumerate(tab20[1::2]) if i != 3]
+    if n <= len(palette):
+        return [tuple(c) for c in palette[:n]]
+    return [tuple(colormaps["turbo"](x)) for x in np.linspace(0.05, 0.95, n)]
+
 
 #: robot task events drawn as vertical lines, with their line style
 ROBOT_EVENTS: dict[str, str] = {"picked": ":", "delivered": "--"}
@@ -70,6 +93,9 @@ class Timeline:
         speed: (T_r,) the norm of the joint velocities [rad/s].
         end_t: the last time in the log [s].
         title: planner, scenario, speed and seed, as the metadata says.
+        min_distance_m: the episode's own closest distance of the sphere models
+            (``eval/min_distance`` of its metrics message, every simulation sample) [m]; NaN
+            when the log holds no metrics (cut short) or no value.
         complete: whether the log holds every record (``Episode.complete``).
         notes: what is missing, in words (e.g. "no forecasts: itomp has no predictor").
     """
@@ -90,6 +116,7 @@ class Timeline:
     speed: np.ndarray
     end_t: float
     title: str
+    min_distance_m: float = float("nan")
     complete: bool = True
     notes: list[str] = field(default_factory=list)
 
@@ -264,9 +291,18 @@ def episode_timeline(episode: Episode | str | Path) -> Timeline:
         speed=speed,
         end_t=end_t,
         title=title,
+        min_distance_m=_metric(episode, "eval/min_distance"),
         complete=bool(episode.complete),
         notes=notes,
     )
+
+
+def _metric(episode: Episode, key: str) -> float:
+    """The episode's metric ``key`` as a float (NaN when absent or not a number)."""
+    try:
+        return float(episode.metrics().get(key, np.nan))
+    except (TypeError, ValueError):
+        return float("nan")
 
 
 def timeline_path(log: str | Path) -> Path:
@@ -277,7 +313,10 @@ def timeline_path(log: str | Path) -> Path:
 def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: str | Path) -> Path:
     """Draw one episode as four panels sharing the time axis.
 
-    1. closest distance between the robot's and the person's spheres [cm];
+    1. closest distance between the robot's and the person's spheres [cm], at the scene
+       samples, with their least value marked and the episode's own minimum
+       (``eval/min_distance``, every simulation sample; at or below the sampled one) drawn
+       as a dotted line, both named in the legend;
     2. each plan's largest collision bound against ``1 - confidence`` (log scale, values below
        1e-12 drawn at 1e-12; plans that were not feasible, cut short by a wait or evasive,
        as crosses: the bound, the static clearance or the velocity limits stopped them);
@@ -286,7 +325,8 @@ def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: st
     4. the arm's joint speed [rad/s].
 
     The planner's waits are shaded red in every panel and the robot's picks and deliveries
-    are vertical lines.
+    are vertical lines. Every action has its own colour (:func:`action_colours`); the legends
+    stand to the right of their panels, outside the plotting area.
 
     Args:
         episode: an :class:`~iplanner_torch.recording.Episode`, the path of its log, or a
@@ -300,7 +340,7 @@ def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: st
         DataError: see :func:`episode_timeline`.
     """
     tl = episode if isinstance(episode, Timeline) else episode_timeline(episode)
-    fig = Figure(figsize=(9.0, 8.0))
+    fig = Figure(figsize=(11.0, 8.0))
     axes = fig.subplots(4, 1, sharex=True, height_ratios=[1.2, 1.0, 1.2, 0.8])
     dist, bound, act, speed = axes
     end = max(tl.end_t, 1e-3)
@@ -320,7 +360,10 @@ def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: st
 
     # 1. distance
     if tl.gap_m.size:
-        dist.plot(tl.scene_t, 100.0 * tl.gap_m, color="k", lw=1.3, label="closest distance")
+        every = float(np.median(np.diff(tl.scene_t))) if tl.scene_t.size > 1 else np.nan
+        rate = f", every {every:.2g} s" if np.isfinite(every) else ""
+        label = f"closest distance (scene samples{rate})"
+        dist.plot(tl.scene_t, 100.0 * tl.gap_m, color="k", lw=1.3, label=label)
         dist.axhline(0.0, color="tab:red", lw=1.0)
         if np.isfinite(tl.gap_m).any():
             i = int(np.nanargmin(tl.gap_m))
@@ -330,17 +373,25 @@ def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: st
                 "o",
                 color="tab:red",
                 ms=5,
-                label=f"least {100.0 * tl.gap_m[i]:.1f} cm at {tl.scene_t[i]:.1f} s "
-                "(scene samples)",
+                label=f"least sampled {100.0 * tl.gap_m[i]:.1f} cm at {tl.scene_t[i]:.1f} s",
             )
     else:
         _empty(dist, "no scene messages")
+    if np.isfinite(tl.min_distance_m):
+        dist.axhline(
+            100.0 * tl.min_distance_m,
+            color="tab:red",
+            lw=1.0,
+            ls=":",
+            label=f"episode minimum {100.0 * tl.min_distance_m:.1f} cm\n"
+            "(eval/min_distance, every sim step)",
+        )
     dist.set_ylabel("robot-person\ndistance [cm]")
     for s, e, _ in tl.reaches:
         dist.axvspan(s, e if e == e else end, color="tab:blue", alpha=0.08, lw=0)
     handles, labels = dist.get_legend_handles_labels()
     if handles:
-        dist.legend(fontsize="x-small", loc="best")
+        _legend_outside(dist)
 
     # 2. collision bound
     if tl.plan_t.size and np.isfinite(tl.max_bound).any():
@@ -362,7 +413,7 @@ def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: st
             bound.step(
                 tl.plan_t, tl.limit, where="post", color="k", lw=1.0, label="limit 1 - confidence"
             )
-        bound.legend(fontsize="x-small", loc="lower right")
+        _legend_outside(bound)
     else:
         _empty(bound, "no collision bounds logged")
     bound.set_ylabel("collision bound\n(floor 1e-12)")
@@ -372,14 +423,15 @@ def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: st
 
     # 3. action probabilities
     if tl.forecast_t.size:
+        colours = action_colours(len(tl.action_names))
         for j, name in enumerate(tl.action_names):
-            colour = ACTION_COLOURS[j % len(ACTION_COLOURS)]
+            colour = colours[j]
             act.plot(tl.forecast_t, tl.weights[:, j], color=colour, lw=1.2, label=name)
             for s, e, real in tl.reaches:
                 if real == name:
                     act.axvspan(s, e if e == e else end, color=colour, alpha=0.15, lw=0)
         act.set_ylim(-0.03, 1.03)
-        act.legend(fontsize="x-small", loc="best", ncol=min(6, len(tl.action_names)))
+        _legend_outside(act, ncol=1 if len(tl.action_names) <= 12 else 2)
     else:
         _empty(act, next((n for n in tl.notes if n.startswith("no forecasts")), "no forecasts"))
         for s, e, _ in tl.reaches:
@@ -406,6 +458,18 @@ def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: st
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100)
     return out
+
+
+def _legend_outside(ax, ncol: int = 1) -> None:
+    """The legend of ``ax`` to the right of it, outside the plotting area, so that it covers
+    no line or marker (``fig.tight_layout()`` makes room for it)."""
+    ax.legend(
+        fontsize="x-small",
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        borderaxespad=0.0,
+        ncol=ncol,
+    )
 
 
 def _empty(ax, text: str) -> None:

@@ -57,8 +57,15 @@ def test_closest_gaps_match_a_loop_over_all_pairs() -> None:
         closest_gaps(np.zeros((2, 3, 4)), np.zeros((3, 3, 4)))
 
 
-def _write(path: Path, planner: str = "iplanner_ni", forecasts: bool = True) -> dict:
-    """A short log with known values; returns them."""
+def _write(
+    path: Path,
+    planner: str = "iplanner_ni",
+    forecasts: bool = True,
+    actions: list[str] = ACTIONS,
+    metrics: dict | None = None,
+) -> dict:
+    """A short log with known values (forecasts over ``actions``; ``metrics`` as the
+    episode's metrics message, none when None); returns them."""
     meta = {"scenario": "s1", "planner": planner, "speed": "medium", "seed": 4}
     t_robot = np.round(np.arange(0.0, 3.0 + 1e-9, 0.1), 10)
     qd = np.stack([np.sin(t_robot), np.cos(t_robot), 0.5 * t_robot], 1)  # (T, 3)
@@ -76,6 +83,8 @@ def _write(path: Path, planner: str = "iplanner_ni", forecasts: bool = True) -> 
         (2.5, "human_take_started", {"block": 0}),  # not finished when the log ends
     ]
     weights = [[1.0, 0.0, 0.0], [0.2, 0.1, 0.7], [0.0, 0.9, 0.1]]
+    if actions != ACTIONS:
+        weights = np.random.default_rng(0).dirichlet(np.ones(len(actions)), 3).tolist()
     with EpisodeWriter(path, metadata=meta) as log:
         for i, t in enumerate(t_robot):
             log.robot_state(float(t), np.zeros(3), qd[i], ["a", "b", "c"])
@@ -89,10 +98,12 @@ def _write(path: Path, planner: str = "iplanner_ni", forecasts: bool = True) -> 
             log.collision_bound(t, times, np.array(bound), conf)
         if forecasts:
             for k, w in enumerate(weights):
-                mean = np.zeros((3, 2, 2, 3))
-                log.forecast(0.5 * k, np.array(w), mean, np.ones_like(mean) * 1e-3, ACTIONS, 0.1)
+                mean = np.zeros((len(actions), 2, 2, 3))
+                log.forecast(0.5 * k, np.array(w), mean, np.ones_like(mean) * 1e-3, actions, 0.1)
         for t, kind, detail in events:
             log.task_event(t, kind, detail)
+        if metrics is not None:
+            log.metrics(3.0, metrics)
     return {"t_robot": t_robot, "qd": qd, "plans": plans, "weights": weights, "meta": meta}
 
 
@@ -138,6 +149,83 @@ def test_the_figure_is_drawn_and_itomp_says_why_it_has_no_forecasts(tmp_path: Pa
     img = matplotlib.image.imread(out)
     assert img.shape[0] >= 700 and img.shape[1] >= 800 and img[..., :3].std() > 0.05
     assert timeline_path(path) == tmp_path / "ep.png"
+
+
+def _figures(monkeypatch: pytest.MonkeyPatch) -> list:
+    """The Figures the timeline module makes from now on."""
+    import iplanner_torch.eval.timeline as timeline
+
+    made = []
+
+    class Recorded(timeline.Figure):
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(timeline, "Figure", Recorded)
+    return made
+
+
+def test_the_distance_panel_names_the_episodes_own_minimum(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The panel marked "least 11.7 cm at 3.6 s (scene samples)" while the run's table said
+    10.9 cm (eval/min_distance, every simulation sample): both are now named, apart."""
+    figures = _figures(monkeypatch)
+    path = tmp_path / "ep.mcap"
+    _write(path, metrics={"eval/min_distance": 0.031, "eval/smoothness": 1.0})
+    tl = episode_timeline(path)
+    assert tl.min_distance_m == pytest.approx(0.031)
+    plot_episode_timeline(tl, tmp_path / "ep.png")
+    dist = figures[-1].axes[0]
+    texts = [t.get_text() for t in dist.get_legend().get_texts()]
+    i = int(np.nanargmin(tl.gap_m))
+    least = f"least sampled {100 * tl.gap_m[i]:.1f} cm at {tl.scene_t[i]:.1f} s"
+    assert least in texts
+    assert "closest distance (scene samples, every 0.5 s)" in texts
+    minimum = next(t for t in texts if t.startswith("episode minimum"))
+    assert minimum.startswith("episode minimum 3.1 cm") and "eval/min_distance" in minimum
+    line = next(ln for ln in dist.get_lines() if ln.get_label() == minimum)
+    assert line.get_ydata()[0] == pytest.approx(3.1)  # drawn where the metric says
+    # a log without its metrics message (cut short) draws the samples alone
+    bare = tmp_path / "bare.mcap"
+    _write(bare)
+    assert math.isnan(episode_timeline(bare).min_distance_m)
+    plot_episode_timeline(bare, tmp_path / "bare.png")
+    texts = [t.get_text() for t in figures[-1].axes[0].get_legend().get_texts()]
+    assert not any(t.startswith("episode minimum") for t in texts)
+
+
+def test_every_action_has_its_own_colour_and_legends_stand_beside_the_panels(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With the reaching predictor's ten actions `idle` and `return` had the same colour (nine
+    colours, by index modulo nine); the collision bound's legend covered plans near the
+    floor."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import to_hex
+
+    from iplanner_torch.eval.timeline import action_colours
+
+    figures = _figures(monkeypatch)
+    actions = ["idle", *(f"reach_{i}" for i in range(8)), "return"]
+    path = tmp_path / "ep.mcap"
+    _write(path, actions=actions)
+    plot_episode_timeline(path, tmp_path / "ep.png")
+    fig = figures[-1]
+    dist, bound, act, _ = fig.axes
+    colours = {ln.get_label(): to_hex(ln.get_color()) for ln in act.get_lines()}
+    assert set(actions) <= set(colours)
+    assert len({colours[a] for a in actions}) == len(actions)
+    assert to_hex("tab:red") not in {colours[a] for a in actions}  # red is the waits'
+    for n in (3, 10, 18, 30):
+        assert len({to_hex(c) for c in action_colours(n)}) == n
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    for ax in (dist, bound, act):
+        legend = ax.get_legend()
+        assert legend is not None
+        box, area = legend.get_window_extent(renderer), ax.get_window_extent(renderer)
+        assert box.x0 >= area.x1 and box.x1 <= fig.bbox.x1 + 1  # beside it, in the figure
 
 
 def test_logs_with_nothing_to_draw_are_refused(tmp_path: Path) -> None:
