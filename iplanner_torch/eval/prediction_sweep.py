@@ -167,8 +167,35 @@ def prediction_vs_noise(
     return pd.DataFrame(rows)
 
 
+#: line style, marker and whether the marker is filled of each predictor, in the order they
+#: first appear: overlapping curves of two predictors both show (a dashed line with hollow,
+#: larger markers over a solid one with filled markers)
+PREDICTOR_STYLES: tuple[tuple[str, str, bool], ...] = (
+    ("-", "o", True),
+    ("--", "s", False),
+    (":", "^", True),
+    ("-.", "D", False),
+)
+
+
 def write_noise_report(df: pd.DataFrame, out_dir: str | Path, command: str = "") -> list[Path]:
-    """Write ``prediction_vs_noise.csv``, ``<metric>.png`` per plotted metric, ``README.md``."""
+    """Write ``prediction_vs_noise.csv``, ``prediction_vs_noise.png`` and ``README.md``.
+
+    The figure has one panel per plotted metric (:data:`PLOTTED`), the metric against the
+    input noise [cm]: one line per predictor and speed, the speed in its colour and the
+    predictor in its line style and marker (:data:`PREDICTOR_STYLES`; hollow markers for
+    every other predictor), so that two predictors with the same values both show. One
+    legend for all panels stands to the right of them, outside the plotting areas.
+
+    Args:
+        df: the rows of :func:`prediction_vs_noise` (``predictor``, ``noise`` [m],
+            ``speed`` and the metric columns).
+        out_dir: the folder (created).
+        command: the command line, quoted in the README.
+
+    Returns:
+        The written paths: the CSV, the PNG and the README.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -179,24 +206,37 @@ def write_noise_report(df: pd.DataFrame, out_dir: str | Path, command: str = "")
     written = [out_dir / "prediction_vs_noise.csv"]
     df.to_csv(written[0], index=False)
     metrics = [m for m in PLOTTED if m in df.columns]
-    fig, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.6), squeeze=False)
-    styles = {"slow": ":", "medium": "-", "fast": "--"}
+    fig, axes = plt.subplots(
+        1, len(metrics), figsize=(4.2 * len(metrics) + 2.0, 3.6), squeeze=False,
+        layout="constrained",
+    )  # fmt: skip
+    names = list(dict.fromkeys(df["predictor"]))
+    speeds = [sp for sp in SPEEDS if sp in set(df["speed"])]
+    speeds += [sp for sp in dict.fromkeys(df["speed"]) if sp not in speeds]
     for ax, metric in zip(axes[0], metrics):
         label, scale = PLOTTED[metric]
-        for (name, speed), g in df.groupby(["predictor", "speed"], sort=False):
-            g = g.sort_values("noise")
-            ax.plot(
-                g["noise"] * 100,
-                g[metric] * scale,
-                styles.get(str(speed), "-"),
-                marker="o",
-                label=f"{name}, {speed}",
-            )
+        for i, name in enumerate(names):
+            ls, marker, filled = PREDICTOR_STYLES[i % len(PREDICTOR_STYLES)]
+            for k, speed in enumerate(speeds):
+                g = df[(df["predictor"] == name) & (df["speed"] == speed)].sort_values("noise")
+                if g.empty:
+                    continue
+                colour = f"C{k}"
+                ax.plot(
+                    g["noise"] * 100,
+                    g[metric] * scale,
+                    ls=ls,
+                    marker=marker,
+                    color=colour,
+                    markerfacecolor=colour if filled else "none",
+                    markersize=5 if filled else 8,
+                    label=f"{name}, {speed}",
+                )
         ax.set_xlabel("input noise sigma [cm]")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside right center", fontsize="small")
     png = out_dir / "prediction_vs_noise.png"
     fig.savefig(png, dpi=110)
     plt.close(fig)

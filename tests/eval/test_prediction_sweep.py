@@ -123,3 +123,54 @@ def test_noise_sweep_rows_noise_levels_and_shared_noise(monkeypatch, tmp_path) -
     readme = written[2].read_text()
     assert "iplanner-evaluate x" in readme
     assert readme.count("\n| p1 |") + readme.count("\n| p2 |") == len(df)
+
+
+def test_noise_plot_shows_predictors_with_equal_curves_and_keeps_its_legend_off_the_data(
+    tmp_path, monkeypatch
+) -> None:
+    """iplanner_no_ni's curves lay exactly under iplanner_ni's (the same line style and
+    marker, only the colour apart), so half the legend was invisible, and the legend stood
+    over a data point of the first panel."""
+    import matplotlib.pyplot as plt
+    import pandas as pd
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import to_hex
+
+    from iplanner_torch.eval.prediction_sweep import PLOTTED, write_noise_report
+
+    made = []
+    real = plt.subplots
+
+    def spy(*args, **kwargs):
+        fig, axes = real(*args, **kwargs)
+        made.append(fig)
+        return fig, axes
+
+    monkeypatch.setattr(plt, "subplots", spy)
+    rows = [
+        {"predictor": name, "noise": noise, "speed": speed,
+         **{m: 0.1 + noise + 0.01 * k for m in PLOTTED}}
+        for name in ("iplanner_no_ni", "iplanner_ni")
+        for k, speed in enumerate(("slow", "medium", "fast"))
+        for noise in (0.0, 0.01, 0.02)
+    ]  # fmt: skip
+    write_noise_report(pd.DataFrame(rows), tmp_path)
+    (fig,) = made
+    for ax in fig.axes:
+        lines = {ln.get_label(): ln for ln in ax.get_lines()}
+        assert len(lines) == 6
+        for speed in ("slow", "medium", "fast"):
+            a, b = lines[f"iplanner_no_ni, {speed}"], lines[f"iplanner_ni, {speed}"]
+            np.testing.assert_array_equal(a.get_ydata(), b.get_ydata())  # the same values
+            assert a.get_linestyle() != b.get_linestyle() and a.get_marker() != b.get_marker()
+            assert to_hex(a.get_color()) == to_hex(b.get_color())  # colour: the speed
+            assert {str(a.get_markerfacecolor()), str(b.get_markerfacecolor())} >= {"none"}
+            assert b.get_markersize() > a.get_markersize()  # the one on top rings the other
+    (legend,) = fig.legends
+    assert len(legend.get_texts()) == 6
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    box = legend.get_window_extent(renderer)
+    assert box.x1 <= fig.bbox.x1 + 1
+    for ax in fig.axes:
+        area = ax.get_window_extent(renderer)
+        assert box.x0 >= area.x1 or box.x1 <= area.x0  # beside every panel, over none
