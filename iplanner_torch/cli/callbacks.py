@@ -244,8 +244,8 @@ def gather_job_metrics(root: Path, out_dir: Path) -> list[Path]:
     csv, md = out_dir / "results.csv", out_dir / "results.md"
     df.to_csv(csv, index=False)
     md.write_text(
-        f"# Sweep of {Path(root).resolve()}\n\nOne row per job; `path` is the job's metrics "
-        "file.\n\n" + to_markdown(df.drop(columns="path")),
+        f"# Sweep of {Path(root).resolve()}\n\nOne row per job; the `path` column of "
+        "`results.csv` names each job's metrics file.\n\n" + to_markdown(df.drop(columns="path")),
         encoding="utf-8",
     )
     written = [csv, md]

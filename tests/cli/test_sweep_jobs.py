@@ -206,6 +206,8 @@ def test_the_metrics_of_a_training_sweep_are_gathered_into_one_table(tmp_path: P
     assert "trainer" not in df.columns  # the same in every job
     md = (tmp_path / "summary" / "results.md").read_text()
     assert "| job | predictor.svgp.num_inducing |" in md and "path" not in md.splitlines()[4]
+    # the table has no path column: the sentence points to the CSV's
+    assert "the `path` column of `results.csv` names each job's metrics file" in md
     assert (tmp_path / "summary" / "metrics.png").stat().st_size > 0
     assert gather_job_metrics(tmp_path / "nothing", tmp_path / "s2") == []
 
