@@ -1272,12 +1272,13 @@ def _paired_section(
 
 #: what the columns of :func:`comparison_table` are, as ``results.md`` says above the table
 COMPARISON_NOTE = (
-    "The table the run printed: episode counts, then means over episodes in the paper's "
-    "units: `pred. ms` prediction time [ms]; `MHD cm` prediction MHD [cm]; `smoothness`, "
-    "`jerkiness` [rad²/s⁴]; `distance cm` the closest distance of the sphere models [cm] "
-    "(`min_distance`); `body cm` the closest of the robot's MuJoCo geoms to the person's "
-    "capsules [cm]; `efficiency` (alone / with robot; finished episodes only); `waits` the "
-    "planner's waits per episode; – where no episode has a value."
+    "The table `iplanner-experiment` and `iplanner-evaluate evaluate.mode=episode` print: "
+    "episode counts, then means over episodes in the paper's units: `pred. ms` prediction "
+    "time [ms]; `MHD cm` prediction MHD [cm]; `smoothness`, `jerkiness` [rad²/s⁴]; "
+    "`distance cm` the closest distance of the sphere models [cm] (`min_distance`); `body cm` "
+    "the closest of the robot's MuJoCo geoms to the person's capsules [cm]; `efficiency` "
+    "(alone / with robot; finished episodes only); `waits` the planner's waits per episode; "
+    "– where no episode has a value."
 )
 
 
