@@ -131,13 +131,10 @@ def _checkpoint(path: Path, cfg: DictConfig) -> Path:
         train = shell_command("iplanner-train", f"predictor={predictor}")
         train += f" {override_word('data.path', cfg.data.path)}"
         train += f" {override_word('train.out_dir', out_dir)}"
-        use = (
-            ""
-            if out_dir == path.parent
-            else (
-                f", then run with {override_word('evaluate.checkpoint', out_dir / 'predictor.ckpt')}"
-            )
-        )
+        use = ""
+        if out_dir != path.parent:
+            checkpoint = override_word("evaluate.checkpoint", out_dir / "predictor.ckpt")
+            use = f", then run with {checkpoint}"
         raise CheckpointError(
             f"{path}: no such checkpoint file; train one with `{train}` (it writes "
             f"{out_dir / 'predictor.ckpt'}){use}"
