@@ -15,6 +15,11 @@ Figures (``run(quick) -> dict``):
 * ``sweep.single_train_s``: one such training alone, default waits, for scale.
 * ``sweep.single_train_passive_s``: the same with passive waits, against it: why a sweep
   whose jobs have the cores to themselves keeps the default.
+* ``sweep.single_train_spin_s``: the same with ``GOMP_SPINCOUNT=1000``, the bounded spin
+  every command sets (``iplanner_torch.cli.bounded_omp_spin``), against the default.
+* ``sweep.busy_train_s``: one training while a one-thread Python loop keeps a core busy
+  (another program on the machine), with the bounded spin; reference: the same with
+  OpenMP's default waits. Why the commands bound the spin.
 
 Each training is the quick predictor of ``bench_prediction`` (its ``training_inputs``: 8
 targets x 4 reaches, 40 SVGP steps) with ``TrainerCfg(num_threads=2)``.
@@ -33,6 +38,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from iplanner_torch.cli import OMP_SPIN_COUNT
+
 #: one training, printed as {"train_s": ...}; run in a fresh process per measurement
 _TRAIN = r"""
 import json, sys, tempfile, time
@@ -49,13 +56,21 @@ with tempfile.TemporaryDirectory() as tmp:
 """
 
 
-def _trainings(n: int, policy: str | None) -> list[float]:
+#: a one-thread busy loop: another program keeping one core busy
+_BUSY = "import time\nt = time.time()\nwhile time.time() - t < 900:\n    pass\n"
+
+
+def _trainings(n: int, policy: str | None, spin: str | None = None) -> list[float]:
     """Run ``n`` trainings at the same time, each in its own process with
-    ``OMP_WAIT_POLICY=policy`` (None: unset, OpenMP's default); their training seconds."""
+    ``OMP_WAIT_POLICY=policy`` and ``GOMP_SPINCOUNT=spin`` (None: unset, OpenMP's default);
+    their training seconds."""
     env = dict(os.environ, PYTHONWARNINGS="ignore")
-    env.pop("OMP_WAIT_POLICY", None)
+    for key in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT", "IPLANNER_TORCH_SET_GOMP_SPINCOUNT"):
+        env.pop(key, None)
     if policy is not None:
         env["OMP_WAIT_POLICY"] = policy
+    if spin is not None:
+        env["GOMP_SPINCOUNT"] = spin
     procs = [
         subprocess.Popen(
             [sys.executable, "-c", _TRAIN, str(Path(__file__).resolve().parent)],
@@ -82,8 +97,16 @@ def run(quick: bool = False) -> dict[str, dict]:
     _trainings(1, None)  # warm-up: the first process compiles (and caches) numba's DTW
     single = _trainings(1, None)[0]
     single_passive = _trainings(1, "PASSIVE")[0]
+    single_spin = _trainings(1, None, OMP_SPIN_COUNT)[0]
     passive = max(_trainings(2, "PASSIVE"))
     default = max(_trainings(2, None))
+    busy = subprocess.Popen([sys.executable, "-c", _BUSY])
+    try:
+        busy_spin = _trainings(1, None, OMP_SPIN_COUNT)[0]
+        busy_default = _trainings(1, None)[0]
+    finally:
+        busy.kill()
+        busy.wait()
     cores = os.cpu_count()
     return {
         "sweep.single_train_s": {"value": single, "unit": "s", "cores": cores},
@@ -93,6 +116,22 @@ def run(quick: bool = False) -> dict[str, dict]:
             "reference": single,
             "reference_name": "sweep.single_train_s (OpenMP's default waits)",
             "ratio": single_passive / single,
+            "cores": cores,
+        },
+        "sweep.single_train_spin_s": {
+            "value": single_spin,
+            "unit": "s",
+            "reference": single,
+            "reference_name": "sweep.single_train_s (OpenMP's default waits)",
+            "ratio": single_spin / single,
+            "cores": cores,
+        },
+        "sweep.busy_train_s": {
+            "value": busy_spin,
+            "unit": "s",
+            "reference": busy_default,
+            "reference_name": "the same training beside the busy loop, OpenMP's default waits",
+            "ratio": busy_spin / busy_default,
             "cores": cores,
         },
         "sweep.parallel_train_s": {

@@ -323,3 +323,64 @@ def test_the_metrics_of_a_prediction_evaluation_sweep_are_gathered(tmp_path: Pat
     df = pd.read_csv(tmp_path / "summary" / "results.csv")
     assert list(df["predictor"]) == ["iplanner_ni", "iplanner_no_ni"]
     assert list(df["mhd_1s"]) == [0.047, 0.048]
+
+
+def test_the_commands_bound_openmp_spinning_before_torch_loads(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Every command imports iplanner_torch.cli before torch, which sets GOMP_SPINCOUNT (read
+    by libgomp when torch loads) unless the environment sets it or OMP_WAIT_POLICY."""
+    import subprocess
+    import sys
+
+    from iplanner_torch.cli import OMP_SPIN_COUNT, SPIN_SET_MARK, bounded_omp_spin
+
+    probe = (
+        "import os, sys\n"
+        "import iplanner_torch.cli\n"
+        "loaded = 'torch' in sys.modules\n"
+        "import iplanner_torch.cli.experiment\n"
+        "print(loaded, os.environ.get('GOMP_SPINCOUNT'), 'torch' in sys.modules)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("GOMP_SPINCOUNT", "OMP_WAIT_POLICY")}
+    out = subprocess.run(
+        [sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert out == ["False", OMP_SPIN_COUNT, "True"]
+    for preset in ({"GOMP_SPINCOUNT": "7"}, {"OMP_WAIT_POLICY": "ACTIVE"}):
+        out = subprocess.run(
+            [sys.executable, "-c", probe], env={**env, **preset}, capture_output=True,
+            text=True, check=True,
+        ).stdout.split()  # fmt: skip
+        assert out[1] == preset.get("GOMP_SPINCOUNT", "None")
+
+    monkeypatch.delenv("GOMP_SPINCOUNT", raising=False)
+    monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    monkeypatch.delenv(SPIN_SET_MARK, raising=False)
+    assert bounded_omp_spin() is True and os.environ["GOMP_SPINCOUNT"] == OMP_SPIN_COUNT
+    assert bounded_omp_spin() is False  # set already
+
+
+@pytest.mark.parametrize("ours", [True, False])
+def test_passive_waits_remove_the_commands_spin_count_not_the_users(
+    monkeypatch: pytest.MonkeyPatch, ours: bool
+) -> None:
+    """libgomp lets GOMP_SPINCOUNT override OMP_WAIT_POLICY: a sweep that sets passive waits
+    drops the spin count the commands set, and keeps one the user set."""
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli import SPIN_SET_MARK
+    from iplanner_torch.cli.callbacks import passive_omp_waits
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    monkeypatch.setenv("GOMP_SPINCOUNT", "1000")
+    if ours:
+        monkeypatch.setenv(SPIN_SET_MARK, "1")
+    else:
+        monkeypatch.delenv(SPIN_SET_MARK, raising=False)
+    config = OmegaConf.create({"hydra": {"launcher": {"_target_": JOBLIB}}, "trainer": {}})
+    assert passive_omp_waits(config, 2) is True
+    assert os.environ["OMP_WAIT_POLICY"] == "PASSIVE"
+    assert os.environ.get("GOMP_SPINCOUNT") == (None if ours else "1000")
+    assert SPIN_SET_MARK not in os.environ
