@@ -223,12 +223,13 @@ def job_metrics_rows(root: Path) -> Any:
     return pd.DataFrame.from_records(rows)
 
 
-def gather_job_metrics(root: Path, out_dir: Path) -> list[Path]:
+def gather_job_metrics(root: Path, out_dir: Path, *, echo: bool = False) -> list[Path]:
     """Report the per-job metrics of a multirun folder (:func:`job_metrics_rows`) into
     ``out_dir``: ``results.csv`` and ``results.md`` with a row per job and the overrides that
     differ between the jobs as columns (:func:`sweep_overrides`), and ``metrics.png``: the
     metrics of :data:`PLOTTED_METRICS` against the first swept override (its values in job
-    order when they are not numbers).
+    order when they are not numbers). With ``echo``, also print a table of the jobs, the
+    swept overrides and those metrics (the files hold every metric).
 
     Returns:
         The written files, or [] when no job wrote metrics.
@@ -251,6 +252,9 @@ def gather_job_metrics(root: Path, out_dir: Path) -> list[Path]:
         encoding="utf-8",
     )
     written = [csv, md]
+    if echo:
+        shown = df[front + [c for c in PLOTTED_METRICS if c in df.columns]]
+        print(shown.to_string(index=False, float_format=lambda x: f"{x:.4g}"), flush=True)
     plot = _plot_job_metrics(df, swept, out_dir / "metrics.png")
     if plot is not None:
         written.append(plot)
@@ -604,7 +608,7 @@ class GatherSweepResults(Callback):
         try:
             # a closed-loop sweep's episodes, else a training or evaluation sweep's metrics
             written = gather_episode_logs(sweep_dir, summary) or gather_job_metrics(
-                sweep_dir, summary
+                sweep_dir, summary, echo=True
             )
         except Exception as exc:  # noqa: BLE001 - Hydra would only warn of it, and exit 0
             gathered = False

@@ -212,6 +212,22 @@ def test_the_metrics_of_a_training_sweep_are_gathered_into_one_table(tmp_path: P
     assert gather_job_metrics(tmp_path / "nothing", tmp_path / "s2") == []
 
 
+def test_a_metrics_sweep_prints_its_table(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """With echo (as the sweep's end calls it), the jobs, the swept override and the plotted
+    metrics are printed, one line per job; the checkpoint path is left to the files."""
+    sweep = tmp_path / "sweep"
+    for job, m, mhd in (("0", 64, 0.05), ("1", 8, 0.0912345)):
+        _job(sweep, job, [f"predictor.svgp.num_inducing={m}"],
+             {"checkpoint": f"/x/{job}", "mhd_1s": mhd, "class_accuracy": 0.75})  # fmt: skip
+    gather_job_metrics(sweep, tmp_path / "summary", echo=True)
+    lines = [line.split() for line in capsys.readouterr().out.strip().splitlines()]
+    assert lines == [
+        ["job", "predictor.svgp.num_inducing", "mhd_1s", "class_accuracy"],
+        ["0", "64", "0.05", "0.75"],
+        ["1", "8", "0.09123", "0.75"],
+    ]
+
+
 def test_a_training_sweep_trains_one_predictor_per_job_and_summarises_them(
     tmp_path: Path,
 ) -> None:
@@ -230,6 +246,7 @@ def test_a_training_sweep_trains_one_predictor_per_job_and_summarises_them(
     res = _run(train, tmp_path)
     assert res.returncode == 0, res.stderr[-3000:]
     assert f"sweep summary: {sweep / 'summary' / 'results.md'}" in res.stdout
+    assert "job  predictor.svgp.num_inducing  mhd_1s" in res.stdout  # the printed table
     df = pd.read_csv(sweep / "summary" / "results.csv")
     assert list(df["predictor.svgp.num_inducing"]) == [8, 16]
     for job, row in df.iterrows():
