@@ -681,6 +681,43 @@ def job_log_path() -> Path | None:
         return None
 
 
+#: what a single run's folder holds when the command stopped on a config error before any
+#: work: Hydra's record, the command's log and the resolved config (experiment)
+_BARE_RUN_FILES = frozenset({".hydra", "config_resolved.yaml"})
+_HYDRA_RECORD_FILES = frozenset({"config.yaml", "hydra.yaml", "overrides.yaml"})
+
+
+def bare_run_dir(line: str) -> Path | None:
+    """This run's folder when it may be deleted after the config error ``line``: a single
+    run (not a job of a multirun) in the dated folder Hydra made for it (``hydra.run.dir``
+    not given on the command line), holding nothing but :data:`_BARE_RUN_FILES`, Hydra's own
+    record in ``.hydra/`` and the command's log, which holds nothing but ``line`` (the
+    command printed nothing before it: no work is recorded there); else None."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+        from hydra.types import RunMode
+
+        hc = HydraConfig.get()
+        if hc.mode != RunMode.RUN:
+            return None
+        if any(override_key(o) == "hydra.run.dir" for o in hc.overrides.hydra):
+            return None
+        folder = Path(hc.runtime.output_dir)
+        allowed = _BARE_RUN_FILES | {f"{hc.job.name}.log"}
+        names = {p.name for p in folder.iterdir()}
+        log = folder / f"{hc.job.name}.log"
+        if log.exists() and log.read_text(encoding="utf-8").strip() not in ("", line):
+            return None
+        record = folder / ".hydra"
+        if not names <= allowed or (
+            record.exists() and not {p.name for p in record.iterdir()} <= _HYDRA_RECORD_FILES
+        ):
+            return None
+        return folder
+    except Exception:  # noqa: BLE001 - not in a Hydra job, or the folder does not read
+        return None
+
+
 @contextlib.contextmanager
 def copy_output_to(path: Path | None) -> Iterator[None]:
     """Copy what the command prints (standard output and error) into ``path`` as well.
@@ -748,6 +785,16 @@ def friendly_errors(
         _task_started()
         one_line_warnings()  # also in the processes of a parallel sweep's jobs
         _clear_failed_marker()
+        bare: list[Path] = []  # the run folder to delete once its log is closed
+        try:
+            return _guarded(args, kwargs, bare)
+        finally:
+            if bare:
+                import shutil
+
+                shutil.rmtree(bare[0], ignore_errors=True)
+
+    def _guarded(args: tuple, kwargs: dict, bare: list[Path]) -> Any:
         log_path = job_log_path()
         with copy_output_to(log_path), _terminate_as_interrupt():
             try:
@@ -764,6 +811,9 @@ def friendly_errors(
                     else f"error: {type(exc).__name__}: {exc}"
                 )
                 print(line, file=sys.stderr)
+                if isinstance(exc, ConfigError | YAMLError):
+                    # a config error before any work leaves no dated folder behind
+                    bare.extend(p for p in [bare_run_dir(line)] if p is not None)
                 _end_job(line)
                 return None
             except (MemoryError, RuntimeError) as exc:  # torch's allocators: RuntimeError

@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib
 import os
 import re
+import subprocess
 import sys
 from pathlib import Path
 
@@ -365,3 +366,59 @@ def test_the_commands_that_errors_suggest_run_as_suggested(
     assert lines == [
         'error: ConfigError: run.seeds: expected a list of int, got 3 (e.g. "run.seeds=[3]")'
     ]
+
+
+def test_a_config_error_before_any_work_leaves_no_dated_run_folder(tmp_path: Path) -> None:
+    """``run.seeds=3`` is refused after Hydra made ``outputs/experiment/<date_time>/``: that
+    folder, holding only Hydra's record and the error line, is deleted; a folder given with
+    ``hydra.run.dir`` is kept."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    cmd = [sys.executable, "-m", "iplanner_torch.cli.experiment", "run.seeds=3"]
+    res = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert res.returncode == 2 and "run.seeds: expected a list of int" in res.stderr
+    assert list((tmp_path / "outputs" / "experiment").iterdir()) == []
+    mine = tmp_path / "mine"
+    res = subprocess.run([*cmd, f"hydra.run.dir={mine}"], cwd=tmp_path, env=env,
+                         capture_output=True, text=True)  # fmt: skip
+    assert res.returncode == 2 and (mine / "experiment.log").is_file()
+
+
+@pytest.mark.parametrize(
+    ("log", "extra", "given_dir", "deleted"),
+    [
+        ("error: ConfigError: x\n", None, False, True),
+        ("experiment 'main': 3 episode(s)\nerror: ConfigError: x\n", None, False, False),
+        ("error: ConfigError: x\n", "results.csv", False, False),
+        ("error: ConfigError: x\n", None, True, False),
+    ],
+)
+def test_only_a_bare_dated_run_folder_is_deleted(
+    tmp_path: Path, log: str, extra: str | None, given_dir: bool, deleted: bool
+) -> None:
+    """A folder whose log shows printed work, that holds another file, or that the command
+    line named, is never a bare run folder."""
+    from hydra.conf import HydraConf
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli._common import bare_run_dir
+
+    folder = tmp_path / "outputs" / "experiment" / "2026-11-28_23-00-00"
+    (folder / ".hydra").mkdir(parents=True)
+    (folder / ".hydra" / "config.yaml").write_text("seed: 0\n")
+    (folder / "experiment.log").write_text(log)
+    if extra is not None:
+        (folder / extra).write_text("x")
+    hydra = OmegaConf.structured(HydraConf)
+    hydra.mode = RunMode.RUN
+    hydra.runtime.output_dir = str(folder)
+    hydra.job.name = "experiment"
+    hydra.overrides.hydra = [f"hydra.run.dir={folder}"] if given_dir else []
+    saved = HydraConfig.instance().cfg
+    HydraConfig.instance().set_config(OmegaConf.create({"hydra": hydra}))
+    try:
+        found = bare_run_dir("error: ConfigError: x")
+    finally:
+        HydraConfig.instance().cfg = saved
+    assert (found == folder) is deleted
