@@ -812,7 +812,12 @@ def friendly_errors(
                 )
                 print(line, file=sys.stderr)
                 if isinstance(exc, ConfigError | YAMLError):
-                    # a config error before any work leaves no dated folder behind
+                    # a config error before any work leaves no dated folder behind; an
+                    # unfinished line (a progress bar: work) reaches the log first
+                    for stream in (sys.stdout, sys.stderr):
+                        close = getattr(stream, "close_line", None)
+                        if callable(close):
+                            close()
                     bare.extend(p for p in [bare_run_dir(line)] if p is not None)
                 _end_job(line)
                 return None

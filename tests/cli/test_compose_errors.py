@@ -422,3 +422,44 @@ def test_only_a_bare_dated_run_folder_is_deleted(
     finally:
         HydraConfig.instance().cfg = saved
     assert (found == folder) is deleted
+
+
+@pytest.mark.parametrize("printed", ["", "training  40%|####      |"])
+def test_a_progress_bar_before_the_error_keeps_the_run_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture, printed: str
+) -> None:
+    """Through the commands' own wrapper: an error at once deletes the dated folder; a bar
+    left unfinished on the line (work under way) reaches the log first, and the folder
+    stays."""
+    from hydra.conf import HydraConf
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli._common import friendly_errors
+
+    folder = tmp_path / "outputs" / "train" / "2026-11-28_23-00-00"
+    (folder / ".hydra").mkdir(parents=True)
+    hydra = OmegaConf.structured(HydraConf)
+    hydra.mode = RunMode.RUN
+    hydra.runtime.output_dir = str(folder)
+    hydra.job.name = "train"
+    hydra.overrides.hydra = []
+
+    @friendly_errors
+    def task() -> None:
+        sys.stdout.write(printed)
+        raise ConfigError("x: expected int")
+
+    saved = HydraConfig.instance().cfg
+    HydraConfig.instance().set_config(OmegaConf.create({"hydra": hydra}))
+    try:
+        with pytest.raises(SystemExit) as stop:
+            task()
+    finally:
+        HydraConfig.instance().cfg = saved
+    assert stop.value.code == 2
+    assert "error: ConfigError: x: expected int" in capsys.readouterr().err
+    assert folder.exists() is bool(printed)
+    if printed:
+        assert printed in (folder / "train.log").read_text()
