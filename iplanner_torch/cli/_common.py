@@ -685,6 +685,8 @@ def job_log_path() -> Path | None:
 #: work: Hydra's record, the command's log and the resolved config (experiment)
 _BARE_RUN_FILES = frozenset({".hydra", "config_resolved.yaml"})
 _HYDRA_RECORD_FILES = frozenset({"config.yaml", "hydra.yaml", "overrides.yaml"})
+#: a record at INFO or DEBUG level in Hydra's job log format: ``[time][logger][INFO] - ...``
+_QUIET_LOG_RECORD = re.compile(r"^\[[^\]]+\]\[[^\]]+\]\[(INFO|DEBUG)\] - ")
 
 
 def bare_run_dir(line: str) -> Path | None:
@@ -692,7 +694,8 @@ def bare_run_dir(line: str) -> Path | None:
     run (not a job of a multirun) in the dated folder Hydra made for it (``hydra.run.dir``
     not given on the command line), holding nothing but :data:`_BARE_RUN_FILES`, Hydra's own
     record in ``.hydra/`` and the command's log, which holds nothing but ``line`` (the
-    command printed nothing before it: no work is recorded there); else None."""
+    command printed nothing before it: no work is recorded there) and libraries' INFO or
+    DEBUG logging records; else None."""
     try:
         from hydra.core.hydra_config import HydraConfig
         from hydra.types import RunMode
@@ -706,8 +709,16 @@ def bare_run_dir(line: str) -> Path | None:
         allowed = _BARE_RUN_FILES | {f"{hc.job.name}.log"}
         names = {p.name for p in folder.iterdir()}
         log = folder / f"{hc.job.name}.log"
-        if log.exists() and log.read_text(encoding="utf-8").strip() not in ("", line):
-            return None
+        if log.exists():
+            # what the command printed; a library's INFO / DEBUG record through Hydra's
+            # job logging (an import announcing itself) is not the command's work
+            kept = [
+                t
+                for t in log.read_text(encoding="utf-8").splitlines()
+                if t.strip() and not _QUIET_LOG_RECORD.match(t)
+            ]
+            if kept not in ([], [line]):
+                return None
         record = folder / ".hydra"
         if not names <= allowed or (
             record.exists() and not {p.name for p in record.iterdir()} <= _HYDRA_RECORD_FILES

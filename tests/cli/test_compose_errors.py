@@ -387,6 +387,20 @@ def test_a_config_error_before_any_work_leaves_no_dated_run_folder(tmp_path: Pat
     ("log", "extra", "given_dir", "deleted"),
     [
         ("error: ConfigError: x\n", None, False, True),
+        # a library announcing itself at import through Hydra's job logging is not work
+        (
+            "[2026-11-28 23:15:02,585][OpenGL.acceleratesupport][INFO] - No OpenGL_accelerate "
+            "module loaded\nerror: ConfigError: x\n",
+            None,
+            False,
+            True,
+        ),
+        (
+            "[2026-11-28 23:15:02,585][root][WARNING] - careful\nerror: ConfigError: x\n",
+            None,
+            False,
+            False,
+        ),
         ("experiment 'main': 3 episode(s)\nerror: ConfigError: x\n", None, False, False),
         ("error: ConfigError: x\n", "results.csv", False, False),
         ("error: ConfigError: x\n", None, True, False),
