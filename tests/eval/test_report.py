@@ -444,17 +444,8 @@ def test_whiskers_stay_within_the_episodes_values(
 
 def test_sweep_bands_stay_within_the_episodes_values(tmp_path: Path) -> None:
     """The ± 1 std band of a sweep plot went below 0 for a metric that cannot be negative."""
-    import iplanner_torch.eval.report as report
-
-    figures = []
-
-    class Recorded(report.Figure):
-        def __init__(self, *args, **kwargs) -> None:
-            super().__init__(*args, **kwargs)
-            figures.append(self)
-
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(report, "Figure", Recorded)
+        figures = _recorded_figures(mp)
         rows = [
             {"planner": "itomp", "noise": n, "seed": i, "jerkiness": v}
             for n in (0.0, 0.02)
@@ -508,16 +499,7 @@ def test_a_bar_of_one_episode_has_no_whisker(
 ) -> None:
     # A standard deviation of one value is undefined: the chart used to draw it as a flat
     # whisker of 0, which reads as "no spread". Now such a bar has no whisker at all.
-    import iplanner_torch.eval.report as report
-
-    figures = []
-
-    class Recorded(report.Figure):
-        def __init__(self, *args, **kwargs) -> None:
-            super().__init__(*args, **kwargs)
-            figures.append(self)
-
-    monkeypatch.setattr(report, "Figure", Recorded)
+    figures = _recorded_figures(monkeypatch)
     keep = results.groupby(["scenario", "planner"], sort=False).cumcount() < 2
     two_or_one = results[keep & ~((results.planner == "itomp") & (results.index % 2 == 1))]
     counts = two_or_one.groupby(["scenario", "planner"], sort=False).size()
@@ -700,12 +682,7 @@ def test_charts_say_what_they_average_over_and_draw_only_what_has_values(
 
     seen: dict[str, list] = {"bars": [], "lines": []}
     real_bars, real_lines = report.plot_comparison, report.plot_sweep
-    figures = []
-
-    class Recorded(report.Figure):
-        def __init__(self, *args, **kwargs) -> None:
-            super().__init__(*args, **kwargs)
-            figures.append(self)
+    figures = _recorded_figures(monkeypatch)
 
     def bars(*args, **kwargs):
         seen["bars"].append(kwargs.get("pooled"))
@@ -717,7 +694,6 @@ def test_charts_say_what_they_average_over_and_draw_only_what_has_values(
 
     monkeypatch.setattr(report, "plot_comparison", bars)
     monkeypatch.setattr(report, "plot_sweep", lines)
-    monkeypatch.setattr(report, "Figure", Recorded)
     df = _sweep_rows().assign(efficiency=np.nan, mhd=0.05)
     df.loc[df.planner == "itomp", "mhd"] = np.nan
     groups = report_groups(df)
