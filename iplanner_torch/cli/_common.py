@@ -829,7 +829,9 @@ def friendly_errors(
                         close = getattr(stream, "close_line", None)
                         if callable(close):
                             close()
-                    bare.extend(p for p in [bare_run_dir(line)] if p is not None)
+                    folder = bare_run_dir(line)
+                    if folder is not None:
+                        bare.append(folder)
                 _end_job(line)
                 return None
             except (MemoryError, RuntimeError) as exc:  # torch's allocators: RuntimeError
