@@ -729,6 +729,31 @@ def bare_run_dir(line: str) -> Path | None:
         return None
 
 
+def delete_run_dir(folder: Path, root: Path | None = None) -> None:
+    """Delete a bare run folder (:func:`bare_run_dir`), then its parents that it leaves
+    empty (``outputs/<job>/``, ``outputs/``) up to, not including, ``root`` (default: the
+    working directory the command was started in). Parents outside ``root`` are kept; errors
+    are ignored (a folder another run has written to since is not empty)."""
+    import shutil
+
+    if root is None:
+        try:
+            from hydra.core.hydra_config import HydraConfig
+
+            root = Path(HydraConfig.get().runtime.cwd)
+        except Exception:  # noqa: BLE001 - not in a Hydra job
+            root = Path.cwd()
+    shutil.rmtree(folder, ignore_errors=True)
+    root = root.resolve()
+    for parent in folder.resolve().parents:
+        if parent == root or root not in parent.parents:
+            break
+        try:
+            parent.rmdir()  # only an empty folder
+        except OSError:
+            break
+
+
 @contextlib.contextmanager
 def copy_output_to(path: Path | None) -> Iterator[None]:
     """Copy what the command prints (standard output and error) into ``path`` as well.
@@ -801,9 +826,7 @@ def friendly_errors(
             return _guarded(args, kwargs, bare)
         finally:
             if bare:
-                import shutil
-
-                shutil.rmtree(bare[0], ignore_errors=True)
+                delete_run_dir(bare[0])
 
     def _guarded(args: tuple, kwargs: dict, bare: list[Path]) -> Any:
         log_path = job_log_path()

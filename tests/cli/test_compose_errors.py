@@ -370,17 +370,42 @@ def test_the_commands_that_errors_suggest_run_as_suggested(
 
 def test_a_config_error_before_any_work_leaves_no_dated_run_folder(tmp_path: Path) -> None:
     """``run.seeds=3`` is refused after Hydra made ``outputs/experiment/<date_time>/``: that
-    folder, holding only Hydra's record and the error line, is deleted; a folder given with
+    folder, holding only Hydra's record and the error line, is deleted, and so are the
+    ``outputs/experiment/`` and ``outputs/`` it leaves empty; a folder given with
     ``hydra.run.dir`` is kept."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     cmd = [sys.executable, "-m", "iplanner_torch.cli.experiment", "run.seeds=3"]
     res = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True)
     assert res.returncode == 2 and "run.seeds: expected a list of int" in res.stderr
-    assert list((tmp_path / "outputs" / "experiment").iterdir()) == []
+    assert list(tmp_path.iterdir()) == []  # outputs/experiment/ left empty: gone too
     mine = tmp_path / "mine"
     res = subprocess.run([*cmd, f"hydra.run.dir={mine}"], cwd=tmp_path, env=env,
                          capture_output=True, text=True)  # fmt: skip
     assert res.returncode == 2 and (mine / "experiment.log").is_file()
+
+
+def test_deleting_a_bare_run_folder_removes_only_the_parents_it_leaves_empty(
+    tmp_path: Path,
+) -> None:
+    """Parents are removed while empty and inside the working directory; one holding another
+    run, the working directory itself and folders above it stay."""
+    from iplanner_torch.cli._common import delete_run_dir
+
+    root = tmp_path / "work"
+    first = root / "outputs" / "experiment" / "2026-11-28_23-00-00"
+    other = root / "outputs" / "train" / "2026-11-28_22-00-00"
+    for folder in (first, other):
+        (folder / ".hydra").mkdir(parents=True)
+    delete_run_dir(first, root)
+    assert not (root / "outputs" / "experiment").exists()
+    assert other.is_dir()  # outputs/ still holds train/
+    delete_run_dir(other, root)
+    assert root.is_dir() and list(root.iterdir()) == []
+    # a run folder outside the working directory: its parents are not touched
+    outside = tmp_path / "elsewhere" / "run"
+    outside.mkdir(parents=True)
+    delete_run_dir(outside, root)
+    assert not outside.exists() and (tmp_path / "elsewhere").is_dir()
 
 
 @pytest.mark.parametrize(
