@@ -52,6 +52,7 @@ import json
 import math
 import numbers
 import re
+import tokenize
 import warnings
 import zipfile
 import zlib
@@ -102,6 +103,19 @@ def _show(value: Any, limit: int = 60) -> str:
     """``repr(value)``, shortened to ``limit`` characters for error messages."""
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _is_dir(path: Path) -> bool:
+    """``path.is_dir()``, with a DataError naming ``path`` where the system refuses to look it
+    up at all (a name too long: a file's text passed as its path), where pathlib raises the
+    OSError instead of answering False."""
+    try:
+        return path.is_dir()
+    except OSError as exc:
+        raise DataError(
+            f"{_show(str(path))}: cannot look up this path ({exc.strerror}); expected the path "
+            "of a file or folder"
+        ) from exc
 
 
 def _json_type(value: Any) -> str:
@@ -190,17 +204,23 @@ def _from_json(obj: Any) -> Any:
     return obj
 
 
+#: why JSON holding an integer of more digits than Python's int() reads (4300) is refused
+_LONG_INTEGER = "an integer of too many digits to read, a corrupted number"
+
+
 def _parse_json(path: Path, field: str, text: str) -> Any:
     """``text`` parsed as JSON, with metadata's NaN and infinities decoded.
 
     Raises:
-        DataError: naming ``path`` and ``field`` when it is not valid JSON or is nested too
-            deep to decode.
+        DataError: naming ``path`` and ``field`` when it is not valid JSON, is nested too
+            deep to decode, or holds an integer too long to read.
     """
     try:
         return _from_json(json.loads(text))
     except json.JSONDecodeError as exc:
         raise DataError(f"{path}: field {field} is not valid JSON ({exc})") from exc
+    except ValueError as exc:  # an integer of more digits than int() reads
+        raise DataError(f"{path}: field {field} is not valid JSON ({_LONG_INTEGER})") from exc
     except RecursionError as exc:
         raise DataError(f"{path}: field {field} is not valid JSON (nested too deep)") from exc
 
@@ -351,6 +371,11 @@ def _read_npz(path: Path) -> dict[str, Any]:
             for k in z.files:
                 try:
                     data[k] = z[k]
+                except MemoryError:  # numpy allocates the shape the header declares, first
+                    raise DataError(
+                        f"{path}: not a valid NPZ demonstration file: field {k!r} declares an "
+                        "array too large to allocate (a damaged header)"
+                    ) from None
                 except ValueError as exc:
                     if "allow_pickle" not in str(exc):
                         raise
@@ -368,6 +393,12 @@ def _read_npz(path: Path) -> dict[str, Any]:
         EOFError,
         NotImplementedError,  # an unsupported compression method
         RuntimeError,  # an encrypted member
+        # an array header numpy cannot parse or use: unbalanced brackets, a shape of no
+        # integers or beyond int64
+        SyntaxError,
+        tokenize.TokenError,
+        TypeError,
+        OverflowError,
     ) as exc:
         raise DataError(f"{path}: not a valid NPZ demonstration file: corrupt ({exc})") from exc
     for key in _REQUIRED_NPZ:
@@ -429,6 +460,10 @@ def _read_csv_header(path: Path, comment: list[tuple[int, str]]) -> dict[str, An
             header = json.loads("".join(text for _, text in comment))
         except json.JSONDecodeError as exc:
             raise DataError(_header_json_error(path, comment, exc)) from exc
+        except ValueError as exc:  # an integer of more digits than int() reads
+            raise DataError(
+                f"{path}: field 'header' (# JSON comment) is invalid ({_LONG_INTEGER})"
+            ) from exc
         except RecursionError as exc:
             raise DataError(
                 f"{path}: field 'header' (# JSON comment) is invalid (nested too deep)"
@@ -911,7 +946,7 @@ def load_demonstration(
     path = Path(path)
     fps = _fps_argument(path, fps)
     joints = _joints_argument(joints)
-    if path.is_dir():
+    if _is_dir(path):
         raise DataError(
             f"{path}: is a folder; load_demonstration reads one .npz or .csv file "
             "(load_demonstrations reads every file below a folder)"
@@ -961,7 +996,7 @@ def demonstration_files(path: str | Path) -> list[Path]:
             f"{path}: an unfinished generation's temporary folder (interrupted, or still "
             "running), not a dataset; delete it and generate the dataset anew"
         )
-    if path.is_dir():
+    if _is_dir(path):
         return sorted(
             p
             for p in path.rglob("*")
@@ -1037,7 +1072,7 @@ def load_demonstrations(
             CSV whose first row holds numbers rather than column names, a ``#`` line after a
             CSV's column header row, a CSV cell overflowing a float (``1e400``), two files
             that would get the same name (both named); also for a ``path`` that is not a
-            str or os.PathLike.
+            str or os.PathLike, or that the system cannot look up (a name too long).
         ConfigError: for a ``joints`` argument that is not a non-empty sequence of unique
             names (a single string included).
 
@@ -1208,7 +1243,7 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
             short: that row is dropped).
     """
     path = Path(path)
-    if path.is_dir():
+    if _is_dir(path):
         files = sorted(p for p in path.rglob("*.txt") if p.is_file())
         root = path
     elif path.is_file():
