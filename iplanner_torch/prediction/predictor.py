@@ -687,11 +687,12 @@ class HumanMotionPredictor:
 
         Raises:
             CheckpointError: for a missing, corrupt or truncated file (naming it), a directory,
-                a checkpoint of another format version than ``CHECKPOINT_VERSION``, a
-                sub-model class that cannot be imported, or a checkpoint of another joint set
-                than ``expect_joints``.
+                a path the system cannot look up (a name too long), a checkpoint of another
+                format version than ``CHECKPOINT_VERSION``, a sub-model class that cannot be
+                imported, a field missing or of the wrong type, or a checkpoint of another joint
+                set than ``expect_joints``.
             ConfigError: when ``map_location`` is not a device, is ``meta`` (no data), or is
-                one this machine lacks.
+                one this machine lacks; when ``expect_joints`` is not a list or tuple.
         """
         path = Path(path)
         if map_location is not None:
@@ -707,7 +708,19 @@ class HumanMotionPredictor:
                     "map_location 'meta' holds no numbers, and a predictor needs its weights "
                     "to forecast: load it on a real device (e.g. 'cpu', 'cuda:0')"
                 )
-        if path.is_dir():
+        if expect_joints is not None and not isinstance(expect_joints, tuple | list):
+            raise ConfigError(
+                f"expected expect_joints a list or tuple of joint names, got {expect_joints!r}"
+            )
+        try:
+            is_dir = path.is_dir()
+        except OSError as err:  # pathlib answers False only for a missing path
+            shown = repr(str(path)) if len(str(path)) <= 60 else repr(str(path)[:57]) + "..."
+            raise CheckpointError(
+                f"predictor checkpoint {shown} cannot be looked up ({err.strerror}); expected "
+                "the path of a checkpoint file"
+            ) from err
+        if is_dir:
             raise CheckpointError(
                 f"predictor checkpoint {path} is a directory, not a checkpoint file (a training "
                 "run writes <out_dir>/predictor.ckpt)"
@@ -721,21 +734,24 @@ class HumanMotionPredictor:
                 f"cannot read predictor checkpoint {path} ({type(err).__name__}: {err}): the "
                 "file is cut short, damaged or not a torch checkpoint; train it again"
             ) from err
-        if not isinstance(d, dict) or d.get("kind") != "HumanMotionPredictor":
+        if not isinstance(d, dict) or not _equals(d.get("kind"), "HumanMotionPredictor"):
             raise CheckpointError(f"{path} is not a HumanMotionPredictor checkpoint")
         version = d.get("version")
-        if version != CHECKPOINT_VERSION:
+        if not _equals(version, CHECKPOINT_VERSION):
             raise CheckpointError(
                 f"predictor checkpoint {path} has format version {version!r}; this code reads "
                 f"version {CHECKPOINT_VERSION} (retrain, or load it with the matching code)"
             )
-        if "digest" in d and d["digest"] != content_digest(d):
+        if "digest" in d and not _equals(d["digest"], content_digest(d)):
             raise CheckpointError(
                 f"predictor checkpoint {path} is damaged: its contents do not match the "
                 "digest written with them (retrain, or restore the file)"
             )
-        if expect_joints is not None and "joint_names" not in d:
-            raise CheckpointError(f"predictor checkpoint {path} is incomplete: no joint_names")
+        if expect_joints is not None and not isinstance(d.get("joint_names"), tuple | list):
+            raise CheckpointError(
+                f"predictor checkpoint {path} is incomplete: no joint_names (a list of names), "
+                f"got {type(d.get('joint_names')).__name__}"
+            )
         if expect_joints is not None and tuple(expect_joints) != tuple(d["joint_names"]):
             raise CheckpointError(
                 f"{path} was trained on joints {tuple(d['joint_names'])}, expected "
@@ -745,8 +761,11 @@ class HumanMotionPredictor:
             pred = cls._from_dict(d)
         except CheckpointError as err:
             raise CheckpointError(f"predictor checkpoint {path}: {err}") from err
-        except (KeyError, TypeError, ValueError, RuntimeError) as err:
-            raise CheckpointError(f"predictor checkpoint {path} is incomplete: {err}") from err
+        except Exception as err:  # noqa: BLE001 - a missing key, a value of the wrong type
+            raise CheckpointError(
+                f"predictor checkpoint {path} is incomplete or malformed "
+                f"({type(err).__name__}: {err})"
+            ) from err
         if map_location is not None:
             try:
                 pred.to(map_location)
@@ -812,6 +831,12 @@ class HumanMotionPredictor:
             window_cfg=d.get("window_cfg"),
             inputs_digest=d.get("inputs_digest", ""),
         )
+
+
+def _equals(value: Any, expected: str | int) -> bool:
+    """``value == expected`` for a checkpoint field of any type: a tensor or an array (whose
+    ``==`` has no single truth value) is never equal."""
+    return isinstance(value, str | int | float) and value == expected
 
 
 def _rebuild(d: dict[str, Any], name: str) -> Any:

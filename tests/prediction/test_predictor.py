@@ -391,6 +391,39 @@ def test_damaged_or_foreign_checkpoints_raise_checkpoint_errors(trained, tmp_pat
         HumanMotionPredictor.load(path, map_location=torch.device("meta"))
 
 
+def test_checkpoint_fields_of_the_wrong_type_raise_checkpoint_errors(
+    trained, tmp_path: Path
+) -> None:
+    path, _ = trained
+    d = torch.load(path, weights_only=False)
+    key = next(iter(d["gps"]))
+    cases = {  # each raised the untyped error named
+        "gps": (dict(gps=None), "is incomplete or malformed \\(AttributeError: "),
+        "n_prev": (dict(n_prev=math.inf), "is incomplete or malformed \\(OverflowError: "),
+        "window": (  # IndexError
+            dict(gps={**d["gps"], key: {**d["gps"][key], "window": [1]}}),
+            "is incomplete or malformed \\(IndexError: ",
+        ),
+        "version": (dict(version=torch.zeros(3)), "has format version tensor"),  # RuntimeError
+        "kind": (dict(kind=np.array(["a", "b"])), "is not a HumanMotionPredictor checkpoint"),
+    }
+    for name, (changes, message) in cases.items():
+        bad = _rewrite(path, tmp_path / f"{name}.ckpt", **changes)
+        with pytest.raises(CheckpointError, match=f"{name}.ckpt {message}"):
+            HumanMotionPredictor.load(bad)
+    bad = _rewrite(path, tmp_path / "digest.ckpt", digest=False)  # ValueError
+    torch.save({**torch.load(bad, weights_only=False), "digest": np.zeros(3)}, bad)
+    with pytest.raises(CheckpointError, match="digest.ckpt is damaged"):
+        HumanMotionPredictor.load(bad)
+    bad = _rewrite(path, tmp_path / "joints.ckpt", joint_names=None)  # TypeError
+    with pytest.raises(CheckpointError, match="joints.ckpt is incomplete: no joint_names"):
+        HumanMotionPredictor.load(bad, expect_joints=JOINTS)
+    with pytest.raises(ConfigError, match="expected expect_joints a list or tuple.*got 5"):
+        HumanMotionPredictor.load(path, expect_joints=5)  # TypeError
+    with pytest.raises(CheckpointError, match=r"cannot be looked up \(File name too long\)"):
+        HumanMotionPredictor.load(tmp_path / ("x" * 300 + ".ckpt"))  # OSError
+
+
 def test_checkpoint_roundtrip_and_errors(trained, tmp_path: Path) -> None:
     path, w = trained
     pred = HumanMotionPredictor.load(path, expect_joints=JOINTS)
