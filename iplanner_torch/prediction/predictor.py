@@ -26,6 +26,7 @@ import hashlib
 import importlib
 import math
 import numbers
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -708,7 +709,9 @@ class HumanMotionPredictor:
                     "map_location 'meta' holds no numbers, and a predictor needs its weights "
                     "to forecast: load it on a real device (e.g. 'cpu', 'cuda:0')"
                 )
-        if expect_joints is not None and not isinstance(expect_joints, tuple | list):
+        if expect_joints is not None and (
+            isinstance(expect_joints, str) or not isinstance(expect_joints, Sequence)
+        ):
             raise ConfigError(
                 f"expected expect_joints a list or tuple of joint names, got {expect_joints!r}"
             )

@@ -420,6 +420,8 @@ def test_checkpoint_fields_of_the_wrong_type_raise_checkpoint_errors(
         HumanMotionPredictor.load(bad, expect_joints=JOINTS)
     with pytest.raises(ConfigError, match="expected expect_joints a list or tuple.*got 5"):
         HumanMotionPredictor.load(path, expect_joints=5)  # TypeError
+    with pytest.raises(ConfigError, match="expected expect_joints a list or tuple.*'torso'"):
+        HumanMotionPredictor.load(path, expect_joints="torso")  # split into characters
     with pytest.raises(CheckpointError, match=r"cannot be looked up \(File name too long\)"):
         HumanMotionPredictor.load(tmp_path / ("x" * 300 + ".ckpt"))  # OSError
 
