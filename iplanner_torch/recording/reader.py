@@ -13,7 +13,8 @@ Scene spheres: the writer leaves out sphere rows with NaN or an infinity (Foxglo
 sphere) and then names, in the entity's metadata, the number of rows (``sphere_count``) and
 the rows of its spheres in order (``sphere_rows``, comma-separated indices), so every sphere
 is read back in its slot and the rows left out are NaN. An entity without them (every row
-drawn, or a log of an earlier writer) is read as it is.
+drawn, or a log of an earlier writer) is read as it is. A ``sphere_count`` above 2^20 rows is
+taken as damage (a ``DataError``), not allocated.
 """
 
 from __future__ import annotations
@@ -21,9 +22,10 @@ from __future__ import annotations
 import functools
 import json
 import math
+import reprlib
 import warnings
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,8 +34,8 @@ import numpy as np
 import pandas as pd
 import torch
 from mcap.reader import make_reader
-from mcap.records import Channel, DataEnd, Footer, Message, Metadata
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Chunk, DataEnd, Footer, McapRecord, Message, Metadata
+from mcap.stream_reader import StreamReader, breakup_chunk
 
 from iplanner_torch.errors import DataError, DataWarning
 from iplanner_torch.prediction.forecast import Forecast
@@ -60,7 +62,11 @@ EPISODE_METADATA_NAME = "iplanner.episode"
 #: Scene entity metadata keys: the number of sphere rows, and the rows its spheres are.
 SPHERE_COUNT_KEY = "sphere_count"
 SPHERE_ROWS_KEY = "sphere_rows"
+#: the most sphere rows a scene entity's ``sphere_count`` may name (more is taken as damage)
+_MAX_SPHERE_ROWS = 2**20
 _MAGIC = b"\x89MCAP0\r\n"
+#: the largest log time an MCAP record holds (an unsigned 64-bit integer) [ns]
+_MAX_LOG_TIME_NS = 2**64 - 1
 #: how a Git LFS pointer file (left where a file was never fetched) begins
 _LFS_POINTER = b"version https://git-lfs.github.com/spec/"
 
@@ -92,6 +98,11 @@ def _sphere_slots(entity: dict[str, Any], n_drawn: int) -> tuple[int, list[int]]
             f"scene entity {SPHERE_COUNT_KEY!r} and {SPHERE_ROWS_KEY!r} must be strings"
         )
     n = int(count)
+    if n > _MAX_SPHERE_ROWS:  # each row is allocated: a damaged count must not take the memory
+        raise ValueError(
+            f"scene entity {entity.get('id')!r}: {SPHERE_COUNT_KEY} {reprlib.repr(count)} is "
+            f"more than {_MAX_SPHERE_ROWS} rows"
+        )
     idx = [int(i) for i in rows.split(",")] if rows else []
     if (
         len(idx) != n_drawn
@@ -340,6 +351,12 @@ class Episode:
         df = self.frames.get(topic)
         if df is None or len(df) == 0:
             raise DataError(f"{self.path}: no messages on {topic}")
+        if "message" in df.columns:  # kept as dicts: the file has no episode metadata record
+            raise DataError(
+                f"{self.path}: the messages on {topic} are not decoded (no "
+                f"{EPISODE_METADATA_NAME} metadata record: not an episode log, or a damaged "
+                f"one); they are in frames[{topic!r}]['message']"
+            )
         return df
 
     def _constant_names(self, topic: str, column: str) -> tuple[str, ...]:
@@ -459,7 +476,9 @@ class Episode:
     def metrics(self) -> dict[str, Any]:
         """The last ``/episode/metrics`` message's dict ({} when none was logged)."""
         df = self.frames.get("/episode/metrics")
-        return {} if df is None or len(df) == 0 else dict(df["metrics"].iloc[-1])
+        if df is None or len(df) == 0:
+            return {}
+        return dict(self._frame("/episode/metrics")["metrics"].iloc[-1])
 
 
 @dataclass
@@ -530,23 +549,51 @@ def _read_indexed(f: Any) -> _Raw:
     _check_summary_crc(f)
     f.seek(0)
     reader = make_reader(f, validate_crcs=True)
-    if reader.get_summary() is None:
+    summary = reader.get_summary()
+    if summary is None:
         raise DataError("no summary section")
     raw = _Raw(complete=True)
+    n_read = 0
     for _, channel, message in reader.iter_messages(log_time_order=False):
+        n_read += 1
         if _is_read(channel):
             raw.keep(channel, message.log_time, message.data)
         else:
             raw.skip(channel)
+    # a chunk whose checksum field was zeroed ("none written") and whose compression name was
+    # damaged is taken as uncompressed by the mcap reader, and its messages vanish silently
+    counted = summary.statistics.message_count if summary.statistics else None
+    if counted is not None and counted != n_read:
+        raise DataError(f"the chunks hold {n_read} messages, the summary counts {counted}")
     for m in reader.iter_metadata():
         raw.metadata[m.name] = dict(m.metadata)
     return raw
 
 
+#: the chunk compressions of MCAP ("": none)
+_COMPRESSIONS = ("", "zstd", "lz4")
+
+
+def _stream_records(f: Any, size: int) -> Iterator[McapRecord]:
+    """The records of a file in order, each chunk's records in its place. A chunk of another
+    compression is a DataError: the mcap reader takes it as uncompressed, and one whose
+    compression name and checksum field (0: none written) were damaged lost its messages
+    silently."""
+    for record in StreamReader(
+        f, validate_crcs=True, emit_chunks=True, record_size_limit=max(size, 1)
+    ).records:
+        if isinstance(record, Chunk):
+            if record.compression not in _COMPRESSIONS:
+                raise DataError(f"a chunk has unknown compression {record.compression!r}")
+            yield from breakup_chunk(record, validate_crc=True)
+        else:
+            yield record
+
+
 def _read_stream(f: Any, size: int) -> _Raw:
     raw = _Raw()
     channels: dict[int, Channel] = {}
-    records = StreamReader(f, validate_crcs=True, record_size_limit=max(size, 1)).records
+    records = _stream_records(f, size)
     while True:
         try:
             record = next(records)
@@ -581,13 +628,15 @@ def read_episode(path: str | Path) -> Episode:
 
     Raises:
         DataError: when ``path`` is not a file path (str or os.PathLike), the file is missing
-            or unreadable, is not MCAP, its metadata is not a JSON object, or a message cannot
-            be decoded (not JSON or nested too deep, a field missing or of the wrong type, or
-            an array whose size does not fit its joint or action names).
+            or unreadable, is not MCAP, its metadata is not a JSON object (or its time offset
+            not in [0, 2^64 - 1] ns), or a message cannot be decoded (not JSON or nested too
+            deep, a field missing or of the wrong type, a number too large for a float, or an
+            array whose size does not fit its joint or action names).
 
     Warns:
         DataWarning: when the file is truncated or damaged (a chunk or the summary failing its
-            checksum, a missing footer, an episode metadata record failing its checksum); the
+            checksum, a chunk of unknown compression, fewer or more messages than the summary
+            counts, a missing footer, an episode metadata record failing its checksum); the
             episode then holds the messages of every chunk before the damage (a prefix of what
             was written). A file cut within its first 8 bytes (empty included) is an empty,
             incomplete episode. A complete MCAP file with no episode metadata record is not an
@@ -684,6 +733,11 @@ def read_episode(path: str | Path) -> Episode:
     try:
         metadata = json.loads(meta_rec["json"]) if "json" in meta_rec else {}
         offset_ns = int(meta_rec.get("time_offset_ns", "0"))
+        if not 0 <= offset_ns <= _MAX_LOG_TIME_NS:
+            raise ValueError(
+                f"time_offset_ns {reprlib.repr(offset_ns)} is not in [0, 2^64 - 1] "
+                "(an unsigned 64-bit log time)"
+            )
         if not isinstance(metadata, dict):
             raise TypeError(f"expected a JSON object, got {type(metadata).__name__}")
         if codec not in VALUE_CODECS:
@@ -707,8 +761,9 @@ def read_episode(path: str | Path) -> Episode:
                 row = {"t": (log_time - offset_ns) * 1e-9, "message": msg}
             else:
                 row = decoder(msg, offset_ns)
-        except (ValueError, KeyError, TypeError, IndexError, RecursionError) as err:
-            # RecursionError: JSON nested deeper than the decoders' recursion goes
+        except (ValueError, KeyError, TypeError, IndexError, RecursionError, OverflowError) as err:
+            # RecursionError: JSON nested deeper than the decoders' recursion goes;
+            # OverflowError: an integer too large for a float (a time, an array value)
             raise DataError(f"{path}: cannot decode a message on {topic}: {err!r}") from err
         rows.setdefault(topic, []).append(row)
     frames = {topic: pd.DataFrame.from_records(r) for topic, r in rows.items()}
