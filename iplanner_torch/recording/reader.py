@@ -82,7 +82,11 @@ def metadata_crc(json_text: str, time_offset_ns: str, value_codec: str | None = 
 
 
 def _t_of_stamp(stamp: dict[str, int], offset_ns: int) -> float:
-    return (stamp["sec"] * 1_000_000_000 + stamp["nsec"] - offset_ns) * 1e-9
+    sec, nsec = stamp["sec"], stamp["nsec"]
+    for v in (sec, nsec):  # a string or a list would be repeated 10^9 times below
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise ValueError(f"timestamp sec and nsec must be numbers, got {reprlib.repr(stamp)}")
+    return (sec * 1_000_000_000 + nsec - offset_ns) * 1e-9
 
 
 def _sphere_slots(entity: dict[str, Any], n_drawn: int) -> tuple[int, list[int]] | None:

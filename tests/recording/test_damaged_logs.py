@@ -164,3 +164,19 @@ def test_accessors_of_messages_not_decoded_name_the_file(tmp_path: Path) -> None
             rf"metadata record",
         ):
             getattr(ep, accessor)()
+
+
+@pytest.mark.parametrize("sec", ['"1"', "[1, 2]"])
+def test_a_stamp_that_is_not_a_number_is_a_data_error(tmp_path: Path, sec: str) -> None:
+    """A /tf stamp whose sec was a string or a list was repeated 10^9 times (gigabytes, or a
+    bare MemoryError) before the sum failed."""
+    tf = (
+        b'{"timestamp": {"sec": %s, "nsec": 0}, "parent_frame_id": "world", "child_frame_id": '
+        b'"t", "translation": {"x": 0, "y": 0, "z": 0}, "rotation": {"x": 0, "y": 0, "z": 0, '
+        b'"w": 1}}' % sec.encode()
+    )
+    path = _plain_mcap(tmp_path / "stamp.mcap", [("/tf", tf)], _record())
+    with pytest.raises(
+        DataError, match=r"stamp.mcap: cannot decode a message on /tf: .*sec and nsec must be n"
+    ):
+        read_episode(path)
