@@ -811,6 +811,11 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
     the_fps = float(file_fps if file_fps is not None else fps)
     if not (math.isfinite(the_fps) and the_fps > 0):
         raise DataError(f"{path}: field 'fps' must be finite and > 0, got {the_fps}")
+    if t >= 2 and not math.isfinite((t - 1) / the_fps):  # fps=1e-308: times overflow
+        raise DataError(
+            f"{path}: field 'fps' is {the_fps:g} Hz: the time of frame {t - 1}, "
+            f"{t - 1} / fps, is beyond float range"
+        )
     ts = raw["timestamps"]
     if ts is not None:
         if np.asarray(ts).dtype.kind not in "iuf":

@@ -87,3 +87,19 @@ def test_a_path_the_system_cannot_look_up(tmp_path, loader):
     for path in (tmp_path / ("x" * 300 + ".csv"), text):
         with pytest.raises(DataError, match=r"cannot look up this path \(File name too long\)"):
             loader(path)  # raised OSError
+
+
+@pytest.mark.parametrize("in_file", [True, False])
+def test_a_frame_rate_so_small_that_frame_times_overflow(tmp_path, in_file):
+    """fps=1e-308 is finite and > 0, but (T - 1) / fps is not: the frame times, computed
+    when the file gives none, were infinite (with numpy's RuntimeWarning)."""
+    p = _saved(tmp_path / "m.npz")
+    arrays = {k: v for k, v in np.load(p).items() if k not in ("timestamps", "fps")}
+    if in_file:
+        arrays["fps"] = np.array(1e-308)
+    np.savez(p, **arrays)
+    with pytest.raises(DataError, match=r"fps' is 1e-308 Hz: the time of frame 5"):
+        load_demonstration(p, fps=None if in_file else 1e-308)
+    if not in_file:  # a slow rate whose frame times are finite is fine
+        demo = load_demonstration(p, fps=1e-3)
+        assert demo.timestamps[-1] == pytest.approx(5e3)
