@@ -34,7 +34,16 @@ import numpy as np
 import pandas as pd
 import torch
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, DataEnd, Footer, McapRecord, Message, Metadata
+from mcap.records import (
+    Channel,
+    Chunk,
+    DataEnd,
+    Footer,
+    McapRecord,
+    Message,
+    Metadata,
+    Statistics,
+)
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from iplanner_torch.errors import DataError, DataWarning
@@ -594,21 +603,41 @@ def _stream_records(f: Any, size: int) -> Iterator[McapRecord]:
             yield record
 
 
+def _error_text(err: BaseException) -> str:
+    """``"Type: message"``. A MemoryError or OverflowError comes from the mcap library
+    reading the bytes that a damaged length field declares ("byte string is too large", or
+    no message at all): it says so."""
+    text = str(err).strip()
+    if isinstance(err, MemoryError | OverflowError):
+        text = "a length field declares more bytes than can be read (damaged)" + (
+            f" ({text})" if text else ""
+        )
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
+
+
 def _read_stream(f: Any, size: int) -> _Raw:
+    """Every record in file order, up to the first that does not read. The data section
+    read in full (its end record and the footer reached) is complete unless the summary's
+    statistics count other messages than were read: a chunk removed or repeated, whose own
+    checksum holds, leaves the summary's (and its offsets) wrong but the stream readable."""
     raw = _Raw()
     channels: dict[int, Channel] = {}
     records = _stream_records(f, size)
+    n_read, counted = 0, None
     while True:
         try:
             record = next(records)
         except StopIteration:
             break
         except Exception as err:  # truncated or damaged record: keep what came before it
-            raw.problem = f"{type(err).__name__}: {err}"
+            raw.problem = _error_text(err)
             break
+        if isinstance(record, Statistics):
+            counted = record.message_count
         if isinstance(record, Channel):
             channels[record.id] = record
         elif isinstance(record, Message):
+            n_read += 1
             ch = channels.get(record.channel_id)
             if ch is not None and _is_read(ch):
                 raw.keep(ch, record.log_time, record.data)
@@ -618,6 +647,10 @@ def _read_stream(f: Any, size: int) -> _Raw:
             raw.metadata[record.name] = dict(record.metadata)
         elif isinstance(record, DataEnd | Footer):  # every data record has been read
             raw.complete = True
+    if raw.complete and counted is not None and counted != n_read:
+        raw.complete = False
+        mismatch = f"the chunks hold {n_read} messages, the summary counts {counted}"
+        raw.problem = f"{raw.problem}; {mismatch}" if raw.problem else mismatch
     return raw
 
 
@@ -683,7 +716,7 @@ def read_episode(path: str | Path) -> Episode:
                 except Exception as err:  # no or damaged summary: read sequentially
                     f.seek(0)
                     raw = _read_stream(f, size)
-                    first = f"{type(err).__name__}: {err}"
+                    first = _error_text(err)
                     raw.problem = f"{first}; then {raw.problem}" if raw.problem else first
     except OSError as err:
         raise DataError(f"{path}: cannot read the episode log: {err}") from err

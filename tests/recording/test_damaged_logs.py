@@ -180,3 +180,60 @@ def test_a_stamp_that_is_not_a_number_is_a_data_error(tmp_path: Path, sec: str) 
         DataError, match=r"stamp.mcap: cannot decode a message on /tf: .*sec and nsec must be n"
     ):
         read_episode(path)
+
+
+def _chunks(blob: bytes) -> list[tuple[int, int]]:
+    """(offset, length) of every chunk record of a log."""
+    at, chunks = 8, []
+    while blob[at] != _DATA_END:
+        n = 9 + struct.unpack_from("<Q", blob, at + 1)[0]
+        if blob[at] == _CHUNK:
+            chunks.append((at, n))
+        at += n
+    return chunks
+
+
+@pytest.mark.parametrize(
+    ("damage", "held", "q"),
+    [("removed", 4, [[0.0], [2.0], [3.0]]), ("repeated", 6, [[0.0], [1.0], [1.0], [2.0], [3.0]])],
+)
+def test_a_removed_or_repeated_chunk_makes_the_log_incomplete(
+    tmp_path: Path, damage: str, held: int, q: list
+) -> None:
+    """A chunk cut out or written twice keeps its own checksum, so the sequential read that
+    follows the summary's failure read every chunk and called the log complete; the summary's
+    statistics count other messages than were read, and the log is incomplete now."""
+    path = tmp_path / "log.mcap"
+    with EpisodeWriter(path, metadata={}, chunk_size=64) as log:
+        for i in range(4):
+            log.robot_state(0.1 * i, [float(i)], [0.0], ["a"])
+    blob = path.read_bytes()
+    at, n = _chunks(blob)[2]  # the chunk of q = 1
+    if damage == "repeated":
+        path.write_bytes(blob[: at + n] + blob[at:])
+    else:
+        path.write_bytes(blob[:at] + blob[at + n :])
+    with pytest.warns(DataWarning, match=f"the chunks hold {held} messages, the summary counts 5"):
+        ep = read_episode(path)
+    assert not ep.complete and ep.robot_q()[1].tolist() == q
+
+
+def test_a_huge_length_field_is_named_in_the_warning(tmp_path: Path) -> None:
+    """A chunk's compressed-size field set to 2^63 - 1 made the mcap library fail with
+    "OverflowError: byte string is too large": the warning now says a length field is
+    damaged."""
+    path = tmp_path / "log.mcap"
+    with EpisodeWriter(path, metadata={}, chunk_size=64) as log:
+        for i in range(4):
+            log.robot_state(0.1 * i, [float(i)], [0.0], ["a"])
+    blob = bytearray(path.read_bytes())
+    at, _ = _chunks(bytes(blob))[-1]
+    # opcode, length, start and end times, uncompressed size, crc, compression: then the size
+    size_at = at + 37 + 4 + struct.unpack_from("<I", blob, at + 37)[0]
+    struct.pack_into("<Q", blob, size_at, 2**63 - 1)
+    path.write_bytes(bytes(blob))
+    with pytest.warns(DataWarning) as caught:
+        ep = read_episode(path)
+    text = str(caught[0].message)
+    assert "OverflowError: a length field declares more bytes than can be read (damaged)" in text
+    assert not ep.complete and ep.robot_q()[1].tolist() == [[0.0], [1.0], [2.0]]
