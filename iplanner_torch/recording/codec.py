@@ -10,7 +10,10 @@ JSON has no NaN or infinity.
   ``"-inf"``, ``None`` as ``null``, and a string that would read as one of them (``"nan"``,
   ``"inf"``, ``"-inf"``) or that starts with ``~`` gets a ``~`` in front. So
   :func:`decode_value` gives back every value as it was: ``None`` stays ``None`` and the
-  string ``"inf"`` stays a string.
+  string ``"inf"`` stays a string. Mappings need string keys (JSON's object keys are strings:
+  ``{1: "a"}`` would read back as ``{"1": "a"}``), values may nest at most
+  :data:`MAX_VALUE_DEPTH` levels (a structure that holds itself never ends), and complex
+  numbers are refused (a float has no imaginary part): :func:`encode_value` raises on them.
 
 Logs written before the value codec was recorded (value codec ``"1"``) wrote a free-form NaN
 as ``null`` and strings as they were; :func:`decode_value` with ``codec="1"`` reads them as
@@ -98,21 +101,41 @@ def _free_scalar(x: Any) -> Any:
     return encode_scalar(x)  # bool, None, int, finite float, +-inf
 
 
-def encode_value(x: Any) -> Any:
+#: How deep free-form values may nest (mappings and lists in one another): a reader decodes
+#: them recursively, so a deeper value could be written but not read back.
+MAX_VALUE_DEPTH = 100
+
+
+def encode_value(x: Any, _depth: int = 0) -> Any:
     """Recursively make dicts, lists, tensors and numbers JSON-safe, losslessly (value codec
     ``"2"`` of the module docstring: NaN as ``"nan"``, ``None`` as ``null``, strings that
-    would read as numbers escaped with ``~``)."""
+    would read as numbers escaped with ``~``).
+
+    Raises:
+        TypeError: on a mapping key that is not a string, or a complex number or array.
+        ValueError: on values nested deeper than :data:`MAX_VALUE_DEPTH` (or holding
+            themselves).
+    """
+    if _depth > MAX_VALUE_DEPTH:
+        raise ValueError(
+            f"nested deeper than {MAX_VALUE_DEPTH} levels (or a value that holds itself)"
+        )
     if isinstance(x, Mapping):
-        return {str(k): encode_value(v) for k, v in x.items()}
+        bad = [k for k in x if not isinstance(k, str)]
+        if bad:
+            raise TypeError(f"keys must be strings (JSON object keys), got {bad[0]!r}")
+        return {k: encode_value(v, _depth + 1) for k, v in x.items()}
     if isinstance(x, torch.Tensor | np.ndarray):
         if x.dtype == torch.bool or (isinstance(x, np.ndarray) and x.dtype == np.bool_):
             return as_numpy(x, dtype=bool).tolist()
+        if x.is_complex() if isinstance(x, torch.Tensor) else np.iscomplexobj(x):
+            raise TypeError(f"complex values are not real numbers: dtype {x.dtype}")
         a = as_numpy(x)
         if np.isfinite(a).all():
             return a.tolist()
         return np.vectorize(_free_scalar, otypes=[object])(a.astype(object)).tolist()
     if isinstance(x, Sequence) and not isinstance(x, str | bytes):
-        return [encode_value(v) for v in x]
+        return [encode_value(v, _depth + 1) for v in x]
     if isinstance(x, np.bool_):
         return bool(x)
     if isinstance(x, np.integer):

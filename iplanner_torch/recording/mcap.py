@@ -44,8 +44,9 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import operator
 import reprlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -57,6 +58,7 @@ from mcap.writer import CompressionType, Writer
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
+from iplanner_torch.checks import integer, is_real
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.recording.codec import (
@@ -221,13 +223,15 @@ def _numbers(name: str, x: Any, pretty: str) -> torch.Tensor:
     """``x`` as a tensor (float64 unless it is one already); a ShapeError naming ``name`` and
     its expected shape ``pretty`` when it is not numbers (strings, ragged nested lists)."""
     if isinstance(x, torch.Tensor):
+        if x.is_complex():  # as_numpy would drop the imaginary parts
+            raise ShapeError(f"expected {name} {pretty} of real numbers, got dtype {x.dtype}")
         return x
     try:
         a = np.asarray(x)
         if a.dtype.kind not in _NUMERIC_KINDS:
             raise TypeError(f"dtype {a.dtype}")
         return torch.as_tensor(a.astype(np.float64, copy=False))
-    except (TypeError, ValueError) as err:
+    except (TypeError, ValueError, OverflowError) as err:  # OverflowError: an int past float
         raise ShapeError(f"expected {name} {pretty} of numbers, got {reprlib.repr(x)}") from err
 
 
@@ -265,19 +269,25 @@ class EpisodeWriter:
     Metadata, metrics and task event details read back as they were given: NaN and
     infinities as floats, ``None`` as ``None``, strings as strings (even ``"inf"``; see
     :mod:`~iplanner_torch.recording.codec`). Tensors and arrays in them read back as lists.
+    Their keys must be strings, they may nest at most
+    :data:`~iplanner_torch.recording.codec.MAX_VALUE_DEPTH` levels and hold no complex
+    numbers.
 
     Raises:
-        ConfigError: on a non-positive chunk size, unknown compression, a confidence outside
-            (0, 1) or a time offset outside [0, 2^64 - 1].
-        DataError: when ``metadata`` is not JSON-serialisable, or ``path`` cannot be written
-            (a folder, below a file, no permission). The logging methods raise ``ShapeError``
-            on arrays of the wrong shape or not numbers, and ``DataError`` on other arguments
-            of the wrong type or value (a time that is not one or whose log time passes
-            2^64 - 1 ns, a number that is not one, a non-bool ``feasible``, names or frame
-            ids that are not strings, metrics or details that are not a mapping, ellipsoid
-            covariances, means or semi-axes with NaN or an infinity, colours outside [0, 1])
-            and on names that differ from the earlier ones of their channel; nothing of a
-            refused message is written.
+        ConfigError: on a chunk size that is not an integer > 0, unknown compression, a
+            confidence outside (0, 1) or a time offset that is not an integer in
+            [0, 2^64 - 1].
+        DataError: when ``metadata`` is not JSON-serialisable (as above), or ``path`` is not
+            a path or cannot be written (a folder, below a file, no permission). The logging
+            methods raise ``ShapeError`` on arrays of the wrong shape or not real numbers,
+            and ``DataError`` on other arguments of the wrong type or value (a time that is
+            not one or whose log time passes 2^64 - 1 ns, a number that is not one or not
+            finite, a non-bool ``feasible``, names that are not a sequence of strings, frame
+            ids or an event kind that are not strings, a transform with NaN or an infinity,
+            metrics or details that are not a mapping or not JSON-serialisable as above,
+            ellipsoid covariances, means or semi-axes with NaN or an infinity, colours outside
+            [0, 1]) and on names that differ from the earlier ones of their channel; nothing
+            of a refused message is written.
     """
 
     def __init__(
@@ -290,18 +300,23 @@ class EpisodeWriter:
         ellipsoid_confidence: float = 0.95,
         time_offset_ns: int = 0,
     ) -> None:
-        if chunk_size <= 0:
-            raise ConfigError(f"expected chunk_size > 0 bytes, got {chunk_size}")
-        if compression not in _COMPRESSION:
+        chunk_size = integer("chunk_size", chunk_size, minimum=1)
+        if not isinstance(compression, str) or compression not in _COMPRESSION:
             raise ConfigError(f"expected compression in {sorted(_COMPRESSION)}, got {compression}")
-        if not 0.0 < ellipsoid_confidence < 1.0:
+        if not (is_real(ellipsoid_confidence) and 0.0 < ellipsoid_confidence < 1.0):
             raise ConfigError(
-                f"expected ellipsoid_confidence in (0, 1), got {ellipsoid_confidence}"
+                f"expected ellipsoid_confidence in (0, 1), got {ellipsoid_confidence!r}"
             )
-        if not 0 <= time_offset_ns <= MAX_LOG_TIME_NS:
+        time_offset_ns = integer("time_offset_ns", time_offset_ns, minimum=0)
+        if time_offset_ns > MAX_LOG_TIME_NS:
             raise ConfigError(
                 f"expected time_offset_ns in [0, 2^64 - 1] (an unsigned 64-bit log time), "
                 f"got {time_offset_ns}"
+            )
+        if not (isinstance(path, str) or hasattr(path, "__fspath__")):  # Path() raises TypeError
+            raise DataError(
+                f"expected path a file path (str or os.PathLike) for the episode log, got "
+                f"{type(path).__name__} {reprlib.repr(path)}"
             )
         self.path = Path(path)
         try:
@@ -412,11 +427,14 @@ class EpisodeWriter:
             if isinstance(t, str | bytes | bool | np.bool_):  # float() would take "1.5", True
                 raise TypeError(type(t).__name__)
             t = float(t)
-        except (TypeError, ValueError) as err:
-            raise DataError(f"{self.path}: expected a finite time t >= 0 s, got {t!r}") from err
+        except (TypeError, ValueError, OverflowError) as err:  # OverflowError: int past float
+            raise DataError(
+                f"{self.path}: expected a finite time t >= 0 s, got {reprlib.repr(t)}"
+            ) from err
         if not math.isfinite(t) or t < 0.0:
             raise DataError(f"{self.path}: expected a finite time t >= 0 s, got {t}")
-        ns = int(round(t * 1e9)) + self._offset_ns
+        scaled = t * 1e9  # inf for t beyond ~1.8e299 s: no integer log time
+        ns = int(round(scaled)) + self._offset_ns if math.isfinite(scaled) else math.inf
         if ns > MAX_LOG_TIME_NS:
             raise DataError(
                 f"{self.path}: time t = {t} s gives a log time beyond 2^64 - 1 ns (with "
@@ -461,13 +479,18 @@ class EpisodeWriter:
         return ns, {"timestamp": _stamp_dict(ns), "t": self._last_t}
 
     def _number(self, name: str, x: Any) -> float:
-        """``x`` as a float (NaN and infinities included); a DataError naming the argument
-        when it is not a number (a string, a bool, None, an array)."""
-        if not isinstance(x, str | bytes | bool | np.bool_):
+        """``x`` as a float; a DataError naming the argument when it is not a number (a
+        string, a bool, None, an array, a complex number, an int too large for a float) or
+        not finite (these fields are plain JSON numbers in their schemas)."""
+        if not isinstance(x, str | bytes | bool | np.bool_ | complex | np.complexfloating):
             try:
-                return float(x)
-            except (TypeError, ValueError):
+                value = float(x)
+            except (TypeError, ValueError, OverflowError):
                 pass
+            else:
+                if math.isfinite(value):
+                    return value
+                raise DataError(f"{self.path}: expected {name} a finite number, got {value}")
         raise DataError(f"{self.path}: expected {name} a number, got {reprlib.repr(x)}")
 
     def _string(self, name: str, x: Any) -> str:
@@ -504,8 +527,13 @@ class EpisodeWriter:
 
         Raises:
             ShapeError: when there are not ``n`` names.
-            DataError: when one is not a string, or they differ from the channel's names.
+            DataError: when they are not a sequence of strings (a single string included), or
+                differ from the channel's names.
         """
+        if isinstance(names, str | bytes) or not isinstance(names, Iterable):
+            raise DataError(
+                f"{self.path}: expected {name} a sequence of strings, got {reprlib.repr(names)}"
+            )
         got = names if isinstance(names, tuple) else tuple(names)
         fixed = self._channel_names.get((topic, name))
         if got == fixed and len(got) == n:
@@ -544,6 +572,11 @@ class EpisodeWriter:
         child = self._string("child", child)
         tr = _as_tensor("translation", translation, (3,))
         rot = _as_tensor("rotation_xyzw", rotation_xyzw, (4,))
+        if not (np.isfinite(tr).all() and np.isfinite(rot).all()):  # plain numbers in Foxglove
+            raise DataError(
+                f"{self.path}: expected translation and rotation_xyzw finite, got "
+                f"{tr.tolist()} and {rot.tolist()}"
+            )
         ns = self._log_time(t)
         self._write(
             "/tf",
@@ -650,8 +683,12 @@ class EpisodeWriter:
 
     def log_forecast(self, t: float, forecast: Forecast, index: int = 0) -> None:
         """Log item ``index`` of the batch of a :class:`Forecast` (see :meth:`forecast`)."""
-        if not 0 <= index < forecast.batch_size:
-            raise ShapeError(f"expected index in [0, {forecast.batch_size}), got {index}")
+        try:
+            index = operator.index(index)  # ints, numpy and 0-d tensor integers; not 0.5
+        except TypeError:
+            index = None
+        if index is None or not 0 <= index < forecast.batch_size:
+            raise ShapeError(f"expected index in [0, {forecast.batch_size}), got {index!r}")
         self.forecast(
             t,
             forecast.weights[index],
@@ -712,14 +749,15 @@ class EpisodeWriter:
 
         Args:
             t: simulation time [s].
-            kind: event name.
+            kind: event name (a string).
             detail: JSON-able details (a mapping, or None for none); they read back as given
                 (NaN, infinities and None included).
         """
+        kind = self._string("kind", kind)
         detail = {} if detail is None else self._mapping("detail", detail)
         encoded = self._encoded("detail", detail)  # before the time is taken as logged
         ns, msg = self._stamped(t)
-        msg["kind"] = str(kind)
+        msg["kind"] = kind
         msg["detail"] = encoded
         self._write("/task/events", ns, msg)
 
@@ -802,6 +840,11 @@ class EpisodeWriter:
 
     def _ellipsoid_primitives(self, items: Sequence[SceneEllipsoid | tuple]) -> list[dict]:
         """Sphere primitives of the ellipsoids (covariances decomposed in one batch)."""
+        if not isinstance(items, Sequence):  # a bare SceneEllipsoid, None, ...
+            raise ShapeError(
+                f"expected ellipsoids a sequence of SceneEllipsoid or tuples, got "
+                f"{reprlib.repr(items)}"
+            )
         means, shapes, colors, is_cov = [], [], [], []
         for e in items:
             if isinstance(e, SceneEllipsoid):

@@ -16,7 +16,9 @@ from foreign_mcap import write_foreign_mcap
 from mcap.writer import Writer
 
 from iplanner_torch.errors import ConfigError, DataError, DataWarning, ShapeError
+from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.recording import EpisodeWriter, SceneEllipsoid, ellipsoid_pose, read_episode
+from iplanner_torch.recording.codec import MAX_VALUE_DEPTH
 
 ARM = ["shoulder", "elbow"]
 HANDS = ["left_hand", "right_hand"]
@@ -329,13 +331,40 @@ def test_a_task_event_detail_nested_too_deep_is_a_data_error(tmp_path: Path) -> 
          r"w.mcap: expected ellipsoid rgba in \[0, 1\], got \[1.0, 1.0, 1.0, nan\]"),
         (lambda log: _scene(log, (np.zeros(3), np.eye(3), (1, 1, 1, 1.5))), DataError,
          r"w.mcap: expected ellipsoid rgba in \[0, 1\]"),
+        (lambda log: log.robot_state(1e300, [1.0], [0.0], ["a"]), DataError,
+         r"w.mcap: time t = 1e\+300 s gives a log time beyond 2\^64 - 1 ns"),
+        (lambda log: log.metrics(10**400, {}), DataError,
+         r"w.mcap: expected a finite time t >= 0 s, got 1000"),
+        (lambda log: log.robot_state(0.0, [10**400], [0.0], ["a"]), ShapeError,
+         r"expected q \(J\) of numbers, got \[1000"),
+        (lambda log: log.robot_state(0.0, torch.tensor([1 + 1j]), [0.0], ["a"]), ShapeError,
+         r"expected q \(J\) of real numbers, got dtype torch.complex64"),
+        (lambda log: log.plan(0.0, [0.0], [[1.0]], True, 10**400, 1.0), DataError,
+         r"w.mcap: expected wait_s a number, got 1000"),
+        (lambda log: log.plan(0.0, [0.0], [[1.0]], True, math.nan, 1.0), DataError,
+         r"w.mcap: expected wait_s a finite number, got nan"),
+        (lambda log: log.collision_bound(0.0, [0.0], [0.0], np.complex128(0.9 + 1j)), DataError,
+         r"w.mcap: expected confidence a number, got np.complex128"),
+        (lambda log: log.frame_transform(0.0, "world", "x", (math.nan, 0, 0)), DataError,
+         r"w.mcap: expected translation and rotation_xyzw finite, got \[nan, 0.0, 0.0\]"),
+        (lambda log: log.robot_state(0.0, [1.0], [0.0], None), DataError,
+         r"w.mcap: expected joint_names a sequence of strings, got None"),
+        (lambda log: log.robot_state(0.0, [1.0, 2.0], [0.0, 0.0], "ab"), DataError,
+         r"w.mcap: expected joint_names a sequence of strings, got 'ab'"),
+        (lambda log: log.task_event(0.0, None), DataError,
+         r"w.mcap: expected kind a string, got None"),
+        (lambda log: log.scene(0.0, np.zeros((1, 4)), np.zeros((1, 4)), None), ShapeError,
+         r"expected ellipsoids a sequence of SceneEllipsoid or tuples, got None"),
     ],
     ids=["t_str", "t_numeric_str", "t_none", "q_str", "qd_numeric_str", "true_ragged",
          "confidence_str", "feasible_str", "feasible_int", "wait_s_none", "solve_ms_str",
          "dt_str", "joint_names_int", "joint_names_bytes", "action_names_none",
          "translation_str", "parent_int", "child_none", "metrics_list", "detail_list",
          "t_beyond_uint64_ns", "cov_nan", "cov_inf", "axes_nan", "mean_str", "rgba_3",
-         "rgba_str", "rgba_nan", "rgba_above_1"],
+         "rgba_str", "rgba_nan", "rgba_above_1", "t_1e300", "t_huge_int", "q_huge_int",
+         "q_complex_tensor", "wait_s_huge_int", "wait_s_nan", "confidence_complex",
+         "translation_nan", "joint_names_none", "joint_names_one_string", "kind_none",
+         "ellipsoids_none"],
 )  # fmt: skip
 def test_writer_arguments_of_the_wrong_type_are_named(
     tmp_path: Path, call, error: type[Exception], match: str
@@ -347,6 +376,89 @@ def test_writer_arguments_of_the_wrong_type_are_named(
         log.robot_state(0.0, [1.0], [0.0], ["a"])  # the log goes on
     ep = read_episode(path)
     assert len(ep.frames["/robot/joint_state"]) == 1 and "/planner/plan" not in ep.frames
+
+
+@pytest.mark.parametrize(
+    ("value", "match"),
+    [
+        ({"d": {"self": None}}, "nested deeper than 100 levels"),
+        ({"d": {1: "a", "1": "b"}}, "keys must be strings"),
+        ({"d": np.array([1 + 2j])}, "complex values are not real numbers"),
+        ({"d": torch.tensor([1 + 2j])}, "complex values are not real numbers"),
+    ],
+    ids=["holds_itself", "int_key", "complex_array", "complex_tensor"],
+)
+def test_free_form_values_that_would_not_read_back_are_refused(
+    tmp_path: Path, value: dict, match: str
+) -> None:
+    """Metadata, metrics and event details: a value that holds itself (or nests deeper than
+    the reader decodes) was a RecursionError, or written so that the whole log failed to
+    read; an int key read back as a string (and {1: .., "1": ..} kept one value); a complex
+    array lost its imaginary parts. Each is a DataError, and the log goes on."""
+    if isinstance(value["d"], dict) and "self" in value["d"]:
+        value["d"]["self"] = value["d"]  # holds itself
+    with pytest.raises(DataError, match=f"metadata is not JSON-serialisable: .*{match}"):
+        EpisodeWriter(tmp_path / "m.mcap", metadata=value)
+    path = tmp_path / "v.mcap"
+    with EpisodeWriter(path, metadata={}) as log:
+        log.metrics(0.0, {"x": 1.0})
+        with pytest.raises(
+            DataError, match=f"v.mcap: metrics is not JSON-serialisable: .*{match}"
+        ):
+            log.metrics(0.5, value)
+        with pytest.raises(DataError, match=f"v.mcap: detail is not JSON-serialisable: .*{match}"):
+            log.task_event(0.5, "k", value)
+        log.metrics(1.0, {"x": 2.0})
+    ep = read_episode(path)
+    assert ep.complete and ep.frames["/episode/metrics"]["t"].tolist() == [0.0, 1.0]
+    assert ep.events() == []
+
+
+def test_values_nested_as_deep_as_allowed_read_back(tmp_path: Path) -> None:
+    deep: dict = {}
+    for _ in range(MAX_VALUE_DEPTH - 1):  # with the metadata dict: nested the limit deep
+        deep = {"x": deep}
+    with EpisodeWriter(tmp_path / "d.mcap", metadata={"d": deep}) as log:
+        log.task_event(0.0, "k", deep)
+    ep = read_episode(tmp_path / "d.mcap")
+    assert ep.metadata == {"d": deep} and ep.events()[0]["detail"] == deep
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"path": None}, DataError, "expected path a file path .*, got NoneType None"),
+        ({"chunk_size": "big"}, ConfigError, "expected chunk_size an integer >= 1, got 'big'"),
+        ({"compression": ["zstd"]}, ConfigError, r"expected compression in \['lz4'"),
+        ({"ellipsoid_confidence": "0.9"}, ConfigError,
+         r"expected ellipsoid_confidence in \(0, 1\), got '0.9'"),
+        ({"time_offset_ns": 1.5}, ConfigError, "expected time_offset_ns an integer >= 0, got 1.5"),
+        ({"time_offset_ns": None}, ConfigError, "expected time_offset_ns an integer >= 0"),
+    ],
+    ids=["path_none", "chunk_str", "compression_list", "confidence_str", "offset_float",
+         "offset_none"],
+)  # fmt: skip
+def test_writer_settings_of_the_wrong_type_are_config_errors(
+    tmp_path: Path, kwargs: dict, error: type[Exception], match: str
+) -> None:
+    """They were bare TypeErrors (or, for a fractional time offset, silently rounded down)."""
+    kwargs = {"path": tmp_path / "s.mcap", "metadata": {}, **kwargs}
+    with pytest.raises(error, match=match):
+        EpisodeWriter(**kwargs)
+
+
+def test_log_forecast_index_that_is_not_an_integer_is_named(tmp_path: Path) -> None:
+    mean = torch.zeros(2, 1, 2, 1, 3)
+    fc = Forecast(
+        weights=torch.ones(2, 1), mean=mean, var=mean + 1, dt=0.1,
+        joint_names=("head",), action_names=("idle",),
+    )  # fmt: skip
+    with EpisodeWriter(tmp_path / "f.mcap", metadata={}) as log:
+        for index in (0.5, "0", None):
+            with pytest.raises(ShapeError, match=r"expected index in \[0, 2\), got"):
+                log.log_forecast(0.0, fc, index)
+        log.log_forecast(0.0, fc, torch.tensor(1))
+    assert len(read_episode(tmp_path / "f.mcap").frames["/prediction/forecast"]) == 1
 
 
 def test_log_times_stop_at_the_largest_unsigned_64_bit_time(tmp_path: Path) -> None:
