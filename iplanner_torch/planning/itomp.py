@@ -51,12 +51,14 @@ def static_human_forecast(
 
     Raises:
         ShapeError: when ``pose`` is not (K, 3) with K = len(joint_names).
-        ConfigError: when n_f is not an integer >= 1, dt is not finite and > 0, std <= 0, or
-            spread is negative or not finite.
+        ConfigError: when n_f is not an integer >= 1, dt or std is not a finite number > 0,
+            spread is negative or not finite, or ``joint_names`` is not a sequence of
+            strings (one string is not).
     """
-    check_shape("pose", pose, (len(joint_names), 3))
+    check_shape("pose", pose, (len(_names(joint_names)), 3))
     integer("n_f", n_f, minimum=1)
     positive("dt", dt)
+    positive("std", std)
     spread = non_negative("spread", spread)
     path = pose.unsqueeze(0).expand(n_f, *pose.shape)
     fc = path_forecast(path, dt, joint_names, std=std, action="observed")
@@ -65,6 +67,14 @@ def static_human_forecast(
         s = std + spread * t
         fc = replace(fc, var=(s * s).view(1, 1, n_f, 1, 1).expand_as(fc.var).clone())
     return fc
+
+
+def _names(joint_names: Sequence[str]) -> tuple[str, ...]:
+    """``joint_names`` as a tuple; ConfigError unless it is a sequence of strings (a single
+    string would be split into one-letter names)."""
+    if isinstance(joint_names, str | bytes) or not isinstance(joint_names, Sequence):
+        raise ConfigError(f"expected joint_names a sequence of strings, got {joint_names!r}")
+    return tuple(joint_names)
 
 
 def path_forecast(
@@ -91,18 +101,22 @@ def path_forecast(
 
     Raises:
         ShapeError: when ``path`` is not (n_f, K, 3) with K = len(joint_names).
-        ConfigError: when n_f < 1, dt <= 0 or std <= 0.
+        ConfigError: when n_f < 1, dt or std is not a finite number > 0 (a bool is not one),
+            or ``joint_names`` is not a sequence of strings (one string is not).
     """
-    check_shape("path", path, ("n_f", len(joint_names), 3))
-    if path.shape[0] < 1 or not dt > 0.0 or not std > 0.0:
-        raise ConfigError(f"expected n_f >= 1, dt > 0, std > 0, got {path.shape[0]}, {dt}, {std}")
+    names = _names(joint_names)
+    check_shape("path", path, ("n_f", len(names), 3))
+    if path.shape[0] < 1:
+        raise ConfigError(f"expected path with n_f >= 1 frames, got {tuple(path.shape)}")
+    dt = positive("dt", dt)
+    std = positive("std", std)
     mean = path.unsqueeze(0).unsqueeze(0).clone()
     return Forecast(
         weights=torch.ones(1, 1, dtype=path.dtype, device=path.device),
         mean=mean,
         var=torch.full_like(mean, std * std),
         dt=dt,
-        joint_names=tuple(joint_names),
+        joint_names=names,
         action_names=(action,),
     )
 

@@ -35,7 +35,7 @@ import torch
 
 from iplanner_torch.checks import finite_time, flag, integer, is_real, non_negative, positive
 from iplanner_torch.collision.human_spheres import HumanSphereMap, SphereLayout
-from iplanner_torch.errors import ConfigError, PlanningError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, PlanningError, ShapeError
 from iplanner_torch.planning import costs as C
 from iplanner_torch.planning.trajectory import Trajectory, accelerations, uniform_times
 from iplanner_torch.prediction.forecast import Forecast
@@ -43,6 +43,8 @@ from iplanner_torch.types import all_finite, check_finite, check_shape
 
 #: Accepted plans keep every waypoint-to-waypoint velocity within this factor of the limits.
 VEL_TOL = 1.05
+#: How far a goal may lie outside the joint limits [rad] (a goal at a limit, rounded).
+GOAL_LIMIT_TOL = 1e-5
 #: Tolerance on the acceleration limit (``OptimizerCfg.acc_max``) at acceptance.
 ACC_TOL = 1.1
 #: Slack [m] below the clearance of a plan's pinned ends within which its waypoints still pass
@@ -451,6 +453,22 @@ class TrajectoryOptimizer:
         if qd_start is not None:
             check_finite("qd_start", qd_start, ("joint",))
 
+    def check_goal(self, q_goal: torch.Tensor) -> None:
+        """DataError unless the (J,) goal is within the joint limits (up to
+        :data:`GOAL_LIMIT_TOL` [rad], for a goal at a limit rounded to another dtype).
+
+        A goal outside them cannot be pinned: every plan would stop at the limit, never reach
+        it and be infeasible, and a replanning robot would wait there for good.
+        """
+        q = q_goal.to(self.device, self.dtype)
+        out = (q < self.q_min - GOAL_LIMIT_TOL) | (q > self.q_max + GOAL_LIMIT_TOL)  # (J,)
+        if bool(out.any()):
+            i = int(out.nonzero()[0, 0])
+            raise DataError(
+                f"expected q_goal within the joint limits, got q_goal[{i}] = {float(q[i])!r} "
+                f"rad outside [{float(self.q_min[i])!r}, {float(self.q_max[i])!r}]"
+            )
+
     def min_duration(
         self,
         q_start: torch.Tensor,
@@ -739,7 +757,8 @@ class TrajectoryOptimizer:
                 the waypoint spacing (a Unix timestamp in float32: pass times relative to the
                 episode start; :func:`~iplanner_torch.planning.trajectory.uniform_times`).
             DataError: when ``q_start``, ``q_goal``, ``qd_start`` or ``q_init`` holds NaN or
-                inf.
+                inf, or ``q_goal`` is outside the joint limits (:meth:`check_goal`; a start
+                outside them is where the robot is, and is planned from).
             PlanningError: when the optimisation produces non-finite waypoints (it cannot
                 from finite inputs: non-finite gradient entries are taken as 0).
         """
@@ -749,6 +768,7 @@ class TrajectoryOptimizer:
         check_shape("q_goal", q_goal, (j,))
         check_finite("q_start", q_start, ("joint",))
         check_finite("q_goal", q_goal, ("joint",))
+        self.check_goal(q_goal)
         _check_forecast(forecast)
         finite_time("t0", t0)
         finite_time("forecast_t0", forecast_t0)

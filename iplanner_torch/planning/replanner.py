@@ -370,7 +370,8 @@ class Replanner:
 
         Raises:
             ShapeError: when ``q_start`` or ``q_goal`` is not (J,).
-            DataError: when one of them or ``t`` is NaN or infinite.
+            DataError: when one of them or ``t`` is NaN or infinite, or ``q_goal`` is outside
+                the joint limits.
         """
         j = self.optimizer.num_joints
         check_shape("q_start", q_start, (j,))
@@ -397,12 +398,14 @@ class Replanner:
 
         Raises:
             ShapeError: when ``q_goal`` is not (J,).
-            DataError: when ``q_goal`` or ``t`` is NaN or infinite.
+            DataError: when ``q_goal`` or ``t`` is NaN or infinite, or ``q_goal`` is outside
+                the joint limits (it could never be reached).
         """
         check_shape("q_goal", q_goal, (self.optimizer.num_joints,))
         if t is not None:
             finite_time("t", t, error=DataError)
         check_finite("q_goal", q_goal, ("joint",))
+        self.optimizer.check_goal(q_goal)
         self._goal = self._to(q_goal)
         if t is not None and self.cfg.replan_on_goal_change:
             self._next_cycle = min(self._next_cycle, t)
@@ -672,8 +675,11 @@ class Replanner:
 
         Raises:
             ShapeError: when ``q_now`` is not (J,).
+            ConfigError: when ``tol`` is not a finite number >= 0 (a NaN or negative one
+                would never be met).
         """
         check_shape("q_now", q_now, (self.optimizer.num_joints,))
+        non_negative("tol", tol)
         if self._goal is None:
             return False
         return float((self._to(q_now) - self._goal).abs().max()) <= tol

@@ -117,9 +117,9 @@ def uniform_times(
             truncated).
         ConfigError: when ``t0`` is not finite or ``duration`` not finite and > 0 (Python
             numbers; tensors are not checked), when ``num_waypoints`` is not an integer >= 2,
-            or when ``like``'s dtype cannot resolve the waypoint spacing at ``t0`` (its
-            rounding there exceeds :data:`TIME_RESOLUTION` of the spacing; Python numbers
-            only).
+            or when ``like``'s dtype cannot hold the times or resolve the waypoint spacing at
+            ``t0`` (its rounding there exceeds :data:`TIME_RESOLUTION` of the spacing; Python
+            numbers only).
     """
     if not isinstance(like, torch.Tensor):
         raise ShapeError(f"expected like to be a torch.Tensor, got {type(like).__name__}")
@@ -139,6 +139,11 @@ def _check_resolution(t0: float, duration: float, num_waypoints: int, dtype: tor
     :data:`TIME_RESOLUTION` times the time between waypoints."""
     step = duration / (num_waypoints - 1)
     largest = max(abs(t0), abs(t0 + duration))
+    if largest > torch.finfo(dtype).max:  # torch.linspace would raise a bare RuntimeError
+        raise ConfigError(
+            f"expected waypoint times within {dtype}'s range (<= {torch.finfo(dtype).max:.3g}), "
+            f"got t0={t0!r} s and duration={duration!r} s"
+        )
     # spacing of the floats in [2^(e-1), 2^e) that holds ``largest``: eps * 2^(e-1)
     spacing = math.inf
     if math.isfinite(largest):  # (t0 + duration may overflow)

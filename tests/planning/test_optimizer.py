@@ -1007,6 +1007,43 @@ def test_static_human_forecast_refuses_bad_frames_and_steps(
         static_human_forecast(torch.zeros(1, 3), n_f, dt, ("j",))  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: static_human_forecast(torch.zeros(1, 3), 3, 0.1, ("j",), std="x"),
+         "expected std > 0 and finite, got 'x'"),
+        (lambda: static_human_forecast(torch.zeros(1, 3), 3, 0.1, None),
+         "expected joint_names a sequence of strings, got None"),
+        (lambda: static_human_forecast(torch.zeros(4, 3), 3, 0.1, "head"),
+         "expected joint_names a sequence of strings, got 'head'"),
+        (lambda: path_forecast(torch.zeros(3, 1, 3), "0.1", ("j",), std=0.01, action="a"),
+         "expected dt > 0 and finite, got '0.1'"),
+        (lambda: path_forecast(torch.zeros(3, 1, 3), True, ("j",), std=0.01, action="a"),
+         "expected dt > 0 and finite, got True"),
+        (lambda: path_forecast(torch.zeros(3, 1, 3), 0.1, ("j",), std=None, action="a"),
+         "expected std > 0 and finite, got None"),
+    ],
+    ids=["std_str", "names_none", "names_one_string", "dt_str", "dt_bool", "std_none"],
+)  # fmt: skip
+def test_forecast_helpers_name_arguments_of_the_wrong_type(call, match: str) -> None:
+    """They were bare TypeErrors, a dt of True was taken as 1 s, and one string of joint
+    names was split into one-letter names."""
+    with pytest.raises(ConfigError, match=match):
+        call()
+
+
+def test_a_goal_outside_the_joint_limits_is_refused(point_robot: PointRobot) -> None:
+    """It was planned towards, stopped at the limit, never pinned and never feasible (a
+    replanning robot would wait there for good); a goal at a limit is fine."""
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg(num_trajectories=2, iterations=2))
+    start = torch.tensor([-1.0, 0.0])
+    with pytest.raises(DataError, match=r"expected q_goal within the joint limits, got "
+                       r"q_goal\[0\] = 5.0 rad outside \[-2.0, 2.0\]"):  # fmt: skip
+        opt.solve(start, torch.tensor([5.0, 0.0]))
+    res = opt.solve(start, torch.tensor([2.0, 0.0]))
+    assert res.q[-1].tolist() == [2.0, 0.0]
+
+
 def test_solve_refuses_a_unix_timestamp_but_plans_hours_into_an_episode(
     point_robot: PointRobot,
 ) -> None:

@@ -500,3 +500,20 @@ def test_goal_reached_refuses_a_wrong_shape(point_robot: PointRobot) -> None:
     with pytest.raises(ShapeError, match=r"expected q_now \(2\), got \(1, 2\)"):
         rp.goal_reached(torch.ones(1, 2))
     assert rp.goal_reached(torch.ones(2))
+
+
+def test_replanner_refuses_a_goal_outside_the_limits_and_a_bad_tolerance() -> None:
+    """A goal beyond the joint limits could never be reached (every plan infeasible); a NaN
+    or negative tolerance is never met and a text one was a TypeError."""
+    rp = Replanner(TrajectoryOptimizer(PointRobot(), OptimizerCfg(num_trajectories=2)))
+    start, goal = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    with pytest.raises(DataError, match=r"expected q_goal within the joint limits"):
+        rp.reset(start, torch.tensor([0.0, -3.0]), 0.0)
+    rp.reset(start, goal, 0.0)
+    with pytest.raises(DataError, match=r"got q_goal\[1\] = -3.0 rad outside"):
+        rp.set_goal(torch.tensor([0.0, -3.0]))
+    assert torch.equal(rp.goal, goal)  # the goal before stays
+    for tol in (math.nan, -1.0, "x"):
+        with pytest.raises(ConfigError, match="expected tol >= 0 and finite"):
+            rp.goal_reached(start, tol)  # type: ignore[arg-type]
+    assert rp.goal_reached(goal, 0.0)

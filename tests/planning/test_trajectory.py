@@ -267,3 +267,10 @@ def test_differences_refuse_waypoints_without_a_joint_axis() -> None:
         accelerations(torch.zeros(1, 4, 2), 0.1, torch.zeros(3))
     with pytest.raises(ShapeError, match="with W >= 2 when qd_start is given"):
         accelerations(torch.zeros(1, 1, 2), 0.1, torch.zeros(2))
+
+
+def test_uniform_times_beyond_the_dtype_range_are_a_config_error() -> None:
+    """A float32 span past 3.4e38 s was a bare RuntimeError from torch.linspace."""
+    with pytest.raises(ConfigError, match=r"expected waypoint times within torch.float32's"):
+        uniform_times(0.0, 1e300, 5, torch.zeros(1))
+    assert uniform_times(0.0, 1e300, 5, torch.zeros(1, dtype=torch.float64))[-1] == 1e300
