@@ -308,6 +308,10 @@ def _pair_bounds(
         base = torch.where(outside & huge, far_val, base)
     idx = active.reshape(-1).nonzero().squeeze(1)  # (N_act,) flat indices of active pairs
     if idx.numel() == 0:
+        # every bound is constant here; the empty sum keeps the result on d2's autograd graph
+        # (zero gradient), so that backward() works as where some pairs are active
+        if d2.requires_grad:
+            return base.expand(shape) + d2.narrow(0, 0, 0).sum()
         return base.expand(shape)
     coords = torch.unravel_index(idx, shape)  # gather through broadcast strides, no copies
     d2_a = d2.expand((3,) + shape)[(slice(None),) + coords]  # (3, N_act)
@@ -318,7 +322,10 @@ def _pair_bounds(
         lam = _newton_step(lam, d2_a, s_a, R_a)  # differentiable (implicit-function) step
     else:
         lam = _solve_bisection(d2_a, s_a, R_a)
-    w = lam * s_a / (1.0 + lam * s_a)  # (3, N_act)
+    # lam s overflows where a variance is many orders above the floor (inf / inf = NaN): capped,
+    # w rounds to 1 there, as it should
+    ls = (lam * s_a).clamp_max(0.5 * torch.finfo(s_a.dtype).max)  # (3, N_act)
+    w = ls / (1.0 + ls)  # (3, N_act)
     m2 = (d2_a * w * w / s_a).sum(0)  # (N_act,) squared Mahalanobis distance of x_max
     vals = _combine(m2, log_vf.expand(shape)[coords], method)  # (N_act,)
     out = base.expand(shape).reshape(-1).index_put((idx,), vals.to(base.dtype))

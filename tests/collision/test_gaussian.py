@@ -683,3 +683,51 @@ def test_volume_bound_gradient_is_finite_with_the_mean_on_the_centre() -> None:
     b = G.sphere_collision_bound(**{**args, "mean": mean}, method="volume", prune_sigma=6.0)
     b.sum().backward()
     assert torch.isfinite(mean.grad).all()
+
+
+@pytest.mark.parametrize(("dtype", "big"), [(torch.float32, 1e38), (torch.float64, 1e307)])
+@pytest.mark.parametrize("full", [False, True])
+def test_huge_variance_beside_a_floored_one_gives_the_bound_not_nan(
+    dtype: torch.dtype, big: float, full: bool
+) -> None:
+    """A variance so far above another one raised to VAR_FLOOR that ``lambda s`` overflowed
+    gave NaN (inf / inf); along that direction the person is anywhere, so the half-space
+    bound is that of the other two: the distance to the disc of the ball at z = 0.1."""
+    var = torch.tensor([[0.01, big, 0.0]], dtype=dtype)
+    spread = torch.diag_embed(var) if full else var
+    fn = G.sphere_collision_bound if full else G.sphere_collision_bound_diag
+    center = torch.zeros(1, 3, dtype=dtype, requires_grad=True)
+    mean = torch.tensor([[0.5, 0.2, 0.1]], dtype=dtype)
+    m = (0.5 - math.sqrt(0.2**2 - 0.1**2)) / 0.1
+    for method in ("halfspace", "min"):
+        b = fn(center, 0.1, mean, spread, 0.1, method=method)
+        assert torch.isfinite(b).all()
+        if method == "halfspace":
+            assert float(b.detach()) == pytest.approx(
+                0.5 * math.erfc(m / math.sqrt(2.0)), rel=1e-3
+            )
+        b.sum().backward()
+        assert torch.isfinite(center.grad).all()
+        center.grad = None
+
+
+def test_backward_works_when_every_bound_is_constant() -> None:
+    """With every mean inside its ball (or every pair pruned) the bounds did not depend on
+    the centres and backward() raised a bare RuntimeError ("does not require grad"); the
+    gradient is now zero."""
+    center = torch.zeros(2, 3, dtype=F64, requires_grad=True)
+    mean = torch.zeros(2, 3, dtype=F64)
+    for method in ("min", "volume", "halfspace"):
+        cov = 0.01 * torch.eye(3, dtype=F64)
+        b = G.sphere_collision_bound(center, 0.1, mean, cov, 0.1, method=method)
+        b.sum().backward()
+        assert center.grad is not None and not center.grad.any()
+        center.grad = None
+        far = torch.full((2, 3), 100.0, dtype=F64)
+        var = torch.full((2, 3), 0.01, dtype=F64)
+        b = G.sphere_collision_bound_diag(
+            center, 0.1, far, var, 0.1, method=method, prune_sigma=6.0
+        )
+        b.sum().backward()
+        assert center.grad is not None and torch.isfinite(center.grad).all()
+        center.grad = None
