@@ -8,11 +8,14 @@ are checked as :class:`Box` and :class:`Plane` check theirs: by the dataclasses 
 and by :func:`sphere_box_distance` and :func:`sphere_plane_distance` when they are given tensors
 (``validate=True``, one host synchronisation); :class:`StaticScene`, whose obstacles were checked
 when they were built, checks only the spheres (it runs in every optimiser iteration, without a
-host synchronisation).
+host synchronisation). The spheres' values are never checked (that would take a host
+synchronisation): a NaN or infinite centre or radius gives a NaN or infinite distance for that
+sphere.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import torch
@@ -124,8 +127,8 @@ def sphere_plane_distance(
     Args:
         centers: (..., 3) sphere centres [m], of a floating dtype.
         radii: (...) sphere radii [m], broadcastable to ``centers[..., 0]``.
-        normal: (3,) plane normal pointing out of the obstacle (normalised here), finite and
-            non-zero.
+        normal: (3,) plane normal pointing out of the obstacle (normalised here, whatever its
+            magnitude), finite and non-zero, of a real dtype (an integer one too).
         offset: plane offset [m]: the plane is ``n . x = offset``; a finite number (or a
             one-element tensor).
         validate: check ``normal`` (and a tensor ``offset``) as :class:`Plane` does (one
@@ -155,20 +158,21 @@ def sphere_plane_distance(
     else:
         raise ConfigError(f"expected offset a finite number [m], got {offset!r}")
     if validate:
-        # the checks of Plane: 3 finite numbers, not all zero (and no norm underflowing to 0)
+        # the checks of Plane: 3 finite numbers, not all zero
         off = float(offset) if isinstance(offset, torch.Tensor) else offset
         Plane(normal=tuple(normal.detach().cpu().tolist()), offset=off)
-        if not bool(torch.linalg.vector_norm(normal) > 0):
-            raise ConfigError(f"expected a non-zero plane normal, got {normal.tolist()}")
-    return _plane_distance(centers, radii, normal, offset)
+    # in the wider of the two dtypes (an integer normal in that of the centres)
+    n = normal.to(centers.device, torch.promote_types(normal.dtype, centers.dtype))
+    n = n / n.abs().amax()  # (3,) largest entry +-1: its norm neither overflows nor underflows
+    return _plane_distance(centers, radii, (n / torch.linalg.vector_norm(n)).to(centers), offset)
 
 
 def _plane_distance(
-    centers: torch.Tensor, radii: torch.Tensor, normal: torch.Tensor, offset: float | torch.Tensor
+    centers: torch.Tensor, radii: torch.Tensor, unit: torch.Tensor, offset: float | torch.Tensor
 ) -> torch.Tensor:
-    """:func:`sphere_plane_distance` without its checks."""
-    n = (normal / torch.linalg.vector_norm(normal)).to(centers)
-    return centers @ n - offset - radii
+    """:func:`sphere_plane_distance` without its checks, for a unit normal ``unit`` (3,) of the
+    centres' dtype and device."""
+    return centers @ unit - offset - radii
 
 
 #: how far ``R R^T`` of a :class:`Box` rotation may be from the identity (rounding of a
@@ -302,9 +306,13 @@ class StaticScene:
                 )
             )
         for plane in self.planes:
-            normal = torch.tensor(plane.normal, **kw)
-            # the plane was checked by Plane, the spheres above
-            out.append(_plane_distance(centers, radii, normal, plane.offset))
+            # the plane was checked by Plane, the spheres above; normalised in Python floats,
+            # scaled first (a normal of 1e300 or 1e-200 overflows or underflows its norm)
+            big = max(abs(v) for v in plane.normal)
+            scaled = [v / big for v in plane.normal]
+            norm = math.hypot(*scaled)
+            unit = torch.tensor([v / norm for v in scaled], **kw)
+            out.append(_plane_distance(centers, radii, unit, plane.offset))
         return torch.stack(out, dim=-1)
 
     def clearance(self, centers: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:

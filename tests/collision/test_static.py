@@ -254,3 +254,26 @@ def test_scene_distances_refuse_non_floating_centres(dtype: torch.dtype) -> None
         scene.distances(_UP.to(dtype), _R)
     with pytest.raises(ShapeError, match=f"expected centers of a floating dtype, got {dtype}"):
         scene.clearance(_UP.to(dtype), _R)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("scale", [1e-200, 1e-30, 1e30, 1e300])
+def test_plane_normal_of_any_magnitude(dtype: torch.dtype, scale: float) -> None:
+    """A normal whose norm overflowed gave a zero unit normal, so every sphere read as
+    penetrating the plane (-0.6 m instead of 1.52 m), or NaN; one whose norm underflowed gave
+    NaN. The normal is scaled before it is normalised."""
+    want = (1.0 + 2.0) / math.sqrt(2.0) - 0.5 - 0.1
+    centers, radii = torch.tensor([[1.0, 2.0, 3.0]], dtype=dtype), torch.tensor([0.1], dtype=dtype)
+    scene = StaticScene(planes=(Plane(normal=(scale, scale, 0.0), offset=0.5),))
+    got = scene.distances(centers, radii)
+    assert got.item() == pytest.approx(want, rel=1e-6)
+    normal = torch.tensor([scale, scale, 0.0], dtype=torch.float64)
+    if dtype == torch.float64 or 1e-30 <= scale <= 1e30:  # representable in dtype
+        got = sphere_plane_distance(centers, radii, normal.to(dtype), 0.5)
+        assert got.item() == pytest.approx(want, rel=1e-6)
+
+
+def test_plane_integer_normal() -> None:
+    """An integer normal raised a bare RuntimeError from linalg.vector_norm."""
+    got = sphere_plane_distance(_UP, _R, torch.tensor([0, 0, 2]), 0.0)
+    torch.testing.assert_close(got, sphere_plane_distance(_UP, _R, torch.tensor([0, 0, 1.0]), 0.0))
