@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from iplanner_torch.checks import is_real, positive, real_array
-from iplanner_torch.errors import DataError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_shape
 
 __all__ = [
@@ -80,11 +80,19 @@ def _real_scalar(value: Any) -> float:
     return float(value) if is_real(value) else math.nan
 
 
+def _is_nan(value: Any) -> bool:
+    """Whether ``value`` is a NaN number (also a numpy NaN or a one-element NaN tensor)."""
+    try:
+        return math.isnan(value)
+    except (TypeError, ValueError):
+        return False
+
+
 def _check_time(t: torch.Tensor, min_len: int) -> None:
     if t.shape[0] < min_len:
         raise ShapeError(f"expected at least {min_len} time samples, got t {tuple(t.shape)}")
-    if not bool(torch.all(torch.diff(t) > 0)):
-        raise DataError("expected strictly increasing times t")
+    if not bool(torch.all(torch.diff(t) > 0) & torch.isfinite(t).all()):
+        raise DataError("expected strictly increasing finite times t")
 
 
 def joint_accelerations(t: Any, q: Any) -> tuple[torch.Tensor, torch.Tensor]:
@@ -109,8 +117,8 @@ def joint_accelerations(t: Any, q: Any) -> tuple[torch.Tensor, torch.Tensor]:
 
     Raises:
         ShapeError: for mismatched shapes or T < 3.
-        DataError: for times that are not strictly increasing (or NaN), or a NaN or infinite
-            joint position (naming the rows).
+        DataError: for times that are not strictly increasing (or NaN or infinite), or a NaN
+            or infinite joint position (naming the rows).
     """
     tt = _f64("t", t, ("T",))
     qq = _f64("q", q, (tt.shape[0], "J")).to(tt.device)
@@ -283,11 +291,11 @@ def efficiency(t_human_alone: float, t_with_robot: float) -> float:
         t_with_robot: completion time of the human-robot team [s].
 
     Raises:
-        DataError: unless both are numbers > 0 (real numbers, numpy scalars or one-element
-            tensors).
+        DataError: unless both are finite numbers > 0 (real numbers, numpy scalars or
+            one-element tensors).
     """
     alone, team = _real_scalar(t_human_alone), _real_scalar(t_with_robot)
-    if not (alone > 0 and team > 0):
+    if not (0 < alone < math.inf and 0 < team < math.inf):
         raise DataError(
             f"expected positive task times, got alone={t_human_alone!r}, "
             f"with robot={t_with_robot!r}"
@@ -307,7 +315,8 @@ def regression_precision(pred_mean: Any, true: Any, dt: float) -> torch.Tensor:
         dt: seconds between predicted frames, finite and > 0.
 
     Returns:
-        (...) [m^2 s], float64 (a 0-d tensor without batch dimensions).
+        (...) [m^2 s], float64 (a 0-d tensor without batch dimensions); NaN or inf where a
+        position behind that entry is (carried through, not an error).
 
     Raises:
         ShapeError: for mismatched shapes or anything but real numbers.
@@ -330,7 +339,8 @@ def regression_accuracy(var: Any, dt: float, *, full_cov: bool = False) -> torch
         full_cov: whether ``var`` holds full 3x3 covariances.
 
     Returns:
-        (...) [m^6 s], float64.
+        (...) [m^6 s], float64; NaN or inf where a variance behind that entry is (carried
+        through, not an error).
 
     Raises:
         ShapeError: for a wrong shape or anything but real numbers.
@@ -352,7 +362,8 @@ def classification_precision(probs: Any, labels: Any, threshold: float = 0.5) ->
     Args:
         probs: (T, A) action probabilities per frame, finite.
         labels: (T,) true action index per frame, integers in [0, A).
-        threshold: frames whose largest probability is not above it are not counted.
+        threshold: frames whose largest probability is not above it are not counted; a
+            finite number (or a one-element tensor).
 
     Returns:
         ``(fraction of counted frames whose arg-max is the label, number of counted frames)``;
@@ -362,7 +373,11 @@ def classification_precision(probs: Any, labels: Any, threshold: float = 0.5) ->
         ShapeError: for mismatched shapes or anything but real numbers.
         DataError: for a NaN or infinite probability (such frames were dropped silently), or
             a label that is not an integer in [0, A).
+        ConfigError: for a ``threshold`` that is not a finite number.
     """
+    if not math.isfinite(_real_scalar(threshold)):
+        raise ConfigError(f"expected threshold a finite number, got {threshold!r}")
+    threshold = _real_scalar(threshold)
     p = _f64("probs", probs, ("T", "A"))
     lab = _f64("labels", labels, (p.shape[0],)).to(p.device)
     bad = ~torch.isfinite(p).all(dim=1)  # (T,)
@@ -419,8 +434,13 @@ def episode_metrics(
 
     Raises:
         ShapeError: for mismatched shapes.
-        DataError: as :func:`smoothness` (from 3 samples on).
+        DataError: as :func:`smoothness` (from 3 samples on), or for an ``mhd`` or
+            ``prediction_ms`` that is not a number (a real number, a numpy scalar or a
+            one-element tensor; NaN passes).
     """
+    for name, value in (("mhd", mhd), ("prediction_ms", prediction_ms)):
+        if value is not None and math.isnan(_real_scalar(value)) and not _is_nan(value):
+            raise DataError(f"expected {name} a number or None, got {value!r}")
     n_t = _f64("t", t, ("T",)).shape[0]
     _f64("q", q, (n_t, "J"))
     short = n_t < 3  # no interior sample: no acceleration
@@ -436,6 +456,6 @@ def episode_metrics(
         "eval/min_distance": dmin,
         "eval/contact": float(dmin <= 0.0) if not math.isnan(dmin) else math.nan,
         "eval/efficiency": eff,
-        "eval/mhd": math.nan if mhd is None else float(mhd),
-        "eval/prediction_ms": math.nan if prediction_ms is None else float(prediction_ms),
+        "eval/mhd": math.nan if mhd is None else _real_scalar(mhd),
+        "eval/prediction_ms": math.nan if prediction_ms is None else _real_scalar(prediction_ms),
     }

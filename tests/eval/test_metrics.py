@@ -10,7 +10,7 @@ import torch
 from scipy.integrate import quad
 from scipy.spatial.distance import cdist
 
-from iplanner_torch.errors import DataError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.eval.metrics import (
     METRIC_KEYS,
     classification_precision,
@@ -327,3 +327,50 @@ def test_closest_distance_refuses_an_infinite_centre() -> None:
     hc[1, 0, 0] = math.nan  # NaN (untracked) is still ignored
     overall, per_step = closest_distance(rc, [0.1], hc, [0.1])
     assert overall == pytest.approx(math.sqrt(3) - 0.2) and math.isnan(per_step[1])
+
+
+@pytest.mark.parametrize(
+    "t", [[-math.inf, 0.5, 1.0, 1.5], [0.0, 0.5, 1.0, math.inf]], ids=["-inf", "inf"]
+)
+def test_trajectory_metrics_refuse_infinite_times(t) -> None:
+    """An infinite first or last time passed as increasing: smoothness was NaN."""
+    q = np.zeros((4, 2))
+    for metric in (smoothness, jerkiness, joint_accelerations):
+        with pytest.raises(DataError, match="strictly increasing finite times"):
+            metric(t, q)
+
+
+def test_efficiency_of_an_infinite_time_raises_data_error() -> None:
+    """An infinite task time gave an efficiency of inf or 0."""
+    for alone, team in ((math.inf, 1.0), (1.0, math.inf)):
+        with pytest.raises(DataError, match="expected positive task times"):
+            efficiency(alone, team)
+
+
+@pytest.mark.parametrize("threshold", ["0.5", None, [0.5], math.nan, True])
+def test_classification_precision_refuses_a_threshold_that_is_not_a_number(threshold) -> None:
+    """A string, None or a list raised a bare TypeError; NaN counted no frame silently."""
+    probs, labels = np.array([[0.9, 0.1], [0.2, 0.8]]), np.array([0, 1])
+    with pytest.raises(ConfigError, match="expected threshold a finite number"):
+        classification_precision(probs, labels, threshold)
+    assert classification_precision(probs, labels, torch.tensor(0.5)) == (1.0, 2)
+
+
+@pytest.mark.parametrize("name", ["mhd", "prediction_ms"])
+def test_episode_metrics_refuse_an_mhd_or_time_that_is_not_a_number(name: str) -> None:
+    """A string or a two-element tensor raised a bare ValueError from float()."""
+    t = np.linspace(0.0, 1.0, 5)
+    args = dict(
+        t=t,
+        q=np.zeros((5, 2)),
+        robot_centers=np.zeros((5, 1, 3)),
+        robot_radii=[0.1],
+        human_centers=np.ones((5, 1, 3)),
+        human_radii=[0.1],
+    )
+    for bad in ("x", torch.tensor([1.0, 2.0])):
+        with pytest.raises(DataError, match=f"expected {name} a number or None"):
+            episode_metrics(**args, **{name: bad})
+    key = f"eval/{name}"
+    assert episode_metrics(**args, **{name: np.float32(2.0)})[key] == 2.0
+    assert math.isnan(episode_metrics(**args, **{name: math.nan})[key])
