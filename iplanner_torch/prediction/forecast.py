@@ -36,7 +36,8 @@ class Forecast:
             Negative entries (rounding in a GP's predictive variance) are not rejected here:
             the planner floors them (:func:`~iplanner_torch.planning.costs.forecast_to_obstacle`
             keeps sphere-centre variances >= 1e-10).
-        dt: seconds between consecutive predicted frames (1 / fps), finite and > 0.
+        dt: seconds between consecutive predicted frames (1 / fps), finite and > 0; a real
+            number (numpy scalars and one-element tensors are converted to float).
         joint_names: the K joint names.
         action_names: the A action names.
 
@@ -47,7 +48,8 @@ class Forecast:
         DataError: when ``weights``, ``mean`` or ``var`` holds NaN or inf (naming the field
             and, for ``mean`` and ``var``, the joint), a coordinate of ``mean`` lies beyond
             :data:`~iplanner_torch.types.MAX_POSITION_M`, a row of ``weights`` is not
-            probabilities (all 0 would hide the person), or ``dt`` is not a finite number > 0.
+            probabilities (all 0 would hide the person), or ``dt`` is not a finite number > 0
+            (a string or a bool included).
             A non-finite or far-away forecast must never reach the planner, whose collision
             bound would read it as "no human".
     """
@@ -76,11 +78,14 @@ class Forecast:
                 f"got {len(self.action_names)}: {tuple(self.action_names)}"
             )
         try:
+            if isinstance(self.dt, (str, bytes, bool)):  # float() takes them: "0.1", True
+                raise TypeError(type(self.dt).__name__)
             dt = float(self.dt)
         except (TypeError, ValueError) as err:
             raise DataError(f"expected forecast dt a number > 0 [s], got {self.dt!r}") from err
         if not (math.isfinite(dt) and dt > 0.0):
             raise DataError(f"expected forecast dt a finite number > 0 [s], got {self.dt!r}")
+        self.dt = dt  # a float, whatever number type (numpy, one-element tensor) it came as
         # weights that are not probabilities: negative, or rows not summing to 1 (NaN is left
         # to the finiteness check)
         w = self.weights

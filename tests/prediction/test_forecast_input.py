@@ -152,3 +152,16 @@ def test_hold_actions_takes_bool_masks_only() -> None:
         f.hold_actions([True, False, False])  # type: ignore[arg-type]
     held = f.hold_actions(torch.tensor([True, False, False]))
     assert torch.equal(held.mean[:, 0, -1], f.mean[:, 0, 0])
+
+
+def test_dt_string_or_bool_is_refused_and_numbers_become_float() -> None:
+    """dt="0.1" passed (float() takes it) and Forecast.times then raised a bare TypeError;
+    dt=True passed as 1 s. A one-element tensor or numpy number is stored as a float."""
+    f = _forecast()
+    fields = {k: getattr(f, k) for k in ("weights", "mean", "var", "joint_names")}
+    fields["action_names"] = f.action_names
+    for bad in ("0.1", True):
+        with pytest.raises(DataError, match="expected forecast dt a number > 0"):
+            Forecast(**fields, dt=bad)
+    g = Forecast(**fields, dt=torch.tensor([0.1]))
+    assert type(g.dt) is float and g.times.shape == (4,)
