@@ -190,7 +190,7 @@ class HumanSphereMap:
                 add({a: 1.0}, r, seg.name)
                 continue
             length = length_scale * scale * seg.length
-            radius = math.sqrt(r**2 + (length / (2.0 * m)) ** 2)
+            radius = math.hypot(r, length / (2.0 * m))
             for i in range(m + 1):
                 u = i / m
                 weights = {a: 1.0 - u, b: u} if 0 < i < m else {a if i == 0 else b: 1.0}
@@ -214,7 +214,8 @@ class HumanSphereMap:
             joints: (..., K, 3) joint positions [m], floating.
 
         Returns:
-            (..., S_h, 3) sphere centres [m], in the dtype of ``joints``.
+            (..., S_h, 3) sphere centres [m], in the dtype of ``joints``. Values are not
+            checked: a NaN joint (untracked) gives NaN centres for the spheres on it.
 
         Raises:
             ShapeError: on a wrong shape or a non-floating dtype.
@@ -368,7 +369,8 @@ def _plan(
         )
     r = seg.radius * scale
     length = length_scale * scale * seg.length
-    half = math.sqrt((r + max_gap) ** 2 - r**2)  # the largest half spacing
+    # the largest half spacing, sqrt((r + g)^2 - r^2) factored: no square of r to overflow
+    half = math.sqrt(max_gap * (2.0 * r + max_gap))
     # 0 where max_gap is below the rounding of r: inf intervals, counted before any rounding
     intervals = math.inf if half == 0.0 else length / (2.0 * half) - 1e-9
     if not intervals < MAX_HUMAN_SPHERES:

@@ -335,3 +335,10 @@ def test_bad_segments_and_joint_names_raise_config_error() -> None:
             HumanSphereMap.from_segments(names)  # type: ignore[arg-type]
     # iterables other than tuples still work
     assert HumanSphereMap.from_segments(list(JOINT_NAMES), iter(SEGMENTS)).num_spheres == 22
+
+
+def test_cover_of_a_huge_scale_raises_config_error() -> None:
+    """scale=1e300 raised a bare OverflowError from squaring the segment radius; it is now
+    the sphere-count ConfigError of any other scale too large for MAX_HUMAN_SPHERES."""
+    with pytest.raises(ConfigError, match="'cover' sphere layout would take about"):
+        HumanSphereMap.from_segments(JOINT_NAMES, layout="cover", scale=1e300)
