@@ -639,7 +639,7 @@ def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None
     Args:
         x: (B, T, D) windows, B >= 2, float32 or float64, finite.
         n_pairs: number of random pairs, >= 1.
-        seed: seed of the pair sampler, an integer.
+        seed: seed of the pair sampler, an integer in [0, 2^63 - 1].
         band: as in :func:`dtw_distance`.
 
     Returns:
@@ -647,7 +647,7 @@ def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None
 
     Raises:
         ShapeError: when fewer than two windows are given, or as :func:`dtw_distance`.
-        ConfigError: when ``n_pairs < 1``, ``seed`` is not an integer, or as
+        ConfigError: when ``n_pairs < 1``, ``seed`` is not an integer in [0, 2^63 - 1], or as
             :func:`dtw_distance` (band).
         DataError: when a window holds NaN or inf (naming window and frame).
     """
@@ -655,7 +655,7 @@ def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None
     if x.shape[0] < 2:
         raise ShapeError(f"expected x (B >= 2, T, D), got {tuple(x.shape)}")
     checks.integer("n_pairs", n_pairs, minimum=1)
-    seed = checks.integer("seed", seed)
+    seed = checks.seed(seed)
     _check_band(band)
     _check_pair(x, x)  # shapes, dtype, finite values
     g = torch.Generator().manual_seed(seed)

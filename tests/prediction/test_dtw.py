@@ -406,7 +406,7 @@ def test_bandwidths_must_be_finite_positive_numbers(value: object):
     ):
         with pytest.raises(ConfigError, match=re.escape(f"expected {name} > 0 and finite")):
             call()
-    with pytest.raises(ConfigError, match="expected seed an integer, got 'a'"):
+    with pytest.raises(ConfigError, match="expected seed an integer >= 0, got 'a'"):
         median_dtw(x, n_pairs=3, seed="a")
 
 
@@ -416,3 +416,12 @@ def test_kernel_from_state_names_missing_arguments():
         kernel_from_state("dtw", {})
     with pytest.raises(ConfigError, match="hparams of kernel 'rbf' a dict, got NoneType"):
         kernel_from_state("rbf", None)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("seed", [2**70, -1])
+def test_median_dtw_refuses_a_seed_out_of_range(seed: int) -> None:
+    """2**70 raised a bare ValueError ("Overflow when unpacking long long") from the torch
+    generator; seeds are checked as everywhere else, as integers in [0, 2^63 - 1]."""
+    x = torch.randn(3, 4, 2, generator=torch.Generator().manual_seed(0))
+    with pytest.raises(ConfigError, match="expected seed an integer"):
+        median_dtw(x, seed=seed)
