@@ -47,6 +47,9 @@ Computing in float32 and rounding back would still overflow the float16 result, 
 convert (``x.float()``) and get float32 distances. Empty batches (B = 0) give empty results.
 Settings (``band``, ``max_cells``, ``sigma``, ``gamma``, ``lengthscale``) are checked when
 given, with :class:`~iplanner_torch.errors.ConfigError`.
+
+DTW and GAK are not differentiable here (the wavefront runs in place): windows that require
+grad are detached, and the results carry no gradient. :class:`RBFKernel` is differentiable.
 """
 
 from __future__ import annotations
@@ -429,6 +432,7 @@ def _gram(
     max_cells: int,
     symmetric: bool,
 ) -> Tensor:
+    x, y = x.detach(), y.detach()  # in-place wavefront: no autograd (module docstring)
     b1, t1, _ = x.shape
     b2, t2, _ = y.shape
     out = torch.empty(b1, b2, dtype=x.dtype, device=x.device)
@@ -475,6 +479,7 @@ def _gram(
 def _chunked_paired(
     x: Tensor, y: Tensor, band: int | None, kind: str, sigma: float | None, max_cells: int
 ) -> Tensor:
+    x, y = x.detach(), y.detach()  # in-place wavefront: no autograd (module docstring)
     t1, t2 = x.shape[1], y.shape[1]
     per_pair = t1 * t2
     step = max(1, max_cells // per_pair)

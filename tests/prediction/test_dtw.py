@@ -425,3 +425,20 @@ def test_median_dtw_refuses_a_seed_out_of_range(seed: int) -> None:
     x = torch.randn(3, 4, 2, generator=torch.Generator().manual_seed(0))
     with pytest.raises(ConfigError, match="expected seed an integer"):
         median_dtw(x, seed=seed)
+
+
+def test_windows_that_require_grad_are_detached() -> None:
+    """Windows that required grad raised a bare RuntimeError ("functions with out=...
+    arguments don't support automatic differentiation") from every DTW and GAK entry point;
+    they are detached, with the values of the detached windows."""
+    g = torch.Generator().manual_seed(8)
+    x = torch.randn(3, 5, 2, generator=g, dtype=torch.float64)
+    y = torch.randn(3, 4, 2, generator=g, dtype=torch.float64)
+    xg = x.clone().requires_grad_(True)
+    for fn in (dtw_distance, dtw_paired):
+        got = fn(xg, y)
+        assert not got.requires_grad
+        torch.testing.assert_close(got, fn(x, y), rtol=0, atol=0)
+    for fn in (gak_log, gak_log_paired):
+        torch.testing.assert_close(fn(xg, y, sigma=1.0), fn(x, y, sigma=1.0), rtol=0, atol=0)
+    assert median_dtw(xg) == median_dtw(x)
