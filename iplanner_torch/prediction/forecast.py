@@ -14,7 +14,7 @@ from typing import Any
 import torch
 
 from iplanner_torch.errors import DataError, ShapeError
-from iplanner_torch.types import MAX_POSITION_M, check_shape
+from iplanner_torch.types import MAX_POSITION_M, check_shape, resolve_device
 
 #: how far a row of forecast weights may sum from 1 (float32 rounding of A probabilities)
 WEIGHT_SUM_TOL = 1e-3
@@ -220,7 +220,13 @@ class Forecast:
         return torch.einsum("ba,bafkc->bfkc", self.weights, self.mean)
 
     def to(self, device: torch.device | str) -> Forecast:
-        """A copy on ``device``."""
+        """A copy on ``device`` (``"cpu"``, ``"cuda"``, ``"cuda:<index>"`` or ``"auto"``).
+
+        Raises:
+            ConfigError: for a device that :func:`~iplanner_torch.types.resolve_device`
+                refuses (an unknown name, CUDA where there is none, another device type).
+        """
+        device = resolve_device(device)
         return self._derive(
             weights=self.weights.to(device),
             mean=self.mean.to(device),
@@ -296,8 +302,8 @@ class Forecast:
 
         Raises:
             ShapeError: for an int outside [-B, B), an index that selects no row, one that
-                does not index the batch dimension alone (a bool, None, a tuple), or an index
-                tensor or list out of range.
+                does not index the batch dimension alone (a bool, None, a tuple), an index
+                tensor or list out of range, or a slice with a step below 1.
         """
         b = self.batch_size
         if isinstance(index, torch.Tensor) and index.dim() == 0 and _is_integer(index):
@@ -316,7 +322,7 @@ class Forecast:
             idx = index
         try:
             weights = self.weights[idx]  # (B', A)
-        except (IndexError, TypeError, RuntimeError) as err:
+        except (IndexError, TypeError, ValueError, RuntimeError) as err:  # ValueError: step < 1
             raise ShapeError(
                 f"index {index!r} does not index the batch of a forecast of B = {b}: {err}"
             ) from err

@@ -8,7 +8,7 @@ import re
 import pytest
 import torch
 
-from iplanner_torch.errors import DataError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import _SMALL_WEIGHTS, Forecast
 from iplanner_torch.types import MAX_POSITION_M
 
@@ -165,3 +165,15 @@ def test_dt_string_or_bool_is_refused_and_numbers_become_float() -> None:
             Forecast(**fields, dt=bad)
     g = Forecast(**fields, dt=torch.tensor([0.1]))
     assert type(g.dt) is float and g.times.shape == (4,)
+
+
+def test_select_of_a_reversing_slice_and_to_an_unknown_device_are_typed_errors() -> None:
+    """select(slice(None, None, -1)) raised a bare ValueError from tensor indexing;
+    to("nope") and to(3) on a machine without an accelerator raised bare RuntimeErrors."""
+    f = _forecast()
+    with pytest.raises(ShapeError, match="does not index the batch"):
+        f.select(slice(None, None, -1))
+    for bad in ("nope", "meta"):
+        with pytest.raises(ConfigError, match="device"):
+            f.to(bad)
+    assert f.to("cpu").mean.device.type == "cpu"
