@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import reprlib
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -126,13 +127,13 @@ def finite_time(name: str, value: Any, *, error: type[Exception] = ConfigError) 
     often come out of tensors.
 
     Raises:
-        error: when ``value`` is NaN or infinite, or has no float value (e.g. a string or
-            ``None``).
+        error: when ``value`` is NaN or infinite, or has no float value (e.g. a string,
+            ``None``, or an integer beyond float range).
     """
     try:
         ok = math.isfinite(value)
-    except (TypeError, ValueError) as err:
-        raise error(f"expected {name} a finite time [s], got {value!r}") from err
+    except (TypeError, ValueError, OverflowError) as err:  # OverflowError: an int > 1e308
+        raise error(f"expected {name} a finite time [s], got {reprlib.repr(value)}") from err
     if not ok:
         raise error(f"expected {name} a finite time [s], got {value!r}")
     return float(value)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import copy
 import math
 import numbers
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,7 +45,8 @@ class Forecast:
     Raises:
         ShapeError: when ``weights``, ``mean`` or ``var`` has the wrong shape (B = 0 or A = 0
             included), is not of a floating dtype, or they differ in dtype or device, or
-            ``action_names`` does not name A actions.
+            ``joint_names`` or ``action_names`` is not a sequence of names (None, one string)
+            or ``action_names`` does not name A actions.
         DataError: when ``weights``, ``mean`` or ``var`` holds NaN or inf (naming the field
             and, for ``mean`` and ``var``, the joint), a coordinate of ``mean`` lies beyond
             :data:`~iplanner_torch.types.MAX_POSITION_M`, a row of ``weights`` is not
@@ -62,6 +64,13 @@ class Forecast:
     action_names: tuple[str, ...]
 
     def __post_init__(self) -> None:
+        for field_name in ("joint_names", "action_names"):
+            names = getattr(self, field_name)
+            if isinstance(names, str | bytes) or not isinstance(names, Sequence):
+                raise ShapeError(
+                    f"expected forecast {field_name} a sequence of names, got "
+                    f"{type(names).__name__} {names!r}"
+                )
         check_shape("weights", self.weights, ("B", "A"))
         b, a = self.weights.shape
         if b < 1 or a < 1:

@@ -54,7 +54,7 @@ def test_finite_time_and_optional() -> None:
     assert checks.finite_time("t", np.float32(0.25)) == 0.25
     with pytest.raises(DataError, match=r"expected t a finite time \[s\], got nan"):
         checks.finite_time("t", math.nan, error=DataError)
-    for bad in ("soon", None, [1.0]):
+    for bad in ("soon", None, [1.0], 10**400):  # 10**400: beyond float range
         with pytest.raises(ConfigError, match="expected t a finite time"):
             checks.finite_time("t", bad)
     with pytest.raises(DataError, match="expected t a finite time"):

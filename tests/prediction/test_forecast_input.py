@@ -177,3 +177,17 @@ def test_select_of_a_reversing_slice_and_to_an_unknown_device_are_typed_errors()
         with pytest.raises(ConfigError, match="device"):
             f.to(bad)
     assert f.to("cpu").mean.device.type == "cpu"
+
+
+@pytest.mark.parametrize("field", ["joint_names", "action_names"])
+@pytest.mark.parametrize("names", [None, "ab", 3])
+def test_names_that_are_not_a_sequence_of_names_are_refused(field: str, names: object) -> None:
+    """joint_names or action_names None (or a number) raised a bare TypeError from len(); one
+    string of as many letters as joints passed, its letters taken as names."""
+    f = _forecast(a=2)
+    fields = {k: getattr(f, k) for k in ("weights", "mean", "var", "dt")}
+    fields |= {"joint_names": f.joint_names, "action_names": f.action_names, field: names}
+    with pytest.raises(ShapeError, match=f"expected forecast {field} a sequence of names"):
+        Forecast(**fields)
+    fields[field] = list("ab")  # a list is fine
+    assert Forecast(**fields).joint_names is not None
