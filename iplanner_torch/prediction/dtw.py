@@ -38,7 +38,12 @@ Kernels (classes with ``__call__(x1, x2) -> (B1, B2)`` and ``diag(x) -> (B,)``):
 * :class:`RBFKernel`: Gaussian kernel on the flattened windows, the cheap alternative.
 
 Inputs: windows are float32 or float64 (:data:`DTYPES`), both of one dtype and on one device,
-with T >= 1 frames and D >= 1 features, finite. Half precision (float16, bfloat16) is refused
+with T >= 1 frames and D >= 1 features, finite, and small enough that squared frame distances
+fit the dtype: summed over D features they overflow once feature values reach about 1e19 in
+float32 (1e154 in float64; earlier the more features), the path sums of squared DTW
+(``squared=True``) about 5x earlier;
+such windows are refused with :class:`~iplanner_torch.errors.DataError` (standardise the
+features) rather than giving inf or NaN. Half precision (float16, bfloat16) is refused
 rather than computed, as in :mod:`iplanner_torch.collision.gaussian`: float16 squared frame
 distances overflow beyond 256 feature units (NaN distances), a DTW sum of up to T + T2 - 1
 costs overflows its largest value 65504 even where each distance does not, bfloat16 keeps
@@ -63,7 +68,7 @@ import torch
 from torch import Tensor
 
 from iplanner_torch import checks
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.types import check_finite, check_shape
 
 __all__ = [
@@ -207,20 +212,47 @@ def _wavefront(cells: Tensor, lay: _Layout, mode: _Mode) -> Tensor:
 # squared frame distances
 
 
-def _sqdist_rows(xf: Tensor, yf: Tensor) -> Tensor:
-    """(n, D), (m, D) -> (n, m) squared Euclidean distances, accurate near zero."""
+def _sqdist_rows(xf: Tensor, yf: Tensor, names: str) -> Tensor:
+    """(n, D), (m, D) -> (n, m) squared Euclidean distances, accurate near zero; n, m >= 1.
+
+    Raises:
+        DataError: when the distances would overflow (see :func:`_check_scale`).
+    """
     mean = torch.cat([xf, yf]).mean(0, keepdim=True)  # distances are translation invariant
     xc, yc = xf - mean, yf - mean
     xn = (xc * xc).sum(-1)  # (n,)
     yn = (yc * yc).sum(-1)  # (m,)
+    scale = float(xn.max() + yn.max())
+    _check_scale(names, scale, xf.dtype, "dtw", 1, 1)
     sq = torch.mm(xc, yc.T).mul_(-2.0)  # (n, m)
     sq.add_(xn[:, None]).add_(yn[None, :])
     # cancellation makes the product form inexact for nearly equal frames: recompute those
-    small = sq < _EXACT_FRACTION * float(xn.max() + yn.max())
+    small = sq < _EXACT_FRACTION * scale
     if bool(small.any()):
         r, c = small.nonzero(as_tuple=True)
         sq[r, c] = (xc[r] - yc[c]).pow(2).sum(-1)
     return sq.clamp_(min=0.0)
+
+
+def _check_scale(
+    names: str, scale: float, dtype: torch.dtype, kind: str, t1: int, t2: int
+) -> None:
+    """DataError when squared frame distances could overflow ``dtype``.
+
+    ``scale = max ||a||^2 + max ||b||^2`` over the centred frames bounds every squared frame
+    distance (and every intermediate of its matrix-product form) by ``2 scale``; for ``dtw_sq``
+    a warping path sums at most ``T + T2 - 1`` of them. One comparison of a Python float, once
+    per call (or chunk of paired windows).
+    """
+    bound = 2.0 * scale * (t1 + t2 - 1 if kind == "dtw_sq" else 1)
+    if not bound <= torch.finfo(dtype).max:  # also refuses NaN and inf (an overflowed scale)
+        what = "their sums along a warping path" if kind == "dtw_sq" else "frame distances"
+        raise DataError(
+            f"{names}: feature values too large for {dtype}: squared frame norms (centred) "
+            f"reach {scale:.3g}, so {what} would overflow to inf or NaN (largest "
+            f"{torch.finfo(dtype).max:.3g}); standardise the features (zero mean, unit "
+            "variance per feature) or use float64"
+        )
 
 
 def _local_terms(sq: Tensor, kind: str, sigma: float | None) -> Tensor:
@@ -350,12 +382,16 @@ class _GridPlan:
 
 def _paired(
     x: Tensor, y: Tensor, band: int | None, kind: str, sigma: float | None
-) -> Tensor:  # (P, T, D), (P, T2, D) -> (P,)
+) -> Tensor:  # (P, T, D), (P, T2, D) -> (P,), P >= 1
     p, t1, _ = x.shape
     t2 = y.shape[1]
     lay = _layout(t1, t2, band, x.device)
     mean = torch.cat([x, y], 1).mean(1, keepdim=True)  # (P, 1, D)
-    d = torch.cdist(x - mean, y - mean, compute_mode="donot_use_mm_for_euclid_dist")
+    xc, yc = x - mean, y - mean  # (P, T, D), (P, T2, D)
+    norms = torch.stack([torch.linalg.vector_norm(c, dim=-1).amax() for c in (xc, yc)])  # (2,)
+    nx, ny = norms.tolist()  # largest centred frame norms: their squares cannot overflow here
+    _check_scale("x and y", nx * nx + ny * ny, x.dtype, kind, t1, t2)
+    d = torch.cdist(xc, yc, compute_mode="donot_use_mm_for_euclid_dist")
     terms = _local_terms(d.pow_(2), kind, sigma)  # (P, T, T2)
     cells = x.new_empty(lay.n_cells, p)  # ((T+1)(T2+1), P)
     cells.view(t1 + 1, t2 + 1, p)[1:, 1:].copy_(terms.permute(1, 2, 0))
@@ -450,6 +486,7 @@ def _gram(
     xc_all, yc_all = x - mean, y - mean  # (B1, T, D), (B2, T2, D)
     xn_all, yn_all = (xc_all * xc_all).sum(-1), (yc_all * yc_all).sum(-1)  # (B1, T), (B2, T2)
     scale = float(xn_all.max() + yn_all.max())
+    _check_scale("x and y", scale, x.dtype, kind, t1, t2)
     mode = _mode(kind)
     plans: dict[tuple[int, int], _GridPlan] = {}
 
@@ -524,7 +561,9 @@ def dtw_distance(
             other than float32 and float64 (half precision included: see the module docstring).
         ConfigError: on a band that is not None or an integer >= 0 (NaN, inf, a string), or a
             ``max_cells`` that is not an integer >= 1.
-        DataError: when a window of ``x`` or ``y`` holds NaN or inf (naming window and frame).
+        DataError: when a window of ``x`` or ``y`` holds NaN or inf (naming window and frame),
+            or features so large that squared frame distances (with ``squared``, their sums
+            along a path) overflow the dtype (see the module docstring).
     """
     _check_pair(x, y)
     _check_band(band)
@@ -654,7 +693,8 @@ def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None
         ShapeError: when fewer than two windows are given, or as :func:`dtw_distance`.
         ConfigError: when ``n_pairs < 1``, ``seed`` is not an integer in [0, 2^63 - 1], or as
             :func:`dtw_distance` (band).
-        DataError: when a window holds NaN or inf (naming window and frame).
+        DataError: when a window holds NaN or inf (naming window and frame), or as
+            :func:`dtw_distance` (features so large that distances overflow).
     """
     check_shape("x", x, ("B", "T", "D"))
     if x.shape[0] < 2:
@@ -827,14 +867,15 @@ class RBFKernel:
         Raises:
             ShapeError: on wrong shapes (T or D = 0 included), different dtypes or devices, or
                 a dtype other than float32 and float64 (as :func:`dtw_distance`).
-            DataError: when a window holds NaN or inf (naming window and frame).
+            DataError: when a window holds NaN or inf (naming window and frame), or features
+                so large that the squared distance of flattened windows overflows the dtype.
         """
         check_shape("x1", x1, ("B1", "T", "D"))
         check_shape("x2", x2, ("B2", x1.shape[1], x1.shape[2]))
         _check_pair(x1, x2, ("x1", "x2"))
         if x1.shape[0] == 0 or x2.shape[0] == 0:
             return x1.new_empty(x1.shape[0], x2.shape[0])
-        sq = _sqdist_rows(x1.flatten(1), x2.flatten(1))  # (B1, B2)
+        sq = _sqdist_rows(x1.flatten(1), x2.flatten(1), "x1 and x2")  # (B1, B2)
         return torch.exp(-0.5 * sq / self.lengthscale**2)
 
     def diag(self, x: Tensor) -> Tensor:

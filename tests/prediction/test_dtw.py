@@ -332,6 +332,27 @@ def test_half_precision_is_refused_by_every_public_function(dtype: torch.dtype):
     )
 
 
+def test_features_whose_squared_distances_overflow_are_refused_by_every_public_function():
+    """float32 windows of 30 features around 1e19 gave inf or NaN distances and kernels (the
+    squared frame norms overflow): a DataError saying to standardise the features instead.
+    The same values in float64 are fine, and squared DTW, whose path sums overflow earlier, is
+    refused from about 1e18 while the plain distance of those windows is computed."""
+    g = torch.Generator().manual_seed(11)
+    base = torch.randn(3, 15, 30, generator=g, dtype=torch.float64)
+    x, y = (1e19 * base).float(), (1e19 * base.flip(0)).float()
+    for call in _every_public_call(x, y):
+        with pytest.raises(
+            DataError, match="feature values too large for torch.float32.*standardise"
+        ):
+            call()
+    assert torch.isfinite(dtw_distance(x.double(), y.double())).all()
+    x, y = (1e18 * base).float(), (1e18 * base.flip(0)).float()
+    assert torch.isfinite(dtw_distance(x, y)).all()
+    for call in (lambda: dtw_distance(x, y, squared=True), lambda: dtw_paired(x, y, squared=True)):
+        with pytest.raises(DataError, match="their sums along a warping path would overflow"):
+            call()
+
+
 def test_empty_batches_give_empty_results_for_every_kernel():
     """RBFKernel()(x[:0], y) used to fail in max() of an empty tensor; the DTW kernels gave
     empty results already."""
