@@ -90,16 +90,67 @@ class TaskMDPCfg:
 
 
 def encode_state(taken: set[int] | int, fetched: set[int] | int, num_objects: int) -> int:
-    """The progress bitmask: bit i for Take_i, bit n + i for Fetch_i."""
-    t = taken if isinstance(taken, int) else sum(1 << i for i in taken)
-    f = fetched if isinstance(fetched, int) else sum(1 << i for i in fetched)
-    return t | (f << num_objects)
+    """The progress bitmask: bit i for Take_i, bit n + i for Fetch_i.
+
+    Args:
+        taken: the objects the human has taken, as a collection of indices in [0, n) or a
+            bitmask in [0, 2^n) (a Python or numpy integer).
+        fetched: the objects the robot has fetched, likewise.
+        num_objects: n, an integer >= 1.
+
+    Raises:
+        ConfigError: for an object index or bitmask out of range (it would set another
+            object's bit), an argument that is neither, or a ``num_objects`` below 1.
+    """
+    n = checks.integer("num_objects", num_objects, minimum=1)
+    return _encode(_object_mask("taken", taken, n), _object_mask("fetched", fetched, n), n)
 
 
 def decode_state(state: int, num_objects: int) -> tuple[int, int]:
-    """(taken mask, fetched mask) of a progress bitmask."""
-    full = (1 << num_objects) - 1
-    return state & full, (state >> num_objects) & full
+    """(taken mask, fetched mask) of a progress bitmask.
+
+    Raises:
+        ConfigError: when ``state`` is not an integer in [0, 4^n), or ``num_objects`` is not
+            an integer >= 1.
+    """
+    n = checks.integer("num_objects", num_objects, minimum=1)
+    return _decode(_state("state", state, n), n)
+
+
+def _encode(taken: int, fetched: int, n: int) -> int:
+    return taken | (fetched << n)
+
+
+def _decode(state: int, n: int) -> tuple[int, int]:
+    full = (1 << n) - 1
+    return state & full, (state >> n) & full
+
+
+def _state(name: str, state: object, n: int) -> int:
+    """``state`` as an int; ConfigError unless it is a progress bitmask of ``n`` objects."""
+    if isinstance(state, (bool, np.bool_)) or not isinstance(state, numbers.Integral):
+        raise ConfigError(f"expected {name} a progress bitmask (an integer), got {state!r}")
+    if not 0 <= state < 1 << (2 * n):
+        raise ConfigError(
+            f"expected {name} a progress bitmask of {n} objects in [0, {1 << (2 * n)}), "
+            f"got {state}"
+        )
+    return int(state)
+
+
+def _object_mask(name: str, objs: object, n: int) -> int:
+    """The bitmask of ``objs`` (a bitmask or a collection of object indices in [0, n))."""
+    if isinstance(objs, numbers.Integral):
+        if not 0 <= objs < 1 << n:
+            raise ConfigError(f"expected {name} a bitmask of {n} objects, got {objs}")
+        return int(objs)
+    if not isinstance(objs, Iterable) or isinstance(objs, (str, bytes)):
+        raise ConfigError(f"expected {name} a set of object indices or a bitmask, got {objs!r}")
+    items = set(objs)
+    for i in items:
+        if isinstance(i, bool) or not isinstance(i, numbers.Integral) or not 0 <= i < n:
+            raise ConfigError(f"unknown object {i!r} in {name}: expected indices in [0, {n})")
+    return sum(1 << int(i) for i in items)
 
 
 def _bits(mask: int, n: int) -> set[int]:
@@ -107,7 +158,12 @@ def _bits(mask: int, n: int) -> set[int]:
 
 
 def _numeric_table(table: object) -> np.ndarray:
-    """``table`` as a float64 array; DataError when it is not numeric."""
+    """``table`` as a float64 array; DataError when it is not numeric or is complex."""
+    if np.iscomplexobj(table):  # float64 conversion would drop the imaginary part
+        raise DataError(
+            f"expected h_table a real (n, n) table, got complex values "
+            f"(dtype {np.asarray(table).dtype})"
+        )
     try:
         return np.asarray(table, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -128,7 +184,7 @@ class TaskPlanner:
 
     Raises:
         ConfigError: when ``h_table`` is not (n, n).
-        DataError: when ``h_table`` is not numeric or holds NaN or inf.
+        DataError: when ``h_table`` is not numeric, is complex or holds NaN or inf.
     """
 
     def __init__(
@@ -169,7 +225,8 @@ class TaskPlanner:
 
         Raises:
             ConfigError: when ``next_action_probs`` gives a shape other than (n,).
-            DataError: when it gives a NaN or infinite probability.
+            DataError: when it gives a NaN or infinite probability, or values that are not
+                real numbers (complex, text, a set).
         """
         n = self.cfg.num_objects
         allowed = self._allowed_takes(taken)
@@ -178,7 +235,15 @@ class TaskPlanner:
             raw = self.next_action_probs(taken)
         elif self.next_action_probs is not None:
             raw = self.next_action_probs.get(taken)
-        p = np.zeros(n) if raw is None else np.asarray(raw, dtype=np.float64).copy()
+        try:
+            if np.iscomplexobj(raw):  # float64 conversion would drop the imaginary part
+                raise TypeError("complex values")
+            p = np.zeros(n) if raw is None else np.asarray(raw, dtype=np.float64).copy()
+        except (TypeError, ValueError) as exc:
+            raise DataError(
+                f"expected real next-action probabilities for taken mask {taken}, got "
+                f"{raw!r} ({exc})"
+            ) from exc
         if p.shape != (n,):
             raise ConfigError(f"expected next-action probabilities of shape ({n},), got {p.shape}")
         if not np.isfinite(p).all():
@@ -194,12 +259,12 @@ class TaskPlanner:
 
     def r_prep(self, state: int, action: int) -> float:
         """Eq. reward: ``sum_h p(n = h | p) H(h, a)``."""
-        taken, _ = decode_state(state, self.cfg.num_objects)
+        taken, _ = _decode(state, self.cfg.num_objects)
         return float(self.human_next_probs(taken) @ self.h_table[:, action])
 
     def available(self, state: int) -> list[int]:
         """Objects not yet fetched in ``state``."""
-        _, fetched = decode_state(state, self.cfg.num_objects)
+        _, fetched = _decode(state, self.cfg.num_objects)
         return [i for i in range(self.cfg.num_objects) if not fetched >> i & 1]
 
     def q_values(self, state: int) -> np.ndarray:
@@ -212,7 +277,23 @@ class TaskPlanner:
 
     # ------------------------------------------------------------ learning
     def update(self, state: int, action: int, reward: float, next_state: int | None) -> None:
-        """One Q-learning update (``next_state`` None: terminal)."""
+        """One Q-learning update (``next_state`` None: terminal).
+
+        Raises:
+            ConfigError: when ``state`` or ``next_state`` is not a progress bitmask in
+                [0, 4^n), or ``action`` not an object index in [0, n).
+            DataError: when ``reward`` is not a finite number.
+        """
+        n = self.cfg.num_objects
+        state = _state("state", state, n)
+        if next_state is not None:
+            next_state = _state("next_state", next_state, n)
+        if not 0 <= checks.integer("action", action) < n:
+            raise ConfigError(f"expected action an object index in [0, {n}), got {action}")
+        reward = checks.finite("reward", reward, error=DataError)
+        self._update(state, int(action), reward, next_state)
+
+    def _update(self, state: int, action: int, reward: float, next_state: int | None) -> None:
         n = self.cfg.num_objects
         q = self.q.setdefault(state, np.zeros(n))
         future = 0.0
@@ -231,13 +312,21 @@ class TaskPlanner:
 
         Raises:
             ConfigError: when ``action`` is not an object index in [0, n).
+            DataError: when ``delay_fn`` gives anything but a finite number of seconds >= 0
+                (NaN, inf, a negative delay, a string), naming the state and action.
         """
         n = self.cfg.num_objects
         if not 0 <= checks.integer("action", action) < n:
             raise ConfigError(f"expected action an object index in [0, {n}), got {action}")
-        taken, fetched = decode_state(state, n)
+        taken, fetched = _decode(state, n)
         reward_prep = self.r_prep(state, action)
-        delay = 0.0 if self.delay_fn is None else float(self.delay_fn(state, action, rng))
+        delay = 0.0
+        if self.delay_fn is not None:
+            raw = self.delay_fn(state, action, rng)
+            where = f"delay_fn(state={state}, action={action})"
+            delay = checks.finite_time(where, raw, error=DataError)
+            if delay < 0.0:
+                raise DataError(f"expected {where} a delay [s] >= 0, got {raw!r}")
         fetched |= 1 << action
         probs = self.human_next_probs(taken)
         if probs.sum() > 0:
@@ -247,7 +336,7 @@ class TaskPlanner:
             else:
                 delay += self.cfg.idle_delay_s
         reward = self.cfg.w_prep * reward_prep - self.cfg.w_delay * delay
-        return encode_state(taken, fetched, n), reward, delay
+        return _encode(taken, fetched, n), reward, delay
 
     def train(self, episodes: int | None = None) -> list[float]:
         """Epsilon-greedy Q-learning over simulated episodes.
@@ -274,7 +363,7 @@ class TaskPlanner:
                 else:
                     action = self._greedy(state)
                 nxt, reward, _ = self.simulate_step(state, action, rng)
-                self.update(state, action, reward, nxt if self.available(nxt) else None)
+                self._update(state, action, reward, nxt if self.available(nxt) else None)
                 state, total = nxt, total + reward
             returns.append(total)
         return returns
@@ -305,35 +394,23 @@ class TaskPlanner:
                 after ``Fetch_i``).
         """
         n = self.cfg.num_objects
-        masks = []
-        for name, objs in (("taken", taken), ("fetched", fetched)):
-            if isinstance(objs, numbers.Integral):
-                if not 0 <= objs < 1 << n:
-                    raise ConfigError(f"expected {name} a bitmask of {n} objects, got {objs}")
-                masks.append(int(objs))
-                continue
-            if not isinstance(objs, Iterable) or isinstance(objs, (str, bytes)):
-                raise ConfigError(
-                    f"expected {name} a set of object indices or a bitmask, got {objs!r}"
-                )
-            for i in objs:
-                if isinstance(i, bool) or not isinstance(i, numbers.Integral) or not 0 <= i < n:
-                    raise ConfigError(
-                        f"unknown object {i!r} in {name}: expected indices in [0, {n})"
-                    )
-            masks.append(sum(1 << int(i) for i in set(objs)))
-        t_mask, f_mask = masks
+        t_mask, f_mask = _object_mask("taken", taken, n), _object_mask("fetched", fetched, n)
         if t_mask & ~f_mask:
             raise DataError(
                 f"expected every taken object fetched (Take_i only after Fetch_i), got taken "
                 f"{sorted(_bits(t_mask, n))} with fetched {sorted(_bits(f_mask, n))}"
             )
-        state = encode_state(t_mask, f_mask, n)
+        state = _encode(t_mask, f_mask, n)
         return self._greedy(state) if self.available(state) else None
 
     # ------------------------------------------------------------ persistence
     def save(self, path: str | Path) -> None:
-        """Write the settings, H and the Q table as JSON."""
+        """Write the settings, H and the Q table as JSON.
+
+        Raises:
+            ConfigError: when ``path`` is not a file path (str or os.PathLike).
+        """
+        _check_path(path)
         data = {
             "format": "iplanner_torch.task_mdp/1",
             "cfg": asdict(self.cfg),
@@ -353,9 +430,11 @@ class TaskPlanner:
         """Read a planner written by :meth:`save`.
 
         Raises:
+            ConfigError: when ``path`` is not a file path (str or os.PathLike).
             CheckpointError: when the file is missing, not a task-planner file, or malformed
                 (unknown or invalid settings, an H or a Q table that does not fit them).
         """
+        _check_path(path)
         try:
             data = json.loads(Path(path).read_text())
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -387,6 +466,15 @@ class TaskPlanner:
         planner = cls(cfg, task_order, next_action_probs, h_table, delay_fn)
         planner.q = q
         return planner
+
+
+def _check_path(path: object) -> None:
+    """ConfigError unless ``path`` is a str or os.PathLike (``Path()`` raised TypeError)."""
+    if not (isinstance(path, str) or hasattr(path, "__fspath__")):
+        raise ConfigError(
+            f"expected path a file path (str or os.PathLike) of a task planner, got "
+            f"{type(path).__name__} {path!r}"
+        )
 
 
 def _load_cfg(path: str | Path, raw: object) -> TaskMDPCfg:

@@ -263,3 +263,77 @@ def test_train_refuses_a_bad_episode_count(episodes: object) -> None:
     with pytest.raises(ConfigError, match="expected episodes an integer >= 0"):
         planner.train(episodes)  # type: ignore[arg-type]
     assert planner.train(0) == []
+
+
+@pytest.mark.parametrize("delay", [math.nan, math.inf, -1.0, "2", None])
+def test_a_bad_delay_is_a_data_error_naming_state_and_action(delay: object) -> None:
+    # NaN, inf or a negative delay went into the Q table silently; a string or None raised a
+    # bare ValueError/TypeError from float()
+    planner = TaskPlanner(TaskMDPCfg(num_objects=2, episodes=3), delay_fn=lambda s, a, r: delay)
+    with pytest.raises(DataError, match=r"expected delay_fn\(state=0, action=\d\) a"):
+        planner.train()
+    assert all(np.isfinite(v).all() for v in planner.q.values())
+
+
+def test_a_complex_h_table_is_a_data_error() -> None:
+    # the imaginary part was dropped with only a numpy ComplexWarning
+    with pytest.raises(DataError, match=r"expected h_table a real \(n, n\) table, got complex"):
+        TaskPlanner(TaskMDPCfg(num_objects=2), h_table=np.eye(2) * (1 + 1j))
+
+
+@pytest.mark.parametrize("raw", [[0.5, 0.5j], [{1}, 0.5], "ab"])
+def test_next_action_probabilities_that_are_not_real_are_a_data_error(raw: object) -> None:
+    planner = TaskPlanner(TaskMDPCfg(num_objects=2), next_action_probs={0: raw})
+    with pytest.raises(
+        DataError, match="expected real next-action probabilities for taken mask 0"
+    ):
+        planner.human_next_probs(0)
+
+
+@pytest.mark.parametrize(
+    ("args", "error", "match"),
+    [
+        ((0, 2, 1.0, None), ConfigError, r"expected action an object index in \[0, 2\), got 2"),
+        ((0, -1, 1.0, None), ConfigError, r"expected action an object index in \[0, 2\), got -1"),
+        ((-1, 0, 1.0, None), ConfigError, r"expected state a progress bitmask of 2 objects"),
+        ((0, 0, 1.0, 16), ConfigError, r"expected next_state a progress bitmask .* got 16"),
+        ((0, 0, math.nan, None), DataError, "expected reward a finite number, got nan"),
+    ],
+)
+def test_update_refuses_out_of_range_indices_and_a_nan_reward(
+    args: tuple, error: type[Exception], match: str
+) -> None:
+    # action 2 raised a bare IndexError; action -1, state -1, next_state 16 and a NaN reward
+    # wrote into the wrong or a nonexistent Q entry silently
+    planner = TaskPlanner(TaskMDPCfg(num_objects=2))
+    with pytest.raises(error, match=match):
+        planner.update(*args)
+    assert planner.q == {}
+
+
+@pytest.mark.parametrize(
+    ("taken", "fetched", "match"),
+    [
+        ({-1}, set(), r"unknown object -1 in taken: expected indices in \[0, 2\)"),
+        ({2}, set(), r"unknown object 2 in taken"),
+        (0, 4, "expected fetched a bitmask of 2 objects, got 4"),
+        (None, 0, "expected taken a set of object indices or a bitmask"),
+    ],
+)
+def test_encode_state_refuses_objects_out_of_range(taken: object, fetched: object, match: str):
+    # {-1} raised a bare ValueError (negative shift), {2} and the mask 4 set another object's
+    # bit silently
+    with pytest.raises(ConfigError, match=match):
+        encode_state(taken, fetched, 2)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match=r"expected state a progress bitmask of 2 objects"):
+        decode_state(-1, 2)
+    assert decode_state(encode_state({0}, {0, 1}, 2), 2) == (0b01, 0b11)
+
+
+def test_load_and_save_refuse_a_path_that_is_not_one(tmp_path: Path) -> None:
+    # Path(None) raised a bare TypeError
+    planner = TaskPlanner(TaskMDPCfg(num_objects=2))
+    with pytest.raises(ConfigError, match=r"expected path a file path \(str or os.PathLike\)"):
+        TaskPlanner.load(None)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="expected path a file path"):
+        planner.save(3)  # type: ignore[arg-type]
