@@ -263,7 +263,9 @@ def _local_terms(sq: Tensor, kind: str, sigma: float | None) -> Tensor:
         return sq
     # GAK: log kappa = -(d^2 / (2 sigma^2) + log(2 - exp(-d^2 / (2 sigma^2))))
     assert sigma is not None
-    u = sq.mul_(-0.5 / sigma**2)  # -d^2 / (2 sigma^2)
+    # -d^2 / (2 sigma^2); sigma * sigma, unlike sigma**2, gives inf (a limit of 0) instead of
+    # raising OverflowError above 1.3e154, and the same value below
+    u = sq.mul_(-0.5 / (sigma * sigma))
     return u.sub_(torch.log(2.0 - torch.exp(u)))
 
 
@@ -876,7 +878,7 @@ class RBFKernel:
         if x1.shape[0] == 0 or x2.shape[0] == 0:
             return x1.new_empty(x1.shape[0], x2.shape[0])
         sq = _sqdist_rows(x1.flatten(1), x2.flatten(1), "x1 and x2")  # (B1, B2)
-        return torch.exp(-0.5 * sq / self.lengthscale**2)
+        return torch.exp(-0.5 * sq / (self.lengthscale * self.lengthscale))  # ** 2 may raise
 
     def diag(self, x: Tensor) -> Tensor:
         """(B, T, D) -> (B,) ones."""

@@ -463,3 +463,19 @@ def test_windows_that_require_grad_are_detached() -> None:
     for fn in (gak_log, gak_log_paired):
         torch.testing.assert_close(fn(xg, y, sigma=1.0), fn(x, y, sigma=1.0), rtol=0, atol=0)
     assert median_dtw(xg) == median_dtw(x)
+
+
+def test_a_bandwidth_beyond_the_square_root_of_float_range_is_its_limit() -> None:
+    """sigma or lengthscale above about 1.3e154 raised a bare OverflowError from squaring it in
+    Python. Its limit is a local kernel of 1: the GAK then counts the alignment paths (the
+    central Delannoy number, 321 for 5 frames), and the RBF kernel is 1."""
+    x = torch.randn(3, 5, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    for sigma in (1e200, 1e300):
+        assert torch.allclose(
+            gak_log(x, x, sigma=sigma), torch.full((3, 3), math.log(321.0)).double()
+        )
+        assert torch.allclose(
+            gak_log_paired(x, x, sigma=sigma), torch.full((3,), math.log(321.0)).double()
+        )
+        assert torch.equal(GlobalAlignmentKernel(sigma=sigma)(x, x), torch.ones(3, 3).double())
+        assert torch.equal(RBFKernel(lengthscale=sigma)(x, x), torch.ones(3, 3).double())
