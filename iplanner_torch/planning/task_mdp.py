@@ -138,6 +138,14 @@ def _state(name: str, state: object, n: int) -> int:
     return int(state)
 
 
+def _action(action: object, n: int) -> int:
+    """``action`` as an int; ConfigError unless it is an object index in [0, n)."""
+    a = checks.integer("action", action)
+    if not 0 <= a < n:
+        raise ConfigError(f"expected action an object index in [0, {n}), got {action}")
+    return a
+
+
 def _object_mask(name: str, objs: object, n: int) -> int:
     """The bitmask of ``objs`` (a bitmask or a collection of object indices in [0, n))."""
     if isinstance(objs, numbers.Integral):
@@ -221,14 +229,16 @@ class TaskPlanner:
         """(n,) p(n = Take_i | p) restricted to the allowed objects and renormalised.
 
         Args:
-            taken: bitmask of the objects the human has taken.
+            taken: bitmask (or set of indices) of the objects the human has taken.
 
         Raises:
-            ConfigError: when ``next_action_probs`` gives a shape other than (n,).
+            ConfigError: when ``taken`` is not a bitmask of n objects, or
+                ``next_action_probs`` gives a shape other than (n,).
             DataError: when it gives a NaN or infinite probability, or values that are not
                 real numbers (complex, text, a set).
         """
         n = self.cfg.num_objects
+        taken = _object_mask("taken", taken, n)
         allowed = self._allowed_takes(taken)
         raw = None
         if callable(self.next_action_probs):
@@ -258,17 +268,27 @@ class TaskPlanner:
         return p / p.sum() if p.sum() > 0 else p
 
     def r_prep(self, state: int, action: int) -> float:
-        """Eq. reward: ``sum_h p(n = h | p) H(h, a)``."""
-        taken, _ = _decode(state, self.cfg.num_objects)
-        return float(self.human_next_probs(taken) @ self.h_table[:, action])
+        """Eq. reward: ``sum_h p(n = h | p) H(h, a)``.
+
+        Raises:
+            ConfigError: when ``state`` is not a progress bitmask in [0, 4^n) or ``action``
+                not an object index in [0, n) (-1 took the last column of H).
+        """
+        n = self.cfg.num_objects
+        taken, _ = _decode(_state("state", state, n), n)
+        return float(self.human_next_probs(taken) @ self.h_table[:, _action(action, n)])
 
     def available(self, state: int) -> list[int]:
-        """Objects not yet fetched in ``state``."""
-        _, fetched = _decode(state, self.cfg.num_objects)
+        """Objects not yet fetched in ``state`` (ConfigError unless a progress bitmask in
+        [0, 4^n))."""
+        n = self.cfg.num_objects
+        _, fetched = _decode(_state("state", state, n), n)
         return [i for i in range(self.cfg.num_objects) if not fetched >> i & 1]
 
     def q_values(self, state: int) -> np.ndarray:
-        """(n,) Q(p, Fetch_i); -inf for objects already fetched."""
+        """(n,) Q(p, Fetch_i); -inf for objects already fetched (ConfigError unless ``state``
+        is a progress bitmask in [0, 4^n))."""
+        state = _state("state", state, self.cfg.num_objects)
         q = self.q.get(state)
         out = np.full(self.cfg.num_objects, -math.inf)
         avail = self.available(state)
@@ -288,10 +308,9 @@ class TaskPlanner:
         state = _state("state", state, n)
         if next_state is not None:
             next_state = _state("next_state", next_state, n)
-        if not 0 <= checks.integer("action", action) < n:
-            raise ConfigError(f"expected action an object index in [0, {n}), got {action}")
+        action = _action(action, n)
         reward = checks.finite("reward", reward, error=DataError)
-        self._update(state, int(action), reward, next_state)
+        self._update(state, action, reward, next_state)
 
     def _update(self, state: int, action: int, reward: float, next_state: int | None) -> None:
         n = self.cfg.num_objects
@@ -311,13 +330,13 @@ class TaskPlanner:
             next state, reward, delay [s] (robot motion delay plus human idle time).
 
         Raises:
-            ConfigError: when ``action`` is not an object index in [0, n).
+            ConfigError: when ``state`` is not a progress bitmask in [0, 4^n) or ``action``
+                not an object index in [0, n).
             DataError: when ``delay_fn`` gives anything but a finite number of seconds >= 0
                 (NaN, inf, a negative delay, a string), naming the state and action.
         """
         n = self.cfg.num_objects
-        if not 0 <= checks.integer("action", action) < n:
-            raise ConfigError(f"expected action an object index in [0, {n}), got {action}")
+        state, action = _state("state", state, n), _action(action, n)
         taken, fetched = _decode(state, n)
         reward_prep = self.r_prep(state, action)
         delay = 0.0

@@ -337,3 +337,26 @@ def test_load_and_save_refuse_a_path_that_is_not_one(tmp_path: Path) -> None:
         TaskPlanner.load(None)  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="expected path a file path"):
         planner.save(3)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda p: p.r_prep(0, -1), r"expected action an object index in \[0, 2\), got -1"),
+        (lambda p: p.r_prep(16, 0), r"expected state a progress bitmask of 2 objects"),
+        (lambda p: p.available("0"), r"expected state a progress bitmask \(an integer\)"),
+        (lambda p: p.q_values(1.5), r"expected state a progress bitmask \(an integer\)"),
+        (lambda p: p.human_next_probs(4), "expected taken a bitmask of 2 objects, got 4"),
+        (lambda p: p.human_next_probs(None), "expected taken a set of object indices"),
+        (lambda p: p.simulate_step(-1, 0, np.random.default_rng(0)), "expected state a"),
+    ],
+)
+def test_the_other_public_methods_refuse_a_state_or_action_out_of_range(
+    call: Callable[[TaskPlanner], object], match: str
+) -> None:
+    # r_prep(s, -1) used the last column of H silently; the others raised a bare TypeError or
+    # IndexError, or read another state's bits
+    planner = TaskPlanner(TaskMDPCfg(num_objects=2))
+    with pytest.raises(ConfigError, match=match):
+        call(planner)
+    assert planner.human_next_probs({0}).tolist() == [0.0, 1.0]  # a set of indices works too
