@@ -237,8 +237,11 @@ class TaskPlanner:
             DataError: when it gives a NaN or infinite probability, or values that are not
                 real numbers (complex, text, a set).
         """
+        return self._human_next_probs(_object_mask("taken", taken, self.cfg.num_objects))
+
+    def _human_next_probs(self, taken: int) -> np.ndarray:
+        """:meth:`human_next_probs` of a checked bitmask (the learning loop's)."""
         n = self.cfg.num_objects
-        taken = _object_mask("taken", taken, n)
         allowed = self._allowed_takes(taken)
         raw = None
         if callable(self.next_action_probs):
@@ -275,23 +278,30 @@ class TaskPlanner:
                 not an object index in [0, n) (-1 took the last column of H).
         """
         n = self.cfg.num_objects
-        taken, _ = _decode(_state("state", state, n), n)
-        return float(self.human_next_probs(taken) @ self.h_table[:, _action(action, n)])
+        return self._r_prep(_state("state", state, n), _action(action, n))
+
+    def _r_prep(self, state: int, action: int) -> float:
+        taken, _ = _decode(state, self.cfg.num_objects)
+        return float(self._human_next_probs(taken) @ self.h_table[:, action])
 
     def available(self, state: int) -> list[int]:
         """Objects not yet fetched in ``state`` (ConfigError unless a progress bitmask in
         [0, 4^n))."""
-        n = self.cfg.num_objects
-        _, fetched = _decode(_state("state", state, n), n)
+        return self._available(_state("state", state, self.cfg.num_objects))
+
+    def _available(self, state: int) -> list[int]:
+        _, fetched = _decode(state, self.cfg.num_objects)
         return [i for i in range(self.cfg.num_objects) if not fetched >> i & 1]
 
     def q_values(self, state: int) -> np.ndarray:
         """(n,) Q(p, Fetch_i); -inf for objects already fetched (ConfigError unless ``state``
         is a progress bitmask in [0, 4^n))."""
-        state = _state("state", state, self.cfg.num_objects)
+        return self._q_values(_state("state", state, self.cfg.num_objects))
+
+    def _q_values(self, state: int) -> np.ndarray:
         q = self.q.get(state)
         out = np.full(self.cfg.num_objects, -math.inf)
-        avail = self.available(state)
+        avail = self._available(state)
         out[avail] = 0.0 if q is None else q[avail]
         return out
 
@@ -316,8 +326,8 @@ class TaskPlanner:
         n = self.cfg.num_objects
         q = self.q.setdefault(state, np.zeros(n))
         future = 0.0
-        if next_state is not None and self.available(next_state):
-            future = float(np.max(self.q_values(next_state)))
+        if next_state is not None and self._available(next_state):
+            future = float(np.max(self._q_values(next_state)))
         a = self.cfg.alpha
         q[action] = (1.0 - a) * q[action] + a * (reward + self.cfg.gamma * future)
 
@@ -336,9 +346,15 @@ class TaskPlanner:
                 (NaN, inf, a negative delay, a string), naming the state and action.
         """
         n = self.cfg.num_objects
-        state, action = _state("state", state, n), _action(action, n)
+        return self._simulate_step(_state("state", state, n), _action(action, n), rng)
+
+    def _simulate_step(
+        self, state: int, action: int, rng: np.random.Generator
+    ) -> tuple[int, float, float]:
+        """:meth:`simulate_step` of a checked state and action (the learning loop's)."""
+        n = self.cfg.num_objects
         taken, fetched = _decode(state, n)
-        reward_prep = self.r_prep(state, action)
+        reward_prep = self._r_prep(state, action)
         delay = 0.0
         if self.delay_fn is not None:
             raw = self.delay_fn(state, action, rng)
@@ -347,7 +363,7 @@ class TaskPlanner:
             if delay < 0.0:
                 raise DataError(f"expected {where} a delay [s] >= 0, got {raw!r}")
         fetched |= 1 << action
-        probs = self.human_next_probs(taken)
+        probs = self._human_next_probs(taken)
         if probs.sum() > 0:
             h = int(rng.choice(n, p=probs))
             if fetched >> h & 1:
@@ -375,24 +391,24 @@ class TaskPlanner:
         returns = []
         for _ in range(self.cfg.episodes if episodes is None else episodes):
             state, total = 0, 0.0
-            while self.available(state):
-                avail = self.available(state)
+            while self._available(state):
+                avail = self._available(state)
                 if rng.random() < self.cfg.epsilon:
                     action = int(rng.choice(avail))
                 else:
                     action = self._greedy(state)
-                nxt, reward, _ = self.simulate_step(state, action, rng)
-                self._update(state, action, reward, nxt if self.available(nxt) else None)
+                nxt, reward, _ = self._simulate_step(state, action, rng)
+                self._update(state, action, reward, nxt if self._available(nxt) else None)
                 state, total = nxt, total + reward
             returns.append(total)
         return returns
 
     def _greedy(self, state: int) -> int:
-        q = self.q_values(state)
+        q = self._q_values(state)
         if state not in self.q:  # unseen: the immediate preparation reward decides
             q = np.array(
                 [
-                    self.r_prep(state, a) if a in self.available(state) else -math.inf
+                    self._r_prep(state, a) if a in self._available(state) else -math.inf
                     for a in range(self.cfg.num_objects)
                 ]
             )
@@ -420,7 +436,7 @@ class TaskPlanner:
                 f"{sorted(_bits(t_mask, n))} with fetched {sorted(_bits(f_mask, n))}"
             )
         state = _encode(t_mask, f_mask, n)
-        return self._greedy(state) if self.available(state) else None
+        return self._greedy(state) if self._available(state) else None
 
     # ------------------------------------------------------------ persistence
     def save(self, path: str | Path) -> None:
