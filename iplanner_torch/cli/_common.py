@@ -51,10 +51,12 @@ def instantiate(node: Any, expected: type | None = None, name: str | None = None
     from hydra.errors import InstantiationException
     from hydra.utils import instantiate as hydra_instantiate
 
+    key = name or (_full_key(node, None) if isinstance(node, (DictConfig, ListConfig)) else "")
     wrong = _wrong_type(node) if isinstance(node, DictConfig) else None
     if wrong:
+        if name and not _full_key(node, None):  # a node the command put together: named as given
+            wrong = f"{name}.{wrong}"
         raise ConfigError(wrong)
-    key = name or (_full_key(node, None) if isinstance(node, (DictConfig, ListConfig)) else "")
     if isinstance(node, (ListConfig, list, tuple)):  # a group file whose top level is a list
         raise ConfigError(_list_node_text(key, expected))
     try:
@@ -64,6 +66,8 @@ def instantiate(node: Any, expected: type | None = None, name: str | None = None
         if isinstance(cause, IPlannerError):
             text = str(cause)
             where = _bad_value_key(node, key, str(exc), text)
+            # "ReachingCfg.fps" (the library's name of the field) -> "fps": the key says where
+            text = re.sub(r"(?<![\w.])[A-Z]\w*Cfg\.(?=[a-z_])", "", text)
             field = where.rsplit(".", 1)[-1]
             if where != field and text.startswith(f"{field}: "):  # "seeds: ..." names it too
                 text = text[len(field) + 2 :]
@@ -140,10 +144,11 @@ def _bad_value_key(node: Any, key: str, hydra_message: str, text: str) -> str:
         cls = None
     if cls is None or not dataclasses.is_dataclass(cls):
         return where
-    named = [
+    own_name = re.escape(cls.__name__)
+    named = [  # "fps" or "ReachingCfg.fps"
         (m.start(), f.name)
         for f in dataclasses.fields(cls)
-        if (m := re.search(rf"(?<![\w.]){re.escape(f.name)}(?!\w)", text))
+        if (m := re.search(rf"(?<![\w.])(?:{own_name}\.)?{re.escape(f.name)}(?!\w)", text))
     ]
     if not named:
         return where
@@ -169,12 +174,13 @@ def _fits(value: Any, expected: type) -> bool:
 
 def _wrong_type(node: DictConfig) -> str | None:
     """The first value under ``node`` whose type does not fit its dataclass field
-    (:func:`_scalar_type`; ``"trainer.max_steps: expected int, got 'abc'"``), or None."""
+    (:func:`_scalar_kind`; ``"trainer.max_steps: expected int, got 'abc'"``; null only where
+    the field may be None, and no mapping where it holds one value), or None."""
     import dataclasses
 
     from hydra.utils import get_class
 
-    fields: dict[str, Any] = {}
+    fields: dict[str, tuple[type, bool]] = {}
     target = node.get("_target_") if "_target_" in node else None
     if isinstance(target, str):
         try:
@@ -182,25 +188,37 @@ def _wrong_type(node: DictConfig) -> str | None:
         except Exception:
             cls = None
         if cls is not None and dataclasses.is_dataclass(cls):
-            fields = {f.name: _scalar_type(cls, f) for f in dataclasses.fields(cls)}
+            fields = {
+                f.name: kind
+                for f in dataclasses.fields(cls)
+                if (kind := _scalar_kind(cls, f)) is not None
+            }
     for key in node:
         try:
             value = node[key]
         except Exception:  # an interpolation that does not resolve: Hydra says so itself
             continue
+        expected, nullable = fields.get(str(key), (None, True))
         if isinstance(value, DictConfig):
+            if expected is not None:  # {} where a number or a name is expected
+                got = _plain(value)
+                return f"{_full_key(node, str(key))}: expected {expected.__name__}, got {got!r}"
             found = _wrong_type(value)
             if found:
                 return found
             continue
-        expected = fields.get(str(key))
-        if expected is not None and value is not None and not _fits(value, expected):
-            return f"{_full_key(node, str(key))}: expected {expected.__name__}, got {value!r}"
+        if expected is None or (value is None and nullable):
+            continue
+        if value is None or not _fits(value, expected):  # null where the field takes none
+            got = "null" if value is None else repr(value)
+            return f"{_full_key(node, str(key))}: expected {expected.__name__}, got {got}"
     return None
 
 
-def _scalar_type(cls: type, field: Any) -> type | None:
-    """bool, int, float or str when a dataclass field holds one (``X`` or ``X | None``)."""
+def _scalar_kind(cls: type, field: Any) -> tuple[type, bool] | None:
+    """``(type, may be None)`` when a dataclass field holds a bool, int, float or str (``X``
+    or ``X | None``; a ``Literal`` of strings is a str), else None. A field whose annotation
+    does not resolve is judged by its default, and may be None."""
     import dataclasses
     import types
     import typing
@@ -212,12 +230,17 @@ def _scalar_type(cls: type, field: Any) -> type | None:
     if hint is not None:
         union = typing.get_origin(hint) in (typing.Union, types.UnionType)
         args = [a for a in typing.get_args(hint) if a is not type(None)] if union else [hint]
+        nullable = union and len(args) < len(typing.get_args(hint))
+        if len(args) == 1 and typing.get_origin(args[0]) is typing.Literal:
+            choices = typing.get_args(args[0])
+            if choices and all(isinstance(c, str) for c in choices):
+                return str, nullable
         if len(args) == 1 and args[0] in (bool, int, float, str):
-            return args[0]
+            return args[0], nullable
         return None
     default = field.default
     if default is not dataclasses.MISSING and type(default) in (bool, int, float, str):
-        return type(default)
+        return type(default), True
     return None
 
 

@@ -276,8 +276,8 @@ class ReachingCfg:
                 self, name, finite_range(f"ReachingCfg.{name}", getattr(self, name))
             )
         reach_targets(self.n_targets)  # validates n_targets
-        if self.reaches_per_target < 1 or self.n_subjects < 1:
-            raise ConfigError("reaches_per_target and n_subjects must be >= 1")
+        for name in ("reaches_per_target", "n_subjects"):  # each by name
+            checks.integer(f"ReachingCfg.{name}", getattr(self, name), minimum=1)
         check_recording_numbers("ReachingCfg.", self.fps, self.noise_sigma, self.dropout_rate)
         if not checks.finite("ReachingCfg.dropout_burst", self.dropout_burst) >= 1:
             raise ConfigError(

@@ -362,10 +362,8 @@ class TaskDatasetCfg:
                     f"task order {self.order!r} leaves object(s) {left} out: arrangement "
                     f"{self.arrangement} has {list(ids)}, and the order must take each once"
                 )
-        if self.n_demos < 1 or self.n_subjects < 1:
-            raise ConfigError(
-                f"need n_demos >= 1 and n_subjects >= 1, got {self.n_demos}, {self.n_subjects}"
-            )
+        for name in ("n_demos", "n_subjects"):  # each by name
+            checks.integer(f"TaskDatasetCfg.{name}", getattr(self, name), minimum=1)
         # every float is checked finite first (NaN and Inf pass a bare "x < 0" test)
         check_recording_numbers("TaskDatasetCfg.", self.fps, self.noise_sigma, self.dropout_rate)
         if self.file_format not in ("npz", "csv"):

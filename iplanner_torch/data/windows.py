@@ -298,6 +298,12 @@ class WindowCfg:
                 f"joints: expected a list of joint names, got the single string "
                 f"{self.joints!r}; write it as a list: [{self.joints}]"
             )
+        for name in ("joints", "progress_actions", "feature_kinds"):
+            val = getattr(self, name)
+            if val is not None and not isinstance(val, (str, Sequence)):  # a number, a bool
+                raise ConfigError(f"{name}: expected a list of names, got {val!r}")
+        if self.feature_kinds is None:
+            raise ConfigError("feature_kinds: expected a list of names, got None")
         for name in ("joints", "progress_actions"):
             val = getattr(self, name)
             if val is not None:

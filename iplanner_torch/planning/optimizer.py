@@ -169,13 +169,9 @@ class OptimizerCfg:
             raise ConfigError(
                 f"expected horizon_s in (0, {MAX_HORIZON_S:g}] s, got {self.horizon_s!r}"
             )
-        integer("iterations", self.iterations)
-        integer("warm_iterations", self.warm_iterations)
-        if self.iterations < 0 or self.warm_iterations < 0:
-            raise ConfigError(
-                "expected iterations and warm_iterations >= 0, got "
-                f"iterations={self.iterations}, warm_iterations={self.warm_iterations}"
-            )
+        for name in ("iterations", "warm_iterations"):  # each by name
+            if integer(name, getattr(self, name)) < 0:
+                raise ConfigError(f"expected {name} >= 0, got {getattr(self, name)}")
         positive("lr", self.lr)  # NaN and inf refused too
         if not is_real(self.lr_final_ratio) or not 0.0 < self.lr_final_ratio <= 1.0:
             raise ConfigError(f"expected lr_final_ratio in (0, 1], got {self.lr_final_ratio!r}")

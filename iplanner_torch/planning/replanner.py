@@ -176,11 +176,9 @@ class ReplannerCfg:
             raise ConfigError(f"expected emergency_check_hz > 0, got {self.emergency_check_hz}")
         if self.tracking not in ("exact", "filtered"):
             raise ConfigError(f"expected tracking 'exact' or 'filtered', got {self.tracking!r}")
-        if not (self.acc_max > 0.0 and self.tracking_bandwidth > 0.0):
-            raise ConfigError(
-                f"expected acc_max > 0 and tracking_bandwidth > 0, got {self.acc_max}, "
-                f"{self.tracking_bandwidth}"
-            )
+        for name in ("acc_max", "tracking_bandwidth"):  # each by name
+            if not getattr(self, name) > 0.0:
+                raise ConfigError(f"expected {name} > 0, got {getattr(self, name)}")
         if not 0.0 < self.tracking_dt <= self.tracking_max_gap_s:
             raise ConfigError(
                 f"expected 0 < tracking_dt <= tracking_max_gap_s, got {self.tracking_dt}, "

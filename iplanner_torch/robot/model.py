@@ -71,7 +71,9 @@ class RobotCfg:
 
     def __post_init__(self) -> None:
         if self.name not in ROBOT_NAMES:
-            raise ConfigError(f"unknown robot {self.name!r}; available: {', '.join(ROBOT_NAMES)}")
+            raise ConfigError(
+                f"name: unknown robot {self.name!r}; available: {', '.join(ROBOT_NAMES)}"
+            )
         if self.base_position is not None:
             object.__setattr__(self, "base_position", _base_position(self.base_position))
         _check_base_yaw(self.base_yaw)

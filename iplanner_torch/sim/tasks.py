@@ -63,11 +63,16 @@ class ScenarioCfg:
                 f"expected task_order a string such as '(0,1)->(2,3)', got {self.task_order!r}"
             )
         if not self.task_order.strip():
-            raise ConfigError("expected a task order expression, got an empty string")
+            raise ConfigError(
+                "expected task_order an expression such as '(0,1)->(2,3)', got an empty string"
+            )
         # parsed now, so a malformed order fails here and not when an episode starts; blocking
         # runs do not use it (only its syntax is checked, against every block id)
         ids = ARRANGEMENT_IDS["2x4" if self.kind == "blocking" else self.arrangement]
-        parse_order(self.task_order, ids, warn_untouched=self.kind != "blocking")
+        try:
+            parse_order(self.task_order, ids, warn_untouched=self.kind != "blocking")
+        except ConfigError as err:  # named by the field (the message says "task order")
+            raise ConfigError(f"task_order: {err}") from None
         checks.finite_tuple("crossing_start", self.crossing_start, 3)
         checks.finite_tuple("crossing_goal", self.crossing_goal, 3)
 

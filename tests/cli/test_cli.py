@@ -588,9 +588,9 @@ def test_data_generate_checks_every_setting_before_it_touches_the_folder(tmp_pat
     assert res.returncode == 0, res.stderr
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     for bad, named in [
-        ("data.generator.fps=-1", "ReachingCfg.fps > 0"),
-        ("data.generator.seed=-1", "ReachingCfg.seed an integer >= 0, got -1"),
-        ("data.generator.file_format=xml", "file_format must be 'npz' or 'csv'"),
+        ("data.generator.fps=-1", "data.generator.fps: expected fps > 0"),
+        ("data.generator.seed=-1", "data.generator.seed: expected seed an integer >= 0, got -1"),
+        ("data.generator.file_format=xml", "file_format: file_format must be 'npz' or 'csv'"),
     ]:
         res = _run([*gen, "data.overwrite=true", bad], tmp_path)
         lines = res.stderr.strip().splitlines()
@@ -602,7 +602,7 @@ def test_data_generate_checks_every_setting_before_it_touches_the_folder(tmp_pat
                 "data.generator.seed=-1"], tmp_path)  # fmt: skip
     assert res.returncode == 2 and "Traceback" not in res.stderr
     assert res.stderr.strip() == (
-        "error: ConfigError: data.generator: expected TaskDatasetCfg.seed an integer >= 0, got -1"
+        "error: ConfigError: data.generator.seed: expected seed an integer >= 0, got -1"
     )
 
 

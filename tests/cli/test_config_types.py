@@ -477,7 +477,7 @@ def test_a_sweep_job_removes_the_failed_marker_of_its_earlier_run(
         ("planner.confidence=2", r"planner\.confidence: expected confidence in \(0, 1\)"),
         (
             "planner.optimizer.iterations=-3",
-            r"planner\.optimizer\.iterations: expected iterations and warm_iterations >= 0",
+            r"planner\.optimizer\.iterations: expected iterations >= 0, got -3",
         ),
         ("scenario.arrangement=3x3", r"scenario\.arrangement: expected arrangement in"),
         ("robot.base_yaw=nan", r"robot\.base_yaw: expected a finite base_yaw"),
