@@ -518,6 +518,8 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     assert isinstance(node, dict)
     node.pop("episode", None)
     named = node.pop("robot", None)
+    if named is not None and not isinstance(named, str):  # [] looked for conf/robot/[].yaml
+        raise ConfigError(f"experiment.robot: expected a robot option name or null, got {named!r}")
     if named is not None and str(named) != robot.name:
         # experiment.robot=<name> is the robot group option <name> (as robot=<name>)
         chosen = [o for o in _task_overrides() if override_key(o) == "robot"]

@@ -75,6 +75,12 @@ class ExperimentCfg:
         for name in ("seeds", "scenarios"):
             if not getattr(self, name):
                 raise ConfigError(f"{name}: expected at least one, got []")
+        odd = [s for s in self.scenarios if not isinstance(s, ScenarioCfg)]
+        if odd:  # [1,2], or a mapping without _target_: an AttributeError when the run starts
+            raise ConfigError(
+                f"scenarios: expected a list of ScenarioCfg settings (each with _target_: "
+                f"iplanner_torch.sim.tasks.ScenarioCfg), got {odd[0]!r}"
+            )
         if not all(isinstance(n, (int, float)) and 0 <= n <= MAX_NOISE_M for n in self.noises):
             raise ConfigError(
                 f"noises: expected noises in [0, {MAX_NOISE_M:g}] m, got {self.noises}"

@@ -42,6 +42,12 @@ def _compose(overrides: list[str]):
          r"experiment\.write_mcap: expected bool, got null"),
         (["experiment=safety_seeds", "experiment.name={}"],
          r"experiment\.name: expected str, got \{\}"),
+        # items that are no scenario settings: an AttributeError once the run started
+        (["experiment=safety_seeds", "experiment.scenarios=[1,2]"],
+         r"experiment\.scenarios: expected a list of ScenarioCfg settings"),
+        # a list for the robot's name looked for conf/robot/[].yaml
+        (["experiment=safety_seeds", "experiment.robot=[]"],
+         r"experiment\.robot: expected a robot option name or null, got \[\]"),
     ],
 )  # fmt: skip
 def test_experiment_values_are_named_by_their_key(overrides: list[str], message: str) -> None:
