@@ -36,6 +36,14 @@ def _plain_mcap(path: Path, messages: list[tuple[str, bytes]], record: dict | No
     return path
 
 
+def _four_states(path: Path) -> Path:
+    """A log of four robot states (q = 0, 1, 2, 3), one per 64-byte chunk (after the /tf)."""
+    with EpisodeWriter(path, metadata={}, chunk_size=64) as log:
+        for i in range(4):
+            log.robot_state(0.1 * i, [float(i)], [0.0], ["a"])
+    return path
+
+
 def _record(offset: str = "0") -> dict[str, str]:
     return {
         "json": "{}",
@@ -49,10 +57,7 @@ def test_a_chunk_of_unknown_compression_without_checksum_stops_the_read(tmp_path
     """A chunk whose compression name ("zstd") and checksum field (0: none written) were
     damaged was taken as uncompressed by the mcap reader: its messages vanished and the log
     read as complete, without a warning. It now ends the read there, with a warning."""
-    path = tmp_path / "chunk.mcap"
-    with EpisodeWriter(path, metadata={}, chunk_size=64) as log:
-        for i in range(4):
-            log.robot_state(0.1 * i, [float(i)], [0.0], ["a"])
+    path = _four_states(tmp_path / "chunk.mcap")
     blob = bytearray(path.read_bytes())
     at, chunks = 8, []
     while blob[at] != _DATA_END:
@@ -203,10 +208,7 @@ def test_a_removed_or_repeated_chunk_makes_the_log_incomplete(
     """A chunk cut out or written twice keeps its own checksum, so the sequential read that
     follows the summary's failure read every chunk and called the log complete; the summary's
     statistics count other messages than were read, and the log is incomplete now."""
-    path = tmp_path / "log.mcap"
-    with EpisodeWriter(path, metadata={}, chunk_size=64) as log:
-        for i in range(4):
-            log.robot_state(0.1 * i, [float(i)], [0.0], ["a"])
+    path = _four_states(tmp_path / "log.mcap")
     blob = path.read_bytes()
     at, n = _chunks(blob)[2]  # the chunk of q = 1
     if damage == "repeated":
@@ -222,10 +224,7 @@ def test_a_huge_length_field_is_named_in_the_warning(tmp_path: Path) -> None:
     """A chunk's compressed-size field set to 2^63 - 1 made the mcap library fail with
     "OverflowError: byte string is too large": the warning now says a length field is
     damaged."""
-    path = tmp_path / "log.mcap"
-    with EpisodeWriter(path, metadata={}, chunk_size=64) as log:
-        for i in range(4):
-            log.robot_state(0.1 * i, [float(i)], [0.0], ["a"])
+    path = _four_states(tmp_path / "log.mcap")
     blob = bytearray(path.read_bytes())
     at, _ = _chunks(bytes(blob))[-1]
     # opcode, length, start and end times, uncompressed size, crc, compression: then the size
