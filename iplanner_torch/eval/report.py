@@ -1313,11 +1313,23 @@ def write_sweep_report(
 
     Returns:
         Every written path.
+
+    Raises:
+        DataError: when ``out_dir`` is a file, or its ``results.csv`` or ``results.md`` a
+            folder (nothing is written then).
     """
     out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise DataError(f"{out_dir}: not a folder; the report needs a folder to write into")
+    written = [out_dir / "results.csv", out_dir / "results.md"]
+    for p in written:
+        if p.exists() and not p.is_file():
+            raise DataError(
+                f"{p}: a folder where the report writes its file; nothing was written: move "
+                "it away or give another output folder"
+            )
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = summary_table(df, group_by)
-    written = [out_dir / "results.csv", out_dir / "results.md"]
     df.to_csv(written[0], index=False)
     note = incomplete_logs_note(df)
     md = ["# Results", "", f"{len(df)} episodes.", ""] + ([note, ""] if note else [])

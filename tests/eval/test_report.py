@@ -1097,3 +1097,17 @@ def test_touched_counts_mujoco_contacts_apart_from_sphere_overlaps() -> None:
         assert row.touched == 1
     plain = gather_results([{k: v for k, v in r.items() if k != "sim/contacts"} for r in rows])
     assert "touched" not in comparison_table(plain).columns
+
+
+def test_sweep_report_refuses_an_output_it_cannot_write_before_writing(
+    results: pd.DataFrame, tmp_path: Path
+) -> None:
+    out = tmp_path / "run"
+    (out / "results.md").mkdir(parents=True)
+    (out / "results.csv").write_text("old rows\n")
+    with pytest.raises(DataError, match=r"results\.md: a folder where the report writes"):
+        write_sweep_report(results, out)
+    assert (out / "results.csv").read_text() == "old rows\n"  # the old results are kept
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(DataError, match="file: not a folder"):
+        write_sweep_report(results, tmp_path / "file")
