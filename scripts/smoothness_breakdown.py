@@ -85,7 +85,8 @@ def main() -> None:
                 print(f"warning: {w.message}", file=sys.stderr)
             b = episode_breakdown(ep, settle_s=args.settle)
         except DataError as exc:  # a log cut short (an interrupted run): left out, named
-            skipped.append(f"{path}: {exc}")
+            text = str(exc)  # most name the file already
+            skipped.append(text if text.startswith(f"{path}: ") else f"{path}: {text}")
             continue
         meta = ep.metadata
         row = {key: meta.get(key) for key in ("scenario", *SWEPT_SETTINGS, "planner", "seed")}

@@ -175,14 +175,16 @@ def episode_breakdown(episode: Any, *, settle_s: float = 1.0) -> SmoothnessBreak
     :func:`~iplanner_torch.recording.read_episode`.
 
     Raises:
-        DataError: when the log has no plans or fewer than 3 robot states.
+        DataError: when the log has no plans, fewer than 3 robot states or states at repeated
+            or decreasing times (naming the log's file).
     """
+    where = f"{episode.path}: " if getattr(episode, "path", None) else ""
     t, q = episode.robot_q()
     if t.shape[0] < 3:
-        raise DataError(f"expected at least 3 robot states in the log, got {t.shape[0]}")
+        raise DataError(f"{where}expected at least 3 robot states in the log, got {t.shape[0]}")
     frame = episode.frames.get("/planner/plan")
     if frame is None or frame.empty:
-        raise DataError("the log has no /planner/plan messages")
+        raise DataError(f"{where}the log has no /planner/plan messages")
     plans = [
         PlanRecord(
             times=np.asarray(row.times, dtype=np.float64),
@@ -191,4 +193,7 @@ def episode_breakdown(episode: Any, *, settle_s: float = 1.0) -> SmoothnessBreak
         )
         for row in frame.itertuples()
     ]
-    return smoothness_breakdown(t, q, plans, settle_s=settle_s)
+    try:
+        return smoothness_breakdown(t, q, plans, settle_s=settle_s)
+    except DataError as err:  # e.g. robot states logged at repeated times
+        raise DataError(f"{where}{err}") from err

@@ -286,6 +286,20 @@ def test_breakdown_reads_one_log_and_names_a_missing_path(tmp_path, run_script) 
     assert code == 2 and "not found" in _one_error_line(err)
 
 
+def test_breakdown_names_each_log_it_cannot_split_once(tmp_path, run_script) -> None:
+    for name, states in (("empty.mcap", 0), ("short.mcap", 1)):
+        with EpisodeWriter(tmp_path / name, metadata={"scenario": "s1"}) as log:
+            for i in range(states):
+                log.robot_state(float(i), np.zeros(2), np.zeros(2), ["a", "b"])
+    code, _, err = run_script("smoothness_breakdown", tmp_path)
+    assert code == 2
+    lines = [ln for ln in err.splitlines() if ln.startswith("skipped ")]
+    assert lines == [
+        f"skipped {tmp_path / 'empty.mcap'}: no messages on /robot/joint_state",
+        f"skipped {tmp_path / 'short.mcap'}: expected at least 3 robot states in the log, got 1",
+    ]
+
+
 @pytest.mark.parametrize("settle", ["-1", "nan", "inf"])
 def test_breakdown_refuses_a_bad_settle_time(tmp_path, run_script, settle) -> None:
     code, _, err = run_script("smoothness_breakdown", tmp_path, "--settle", settle)

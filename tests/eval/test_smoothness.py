@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -179,3 +180,26 @@ def test_plan_records_take_lists_and_check_their_fields() -> None:
     for settle in ("a", None, float("nan")):
         with pytest.raises(ConfigError, match="expected settle_s >= 0"):
             wait_windows(PLANS, settle)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("times", "plan", "message"),
+    [
+        ([0.0, 0.1], True, "expected at least 3 robot states in the log, got 2"),
+        ([0.0, 0.1, 0.2], False, "the log has no /planner/plan messages"),
+        ([0.0, 0.1, 0.1, 0.2], True, "expected strictly increasing"),
+    ],
+)
+def test_episode_breakdown_names_the_log_it_cannot_split(
+    tmp_path: Path, times: list[float], plan: bool, message: str
+) -> None:
+    from iplanner_torch.recording import EpisodeWriter, read_episode
+
+    path = tmp_path / "ep 1.mcap"
+    with EpisodeWriter(path, metadata={"planner": "test"}) as log:
+        if plan:
+            log.plan(0.0, np.array([0.0, 1.0]), np.zeros((2, 2)), True, 0.0, 1.0)
+        for t in times:
+            log.robot_state(t, np.zeros(2), np.zeros(2), ["a", "b"])
+    with pytest.raises(DataError, match=f"^{re.escape(str(path))}: {message}"):
+        episode_breakdown(read_episode(path))
