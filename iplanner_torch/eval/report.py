@@ -1315,10 +1315,17 @@ def write_sweep_report(
         Every written path.
 
     Raises:
-        DataError: when ``out_dir`` is a file, or its ``results.csv`` or ``results.md`` a
-            folder (nothing is written then).
+        DataError: when ``df`` holds no episode, ``out_dir`` is a file, or its
+            ``results.csv`` or ``results.md`` a folder (nothing is written then). The tables
+            are built before ``results.csv`` and ``results.md`` are written, so an error
+            while building them leaves the earlier ones as they were.
     """
     out_dir = Path(out_dir)
+    if len(df) == 0:
+        raise DataError(
+            f"{out_dir}: no episode to report (the results hold no rows: no readable episode "
+            "log, or none with its metrics); nothing was written"
+        )
     if out_dir.exists() and not out_dir.is_dir():
         raise DataError(f"{out_dir}: not a folder; the report needs a folder to write into")
     written = [out_dir / "results.csv", out_dir / "results.md"]
@@ -1330,7 +1337,6 @@ def write_sweep_report(
             )
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = summary_table(df, group_by)
-    df.to_csv(written[0], index=False)
     note = incomplete_logs_note(df)
     md = ["# Results", "", f"{len(df)} episodes.", ""] + ([note, ""] if note else [])
     legend = [
@@ -1351,6 +1357,7 @@ def write_sweep_report(
     md += [to_markdown(summary)]
     paired_md, paired_png = _paired_section(df, group_by, out_dir, baseline)
     md += paired_md
+    df.to_csv(written[0], index=False)  # both once every table is built
     written[1].write_text("\n".join(md))
     written += paired_png
 

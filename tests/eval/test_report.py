@@ -1111,3 +1111,26 @@ def test_sweep_report_refuses_an_output_it_cannot_write_before_writing(
     (tmp_path / "file").write_text("x")
     with pytest.raises(DataError, match="file: not a folder"):
         write_sweep_report(results, tmp_path / "file")
+
+
+def test_sweep_report_of_no_episode_or_one_that_fails_keeps_the_earlier_results(
+    results: pd.DataFrame, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """No rows were a ConfigError about group columns (reading as a settings mistake), and a
+    report that failed while building its tables had already replaced results.csv."""
+    import iplanner_torch.eval.report as report
+
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "results.csv").write_text("old rows\n")
+    with pytest.raises(DataError, match=r"run: no episode to report .* nothing was written"):
+        write_sweep_report(results.iloc[:0], out)
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise RuntimeError("a table that does not build")
+
+    monkeypatch.setattr(report, "comparison_table", broken)
+    with pytest.raises(RuntimeError, match="does not build"):
+        write_sweep_report(results, out)
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv"]
+    assert (out / "results.csv").read_text() == "old rows\n"
