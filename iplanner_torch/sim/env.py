@@ -22,7 +22,6 @@ Task events (``TaskEvent.kind``): ``fetch_started``, ``picked``, ``delivered``,
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import mujoco
@@ -45,11 +44,20 @@ from iplanner_torch.sim.tracker import MAX_NOISE_M, Tracker, TrackerCfg
 BODY_DISTANCE_MAX = 1.0
 #: how far an initial joint position may lie outside its limit (rounding of the limits) [rad]
 Q_INIT_TOLERANCE = 1e-6
+#: most physics steps in one control period: each is a Python iteration of :meth:`SimEnv.step`
+#: (about 0.1 ms), so 10000 take about a second; a physics_dt of 1e-9 s at 100 Hz asked for
+#: 10^7 of them and a step never returned
+MAX_SUBSTEPS = 10_000
 
 
 @dataclass(frozen=True, kw_only=True)
 class SimCfg:
-    """Simulation rates, sensing and the human's behaviour."""
+    """Simulation rates, sensing and the human's behaviour.
+
+    Raises:
+        ConfigError: for a value out of range, and when a control period would hold more than
+            ``MAX_SUBSTEPS`` physics steps (``control_hz * physics_dt < 1 / MAX_SUBSTEPS``).
+    """
 
     # MuJoCo physics timestep [s]
     physics_dt: float = 0.002
@@ -78,10 +86,11 @@ class SimCfg:
                 f"expected 0 < control_hz <= 1 / physics_dt, got {self.control_hz} Hz with "
                 f"physics_dt {self.physics_dt} s"
             )
-        if not (ratio > 0.0 and math.isfinite(1.0 / ratio)):  # substeps must be a number
+        if not ratio > 1.0 / (MAX_SUBSTEPS + 0.5):  # round(1 / ratio) <= MAX_SUBSTEPS
             raise ConfigError(
-                f"expected a finite number of physics steps per control period, got "
-                f"control_hz {self.control_hz} Hz with physics_dt {self.physics_dt} s"
+                f"expected at most {MAX_SUBSTEPS} physics steps per control period "
+                f"(control_hz * physics_dt >= {1.0 / MAX_SUBSTEPS:g}), got control_hz "
+                f"{self.control_hz} Hz with physics_dt {self.physics_dt} s"
             )
         # the tracker fields under their names here (TrackerCfg checks them again)
         checks.positive("tracker_fps", self.tracker_fps)
@@ -146,11 +155,13 @@ class SimEnv:
         human: the scripted human (its ``targets`` are the delivery grasp points).
         tracker: the skeleton tracker.
         seed: seed of the environment (only the MuJoCo state here; human and tracker carry
-            their own seeds).
+            their own seeds), an integer >= 0.
         cfg: rates and tolerances.
 
     Raises:
-        ConfigError: when the robot's limits (``q_min``, ``q_max``, ``v_max``) are not (J,).
+        ConfigError: when the robot's limits (``q_min``, ``q_max``, ``v_max``) are not (J,),
+            ``seed`` is not a non-negative integer, or ``scene_cfg`` / ``cfg`` is not a
+            :class:`SceneCfg` / :class:`SimCfg`.
     """
 
     def __init__(
@@ -162,11 +173,15 @@ class SimEnv:
         seed: int,
         cfg: SimCfg | None = None,
     ) -> None:
+        if not isinstance(scene_cfg, SceneCfg):
+            raise ConfigError(f"expected scene_cfg a SceneCfg, got {type(scene_cfg).__name__}")
+        if cfg is not None and not isinstance(cfg, SimCfg):
+            raise ConfigError(f"expected cfg a SimCfg or None, got {type(cfg).__name__}")
         self.scene_cfg = scene_cfg
         self.robot = robot
         self.human = human
         self.tracker = tracker
-        self.seed = int(seed)
+        self.seed = checks.seed(seed)
         self.cfg = cfg or SimCfg()
         self.model = build_scene(scene_cfg, robot, physics_dt=self.cfg.physics_dt)
         self.data = mujoco.MjData(self.model)

@@ -484,16 +484,15 @@ class ScriptedHuman:
             (n, K, 3) joint positions [m].
 
         Raises:
-            ShapeError: when ``times`` is not 1-D.
+            ShapeError: when ``times`` is not 1-D real numbers.
             DataError: when ``times`` holds NaN or infinity.
-            ConfigError: when ``step_s`` is not finite and > 0, or ``times`` decrease or lie
-                before now.
+            ConfigError: when ``step_s`` is not a finite real number > 0, or ``times``
+                decrease or lie before now.
         """
-        ts = np.asarray(times, dtype=np.float64)
+        ts = checks.real_array("times", times).astype(np.float64)
         if ts.ndim != 1:
             raise ShapeError(f"expected times (n,), got {ts.shape}")
-        if not 0.0 < step_s < np.inf:
-            raise ConfigError(f"expected step_s > 0 and finite, got {step_s}")
+        checks.positive("step_s", step_s)
         if not np.isfinite(ts).all():
             raise DataError(f"expected finite times, got {ts}")
         if ts.size and (ts[0] < self.time - 1e-9 or bool(np.any(np.diff(ts) < 0.0))):
