@@ -38,7 +38,7 @@ from iplanner_torch.sim.scene import (
     pose_human,
 )
 from iplanner_torch.sim.tasks import FetchCfg, FetchPhase, FetchTask
-from iplanner_torch.sim.tracker import MAX_NOISE_M, Tracker, TrackerCfg
+from iplanner_torch.sim.tracker import MAX_NOISE_M, MAX_WINDOW, Tracker, TrackerCfg
 
 #: geom pairs farther apart than this are not measured exactly; a distance is capped there [m]
 BODY_DISTANCE_MAX = 1.0
@@ -69,7 +69,8 @@ class SimCfg:
     tracker_noise: float = 0.01
     # probability that a joint is lost in a tracker frame
     tracker_dropout: float = 0.0
-    # frames in the tracker window; a predictor that states its window (n_prev) sets it
+    # frames in the tracker window (at most MAX_WINDOW); a predictor that states its window
+    # (n_prev) sets it
     tracker_window: int = 15
     # human behaviour (speed, holds, idles, blocking)
     human: HumanCfg = field(default_factory=HumanCfg)
@@ -100,7 +101,10 @@ class SimCfg:
             )
         if not 0.0 <= checks.finite("tracker_dropout", self.tracker_dropout) < 1.0:
             raise ConfigError(f"expected tracker_dropout in [0, 1), got {self.tracker_dropout!r}")
-        checks.integer("tracker_window", self.tracker_window, minimum=1)
+        if checks.integer("tracker_window", self.tracker_window, minimum=1) > MAX_WINDOW:
+            raise ConfigError(
+                f"expected tracker_window <= {MAX_WINDOW} frames, got {self.tracker_window!r}"
+            )
         self.tracker_cfg()
         if not isinstance(self.human, HumanCfg):
             raise ConfigError(f"expected human a HumanCfg, got {self.human!r}")

@@ -235,8 +235,13 @@ def build_scene(cfg: SceneCfg, robot: RobotLike, *, physics_dt: float = 0.002) -
         The compiled model (names as in the module docstring).
 
     Raises:
-        ConfigError: when the robot MJCF has no body or lacks a joint of ``robot.joint_names``.
+        ConfigError: when ``cfg`` is not a :class:`SceneCfg`, ``physics_dt`` is not a finite
+            real number > 0, or the robot MJCF has no body or lacks a joint of
+            ``robot.joint_names``.
     """
+    if not isinstance(cfg, SceneCfg):
+        raise ConfigError(f"expected cfg a SceneCfg, got {type(cfg).__name__}")
+    checks.positive("physics_dt", physics_dt)
     spec = mujoco.MjSpec()
     spec.modelname = f"iplanner_{cfg.arrangement}_{robot.name}"
     spec.option.timestep = physics_dt

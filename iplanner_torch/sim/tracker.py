@@ -28,6 +28,10 @@ _MAX_CATCH_UP = 1024
 #: at the predictor's coordinate limit and ITOMP planning around a person 100 m away)
 MAX_NOISE_M = 1.0
 
+#: most frames a tracker window holds (11 min at 15 Hz; predictors look at about 15): a window
+#: of 10^12 frames was accepted and :meth:`Tracker.window` then ran out of memory padding it
+MAX_WINDOW = 10_000
+
 
 @dataclass(frozen=True, kw_only=True)
 class TrackerCfg:
@@ -39,7 +43,7 @@ class TrackerCfg:
     noise_sigma: float = 0.01
     # probability that a joint is missing (NaN) in a frame
     dropout_rate: float = 0.0
-    # frames kept (n_p of the predictor)
+    # frames kept (n_p of the predictor), at most MAX_WINDOW
     window: int = 15
 
     def __post_init__(self) -> None:
@@ -50,7 +54,8 @@ class TrackerCfg:
             )
         if not 0.0 <= checks.finite("dropout_rate", self.dropout_rate) < 1.0:
             raise ConfigError(f"expected dropout_rate in [0, 1), got {self.dropout_rate!r}")
-        checks.integer("window", self.window, minimum=1)
+        if checks.integer("window", self.window, minimum=1) > MAX_WINDOW:
+            raise ConfigError(f"expected window <= {MAX_WINDOW} frames, got {self.window!r}")
 
 
 class Tracker:

@@ -9,8 +9,8 @@ from sim_fakes import FakeMotion, FakeOrder, deadline
 from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.sim.env import MAX_SUBSTEPS, SimCfg, SimEnv
 from iplanner_torch.sim.human import HumanCfg, ScriptedHuman
-from iplanner_torch.sim.scene import SceneCfg
-from iplanner_torch.sim.tracker import Tracker, TrackerCfg
+from iplanner_torch.sim.scene import SceneCfg, build_scene
+from iplanner_torch.sim.tracker import MAX_WINDOW, Tracker, TrackerCfg
 
 
 def _parts(scene: SceneCfg) -> tuple[ScriptedHuman, Tracker]:
@@ -56,3 +56,22 @@ def test_preview_refuses_a_step_or_times_that_are_not_numbers() -> None:
         human.preview(np.array([0.5]), set(), "0.01")  # type: ignore[arg-type]
     with pytest.raises(ShapeError, match="times an array of real numbers"):
         human.preview(["a"], set(), 0.01)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("dt", [-1.0, 0.0, float("nan"), "0.002"])
+def test_build_scene_refuses_a_timestep_that_is_not_positive(arm, dt: object) -> None:
+    """-1 and NaN compiled, and MuJoCo then ran time backwards or into NaN positions with
+    warnings; a string was a bare TypeError."""
+    with pytest.raises(ConfigError, match="physics_dt"):
+        build_scene(SceneCfg(), arm, physics_dt=dt)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="cfg a SceneCfg, got NoneType"):
+        build_scene(None, arm)  # type: ignore[arg-type]
+
+
+def test_tracker_window_is_bounded() -> None:
+    """A window of 10^12 frames was accepted and Tracker.window ran out of memory."""
+    assert TrackerCfg(window=MAX_WINDOW).window == MAX_WINDOW
+    with pytest.raises(ConfigError, match="expected window <= "):
+        TrackerCfg(window=10**12)
+    with pytest.raises(ConfigError, match="expected tracker_window <= "):
+        SimCfg(tracker_window=MAX_WINDOW + 1)
