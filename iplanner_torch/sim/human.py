@@ -46,6 +46,9 @@ Arm = Literal["left", "right"]
 HUMAN_SEED_SALT = 7919
 #: Seconds over which a motion's first frames are blended from the pose the person holds.
 START_BLEND_S = 0.3
+#: The least update period :meth:`ScriptedHuman.preview` steps its copy with [s] (far below
+#: any control period; the copy is stepped through every motion in the span).
+MIN_PREVIEW_STEP_S = 1e-4
 #: Speed factor of each named human speed (1 = the generator's nominal speed).
 SPEED_FACTORS: dict[str, float] = {"slow": 0.5, "medium": 1.0, "fast": 2.0}
 
@@ -486,13 +489,18 @@ class ScriptedHuman:
         Raises:
             ShapeError: when ``times`` is not 1-D real numbers.
             DataError: when ``times`` holds NaN or infinity.
-            ConfigError: when ``step_s`` is not a finite real number > 0, or ``times``
-                decrease or lie before now.
+            ConfigError: when ``step_s`` is not a finite real number >=
+                :data:`MIN_PREVIEW_STEP_S` (a smaller one stepped the copy through each motion
+                for minutes: 1e-9 s never returned), or ``times`` decrease or lie before now.
         """
         ts = checks.real_array("times", times).astype(np.float64)
         if ts.ndim != 1:
             raise ShapeError(f"expected times (n,), got {ts.shape}")
-        checks.positive("step_s", step_s)
+        if checks.positive("step_s", step_s) < MIN_PREVIEW_STEP_S:
+            raise ConfigError(
+                f"expected step_s >= {MIN_PREVIEW_STEP_S} s (the simulation's control period), "
+                f"got {step_s!r}"
+            )
         if not np.isfinite(ts).all():
             raise DataError(f"expected finite times, got {ts}")
         if ts.size and (ts[0] < self.time - 1e-9 or bool(np.any(np.diff(ts) < 0.0))):

@@ -8,7 +8,7 @@ from sim_fakes import FakeMotion, FakeOrder, deadline
 
 from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.sim.env import MAX_SUBSTEPS, SimCfg, SimEnv
-from iplanner_torch.sim.human import HumanCfg, ScriptedHuman
+from iplanner_torch.sim.human import MIN_PREVIEW_STEP_S, HumanCfg, ScriptedHuman
 from iplanner_torch.sim.scene import SceneCfg, build_scene
 from iplanner_torch.sim.tracker import MAX_WINDOW, Tracker, TrackerCfg
 
@@ -56,6 +56,15 @@ def test_preview_refuses_a_step_or_times_that_are_not_numbers() -> None:
         human.preview(np.array([0.5]), set(), "0.01")  # type: ignore[arg-type]
     with pytest.raises(ShapeError, match="times an array of real numbers"):
         human.preview(["a"], set(), 0.01)  # type: ignore[arg-type]
+
+
+def test_preview_refuses_a_step_too_small_to_step_through_a_motion() -> None:
+    """step_s=1e-9 stepped the copy one nanosecond at a time through each reach: the call
+    never returned."""
+    human, _ = _parts(SceneCfg())
+    with deadline(10.0), pytest.raises(ConfigError, match=r"expected step_s >= 0.0001 s"):
+        human.preview(np.array([3.0]), {0, 1}, 1e-9)  # two blocks delivered: reaches run
+    assert human.preview(np.array([3.0]), {0, 1}, MIN_PREVIEW_STEP_S).shape[0] == 1
 
 
 @pytest.mark.parametrize("dt", [-1.0, 0.0, float("nan"), "0.002"])
