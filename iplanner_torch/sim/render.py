@@ -54,6 +54,7 @@ if "MUJOCO_GL" not in os.environ and not (
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from iplanner_torch.checks import integer  # noqa: E402
 from iplanner_torch.errors import ConfigError, ShapeError  # noqa: E402
 
 CameraName = Literal["overview", "side", "top"]
@@ -99,7 +100,7 @@ class SceneRenderer:
         max_geom: capacity of the visual scene (model geoms plus overlay spheres).
 
     Raises:
-        ConfigError: when width or height is not positive.
+        ConfigError: when width or height is not an integer >= 1.
         RuntimeError / ImportError: when no GL context can be opened (see :func:`gl_available`).
 
     Example:
@@ -110,8 +111,8 @@ class SceneRenderer:
     def __init__(
         self, model: mujoco.MjModel, *, width: int = 640, height: int = 480, max_geom: int = 4000
     ) -> None:
-        if width <= 0 or height <= 0:
-            raise ConfigError(f"expected positive width and height, got {width} x {height}")
+        width = integer("width", width, minimum=1)  # "x" raised a bare TypeError, 1.5 passed
+        height = integer("height", height, minimum=1)
         self._gl: Any = None
         self._con: mujoco.MjrContext | None = None
         self._src = model

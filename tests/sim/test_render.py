@@ -152,8 +152,11 @@ def test_render_errors(ws: Workspace, renderer: SceneRenderer) -> None:
     with pytest.raises(ConfigError, match="overlay spheres"):
         many = np.zeros((renderer.scene.maxgeom, 3))
         renderer.render(ws.data, spheres=[(many, np.ones(len(many)), (1, 0, 0, 1))])
-    with pytest.raises(ConfigError, match="positive width and height"):
+    with pytest.raises(ConfigError, match="expected width an integer >= 1"):
         SceneRenderer(ws.model, width=0)
+    for bad in ("x", 1.5, None):  # "x" and None raised a bare TypeError; 1.5 was accepted
+        with pytest.raises(ConfigError, match="expected height an integer"):
+            SceneRenderer(ws.model, height=bad)  # type: ignore[arg-type]
     r = SceneRenderer(ws.model, width=32, height=24)
     r.close()
     r.close()  # idempotent
