@@ -58,7 +58,7 @@ def test_a_summary_that_cannot_be_written_is_an_error_and_failed_jobs_are_still_
         GatherSweepResults().on_multirun_end(config=config)
     assert stop.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[0].startswith(f"error: FileExistsError: [Errno 17] File exists: '{sweep}")
+    assert err[0].startswith(f"error: DataError: {sweep / 'summary'}: not a folder")
     assert err[0].endswith("is not written; each job's results are in its folder)")
     assert err[1] == "1 of 2 sweep job(s) failed (the others ran):"
     assert err[2] == f"  {sweep / '1'} [tracker.noise=-1 run.planners=[itomp]]: {failed}"
@@ -67,7 +67,7 @@ def test_a_summary_that_cannot_be_written_is_an_error_and_failed_jobs_are_still_
     (sweep / "1" / "FAILED").unlink()
     with pytest.raises(SystemExit, match="2"):
         GatherSweepResults().on_multirun_end(config=config)
-    assert capsys.readouterr().err.startswith("error: FileExistsError: ")
+    assert capsys.readouterr().err.startswith("error: DataError: ")
 
 
 def test_an_unexpected_error_in_a_sweep_job_fails_that_job_alone(tmp_path: Path) -> None:
