@@ -26,11 +26,12 @@ import math
 import numbers
 import reprlib
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
 
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 
 _T = TypeVar("_T")
 
@@ -137,6 +138,28 @@ def finite_time(name: str, value: Any, *, error: type[Exception] = ConfigError) 
     if not ok:
         raise error(f"expected {name} a finite time [s], got {value!r}")
     return float(value)
+
+
+def path_argument(
+    value: object,
+    purpose: str,
+    *,
+    kind: str = "file path",
+    name: str = "path",
+    error: type[Exception] = DataError,
+) -> Path:
+    """``value`` as a :class:`~pathlib.Path`; ``error`` unless it is a str or os.PathLike
+    (``Path()`` raises a bare TypeError for None, a number, a list ...).
+
+    The message reads ``"expected path a file path (str or os.PathLike) <purpose>, got
+    NoneType None"``; ``kind`` replaces "file path" (e.g. "file or folder path").
+    """
+    if not (isinstance(value, str) or hasattr(value, "__fspath__")):
+        raise error(
+            f"expected {name} a {kind} (str or os.PathLike) {purpose}, got "
+            f"{type(value).__name__} {reprlib.repr(value)}"
+        )
+    return Path(value)  # type: ignore[arg-type]
 
 
 def optional(check: Callable[..., _T], name: str, value: object, **kwargs: Any) -> _T | None:

@@ -62,6 +62,7 @@ from typing import Any
 
 import numpy as np
 
+from iplanner_torch.checks import path_argument
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.types import MAX_POSITION_M
@@ -943,12 +944,7 @@ def load_demonstration(
     path: str | Path, *, fps: float | None = None, joints: Sequence[str] | None = None
 ) -> Demonstration:
     """Load and validate one NPZ or CSV demonstration file (see :func:`load_demonstrations`)."""
-    if not (isinstance(path, str) or hasattr(path, "__fspath__")):  # Path() raised TypeError
-        raise DataError(
-            f"expected path a file path (str or os.PathLike) of a demonstration, got "
-            f"{type(path).__name__} {path!r}"
-        )
-    path = Path(path)
+    path = path_argument(path, "of a demonstration")
     fps = _fps_argument(path, fps)
     joints = _joints_argument(joints)
     if _is_dir(path):
@@ -1086,12 +1082,7 @@ def load_demonstrations(
             frame is then unlabelled, -1); for a CSV whose last line has no line terminator
             (it may be cut short: that row is dropped).
     """
-    if not (isinstance(path, str) or hasattr(path, "__fspath__")):  # Path() raised TypeError
-        raise DataError(
-            "expected path a file or folder path (str or os.PathLike) of demonstrations, got "
-            f"{type(path).__name__} {path!r}"
-        )
-    path = Path(path)
+    path = path_argument(path, "of demonstrations", kind="file or folder path")
     fps = _fps_argument(path, fps)
     joints = _joints_argument(joints)
     files = demonstration_files(path)

@@ -505,11 +505,7 @@ class TaskPlanner:
 
 def _check_path(path: object) -> None:
     """ConfigError unless ``path`` is a str or os.PathLike (``Path()`` raised TypeError)."""
-    if not (isinstance(path, str) or hasattr(path, "__fspath__")):
-        raise ConfigError(
-            f"expected path a file path (str or os.PathLike) of a task planner, got "
-            f"{type(path).__name__} {path!r}"
-        )
+    checks.path_argument(path, "of a task planner", error=ConfigError)
 
 
 def _load_cfg(path: str | Path, raw: object) -> TaskMDPCfg:

@@ -58,7 +58,7 @@ from mcap.writer import CompressionType, Writer
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from iplanner_torch.checks import integer, is_real
+from iplanner_torch.checks import integer, is_real, path_argument
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.recording.codec import (
@@ -313,12 +313,7 @@ class EpisodeWriter:
                 f"expected time_offset_ns in [0, 2^64 - 1] (an unsigned 64-bit log time), "
                 f"got {time_offset_ns}"
             )
-        if not (isinstance(path, str) or hasattr(path, "__fspath__")):  # Path() raises TypeError
-            raise DataError(
-                f"expected path a file path (str or os.PathLike) for the episode log, got "
-                f"{type(path).__name__} {reprlib.repr(path)}"
-            )
-        self.path = Path(path)
+        self.path = path_argument(path, "for the episode log")
         try:
             meta_json = json.dumps(encode_value(dict(metadata)), allow_nan=False)
         except (TypeError, ValueError) as err:

@@ -46,6 +46,7 @@ from mcap.records import (
 )
 from mcap.stream_reader import StreamReader, breakup_chunk
 
+from iplanner_torch.checks import path_argument
 from iplanner_torch.errors import DataError, DataWarning
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.recording.codec import (
@@ -682,12 +683,7 @@ def read_episode(path: str | Path) -> Episode:
             other tools whose messages are not JSON (protobuf, raw bytes); other tools'
             JSON channels are read into frames with one ``message`` column.
     """
-    if not (isinstance(path, str) or hasattr(path, "__fspath__")):  # Path() raised TypeError
-        raise DataError(
-            f"expected path a file path (str or os.PathLike) of an .mcap episode log, got "
-            f"{type(path).__name__} {path!r}"
-        )
-    path = Path(path)
+    path = path_argument(path, "of an .mcap episode log")
     if path.is_dir():
         raise DataError(
             f"{path}: is a folder; read_episode reads one .mcap file "

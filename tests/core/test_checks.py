@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -113,3 +114,15 @@ def test_all_finite_is_exact_when_a_sum_overflows() -> None:
     with pytest.raises(DataError, match=r"^x is NaN/Inf at index \(1,\)$"):
         check_finite("x", torch.tensor([3e38, math.nan, 3e38]))
     check_finite("x", huge)  # no false alarm
+
+
+def test_path_argument() -> None:
+    assert checks.path_argument("a/b.mcap", "of a log") == Path("a/b.mcap")
+    assert checks.path_argument(Path("c"), "of a log") == Path("c")
+    for bad in (None, 3, ["a"]):
+        with pytest.raises(
+            DataError, match=r"expected path a file path \(str or os.PathLike\) of"
+        ):
+            checks.path_argument(bad, "of a log")
+    with pytest.raises(ConfigError, match="expected out a folder path .* for plots, got NoneType"):
+        checks.path_argument(None, "for plots", kind="folder path", name="out", error=ConfigError)
