@@ -164,8 +164,9 @@ class SimEnv:
 
     Raises:
         ConfigError: when the robot's limits (``q_min``, ``q_max``, ``v_max``) are not (J,),
-            ``seed`` is not a non-negative integer, or ``scene_cfg`` / ``cfg`` is not a
-            :class:`SceneCfg` / :class:`SimCfg`.
+            ``seed`` is not a non-negative integer, ``scene_cfg`` / ``cfg`` is not a
+            :class:`SceneCfg` / :class:`SimCfg`, or ``human`` / ``tracker`` is not a
+            :class:`ScriptedHuman` / :class:`Tracker`.
     """
 
     def __init__(
@@ -181,6 +182,10 @@ class SimEnv:
             raise ConfigError(f"expected scene_cfg a SceneCfg, got {type(scene_cfg).__name__}")
         if cfg is not None and not isinstance(cfg, SimCfg):
             raise ConfigError(f"expected cfg a SimCfg or None, got {type(cfg).__name__}")
+        if not isinstance(human, ScriptedHuman):
+            raise ConfigError(f"expected human a ScriptedHuman, got {type(human).__name__}")
+        if not isinstance(tracker, Tracker):
+            raise ConfigError(f"expected tracker a Tracker, got {type(tracker).__name__}")
         self.scene_cfg = scene_cfg
         self.robot = robot
         self.human = human

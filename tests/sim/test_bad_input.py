@@ -48,6 +48,11 @@ def test_env_refuses_settings_of_the_wrong_kind(arm) -> None:
         SimEnv(None, arm, *_parts(scene), seed=0)  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="cfg a SimCfg or None, got HumanCfg"):
         SimEnv(scene, arm, *_parts(scene), seed=0, cfg=HumanCfg())  # type: ignore[arg-type]
+    human, tracker = _parts(scene)
+    with pytest.raises(ConfigError, match="human a ScriptedHuman, got NoneType"):
+        SimEnv(scene, arm, None, tracker, seed=0)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="tracker a Tracker, got TrackerCfg"):
+        SimEnv(scene, arm, human, TrackerCfg(), seed=0)  # type: ignore[arg-type]
 
 
 def test_preview_refuses_a_step_or_times_that_are_not_numbers() -> None:
