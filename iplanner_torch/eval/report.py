@@ -26,6 +26,7 @@ import io
 import json
 import math
 import re
+import reprlib
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
@@ -324,8 +325,7 @@ def _rows_of_csv(p: Path) -> list[dict[str, Any]]:
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
         raise DataError(f"{p}: not a readable results CSV: {err}") from err
     for col in df.columns:  # metric columns: a cell that is not a number is read as missing
-        name = _metric_name(str(col))
-        if "/" not in str(col) and name not in DEFAULT_METRICS:
+        if not _is_metric_column(col):
             continue
         values = pd.to_numeric(df[col], errors="coerce")
         bad = values.isna() & df[col].notna()
@@ -396,7 +396,9 @@ def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path)
             episode logs (e.g. a Git LFS pointer never fetched, another program's MCAP file):
             they are left out, named in one warning per folder. A truncated episode log is
             still read (what it holds; see
-            :func:`~iplanner_torch.recording.reader.read_episode`).
+            :func:`~iplanner_torch.recording.reader.read_episode`). Also for metric values
+            (``stage/name`` keys and :data:`DEFAULT_METRICS`) that are not numbers: they are
+            read as missing, one warning per metric naming the files or rows.
     """
     if isinstance(items, str | Path):
         items = [items]
@@ -414,7 +416,39 @@ def gather_results(items: Iterable[Mapping[str, Any] | str | Path] | str | Path)
             rows.append(_row_of_path(p))
         else:
             raise DataError(f"{p}: no such result file or folder")
-    return _drop_aliases(pd.DataFrame.from_records(rows))
+    return _numeric_metrics(_drop_aliases(pd.DataFrame.from_records(rows)))
+
+
+def _is_metric_column(col: Any) -> bool:
+    """A metric column: a ``stage/name`` one or one of :data:`DEFAULT_METRICS`."""
+    return "/" in str(col) or _metric_name(str(col)) in DEFAULT_METRICS
+
+
+def _numeric_metrics(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with every metric column (:func:`_is_metric_column`) read as numbers: a value
+    that is not a number (a string, a list, a dict from a result dict or JSON file) becomes
+    NaN, with one :class:`DataWarning` per column naming the rows (their ``path`` where they
+    have one), so that no mean silently leaves it out."""
+    for col in df.columns:
+        if not _is_metric_column(col) or pd.api.types.is_numeric_dtype(df[col]):
+            continue
+        values = pd.to_numeric(df[col], errors="coerce")
+        bad = values.isna() & df[col].notna()
+        if bool(bad.any()):
+            where = (
+                [str(v) for v in df.loc[bad, "path"][:3]]
+                if "path" in df.columns
+                else [f"row {int(i)}" for i in df.index[bad][:3]]
+            )
+            more = " ..." if int(bad.sum()) > 3 else ""
+            warnings.warn(
+                f"{int(bad.sum())} value(s) of {col!r} are not numbers ({', '.join(where)}"
+                f"{more}: e.g. {reprlib.repr(df.loc[bad, col].iloc[0])}); read as missing",
+                DataWarning,
+                stacklevel=3,
+            )
+        df[col] = values
+    return df
 
 
 #: metadata keys an episode log also holds under a second name, with the same value (alias ->

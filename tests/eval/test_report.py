@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -154,6 +155,30 @@ def test_gather_results_reads_results_csv_with_or_without_the_prefix(tmp_path: P
     (tmp_path / "empty.csv").write_text("")
     with pytest.raises(DataError, match="empty.csv: not a readable results CSV"):
         gather_results(tmp_path / "empty.csv")
+
+
+def test_gather_results_warns_of_metric_values_that_are_not_numbers(tmp_path: Path) -> None:
+    """A string or a list where a metric belongs (a result dict or JSON file) is read as
+    missing with a warning naming the file; before, the mean left it out unsaid."""
+    meta = {"scenario": "s", "planner": "itomp"}
+    (tmp_path / "a.json").write_text(
+        json.dumps({"metadata": meta, "metrics": {"eval/smoothness": "abc", "sim/waits": 1}})
+    )
+    (tmp_path / "b.json").write_text(
+        json.dumps({"metadata": meta, "metrics": {"eval/smoothness": 3.0, "sim/waits": 2}})
+    )
+    with pytest.warns(DataWarning) as caught:
+        df = gather_results([tmp_path / "a.json", tmp_path / "b.json"])
+    assert len(caught) == 1
+    message = str(caught[0].message)
+    assert "1 value(s) of 'smoothness' are not numbers" in message and "a.json" in message
+    assert "'abc'" in message
+    assert math.isnan(df["smoothness"].iloc[0]) and df["smoothness"].iloc[1] == 3.0
+    assert df["sim/waits"].tolist() == [1, 2]
+    assert summary_table(df)["smoothness_mean"].tolist() == [3.0]
+    with pytest.warns(DataWarning, match=r"value\(s\) of 'sim/waits' are not numbers \(row 1"):
+        rows = gather_results([dict(meta, **{"sim/waits": 1}), dict(meta, **{"sim/waits": [2]})])
+    assert rows["sim/waits"].iloc[0] == 1 and math.isnan(rows["sim/waits"].iloc[1])
 
 
 def test_gather_results_leaves_out_a_cut_short_last_row(tmp_path: Path) -> None:
