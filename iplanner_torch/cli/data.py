@@ -28,7 +28,8 @@ Config group and main options:
     data.overwrite=true            generate: replace the demonstration files (.npz, .csv) and
                                    dataset card already in data.path, nothing else; they are
                                    deleted only once the new set is complete
-    data.generator.<field>=<value> generate: a generator setting; the main fields are
+    data.generator.<field>=<value> generate: a generator setting (info and iplanner-train
+                                   check them too); the main fields are
         reaching: reaches_per_target, n_targets, n_subjects, fps, noise_sigma, speeds, seed
         tasks: order, arrangement, n_demos, n_subjects, fps, noise_sigma, seed, file_format
     data.windows.joints=[a,b]      info: check only these joints, as training selects them
@@ -160,6 +161,8 @@ def _info(cfg: DictConfig) -> None:
     path = repo_path(cfg.data.path)
     fmt = data_format(cfg.data)
     data_fps(cfg.data)
+    if cfg.data.get("generator") is not None:  # checked as training checks it
+        dataset_generator(cfg.data, name="data.generator")
     # the window settings training reads (data.windows.joints selects the joints), so info
     # accepts what it accepts
     selected = None

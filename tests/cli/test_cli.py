@@ -64,6 +64,12 @@ def test_data_errors_are_one_line_with_exit_code_2(tmp_path: Path) -> None:
     assert res.returncode == 2 and "unknown command" in res.stderr
     res = _run(["iplanner-data", "info", "data.pth=x"], tmp_path)
     assert res.returncode != 0 and "pth" in res.stderr
+    # a generator setting is checked as training checks it (it was accepted unread)
+    res = _run(["iplanner-data", "info", "data.generator.reaches_per_target=abc"], tmp_path)
+    assert res.returncode == 2
+    assert res.stderr.strip() == (
+        "error: ConfigError: data.generator.reaches_per_target: expected int, got 'abc'"
+    )
 
 
 def test_data_generate_refuses_existing_dataset_then_overwrites(tmp_path: Path) -> None:
