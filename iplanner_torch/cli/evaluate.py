@@ -68,6 +68,8 @@ from iplanner_torch.cli._common import (
     check_added_keys,
     check_root_keys,
     config_split,
+    data_format,
+    data_fps,
     differing_settings,
     friendly_errors,
     instantiate,
@@ -335,6 +337,9 @@ def _prediction(cfg: DictConfig) -> None:
     _refuse_unread("prediction")
     ckpt = _checkpoint(repo_path(cfg.evaluate.checkpoint), cfg)
     out = _out_dir(cfg) / "prediction_metrics.json"
+    data_format(cfg.data)  # the data settings, checked before the checkpoint loads
+    data_fps(cfg.data)
+    config_split(cfg)
     predictor = HumanMotionPredictor.load(ckpt, map_location=_device(cfg))
     _check_joints(cfg, predictor, ckpt)
     _check_windows(cfg, predictor, ckpt)
@@ -504,6 +509,9 @@ def _noise_sweep(cfg: DictConfig) -> None:
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
     compare, noises, speeds = _noise_sweep_grid(cfg)
+    data_format(cfg.data)  # the data settings, checked before a checkpoint loads
+    data_fps(cfg.data)
+    config_split(cfg)
     report_dir = _out_dir(cfg)
     device = _device(cfg)
     folder = Path(cfg.paths.checkpoints) / Path(cfg.data.path).name

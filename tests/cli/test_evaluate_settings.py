@@ -220,6 +220,27 @@ def test_prediction_refuses_window_settings_other_than_the_checkpoints(
     assert scored[-1].names == sorted(trained.held_out)
 
 
+@pytest.mark.parametrize(
+    ("given", "message"),
+    [("+data.format=xyz", r"data\.format: expected one of"),
+     ("+data.fps=-1", r"data\.fps: expected a frame rate > 0"),
+     ("data.split=abc", r"data\.split: fractions: expected 3 numbers")],
+)  # fmt: skip
+def test_prediction_checks_the_data_settings_before_loading_the_checkpoint(
+    given: str, message: str, trained: SimpleNamespace, tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:  # fmt: skip
+    """A bad data setting is named before the checkpoint loads (it was reported only after a
+    checkpoint load, and not at all where the checkpoint was damaged)."""
+    damaged = tmp_path / "damaged.ckpt"
+    damaged.write_bytes(b"not a checkpoint")
+    args = _prediction_args(trained, tmp_path, damaged)
+    with pytest.raises(ConfigError, match=f"^{message}"):
+        evaluate._prediction(_cfg(monkeypatch, *args, given))
+    with pytest.raises(CheckpointError):
+        evaluate._prediction(_cfg(monkeypatch, *args))
+
+
 def test_prediction_loads_the_predictor_on_device(
     trained: SimpleNamespace, scored: list, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     device: torch.device,
