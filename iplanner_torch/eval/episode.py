@@ -84,7 +84,15 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from iplanner_torch.checks import flag, integer, is_real, non_negative, optional, positive
+from iplanner_torch.checks import (
+    MAX_SEED,
+    flag,
+    integer,
+    is_real,
+    non_negative,
+    optional,
+    positive,
+)
 from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.skeleton import JOINT_INDEX, JOINT_NAMES
 from iplanner_torch.errors import ConfigError, ShapeError
@@ -747,7 +755,8 @@ def _run_episode(
     lift = np.array([0.0, 0.0, 0.04 - 0.5 * scene.block_size])
     targets = {i: scene.delivery_position(i) + lift for i in scene.block_ids}
     human = ScriptedHuman(human_cfg, motion, task_order=order, targets=targets, seed=seed)
-    tracker = Tracker(sim_cfg.tracker_cfg(), seed=seed + 1)
+    # the episode seed + 1, wrapped to 0 after MAX_SEED (no other episode's tracker uses 0)
+    tracker = Tracker(sim_cfg.tracker_cfg(), seed=(seed + 1) % (MAX_SEED + 1))
     env = SimEnv(scene, robot, human, tracker, seed, sim_cfg)
     ref = robot.q_home
     dev, dt_ = ref.device, ref.dtype
