@@ -95,6 +95,10 @@ NEWTON_MAX_EXTRA_ITERS = 40
 BISECTION_ITERS = 60
 #: Smallest variance used [m^2]; smaller eigenvalues are raised to it (1 micrometre std).
 VAR_FLOOR = 1e-12
+#: Smallest radius sum used [m]; smaller ones are raised to it (1 nanometre). The bounds grow
+#: with the radius, so they stay upper bounds, and ``x_max`` moves by less than this; below
+#: it the solver's squared terms (of order ``R^2``) underflow float32 and made NaN.
+RADIUS_FLOOR = 1e-9
 #: Default pruning threshold in standard deviations (see the module docstring).
 DEFAULT_PRUNE_SIGMA = 6.0
 
@@ -136,7 +140,9 @@ def _secular_residual(lam: torch.Tensor, d2: torch.Tensor, s: torch.Tensor, R: t
     y2 = d2 * w * w  # (3, N) squared components of y
     q = torch.rsqrt(y2.sum(0))  # (N,) 1/||y||
     g = q - 1.0 / R
-    gp = (y2 * s * w).sum(0) * q * q * q
+    # (y2 q^2) (s w) q: the shares of ||y||^2 first, so that no product underflows before
+    # the large q (up to 1/RADIUS_FLOOR) scales it back (y2 s w underflowed float32 far away)
+    gp = (y2 * (q * q) * (s * w)).sum(0) * q
     return g, gp
 
 
@@ -267,6 +273,7 @@ def _pair_bounds(
         (...) bound in [0, 1], the broadcast shape of the three inputs.
     """
     s = s.clamp_min(VAR_FLOOR)
+    R = R.clamp_min(RADIUS_FLOOR)
     log_det = torch.log(s).sum(0)  # (...) broadcastable, computed before expanding
     log_vf = _log_volume_factor(R, log_det)  # (...) broadcastable
     shape = torch.broadcast_shapes(d2.shape[1:], s.shape[1:], R.shape)
@@ -526,7 +533,9 @@ def sphere_collision_bound(
 
     A pair whose squared distance ``||mean - robot_center||^2`` overflows the dtype (a
     distance beyond about 1.3e154 m in float64, 1.8e19 m in float32) gets the bound of the
-    Euclidean gap alone, 0 in practice, with no gradient (see the module docstring).
+    Euclidean gap alone, 0 in practice, with no gradient (see the module docstring). A radius
+    sum below :data:`RADIUS_FLOOR` (1 nm) is raised to it, which keeps the bound an upper
+    bound.
 
     Args:
         robot_center: (..., 3) robot sphere centres [m], float32 or float64.
@@ -633,8 +642,8 @@ def max_density_point(
 
     Args:
         robot_center: (..., 3) ball centre ``c`` [m], float32 or float64.
-        radius: (...) ball radius ``R = r1 + r2`` [m], > 0, dtype and device of
-            ``robot_center``, or a float.
+        radius: (...) ball radius ``R = r1 + r2`` [m], > 0 (below :data:`RADIUS_FLOOR`
+            raised to it), dtype and device of ``robot_center``, or a float.
         mean: (..., 3) Gaussian mean [m], dtype and device of ``robot_center``.
         cov: (..., 3, 3) Gaussian covariance [m^2], symmetric positive (semi)definite, dtype
             and device of ``robot_center``.
@@ -674,7 +683,7 @@ def max_density_point(
     U = U.expand(batch + (3, 3))
     s = s.expand(batch + (3,))
     d = torch.einsum("...ji,...j->...i", U, diff.expand(batch + (3,)))  # (..., 3)
-    R = radius.expand(batch)
+    R = radius.expand(batch).clamp_min(RADIUS_FLOOR)
     dist2 = (d * d).sum(-1)  # (...)
     outside = dist2 > R * R
     in_range = torch.isfinite(dist2)

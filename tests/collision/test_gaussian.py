@@ -731,3 +731,54 @@ def test_backward_works_when_every_bound_is_constant() -> None:
         b.sum().backward()
         assert center.grad is not None and torch.isfinite(center.grad).all()
         center.grad = None
+
+
+@pytest.mark.parametrize(
+    ("dtype", "radius"),
+    [(torch.float32, 1e-12), (torch.float32, 1e-30), (torch.float64, 1e-30),
+     (torch.float64, 1e-200)],
+)  # fmt: skip
+def test_near_zero_radii_give_the_floor_radius_bound_not_nan(
+    dtype: torch.dtype, radius: float
+) -> None:
+    """Radius sums below ``RADIUS_FLOOR`` are raised to it; they made NaN (float64 below about
+    1e-154 m, float32 below about 1e-19 m) where the solver's squares underflowed. The bound
+    at the floor stays above the probability of the tiny ball, about its volume times the
+    density at its centre."""
+    c = torch.zeros(3, dtype=dtype)
+    mean = torch.tensor([0.3, 0.1, 0.0], dtype=dtype)
+    cov = torch.diag(torch.tensor([1e-2, 2e-2, 5e-3], dtype=dtype))
+    half = G.RADIUS_FLOOR / 2
+    for method in ("min", "volume", "halfspace"):
+        b = G.sphere_collision_bound(c, radius, mean, cov, radius, method=method)
+        at_floor = G.sphere_collision_bound(c, half, mean, cov, half, method=method)
+        assert torch.isfinite(b) and 0.0 <= float(b) <= 1.0, (method, b)
+        assert float(b) == float(at_floor), method
+    bound = G.sphere_collision_bound(c, radius, mean, cov, radius)
+    diag = G.sphere_collision_bound_diag(c, radius, mean, torch.diagonal(cov), radius)
+    assert float(diag) == pytest.approx(float(bound), rel=1e-5)
+    m, S = mean.double(), cov.double()
+    density = math.exp(-0.5 * float(m @ torch.linalg.solve(S, m))) / math.sqrt(
+        (2 * math.pi) ** 3 * float(torch.det(S))
+    )
+    p_ball = 4 / 3 * math.pi * G.RADIUS_FLOOR**3 * density  # the density varies by < 1e-6
+    assert float(bound) >= p_ball * (1 - 1e-4)
+    x, lam = G.max_density_point(c, torch.tensor(2 * radius, dtype=dtype), mean, cov)
+    assert torch.isfinite(x).all() and torch.isfinite(lam)
+    assert float(torch.linalg.norm(x.double())) == pytest.approx(G.RADIUS_FLOOR, rel=1e-4)
+
+
+def test_far_pairs_with_tiny_radius_and_variance_are_finite_in_float32() -> None:
+    """A mean 1e9 m away with variance 1e-12 m^2 and the floor radius: the secular equation's
+    derivative (a product of y^2, s and w) underflowed float32 to 0 and made NaN."""
+    c = torch.zeros(3)
+    mean = torch.tensor([1e9, 3e8, 0.0])
+    cov = torch.diag(torch.tensor([1e-12, 2e-12, 5e-13]))
+    for method in ("min", "halfspace"):
+        b = G.sphere_collision_bound(c, 1e-10, mean, cov, 1e-10, method=method)
+        assert float(b) == 0.0, method
+    x, _ = G.max_density_point(c, torch.tensor(2e-9), mean, cov)
+    assert torch.isfinite(x).all()
+    direction = (mean / torch.linalg.norm(mean)).double()
+    assert float(torch.linalg.norm(x.double())) == pytest.approx(2e-9, rel=1e-3)
+    assert float(x.double() @ direction) > 0.0
