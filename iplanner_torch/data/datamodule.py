@@ -9,6 +9,7 @@ import lightning as L
 import torch
 from torch.utils.data import BatchSampler, DataLoader, Dataset, RandomSampler, SequentialSampler
 
+from iplanner_torch import checks
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.data.windows import (
@@ -48,7 +49,7 @@ class ReachingDataModule(L.LightningDataModule):
         window_cfg: window settings (default :class:`WindowCfg`).
         fractions: (train, val, test) fractions of demonstrations.
         batch_size: windows per batch.
-        seed: split and shuffling seed.
+        seed: split and shuffling seed, an integer in [0, 2^63 - 1].
         fps: frame rate for files that do not state one.
         num_workers: DataLoader workers (0 keeps everything in-process).
     """
@@ -71,7 +72,7 @@ class ReachingDataModule(L.LightningDataModule):
         self.window_cfg = window_cfg or WindowCfg()
         self.fractions = check_split_fractions(fractions)
         self.batch_size = int(batch_size)
-        self.seed = int(seed)
+        self.seed = checks.seed(seed)
         self.fps = fps
         self.num_workers = int(num_workers)
         self.demos: list[Demonstration] = []
