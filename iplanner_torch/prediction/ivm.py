@@ -86,7 +86,7 @@ class IVMClassifier:
         candidates: random candidates scored per import step, an integer >= 1; None scores
             all.
         newton_steps: Newton (bound) steps per candidate and per refit, an integer >= 1.
-        seed: seed of the candidate sampler, an integer.
+        seed: seed of the candidate sampler, an integer in [0, 2^63 - 1].
 
     Raises:
         ConfigError: when a setting is not of the type and range above (a float ``2.5`` or a
@@ -117,7 +117,7 @@ class IVMClassifier:
         self.tol = checks.non_negative("tol", tol)
         self.candidates = checks.optional(checks.integer, "candidates", candidates, minimum=1)
         self.newton_steps = checks.integer("newton_steps", newton_steps, minimum=1)
-        self.seed = checks.integer("seed", seed)
+        self.seed = checks.seed(seed)
         self.classes_: Tensor | None = None
         self.import_vectors_: Tensor | None = None
         self.import_index_: Tensor | None = None
