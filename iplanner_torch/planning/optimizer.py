@@ -1326,7 +1326,10 @@ class TrajectoryOptimizer:
                         (n,) = torch.autograd.grad(clear, x)
                         if all_finite(n) and float(n.square().sum()) > 0.0:
                             normal = n
-            v = torch.minimum(torch.maximum(v + (v_des - v).clamp(-a_step, a_step), -v_lim), v_lim)
+            # the first segment's velocity is the velocity half a step after the start (see
+            # trajectory.accelerations): half the change reaches acc_max there
+            a_i = 0.5 * a_step if i == 1 else a_step
+            v = torch.minimum(torch.maximum(v + (v_des - v).clamp(-a_i, a_i), -v_lim), v_lim)
             if normal is not None and scene is not None:
                 with torch.no_grad():
                     # slide along the obstacle when the step would bring it closer than the

@@ -80,8 +80,10 @@ def accelerations(
         q: (..., W, J) joint positions [rad].
         dt: seconds between waypoints, finite and > 0.
         qd_start: (..., J) or (J,) velocity at the first waypoint [rad/s]; when given, the
-            acceleration at the first waypoint ``((q_1 - q_0) / dt - qd_start) / dt`` is
-            prepended.
+            acceleration at the first waypoint ``2 ((q_1 - q_0) / dt - qd_start) / dt`` is
+            prepended: the change from ``qd_start`` to the first segment's mean velocity,
+            which is the velocity half a step later (exact for a constant acceleration, as the
+            second differences are).
 
     Returns:
         (..., W - 2, J) accelerations [rad/s^2] (``W - 1`` rows when ``qd_start`` is given).
@@ -96,7 +98,7 @@ def accelerations(
     acc = (q[..., 2:, :] - 2.0 * q[..., 1:-1, :] + q[..., :-2, :]) / (dt * dt)
     if qd_start is None:
         return acc
-    a0 = ((q[..., 1, :] - q[..., 0, :]) / dt - qd_start) / dt
+    a0 = 2.0 * ((q[..., 1, :] - q[..., 0, :]) / dt - qd_start) / dt
     return torch.cat([a0.unsqueeze(-2).expand(*acc.shape[:-2], 1, acc.shape[-1]), acc], dim=-2)
 
 

@@ -78,17 +78,6 @@ def test_differences_and_smoothness_cost_equal_numpy() -> None:
     np.testing.assert_allclose(C.joint_acc_l2(qt, dt).numpy(), want, rtol=1e-12)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "accelerations(q, dt, qd_start) puts ((q_1 - q_0) / dt - qd_start) / dt at the first "
-        "waypoint: the change from the velocity at t_0 to the first segment's mean velocity, "
-        "which is the velocity at t_0 + dt / 2, divided by dt instead of dt / 2. On a motion "
-        "of constant acceleration a it gives a / 2 (the interior waypoints give a), so "
-        "joint_acc_l2 and joint_acc_limit_violation, and the optimiser's acc_max check, "
-        "undercount the first waypoint's acceleration by half"
-    ),
-)
 def test_first_waypoint_acceleration_of_a_constant_acceleration_is_exact() -> None:
     """``q(t) = q0 + v0 t + a t^2 / 2`` with ``qd_start = v0``: Taylor's expansion gives the
     acceleration ``2 (q_1 - q_0 - v0 dt) / dt^2 = a`` exactly at the first waypoint, as the
