@@ -88,7 +88,10 @@ class TrainerCfg:
     devices: int = 1
     # logging interval [steps].
     log_every_n_steps: int = 10
-    # seed of every fit (Lightning seed_everything).
+    # seed of the global random state (torch, numpy, Python) at every fit (Lightning
+    # seed_everything). The built-in models draw only from generators seeded by the
+    # predictor's own seed (the root ``seed`` sets both), so this one alone changes none of
+    # their numbers; it matters to code that reads the global state, e.g. a custom model.
     seed: int = 0
     # write TensorBoard logs beside the CSV logs.
     tensorboard: bool = True
