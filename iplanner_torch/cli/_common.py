@@ -1076,7 +1076,7 @@ def run_app(app: Callable[[], Any]) -> None:
     except Exception as exc:  # noqa: BLE001 - what is not a config error is raised again
         if _SET_BY_RUN_APP not in os.environ:  # raised by the command after it started
             raise
-        text = composition_error_text(exc)
+        text = composition_error_text(exc) or _launcher_error_text(exc)
         os_error = _os_error_of(exc)
         if text is not None:
             line = f"error: ConfigError: {text}"
@@ -1088,6 +1088,19 @@ def run_app(app: Callable[[], Any]) -> None:
         raise SystemExit(2) from None
     finally:
         _task_started()
+
+
+def _launcher_error_text(exc: BaseException) -> str | None:
+    """What stops a sweep's launcher before its first job, in one line, or None: submitit's
+    SLURM executor raises ``RuntimeError: Could not detect "srun"`` on a machine that is not a
+    SLURM cluster (``hydra/launcher=slurm`` where no ``srun`` is on the PATH)."""
+    if isinstance(exc, RuntimeError) and 'Could not detect "srun"' in str(exc):
+        return (
+            "hydra/launcher=slurm submits jobs to a SLURM cluster, but no `srun` is on the "
+            "PATH here (not a SLURM login node?); run it where SLURM is, or use "
+            "hydra/launcher=joblib to run the jobs on this machine"
+        )
+    return None
 
 
 def _os_error_of(exc: BaseException) -> OSError | None:

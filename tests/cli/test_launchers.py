@@ -121,3 +121,23 @@ def test_a_sweep_runs_on_submitits_local_executor(tmp_path: Path) -> None:
 
     rows = pd.read_csv(sweep / "summary" / "results.csv")
     assert sorted(rows["noise"]) == [0.0, 0.02]
+
+
+def test_the_slurm_launcher_off_a_cluster_is_one_line(tmp_path: Path) -> None:
+    """``hydra/launcher=slurm`` where no ``srun`` is on the PATH: Submitit's RuntimeError was a
+    traceback with exit code 1; it is one line naming the way out, with exit code 2."""
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
+    bin_dir = tmp_path / "bin"  # a PATH with this Python only (no srun wherever SLURM is)
+    bin_dir.mkdir()
+    (bin_dir / "python").symlink_to(sys.executable)
+    env = dict(os.environ, PATH=str(bin_dir), PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+    res = subprocess.run(
+        [sys.executable, "-m", "iplanner_torch.cli.experiment", "-m", "hydra/launcher=slurm",
+         f"hydra.sweep.dir={tmp_path / 'sweep'}", "tracker.noise=0"],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert res.returncode == 2, res.stderr[-2000:]
+    assert "Traceback" not in res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert lines[-1].startswith("error: ConfigError: hydra/launcher=slurm submits jobs to a SLURM")
+    assert "no `srun` is on the PATH" in lines[-1] and "hydra/launcher=joblib" in lines[-1]
