@@ -369,9 +369,11 @@ def _resume(ckpt: Path, key: str, build: Any, digest: str) -> Any:
             return None
         return build(d)
     except Exception as err:  # noqa: BLE001 - a broken file is an error the user must see
+        # our own CheckpointError says what is wrong already; another error is named by type
+        why = str(err) if isinstance(err, CheckpointError) else f"{type(err).__name__}: {err}"
         raise CheckpointError(
-            f"cannot resume from {ckpt}: {type(err).__name__}: {err}; delete the file to "
-            "retrain that sub-model, or run with train.resume=false"
+            f"cannot resume from {ckpt}: {why}; delete the file to retrain that sub-model, or "
+            "run with train.resume=false"
         ) from err
 
 

@@ -441,7 +441,8 @@ def test_resume_refuses_a_sub_model_changed_after_it_was_written(tmp_path: Path)
         mean = next(v for k, v in d["svgp"]["state_dict"].items() if "variational_mean" in k)
         mean.view(-1)[0] = value
         torch.save(d, gp)
-        with pytest.raises(CheckpointError, match=rf"cannot resume from {gp}: .*damaged"):
+        with pytest.raises(CheckpointError, match=rf"cannot resume from {gp}: .*damaged") as e:
             _trained(tmp_path, windows, resume=True)
+        assert f"{gp}: its contents do not match" in str(e.value)  # the type is named once
         assert (tmp_path / "predictor.ckpt").read_bytes() == good
         gp.write_bytes(original)
