@@ -55,7 +55,7 @@ def _fmt(v: object) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="reduced sizes (CI smoke run)")
     parser.add_argument("--json", type=Path, default=None, help="write the figures as JSON")
     parser.add_argument(

@@ -87,6 +87,6 @@ def run(quick: bool) -> dict[str, dict]:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true")
     print(json.dumps(run(parser.parse_args().quick), indent=2))

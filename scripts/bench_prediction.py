@@ -153,7 +153,7 @@ def run(quick: bool = False, *, predictor_cfg: PredictorCfg | None = None) -> di
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (CI smoke)")
     args = ap.parse_args()
     print(json.dumps(run(args.quick), indent=2))

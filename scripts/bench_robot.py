@@ -103,7 +103,7 @@ def run(quick: bool) -> dict[str, dict]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="few repetitions, iiwa only")
     args = parser.parse_args()
     print(json.dumps(run(args.quick), indent=2))

@@ -70,7 +70,7 @@ def gaps(frames: torch.Tensor, gen: torch.Generator, points: int = 400) -> dict[
 
 @main_guard
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=ROOT / "datasets" / "reaching")
     parser.add_argument("--frames", type=int, default=200, help="frames to sample (>= 1)")
     parser.add_argument("--seed", type=int, default=0)

@@ -86,7 +86,7 @@ def plot_reaches(path: Path, cfg: ReachingCfg) -> None:
 @main_guard
 def main() -> None:
     """Plot, then (unless ``--no-measure``) generate the default dataset to a temp folder."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--no-measure", action="store_true", help="skip the timing run")
     parser.add_argument(
         "--out", type=Path, default=OUT, help=f"folder for reaches.png and README.md ({OUT})"

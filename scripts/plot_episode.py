@@ -45,7 +45,7 @@ def _logs(paths: list[Path]) -> list[Path]:
 
 @main_guard
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("paths", type=Path, nargs="+", help="run folders or .mcap logs")
     parser.add_argument("--out", type=Path, help="folder for the PNGs (default: beside each log)")
     parser.add_argument("--force", action="store_true", help="replace existing PNGs")

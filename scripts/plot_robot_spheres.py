@@ -72,7 +72,7 @@ def plot_robot(name: str, path: Path) -> None:
 
 @main_guard
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
         "--out",
         type=Path,

@@ -121,7 +121,7 @@ def paired(df: pd.DataFrame) -> pd.DataFrame:
 @main_guard
 def main() -> None:
     args = parse_report_args(
-        __doc__.splitlines()[0], "iplanner-experiment -m experiment=safety_seeds", OUT
+        __doc__.split("\n\n")[0], "iplanner-experiment -m experiment=safety_seeds", OUT
     )
     df = gather(args.run_dir)
     level = ""

@@ -54,7 +54,7 @@ COLUMNS = {
 
 @main_guard
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("run_dir", type=Path, help="run folder, or one .mcap episode log")
     parser.add_argument("--settle", type=float, default=1.0, help="seconds after a wait")
     parser.add_argument("--episodes", action="store_true", help="one row per episode too")

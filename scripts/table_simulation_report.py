@@ -42,7 +42,7 @@ KEYS = ["arrangement", "task_order", "confidence", "planner"]
 @main_guard
 def main() -> None:
     args = parse_report_args(
-        __doc__.splitlines()[0], "iplanner-experiment experiment=table_simulation", OUT
+        __doc__.split("\n\n")[0], "iplanner-experiment experiment=table_simulation", OUT
     )
     path = args.run_dir / "results.csv"
     if not path.is_file():

@@ -435,3 +435,18 @@ def test_bench_prints_the_figures_when_the_json_cannot_be_written(
     code, out, err = run_script("bench", "--only", "dtw", "--json", target, module=bench)
     assert code == 2 and "error: FileExistsError" in err and "the figures are above" in err
     assert '"x.ms"' in out and not target.exists()
+
+
+@pytest.mark.parametrize("name", ["plot_episode", "safety_seeds_report"])
+def test_help_describes_a_script_with_its_whole_first_paragraph(
+    run_script, name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A docstring whose first paragraph runs over two lines: --help showed only its first
+    line, a sentence cut off (an opened bracket never closed)."""
+    monkeypatch.setenv("COLUMNS", "1000")  # argparse wraps at the terminal width (hyphens too)
+    code, out, _ = run_script(name, "--help")
+    assert code == 0
+    doc = _load(name).__doc__
+    first = " ".join(doc.split("\n\n")[0].split())
+    assert len(doc.split("\n\n")[0].strip().splitlines()) > 1  # the case this test is about
+    assert first in " ".join(out.split())
