@@ -25,6 +25,8 @@ Config group and main options:
                                    iplanner-train and the other commands never generate
                                    one given this way outside paths.datasets: generate
                                    writes it
+    paths.datasets=<folder>        the folder of the generated sets (default datasets):
+                                   data=reaching and data=tasks put their data.path in it
     data.overwrite=true            generate: replace the demonstration files (.npz, .csv) and
                                    dataset card already in data.path, nothing else; they are
                                    deleted only once the new set is complete

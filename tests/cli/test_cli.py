@@ -113,7 +113,13 @@ def test_data_help_anywhere_lists_commands_and_options(tmp_path: Path) -> None:
     assert "convert" not in text and "``" not in text
     options = sorted(p.stem for p in conf.glob("*.yaml"))
     assert f"data={'|'.join(sorted(options, key=text.index))}" in text
-    for key in ("data.path=", "data.overwrite=true", "data.generator.", "data.windows.joints"):
+    for key in (
+        "data.path=",
+        "paths.datasets=",
+        "data.overwrite=true",
+        "data.generator.",
+        "data.windows.joints",
+    ):
         assert key in text
     for kind, cfg in (("reaching", ReachingCfg), ("tasks", TaskDatasetCfg)):
         line = next(ln for ln in text.splitlines() if ln.strip().startswith(f"{kind}: "))
