@@ -96,8 +96,9 @@ BISECTION_ITERS = 60
 #: Smallest variance used [m^2]; smaller eigenvalues are raised to it (1 micrometre std).
 VAR_FLOOR = 1e-12
 #: Smallest radius sum used [m]; smaller ones are raised to it (1 nanometre). The bounds grow
-#: with the radius, so they stay upper bounds, and ``x_max`` moves by less than this; below
-#: it the solver's squared terms (of order ``R^2``) underflow float32 and made NaN.
+#: with the radius, so they stay upper bounds, and ``x_max`` moves by less than this. Far
+#: smaller radii made NaN: the solver's squared terms (of order ``R^2``) underflow below
+#: about 1e-19 m in float32 and 1e-154 m in float64; the floor keeps a wide margin.
 RADIUS_FLOOR = 1e-9
 #: Default pruning threshold in standard deviations (see the module docstring).
 DEFAULT_PRUNE_SIGMA = 6.0

@@ -31,6 +31,7 @@ from typing import Protocol
 import torch
 
 from iplanner_torch.checks import finite, finite_time, integer, is_real, non_negative
+from iplanner_torch.collision.gaussian import RADIUS_FLOOR
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.planning.trajectory import accelerations, velocities
 from iplanner_torch.prediction.forecast import Forecast
@@ -260,7 +261,9 @@ def _secular_lambda(d: torch.Tensor, var: torch.Tensor, rad: torch.Tensor) -> to
         n2 = (d2 / den.square()).sum(-1)
         n = n2.sqrt()
         phi = 1.0 / n - 1.0 / rad
-        dphi = (d2 * var / den.pow(3)).sum(-1) / (n2 * n)
+        # (y^2 / ||y||^2) (s / den) / ||y||: no product underflows before 1 / ||y|| (up to
+        # 1 / RADIUS_FLOOR) scales it back (d2 var / den^3 underflowed float32 far away)
+        dphi = ((d2 / den.square()) / n2.unsqueeze(-1) * (var / den)).sum(-1) / n
         lam = (lam - phi / dphi).clamp_min(0.0)
     return torch.where(dn > rad, lam, torch.zeros_like(lam))
 
@@ -273,12 +276,15 @@ def gaussian_ball_bound_diag(
     Args:
         d: (..., 3) Gaussian mean relative to the ball's centre [m] (differentiable).
         var: (..., 3) diagonal variances [m^2], > 0.
-        rad: (...) ball radius R = r_robot + r_human [m].
+        rad: (...) ball radius R = r_robot + r_human [m]; below
+            :data:`~iplanner_torch.collision.gaussian.RADIUS_FLOOR` raised to it (the bound
+            stays an upper bound).
 
     Returns:
         bound (...) in [0, 1], ``min(4/3 pi R^3 f(x_max), Phi(-m), 1)``, and ``m^2`` (...)
         the squared Mahalanobis distance from the mean to the ball (0 inside).
     """
+    rad = rad.clamp_min(RADIUS_FLOOR)
     with torch.no_grad():
         lam = _secular_lambda(d, var, rad)
         y = d / (1.0 + lam.unsqueeze(-1) * var)  # x_max - ball centre, on the sphere

@@ -769,8 +769,9 @@ def test_near_zero_radii_give_the_floor_radius_bound_not_nan(
 
 
 def test_far_pairs_with_tiny_radius_and_variance_are_finite_in_float32() -> None:
-    """A mean 1e9 m away with variance 1e-12 m^2 and the floor radius: the secular equation's
-    derivative (a product of y^2, s and w) underflowed float32 to 0 and made NaN."""
+    """A mean 1e9 m away with variance 1e-12 m^2 and a radius sum at or near the floor: the
+    secular equation's derivative (a product of y^2, s and w) underflowed float32 to 0 and
+    made NaN."""
     c = torch.zeros(3)
     mean = torch.tensor([1e9, 3e8, 0.0])
     cov = torch.diag(torch.tensor([1e-12, 2e-12, 5e-13]))

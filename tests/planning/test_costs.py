@@ -542,3 +542,24 @@ def test_static_clearance_refuses_a_non_finite_margin() -> None:
     centers = torch.zeros(1, 2, 1, 3)
     with pytest.raises(ConfigError, match="expected margin a finite number, got nan"):
         C.static_clearance(centers, torch.ones(1), _Floor(), math.nan)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_exact_bound_is_finite_for_near_zero_radii_and_far_tiny_variances(
+    dtype: torch.dtype,
+) -> None:
+    """The acceptance bound with a radius sum of 1e-30 m (raised to RADIUS_FLOOR), and a mean
+    1e9 m away with variance 1e-12 m^2 in float32, whose Newton derivative underflowed: NaN
+    before. Each agrees with the collision module's bound at the floor radius."""
+    from iplanner_torch.collision import gaussian as G
+
+    cases = [((0.3, 0.1, 0.0), 1e-2, 1e-30), ((1e9, 3e8, 0.0), 1e-12, 2e-9)]
+    for mean, v, r in cases:
+        d = torch.tensor([mean], dtype=dtype)
+        var = torch.full((1, 3), v, dtype=dtype)
+        bound, m2 = C.gaussian_ball_bound_diag(d, var, torch.tensor([r], dtype=dtype))
+        assert torch.isfinite(bound).all() and torch.isfinite(m2).all(), (mean, r)
+        ref = G.sphere_collision_bound_diag(
+            torch.zeros(3, dtype=dtype), max(r, G.RADIUS_FLOOR), d[0], var[0], 0.0
+        )
+        assert float(bound) == pytest.approx(float(ref), rel=1e-3, abs=1e-30), (mean, r)
