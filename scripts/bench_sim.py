@@ -108,7 +108,7 @@ def run(quick: bool, predictor_path: str | None = None) -> dict[str, dict]:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     size = parser.add_mutually_exclusive_group()
     size.add_argument("--quick", action="store_true", help="a few simulated seconds (default)")
     size.add_argument("--full", action="store_true", help="longer episodes, 3 repeats")

@@ -112,10 +112,15 @@ def test_same_seed_same_episode_whatever_the_global_random_state(tmp_path: Path)
 
 
 def test_another_seed_another_person_and_tracker_noise(tmp_path: Path) -> None:
+    """Seeds 3 and 4: the person's own task order differs (drawn from the seed), and so do
+    the tracked joints where the true ones do not (the 2 s here precede any difference in
+    the person's motion), which is the tracker's noise alone."""
     _episode(tmp_path, 3, "a.mcap", global_seed=1)
     _episode(tmp_path, 4, "b.mcap", global_seed=1)
     differ = _log_differences(tmp_path / "a.mcap", tmp_path / "b.mcap")
     assert "metadata/seed" in differ
+    assert "metadata/human_order" in differ  # another person
+    assert "/human/joints_true/positions" not in differ
     assert "/human/joints_tracked/positions" in differ  # the tracker's noise
 
 
