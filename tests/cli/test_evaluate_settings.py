@@ -342,6 +342,27 @@ def test_noise_sweep_checks_the_split_and_windows_before_training(
         evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "seed=1", "data.split=[0.6,0.2,0.2]"))
 
 
+@pytest.mark.parametrize(
+    ("given", "message"),
+    [("+data.format=xyz", r"data\.format: expected one of"),
+     ("+data.fps=-1", r"data\.fps: expected a frame rate > 0"),
+     ("data.split=abc", r"data\.split: fractions: expected 3 numbers")],
+)  # fmt: skip
+def test_noise_sweep_checks_the_data_settings_before_loading_a_checkpoint(
+    given: str, message: str, trained: SimpleNamespace, tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch, no_training: None,
+) -> None:  # fmt: skip
+    """A bad data setting is named before the checkpoints load (a damaged one hid it)."""
+    folder = tmp_path / "ck" / "ds" / "iplanner_ni"
+    folder.mkdir(parents=True)
+    (folder / "predictor.ckpt").write_bytes(b"not a checkpoint")
+    sweep = _sweep_args(trained, tmp_path)
+    with pytest.raises(ConfigError, match=f"^{message}"):
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep, given))
+    with pytest.raises(CheckpointError):
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
+
+
 def test_held_out_demonstrations_warn_on_other_data(trained: SimpleNamespace) -> None:
     demos = load_demonstrations(trained.ds)
     split = SplitRecord(seed=1, fractions=FRACTIONS, held_out=["reach_t0_r00_v1", "elsewhere"])
