@@ -93,7 +93,13 @@ class CostWeights:
 
 
 def joint_acc_l2(q: torch.Tensor, dt: float, qd_start: torch.Tensor | None = None) -> torch.Tensor:
-    """Smoothness: ``dt * sum ||q_ddot||^2`` over the waypoints.
+    """Smoothness: ``sum ||q_ddot||^2`` over the waypoints times the time each stands for,
+    the integral of the squared acceleration.
+
+    An interior waypoint's second difference stands for ``dt`` (from the mid-point of the
+    segment before it to that of the segment after); the first waypoint's acceleration (with
+    ``qd_start``, see :func:`~iplanner_torch.planning.trajectory.accelerations`) for the
+    half step ``dt / 2`` from the start to the first segment's mid-point.
 
     Args:
         q: (B, W, J) joint positions [rad].
@@ -109,8 +115,10 @@ def joint_acc_l2(q: torch.Tensor, dt: float, qd_start: torch.Tensor | None = Non
         ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
     check_shape("q", q, ("B", "W", "J"))
-    acc = accelerations(q, dt, qd_start)
-    return dt * acc.square().sum(dim=(-2, -1))
+    sq = accelerations(q, dt, qd_start).square().sum(-1)  # (B, W - 2) or (B, W - 1)
+    if qd_start is None:
+        return dt * sq.sum(-1)
+    return dt * (sq.sum(-1) - 0.5 * sq[..., 0])
 
 
 def joint_limit_violation(

@@ -841,9 +841,10 @@ def test_acceleration_limit_is_met_by_the_accepted_plan(point_robot: PointRobot)
     acc = accelerations(res.q, float(res.times[1] - res.times[0]), qd)
     assert res.feasible
     assert float(acc.abs().max()) <= ACC_TOL * limit
-    # the reported term is the squared excess of the plan's own accelerations (tiny: a hinge)
+    # the reported term is the squared excess of the plan's own accelerations (tiny: a hinge);
+    # float32 accelerations near 8 leave an excess near 0.02 good to about 1e-4 relative
     excess = float(torch.relu(acc.abs() - limit).square().sum())
-    assert float(res.cost_terms["joint_acc_limit_violation"]) == pytest.approx(excess, abs=1e-9)
+    assert float(res.cost_terms["joint_acc_limit_violation"]) == pytest.approx(excess, rel=1e-3)
     assert "joint_acc_limit_violation" not in res_free.cost_terms
     with pytest.raises(ConfigError, match="acc_max"):
         OptimizerCfg(acc_max=0.0)

@@ -91,6 +91,22 @@ def test_first_waypoint_acceleration_of_a_constant_acceleration_is_exact() -> No
     np.testing.assert_allclose(acc[0].numpy(), a, rtol=1e-9)
 
 
+def test_smoothness_cost_from_a_start_velocity_is_the_integral_of_the_squared_acceleration(
+) -> None:  # fmt: skip
+    """With a start velocity, the accelerations stand for the time from the start to the last
+    segment's mid-point: ``(W - 1.5) dt``, the first one for its half step. On a motion of
+    constant acceleration ``a`` the cost is then ``|a|^2 (W - 1.5) dt`` exactly (float64:
+    rtol 1e-9)."""
+    dt, w = 0.1, 8
+    t = dt * np.arange(w)
+    v0, a = np.array([0.5, -1.0]), np.array([3.0, 2.0])
+    q = torch.from_numpy(v0 * t[:, None] + 0.5 * a * t[:, None] ** 2)[None]
+    got = float(C.joint_acc_l2(q, dt, torch.from_numpy(v0))[0])
+    assert got == pytest.approx(float(a @ a) * (w - 1.5) * dt, rel=1e-9)
+    # without it, from the first interior waypoint's segment mid-point on: (W - 2) dt
+    assert float(C.joint_acc_l2(q, dt)[0]) == pytest.approx(float(a @ a) * (w - 2) * dt, rel=1e-9)
+
+
 def test_forecast_to_obstacle_equals_numpy_interpolation_and_the_sphere_rows() -> None:
     """Sphere-centre means and variances at query times before, between, on and after the
     forecast frames: every joint coordinate's mean and variance interpolated by ``np.interp``
