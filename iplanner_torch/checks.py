@@ -162,6 +162,27 @@ def path_argument(
     return Path(value)  # type: ignore[arg-type]
 
 
+def is_dir(
+    path: Path, expected: str, *, what: str = "", error: type[Exception] = DataError
+) -> bool:
+    """``path.is_dir()``, with ``error`` naming ``path`` where the system refuses to look it up
+    at all (a name too long: a file's text passed as its path), where pathlib raises the
+    OSError instead of answering False.
+
+    The message reads ``"<what> '<path>': cannot look up this path (File name too long);
+    expected <expected>"``, the path shortened to 60 characters.
+    """
+    try:
+        return path.is_dir()
+    except OSError as exc:
+        shown = repr(str(path))
+        shown = shown if len(shown) <= 60 else shown[:57] + "..."
+        raise error(
+            f"{what + ' ' if what else ''}{shown}: cannot look up this path ({exc.strerror}); "
+            f"expected {expected}"
+        ) from exc
+
+
 def optional(check: Callable[..., _T], name: str, value: object, **kwargs: Any) -> _T | None:
     """``check(name, value, **kwargs)`` for a field that may also be None (returned as is).
 

@@ -62,6 +62,7 @@ from typing import Any
 
 import numpy as np
 
+from iplanner_torch import checks
 from iplanner_torch.checks import path_argument
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.errors import ConfigError, DataError, DataWarning
@@ -104,19 +105,6 @@ def _show(value: Any, limit: int = 60) -> str:
     """``repr(value)``, shortened to ``limit`` characters for error messages."""
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _is_dir(path: Path) -> bool:
-    """``path.is_dir()``, with a DataError naming ``path`` where the system refuses to look it
-    up at all (a name too long: a file's text passed as its path), where pathlib raises the
-    OSError instead of answering False."""
-    try:
-        return path.is_dir()
-    except OSError as exc:
-        raise DataError(
-            f"{_show(str(path))}: cannot look up this path ({exc.strerror}); expected the path "
-            "of a file or folder"
-        ) from exc
 
 
 def _json_type(value: Any) -> str:
@@ -947,7 +935,7 @@ def load_demonstration(
     path = path_argument(path, "of a demonstration")
     fps = _fps_argument(path, fps)
     joints = _joints_argument(joints)
-    if _is_dir(path):
+    if checks.is_dir(path, "the path of a file or folder"):
         raise DataError(
             f"{path}: is a folder; load_demonstration reads one .npz or .csv file "
             "(load_demonstrations reads every file below a folder)"
@@ -997,7 +985,7 @@ def demonstration_files(path: str | Path) -> list[Path]:
             f"{path}: an unfinished generation's temporary folder (interrupted, or still "
             "running), not a dataset; delete it and generate the dataset anew"
         )
-    if _is_dir(path):
+    if checks.is_dir(path, "the path of a file or folder"):
         return sorted(
             p
             for p in path.rglob("*")
@@ -1239,7 +1227,7 @@ def load_lego_assembly(path: str | Path, *, fps: float = 30.0) -> list[Demonstra
             short: that row is dropped).
     """
     path = Path(path)
-    if _is_dir(path):
+    if checks.is_dir(path, "the path of a file or folder"):
         files = sorted(p for p in path.rglob("*.txt") if p.is_file())
         root = path
     elif path.is_file():

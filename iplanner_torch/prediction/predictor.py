@@ -715,15 +715,12 @@ class HumanMotionPredictor:
             raise ConfigError(
                 f"expected expect_joints a list or tuple of joint names, got {expect_joints!r}"
             )
-        try:
-            is_dir = path.is_dir()
-        except OSError as err:  # pathlib answers False only for a missing path
-            shown = repr(str(path)) if len(str(path)) <= 60 else repr(str(path)[:57]) + "..."
-            raise CheckpointError(
-                f"predictor checkpoint {shown} cannot be looked up ({err.strerror}); expected "
-                "the path of a checkpoint file"
-            ) from err
-        if is_dir:
+        if checks.is_dir(
+            path,
+            "the path of a checkpoint file",
+            what="predictor checkpoint",
+            error=CheckpointError,
+        ):
             raise CheckpointError(
                 f"predictor checkpoint {path} is a directory, not a checkpoint file (a training "
                 "run writes <out_dir>/predictor.ckpt)"

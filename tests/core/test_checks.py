@@ -126,3 +126,16 @@ def test_path_argument() -> None:
             checks.path_argument(bad, "of a log")
     with pytest.raises(ConfigError, match="expected out a folder path .* for plots, got NoneType"):
         checks.path_argument(None, "for plots", kind="folder path", name="out", error=ConfigError)
+
+
+def test_is_dir_answers_and_names_a_path_the_system_cannot_look_up(tmp_path) -> None:
+    from iplanner_torch.checks import is_dir
+    from iplanner_torch.errors import CheckpointError
+
+    assert is_dir(tmp_path, "a folder") and not is_dir(tmp_path / "missing", "a folder")
+    with pytest.raises(DataError, match=r"^'.{56}\.\.\.: cannot look up this path \(File name "
+                       r"too long\); expected a folder$"):  # fmt: skip
+        is_dir(tmp_path / ("x" * 300), "a folder")
+    with pytest.raises(CheckpointError, match=r"^predictor checkpoint '.*; expected a file$"):
+        long_path = tmp_path / ("x" * 300)
+        is_dir(long_path, "a file", what="predictor checkpoint", error=CheckpointError)
