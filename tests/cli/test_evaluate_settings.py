@@ -33,6 +33,12 @@ from iplanner_torch.prediction.predictor import HumanMotionPredictor
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
 FRACTIONS = (0.6, 0.2, 0.2)
+#: a bad data setting on the command line and the start of its message
+BAD_DATA_SETTINGS = [
+    ("+data.format=xyz", r"data\.format: expected one of"),
+    ("+data.fps=-1", r"data\.fps: expected a frame rate > 0"),
+    ("data.split=abc", r"data\.split: fractions: expected 3 numbers"),
+]
 
 
 @pytest.fixture(scope="module")
@@ -220,12 +226,7 @@ def test_prediction_refuses_window_settings_other_than_the_checkpoints(
     assert scored[-1].names == sorted(trained.held_out)
 
 
-@pytest.mark.parametrize(
-    ("given", "message"),
-    [("+data.format=xyz", r"data\.format: expected one of"),
-     ("+data.fps=-1", r"data\.fps: expected a frame rate > 0"),
-     ("data.split=abc", r"data\.split: fractions: expected 3 numbers")],
-)  # fmt: skip
+@pytest.mark.parametrize(("given", "message"), BAD_DATA_SETTINGS)
 def test_prediction_checks_the_data_settings_before_loading_the_checkpoint(
     given: str, message: str, trained: SimpleNamespace, tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,
@@ -342,12 +343,7 @@ def test_noise_sweep_checks_the_split_and_windows_before_training(
         evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "seed=1", "data.split=[0.6,0.2,0.2]"))
 
 
-@pytest.mark.parametrize(
-    ("given", "message"),
-    [("+data.format=xyz", r"data\.format: expected one of"),
-     ("+data.fps=-1", r"data\.fps: expected a frame rate > 0"),
-     ("data.split=abc", r"data\.split: fractions: expected 3 numbers")],
-)  # fmt: skip
+@pytest.mark.parametrize(("given", "message"), BAD_DATA_SETTINGS)
 def test_noise_sweep_checks_the_data_settings_before_loading_a_checkpoint(
     given: str, message: str, trained: SimpleNamespace, tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch, no_training: None,
