@@ -18,7 +18,10 @@ folder each command-line override its jobs differ in, e.g. ``planner.itomp_sprea
   the wait windows (a wait's stop and the start after it, ``--settle`` seconds);
 - ``outside_waits``: the smoothness of the time outside them;
 - ``plan_executed``: the mean ``sum_i qdd_i^2`` of the plans' own waypoints over the parts
-  that ran before the next plan took over.
+  that ran before the next plan took over;
+- ``plan_change``: the median, over successive plans, of the largest joint difference
+  between a plan and the one before it where both run [rad]: how far replanning moves the
+  path.
 
 ``--episodes`` prints one row per episode as well. Logs that cannot be split, and truncated
 or damaged logs (read only up to their last complete chunk) unless ``--include-incomplete``,
@@ -49,6 +52,7 @@ COLUMNS = {
     "wait_share": "wait_share",
     "outside_waits": "smoothness_outside",
     "plan_executed": "plan_executed",
+    "plan_change": "plan_change",
 }
 
 
@@ -110,7 +114,7 @@ def main() -> None:
     extra = split_columns(df, tuple(groups), swept)  # as episode_report: before the planner
     groups = [*groups[:-1], *extra, groups[-1]]
     by = df.groupby(groups, sort=False, dropna=False)  # a log outside the jobs is kept too
-    means = by[list(COLUMNS)].mean().reset_index()
+    means = by[[c for c in COLUMNS if c in df.columns]].mean().reset_index()  # all-NaN dropped
     means.insert(len(groups), "episodes", by.size().values)
     print(to_markdown(means))
 

@@ -9,7 +9,9 @@ ways:
   next plan that does not: the stop and the start again), and the smoothness of the rest;
 - by plan: the mean ``sum_i qdd_i^2`` of each plan's own waypoints over the part that runs
   before the next plan takes over, i.e. how rough the plans are that the robot executes (the
-  filtered tracking follows them up to its acceleration limit).
+  filtered tracking follows them up to its acceleration limit); and how far each plan moves
+  the path from the one before it (``plan_change``), since a robot whose successive plans
+  take different ways round an obstacle is rough however smooth each plan is.
 
 :func:`episode_breakdown` reads both from an episode log (``/robot/joint_state`` and
 ``/planner/plan``); the log's robot state is sampled more sparsely than the metrics'
@@ -79,6 +81,9 @@ class SmoothnessBreakdown:
             (NaN when there is none).
         plan_executed: mean over plans of the mean ``sum_i qdd_i^2`` of the plan's interior
             waypoints before the next take-over [rad^2/s^4] (NaN without such waypoints).
+        plan_change: median over successive plans of the largest joint difference between a
+            plan's waypoints and the plan before it (linearly interpolated at their times,
+            where the two overlap) [rad] (NaN when no two plans overlap).
     """
 
     smoothness: float
@@ -87,6 +92,7 @@ class SmoothnessBreakdown:
     wait_share: float
     smoothness_outside: float
     plan_executed: float
+    plan_change: float
 
 
 def wait_windows(plans: Sequence[PlanRecord], settle_s: float = 1.0) -> list[tuple[float, float]]:
@@ -130,6 +136,33 @@ def _plan_executed(plans: Sequence[PlanRecord]) -> float:
     return float(np.mean(values)) if values else math.nan
 
 
+def plan_changes(plans: Sequence[PlanRecord]) -> np.ndarray:
+    """(P,) for each plan that overlaps the one before it in time, the largest joint
+    difference [rad] between its waypoints inside that plan's span and that plan linearly
+    interpolated at their times: how far replanning moved the path. Pairs without a common
+    waypoint time are left out.
+
+    Raises:
+        ShapeError: when two successive plans have different joint counts.
+    """
+    out = []
+    for k, (before, plan) in enumerate(zip(plans[:-1], plans[1:], strict=True)):
+        if before.q.ndim != 2 or plan.q.ndim != 2 or before.q.shape[1] != plan.q.shape[1]:
+            raise ShapeError(
+                f"plans {k} and {k + 1}: expected q (W, J) with one J, got {before.q.shape} "
+                f"and {plan.q.shape}"
+            )
+        inside = (plan.times >= before.times[0]) & (plan.times <= before.times[-1])
+        if not inside.any():
+            continue
+        t = plan.times[inside]
+        then = np.stack(
+            [np.interp(t, before.times, before.q[:, j]) for j in range(before.q.shape[1])], 1
+        )
+        out.append(float(np.abs(plan.q[inside] - then).max()))
+    return np.asarray(out, dtype=np.float64)
+
+
 def smoothness_breakdown(
     t: Any, q: Any, plans: Sequence[PlanRecord], *, settle_s: float = 1.0
 ) -> SmoothnessBreakdown:
@@ -160,6 +193,7 @@ def smoothness_breakdown(
         inside |= (t_in >= start) & (t_in <= end)
     total_w, total_a = float(w.sum()), float(a2.sum())
     out_w = float(w[~inside].sum())
+    changes = plan_changes(plans)  # (P,) [rad]
     return SmoothnessBreakdown(
         smoothness=total_a / total_w,
         waits=sum(int(p.wait_s > 0.0) for p in plans),
@@ -167,6 +201,7 @@ def smoothness_breakdown(
         wait_share=float(a2[inside].sum()) / total_a if total_a > 0.0 else 0.0,
         smoothness_outside=float(a2[~inside].sum()) / out_w if out_w > 0.0 else math.nan,
         plan_executed=_plan_executed(plans),
+        plan_change=float(np.median(changes)) if changes.size else math.nan,
     )
 
 

@@ -13,6 +13,7 @@ from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.eval.smoothness import (
     PlanRecord,
     episode_breakdown,
+    plan_changes,
     smoothness_breakdown,
     wait_windows,
 )
@@ -203,3 +204,29 @@ def test_episode_breakdown_names_the_log_it_cannot_split(
             log.robot_state(t, np.zeros(2), np.zeros(2), ["a", "b"])
     with pytest.raises(DataError, match=f"^{re.escape(str(path))}: {message}"):
         episode_breakdown(read_episode(path))
+
+
+def _line(t0: float, t1: float, slope: float, offset: float) -> PlanRecord:
+    """Joint 0 at ``offset + slope t`` (linear: interpolation is exact), joint 1 at rest."""
+    times = np.linspace(t0, t1, 11)
+    return PlanRecord(
+        times=times, q=np.stack([offset + slope * times, np.zeros(11)], 1), wait_s=0.0
+    )
+
+
+def test_plan_changes_against_closed_form() -> None:
+    """Successive plans q = t on [0, 2], t + 0.1 on [1, 3], 2 t on [2.5, 4], then one on
+    [5, 6] that overlaps nothing: the second moves the path by 0.1 everywhere, the third by
+    |2 t - (t + 0.1)| = t - 0.1 at its waypoints in [2.5, 3] (0.15 s apart), at most 2.85
+    at t = 2.95; the last is left out."""
+    plans = [_line(0.0, 2.0, 1.0, 0.0), _line(1.0, 3.0, 1.0, 0.1), _line(2.5, 4.0, 2.0, 0.0),
+             _line(5.0, 6.0, 0.0, 7.0)]  # fmt: skip
+    np.testing.assert_allclose(plan_changes(plans), [0.1, 2.85], rtol=1e-12)
+    t, q = _executed()
+    b = smoothness_breakdown(t, q, plans, settle_s=1.0)
+    assert b.plan_change == pytest.approx(1.475, rel=1e-12)  # the median of 0.1 and 2.85
+    assert np.isnan(smoothness_breakdown(t, q, [plans[0], plans[3]]).plan_change)
+    assert plan_changes(plans[:1]).shape == (0,)
+    three = PlanRecord(times=np.linspace(0.5, 1.0, 3), q=np.zeros((3, 3)), wait_s=0.0)
+    with pytest.raises(ShapeError, match=r"plans 0 and 1: expected q \(W, J\) with one J"):
+        plan_changes([plans[0], three])
