@@ -140,6 +140,12 @@ def finite_time(name: str, value: Any, *, error: type[Exception] = ConfigError) 
     return float(value)
 
 
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)``, shortened to ``limit`` characters (ending in ``...``) for messages."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def path_argument(
     value: object,
     purpose: str,
@@ -175,8 +181,7 @@ def is_dir(
     try:
         return path.is_dir()
     except OSError as exc:
-        shown = repr(str(path))
-        shown = shown if len(shown) <= 60 else shown[:57] + "..."
+        shown = short_repr(str(path))
         raise error(
             f"{what + ' ' if what else ''}{shown}: cannot look up this path ({exc.strerror}); "
             f"expected {expected}"

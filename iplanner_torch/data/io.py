@@ -64,6 +64,7 @@ import numpy as np
 
 from iplanner_torch import checks
 from iplanner_torch.checks import path_argument
+from iplanner_torch.checks import short_repr as _show
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.types import MAX_POSITION_M
@@ -99,12 +100,6 @@ _CSV_COLUMN_HINTS = {
     "action": "label",
     "actions": "label",
 }
-
-
-def _show(value: Any, limit: int = 60) -> str:
-    """``repr(value)``, shortened to ``limit`` characters for error messages."""
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _json_type(value: Any) -> str:
