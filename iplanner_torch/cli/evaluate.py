@@ -323,6 +323,14 @@ def _split_source(recorded: SplitRecord | None, ckpts: list[Path]) -> str:
     return f"from seed and data.split: no {INPUTS_FILE} beside the checkpoint records its split"
 
 
+def _check_data_settings(cfg: DictConfig) -> None:
+    """``data.format``, ``data.fps`` and ``data.split`` (with ``seed``), checked: ConfigError
+    naming the key, so that a bad one is named before any checkpoint loads."""
+    data_format(cfg.data)
+    data_fps(cfg.data)
+    config_split(cfg)
+
+
 def _device(cfg: DictConfig) -> Any:
     """The torch device ``device`` names (``auto``: CUDA when present)."""
     from iplanner_torch.types import resolve_device
@@ -337,9 +345,7 @@ def _prediction(cfg: DictConfig) -> None:
     _refuse_unread("prediction")
     ckpt = _checkpoint(repo_path(cfg.evaluate.checkpoint), cfg)
     out = _out_dir(cfg) / "prediction_metrics.json"
-    data_format(cfg.data)  # the data settings, checked before the checkpoint loads
-    data_fps(cfg.data)
-    config_split(cfg)
+    _check_data_settings(cfg)  # before the checkpoint loads
     predictor = HumanMotionPredictor.load(ckpt, map_location=_device(cfg))
     _check_joints(cfg, predictor, ckpt)
     _check_windows(cfg, predictor, ckpt)
@@ -509,9 +515,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
     compare, noises, speeds = _noise_sweep_grid(cfg)
-    data_format(cfg.data)  # the data settings, checked before a checkpoint loads
-    data_fps(cfg.data)
-    config_split(cfg)
+    _check_data_settings(cfg)  # before a checkpoint loads
     report_dir = _out_dir(cfg)
     device = _device(cfg)
     folder = Path(cfg.paths.checkpoints) / Path(cfg.data.path).name
