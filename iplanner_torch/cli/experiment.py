@@ -42,7 +42,7 @@ from typing import Any
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
@@ -447,11 +447,47 @@ def choose_planner(cfg: DictConfig, overrides: list[str]) -> None:
     node.planners = [option]
 
 
-def merged_episode_node(cfg: DictConfig) -> DictConfig:
+def _leaf_keys(node: Any, prefix: str = "") -> list[str]:
+    """The dotted keys of the values under a nested mapping (``{"a": {"b": 1}}`` -> ``a.b``)."""
+    if not isinstance(node, (dict, DictConfig)):
+        return [prefix] if prefix else []
+    out = []
+    for key in node:
+        path = f"{prefix}.{key}" if prefix else str(key)
+        value = node[key]
+        out.extend(_leaf_keys(value, path) if isinstance(value, (dict, DictConfig)) else [path])
+    return out
+
+
+def drop_per_kind_keys(planner: DictConfig, keys: list[str]) -> None:
+    """Remove the settings at ``keys`` (dotted, under ``planner``: ``replanner.fresh_fraction``)
+    from every ``planner.per_kind`` entry, so that a value set for the whole run (on the
+    command line or in ``experiment.episode.planner``) serves every planner of it, as asked,
+    instead of being replaced by a planner's own default."""
+    per_kind = planner.get("per_kind")
+    if not isinstance(per_kind, DictConfig):
+        return
+    for key in keys:
+        if key == "per_kind" or key.startswith("per_kind."):
+            continue
+        parent, _, leaf = key.rpartition(".")
+        for name in list(per_kind):
+            entry = per_kind[name]
+            node = OmegaConf.select(entry, parent) if parent else entry
+            if isinstance(node, DictConfig) and leaf in node:
+                with open_dict(node):
+                    node.pop(leaf)
+
+
+def merged_episode_node(cfg: DictConfig, overrides: list[str] | None = None) -> DictConfig:
     """The ``EpisodeCfg`` node of this run: the scenario, sim and planner groups and the
     ``run.*`` episode keys, with ``experiment.episode`` (when an experiment is chosen) merged
     over them, so that an experiment file names only what it changes (e.g. one cost weight
-    of ``planner``)."""
+    of ``planner``).
+
+    A ``planner.*`` setting of the command line (``overrides``, default: this run's) or of
+    ``experiment.episode.planner`` serves every planner of the run: it replaces that setting
+    in the ``planner.per_kind`` entries (:func:`drop_per_kind_keys`), which set the rest."""
     node = OmegaConf.create(
         {
             "_target_": "iplanner_torch.eval.episode.EpisodeCfg",
@@ -464,9 +500,16 @@ def merged_episode_node(cfg: DictConfig) -> DictConfig:
             "progress_bar": cfg_scalar(cfg, "progress", bool),
         }
     )
+    given = [
+        override_key(o).split(".", 1)[1]
+        for o in (_task_overrides() if overrides is None else overrides)
+        if not o.startswith("~") and override_key(o).startswith("planner.")
+    ]
     exp_node = cfg.get("experiment")
     if exp_node is not None and exp_node.get("episode") is not None:
         node = OmegaConf.merge(node, exp_node.episode)
+        given += _leaf_keys(exp_node.episode.get("planner"))
+    drop_per_kind_keys(node.planner, given)
     return node
 
 

@@ -587,7 +587,9 @@ def oracle_forecast(
 
 
 def planner_cfg_for(base: PlannerCfg, kind: str, confidence: float) -> PlannerCfg:
-    """``base`` with the kind, predictor variant and confidence of one episode.
+    """``base`` with the settings of planner ``kind`` (``base.per_kind[kind]``, see
+    :meth:`PlannerCfg.for_planner`), and the kind, predictor variant and confidence of one
+    episode.
 
     Raises:
         ConfigError: on an unknown planner kind.
@@ -596,7 +598,7 @@ def planner_cfg_for(base: PlannerCfg, kind: str, confidence: float) -> PlannerCf
         raise ConfigError(f"expected planner_kind in {sorted(PLANNER_KINDS)}, got {kind!r}")
     variant = PLANNER_KINDS[kind]
     return replace(
-        base,
+        base.for_planner(kind),
         kind=kind if kind in ("itomp", "oracle") else "iplanner",
         predictor_variant=variant,  # type: ignore[arg-type]
         confidence=confidence,

@@ -40,10 +40,14 @@ does not dwell at a pick or place point; the regular cadence resumes from the ta
 
 from __future__ import annotations
 
+import dataclasses
+import difflib
 import time
+import typing
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Literal
+from typing import Any, Literal
 
 import torch
 
@@ -213,6 +217,11 @@ class PlannerCfg:
     # Gaussian stand-in for ITOMP's conservative bound on where a moving obstacle can be;
     # 0: the pose held still (the paper's baseline as reproduced here)
     itomp_spread_mps: float = 0.0
+    # settings of one planner of a run only, over the ones above: planner name (one of
+    # PLANNER_NAMES) -> nested fields, e.g. {"iplanner_ni": {"replanner": {"fresh_fraction":
+    # 0.0}}}; :meth:`for_planner` applies them (kind, predictor_variant, confidence and
+    # optimizer.seed are set per episode and cannot be changed here)
+    per_kind: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         finite("confidence", self.confidence)
@@ -242,6 +251,45 @@ class PlannerCfg:
                     f"expected replanner.{name} <= replan_step_s or None, got "
                     f"replanner.{name}={lead} with replan_step_s={self.replan_step_s}"
                 )
+        if not isinstance(self.per_kind, Mapping):
+            raise ConfigError(
+                f"expected per_kind a mapping of planner names to settings, got "
+                f"{type(self.per_kind).__name__}"
+            )
+        for name in self.per_kind:
+            self.for_planner(name)  # every entry is checked when the settings are made
+
+    def for_planner(self, name: str) -> PlannerCfg:
+        """These settings with ``per_kind[name]`` applied (themselves when it has none).
+
+        Args:
+            name: a planner of the run (one of :data:`PLANNER_NAMES`).
+
+        Raises:
+            ConfigError: on an unknown planner name, an unknown or fixed field in its
+                entry, or a value the settings refuse, naming ``per_kind.<name>.<field>``.
+        """
+        if name not in PLANNER_NAMES:
+            raise ConfigError(
+                f"per_kind: unknown planner {name!r}; expected one of {list(PLANNER_NAMES)}"
+            )
+        changes = self.per_kind.get(name) or {}
+        if not changes:
+            return self
+        where = f"per_kind.{name}"
+        if not isinstance(changes, Mapping):
+            raise ConfigError(
+                f"{where}: expected a mapping of settings, got {type(changes).__name__}"
+            )
+        for key in PER_KIND_FIXED:
+            head, _, rest = key.partition(".")
+            entry = changes.get(head)
+            if head in changes and (not rest or (isinstance(entry, Mapping) and rest in entry)):
+                raise ConfigError(
+                    f"{where}.{key}: set for every episode by the run (the planners list, "
+                    "the scenario or the seeds), not per planner"
+                )
+        return _with_fields(replace(self, per_kind={}), changes, where)
 
     def optimizer_cfg(self) -> OptimizerCfg:
         """The optimiser's settings with this planner's confidence; with filtered tracking
@@ -254,6 +302,83 @@ class PlannerCfg:
     def replanner_cfg(self) -> ReplannerCfg:
         """The replanner's settings with this planner's step."""
         return replace(self.replanner, replan_step_s=self.replan_step_s)
+
+
+#: The planner names of a run (``experiment.planners``), the keys of ``PlannerCfg.per_kind``.
+PLANNER_NAMES: tuple[str, ...] = ("itomp", "iplanner_no_ni", "iplanner_ni", "oracle")
+#: PlannerCfg fields each episode sets, which ``per_kind`` cannot change.
+PER_KIND_FIXED: tuple[str, ...] = (
+    "kind",
+    "predictor_variant",
+    "confidence",
+    "per_kind",
+    "optimizer.seed",
+)
+
+
+def _with_fields(obj: Any, changes: Mapping[str, Any], where: str) -> Any:
+    """The dataclass ``obj`` with the nested field values of ``changes`` (a mapping whose
+    values are mappings for dataclass fields); built again, so its own checks run.
+
+    Raises:
+        ConfigError: on an unknown field (with the closest name), a mapping where one value
+            is expected, a value of another kind than the field's, or a value the
+            dataclass refuses; each names ``<where>.<field>``.
+    """
+    fields = {f.name: f for f in dataclasses.fields(obj)}
+    hints = typing.get_type_hints(type(obj))
+    updates: dict[str, Any] = {}
+    for key, value in changes.items():
+        key_s = str(key)
+        at = f"{where}.{key_s}"
+        if key_s not in fields:
+            near = difflib.get_close_matches(key_s, list(fields), n=1, cutoff=0.6)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise ConfigError(
+                f"{at}: unknown field{hint}; {type(obj).__name__} has {sorted(fields)}"
+            )
+        current = getattr(obj, key_s)
+        if dataclasses.is_dataclass(current):
+            if not isinstance(value, Mapping):
+                raise ConfigError(f"{at}: expected a mapping of {type(current).__name__} fields")
+            updates[key_s] = _with_fields(current, value, at)
+            continue
+        if isinstance(value, Mapping):
+            raise ConfigError(f"{at}: expected one value, got a mapping {dict(value)!r}")
+        _check_kind(at, value, hints.get(key_s))
+        updates[key_s] = value
+    try:
+        return replace(obj, **updates)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from exc
+
+
+def _check_kind(at: str, value: Any, hint: Any) -> None:
+    """Refuse ``value`` when the annotation ``hint`` takes bool, int, float or str (or a
+    Literal of them, possibly ``| None``) and ``value`` is none of those."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    nullable = len(args) < len(typing.get_args(hint))
+    if typing.get_origin(hint) is Literal:
+        args, nullable = [hint], False
+    if len(args) != 1:
+        args = [hint]
+    base = args[0]
+    if typing.get_origin(base) is Literal:
+        choices = typing.get_args(base)
+        if value not in choices and not (value is None and nullable):
+            raise ConfigError(f"{at}: expected one of {list(choices)}, got {value!r}")
+        return
+    if base not in (bool, int, float, str):
+        return
+    if value is None:
+        if not nullable:
+            raise ConfigError(f"{at}: expected {base.__name__}, got null")
+        return
+    ok = isinstance(value, base) and not (base is not bool and isinstance(value, bool))
+    if base is float and isinstance(value, int) and not isinstance(value, bool):
+        ok = True
+    if not ok:
+        raise ConfigError(f"{at}: expected {base.__name__}, got {value!r}")
 
 
 def build_replanner(

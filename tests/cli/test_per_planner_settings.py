@@ -1,0 +1,82 @@
+"""The planner group's ``per_kind`` entries in ``iplanner-experiment``: the defaults, and a
+``planner.*`` value of the command line or of an experiment serving every planner."""
+
+from __future__ import annotations
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from omegaconf import OmegaConf, open_dict
+
+from iplanner_torch.cli._common import CONF_DIR, instantiate
+from iplanner_torch.cli.experiment import merged_episode_node
+from iplanner_torch.errors import ConfigError
+from iplanner_torch.eval.episode import EpisodeCfg, planner_cfg_for
+
+
+@pytest.fixture(autouse=True)
+def _hydra() -> None:
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        yield
+    GlobalHydra.instance().clear()
+
+
+def _fresh(overrides: list[str], kind: str) -> float:
+    cfg = compose(config_name="config", overrides=overrides)
+    episode = instantiate(merged_episode_node(cfg, overrides), EpisodeCfg)
+    return planner_cfg_for(episode.planner, kind, 0.95).replanner.fresh_fraction
+
+
+@pytest.mark.parametrize("option", ["itomp", "iplanner_ni", "iplanner_no_ni"])
+def test_every_planner_option_has_the_same_entries(option: str) -> None:
+    cfg = compose(config_name="config", overrides=[f"planner={option}"])
+    assert OmegaConf.to_container(cfg.planner.per_kind) == {
+        "iplanner_no_ni": {"replanner": {"fresh_fraction": 0.0}},
+        "iplanner_ni": {"replanner": {"fresh_fraction": 0.0}},
+    }
+
+
+def test_defaults_differ_per_planner() -> None:
+    assert _fresh([], "itomp") == 0.5
+    assert _fresh([], "oracle") == 0.5
+    assert _fresh([], "iplanner_ni") == 0.0
+    assert _fresh([], "iplanner_no_ni") == 0.0
+
+
+def test_command_line_value_serves_every_planner() -> None:
+    given = ["planner.replanner.fresh_fraction=0.3"]
+    for kind in ("itomp", "iplanner_no_ni", "iplanner_ni", "oracle"):
+        assert _fresh(given, kind) == 0.3
+
+
+def test_command_line_entry_changes_one_planner() -> None:
+    given = ["planner.per_kind.iplanner_ni.replanner.fresh_fraction=0.75"]
+    assert _fresh(given, "iplanner_ni") == 0.75
+    assert _fresh(given, "iplanner_no_ni") == 0.0
+    assert _fresh(given, "itomp") == 0.5
+    added = ["+planner.per_kind.itomp.replanner.fresh_fraction=0.0"]
+    assert _fresh(added, "itomp") == 0.0
+
+
+def test_whole_node_on_the_command_line_replaces_the_entries_node() -> None:
+    given = ["planner.replanner={fresh_fraction: 0.2}"]
+    cfg = compose(config_name="config", overrides=given)
+    node = merged_episode_node(cfg, given)
+    assert "replanner" not in node.planner.per_kind.iplanner_ni
+
+
+def test_experiment_episode_value_serves_every_planner() -> None:
+    cfg = compose(config_name="config", overrides=["experiment=safety_seeds"])
+    with open_dict(cfg):
+        cfg.experiment.episode.planner = {"replanner": {"fresh_fraction": 0.4}}
+    episode = instantiate(merged_episode_node(cfg, []), EpisodeCfg)
+    for kind in ("itomp", "iplanner_ni"):
+        assert planner_cfg_for(episode.planner, kind, 0.95).replanner.fresh_fraction == 0.4
+
+
+def test_misspelt_entry_key_is_refused_with_its_path() -> None:
+    given = ["+planner.per_kind.iplanner_ni.replanner.fresh_fracton=0.1"]
+    cfg = compose(config_name="config", overrides=given)
+    with pytest.raises(ConfigError, match=r"per_kind.iplanner_ni.replanner.fresh_fracton"):
+        instantiate(merged_episode_node(cfg, given), EpisodeCfg)
