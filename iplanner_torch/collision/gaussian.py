@@ -215,6 +215,37 @@ def _solve_newton(d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor) -> torch.T
     return lam
 
 
+def secular_multiplier(d: torch.Tensor, var: torch.Tensor, rad: torch.Tensor) -> torch.Tensor:
+    """The multiplier of the closest point on a sphere to a Gaussian with diagonal covariance.
+
+    ``lambda >= 0`` with ``||d / (1 + lambda var)|| = rad`` (:func:`_solve_newton`, the solver
+    of :func:`sphere_collision_bound`, in the axes of the diagonal covariance), so that
+    ``x_max - c = d / (1 + lambda var)``; 0 where the mean lies inside the ball. No autograd.
+
+    Args:
+        d: (..., 3) Gaussian mean minus ball centre [m].
+        var: (..., 3) diagonal variances [m^2], > 0.
+        rad: (...) ball radius [m], at least :data:`RADIUS_FLOOR` (broadcast to ``d``'s
+            batch shape).
+
+    Returns:
+        (...) lambda [m^-2].
+    """
+    with torch.no_grad():
+        shape = d.shape[:-1]
+        d2 = d.detach().square()
+        rad = rad.detach().expand(shape)
+        outside = d2.sum(-1) > rad.square()
+        # an inside mean gets a stand-in outside its ball (its multiplier is 0 anyway), so that
+        # every entry goes through one vectorised solve without a data-dependent shape
+        stand_in = torch.zeros_like(d2)
+        stand_in[..., 0] = (2.0 * rad).square()
+        d2 = torch.where(outside.unsqueeze(-1), d2, stand_in)
+        s = var.detach().expand(d2.shape)
+        lam = _solve_newton(d2.reshape(-1, 3).T, s.reshape(-1, 3).T, rad.reshape(-1))
+        return torch.where(outside, lam.view(shape), torch.zeros_like(rad))
+
+
 def _solve_bisection(d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor) -> torch.Tensor:
     """The paper's bisection on ``[lambda_lo, lambda_hi]``; returns the bracket's lower end.
 

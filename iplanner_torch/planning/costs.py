@@ -31,7 +31,7 @@ from typing import Protocol
 import torch
 
 from iplanner_torch.checks import finite, finite_time, integer, is_real, non_negative
-from iplanner_torch.collision.gaussian import RADIUS_FLOOR
+from iplanner_torch.collision.gaussian import RADIUS_FLOOR, secular_multiplier
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.planning.trajectory import accelerations, velocities
 from iplanner_torch.prediction.forecast import Forecast
@@ -250,32 +250,6 @@ def goal_distance_ee(ee: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return (ee - target).square().sum(-1)
 
 
-def _secular_lambda(d: torch.Tensor, var: torch.Tensor, rad: torch.Tensor) -> torch.Tensor:
-    """Newton's method for ``||d / (1 + lambda s)|| = R`` (points outside the ball only).
-
-    Args:
-        d: (..., 3) mean minus ball centre [m].
-        var: (..., 3) diagonal variances [m^2].
-        rad: (...) ball radius [m].
-
-    Returns:
-        (...) lambda >= 0 [1/m^2]; 0 where the mean lies inside the ball.
-    """
-    dn = d.norm(dim=-1)
-    lam = ((dn / rad - 1.0) / var.amax(-1)).clamp_min(0.0)  # lower bound: phi(lam) <= 0
-    d2 = d * d
-    for _ in range(8):
-        den = 1.0 + lam.unsqueeze(-1) * var
-        n2 = (d2 / den.square()).sum(-1)
-        n = n2.sqrt()
-        phi = 1.0 / n - 1.0 / rad
-        # (y^2 / ||y||^2) (s / den) / ||y||: no product underflows before 1 / ||y|| (up to
-        # 1 / RADIUS_FLOOR) scales it back (d2 var / den^3 underflowed float32 far away)
-        dphi = ((d2 / den.square()) / n2.unsqueeze(-1) * (var / den)).sum(-1) / n
-        lam = (lam - phi / dphi).clamp_min(0.0)
-    return torch.where(dn > rad, lam, torch.zeros_like(lam))
-
-
 def gaussian_ball_bound_diag(
     d: torch.Tensor, var: torch.Tensor, rad: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -294,7 +268,7 @@ def gaussian_ball_bound_diag(
     """
     rad = rad.clamp_min(RADIUS_FLOOR)
     with torch.no_grad():
-        lam = _secular_lambda(d, var, rad)
+        lam = secular_multiplier(d, var, rad)
         y = d / (1.0 + lam.unsqueeze(-1) * var)  # x_max - ball centre, on the sphere
     maha2 = ((y - d).square() / var).sum(-1)  # envelope theorem: y is held fixed
     log_f = -0.5 * maha2 - 0.5 * torch.log(2.0 * math.pi * var).sum(-1)

@@ -9,6 +9,7 @@ import pytest
 import torch
 from planning_fakes import mc_ball_probability
 
+from iplanner_torch.collision.gaussian import secular_multiplier
 from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.skeleton import JOINT_NAMES
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
@@ -38,7 +39,7 @@ def _bisection_lambda(d, var, rad, iters: int = 200):
 def test_newton_lambda_matches_bisection() -> None:
     d, var, rad = _cases(300)
     outside = d.norm(dim=-1) > rad
-    lam = C._secular_lambda(d, var, rad)
+    lam = secular_multiplier(d, var, rad)
     ref = _bisection_lambda(d, var, rad)
     assert torch.allclose(lam[outside], ref[outside], rtol=1e-6)
     assert bool((lam[~outside] == 0).all())
