@@ -71,6 +71,8 @@ def instantiate(node: Any, expected: type | None = None, name: str | None = None
             field = where.rsplit(".", 1)[-1]
             if where != field and text.startswith(f"{field}: "):  # "seeds: ..." names it too
                 text = text[len(field) + 2 :]
+            elif where != field and text.startswith(f"{field}."):  # "per_kind.itomp.x: ..."
+                raise ConfigError(where + text[len(field) :]) from exc
             raise ConfigError(
                 f"{where}: {text}" if where and not text.startswith(where) else text
             ) from exc
@@ -1250,6 +1252,12 @@ def unknown_key_text(exc: BaseException) -> str | None:
     missing = str(getattr(cause, "full_key", "") or "")
     if not missing or not (key == missing or key.startswith(missing + ".")):
         return f"unknown key {key!r}"
+    entry = re.match(r"planner\.per_kind\.([^.]+)$", missing)
+    if entry is not None:  # a planner without an entry (PlannerCfg.per_kind)
+        return (
+            f"unknown key {key!r}: planner.per_kind has no entry for {entry.group(1)!r}; "
+            f"add the setting with +{key}=<value>"
+        )
     if "." not in missing and (Path(CONF_DIR) / missing).is_dir():
         return _unchosen_group_key_text(key, missing)
     prefix = missing.rpartition(".")[0]

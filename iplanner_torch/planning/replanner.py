@@ -333,10 +333,8 @@ def _with_fields(obj: Any, changes: Mapping[str, Any], where: str) -> Any:
         at = f"{where}.{key_s}"
         if key_s not in fields:
             near = difflib.get_close_matches(key_s, list(fields), n=1, cutoff=0.6)
-            hint = f" (did you mean {near[0]!r}?)" if near else ""
-            raise ConfigError(
-                f"{at}: unknown field{hint}; {type(obj).__name__} has {sorted(fields)}"
-            )
+            hint = f"did you mean {near[0]!r}?" if near else f"{type(obj).__name__} has "
+            raise ConfigError(f"{at}: unknown field ({hint}{'' if near else sorted(fields)})")
         current = getattr(obj, key_s)
         if dataclasses.is_dataclass(current):
             if not isinstance(value, Mapping):

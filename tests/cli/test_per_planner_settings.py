@@ -3,6 +3,9 @@
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
@@ -80,3 +83,48 @@ def test_misspelt_entry_key_is_refused_with_its_path() -> None:
     cfg = compose(config_name="config", overrides=given)
     with pytest.raises(ConfigError, match=r"per_kind.iplanner_ni.replanner.fresh_fracton"):
         instantiate(merged_episode_node(cfg, given), EpisodeCfg)
+
+
+@pytest.mark.parametrize(
+    ("override", "line"),
+    [
+        ("+planner.per_kind.iplanner_ni.replanner.fresh_fracton=0",
+         "error: ConfigError: planner.per_kind.iplanner_ni.replanner.fresh_fracton: unknown "
+         "field (did you mean 'fresh_fraction'?)"),
+        ("planner.per_kind.itomp.replanner.fresh_fraction=0",
+         "error: ConfigError: unknown key 'planner.per_kind.itomp.replanner.fresh_fraction': "
+         "planner.per_kind has no entry for 'itomp'; add the setting with "
+         "+planner.per_kind.itomp.replanner.fresh_fraction=<value>"),
+        ("planner.per_kind.iplanner_ni.replanner.fresh_fraction=3",
+         "error: ConfigError: planner.per_kind.iplanner_ni.replanner: expected fresh_fraction "
+         "in [0, 1], got 3"),
+        ("+planner.per_kind.rrt.replan_step_s=0.3",
+         "error: ConfigError: planner.per_kind: unknown planner 'rrt'; expected one of "
+         "['itomp', 'iplanner_no_ni', 'iplanner_ni', 'oracle']"),
+    ],
+)  # fmt: skip
+def test_bad_entry_on_the_command_line_is_one_line_before_anything_runs(
+    override: str,
+    line: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture,
+) -> None:
+    from hydra.core.global_hydra import GlobalHydra
+
+    from iplanner_torch.cli import experiment
+
+    monkeypatch.setattr(
+        sys, "argv", ["iplanner-experiment", override, f"hydra.run.dir={tmp_path / 'run'}"]
+    )
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    GlobalHydra.instance().clear()
+    try:
+        with pytest.raises(SystemExit) as stop:
+            experiment.main()
+    finally:
+        GlobalHydra.instance().clear()
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert stop.value.code == 2
+    assert lines == [line]
+    assert not (tmp_path / "run" / "episodes").exists()
