@@ -34,6 +34,7 @@ from typing import Protocol, runtime_checkable
 import torch
 
 from iplanner_torch.checks import finite_time, flag, integer, is_real, non_negative, positive
+from iplanner_torch.checks import seed as check_seed
 from iplanner_torch.collision.human_spheres import HumanSphereMap, SphereLayout
 from iplanner_torch.errors import ConfigError, DataError, PlanningError, ShapeError
 from iplanner_torch.planning import costs as C
@@ -205,7 +206,7 @@ class OptimizerCfg:
         within = self.escape_within_s
         if within is not None and (not is_real(within) or not within >= 0.0):
             raise ConfigError(f"expected escape_within_s >= 0 or None, got {within!r}")
-        integer("seed", self.seed)
+        check_seed(self.seed)
         _check_device(self.device)
 
 
