@@ -217,6 +217,8 @@ class TaskPlanner:
             )
         self.delay_fn = delay_fn
         self.q: dict[int, np.ndarray] = {}
+        # the training episodes' random stream: a second train() continues it
+        self._rng = np.random.default_rng(cfg.seed)
 
     # ------------------------------------------------------------ model pieces
     def _allowed_takes(self, taken: int) -> set[int]:
@@ -376,6 +378,9 @@ class TaskPlanner:
     def train(self, episodes: int | None = None) -> list[float]:
         """Epsilon-greedy Q-learning over simulated episodes.
 
+        A second call continues the first one's random stream (``train(a)`` then ``train(b)``
+        gives the Q-table of ``train(a + b)``), rather than replaying the same episodes.
+
         Args:
             episodes: how many (>= 0); None uses ``cfg.episodes``.
 
@@ -387,7 +392,7 @@ class TaskPlanner:
         """
         if episodes is not None:
             episodes = checks.integer("episodes", episodes, minimum=0)
-        rng = np.random.default_rng(self.cfg.seed)
+        rng = self._rng
         returns = []
         for _ in range(self.cfg.episodes if episodes is None else episodes):
             state, total = 0, 0.0

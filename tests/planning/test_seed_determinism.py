@@ -57,3 +57,17 @@ def test_q_learning_follows_its_seed_only() -> None:
     assert _q_learning(3, global_seed=2) == (returns, q)
     other_returns, other_q = _q_learning(4, global_seed=1)
     assert other_returns != returns and other_q != q
+
+
+def test_a_second_training_continues_the_stream() -> None:
+    """train(a) then train(b) is train(a + b); a second call used to replay the first one's
+    episodes from the seed."""
+    cfg = TaskMDPCfg(num_objects=3, episodes=60, seed=5)
+    split = TaskPlanner(cfg, AnyOrder())
+    first = split.train(25)
+    second = split.train(35)
+    whole = TaskPlanner(cfg, AnyOrder())
+    assert first + second == whole.train(60)
+    assert {s: v.tolist() for s, v in split.q.items()} == {
+        s: v.tolist() for s, v in whole.q.items()
+    }
