@@ -29,6 +29,7 @@ import re
 import reprlib
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -1259,12 +1260,14 @@ def _paired_section(
     group_by: Sequence[str],
     out_dir: Path | None = None,
     baseline: str = "itomp",
+    draw: list[tuple[Path, Callable[[], object]]] | None = None,
 ) -> tuple[list[str], list[Path]]:
     """Markdown lines comparing each planner with ``baseline`` seed by seed
-    (:func:`paired_table`), grouped like the summary, and, with ``out_dir``, a
-    ``paired_<metric>.png`` forest plot of each metric (:func:`plot_paired`); nothing without
-    the baseline and another planner, and a line saying why (:func:`paired_skip_note`) when
-    they share fewer than two seeds."""
+    (:func:`paired_table`), grouped like the summary, and, with ``out_dir``, the names of a
+    ``paired_<metric>.png`` forest plot of each metric (:func:`plot_paired`), whose drawing
+    is appended to ``draw`` (path, call) when given; nothing without the baseline and another
+    planner, and a line saying why (:func:`paired_skip_note`) when they share fewer than two
+    seeds."""
     skipped = paired_skip_note(df, group_by, baseline)
     if skipped:
         return ["", "## Paired by seed", "", skipped[0].upper() + skipped[1:] + "."], []
@@ -1289,7 +1292,9 @@ def _paired_section(
         for m in dict.fromkeys(table["metric"]):
             part = table[table["metric"] == m].drop(columns="metric")
             png = out_dir / f"paired_{m}.png"
-            plots.append(plot_paired(part, str(m), png, baseline=baseline))
+            plots.append(png)
+            if draw is not None:
+                draw.append((png, partial(plot_paired, part, str(m), png, baseline=baseline)))
     name = "ITOMP" if baseline == "itomp" else f"`{baseline}`"
     lines += [
         f"Each planner minus {name} in the same setting and seed (same person, noise and task "
@@ -1353,6 +1358,11 @@ def write_sweep_report(
             ``results.csv`` or ``results.md`` a folder (nothing is written then). The tables
             are built before ``results.csv`` and ``results.md`` are written, so an error
             while building them leaves the earlier ones as they were.
+
+    Warns:
+        DataWarning: naming each plot that could not be drawn or saved (a folder in its
+            place, a full disk, a plotting error), once the tables are written; the other
+            plots are still drawn, and the returned paths leave it out.
     """
     out_dir = Path(out_dir)
     if len(df) == 0:
@@ -1389,46 +1399,68 @@ def write_sweep_report(
     md += ["## Mean ± std", ""]
     md += ["Means over episodes ± sample std: " + "; ".join(units) + ".", ""] if units else []
     md += [to_markdown(summary)]
-    paired_md, paired_png = _paired_section(df, group_by, out_dir, baseline)
+    draw: list[tuple[Path, Callable[[], object]]] = []
+    paired_md, _ = _paired_section(df, group_by, out_dir, baseline, draw)
     md += paired_md
     df.to_csv(written[0], index=False)  # both once every table is built
     written[1].write_text("\n".join(md))
-    written += paired_png
 
     def varies(c: str) -> bool:
         return c in df.columns and df[c].nunique(dropna=True) > 1
 
+    # the plots follow the tables, each on its own: one that cannot be drawn or saved (a
+    # folder in its place, a full disk, a plotting error) is named in one warning, the
+    # others are still drawn and the tables stay written
+    failed: list[str] = []
+    for png, call in draw:
+        _draw_plot(png, call, written, failed)
     if len(group_by) >= 2:
         pooled = [c for c in group_by[:-2] if varies(c)]
-        written += plot_comparison(
-            df, out_dir, group_by=(group_by[-2], group_by[-1]), pooled=pooled
-        )
+        for m in ("smoothness", "jerkiness", "min_distance", "efficiency"):
+            call = partial(
+                plot_comparison, df, out_dir, metrics=(m,),
+                group_by=(group_by[-2], group_by[-1]), pooled=pooled,
+            )  # fmt: skip
+            _draw_plot(out_dir / f"compare_{m}.png", call, written, failed)
     if sweep is not None:
         others = [c for c in group_by[:-1] if c != sweep and varies(c)]
         facets = others[-2:]
         pooled = [c for c in others if c not in facets]
         row, col = ([None, *facets])[-2:] if facets else (None, None)
         panels = df.groupby(facets, dropna=False)[sweep] if facets else [(None, df[sweep])]
-        if max(x.nunique() for _, x in panels) < 2:
-            # the x values only ever change with the panel (e.g. one confidence per
-            # scenario): no line to draw
-            return written
-        for m in _default_metrics(df, list(group_by) + [sweep]):
-            if not pd.to_numeric(df[m], errors="coerce").notna().any():
-                continue  # no value to draw (e.g. efficiency when no episode finished)
-            written.append(
-                plot_sweep(
-                    df,
-                    sweep,
-                    m,
-                    group_by[-1],
-                    out_dir / f"sweep_{m}.png",
-                    facet_col=col,
-                    facet_row=row,
-                    pooled=pooled,
-                )
-            )
+        # with x values that only ever change with the panel (e.g. one confidence per
+        # scenario) there is no line to draw
+        if max(x.nunique() for _, x in panels) >= 2:
+            for m in _default_metrics(df, list(group_by) + [sweep]):
+                if not pd.to_numeric(df[m], errors="coerce").notna().any():
+                    continue  # no value to draw (e.g. efficiency when no episode finished)
+                png = out_dir / f"sweep_{m}.png"
+                call = partial(
+                    plot_sweep, df, sweep, m, group_by[-1], png, facet_col=col,
+                    facet_row=row, pooled=pooled,
+                )  # fmt: skip
+                _draw_plot(png, call, written, failed)
+    if failed:
+        warnings.warn(
+            f"{out_dir}: {len(failed)} plot(s) not written: {'; '.join(failed)}; "
+            "results.csv and results.md are",
+            DataWarning,
+            stacklevel=2,
+        )
     return written
+
+
+def _draw_plot(
+    png: Path, call: Callable[[], object], written: list[Path], failed: list[str]
+) -> None:
+    """Run ``call`` (it draws ``png``, or returns several paths); add what it wrote to
+    ``written``, or ``"<name> (<error>)"`` to ``failed`` when it raises."""
+    try:
+        out = call()
+    except Exception as exc:  # noqa: BLE001 - a plot never costs the tables (see caller)
+        failed.append(f"{png.name} ({type(exc).__name__}: {exc})")
+        return
+    written.extend(out if isinstance(out, list) else [Path(out)])  # type: ignore[arg-type]
 
 
 # ---------------------------------------------------------------------------------------------

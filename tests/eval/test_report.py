@@ -724,7 +724,8 @@ def test_charts_say_what_they_average_over_and_draw_only_what_has_values(
     groups = report_groups(df)
     assert groups == ("scenario", "speed", "noise", "confidence", "planner")
     written = {p.name for p in write_sweep_report(df, tmp_path, groups, sweep="noise")}
-    assert seen["bars"] == [["speed", "noise"]]
+    # one chart per metric, each pooling the same settings
+    assert seen["bars"] == [["speed", "noise"]] * 4
     titles = [f.axes[0].get_title() for f in figures if f.axes and f.axes[0].get_title()]
     assert any(t.endswith("; averaged over speed, noise") for t in titles)
     # the lines over noise: speed and confidence lay out the panels, nothing is pooled
@@ -1159,3 +1160,26 @@ def test_sweep_report_of_no_episode_or_one_that_fails_keeps_the_earlier_results(
         write_sweep_report(results, out)
     assert sorted(p.name for p in out.iterdir()) == ["results.csv"]
     assert (out / "results.csv").read_text() == "old rows\n"
+
+
+def test_a_plot_that_cannot_be_saved_costs_neither_the_tables_nor_the_other_plots(
+    tmp_path: Path,
+) -> None:
+    """A folder where a chart goes (or a full disk) made the report stop with an OSError
+    after results.csv, without the other plots; now it is one warning naming the chart."""
+    df = _sweep_rows()
+    groups = report_groups(df)
+    (tmp_path / "compare_smoothness.png").mkdir()
+    (tmp_path / "paired_min_distance.png").mkdir()
+    with pytest.warns(DataWarning) as record:
+        written = {p.name for p in write_sweep_report(df, tmp_path, groups, sweep="noise")}
+    messages = [str(w.message) for w in record if issubclass(w.category, DataWarning)]
+    assert len(messages) == 1
+    assert "2 plot(s) not written: paired_min_distance.png (IsADirectoryError" in messages[0]
+    assert "compare_smoothness.png (IsADirectoryError" in messages[0]
+    assert messages[0].endswith("results.csv and results.md are")
+    assert {"results.csv", "results.md", "compare_min_distance.png"} <= written
+    assert "paired_smoothness.png" in written and "sweep_smoothness.png" in written
+    assert "compare_smoothness.png" not in written and "paired_min_distance.png" not in written
+    assert (tmp_path / "results.csv").is_file()
+    assert (tmp_path / "compare_min_distance.png").is_file()
