@@ -16,8 +16,9 @@ Without ``experiment=...`` the run uses the ``scenario`` group at the confidence
 scenarios, planners, seeds, speeds and noises; the ``sim`` and ``planner`` groups give the
 episode settings it does not override. The ``planner`` group holds the settings (confidence,
 optimiser) every planner of the run is built with, each as its kind (the default option's
-settings serve all three planners of the main job); ``planner=<option>`` runs that planner
-alone. The I-Planner variants need predictors: by default
+settings serve all three planners of the main job), but for what its ``per_kind.<planner>``
+entries set for one planner (by default the I-Planners' warm starts; a ``planner.<key>`` of
+the command line serves every planner); ``planner=<option>`` runs that planner alone. The I-Planner variants need predictors: by default
 (``run.train_data=tasks``) each scenario's predictors learn from task demonstrations of its
 arrangement and task order (``datasets/tasks_<...>``, generated when absent; a blocking
 scenario's from the reaching set), kept in ``checkpoints/<dataset>/iplanner_{ni,no_ni}/``;
