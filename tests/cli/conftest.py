@@ -3,6 +3,7 @@ settings tests."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from types import SimpleNamespace
 
 import pytest
@@ -35,3 +36,17 @@ def tiny_reaching(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
         split=SplitRecord(seed=1, fractions=FRACTIONS, held_out=held_out),
         cfg=tiny_predictor_cfg(),
     )
+
+
+@pytest.fixture
+def hydra_conf() -> Iterator[None]:
+    """Hydra initialised on the project's ``conf/`` for ``compose`` (cleared before and after)."""
+    from hydra import initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    from iplanner_torch.cli._common import CONF_DIR
+
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        yield
+    GlobalHydra.instance().clear()

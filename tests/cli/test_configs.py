@@ -6,8 +6,7 @@ import importlib
 from pathlib import Path
 
 import pytest
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
+from hydra import compose
 from hydra.errors import ConfigCompositionException
 from omegaconf import DictConfig, OmegaConf
 
@@ -22,12 +21,8 @@ def _options(group: str) -> list[str]:
     return sorted(p.stem for p in (Path(CONF_DIR) / group).glob("*.yaml"))
 
 
-@pytest.fixture(autouse=True)
-def _hydra() -> None:
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        yield
-    GlobalHydra.instance().clear()
+#: every test composes the project's config (conftest.hydra_conf)
+pytestmark = pytest.mark.usefixtures("hydra_conf")
 
 
 def _targets(node: object) -> list[DictConfig]:

@@ -8,26 +8,18 @@ from __future__ import annotations
 import shutil
 import warnings
 from pathlib import Path
-from typing import Any
 
 import pytest
 from foreign_mcap import write_foreign_mcap
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
+from hydra import compose
 
 import iplanner_torch.cli.evaluate as evaluate
-from iplanner_torch.cli._common import CONF_DIR
 from iplanner_torch.cli.callbacks import gather_episode_logs
 from iplanner_torch.errors import DataError, DataWarning
 from iplanner_torch.recording import EpisodeWriter
 
-
-@pytest.fixture(autouse=True)
-def _hydra() -> Any:
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        yield
-    GlobalHydra.instance().clear()
+#: every test composes the project's config (conftest.hydra_conf)
+pytestmark = pytest.mark.usefixtures("hydra_conf")
 
 
 def _evaluate(

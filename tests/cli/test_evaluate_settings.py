@@ -17,14 +17,12 @@ from typing import Any
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
+from hydra import compose
 from omegaconf import DictConfig
 
 import iplanner_torch.cli.evaluate as evaluate
 import iplanner_torch.cli.train as cli_train
 import iplanner_torch.eval.prediction as eval_prediction
-from iplanner_torch.cli._common import CONF_DIR
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.data.windows import split_by_demonstration
 from iplanner_torch.errors import CheckpointError, ConfigError, DataWarning
@@ -65,12 +63,8 @@ def trained(
     return SimpleNamespace(ds=tiny_reaching.ds, ckpt=ckpt, held_out=tiny_reaching.held_out)
 
 
-@pytest.fixture(autouse=True)
-def _hydra() -> Any:
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        yield
-    GlobalHydra.instance().clear()
+#: every test composes the project's config (conftest.hydra_conf)
+pytestmark = pytest.mark.usefixtures("hydra_conf")
 
 
 def _cfg(monkeypatch: pytest.MonkeyPatch, *overrides: str) -> DictConfig:

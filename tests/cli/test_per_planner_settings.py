@@ -7,22 +7,17 @@ import sys
 from pathlib import Path
 
 import pytest
-from hydra import compose, initialize_config_dir
+from hydra import compose
 from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf, open_dict
 
-from iplanner_torch.cli._common import CONF_DIR, instantiate
+from iplanner_torch.cli._common import instantiate
 from iplanner_torch.cli.experiment import merged_episode_node
 from iplanner_torch.errors import ConfigError
 from iplanner_torch.eval.episode import EpisodeCfg, planner_cfg_for
 
-
-@pytest.fixture(autouse=True)
-def _hydra() -> None:
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        yield
-    GlobalHydra.instance().clear()
+#: every test composes the project's config (conftest.hydra_conf)
+pytestmark = pytest.mark.usefixtures("hydra_conf")
 
 
 def _fresh(overrides: list[str], kind: str) -> float:
@@ -110,7 +105,6 @@ def test_bad_entry_on_the_command_line_is_one_line_before_anything_runs(
     monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture,
 ) -> None:
-    from hydra.core.global_hydra import GlobalHydra
 
     from iplanner_torch.cli import experiment
 
