@@ -13,19 +13,19 @@ Examples::
 Without ``experiment=...`` the run uses the ``scenario`` group at the confidence
 ``planner.confidence`` (which follows ``scenario.confidence`` unless set), the planners in
 ``run.planners`` and the seeds in ``run.seeds``. With it, the experiment file lists its own
-scenarios, planners, seeds, speeds and noises; the ``sim`` and ``planner`` groups give the
-episode settings it does not override. The ``planner`` group holds the settings (confidence,
-optimiser) every planner of the run is built with, each as its kind (the default option's
-settings serve all three planners of the main job), but for what its ``per_kind.<planner>``
-entries set for one planner (by default the I-Planners' warm starts; a ``planner.<key>`` of
-the command line serves every planner); ``planner=<option>`` runs that planner alone. The I-Planner variants need predictors: by default
-(``run.train_data=tasks``) each scenario's predictors learn from task demonstrations of its
-arrangement and task order (``datasets/tasks_<...>``, generated when absent; a blocking
-scenario's from the reaching set), kept in ``checkpoints/<dataset>/iplanner_{ni,no_ni}/``;
-missing ones are trained first on a small budget (``run.train_trainer``) when
-``run.train_if_missing`` is true; an existing one is used as it is, but a command-line
-``run.train_trainer``, ``seed`` or ``data.windows.*`` value it was not trained with is refused.
-Results: ``results.csv``, ``results.md``, plots, ``episodes/*.mcap`` and, unless
+scenarios, planners, seeds, speeds and noises; the ``sim`` and ``planner`` groups give the episode
+settings it does not override. The ``planner`` group holds the settings (confidence, optimiser)
+every planner of the run is built with, each as its kind (the default option's settings serve all
+three planners of the main job), but for what its ``per_kind.<planner>`` entries set for one
+planner (by default the I-Planners' warm starts; a ``planner.<key>`` of the command line serves
+every planner); ``planner=<option>`` runs that planner alone. The I-Planner variants need
+predictors: by default (``run.train_data=tasks``) each scenario's predictors learn from task
+demonstrations of its arrangement and task order (``datasets/tasks_<...>``, generated when absent;
+a blocking scenario's from the reaching set), kept in
+``checkpoints/<dataset>/iplanner_{ni,no_ni}/``; missing ones are trained first on a small budget
+(``run.train_trainer``) when ``run.train_if_missing`` is true; an existing one is used as it is,
+but a command-line ``run.train_trainer``, ``seed`` or ``data.windows.*`` value it was not trained
+with is refused. Results: ``results.csv``, ``results.md``, plots, ``episodes/*.mcap`` and, unless
 ``run.timeline_plots=false``, one timeline plot per log (``episodes/<episode>.png``, see
 :mod:`iplanner_torch.eval.timeline`) in the run folder.
 """
