@@ -221,7 +221,7 @@ class PlannerCfg:
     # PLANNER_NAMES) -> nested fields, e.g. {"iplanner_ni": {"replanner": {"fresh_fraction":
     # 0.0}}}; :meth:`for_planner` applies them (kind, predictor_variant, confidence and
     # optimizer.seed are set per episode and cannot be changed here)
-    per_kind: dict[str, dict[str, Any]] = field(default_factory=dict)
+    per_kind: dict[str, dict[str, Any]] = field(default_factory=dict, hash=False)
 
     def __post_init__(self) -> None:
         finite("confidence", self.confidence)

@@ -88,3 +88,11 @@ def test_empty_entry_is_the_base() -> None:
     assert base.for_planner("itomp") is base
     with pytest.raises(ConfigError, match="unknown planner"):
         base.for_planner("rrt")
+
+
+def test_settings_with_entries_stay_hashable() -> None:
+    """A frozen settings class hashes its fields; a dict field would make hash() fail."""
+    base = _cfg(iplanner_ni={"replanner": {"fresh_fraction": 0.0}})
+    assert hash(base) == hash(_cfg(iplanner_ni={"replanner": {"fresh_fraction": 0.0}}))
+    assert base == _cfg(iplanner_ni={"replanner": {"fresh_fraction": 0.0}})
+    assert base != _cfg(iplanner_ni={"replanner": {"fresh_fraction": 0.5}})
