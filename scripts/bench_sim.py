@@ -5,9 +5,10 @@ I-Planner (NI) with the real predictor when a checkpoint is given (``--predictor
 environment variable ``IPLANNER_PREDICTOR``), else ITOMP; its reference,
 ``sim.realtime_factor_physics``, is the same scene with the robot holding its pose and no
 planner (MuJoCo, human and tracker only), measured in the same run. Episodes run with one
-torch thread (``EpisodeCfg.torch_threads``) and the planner settings of ``conf/planner``
-(25 cold / 8 warm iterations). ``plan.solve_ms`` is the mean wall-clock time of a replanning
-solve in those episodes, against the step m = 0.5 s.
+torch thread (``EpisodeCfg.torch_threads``) and the planner settings of
+``conf/planner/itomp.yaml``, read from the file (with its ``per_kind`` entries, so the
+I-Planner runs as in the experiments). ``plan.solve_ms`` is the mean wall-clock time of a
+replanning solve in those episodes, against the step m = 0.5 s.
 
 Run: ``python scripts/bench_sim.py [--quick | --full] [--predictor PATH]`` (``--quick``, a few
 simulated seconds, is the default here; ``scripts/bench.py`` runs the full size unless given
@@ -57,8 +58,12 @@ def _motion():
 
 def run(quick: bool, predictor_path: str | None = None) -> dict[str, dict]:
     """``{figure: {"value", "unit", ...}}`` (quick: a few simulated seconds)."""
+    from pathlib import Path
+
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.cli._common import CONF_DIR, instantiate
     from iplanner_torch.eval.episode import EpisodeCfg, run_episode
-    from iplanner_torch.planning.optimizer import OptimizerCfg
     from iplanner_torch.planning.replanner import PlannerCfg
     from iplanner_torch.robot.model import RobotModel
 
@@ -74,7 +79,9 @@ def run(quick: bool, predictor_path: str | None = None) -> dict[str, dict]:
 
         predictor = HumanMotionPredictor.load(predictor_path)
         kind = "iplanner_ni"
-    planner = PlannerCfg(optimizer=OptimizerCfg(iterations=25, warm_iterations=8))
+    # the experiments' planner settings (their interpolations fall back to their defaults)
+    node = OmegaConf.load(Path(CONF_DIR) / "planner" / "itomp.yaml")
+    planner = instantiate(node, PlannerCfg, name="planner")
     cfg = EpisodeCfg(max_duration_s=sim_s, planner=planner)
     _physics_only(robot, 0.2)  # warm-up
     ref = statistics.median(_physics_only(robot, sim_s) for _ in range(repeats))
