@@ -1399,21 +1399,26 @@ def write_sweep_report(
     md += ["## Mean ± std", ""]
     md += ["Means over episodes ± sample std: " + "; ".join(units) + ".", ""] if units else []
     md += [to_markdown(summary)]
+    # each plot is drawn on its own: one that cannot be drawn or saved (a folder in its
+    # place, a full disk, a plotting error) is named in one warning at the end, the others
+    # are still drawn, and the tables are written all the same
+    failed: list[str] = []
     draw: list[tuple[Path, Callable[[], object]]] = []
     paired_md, _ = _paired_section(df, group_by, out_dir, baseline, draw)
+    paired: list[Path] = []
+    for png, call in draw:  # first, so that results.md names only the paired plots drawn
+        _draw_plot(png, call, paired, failed)
+    if paired_md and paired_md[-1].startswith("Plots: "):
+        names = ", ".join(f"`{p.name}`" for p in paired)
+        paired_md = paired_md[:-2] + (["", f"Plots: {names}."] if paired else [])
     md += paired_md
     df.to_csv(written[0], index=False)  # both once every table is built
     written[1].write_text("\n".join(md))
+    written += paired
 
     def varies(c: str) -> bool:
         return c in df.columns and df[c].nunique(dropna=True) > 1
 
-    # the plots follow the tables, each on its own: one that cannot be drawn or saved (a
-    # folder in its place, a full disk, a plotting error) is named in one warning, the
-    # others are still drawn and the tables stay written
-    failed: list[str] = []
-    for png, call in draw:
-        _draw_plot(png, call, written, failed)
     if len(group_by) >= 2:
         pooled = [c for c in group_by[:-2] if varies(c)]
         for m in ("smoothness", "jerkiness", "min_distance", "efficiency"):

@@ -1183,3 +1183,6 @@ def test_a_plot_that_cannot_be_saved_costs_neither_the_tables_nor_the_other_plot
     assert "compare_smoothness.png" not in written and "paired_min_distance.png" not in written
     assert (tmp_path / "results.csv").is_file()
     assert (tmp_path / "compare_min_distance.png").is_file()
+    # results.md names the paired plots that were drawn, not the one that failed
+    md = (tmp_path / "results.md").read_text()
+    assert "`paired_smoothness.png`" in md and "paired_min_distance.png" not in md
