@@ -10,7 +10,10 @@ Configs (``__post_init__``) and public functions check their number arguments wi
 - :func:`finite_time`: anything with a float value (also numpy numbers and one-element
   tensors), as :func:`math.isfinite` takes it; anything else is ``error`` too;
 - :func:`optional`: any of the above for a field that may also be None;
-- :func:`real_array`: an array-like of real numbers (not bool, complex, text or ragged).
+- :func:`real_array`: an array-like of real numbers (not bool, complex, text or ragged);
+- :func:`field_kind`, :func:`fits_kind`: the scalar kind a dataclass field takes (bool, int,
+  float or str, a ``Literal``, ``| None``) and whether a value is of it, for settings given by
+  name (the command line's config check and ``PlannerCfg.per_kind``).
 
 Each check raises ``error`` (:class:`~iplanner_torch.errors.ConfigError` unless the caller
 passes another exception type, e.g. :class:`~iplanner_torch.errors.DataError` for input data)
@@ -22,12 +25,15 @@ in :mod:`iplanner_torch.types`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import reprlib
+import types
+import typing
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 import numpy as np
 
@@ -217,3 +223,71 @@ def real_array(name: str, value: object) -> np.ndarray:
     if arr.dtype.kind not in "iuf":
         raise ShapeError(f"expected {name} an array of real numbers, got dtype {arr.dtype}")
     return arr
+
+
+#: The scalar types :func:`field_kind` reports.
+SCALAR_TYPES: tuple[type, ...] = (bool, int, float, str)
+
+
+@dataclasses.dataclass(frozen=True)
+class FieldKind:
+    """What one dataclass field takes (:func:`field_kind`).
+
+    Attributes:
+        base: bool, int, float or str; for a ``Literal``, the type all its choices share
+            (``object`` when they mix types).
+        nullable: whether the field may be None (``X | None``; a field judged by its default,
+            its annotation not resolving, may be None).
+        choices: the values of a ``Literal`` field, else None.
+    """
+
+    base: type
+    nullable: bool
+    choices: tuple[Any, ...] | None = None
+
+
+def field_kind(cls: type, name: str) -> FieldKind | None:
+    """The scalar kind of the field ``name`` of the dataclass ``cls``, or None when it holds
+    anything else (a dataclass, a list, a union of several types) or is not a field.
+
+    The field is ``X``, ``X | None``, ``Literal[...]`` or ``Literal[...] | None`` with ``X``
+    one of :data:`SCALAR_TYPES`. A field whose annotation does not resolve is judged by its
+    default (a scalar default: that type, nullable).
+    """
+    fields = {f.name: f for f in dataclasses.fields(cls)} if dataclasses.is_dataclass(cls) else {}
+    if name not in fields:
+        return None
+    try:
+        hint = typing.get_type_hints(cls).get(name)
+    except Exception:  # an annotation that does not resolve: fall back to the default
+        hint = None
+    if hint is None:
+        default = fields[name].default
+        if default is not dataclasses.MISSING and type(default) in SCALAR_TYPES:
+            return FieldKind(type(default), True)
+        return None
+    union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+    args = [a for a in typing.get_args(hint) if a is not type(None)] if union else [hint]
+    nullable = union and len(args) < len(typing.get_args(hint))
+    if len(args) != 1:
+        return None
+    base = args[0]
+    if typing.get_origin(base) is Literal:
+        choices = typing.get_args(base)
+        kinds = {type(c) for c in choices}
+        return FieldKind(kinds.pop() if len(kinds) == 1 else object, nullable, choices)
+    if base in SCALAR_TYPES:
+        return FieldKind(base, nullable)
+    return None
+
+
+def fits_kind(value: object, base: type) -> bool:
+    """Whether ``value`` is a ``base`` (:data:`SCALAR_TYPES`): a bool is no int or float, an
+    int is a float; any other ``base`` by ``isinstance``."""
+    if base is bool:
+        return isinstance(value, bool)
+    if base is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if base is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return isinstance(value, base)

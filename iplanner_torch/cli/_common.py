@@ -14,6 +14,7 @@ from typing import Any, TypeVar
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from yaml import YAMLError
 
+from iplanner_torch.checks import field_kind, fits_kind
 from iplanner_torch.errors import ConfigError, IPlannerError
 from iplanner_torch.sim.tracker import MAX_NOISE_M
 
@@ -164,16 +165,6 @@ def _full_key(node: DictConfig, key: str | None) -> str:
         return key
 
 
-def _fits(value: Any, expected: type) -> bool:
-    if expected is bool:
-        return isinstance(value, bool)
-    if expected is int:
-        return isinstance(value, int) and not isinstance(value, bool)
-    if expected is float:
-        return isinstance(value, (int, float)) and not isinstance(value, bool)
-    return isinstance(value, expected)
-
-
 def _wrong_type(node: DictConfig) -> str | None:
     """The first value under ``node`` whose type does not fit its dataclass field
     (:func:`_scalar_kind`; ``"trainer.max_steps: expected int, got 'abc'"``; null only where
@@ -211,7 +202,7 @@ def _wrong_type(node: DictConfig) -> str | None:
             continue
         if expected is None or (value is None and nullable):
             continue
-        if value is None or not _fits(value, expected):  # null where the field takes none
+        if value is None or not fits_kind(value, expected):  # null where the field takes none
             got = "null" if value is None else repr(value)
             return f"{_full_key(node, str(key))}: expected {expected.__name__}, got {got}"
     return None
@@ -219,31 +210,13 @@ def _wrong_type(node: DictConfig) -> str | None:
 
 def _scalar_kind(cls: type, field: Any) -> tuple[type, bool] | None:
     """``(type, may be None)`` when a dataclass field holds a bool, int, float or str (``X``
-    or ``X | None``; a ``Literal`` of strings is a str), else None. A field whose annotation
-    does not resolve is judged by its default, and may be None."""
-    import dataclasses
-    import types
-    import typing
-
-    try:
-        hint = typing.get_type_hints(cls).get(field.name)
-    except Exception:  # an annotation that does not resolve: fall back to the default
-        hint = None
-    if hint is not None:
-        union = typing.get_origin(hint) in (typing.Union, types.UnionType)
-        args = [a for a in typing.get_args(hint) if a is not type(None)] if union else [hint]
-        nullable = union and len(args) < len(typing.get_args(hint))
-        if len(args) == 1 and typing.get_origin(args[0]) is typing.Literal:
-            choices = typing.get_args(args[0])
-            if choices and all(isinstance(c, str) for c in choices):
-                return str, nullable
-        if len(args) == 1 and args[0] in (bool, int, float, str):
-            return args[0], nullable
+    or ``X | None``; a ``Literal`` of strings is a str), else None
+    (:func:`~iplanner_torch.checks.field_kind`). A field whose annotation does not resolve is
+    judged by its default, and may be None."""
+    kind = field_kind(cls, field.name)
+    if kind is None or (kind.choices is not None and kind.base is not str):
         return None
-    default = field.default
-    if default is not dataclasses.MISSING and type(default) in (bool, int, float, str):
-        return type(default), True
-    return None
+    return kind.base, kind.nullable
 
 
 def cfg_scalar(node: DictConfig, key: str, kind: type) -> Any:
@@ -253,7 +226,7 @@ def cfg_scalar(node: DictConfig, key: str, kind: type) -> Any:
         ConfigError: naming the key, the expected type and the value given.
     """
     value = node[key]
-    if not _fits(value, kind):
+    if not fits_kind(value, kind):
         raise ConfigError(f"{_full_key(node, key)}: expected {kind.__name__}, got {value!r}")
     return kind(value)
 
@@ -265,11 +238,13 @@ def cfg_list(node: DictConfig, key: str, kind: type) -> list[Any]:
         ConfigError: naming the key when it is not a list or an item is not a ``kind``.
     """
     value = node[key]
-    if not isinstance(value, (list, tuple, ListConfig)) or not all(_fits(v, kind) for v in value):
+    if not isinstance(value, (list, tuple, ListConfig)) or not all(
+        fits_kind(v, kind) for v in value
+    ):
         name = _full_key(node, key)
         example = {int: "[0,1,2]", float: "[0.0,0.5]", bool: "[true,false]"}.get(kind, "[a,b]")
         if isinstance(value, str) or (
-            not isinstance(value, (list, tuple, ListConfig, bool)) and _fits(value, kind)
+            not isinstance(value, (list, tuple, ListConfig, bool)) and fits_kind(value, kind)
         ):  # one value where a list was asked for: that value in a list
             example = f"[{value}]"
         raise ConfigError(
@@ -502,7 +477,7 @@ def check_run_keys(cfg: DictConfig) -> None:
             )
     if "stall_fallback_s" in run:
         stall = run.stall_fallback_s
-        if stall is not None and (not _fits(stall, float) or not float(stall) > 0):
+        if stall is not None and (not fits_kind(stall, float) or not float(stall) > 0):
             raise ConfigError(
                 f"run.stall_fallback_s: expected a number > 0 [s] or null (never), got "
                 f"{_plain(stall)!r}"
@@ -1408,7 +1383,7 @@ def data_fps(data_cfg: DictConfig) -> float | None:
     fps = data_cfg.get("fps", None)
     if fps is None:
         return None
-    if not _fits(fps, float) or not 0 < float(fps) < math.inf:
+    if not fits_kind(fps, float) or not 0 < float(fps) < math.inf:
         raise ConfigError(f"data.fps: expected a frame rate > 0 [Hz], got {fps!r}")
     return float(fps)
 

@@ -43,7 +43,6 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import time
-import typing
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -51,7 +50,16 @@ from typing import Any, Literal
 
 import torch
 
-from iplanner_torch.checks import finite, finite_time, flag, non_negative, optional
+from iplanner_torch.checks import (
+    FieldKind,
+    field_kind,
+    finite,
+    finite_time,
+    fits_kind,
+    flag,
+    non_negative,
+    optional,
+)
 from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.planning.optimizer import (
     MAX_HORIZON_S,
@@ -326,7 +334,6 @@ def _with_fields(obj: Any, changes: Mapping[str, Any], where: str) -> Any:
             dataclass refuses; each names ``<where>.<field>``.
     """
     fields = {f.name: f for f in dataclasses.fields(obj)}
-    hints = typing.get_type_hints(type(obj))
     updates: dict[str, Any] = {}
     for key, value in changes.items():
         key_s = str(key)
@@ -343,7 +350,7 @@ def _with_fields(obj: Any, changes: Mapping[str, Any], where: str) -> Any:
             continue
         if isinstance(value, Mapping):
             raise ConfigError(f"{at}: expected one value, got a mapping {dict(value)!r}")
-        _check_kind(at, value, hints.get(key_s))
+        _check_kind(at, value, field_kind(type(obj), key_s))
         updates[key_s] = value
     try:
         return replace(obj, **updates)
@@ -351,32 +358,22 @@ def _with_fields(obj: Any, changes: Mapping[str, Any], where: str) -> Any:
         raise ConfigError(f"{where}: {exc}") from exc
 
 
-def _check_kind(at: str, value: Any, hint: Any) -> None:
-    """Refuse ``value`` when the annotation ``hint`` takes bool, int, float or str (or a
-    Literal of them, possibly ``| None``) and ``value`` is none of those."""
-    args = [a for a in typing.get_args(hint) if a is not type(None)]
-    nullable = len(args) < len(typing.get_args(hint))
-    if typing.get_origin(hint) is Literal:
-        args, nullable = [hint], False
-    if len(args) != 1:
-        args = [hint]
-    base = args[0]
-    if typing.get_origin(base) is Literal:
-        choices = typing.get_args(base)
-        if value not in choices and not (value is None and nullable):
-            raise ConfigError(f"{at}: expected one of {list(choices)}, got {value!r}")
+def _check_kind(at: str, value: Any, kind: FieldKind | None) -> None:
+    """Refuse ``value`` when the field takes bool, int, float or str (or a Literal of them,
+    possibly ``| None``: :func:`~iplanner_torch.checks.field_kind`) and ``value`` is none of
+    those."""
+    if kind is None:
         return
-    if base not in (bool, int, float, str):
+    if kind.choices is not None:
+        if value not in kind.choices and not (value is None and kind.nullable):
+            raise ConfigError(f"{at}: expected one of {list(kind.choices)}, got {value!r}")
         return
     if value is None:
-        if not nullable:
-            raise ConfigError(f"{at}: expected {base.__name__}, got null")
+        if not kind.nullable:
+            raise ConfigError(f"{at}: expected {kind.base.__name__}, got null")
         return
-    ok = isinstance(value, base) and not (base is not bool and isinstance(value, bool))
-    if base is float and isinstance(value, int) and not isinstance(value, bool):
-        ok = True
-    if not ok:
-        raise ConfigError(f"{at}: expected {base.__name__}, got {value!r}")
+    if not fits_kind(value, kind.base):
+        raise ConfigError(f"{at}: expected {kind.base.__name__}, got {value!r}")
 
 
 def build_replanner(

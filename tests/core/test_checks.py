@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import pytest
@@ -139,3 +141,56 @@ def test_is_dir_answers_and_names_a_path_the_system_cannot_look_up(tmp_path) -> 
     with pytest.raises(CheckpointError, match=r"^predictor checkpoint '.*; expected a file$"):
         long_path = tmp_path / ("x" * 300)
         is_dir(long_path, "a file", what="predictor checkpoint", error=CheckpointError)
+
+
+@dataclass
+class _Settings:
+    flag: bool = False
+    count: int = 1
+    rate: float | None = None
+    name: str = "a"
+    mode: Literal["x", "y"] = "x"
+    maybe: Literal["x", "y"] | None = None
+    level: Literal[1, 2] = 1
+    mixed: Literal[1, "a"] = 1
+    both: int | float = 1
+    items: list[int] = field(default_factory=list)
+
+
+def test_field_kind_reads_each_annotation_form() -> None:
+    Settings = _Settings
+    kind = checks.field_kind
+    assert kind(Settings, "flag") == checks.FieldKind(bool, False)
+    assert kind(Settings, "count") == checks.FieldKind(int, False)
+    assert kind(Settings, "rate") == checks.FieldKind(float, True)
+    assert kind(Settings, "name") == checks.FieldKind(str, False)
+    assert kind(Settings, "mode") == checks.FieldKind(str, False, ("x", "y"))
+    assert kind(Settings, "maybe") == checks.FieldKind(str, True, ("x", "y"))
+    assert kind(Settings, "level") == checks.FieldKind(int, False, (1, 2))
+    assert kind(Settings, "mixed") == checks.FieldKind(object, False, (1, "a"))
+    assert kind(Settings, "both") is None and kind(Settings, "items") is None
+    assert kind(Settings, "absent") is None and kind(int, "real") is None
+
+
+def test_field_kind_judges_an_unresolvable_annotation_by_its_default() -> None:
+    @dataclass
+    class Settings:
+        speed: NoSuchType = 2.5  # type: ignore[name-defined] # noqa: F821
+        table: NoSuchType = None  # type: ignore[name-defined] # noqa: F821
+
+    assert checks.field_kind(Settings, "speed") == checks.FieldKind(float, True)
+    assert checks.field_kind(Settings, "table") is None
+
+
+@pytest.mark.parametrize(
+    ("base", "good", "bad"),
+    [
+        (bool, [True, False], [0, 1, "true", None]),
+        (int, [0, -3], [True, 1.0, "1", None]),
+        (float, [0, 1.5, np.float64(2.0), math.inf], [True, "1.5", None]),
+        (str, ["", "a"], [1, None, b"a"]),
+    ],
+)  # fmt: skip
+def test_fits_kind_keeps_bools_apart_from_numbers(base, good, bad) -> None:
+    assert all(checks.fits_kind(v, base) for v in good)
+    assert not any(checks.fits_kind(v, base) for v in bad)
