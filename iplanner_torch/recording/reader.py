@@ -676,12 +676,16 @@ def read_episode(path: str | Path) -> Episode:
             checksum, a chunk of unknown compression, fewer or more messages than the summary
             counts, a missing footer, an episode metadata record failing its checksum); the
             episode then holds the messages of every chunk before the damage (a prefix of what
-            was written). A file cut within its first 8 bytes (empty included) is an empty,
-            incomplete episode. A complete MCAP file with no episode metadata record is not an
-            episode log (another program's): it is read, ``foreign`` and incomplete, with a
-            warning saying so. Also (one warning naming them) when channels are skipped: those of
-            other tools whose messages are not JSON (protobuf, raw bytes); other tools'
-            JSON channels are read into frames with one ``message`` column.
+            was written). A metadata record failing its checksum is dropped whole, its time
+            offset too: the times taken from log times (``/scene``, ``/tf``, other tools'
+            channels) then count from log time 0, which the warning says when the offset was
+            not 0 (the episode commands write 0). A file cut within its first 8 bytes (empty
+            included) is an empty, incomplete episode. A complete MCAP file with no episode
+            metadata record is not an episode log (another program's): it is read, ``foreign``
+            and incomplete, with a warning saying so. Also (one warning naming them) when
+            channels are skipped: those of other tools whose messages are not JSON (protobuf,
+            raw bytes); other tools' JSON channels are read into frames with one ``message``
+            column.
     """
     path = path_argument(path, "of an .mcap episode log")
     if path.is_dir():
@@ -731,12 +735,16 @@ def read_episode(path: str | Path) -> Episode:
             meta_rec.get("value_codec"),
         )
     ):
+        damaged = "episode metadata fails its checksum (dropped)"
+        if meta_rec.get("time_offset_ns", "0") != "0":  # which part was damaged is unknown
+            damaged += (
+                f"; its time offset ({reprlib.repr(meta_rec['time_offset_ns'])} ns) is not "
+                "trusted either: times count from log time 0"
+            )
         meta_rec = {}  # its values cannot be trusted
         # the best guess left: only writers of codec "2" record one
         codec = VALUE_CODEC if "value_codec" in raw.metadata[EPISODE_METADATA_NAME] else "1"
-        raw.problem = "; ".join(
-            p for p in (raw.problem, "episode metadata fails its checksum") if p
-        )
+        raw.problem = "; ".join(p for p in (raw.problem, damaged) if p)
         raw.complete = False
     foreign = raw.complete and EPISODE_METADATA_NAME not in raw.metadata
     if foreign:  # every record read, none of them ours: another program's MCAP file

@@ -635,6 +635,25 @@ def test_a_log_without_a_value_codec_reads_null_and_inf_as_numbers(tmp_path: Pat
     assert math.isnan(m["mhd"]) and m["x"] == math.inf and m["s"] == "~a"
 
 
+def test_a_damaged_metadata_record_names_the_time_offset_it_drops(tmp_path: Path) -> None:
+    """The writer's time offset lives in the metadata record: when its checksum fails the
+    offset is dropped with the rest, and the warning says that the scene's times (taken from
+    log times) then count from log time 0."""
+    path = tmp_path / "offset.mcap"
+    with EpisodeWriter(path, metadata={"planner": "itomp"}, time_offset_ns=5_000_000_000) as log:
+        log.robot_state(1.0, [1.0, 2.0], [0, 0], ARM)
+        log.scene(1.0, np.zeros((1, 4)), np.zeros((1, 4)), [])
+    assert read_episode(path).frames["/scene"]["t"].tolist() == [1.0]
+    data = path.read_bytes()
+    i = data.index(b'"planner"') + 1
+    path.write_bytes(data[:i] + b"P" + data[i + 1 :])
+    said = r"checksum \(dropped\); its time offset \('5000000000' ns\) is not trusted either: "
+    with pytest.warns(DataWarning, match=said + "times count from log time 0"):
+        ep = read_episode(path)
+    assert ep.metadata == {} and ep.frames["/scene"]["t"].tolist() == [6.0]
+    assert ep.frames["/robot/joint_state"]["t"].tolist() == [1.0]  # its own time field
+
+
 def test_a_value_codec_this_version_does_not_read_is_named(tmp_path: Path) -> None:
     from iplanner_torch.recording.reader import metadata_crc
 
