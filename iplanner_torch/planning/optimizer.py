@@ -95,6 +95,12 @@ class KinematicModel(Protocol):
 #: safe)
 MAX_HORIZON_S = 60.0
 
+#: most candidate waypoints one solve holds, ``num_trajectories * num_waypoints`` (the paper's
+#: 8 x 20 is 160): the collision bound keeps a value per waypoint and sphere pair, so a count
+#: beyond this (a typo's extra zeros) would exhaust the memory midway, killing the process
+#: with what it had not yet written; it is refused when the settings are made
+MAX_PLAN_WAYPOINTS = 2**16
+
 
 @dataclass(frozen=True, kw_only=True)
 class OptimizerCfg:
@@ -166,6 +172,12 @@ class OptimizerCfg:
         # with a raw Python error in the middle of a solve
         integer("num_trajectories", self.num_trajectories, minimum=1)
         integer("num_waypoints", self.num_waypoints, minimum=3)
+        if self.num_trajectories * self.num_waypoints > MAX_PLAN_WAYPOINTS:
+            raise ConfigError(
+                f"expected num_trajectories * num_waypoints <= {MAX_PLAN_WAYPOINTS} "
+                f"(MAX_PLAN_WAYPOINTS, the candidate waypoints of one solve), got "
+                f"{self.num_trajectories} * {self.num_waypoints}"
+            )
         if not is_real(self.horizon_s) or not 0.0 < self.horizon_s <= MAX_HORIZON_S:
             raise ConfigError(
                 f"expected horizon_s in (0, {MAX_HORIZON_S:g}] s, got {self.horizon_s!r}"

@@ -219,6 +219,10 @@ def test_inputs_and_config_are_validated(point_robot: PointRobot) -> None:
         OptimizerCfg(confidence=1.0)
     with pytest.raises(ConfigError, match="num_waypoints"):
         OptimizerCfg(num_waypoints=2)
+    for b, w in ((8, 10**7), (10**9, 20), (2**14 + 1, 4)):
+        with pytest.raises(ConfigError, match=rf"<= 65536 \(MAX_PLAN_WAYPOINTS.*got {b} \* {w}$"):
+            OptimizerCfg(num_trajectories=b, num_waypoints=w)
+    assert OptimizerCfg(num_trajectories=2**14, num_waypoints=4).num_trajectories == 2**14
     for bad in (float("inf"), float("nan"), 0.0, 60.5):
         with pytest.raises(ConfigError, match=r"expected horizon_s in \(0, 60\] s"):
             OptimizerCfg(horizon_s=bad)
