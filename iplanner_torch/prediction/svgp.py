@@ -92,6 +92,12 @@ UNREAD_BY_NOISY_INPUT: dict[str, tuple[str, ...]] = {
 #: version of :meth:`SVGPRegressor.to_checkpoint`'s layout
 CHECKPOINT_FORMAT = 2
 
+#: most inducing inputs of one GP (the paper's 100): each output channel keeps an M x M
+#: covariance root, so a count beyond this (a typo's extra zeros, on a training set that
+#: large) would exhaust the memory midway through training; it is refused when the settings
+#: are made
+MAX_INDUCING = 8192
+
 
 @dataclass(frozen=True, kw_only=True)
 class SVGPCfg:
@@ -144,7 +150,10 @@ class SVGPCfg:
     def __post_init__(self) -> None:
         # every number is checked for its range and, for floats, for NaN and infinities
         # (``nan <= 0`` is False): a bad value fails here, before a training folder is touched
-        checks.integer("num_inducing", self.num_inducing, minimum=1)
+        if checks.integer("num_inducing", self.num_inducing, minimum=1) > MAX_INDUCING:
+            raise ConfigError(
+                f"expected num_inducing <= {MAX_INDUCING} (MAX_INDUCING), got {self.num_inducing}"
+            )
         if self.kernel not in ("rbf", "matern", "gak", "dtw"):
             raise ConfigError(f"kernel must be one of rbf, matern, gak, dtw, got {self.kernel!r}")
         if self.noisy_input not in ("none", "simple", "nigp"):

@@ -388,6 +388,9 @@ def test_full_rank_series_kernel_svgp_equals_exact_gp(kind: str) -> None:
 def test_errors() -> None:
     with pytest.raises(ConfigError, match="num_inducing"):
         SVGPCfg(num_inducing=0)
+    with pytest.raises(ConfigError, match=r"num_inducing <= 8192 \(MAX_INDUCING\), got 100000"):
+        SVGPCfg(num_inducing=100_000)
+    assert SVGPCfg(num_inducing=8192).num_inducing == 8192
     with pytest.raises(ConfigError, match="noisy_input"):
         SVGPCfg(noisy_input="bogus")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="kernel"):
