@@ -46,6 +46,12 @@ person's own task order: an upper bound on what better prediction could give, fo
 planners rather than a planner a robot could run. Its ``eval/mhd`` measures how far that
 future was off (only a block delivered within the span changes it).
 
+The ``blind`` planner is the other reference: ITOMP's optimiser with no person at all (no
+forecast, so no human cost, no confidence limit and no wait for the person), fetching as ITOMP
+does. The person still moves and still counts for contacts and distances. How far the other
+planners are from it shows how much the person is in the robot's way in a scene: a planner
+that is as smooth as ``blind`` has no roughness that better prediction could remove.
+
 Torch runs with ``torch_threads`` threads during the episode (restored afterwards): the
 planner's tensors are small, so one thread avoids the thread-pool overhead that dominates them
 on a few cores.
@@ -110,7 +116,7 @@ from iplanner_torch.types import torch_threads
 #: Joint indices of the hands: the joints the forecasts are scored and logged on.
 HAND_JOINTS: list[int] = [JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]]
 
-PlannerKind = Literal["itomp", "iplanner_no_ni", "iplanner_ni", "oracle"]
+PlannerKind = Literal["itomp", "iplanner_no_ni", "iplanner_ni", "oracle", "blind"]
 #: how far the tool point may end from a blocking scenario's crossing start or goal [m]
 CROSSING_TOLERANCE_M = 0.02
 
@@ -120,7 +126,11 @@ PLANNER_KINDS: dict[str, str | None] = {
     "iplanner_no_ni": "no_ni",
     "iplanner_ni": "ni",
     "oracle": None,
+    "blind": None,
 }
+#: The ``PlannerCfg.kind`` of the planners that are not I-Planners (``blind`` runs ITOMP's
+#: optimiser, given no forecast).
+_OPTIMIZER_KIND: dict[str, str] = {"itomp": "itomp", "oracle": "oracle", "blind": "itomp"}
 
 
 class PredictorLike(Protocol):
@@ -599,7 +609,7 @@ def planner_cfg_for(base: PlannerCfg, kind: str, confidence: float) -> PlannerCf
     variant = PLANNER_KINDS[kind]
     return replace(
         base.for_planner(kind),
-        kind=kind if kind in ("itomp", "oracle") else "iplanner",
+        kind=_OPTIMIZER_KIND.get(kind, "iplanner"),  # type: ignore[arg-type]
         predictor_variant=variant,  # type: ignore[arg-type]
         confidence=confidence,
     )
@@ -734,6 +744,7 @@ def _run_episode(
     pcfg = planner_cfg_for(cfg.planner, planner_kind, cfg.scenario.confidence)
     use_prediction = PLANNER_KINDS[planner_kind] is not None
     oracle = planner_kind == "oracle"
+    blind = planner_kind == "blind"  # plans with nobody there: no forecast at all
     # the planner's forecast predicts motion (ITOMP's holds the observed pose still)
     forecasts_motion = use_prediction or oracle
     # ITOMP's conservative spread of the held pose (not the stalled I-Planner's fallback)
@@ -929,6 +940,8 @@ def _run_episode(
                             hold = rest_hold(action_names, keep)
                             if bool(hold.any()):
                                 forecast = forecast.hold_actions(hold)
+                elif blind:
+                    forecast = None
                 elif oracle:
                     t_obs = t
                     forecast = oracle_forecast(

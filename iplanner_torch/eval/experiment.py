@@ -37,7 +37,7 @@ class ExperimentCfg:
     device: str = "cpu"
     # scenarios (rows of the paper's table)
     scenarios: list[ScenarioCfg] = field(default_factory=lambda: [ScenarioCfg()])
-    # planner kinds: "itomp", "iplanner_no_ni", "iplanner_ni", "oracle"
+    # planner kinds: "itomp", "iplanner_no_ni", "iplanner_ni", "oracle", "blind"
     planners: list[str] = field(default_factory=lambda: ["itomp", "iplanner_no_ni", "iplanner_ni"])
     # episode seeds
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])

@@ -313,7 +313,7 @@ class PlannerCfg:
 
 
 #: The planner names of a run (``experiment.planners``), the keys of ``PlannerCfg.per_kind``.
-PLANNER_NAMES: tuple[str, ...] = ("itomp", "iplanner_no_ni", "iplanner_ni", "oracle")
+PLANNER_NAMES: tuple[str, ...] = ("itomp", "iplanner_no_ni", "iplanner_ni", "oracle", "blind")
 #: PlannerCfg fields each episode sets, which ``per_kind`` cannot change.
 PER_KIND_FIXED: tuple[str, ...] = (
     "kind",

@@ -95,7 +95,7 @@ def test_misspelt_entry_key_is_refused_with_its_path() -> None:
          "in [0, 1], got 3"),
         ("+planner.per_kind.rrt.replan_step_s=0.3",
          "error: ConfigError: planner.per_kind: unknown planner 'rrt'; expected one of "
-         "['itomp', 'iplanner_no_ni', 'iplanner_ni', 'oracle']"),
+         "['itomp', 'iplanner_no_ni', 'iplanner_ni', 'oracle', 'blind']"),
     ],
 )  # fmt: skip
 def test_bad_entry_on_the_command_line_is_one_line_before_anything_runs(

@@ -345,6 +345,30 @@ def test_oracle_plans_on_the_true_future(tmp_path: Path) -> None:
     assert logged.action_names == ("oracle",) and len(t_fc) == len(replanner.forecasts)
 
 
+def test_blind_plans_with_nobody_there(tmp_path: Path) -> None:
+    """``blind`` hands the replanner no forecast in any cycle and logs none; the person still
+    moves and counts. With a replanner that ignores forecasts it is ITOMP's episode exactly
+    (same fetch order, events and distances)."""
+    from iplanner_torch.errors import DataError
+    from iplanner_torch.recording.reader import read_episode
+
+    cfg = EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=12.0)
+    blind = fakes.LinearReplanner(speed=1.5)
+    res = _fake_episode(tmp_path, cfg, "blind", blind, path=tmp_path / "blind.mcap", seed=1)
+    assert len(blind.forecasts) > 5 and all(f is None for _, f in blind.forecasts)
+    itomp = fakes.LinearReplanner(speed=1.5)
+    ref = _fake_episode(tmp_path, cfg, "itomp", itomp, seed=1)
+    assert all(f is not None for _, f in itomp.forecasts)
+    assert res.events == ref.events and any(k == "delivered" for _, k, _ in res.events)
+    for name in ("eval/min_distance", "sim/body_distance", "eval/smoothness"):
+        assert res.metrics[name] == ref.metrics[name], name
+    assert math.isnan(res.metrics["eval/mhd"])
+    ep = read_episode(tmp_path / "blind.mcap")
+    assert ep.metadata["planner"] == "blind"
+    with pytest.raises(DataError):
+        ep.forecasts()
+
+
 def test_errors(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="needs a predictor"):
         run_episode(
@@ -456,7 +480,7 @@ def test_full_episode_completes_all_tasks(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["itomp", "iplanner_no_ni", "iplanner_ni", "oracle"])
+@pytest.mark.parametrize("kind", ["itomp", "iplanner_no_ni", "iplanner_ni", "oracle", "blind"])
 def test_real_kuka_episode_delivers_every_block(tmp_path: Path, kind: str) -> None:
     """The real ITOMP / I-Planner optimiser on the KUKA iiwa in MuJoCo (stand-in predictor)."""
     from iplanner_torch.recording.reader import read_episode
@@ -467,7 +491,7 @@ def test_real_kuka_episode_delivers_every_block(tmp_path: Path, kind: str) -> No
     res = run_episode(
         EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=60.0),
         robot=robot,
-        predictor=None if kind in ("itomp", "oracle") else fakes.ConstantPredictor(),
+        predictor=None if kind in ("itomp", "oracle", "blind") else fakes.ConstantPredictor(),
         planner_kind=kind,  # type: ignore[arg-type]
         writer_path=path,
         seed=0,
