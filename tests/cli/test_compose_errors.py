@@ -259,8 +259,9 @@ def test_an_error_inside_the_command_is_reported_as_before(
         ("experiment", ["+seeds=[1]"], "unknown key 'seeds' (did you mean 'seed'?): added by "
          "+seeds=[1], which nothing reads"),
         ("experiment", ["+experiment.episode.max_duration_s=1"],
-         "key 'experiment.episode.max_duration_s' needs experiment=<option> (safety_seeds, "
-         "speed_response, table_simulation): with experiment=null there is no experiment node: "
+         "key 'experiment.episode.max_duration_s' needs experiment=<option> (reach_across, "
+         "safety_seeds, speed_response, table_simulation): with experiment=null there is no "
+         "experiment node: "
          "added by +experiment.episode.max_duration_s=1"),
         ("data", ["info", "data.path=nowhere", "+data.pth=x"],
          "unknown key 'data.pth' (did you mean 'data.path'?): added by +data.pth=x, which "
