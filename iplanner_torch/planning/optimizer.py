@@ -162,6 +162,13 @@ class OptimizerCfg:
     # "cover", 42 spheres up to 1 cm larger than the capsules whose union contains them, so
     # the bound is one on touching the body
     human_spheres: SphereLayout = "inner"
+    # the confidence constraint (and its penalty) also covers the plan's waypoints up to this
+    # many seconds after the execution window, against the forecast held at its last frame
+    # beyond its horizon: a plan may not move the robot to where the person is predicted to
+    # be soon after the window, as a plan checked on the window alone can (then the hold
+    # there is unsafe). A plan unsafe only there runs up to its last safe waypoint. 0: the
+    # window alone (the paper)
+    check_ahead_s: float = 0.0
     # seed of the random initial perturbations (same seed -> same plan)
     seed: int = 0
     # device of the plan; None follows the robot model's tensors
@@ -218,6 +225,10 @@ class OptimizerCfg:
         within = self.escape_within_s
         if within is not None and (not is_real(within) or not within >= 0.0):
             raise ConfigError(f"expected escape_within_s >= 0 or None, got {within!r}")
+        if not is_real(self.check_ahead_s) or not 0.0 <= self.check_ahead_s <= MAX_HORIZON_S:
+            raise ConfigError(
+                f"expected check_ahead_s in [0, {MAX_HORIZON_S:g}] s, got {self.check_ahead_s!r}"
+            )
         check_seed(self.seed)
         _check_device(self.device)
 
@@ -810,7 +821,10 @@ class TrajectoryOptimizer:
             raise ConfigError(f"expected duration > 0, got {duration}")
         times = uniform_times(t0, duration, w, q_start)
         dt = duration / (w - 1)
-        win_idx = self._window_indices(times, window)
+        checked = window
+        if window is not None and forecast is not None and cfg.check_ahead_s > 0.0:
+            checked = (float(window[0]), float(window[1]) + cfg.check_ahead_s)
+        win_idx = self._window_indices(times, checked)
         look_idx = self._lookahead_indices(win_idx, w) if forecast is not None else None
 
         collision_timer = _Timer(self.device)

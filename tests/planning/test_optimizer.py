@@ -183,6 +183,43 @@ def test_window_restricts_the_constraint(point_robot: PointRobot) -> None:
     assert res.feasible  # the straight line meets the human only after the window
 
 
+def test_check_ahead_extends_the_constraint_past_the_window(point_robot: PointRobot) -> None:
+    """A straight line that meets the human only after the window is accepted on the window
+    alone; with ``check_ahead_s`` it is unsafe there, the plan runs to its last waypoint
+    clear of the human (independent Monte Carlo probability) and holds, and the window's own
+    waypoints are untouched by the cut."""
+    std, r_h = 0.05, 0.1
+    fc = static_forecast([0.0, 0.0, 0.0], std)
+    q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    held = {}
+    for ahead in (0.0, 1.0):
+        cfg = OptimizerCfg(num_trajectories=1, iterations=0, confidence=0.95, check_ahead_s=ahead)
+        opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(r_h))
+        res = opt.solve(q_s, q_g, forecast=fc, duration=1.9, window=(0.0, 0.5))
+        held[ahead] = res
+        checked = res.times <= 0.5 + ahead + 1e-6
+        after = ~checked
+        assert float(res.bound[after].abs().max()) == 0.0  # nothing checked beyond
+    assert held[0.0].feasible and held[0.0].wait_s == 0.0
+    cut = held[1.0]
+    assert not cut.feasible
+    assert cut.wait_s == 0.0  # the whole window still runs: the hold comes after it
+    probs = [
+        mc_ball_probability(
+            -torch.cat([q, torch.zeros(1)]), torch.full((3,), std**2), r_h + 0.05, n=20_000
+        )
+        for q in cut.q
+    ]
+    assert max(probs) <= 0.05  # the held plan stays clear of the human over its whole span
+    assert float(cut.q[:, 0].max()) < -0.1  # it stops short of the human at x = 0
+    in_window = cut.times <= 0.5 + 1e-6
+    assert float(cut.bound[in_window].max()) <= 0.05
+    with pytest.raises(ConfigError, match=r"check_ahead_s in \[0, 60\] s"):
+        OptimizerCfg(check_ahead_s=-0.1)
+    with pytest.raises(ConfigError, match="check_ahead_s"):
+        OptimizerCfg(check_ahead_s=float("nan"))
+
+
 def test_lookahead_bends_the_plan_after_the_window_and_never_constrains_it(
     point_robot: PointRobot,
 ) -> None:
