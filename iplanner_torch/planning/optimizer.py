@@ -21,7 +21,10 @@ constraint, and ``OptimizerCfg.escape_within_s`` steps out of the person's way w
 breaks it within that time and no candidate is less risky. Also beyond the paper,
 ``CostWeights.human_lookahead_penalty`` puts the same penalty, as a soft cost only, on the
 waypoints after the window, so a plan bends around where the person is predicted to be before
-that part of it is executed.
+that part of it is executed, and ``OptimizerCfg.check_ahead_s`` (opt-in) makes the constraint
+itself cover the waypoints up to that many seconds after the window (the forecast held at its
+last frame beyond its horizon), so that no plan takes the robot where the person is
+predicted to be just after the window.
 """
 
 from __future__ import annotations
