@@ -185,9 +185,8 @@ def test_window_restricts_the_constraint(point_robot: PointRobot) -> None:
 
 def test_check_ahead_extends_the_constraint_past_the_window(point_robot: PointRobot) -> None:
     """A straight line that meets the human only after the window is accepted on the window
-    alone; with ``check_ahead_s`` it is unsafe there, the plan runs to its last waypoint
-    clear of the human (independent Monte Carlo probability) and holds, and the window's own
-    waypoints are untouched by the cut."""
+    alone; with ``check_ahead_s`` it is unsafe there: the plan runs the whole window and holds
+    at its last waypoint clear of the human (independent Monte Carlo probability)."""
     std, r_h = 0.05, 0.1
     fc = static_forecast([0.0, 0.0, 0.0], std)
     q_s, q_g = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
