@@ -269,7 +269,8 @@ class PlanResult:
             or (``evasive``) the trajectory with the smallest peak bound.
         q: (W, J) waypoints [rad]; after a wait, the waypoints from the hold on repeat it.
         times: (W,) waypoint times [s].
-        bound: (W,) human-collision bound per waypoint (0 outside the execution window).
+        bound: (W,) human-collision bound per waypoint (0 outside the execution window and
+            the ``cfg.check_ahead_s`` after it).
         wait_s: seconds the plan holds at its last safe pose inside the window (0 if feasible).
         hold_index: the waypoint held from, or None.
         qd_start: (J,) velocity at the first waypoint [rad/s] or None (rest).
@@ -759,8 +760,9 @@ class TrajectoryOptimizer:
             duration: seconds from start to goal; None uses ``cfg.horizon_s``, lengthened to
                 respect the velocity limits.
             window: (t_a, t_b) absolute times [s] of the execution window whose waypoints
-                carry the human cost and the confidence constraint (eq. collision_probability);
-                None uses every waypoint after the start.
+                carry the human cost and the confidence constraint (eq. collision_probability),
+                with a forecast extended by ``cfg.check_ahead_s`` at its end; None uses every
+                waypoint after the start.
             q_init: (B, W, J) initial trajectories [rad] (a warm start: ``cfg.warm_iterations``
                 iterations); None builds cold ones (``cfg.iterations``).
             qd_start: (J,) velocity at the start [rad/s] (continuity with the previous plan).

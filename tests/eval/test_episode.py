@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from iplanner_torch.data.skeleton import JOINT_NAMES
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.eval.episode import (
     EpisodeCfg,
     StallWatch,
@@ -349,7 +349,6 @@ def test_blind_plans_with_nobody_there(tmp_path: Path) -> None:
     """``blind`` hands the replanner no forecast in any cycle and logs none; the person still
     moves and counts. With a replanner that ignores forecasts it is ITOMP's episode exactly
     (same fetch order, events and distances)."""
-    from iplanner_torch.errors import DataError
     from iplanner_torch.recording.reader import read_episode
 
     cfg = EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=12.0)
