@@ -13,7 +13,11 @@ Loop (synchronous; simulated time stops while the planner thinks, and
    ``Fetch_i`` is ``task_policy(taken, fetched)`` when given; else, with a predictor that has
    a next-action model, the Q-learning :class:`~iplanner_torch.planning.task_mdp.TaskPlanner`
    on ``predictor.next_action`` (:func:`predictor_task_policy`); else the smallest
-   undelivered id the task order allows. A goal change starts a replanning cycle at once
+   undelivered id the task order allows. With ``task_crossing_radius`` the predicting
+   planners also keep the person's reaches in view: the next ``Fetch_i`` moves off a spot
+   that a reach for a block the person takes soon crosses, and a picked block whose spot a
+   reach crosses is held where it was picked until no reach does (``delivery_held``,
+   ``delivery_resumed``). A goal change starts a replanning cycle at once
    (``replan_on_goal_change``; the new plan still takes over ``m`` later, as every plan).
 
 The progress state given to the predictor is the bitmask of the human's completed ``Take_i``
@@ -28,7 +32,8 @@ the spread that the idle forecast learns from demonstrations is the chance that 
 within the horizon, and no reach can start then. It cut the I-Planner's waits (iiwa, 20 seeds
 of 7 scenarios: fewer in 5 of 7, still no contact) without a gain in efficiency, and it made
 the Fetch arm less safe (contact-free in 60 instead of 66 of 70 episodes), so it is an option
-(``experiments/safety_seeds/README.md``).
+(``experiments/safety_seeds/README.md``). With ``mask_by_order`` a block on its spot that
+the task order does not let the person take yet counts as unavailable too.
 A predicting planner can wait for a reach the person never starts, e.g. for a delivered
 block the person leaves on its spot while waiting for another one; the person then waits for
 the robot. When ``stall_fallback_s`` (5 s) pass without task progress while the person's
@@ -209,6 +214,10 @@ class EpisodeCfg:
     # at its first frame: a person with nothing to take is predicted to stay at rest (off: it
     # made the Fetch arm less safe, see the module docstring)
     rest_when_nothing_available: bool = False
+    # with the mask on, a block on its spot that the task order does not let the person take
+    # yet counts as unavailable too (the robot knows the order: the person takes 6 only after
+    # 1 in 4->0->5->1->6); off: every block on its spot is available
+    mask_by_order: bool = False
     # stall fallback of the predicting planners (:class:`StallWatch`): after this many seconds
     # without task progress, with waits, during which the person's tracked hands stayed
     # still, plan against the observed pose held still (ITOMP's forecast) until the hands
@@ -217,6 +226,15 @@ class EpisodeCfg:
     # hands whose tracked position (mean of the last 0.5 s) stays within this distance, per
     # coordinate, of where it was count as still [m]
     still_radius: float = 0.08
+    # the person's reaches in the predicting planners' task choice (I-Planner, oracle): a
+    # reach is the straight line, seen from above, from the person's tracked shoulder to a
+    # block the person takes soon (one on its delivery spot, or in the person's hand), and a
+    # delivery spot within this distance of it [m] is crossed. The robot does not fetch a
+    # block whose spot is crossed when a block of the same or the next group of the task
+    # order is not (:func:`defer_crossed_fetch`, metric task/deferred_fetches), and holds a
+    # block it has picked where it picked it while its spot is crossed (task events
+    # delivery_held and delivery_resumed, metric task/held_s); None: off (the paper)
+    task_crossing_radius: float | None = None
 
     def __post_init__(self) -> None:
         for name, kind in (("scenario", ScenarioCfg), ("sim", SimCfg), ("planner", PlannerCfg)):
@@ -251,12 +269,14 @@ class EpisodeCfg:
             "replan_on_goal_change",
             "mask_unavailable_actions",
             "rest_when_nothing_available",
+            "mask_by_order",
         ):
             flag(name, getattr(self, name))
         stall = self.stall_fallback_s
         if stall is not None and (not is_real(stall) or not stall > 0):  # inf: never, as None
             raise ConfigError(f"expected stall_fallback_s > 0 or None, got {stall!r}")
         positive("still_radius", self.still_radius)
+        optional(non_negative, "task_crossing_radius", self.task_crossing_radius)
 
     def scene_cfg(self) -> SceneCfg:
         """The workspace of the scenario."""
@@ -487,6 +507,25 @@ def action_mask(action_names: tuple[str, ...], available: set[int]) -> torch.Ten
         block = _take_block(name)
         keep.append(block is None or block in available)
     return torch.tensor(keep, dtype=torch.bool)
+
+
+def available_blocks(
+    on_spot: set[int], in_hand: set[int], order: Any | None, taken: set[int]
+) -> set[int]:
+    """The blocks the person may take now, for :func:`action_mask`.
+
+    Args:
+        on_spot: blocks that lie on their delivery spots.
+        in_hand: blocks in the person's hand (their take goes on).
+        order: the task order (``allowed_next(taken)``), or None: every block on its spot.
+        taken: blocks the person has taken.
+
+    Returns:
+        ``in_hand`` and the blocks on their spots that ``order`` lets the person take next.
+    """
+    if order is None:
+        return set(on_spot) | set(in_hand)
+    return (set(on_spot) & set(order.allowed_next(set(taken)))) | set(in_hand)
 
 
 def rest_hold(action_names: tuple[str, ...], keep: torch.Tensor) -> torch.Tensor:
@@ -729,6 +768,109 @@ def predictor_task_policy(
     return policy
 
 
+#: Where the person's shoulders are taken to be, seen from above, while the tracker has not
+#: seen them: (x offset from the seat [m], |y| [m]) (the rest pose's shoulders are at the
+#: seat's x and 0.16-0.20 m to each side).
+SEAT_SHOULDER = (0.0, 0.18)
+
+
+def crossed_spots(
+    blocks: list[int],
+    *,
+    pending: set[int],
+    spots: dict[int, np.ndarray],
+    shoulders: dict[str, np.ndarray],
+    radius: float,
+) -> np.ndarray:
+    """Which of ``blocks``' delivery spots the person's reaches for ``pending`` cross.
+
+    Each reach is the straight line, seen from above, from the person's shoulder on the
+    spot's side (``y > 0``: the left) to the spot of a pending block
+    (:func:`~iplanner_torch.planning.task_mdp.reach_crossings`); a block's own reach does not
+    count against its spot.
+
+    Args:
+        blocks: block ids to test.
+        pending: blocks that lie on their delivery spots, which the person takes soon.
+        spots: block id -> (3,) delivery spot [m], for every id in ``blocks`` and ``pending``.
+        shoulders: ``"left"`` / ``"right"`` -> (3,) shoulder position [m].
+        radius: distance from a reach within which a spot counts as crossed [m].
+
+    Returns:
+        (len(blocks),) bool.
+
+    Raises:
+        ConfigError: when a block lacks a spot.
+    """
+    from iplanner_torch.planning.task_mdp import reach_crossings
+
+    missing = sorted((set(blocks) | pending) - set(spots))
+    if missing:
+        raise ConfigError(f"no delivery spot for blocks {missing}")
+    out = np.zeros(len(blocks), dtype=bool)
+    for p in sorted(pending):
+        end = np.asarray(spots[p], dtype=np.float64)
+        start = np.asarray(shoulders["left" if end[1] > 0.0 else "right"], dtype=np.float64)
+        others = [k for k, b in enumerate(blocks) if b != p]
+        if others:
+            pts = np.stack([np.asarray(spots[blocks[k]], dtype=np.float64) for k in others])
+            out[others] |= reach_crossings(start[None], end[None], pts, radius)
+    return out
+
+
+def defer_crossed_fetch(
+    choice: int,
+    *,
+    remaining: set[int],
+    pending: set[int],
+    spots: dict[int, np.ndarray],
+    shoulders: dict[str, np.ndarray],
+    groups: tuple[tuple[int, ...], ...] | None,
+    radius: float,
+) -> int:
+    """The block to fetch instead of ``choice`` when the person's next reach crosses its spot.
+
+    The task planner of the paper picks ``choice`` from the person's predicted next action;
+    it does not know where the person's arm will be. When a block the person takes soon lies
+    on its spot beyond ``choice``'s delivery spot, the robot would deliver into the reach
+    (:func:`crossed_spots`).
+
+    Args:
+        choice: the task planner's block.
+        remaining: blocks not yet fetched (``choice`` among them).
+        pending: blocks that lie on their delivery spots, which the person takes soon.
+        spots: block id -> (3,) delivery spot [m], for every id in ``remaining | pending``.
+        shoulders: ``"left"`` / ``"right"`` -> (3,) shoulder position [m].
+        groups: the task order's groups (``TaskOrder.groups``), or None (one group).
+        radius: distance from a reach within which a spot counts as crossed [m].
+
+    Returns:
+        ``choice`` when no reach crosses its spot; else the block of the earliest group (then
+        the smallest id) among those of ``choice``'s group and the next one whose spots no
+        reach crosses; ``choice`` when there is none.
+
+    Raises:
+        ConfigError: when ``choice`` is not in ``remaining``, or a block lacks a spot.
+    """
+    if choice not in remaining:
+        raise ConfigError(
+            f"expected choice {choice} among the remaining blocks {sorted(remaining)}"
+        )
+    cand = sorted(remaining)
+    crossed = crossed_spots(cand, pending=pending, spots=spots, shoulders=shoulders, radius=radius)
+    if not crossed[cand.index(choice)]:
+        return choice
+
+    def group(i: int) -> int:
+        if groups is None:
+            return 0
+        return next((k for k, g in enumerate(groups) if i in g), len(groups))
+
+    limit = group(choice) + 1
+    free = [i for i, c in zip(cand, crossed, strict=True) if not c and group(i) <= limit]
+    return min(free, key=lambda i: (group(i), i)) if free else choice
+
+
 def _run_episode(
     cfg: EpisodeCfg,
     *,
@@ -842,7 +984,28 @@ def _run_episode(
         if writer is not None:
             writer.task_event(t, kind, {"block": block})
 
+    crossing = cfg.task_crossing_radius if forecasts_motion and not blocking else None
+    spots = {i: scene.delivery_position(i) for i in scene.block_ids}
+    deferred = 0  # fetches moved off a spot the person's next reach crosses
+    held: int | None = None  # the carried block held back while a reach crosses its spot
+    held_s = 0.0
+
+    def shoulders() -> dict[str, np.ndarray]:
+        pose = np.asarray(tracker.latest_pose(), dtype=np.float64)
+        out = {}
+        for side, sign in (("left", 1.0), ("right", -1.0)):
+            p = pose[JOINT_INDEX[f"{side}_shoulder"]]
+            seat = [scene.human_seat_x + SEAT_SHOULDER[0], sign * SEAT_SHOULDER[1], 0.0]
+            out[side] = p if np.isfinite(p).all() else np.asarray(seat)
+        return out
+
+    def pending_reaches() -> set[int]:
+        """Blocks whose reach the person makes soon or makes now: those on their delivery
+        spots and the one in the person's hand (its reach back crosses the same spots)."""
+        return set(env.delivered) | {i for i, s in env.block_state.items() if s == "human"}
+
     def choose_next() -> int | None:
+        nonlocal deferred
         fetched = (
             set(env.delivered)
             | set(env.taken)
@@ -851,9 +1014,38 @@ def _run_episode(
         if len(fetched) == len(scene.block_ids):
             return None
         if task_policy is not None:
-            return task_policy(set(env.taken), fetched)
-        nxt = next_feasible(order, fetched, scene.block_ids)  # type: ignore[arg-type]
-        return None if nxt < 0 else nxt
+            nxt = task_policy(set(env.taken), fetched)
+        else:
+            first = next_feasible(order, fetched, scene.block_ids)  # type: ignore[arg-type]
+            nxt = None if first < 0 else first
+        if nxt is None or crossing is None or nxt in fetched:
+            return nxt
+        choice = defer_crossed_fetch(
+            nxt,
+            remaining=set(scene.block_ids) - fetched,
+            pending=pending_reaches(),
+            spots=spots,
+            shoulders=shoulders(),
+            groups=getattr(order, "groups", None),
+            radius=crossing,
+        )
+        deferred += int(choice != nxt)
+        return choice
+
+    def reach_crosses(block: int) -> bool:
+        """Whether a reach for a block on its spot crosses ``block``'s spot (the option on)."""
+        reaching = pending_reaches()
+        if crossing is None or not reaching:
+            return False
+        return bool(
+            crossed_spots(
+                [block],
+                pending=reaching,
+                spots=spots,
+                shoulders=shoulders(),
+                radius=crossing,
+            )[0]
+        )
 
     def start_next(t: float) -> torch.Tensor:
         nxt = choose_next()
@@ -931,9 +1123,12 @@ def _run_episode(
                     )
                     predict_ms.append(1e3 * (time.perf_counter() - w0))
                     if cfg.mask_unavailable_actions and action_names and not blocking:
-                        available = set(env.delivered) | {
-                            i for i, st in env.block_state.items() if st == "human"
-                        }
+                        available = available_blocks(
+                            set(env.delivered),
+                            {i for i, st in env.block_state.items() if st == "human"},
+                            order if cfg.mask_by_order else None,
+                            set(env.taken),
+                        )
                         keep = action_mask(action_names, available)
                         forecast = forecast.mask_actions(keep)
                         if cfg.rest_when_nothing_available:
@@ -1017,7 +1212,12 @@ def _run_episode(
                     watch.observe_progress(ev.time)
                 q_now = tens(env.robot_q())
                 if ev.kind == "picked":
-                    replanner.set_goal(ik(env.fetch.target_point(), q_now), t)  # type: ignore[union-attr]
+                    if reach_crosses(ev.block):  # hold it where it was picked, clear of the reach
+                        held = ev.block
+                        record(t, "delivery_held", ev.block)
+                        replanner.set_goal(q_now, t)
+                    else:
+                        replanner.set_goal(ik(env.fetch.target_point(), q_now), t)  # type: ignore[union-attr]
                     goal_changed = True
                 elif ev.kind == "delivered":
                     replanner.set_goal(start_next(t) if cfg.direct_next_fetch else q_home, t)
@@ -1027,6 +1227,14 @@ def _run_episode(
                     goal_changed = True
                 elif ev.kind == "done":
                     t_done = ev.time
+            if held is not None:
+                held_s += env.control_dt
+                if not reach_crosses(held):
+                    record(t, "delivery_resumed", held)
+                    held = None
+                    target = env.fetch.target_point()  # type: ignore[union-attr]
+                    replanner.set_goal(ik(target, tens(env.robot_q())), t)
+                    goal_changed = True
             if goal_changed and cfg.replan_on_goal_change:
                 next_cycle = t
             if info.new_contact:
@@ -1073,6 +1281,8 @@ def _run_episode(
                 "plan/escapes": float(getattr(stats, "escapes", 0)),
                 "plan/emergencies": float(getattr(stats, "emergencies", 0)),
                 "plan/stall_cycles": float(stall_cycles),
+                "task/deferred_fetches": float(deferred),
+                "task/held_s": float(held_s),
                 "plan/mean_solve_ms": float(getattr(stats, "mean_solve_ms", 0.0)),
                 "eval/completed": float(t_done is not None or (blocking and t_goal is not None)),
             }

@@ -28,7 +28,7 @@ from typing import Protocol
 import numpy as np
 
 from iplanner_torch import checks
-from iplanner_torch.errors import CheckpointError, ConfigError, DataError
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
 
 
 class TaskOrderLike(Protocol):
@@ -176,6 +176,55 @@ def _numeric_table(table: object) -> np.ndarray:
         return np.asarray(table, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise DataError(f"expected h_table a numeric (n, n) table, got {exc}") from exc
+
+
+def reach_crossings(
+    starts: np.ndarray, ends: np.ndarray, points: np.ndarray, radius: float
+) -> np.ndarray:
+    """Which points lie within ``radius`` of a person's reach, seen from above.
+
+    A reach is the straight segment from ``starts[k]`` (the shoulder) to ``ends[k]`` (the
+    spot of a block the person is about to take); only x and y count, the table's plane, since
+    the hand passes over what lies below its path. A delivery spot near a reach is one where a
+    robot that delivers there meets the person's arm (``EpisodeCfg.task_crossing_radius``).
+
+    Args:
+        starts: (P, D) reach starts [m], D >= 2 (x, y first).
+        ends: (P, D) reach ends [m].
+        points: (N, D) points to test [m].
+        radius: distance within which a point counts as crossed [m], finite and >= 0.
+
+    Returns:
+        (N,) bool: point ``n`` lies within ``radius`` of at least one reach (all False for
+        P = 0).
+
+    Raises:
+        ShapeError: when the arrays are not (P, D), (P, D) and (N, D) with D >= 2, or hold
+            anything but real numbers.
+        DataError: when one of them holds NaN or inf.
+        ConfigError: when ``radius`` is not a finite number >= 0.
+    """
+    radius = checks.non_negative("radius", radius)
+    a = checks.real_array("starts", starts).astype(np.float64)
+    b = checks.real_array("ends", ends).astype(np.float64)
+    x = checks.real_array("points", points).astype(np.float64)
+    if a.ndim != 2 or a.shape[1] < 2 or b.shape != a.shape:
+        raise ShapeError(
+            f"expected starts and ends (P, D) with D >= 2, got {a.shape} and {b.shape}"
+        )
+    if x.ndim != 2 or x.shape[1] != a.shape[1]:
+        raise ShapeError(f"expected points (N, {a.shape[1]}), got {x.shape}")
+    for name, arr in (("starts", a), ("ends", b), ("points", x)):
+        if not np.isfinite(arr).all():
+            raise DataError(f"expected finite {name}, got NaN or inf")
+    a, b, x = a[:, :2], b[:, :2], x[:, :2]
+    d = b - a  # (P, 2)
+    len2 = (d * d).sum(-1)  # (P,)
+    rel = x[:, None, :] - a[None, :, :]  # (N, P, 2)
+    s = np.where(len2 > 0, (rel * d).sum(-1) / np.where(len2 > 0, len2, 1.0), 0.0)
+    foot = a[None] + np.clip(s, 0.0, 1.0)[..., None] * d[None]  # (N, P, 2)
+    dist = np.linalg.norm(x[:, None, :] - foot, axis=-1)  # (N, P)
+    return (dist <= radius).any(axis=1) if dist.shape[1] else np.zeros(len(x), dtype=bool)
 
 
 class TaskPlanner:

@@ -134,11 +134,18 @@ def next_feasible(order: TaskOrderLike, delivered: set[int], all_ids: tuple[int,
     """The default task choice: the smallest undelivered id the order allows next.
 
     The robot treats the blocks it has delivered as done, so its deliveries follow a valid
-    order; -1 when nothing is left.
+    order; -1 when nothing is left. With an order that has groups (``TaskOrder``), the
+    smallest undelivered id of the earliest group that has one, which is the same block and
+    is defined too when the deliveries broke the order (a fetch moved off the person's reach,
+    ``EpisodeCfg.task_crossing_radius``); ids the order does not name come last.
     """
     remaining = [i for i in all_ids if i not in delivered]
     if not remaining:
         return -1
+    groups = getattr(order, "groups", None)
+    if groups is not None:
+        rank = {i: k for k, g in enumerate(groups) for i in g}
+        return min(remaining, key=lambda i: (rank.get(i, len(groups)), i))
     allowed = order.allowed_next(set(delivered))
     for i in sorted(remaining):
         if i in allowed:

@@ -10,8 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iplanner_torch.errors import CheckpointError, ConfigError, DataError
-from iplanner_torch.planning.task_mdp import TaskMDPCfg, TaskPlanner, decode_state, encode_state
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
+from iplanner_torch.planning.task_mdp import (
+    TaskMDPCfg,
+    TaskPlanner,
+    decode_state,
+    encode_state,
+    reach_crossings,
+)
 
 
 class StrictOrder:
@@ -360,3 +366,43 @@ def test_the_other_public_methods_refuse_a_state_or_action_out_of_range(
     with pytest.raises(ConfigError, match=match):
         call(planner)
     assert planner.human_next_probs({0}).tolist() == [0.0, 1.0]  # a set of indices works too
+
+
+def test_reach_crossings_against_points_sampled_along_the_reaches() -> None:
+    """The closest point of each reach, seen from above, against 20,001 points sampled on it;
+    the heights (third coordinate) play no part."""
+    rng = np.random.default_rng(3)
+    starts = rng.uniform(-0.5, 0.5, (4, 3))
+    ends = rng.uniform(-0.5, 0.5, (4, 3))
+    ends[3] = starts[3]  # a reach of length 0: a point
+    points = rng.uniform(-0.6, 0.6, (300, 3))
+    s = np.linspace(0.0, 1.0, 20001)[:, None, None]
+    samples = starts[None, :, :2] + s * (ends - starts)[None, :, :2]  # (S, P, 2)
+    dist = np.linalg.norm(points[:, None, None, :2] - samples[None], axis=-1).min(axis=(1, 2))
+    for radius in (0.02, 0.1, 0.25):
+        clear = np.abs(dist - radius) > 1e-4  # leave out points on the edge of the sampling
+        got = reach_crossings(starts, ends, points, radius)
+        assert clear.sum() > 250
+        np.testing.assert_array_equal(got[clear], (dist <= radius)[clear])
+    lifted = points.copy()
+    lifted[:, 2] += 5.0
+    np.testing.assert_array_equal(
+        reach_crossings(starts, ends, lifted, 0.1), reach_crossings(starts, ends, points, 0.1)
+    )
+    assert not reach_crossings(np.zeros((0, 3)), np.zeros((0, 3)), points, 1.0).any()
+
+
+@pytest.mark.parametrize(
+    ("args", "error", "match"),
+    [
+        ((np.zeros((2, 3)), np.zeros((1, 3)), np.zeros((1, 3)), 0.1), ShapeError, "starts"),
+        ((np.zeros((2, 1)), np.zeros((2, 1)), np.zeros((1, 1)), 0.1), ShapeError, "D >= 2"),
+        ((np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((1, 2)), 0.1), ShapeError, "points"),
+        ((np.zeros((1, 3)), np.full((1, 3), np.nan), np.zeros((1, 3)), 0.1), DataError, "ends"),
+        ((np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)), -0.1), ConfigError, "radius"),
+        ((np.zeros((1, 3)), np.zeros((1, 3)), [["a", "b", "c"]], 0.1), ShapeError, "points"),
+    ],
+)
+def test_reach_crossings_bad_input(args: tuple, error: type, match: str) -> None:
+    with pytest.raises(error, match=match):
+        reach_crossings(*args)

@@ -28,6 +28,26 @@ def test_orders_of_the_paper_table() -> None:
         ScenarioCfg(confidence=1.0)
 
 
+def test_next_feasible_after_deliveries_out_of_order() -> None:
+    """A robot that delivered a later block first (moved off the person's reach) still gets
+    the earliest block of the order it has not delivered, where ``allowed_next`` of its
+    deliveries would refuse them as an order the person could not follow."""
+    ids = (0, 1, 2, 3, 4, 5, 6, 7)
+    order = parse_order("4->0->5->1->6->2->7->3", ids)
+    with pytest.raises(ConfigError, match="breaks the order"):
+        order.allowed_next({4, 5})
+    assert next_feasible(order, {4, 5}, ids) == 0
+    assert next_feasible(order, {4, 5, 0, 6}, ids) == 1
+    groups = parse_order("(0,4)->(1,5)->(2,6)->(3,7)", ids)
+    assert next_feasible(groups, {4, 1}, ids) == 0
+    assert next_feasible(groups, {0, 4, 5, 6}, ids) == 1
+    # in order, the same block as the smallest id the order allows next
+    for done in ({4}, {4, 0}, {4, 0, 5, 1, 6}):
+        assert next_feasible(order, done, ids) == min(order.allowed_next(done))
+    partial = parse_order("1->0", (0, 1, 2, 3))  # blocks the order leaves out come last
+    assert next_feasible(partial, {1, 0}, (0, 1, 2, 3)) == 2
+
+
 def test_conf_option_files_instantiate() -> None:
     from hydra.utils import instantiate
     from omegaconf import OmegaConf
