@@ -457,7 +457,8 @@ def check_run_keys(cfg: DictConfig) -> None:
     alone trains nothing, so ``run.train_if_missing`` and ``run.train_trainer`` would pass
     unseen), naming the full key: ``run.train_if_missing`` must be a bool,
     ``run.train_trainer`` a ``conf/trainer`` option, ``run.stall_fallback_s`` null or a number
-    > 0 [s] (``EpisodeCfg.stall_fallback_s``).
+    > 0 [s] (``EpisodeCfg.stall_fallback_s``), ``run.task_crossing_radius`` null or a number
+    >= 0 [m], ``run.mask_by_order`` and ``run.rest_when_nothing_available`` bools.
 
     Raises:
         ConfigError: naming the key, what it expects and what it got.
@@ -482,6 +483,17 @@ def check_run_keys(cfg: DictConfig) -> None:
                 f"run.stall_fallback_s: expected a number > 0 [s] or null (never), got "
                 f"{_plain(stall)!r}"
             )
+    if "task_crossing_radius" in run:
+        radius = run.task_crossing_radius
+        ok = radius is None or (fits_kind(radius, float) and 0 <= float(radius) < math.inf)
+        if not ok:
+            raise ConfigError(
+                f"run.task_crossing_radius: expected a distance >= 0 [m] or null (off), got "
+                f"{_plain(radius)!r}"
+            )
+    for key in ("mask_by_order", "rest_when_nothing_available"):
+        if key in run:
+            cfg_scalar(run, key, bool)
 
 
 class _Tee:

@@ -365,6 +365,9 @@ RUN_EPISODE_PATHS = {
     "run.max_duration_s": "max_duration_s",
     "run.stall_fallback_s": "stall_fallback_s",
     "run.scene_hz": "scene_hz",
+    "run.task_crossing_radius": "task_crossing_radius",
+    "run.mask_by_order": "mask_by_order",
+    "run.rest_when_nothing_available": "rest_when_nothing_available",
 }
 
 
@@ -498,6 +501,9 @@ def merged_episode_node(cfg: DictConfig, overrides: list[str] | None = None) -> 
             "max_duration_s": cfg_scalar(cfg.run, "max_duration_s", float),
             "stall_fallback_s": cfg.run.stall_fallback_s,
             "scene_hz": cfg_scalar(cfg.run, "scene_hz", float),
+            "task_crossing_radius": cfg.run.get("task_crossing_radius", 0.1),
+            "mask_by_order": cfg.run.get("mask_by_order", True),
+            "rest_when_nothing_available": cfg.run.get("rest_when_nothing_available", True),
             "progress_bar": cfg_scalar(cfg, "progress", bool),
         }
     )

@@ -26,14 +26,17 @@ With ``mask_unavailable_actions`` (default) the forecast is also conditioned on 
 the robot knows: taking a block that is not on its delivery spot gets weight 0
 (:func:`action_mask`, :meth:`Forecast.mask_actions`); an idle person who waits for block ``i``
 is then not predicted to reach for the empty spot ``i`` the robot must deliver to. With
-``rest_when_nothing_available`` (off by default), when no block is available to the person at
-all, the ``idle`` action's forecast is held at its first frame (:meth:`Forecast.hold_actions`):
-the spread that the idle forecast learns from demonstrations is the chance that a reach starts
-within the horizon, and no reach can start then. It cut the I-Planner's waits (iiwa, 20 seeds
-of 7 scenarios: fewer in 5 of 7, still no contact) without a gain in efficiency, and it made
-the Fetch arm less safe (contact-free in 60 instead of 66 of 70 episodes), so it is an option
-(``experiments/safety_seeds/README.md``). With ``mask_by_order`` a block on its spot that
-the task order does not let the person take yet counts as unavailable too.
+``mask_by_order`` (default) a block on its spot that the task order does not let the person
+take yet counts as unavailable too. With ``rest_when_nothing_available`` (default), when no
+block is available to the person at all, the ``idle`` action's forecast is held at its first
+frame (:meth:`Forecast.hold_actions`): the spread that the idle forecast learns from
+demonstrations is the chance that a reach starts within the horizon, and no reach can start
+then. Alone, before the other two settings, it cut the I-Planner's waits (iiwa, 20 seeds of 7
+scenarios: fewer in 5 of 7, still no contact) without a gain in efficiency, and it made the
+Fetch arm less safe (contact-free in 60 instead of 66 of 70 episodes); the three together
+(``task_crossing_radius`` below) left the iiwa without contact in 140 of 140 table episodes
+and the Fetch arm in 139 of 140 (138 before), at an efficiency of 1.64-1.83
+(``experiments/safety_seeds/README.md``).
 A predicting planner can wait for a reach the person never starts, e.g. for a delivered
 block the person leaves on its spot while waiting for another one; the person then waits for
 the robot. When ``stall_fallback_s`` (5 s) pass without task progress while the person's
@@ -211,13 +214,14 @@ class EpisodeCfg:
     # delivery spot (not delivered yet, or already taken) is set to 0 (:func:`action_mask`)
     mask_unavailable_actions: bool = True
     # with the mask on and no block available to the person, hold the idle action's forecast
-    # at its first frame: a person with nothing to take is predicted to stay at rest (off: it
-    # made the Fetch arm less safe, see the module docstring)
-    rest_when_nothing_available: bool = False
+    # at its first frame: a person with nothing to take is predicted to stay at rest (on by
+    # default with mask_by_order and task_crossing_radius since they came together; alone,
+    # before them, it made the Fetch arm less safe: see the module docstring)
+    rest_when_nothing_available: bool = True
     # with the mask on, a block on its spot that the task order does not let the person take
     # yet counts as unavailable too (the robot knows the order: the person takes 6 only after
-    # 1 in 4->0->5->1->6); off: every block on its spot is available
-    mask_by_order: bool = False
+    # 1 in 4->0->5->1->6); False: every block on its spot is available
+    mask_by_order: bool = True
     # stall fallback of the predicting planners (:class:`StallWatch`): after this many seconds
     # without task progress, with waits, during which the person's tracked hands stayed
     # still, plan against the observed pose held still (ITOMP's forecast) until the hands
@@ -233,8 +237,9 @@ class EpisodeCfg:
     # block whose spot is crossed when a block of the same or the next group of the task
     # order is not (:func:`defer_crossed_fetch`, metric task/deferred_fetches), and holds a
     # block it has picked where it picked it while its spot is crossed (task events
-    # delivery_held and delivery_resumed, metric task/held_s); None: off (the paper)
-    task_crossing_radius: float | None = None
+    # delivery_held and delivery_resumed, metric task/held_s); None: off (the paper; the
+    # three settings together: experiments/reach_across/ and experiments/safety_seeds/)
+    task_crossing_radius: float | None = 0.1
 
     def __post_init__(self) -> None:
         for name, kind in (("scenario", ScenarioCfg), ("sim", SimCfg), ("planner", PlannerCfg)):

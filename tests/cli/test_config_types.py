@@ -179,6 +179,19 @@ def test_console_script_reports_a_wrong_type_in_one_line(tmp_path: Path) -> None
             {"run": {"stall_fallback_s": 0}},
             "run.stall_fallback_s: expected a number > 0 [s] or null (never), got 0",
         ),
+        (
+            {"run": {"task_crossing_radius": -0.1}},
+            "run.task_crossing_radius: expected a distance >= 0 [m] or null (off), got -0.1",
+        ),
+        (
+            {"run": {"task_crossing_radius": "near"}},
+            "run.task_crossing_radius: expected a distance >= 0 [m] or null (off), got 'near'",
+        ),
+        ({"run": {"mask_by_order": "yes"}}, "run.mask_by_order: expected bool, got 'yes'"),
+        (
+            {"run": {"rest_when_nothing_available": 1}},
+            "run.rest_when_nothing_available: expected bool, got 1",
+        ),
     ],
 )
 def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
@@ -193,6 +206,13 @@ def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
     # the optional paths may be null, and evaluate.logs a list; the run.* defaults pass
     check_root_keys(OmegaConf.create({"evaluate": {"out_dir": None, "logs": ["a", "b"]}}))
     run = {"train_if_missing": False, "train_trainer": "fast", "stall_fallback_s": None}
+    check_root_keys(OmegaConf.create({"run": run}))
+    run = {
+        "task_crossing_radius": None,
+        "mask_by_order": False,
+        "rest_when_nothing_available": True,
+    }
+    check_root_keys(OmegaConf.create({"run": {**run, "task_crossing_radius": 0.1}}))
     check_root_keys(OmegaConf.create({"run": run}))
     with pytest.raises(ConfigError) as err:
         check_root_keys(OmegaConf.create(root))

@@ -122,3 +122,28 @@ def test_bad_entry_on_the_command_line_is_one_line_before_anything_runs(
     assert stop.value.code == 2
     assert lines == [line]
     assert not (tmp_path / "run" / "episodes").exists()
+
+
+@pytest.mark.parametrize(
+    ("overrides", "want"),
+    [
+        ([], (0.1, True, True)),
+        (["run.task_crossing_radius=null"], (None, True, True)),
+        (
+            ["run.mask_by_order=false", "run.rest_when_nothing_available=false"],
+            (0.1, False, False),
+        ),
+        (["experiment=reach_across", "run.task_crossing_radius=0.2"], (0.2, True, True)),
+    ],
+)
+def test_task_choice_settings_reach_the_episode(overrides: list[str], want: tuple) -> None:
+    """The ``run.*`` keys of the person's reaches in the task choice feed every episode of the
+    main job and of an experiment."""
+    cfg = compose(config_name="config", overrides=overrides)
+    episode = instantiate(merged_episode_node(cfg, overrides), EpisodeCfg)
+    got = (
+        episode.task_crossing_radius,
+        episode.mask_by_order,
+        episode.rest_when_nothing_available,
+    )
+    assert got == want
