@@ -236,8 +236,9 @@ class EpisodeCfg:
     # delivery spot within this distance of it [m] is crossed. The robot does not fetch a
     # block whose spot is crossed when a block of the same or the next group of the task
     # order is not (:func:`defer_crossed_fetch`, metric task/deferred_fetches), and holds a
-    # block it has picked where it picked it while its spot is crossed (task events
-    # delivery_held and delivery_resumed, metric task/held_s); None: off (the paper; the
+    # block it has picked where it picked it while its spot is crossed and the person has a
+    # take under way or a block to take (task events delivery_held and delivery_resumed,
+    # metric task/held_s); None: off (the paper; the
     # three settings together: experiments/reach_across/ and experiments/safety_seeds/)
     task_crossing_radius: float | None = 0.1
 
@@ -1038,19 +1039,23 @@ def _run_episode(
         return choice
 
     def reach_crosses(block: int) -> bool:
-        """Whether a reach for a block on its spot crosses ``block``'s spot (the option on)."""
+        """Whether ``block`` must wait clear of a reach (the option on): a reach for a block
+        the person takes soon crosses its spot, and the person can go on meanwhile (a take
+        under way, or a block on its spot the order lets the person take; else the person
+        waits for ``block`` itself, as when the order puts it before the crossing block, and
+        the hold would never end)."""
         reaching = pending_reaches()
         if crossing is None or not reaching:
             return False
-        return bool(
-            crossed_spots(
-                [block],
-                pending=reaching,
-                spots=spots,
-                shoulders=shoulders(),
-                radius=crossing,
-            )[0]
+        crossed = crossed_spots(
+            [block], pending=reaching, spots=spots, shoulders=shoulders(), radius=crossing
         )
+        if not crossed[0]:
+            return False
+        if any(st == "human" for st in env.block_state.values()):
+            return True  # a take under way (the block in the person's hand)
+        allowed = set(order.allowed_next(set(env.taken)))  # type: ignore[union-attr]
+        return bool(allowed & set(env.delivered))
 
     def start_next(t: float) -> torch.Tensor:
         nxt = choose_next()

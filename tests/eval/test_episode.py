@@ -877,3 +877,32 @@ def test_available_blocks_by_order() -> None:
     assert available_blocks({6}, set(), order, {4, 0, 5}) == set()  # 6 only after 1
     assert available_blocks({1, 6}, {5}, order, {4, 0}) == {5}
     assert available_blocks({1, 6}, set(), order, {4, 0, 5}) == {1}
+
+
+@pytest.mark.filterwarnings("ignore:task order .* leaves blocks")
+def test_a_held_block_the_person_needs_first_is_not_held_for_good(tmp_path: Path) -> None:
+    """The robot delivers back block 4 first although the person must take front block 0
+    before it: the reach for 4 crosses spot 0, but the person cannot make it before taking
+    0, and has nothing else to take, so block 0 is not held back (the hold would never end)."""
+
+    def policy(taken: set[int], fetched: set[int]) -> int | None:
+        return next((i for i in (4, 0, 1, 2, 3, 5, 6, 7) if i not in fetched), None)
+
+    cfg = EpisodeCfg(
+        scenario=ScenarioCfg(arrangement="2x4", task_order="0->4"), max_duration_s=30.0
+    )
+    res = run_episode(
+        cfg,
+        robot=fakes.FakeArm(tmp_path),
+        predictor=None,
+        planner_kind="oracle",
+        writer_path=None,
+        seed=0,
+        replanner=fakes.LinearReplanner(speed=1.5),
+        motion=fakes.FakeMotion(),
+        task_policy=policy,
+    )
+    assert res.metrics["eval/completed"] == 1.0
+    assert [b for _, k, b in res.events if k == "human_took"] == [0, 4]
+    assert [b for _, k, b in res.events if k == "fetch_started"][:2] == [4, 0]
+    assert res.metrics["task/held_s"] == 0.0
