@@ -501,10 +501,13 @@ def merged_episode_node(cfg: DictConfig, overrides: list[str] | None = None) -> 
             "max_duration_s": cfg_scalar(cfg.run, "max_duration_s", float),
             "stall_fallback_s": cfg.run.stall_fallback_s,
             "scene_hz": cfg_scalar(cfg.run, "scene_hz", float),
-            "task_crossing_radius": cfg.run.get("task_crossing_radius", 0.1),
-            "mask_by_order": cfg.run.get("mask_by_order", True),
-            "rest_when_nothing_available": cfg.run.get("rest_when_nothing_available", True),
             "progress_bar": cfg_scalar(cfg, "progress", bool),
+            # the task-choice keys when the run group has them (else EpisodeCfg's defaults)
+            **{
+                key: cfg.run[key]
+                for key in ("task_crossing_radius", "mask_by_order", "rest_when_nothing_available")
+                if key in cfg.run
+            },
         }
     )
     given = [

@@ -117,7 +117,7 @@ from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.sim.env import SimCfg, SimEnv
 from iplanner_torch.sim.human import MotionSource, ReachingMotionSource, ScriptedHuman
 from iplanner_torch.sim.scene import SceneCfg
-from iplanner_torch.sim.tasks import ScenarioCfg, next_feasible, parse_order
+from iplanner_torch.sim.tasks import ScenarioCfg, group_ranks, next_feasible, parse_order
 from iplanner_torch.sim.tracker import Tracker
 from iplanner_torch.types import torch_threads
 
@@ -867,10 +867,10 @@ def defer_crossed_fetch(
     if not crossed[cand.index(choice)]:
         return choice
 
+    rank = group_ranks(groups) if groups is not None else {}
+
     def group(i: int) -> int:
-        if groups is None:
-            return 0
-        return next((k for k, g in enumerate(groups) if i in g), len(groups))
+        return rank.get(i, len(groups)) if groups is not None else 0
 
     limit = group(choice) + 1
     free = [i for i, c in zip(cand, crossed, strict=True) if not c and group(i) <= limit]
@@ -1005,10 +1005,14 @@ def _run_episode(
             out[side] = p if np.isfinite(p).all() else np.asarray(seat)
         return out
 
+    def in_hand() -> set[int]:
+        """Blocks in the person's hand (a take under way, past the grasp)."""
+        return {i for i, st in env.block_state.items() if st == "human"}
+
     def pending_reaches() -> set[int]:
         """Blocks whose reach the person makes soon or makes now: those on their delivery
         spots and the one in the person's hand (its reach back crosses the same spots)."""
-        return set(env.delivered) | {i for i, s in env.block_state.items() if s == "human"}
+        return set(env.delivered) | in_hand()
 
     def choose_next() -> int | None:
         nonlocal deferred
@@ -1052,8 +1056,8 @@ def _run_episode(
         )
         if not crossed[0]:
             return False
-        if any(st == "human" for st in env.block_state.values()):
-            return True  # a take under way (the block in the person's hand)
+        if in_hand():
+            return True  # a take under way
         allowed = set(order.allowed_next(set(env.taken)))  # type: ignore[union-attr]
         return bool(allowed & set(env.delivered))
 
@@ -1135,7 +1139,7 @@ def _run_episode(
                     if cfg.mask_unavailable_actions and action_names and not blocking:
                         available = available_blocks(
                             set(env.delivered),
-                            {i for i, st in env.block_state.items() if st == "human"},
+                            in_hand(),
                             order if cfg.mask_by_order else None,
                             set(env.taken),
                         )

@@ -224,7 +224,7 @@ def reach_crossings(
     s = np.where(len2 > 0, (rel * d).sum(-1) / np.where(len2 > 0, len2, 1.0), 0.0)
     foot = a[None] + np.clip(s, 0.0, 1.0)[..., None] * d[None]  # (N, P, 2)
     dist = np.linalg.norm(x[:, None, :] - foot, axis=-1)  # (N, P)
-    return (dist <= radius).any(axis=1) if dist.shape[1] else np.zeros(len(x), dtype=bool)
+    return (dist <= radius).any(axis=1)  # (N,); all False for P = 0
 
 
 class TaskPlanner:

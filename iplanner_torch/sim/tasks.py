@@ -17,6 +17,7 @@ carried kinematically: it keeps the offset it had to the tool point at pick time
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 from typing import Literal
@@ -130,6 +131,11 @@ def parse_order(
     return order
 
 
+def group_ranks(groups: Sequence[Sequence[int]]) -> dict[int, int]:
+    """Block id -> the index of its group in a task order's groups (``TaskOrder.groups``)."""
+    return {i: k for k, g in enumerate(groups) for i in g}
+
+
 def next_feasible(order: TaskOrderLike, delivered: set[int], all_ids: tuple[int, ...]) -> int:
     """The default task choice: the smallest undelivered id the order allows next.
 
@@ -144,7 +150,7 @@ def next_feasible(order: TaskOrderLike, delivered: set[int], all_ids: tuple[int,
         return -1
     groups = getattr(order, "groups", None)
     if groups is not None:
-        rank = {i: k for k, g in enumerate(groups) for i in g}
+        rank = group_ranks(groups)
         return min(remaining, key=lambda i: (rank.get(i, len(groups)), i))
     allowed = order.allowed_next(set(delivered))
     for i in sorted(remaining):
