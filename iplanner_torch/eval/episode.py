@@ -16,8 +16,9 @@ Loop (synchronous; simulated time stops while the planner thinks, and
    undelivered id the task order allows. With ``task_crossing_radius`` the predicting
    planners also keep the person's reaches in view: the next ``Fetch_i`` moves off a spot
    that a reach for a block the person takes soon crosses, and a picked block whose spot a
-   reach crosses is held where it was picked until no reach does (``delivery_held``,
-   ``delivery_resumed``). A goal change starts a replanning cycle at once
+   reach crosses is held at its pick pose until no reach does (``delivery_held``,
+   ``delivery_resumed``; the goal stays the pick pose, so an arm that picks on the move
+   stops there rather than turning back). A goal change starts a replanning cycle at once
    (``replan_on_goal_change``; the new plan still takes over ``m`` later, as every plan).
 
 The progress state given to the predictor is the bitmask of the human's completed ``Take_i``
@@ -236,7 +237,7 @@ class EpisodeCfg:
     # delivery spot within this distance of it [m] is crossed. The robot does not fetch a
     # block whose spot is crossed when a block of the same or the next group of the task
     # order is not (:func:`defer_crossed_fetch`, metric task/deferred_fetches), and holds a
-    # block it has picked where it picked it while its spot is crossed and the person has a
+    # block it has picked at its pick pose while its spot is crossed and the person has a
     # take under way or a block to take (task events delivery_held and delivery_resumed,
     # metric task/held_s); None: off (the paper; the
     # three settings together: experiments/reach_across/ and experiments/safety_seeds/)
@@ -1226,13 +1227,12 @@ def _run_episode(
                     watch.observe_progress(ev.time)
                 q_now = tens(env.robot_q())
                 if ev.kind == "picked":
-                    if reach_crosses(ev.block):  # hold it where it was picked, clear of the reach
+                    if reach_crosses(ev.block):  # hold it at the pick pose (the goal stays)
                         held = ev.block
                         record(t, "delivery_held", ev.block)
-                        replanner.set_goal(q_now, t)
                     else:
                         replanner.set_goal(ik(env.fetch.target_point(), q_now), t)  # type: ignore[union-attr]
-                    goal_changed = True
+                        goal_changed = True
                 elif ev.kind == "delivered":
                     replanner.set_goal(start_next(t) if cfg.direct_next_fetch else q_home, t)
                     goal_changed = True

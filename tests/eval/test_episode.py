@@ -823,16 +823,25 @@ def test_no_delivery_into_a_reach_that_crosses_its_spot(tmp_path: Path) -> None:
     # the first two columns (the stand-in arm's IK does not find every block of the second
     # pair from where this order leaves it); the scene's other blocks come after
     order = "4->0->5->1"
-    runs = {}
+
+    class GoalLog(fakes.LinearReplanner):
+        def __init__(self, speed: float) -> None:
+            super().__init__(speed)
+            self.goal_times: list[float] = []
+
+        def set_goal(self, q_goal, t=None) -> None:
+            self.goal_times.append(t)
+            super().set_goal(q_goal, t)
+
+    runs, replanners = {}, {}
     for radius in (None, 0.1):
         cfg = EpisodeCfg(
             scenario=ScenarioCfg(arrangement="2x4", task_order=order),
             max_duration_s=40.0,
             task_crossing_radius=radius,
         )
-        runs[radius] = _fake_episode(
-            tmp_path, cfg, "oracle", fakes.LinearReplanner(speed=1.5), seed=0
-        )
+        replanners[radius] = GoalLog(speed=1.5)
+        runs[radius] = _fake_episode(tmp_path, cfg, "oracle", replanners[radius], seed=0)
     assert (0, 4) in into_reaches(runs[None])
     on = runs[0.1]
     assert into_reaches(on) == []
@@ -843,6 +852,10 @@ def test_no_delivery_into_a_reach_that_crosses_its_spot(tmp_path: Path) -> None:
     assert on.metrics["task/deferred_fetches"] >= 1
     held = [b for _, k, b in on.events if k == "delivery_held"]
     assert held and held == [b for _, k, b in on.events if k == "delivery_resumed"]
+    # a held block keeps the pick goal: the arm, still moving when it picks, stops there
+    # instead of turning back to where the pick was detected
+    held_at = [t for t, k, _ in on.events if k == "delivery_held"]
+    assert not set(held_at) & set(replanners[0.1].goal_times)
     assert on.metrics["task/held_s"] > 0
     assert runs[None].metrics["task/deferred_fetches"] == 0
     assert runs[None].metrics["task/held_s"] == 0
