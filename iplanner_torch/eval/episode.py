@@ -996,6 +996,7 @@ def _run_episode(
     deferred = 0  # fetches moved off a spot the person's next reach crosses
     held: int | None = None  # the carried block held back while a reach crosses its spot
     held_s = 0.0
+    held_frames = -1  # tracker frames when the hold was last checked
 
     def shoulders() -> dict[str, np.ndarray]:
         pose = np.asarray(tracker.latest_pose(), dtype=np.float64)
@@ -1225,13 +1226,13 @@ def _run_episode(
                 record(ev.time, ev.kind, ev.block)
                 if watch is not None:
                     watch.observe_progress(ev.time)
-                q_now = tens(env.robot_q())
                 if ev.kind == "picked":
                     if reach_crosses(ev.block):  # hold it at the pick pose (the goal stays)
                         held = ev.block
                         record(t, "delivery_held", ev.block)
                     else:
-                        replanner.set_goal(ik(env.fetch.target_point(), q_now), t)  # type: ignore[union-attr]
+                        target = env.fetch.target_point()  # type: ignore[union-attr]
+                        replanner.set_goal(ik(target, tens(env.robot_q())), t)
                         goal_changed = True
                 elif ev.kind == "delivered":
                     replanner.set_goal(start_next(t) if cfg.direct_next_fetch else q_home, t)
@@ -1243,7 +1244,11 @@ def _run_episode(
                     t_done = ev.time
             if held is not None:
                 held_s += env.control_dt
-                if not reach_crosses(held):
+                # the crossing's inputs (the tracked shoulders, the blocks on their spots and
+                # in the hand, the blocks taken) change only at tracker frames and task events
+                fresh = bool(info.events) or tracker.num_frames != held_frames
+                held_frames = tracker.num_frames
+                if fresh and not reach_crosses(held):
                     record(t, "delivery_resumed", held)
                     held = None
                     target = env.fetch.target_point()  # type: ignore[union-attr]
