@@ -16,6 +16,7 @@ from typing import Any
 
 from iplanner_torch.data.io import PARTIAL_MARK, demonstration_files
 from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.interrupts import interrupts_deferred
 
 #: The dataset card's file name, in the dataset folder.
 CARD_NAME = "README.md"
@@ -320,7 +321,7 @@ def finish_staged_dataset(
     """
     staging, out_dir = summary.out_dir, Path(out_dir)
     moved = 0
-    with _interrupts_deferred():
+    with interrupts_deferred():
         try:
             if not out_dir.exists() and _rename_folder(staging, out_dir):
                 moved = len(summary.files)
@@ -359,20 +360,3 @@ def _rename_folder(src: Path, dest: Path) -> bool:
             return False
         raise
     return True
-
-
-@contextmanager
-def _interrupts_deferred() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM back inside the block; one that came is handled at its end
-    (where the platform can block signals; elsewhere a no-op)."""
-    import signal
-
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    held = {signal.SIGINT, signal.SIGTERM}
-    before = signal.pthread_sigmask(signal.SIG_BLOCK, held)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, before)

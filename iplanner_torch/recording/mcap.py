@@ -60,6 +60,7 @@ from scipy.stats import chi2
 
 from iplanner_torch.checks import integer, is_real, path_argument
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
+from iplanner_torch.interrupts import interrupts_deferred
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.recording.codec import (
     VALUE_CODEC,
@@ -383,14 +384,16 @@ class EpisodeWriter:
                 self.task_event(self._last_t, "interrupted", {"error": type(error).__name__})
         self._closed = True
         try:
-            self._writer.finish()
+            with interrupts_deferred():  # the summary and footer are written whole
+                self._writer.finish()
         finally:
             self._file.close()
 
     def flush(self) -> None:
         """Close the chunk in progress and flush the file (e.g. at a task milestone)."""
         self._check_open()
-        self._writer.flush()
+        with interrupts_deferred():
+            self._writer.flush()
 
     # -- plumbing -----------------------------------------------------------------------------
 
@@ -456,14 +459,17 @@ class EpisodeWriter:
                 f"{self.path}: a {topic} message is not JSON-serialisable: {err}"
             ) from err
         before = self._file.tell()
-        self._writer.add_message(
-            channel_id=self._channels[topic],
-            log_time=log_time,
-            data=data,
-            publish_time=log_time,
-            sequence=self._sequence[topic],
-        )
-        self._sequence[topic] += 1
+        # one record is several writes into the chunk: a Ctrl-C between two of them would
+        # leave a record whose length field covers the next one (the whole log unreadable)
+        with interrupts_deferred():
+            self._writer.add_message(
+                channel_id=self._channels[topic],
+                log_time=log_time,
+                data=data,
+                publish_time=log_time,
+                sequence=self._sequence[topic],
+            )
+            self._sequence[topic] += 1
         for name, fixed in (names or {}).items():
             self._channel_names.setdefault((topic, name), fixed)
         if self._file.tell() != before:  # a chunk was completed: get it onto the disk

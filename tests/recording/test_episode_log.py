@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
 import textwrap
@@ -484,6 +485,46 @@ def test_leaving_the_writer_on_an_exception_logs_where_and_why(tmp_path: Path) -
     with EpisodeWriter(tmp_path / "fine.mcap", metadata={"planner": "itomp"}) as log:
         log.robot_state(0.5, [0.0] * 7, [0.0] * 7, list("abcdefg"))
     assert read_episode(tmp_path / "fine.mcap").events() == []
+
+
+@pytest.mark.skipif(not hasattr(signal, "pthread_sigmask"), reason="signals cannot be held")
+@pytest.mark.parametrize("field", [3, 5, 8])
+def test_a_ctrl_c_in_the_middle_of_a_record_leaves_a_readable_log(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, field: int
+) -> None:
+    """A real SIGINT that arrives while a message record is half written (after its
+    ``field``-th 8-byte field of the run) is handled once the record is whole: the log reads,
+    with every state logged before and an ``interrupted`` event. Without the held signals the
+    interrupt cut the record, and its length field covered the ``interrupted`` event."""
+    from mcap.data_stream import RecordBuilder
+
+    count = {"n": 0}
+    write8 = RecordBuilder.write8
+
+    def interrupting_write8(self: RecordBuilder, value: int) -> None:
+        count["n"] += 1
+        if count["n"] == field:
+            os.kill(os.getpid(), signal.SIGINT)
+        write8(self, value)
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    path = tmp_path / "cut.mcap"
+    logged = []
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with EpisodeWriter(path, metadata={"planner": "itomp"}) as log:
+                monkeypatch.setattr(RecordBuilder, "write8", interrupting_write8)
+                for i in range(20):
+                    log.robot_state(0.1 * i, [0.1 * i] * 7, [0.0] * 7, list("abcdefg"))
+                    logged.append(0.1 * i)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        monkeypatch.undo()
+    ep = read_episode(path)
+    assert ep.complete
+    t, q = ep.robot_q()[:2]
+    assert len(logged) < 20 and np.allclose(np.asarray(t)[: len(logged)], logged)
+    assert ep.events()[-1]["kind"] == "interrupted"
 
 
 def test_the_readme_example_runs_on_a_log(log_path: Path, capsys: pytest.CaptureFixture) -> None:
