@@ -458,7 +458,8 @@ def check_run_keys(cfg: DictConfig) -> None:
     unseen), naming the full key: ``run.train_if_missing`` must be a bool,
     ``run.train_trainer`` a ``conf/trainer`` option, ``run.stall_fallback_s`` null or a number
     > 0 [s] (``EpisodeCfg.stall_fallback_s``), ``run.task_crossing_radius`` null or a number
-    >= 0 [m], ``run.mask_by_order`` and ``run.rest_when_nothing_available`` bools.
+    >= 0 [m], ``run.mask_by_order`` and ``run.rest_when_nothing_available`` bools,
+    ``run.reaction_s`` null or a number >= 0 [s].
 
     Raises:
         ConfigError: naming the key, what it expects and what it got.
@@ -494,6 +495,13 @@ def check_run_keys(cfg: DictConfig) -> None:
     for key in ("mask_by_order", "rest_when_nothing_available"):
         if key in run:
             cfg_scalar(run, key, bool)
+    if "reaction_s" in run:
+        reaction = run.reaction_s
+        ok = reaction is None or (fits_kind(reaction, float) and 0 <= float(reaction) < math.inf)
+        if not ok:
+            raise ConfigError(
+                f"run.reaction_s: expected a time >= 0 [s] or null (off), got {_plain(reaction)!r}"
+            )
 
 
 class _Tee:

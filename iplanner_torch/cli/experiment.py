@@ -368,6 +368,7 @@ RUN_EPISODE_PATHS = {
     "run.task_crossing_radius": "task_crossing_radius",
     "run.mask_by_order": "mask_by_order",
     "run.rest_when_nothing_available": "rest_when_nothing_available",
+    "run.reaction_s": "reaction_s",
 }
 
 
@@ -505,7 +506,12 @@ def merged_episode_node(cfg: DictConfig, overrides: list[str] | None = None) -> 
             # the task-choice keys when the run group has them (else EpisodeCfg's defaults)
             **{
                 key: cfg.run[key]
-                for key in ("task_crossing_radius", "mask_by_order", "rest_when_nothing_available")
+                for key in (
+                    "task_crossing_radius",
+                    "mask_by_order",
+                    "rest_when_nothing_available",
+                    "reaction_s",
+                )
                 if key in cfg.run
             },
         }

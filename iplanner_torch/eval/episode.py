@@ -38,6 +38,13 @@ Fetch arm less safe (contact-free in 60 instead of 66 of 70 episodes); the three
 (``task_crossing_radius`` below) left the iiwa without contact in 140 of 140 table episodes
 and the Fetch arm in 139 of 140 (138 before), at an efficiency of 1.64-1.83
 (``experiments/safety_seeds/README.md``).
+With ``reaction_s`` (default 0.3 s), while the person's tracked hands rest
+(:func:`hands_still`), the forecast of taking a block that the robot put on its spot less than
+``reaction_s`` ago is delayed to start when that time is up (:func:`reaction_delays`,
+:meth:`Forecast.delay_actions`): the predictor, which sees only the resting hands, predicts
+the reach to start at once, and the arm leaving the spot it just delivered to would swerve
+from a hand that cannot be there yet. The scripted person reacts after 0.4 s
+(``HumanCfg.reaction_s``); 0.3 s is the lower end of a person's choice reaction time.
 A predicting planner can wait for a reach the person never starts, e.g. for a delivered
 block the person leaves on its spot while waiting for another one; the person then waits for
 the robot. When ``stall_fallback_s`` (5 s) pass without task progress while the person's
@@ -90,7 +97,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal, Protocol
@@ -242,6 +249,13 @@ class EpisodeCfg:
     # metric task/held_s); None: off (the paper; the
     # three settings together: experiments/reach_across/ and experiments/safety_seeds/)
     task_crossing_radius: float | None = 0.1
+    # the person's least reaction time, a prior of the predicting planners [s]: with the mask
+    # on and the tracked hands at rest, the forecast of taking a block that landed on its
+    # spot less than this long ago is delayed until then (:func:`reaction_delays`,
+    # :meth:`Forecast.delay_actions`), since a resting person cannot start that reach
+    # sooner; below the scripted person's own (``HumanCfg.reaction_s``, 0.4 s) and the
+    # 0.3-0.5 s of a choice reaction. None or 0: off
+    reaction_s: float | None = 0.3
 
     def __post_init__(self) -> None:
         for name, kind in (("scenario", ScenarioCfg), ("sim", SimCfg), ("planner", PlannerCfg)):
@@ -284,6 +298,7 @@ class EpisodeCfg:
             raise ConfigError(f"expected stall_fallback_s > 0 or None, got {stall!r}")
         positive("still_radius", self.still_radius)
         optional(non_negative, "task_crossing_radius", self.task_crossing_radius)
+        optional(non_negative, "reaction_s", self.reaction_s)
 
     def scene_cfg(self) -> SceneCfg:
         """The workspace of the scenario."""
@@ -541,6 +556,68 @@ def rest_hold(action_names: tuple[str, ...], keep: torch.Tensor) -> torch.Tensor
     takes = [_take_block(n) is not None for n in action_names]
     nothing = any(takes) and not any(bool(k) for k, t in zip(keep.tolist(), takes) if t)
     return torch.tensor([nothing and n.lower() == "idle" for n in action_names], dtype=torch.bool)
+
+
+def reaction_delays(
+    action_names: tuple[str, ...],
+    available: set[int],
+    landed: Mapping[int, float],
+    t_obs: float,
+    reaction_s: float,
+    dt: float,
+) -> torch.Tensor:
+    """(A,) int64 frames by which each action's forecast is delayed (see ``reaction_s``).
+
+    A resting person cannot start to take block ``i`` sooner than ``reaction_s`` after it
+    landed on its spot at ``landed[i]``: ``take_<i>`` / ``reach_<i>`` is delayed by the whole
+    frames of ``dt`` left until then after ``t_obs`` (rounded down: never more than the time
+    left). ``idle``, whose spread is the chance that a reach starts, is delayed by the least
+    delay of the available blocks' actions, so by none when one of them landed long enough
+    ago, or has no landing time (it lay there from the start, or is in the person's hand).
+    Actions of blocks that are not ``available`` keep 0 (their weight is masked anyway).
+
+    Args:
+        action_names: the forecast's A action names.
+        available: the blocks the person may take now (:func:`available_blocks`).
+        landed: block -> time it landed on its delivery spot [s].
+        t_obs: time of the forecast's last observed frame [s].
+        reaction_s: the person's least reaction time [s], >= 0.
+        dt: seconds between predicted frames, > 0.
+    """
+    left: dict[int, float] = {
+        b: max(0.0, reaction_s - (t_obs - landed[b])) if b in landed else 0.0 for b in available
+    }
+    frames = [0] * len(action_names)
+    takes = []
+    for a, name in enumerate(action_names):
+        block = _take_block(name)
+        if block is not None and block in left:
+            frames[a] = math.floor(left[block] / dt + 1e-9)
+            takes.append(frames[a])
+    if takes:
+        for a, name in enumerate(action_names):
+            if name.lower() == "idle":
+                frames[a] = min(takes)
+    return torch.tensor(frames, dtype=torch.int64)
+
+
+#: the tracked hands rest (``reaction_s``) when the mean of each over the later half of the
+#: last REST_WINDOW_S [s] lies within REST_RADIUS_M [m] of its mean over the earlier half
+REST_WINDOW_S = 0.3
+REST_RADIUS_M = 0.03
+
+
+def hands_still(window: np.ndarray, frames: int, radius: float) -> bool:
+    """Whether both tracked hands rest: over the last ``frames`` frames of a tracker window
+    (T, K, 3), the mean position of each hand in the later half lies within ``radius`` [m],
+    per coordinate, of the mean in the earlier half (means, so that tracker noise does not
+    read as motion). A NaN (dropped) hand frame, or fewer than 2 frames, counts as moving."""
+    hands = np.asarray(window)[-frames:, HAND_JOINTS]  # (f, 2, 3)
+    if hands.shape[0] < 2 or not bool(np.isfinite(hands).all()):
+        return False
+    half = hands.shape[0] // 2
+    shift = np.abs(hands[half:].mean(0) - hands[:half].mean(0))
+    return bool(shift.max() < radius)
 
 
 #: Look-ahead times [s] of the predicted joint ellipsoids drawn in the log's ``/scene``.
@@ -997,6 +1074,7 @@ def _run_episode(
     held: int | None = None  # the carried block held back while a reach crosses its spot
     held_s = 0.0
     held_frames = -1  # tracker frames when the hold was last checked
+    landed: dict[int, float] = {}  # block -> when the robot put it on its spot [s]
 
     def shoulders() -> dict[str, np.ndarray]:
         pose = np.asarray(tracker.latest_pose(), dtype=np.float64)
@@ -1097,6 +1175,7 @@ def _run_episode(
         else None
     )
     still_frames = max(1, round(0.5 * sim_cfg.tracker_fps))
+    rest_frames = max(2, round(REST_WINDOW_S * sim_cfg.tracker_fps))  # for reaction_s
     stall_cycles = 0
     t_done: float | None = None
     t_goal: float | None = None
@@ -1151,6 +1230,19 @@ def _run_episode(
                             hold = rest_hold(action_names, keep)
                             if bool(hold.any()):
                                 forecast = forecast.hold_actions(hold)
+                        if cfg.reaction_s and hands_still(
+                            tracker.window(), rest_frames, REST_RADIUS_M
+                        ):
+                            delay = reaction_delays(
+                                action_names,
+                                available,
+                                landed,
+                                t_obs,
+                                cfg.reaction_s,
+                                forecast.dt,
+                            )
+                            if bool((delay > 0).any()):
+                                forecast = forecast.delay_actions(delay)
                 elif blind:
                     forecast = None
                 elif oracle:
@@ -1235,6 +1327,7 @@ def _run_episode(
                         replanner.set_goal(ik(target, tens(env.robot_q())), t)
                         goal_changed = True
                 elif ev.kind == "delivered":
+                    landed[ev.block] = ev.time
                     replanner.set_goal(start_next(t) if cfg.direct_next_fetch else q_home, t)
                     goal_changed = True
                 elif ev.kind == "fetch_done":

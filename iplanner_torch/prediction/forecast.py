@@ -298,6 +298,38 @@ class Forecast:
         var = torch.where(h, self.var[:, :, :1].expand_as(self.var), self.var)
         return self._derive(mean=mean, var=var)
 
+    def delay_actions(self, frames: torch.Tensor) -> Forecast:
+        """The forecast with some actions' motion starting later.
+
+        Task-state conditioning of a reaction time: a person who rests cannot start a reach
+        for a block sooner than a reaction time after it landed, so that action's predicted
+        motion is shifted later by the frames left until then, the person held at the first
+        predicted frame meanwhile.
+
+        Args:
+            frames: (A,) integer delays >= 0 [frames]; 0 leaves an action as it is, a delay of
+                ``n_f`` or more holds it at its first frame over the whole horizon (as
+                :meth:`hold_actions`).
+
+        Returns:
+            A forecast with the same weights; for action ``a``, frame ``k`` of mean and var is
+            frame ``max(0, k - frames[a])`` of this one.
+
+        Raises:
+            ShapeError: when ``frames`` is not an integer tensor (A,).
+            DataError: when a delay is negative.
+        """
+        check_shape("frames", frames, (int(self.weights.shape[1]),))
+        if not _is_integer(frames):
+            raise ShapeError(f"expected frames an integer tensor (A,), got {frames.dtype}")
+        if bool((frames < 0).any()):
+            raise DataError(f"expected frames >= 0, got {frames.tolist()}")
+        n = self.horizon
+        k = torch.arange(n, device=self.mean.device)
+        idx = (k.view(1, n) - frames.to(self.mean.device).view(-1, 1)).clamp(min=0)  # (A, n_f)
+        g = idx.view(1, -1, n, 1, 1).expand_as(self.mean)
+        return self._derive(mean=self.mean.gather(2, g), var=self.var.gather(2, g))
+
     def select(self, index: int | slice | torch.Tensor | list[int]) -> Forecast:
         """The forecast for a subset of the batch (keeps the batch dimension).
 

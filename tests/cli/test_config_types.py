@@ -192,6 +192,14 @@ def test_console_script_reports_a_wrong_type_in_one_line(tmp_path: Path) -> None
             {"run": {"rest_when_nothing_available": 1}},
             "run.rest_when_nothing_available: expected bool, got 1",
         ),
+        (
+            {"run": {"reaction_s": -0.3}},
+            "run.reaction_s: expected a time >= 0 [s] or null (off), got -0.3",
+        ),
+        (
+            {"run": {"reaction_s": "soon"}},
+            "run.reaction_s: expected a time >= 0 [s] or null (off), got 'soon'",
+        ),
     ],
 )
 def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
@@ -211,8 +219,10 @@ def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
         "task_crossing_radius": None,
         "mask_by_order": False,
         "rest_when_nothing_available": True,
+        "reaction_s": None,
     }
     check_root_keys(OmegaConf.create({"run": {**run, "task_crossing_radius": 0.1}}))
+    check_root_keys(OmegaConf.create({"run": {**run, "reaction_s": 0.3}}))
     check_root_keys(OmegaConf.create({"run": run}))
     with pytest.raises(ConfigError) as err:
         check_root_keys(OmegaConf.create(root))

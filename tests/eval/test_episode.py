@@ -432,6 +432,9 @@ def test_errors(tmp_path: Path) -> None:
         ({"task_crossing_radius": -0.1}, "expected task_crossing_radius >= 0"),
         ({"task_crossing_radius": "0.1"}, "expected task_crossing_radius >= 0"),
         ({"task_crossing_radius": math.nan}, "expected task_crossing_radius >= 0"),
+        ({"reaction_s": -0.3}, "expected reaction_s >= 0"),
+        ({"reaction_s": "0.3"}, "expected reaction_s >= 0"),
+        ({"reaction_s": math.nan}, "expected reaction_s >= 0"),
         ({"scenario": {}}, "expected scenario a ScenarioCfg, got dict"),
         ({"sim": None}, "expected sim a SimCfg, got NoneType"),
         ({"planner": "iplanner"}, "expected planner a PlannerCfg, got str"),
@@ -919,3 +922,47 @@ def test_a_held_block_the_person_needs_first_is_not_held_for_good(tmp_path: Path
     assert [b for _, k, b in res.events if k == "human_took"] == [0, 4]
     assert [b for _, k, b in res.events if k == "fetch_started"][:2] == [4, 0]
     assert res.metrics["task/held_s"] == 0.0
+
+
+def test_a_just_delivered_blocks_reach_starts_after_the_reaction_time(tmp_path: Path) -> None:
+    """``reaction_s``: in the forecasts the planner gets, the reach for a block that landed
+    less than ``reaction_s`` before the last tracked frame starts no sooner than the reaction
+    time allows (the whole frames left, rounded down), and is delayed in some; with None the
+    planner gets the predictor's forecasts as they are."""
+
+    class MovingPredictor(fakes.ConstantPredictor):
+        """Every action moves the whole body 1 cm a frame along x."""
+
+        def predict_positions(self, positions, progress):
+            f = super().predict_positions(positions, progress)
+            steps = 0.01 * torch.arange(1, f.horizon + 1, dtype=f.mean.dtype)
+            mean = f.mean.clone()
+            mean[..., 0] += steps.view(1, 1, -1, 1)
+            return replace(f, mean=mean)
+
+    class ForecastLog(fakes.LinearReplanner):
+        def step(self, t, q_now, forecast, *, forecast_t0):
+            self.forecasts.append((forecast_t0, forecast))
+            return super().step(t, q_now, forecast, forecast_t0=forecast_t0)
+
+    delayed = {}
+    for reaction in (None, 0.3):
+        cfg = replace(_cfg(8.0), reaction_s=reaction)
+        log = ForecastLog(speed=1.5)
+        res = _fake_episode(tmp_path, cfg, "iplanner_ni", log, predictor=MovingPredictor())
+        landed = {b: t for t, kind, b in res.events if kind == "delivered"}
+        assert landed, "the stand-in robot delivers within the episode"
+        delayed[reaction] = 0
+        for t0, f in log.forecasts:
+            for a, name in enumerate(f.action_names):
+                x = f.mean[0, a, :, 0, 0]
+                # frames at the first predicted position, less the first one
+                d = int(((x - x[0]).abs() < 1e-9).sum()) - 1
+                block = int(name.rsplit("_", 1)[1])
+                left = 0.0
+                if reaction is not None and block in landed:
+                    left = reaction - (t0 - landed[block])
+                assert d <= max(0, math.floor(left / f.dt + 1e-9)), (reaction, t0, name, d)
+                delayed[reaction] += int(d > 0)
+    assert delayed[None] == 0
+    assert delayed[0.3] > 0

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from iplanner_torch.errors import DataError, ShapeError
-from iplanner_torch.eval.episode import action_mask, rest_hold
+from iplanner_torch.eval.episode import action_mask, reaction_delays, rest_hold
 from iplanner_torch.prediction.forecast import Forecast
 
 
@@ -168,3 +168,67 @@ def test_weights_of_a_large_batch_are_checked_with_tensors_alike() -> None:
         _forecast(rows[:5] + [[0.0, 0.0, 0.0, 0.0]] + rows[6:])
     with pytest.raises(DataError, match=re.escape("weights is NaN/Inf for action 'x1' (batch 2)")):
         _forecast(rows[:2] + [[0.5, math.nan, 0.25, 0.25]] + rows[3:])
+
+
+def test_delay_actions_shifts_each_actions_frames_later() -> None:
+    """Frame k of a delayed action is frame max(0, k - d) of the forecast (a loop over the
+    frames); a delay of 0 keeps the action, one of n_f or more holds it as hold_actions."""
+    f = _forecast([[0.5, 0.3, 0.2], [0.2, 0.2, 0.6]])
+    delays = [0, 2, 9]
+    g = f.delay_actions(torch.tensor(delays))
+    assert torch.equal(g.weights, f.weights)
+    for a, d in enumerate(delays):
+        for k in range(f.horizon):
+            src = max(0, k - d)
+            assert torch.equal(g.mean[:, a, k], f.mean[:, a, src])
+            assert torch.equal(g.var[:, a, k], f.var[:, a, src])
+    held = f.hold_actions(torch.tensor([False, False, True]))
+    assert torch.equal(g.mean[:, 2], held.mean[:, 2]) and torch.equal(g.var[:, 2], held.var[:, 2])
+
+
+@pytest.mark.parametrize(
+    ("frames", "error", "message"),
+    [
+        (torch.tensor([0.0, 1.0, 2.0]), ShapeError, "integer tensor"),
+        (torch.tensor([True, False, True]), ShapeError, "integer tensor"),
+        (torch.tensor([0, 1]), ShapeError, "frames"),
+        (torch.tensor([0, -1, 2]), DataError, "expected frames >= 0"),
+    ],
+)
+def test_delay_actions_refuses_bad_delays(frames, error, message) -> None:
+    with pytest.raises(error, match=message):
+        _forecast([[0.5, 0.3, 0.2]]).delay_actions(frames)
+
+
+def test_reaction_delays_count_the_whole_frames_left_of_the_reaction() -> None:
+    """take_1 landed 0.05 s before the observation: 0.25 s of a 0.3 s reaction are left, two
+    whole frames of 0.1 s; take_2 landed long ago; take_3 is not available; idle is delayed
+    by the least delay of the available takes."""
+    names = ("idle", "take_1", "take_2", "take_3")
+    landed = {1: 9.95, 2: 5.0, 3: 9.99}
+    assert reaction_delays(names, {1}, landed, 10.0, 0.3, 0.1).tolist() == [2, 2, 0, 0]
+    assert reaction_delays(names, {1, 2}, landed, 10.0, 0.3, 0.1).tolist() == [0, 2, 0, 0]
+    # a block with no landing time (there from the start, or in the hand) is not delayed
+    assert reaction_delays(names, {1, 3}, {1: 9.95}, 10.0, 0.3, 0.1).tolist() == [0, 2, 0, 0]
+    # exactly 0.3 s left: three frames (not two after rounding), none once the time is up
+    assert reaction_delays(names, {1}, {1: 10.0}, 10.0, 0.3, 0.1).tolist() == [3, 3, 0, 0]
+    assert reaction_delays(names, {1}, {1: 9.7}, 10.0, 0.3, 0.1).tolist() == [0, 0, 0, 0]
+    assert reaction_delays(names, set(), landed, 10.0, 0.3, 0.1).tolist() == [0, 0, 0, 0]
+    assert reaction_delays(("reach_1",), {1}, landed, 10.0, 0.0, 0.1).tolist() == [0]
+
+
+def test_hands_still_reads_tracker_noise_as_rest_and_a_reach_as_motion() -> None:
+    from iplanner_torch.data.skeleton import JOINT_NAMES
+    from iplanner_torch.eval.episode import HAND_JOINTS, hands_still
+
+    rng = np.random.default_rng(0)
+    rest = np.zeros((20, len(JOINT_NAMES), 3))
+    noisy = rest + rng.normal(0.0, 0.01, rest.shape)  # 1 cm tracker noise
+    assert hands_still(noisy, 4, 0.03)
+    moving = noisy.copy()
+    moving[:, HAND_JOINTS, 0] += np.linspace(0.0, 0.6, 20)[:, None]  # 0.45 m/s at 15 Hz
+    assert not hands_still(moving, 4, 0.03)
+    dropped = rest.copy()
+    dropped[-1, HAND_JOINTS[0]] = np.nan
+    assert not hands_still(dropped, 4, 0.03)
+    assert not hands_still(rest[:1], 4, 0.03)
