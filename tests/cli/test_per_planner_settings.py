@@ -127,14 +127,14 @@ def test_bad_entry_on_the_command_line_is_one_line_before_anything_runs(
 @pytest.mark.parametrize(
     ("overrides", "want"),
     [
-        ([], (0.1, True, True, 0.3)),
-        (["run.task_crossing_radius=null"], (None, True, True, 0.3)),
+        ([], (0.1, True, True, None)),
+        (["run.task_crossing_radius=null"], (None, True, True, None)),
         (
             ["run.mask_by_order=false", "run.rest_when_nothing_available=false"],
-            (0.1, False, False, 0.3),
+            (0.1, False, False, None),
         ),
-        (["experiment=reach_across", "run.task_crossing_radius=0.2"], (0.2, True, True, 0.3)),
-        (["run.reaction_s=null"], (0.1, True, True, None)),
+        (["experiment=reach_across", "run.task_crossing_radius=0.2"], (0.2, True, True, None)),
+        (["run.reaction_s=0.3"], (0.1, True, True, 0.3)),
         (["experiment=reach_across", "run.reaction_s=0.25"], (0.1, True, True, 0.25)),
     ],
 )
