@@ -360,15 +360,20 @@ ALIAS_PATHS = {
     "tracker.dropout": "sim.tracker_dropout",
     "human.speed": "sim.human.speed",
 }
+#: run.* keys passed to EpisodeCfg as they are, under the same name, when the run group has
+#: them (else EpisodeCfg's defaults): the task choice and the forecast's task conditioning
+RUN_EPISODE_KEYS = (
+    "task_crossing_radius",
+    "mask_by_order",
+    "rest_when_nothing_available",
+    "reaction_s",
+)
 #: run.* keys -> the EpisodeCfg fields they feed.
 RUN_EPISODE_PATHS = {
     "run.max_duration_s": "max_duration_s",
     "run.stall_fallback_s": "stall_fallback_s",
     "run.scene_hz": "scene_hz",
-    "run.task_crossing_radius": "task_crossing_radius",
-    "run.mask_by_order": "mask_by_order",
-    "run.rest_when_nothing_available": "rest_when_nothing_available",
-    "run.reaction_s": "reaction_s",
+    **{f"run.{key}": key for key in RUN_EPISODE_KEYS},
 }
 
 
@@ -503,17 +508,7 @@ def merged_episode_node(cfg: DictConfig, overrides: list[str] | None = None) -> 
             "stall_fallback_s": cfg.run.stall_fallback_s,
             "scene_hz": cfg_scalar(cfg.run, "scene_hz", float),
             "progress_bar": cfg_scalar(cfg, "progress", bool),
-            # the task-choice keys when the run group has them (else EpisodeCfg's defaults)
-            **{
-                key: cfg.run[key]
-                for key in (
-                    "task_crossing_radius",
-                    "mask_by_order",
-                    "rest_when_nothing_available",
-                    "reaction_s",
-                )
-                if key in cfg.run
-            },
+            **{key: cfg.run[key] for key in RUN_EPISODE_KEYS if key in cfg.run},
         }
     )
     given = [
