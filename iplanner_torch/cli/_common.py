@@ -484,24 +484,20 @@ def check_run_keys(cfg: DictConfig) -> None:
                 f"run.stall_fallback_s: expected a number > 0 [s] or null (never), got "
                 f"{_plain(stall)!r}"
             )
-    if "task_crossing_radius" in run:
-        radius = run.task_crossing_radius
-        ok = radius is None or (fits_kind(radius, float) and 0 <= float(radius) < math.inf)
-        if not ok:
-            raise ConfigError(
-                f"run.task_crossing_radius: expected a distance >= 0 [m] or null (off), got "
-                f"{_plain(radius)!r}"
-            )
+    for key, what in (
+        ("task_crossing_radius", "a distance >= 0 [m]"),
+        ("reaction_s", "a time >= 0 [s]"),
+    ):
+        if key in run:
+            value = run[key]
+            ok = value is None or (fits_kind(value, float) and 0 <= float(value) < math.inf)
+            if not ok:
+                raise ConfigError(
+                    f"run.{key}: expected {what} or null (off), got {_plain(value)!r}"
+                )
     for key in ("mask_by_order", "rest_when_nothing_available"):
         if key in run:
             cfg_scalar(run, key, bool)
-    if "reaction_s" in run:
-        reaction = run.reaction_s
-        ok = reaction is None or (fits_kind(reaction, float) and 0 <= float(reaction) < math.inf)
-        if not ok:
-            raise ConfigError(
-                f"run.reaction_s: expected a time >= 0 [s] or null (off), got {_plain(reaction)!r}"
-            )
 
 
 class _Tee:
