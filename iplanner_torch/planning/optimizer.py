@@ -129,9 +129,9 @@ class OptimizerCfg:
     perturbation_std: float = 0.3
     # delta_CL: the bound must be <= 1 - confidence at every waypoint of the window
     confidence: float = 0.95
-    # the penalty aims at bound <= penalty_target * (1 - confidence) (the planner configs,
-    # conf/planner/, set 0.8: at 0.5 every plan kept half the limit as margin, a detour under a
-    # spreading forecast; experiments/reach_across/)
+    # the penalty aims at bound <= penalty_target * (1 - confidence): a margin under the hard
+    # limit (0.8 is smoother where the forecast is right, much less safe where it is wrong:
+    # experiments/reach_across/, experiments/speed_response/)
     penalty_target: float = 0.5
     # actions whose total weight is at most this share of 1 - confidence are left out of the
     # bound and their weight added to it instead (still an upper bound; fewer sphere pairs)
