@@ -615,6 +615,7 @@ def _episode(cfg: DictConfig) -> None:
     from iplanner_torch.eval.report import (
         comparison_table,
         incomplete_logs_note,
+        overrun_note,
         paired_skip_note,
         print_table,
         report_groups,
@@ -680,9 +681,9 @@ def _episode(cfg: DictConfig) -> None:
     extra = split_columns(df, groups, swept)
     groups = (*groups[:-1], *extra, groups[-1]) if extra else groups
     print_table(comparison_table(df, groups))
-    note = incomplete_logs_note(df)
-    if note:
-        print(note)
+    for note in (incomplete_logs_note(df), overrun_note(df)):
+        if note:
+            print(note)
     skipped = paired_skip_note(df, groups, baseline)  # results.md says it too
     if skipped:
         print(skipped)

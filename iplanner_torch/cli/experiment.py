@@ -698,6 +698,7 @@ def _app(cfg: DictConfig) -> None:
     from iplanner_torch.eval.report import (
         comparison_table,  # the table iplanner-evaluate evaluate.mode=episode prints too
         gather_results,
+        overrun_note,
         print_table,
         report_groups,
         write_sweep_report,
@@ -743,6 +744,10 @@ def _app(cfg: DictConfig) -> None:
     print()
     print_table(table)
     print()
+    note = overrun_note(df)
+    if note:
+        print(note)
+        print()
     mcaps = sorted((out_dir / "episodes").glob("*.mcap"))
     timelines = (
         write_timelines(mcaps, progress=cfg_scalar(cfg, "progress", bool))

@@ -27,6 +27,7 @@ from iplanner_torch.eval.report import (
     incomplete_logs_note,
     natural_key,
     ordered_values,
+    overrun_note,
     paired_differences,
     paper_table_simulation,
     plot_comparison,
@@ -814,6 +815,43 @@ def test_a_truncated_log_counts_as_unknown_contact_in_every_table(tmp_path: Path
     write_sweep_report(df, tmp_path / "report", ["planner"])
     md = (tmp_path / "report" / "results.md").read_text()
     assert note in md and "| itomp | 3 | 1 | 1 | 2 |" in md
+
+
+def _overrun_rows(overruns: list[float], realtime: list[float]) -> pd.DataFrame:
+    rows = [
+        {"scenario": "s", "planner": "itomp", "seed": i, "smoothness": 3.0,
+         "plan/overruns": 0.0, "plan/cycles": 10.0, "plan/mean_solve_ms": 80.0,
+         "sim/realtime_factor": 3.0}
+        for i in range(2)
+    ] + [
+        {"scenario": "s", "planner": "iplanner_ni", "seed": i, "smoothness": 9.0,
+         "plan/overruns": o, "plan/cycles": c, "plan/mean_solve_ms": ms,
+         "sim/realtime_factor": rt}
+        for i, (o, c, ms, rt) in enumerate(zip(overruns, (10.0, 30.0), (300.0, 500.0), realtime))
+    ]  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def test_overrun_note_names_the_planners_whose_solves_overran(tmp_path: Path) -> None:
+    """Counts and the cycle-weighted mean solve by hand: (300 x 10 + 500 x 30) / 40 = 450 ms;
+    a planner without overruns is not named; the slowest episode only below real time."""
+    df = _overrun_rows([3.0, 4.0], [0.6, 1.2])
+    note = overrun_note(df)
+    assert note.startswith(
+        "replanning solves over their wall-clock budget: iplanner_ni 7 of 40 (mean solve "
+        "450 ms). The slowest episode ran at 0.60x real time."
+    )
+    assert "itomp" not in note and "as if the planner were faster" in note
+    assert overrun_note(_overrun_rows([0.0, 0.0], [0.6, 1.2])) == ""
+    # above real time: no sentence on it; a NaN count is skipped, not summed as 0 or NaN
+    fast = overrun_note(_overrun_rows([math.nan, 2.0], [1.5, 1.2]))
+    assert "iplanner_ni 2 of 40" in fast and "real time." not in fast
+    # no cycles or solve columns (older results): the count alone
+    bare = df.drop(columns=["plan/cycles", "plan/mean_solve_ms", "sim/realtime_factor"])
+    assert "iplanner_ni 7." in overrun_note(bare)
+    assert overrun_note(df.drop(columns=["plan/overruns"])) == ""
+    write_sweep_report(df, tmp_path, ["scenario", "planner"])
+    assert note in (tmp_path / "results.md").read_text()
 
 
 def test_a_log_cut_after_its_metrics_keeps_its_contact(tmp_path: Path) -> None:
