@@ -601,7 +601,7 @@ def overrun_note(df: pd.DataFrame) -> str:
 
     The episode loop counts an overrun (``plan/overruns``) but adopts the plan at its
     simulated time all the same, as if the planner were faster than the machine that ran
-    it; the note says so next to the table, where a reader would not look for it.
+    it. The note puts that next to the table, since few readers look for it in the CSV.
 
     Args:
         df: per-episode results (:func:`gather_results`) with a ``planner`` column; uses
