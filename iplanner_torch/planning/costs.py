@@ -309,8 +309,13 @@ class HumanObstacle:
     # bound adds it, as those actions' collision probabilities are at most 1
     residual: float = 0.0
     # the per-pair tensors of the last ``pairs`` seen (the optimiser reuses one pair set for
-    # several iterations): key, then (mean, var, 1 / s_max, radius sums)
+    # several iterations): (pairs, robot radii), then (mean, var, 1 / s_max, radius sums)
     _pair_cache: tuple[tuple, tuple] | None = field(default=None, repr=False, compare=False)
+    # the per-entry tensors of the last ``entries`` seen (see :meth:`entry_tensors`):
+    # (entries, pairs, robot radii), then the tensors
+    _entry_cache: tuple[tuple, tuple] | None = field(default=None, repr=False, compare=False)
+    # (W_x, A, S_h) largest standard deviations (computed once, see :meth:`max_std`)
+    _max_std: torch.Tensor | None = field(default=None, repr=False, compare=False)
     # () bool tensor: whether mean, var and weights are all finite (computed once)
     _finite: torch.Tensor | None = field(default=None, repr=False, compare=False)
 
@@ -343,6 +348,13 @@ class HumanObstacle:
             )
         return self._finite
 
+    def max_std(self) -> torch.Tensor:
+        """(W_x, A, S_h) the largest standard deviation of each sphere centre [m] (computed on
+        the first call only)."""
+        if self._max_std is None:
+            self._max_std = self.var.amax(-1).sqrt()
+        return self._max_std
+
     def pair_tensors(
         self, pairs: torch.Tensor, robot_radii: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -356,8 +368,10 @@ class HumanObstacle:
             mean (W_x, P, A, 3) [m], var (W_x, P, A, 3) [m^2], ``1 / s_max`` (W_x, P, A)
             [1/m] with ``s_max`` the largest standard deviation, and ``R`` (P, 1) [m].
         """
-        key = (id(pairs), pairs.data_ptr(), pairs.shape[0], id(robot_radii))
-        if self._pair_cache is None or self._pair_cache[0] != key:
+        # the key holds the tensors themselves: an id() or data_ptr() alone could be reused by
+        # a new tensor once the old one is freed
+        key = (pairs, robot_radii)
+        if self._pair_cache is None or not _same_objects(self._pair_cache[0], key):
             ri, hi = pairs[:, 0], pairs[:, 1]
             try:
                 mean = self.mean.transpose(1, 2)[:, hi]  # (W_x, P, A, 3)
@@ -370,6 +384,53 @@ class HumanObstacle:
                 ) from err
             self._pair_cache = (key, (mean, var, var.amax(-1).rsqrt(), rad))
         return self._pair_cache[1]
+
+    def entry_tensors(
+        self, pairs: torch.Tensor, entries: torch.Tensor, robot_radii: torch.Tensor
+    ) -> tuple[torch.Tensor, ...]:
+        """Per-entry tensors of (waypoint, pair, action) entries (cached for the last ones).
+
+        Args:
+            pairs: (P, 2) (robot, human) sphere indices.
+            entries: (K, 3) (waypoint, index into ``pairs``, action) indices.
+            robot_radii: (S_r,) [m].
+
+        Returns:
+            mean (K, 1, 3) [m], var (K, 1, 3) [m^2], ``1 / s_max`` (K, 1) [1/m], ``R`` (K, 1)
+            [m], the action weights (K,), the flat (waypoint, pair) index ``w P + p`` (K,),
+            the flat (waypoint, robot sphere) index ``w S_r + r`` (K,), the pair index (K,)
+            and (W_x, P, A) 1 at the entries, else 0.
+        """
+        key = (entries, pairs, robot_radii)
+        if self._entry_cache is None or not _same_objects(self._entry_cache[0], key):
+            mean_p, var_p, inv_s_p, rad_p = self.pair_tensors(pairs, robot_radii)
+            w_k, p_k, a_k = entries.unbind(-1)
+            try:
+                mean = mean_p[w_k, p_k, a_k].unsqueeze(1)
+                var = var_p[w_k, p_k, a_k].unsqueeze(1)
+                inv_s = inv_s_p[w_k, p_k, a_k].unsqueeze(1)
+                rad = rad_p[p_k]
+                weight = self.weights[a_k]
+            except IndexError as err:  # (the CPU's bounds check; free)
+                raise ShapeError(
+                    f"expected entries of (waypoint, pair, action) indices below "
+                    f"({mean_p.shape[0]}, {pairs.shape[0]}, {self.weights.shape[0]}) "
+                    f"(W_x, P, A): {err}"
+                ) from err
+            flat_wp = w_k * pairs.shape[0] + p_k
+            flat_wr = w_k * robot_radii.shape[0] + pairs[p_k, 0]
+            kept = torch.zeros(mean_p.shape[:3], dtype=weight.dtype, device=weight.device)
+            kept[w_k, p_k, a_k] = 1.0
+            self._entry_cache = (
+                key,
+                (mean, var, inv_s, rad, weight, flat_wp, flat_wr, p_k, kept),
+            )
+        return self._entry_cache[1]
+
+
+def _same_objects(a: tuple, b: tuple) -> bool:
+    """Whether two tuples hold the very same objects, one by one."""
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b, strict=True))
 
 
 def drop_light_actions(human: HumanObstacle, max_mass: float) -> HumanObstacle:
@@ -466,6 +527,57 @@ def candidate_pairs(
         ConfigError: when ``margin`` is not a finite number >= 0 (a NaN margin would keep no
             pair, a bound of 0 for a sphere inside the person).
     """
+    return _candidates(robot_centers, robot_radii, human, margin, with_entries=False)[0]
+
+
+def candidate_entries(
+    robot_centers: torch.Tensor,
+    robot_radii: torch.Tensor,
+    human: HumanObstacle,
+    margin: float,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The pairs of :func:`candidate_pairs` and, within them, the (waypoint, pair, action)
+    entries whose bound can exceed Phi(-PRUNE_SIGMAS) after a move of up to ``margin``.
+
+    A pair is kept when one of its actions comes within reach at some waypoint; an entry only
+    where that action's sphere does at that waypoint, by its own standard deviation there
+    (the pair's test takes the largest over all waypoints and actions). With many actions
+    spread over the workspace, most entries of the kept pairs are far: in the blocking scene
+    with the reaching predictor's 9 weighted actions, 28 % of them are kept at the optimiser's
+    margin of 0.15 m and 18 % at 0. :func:`human_collision_bound` given both evaluates only
+    the entries.
+
+    Args:
+        robot_centers: (B, W_x, S_r, 3) robot sphere centres [m], B >= 1, W_x >= 1 the
+            obstacle's.
+        robot_radii: (S_r,) [m].
+        human: the Gaussian human spheres (dtype and device of the robot's tensors).
+        margin: extra distance the robot spheres may move before the entries are refreshed
+            [m], a finite number >= 0.
+
+    Returns:
+        pairs (P, 2) long (robot sphere, human sphere) indices, as :func:`candidate_pairs`,
+        and entries (K, 3) long (waypoint, index into ``pairs``, action), each left-out
+        entry's isotropic bound at most Phi(-PRUNE_SIGMAS) for every trajectory.
+
+    Raises:
+        ShapeError: as :func:`candidate_pairs`.
+        ConfigError: as :func:`candidate_pairs`.
+    """
+    pairs, entries = _candidates(robot_centers, robot_radii, human, margin, with_entries=True)
+    assert entries is not None
+    return pairs, entries
+
+
+def _candidates(
+    robot_centers: torch.Tensor,
+    robot_radii: torch.Tensor,
+    human: HumanObstacle,
+    margin: float,
+    *,
+    with_entries: bool,
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """Pairs (P, 2) and, ``with_entries``, entries (K, 3) (:func:`candidate_entries`)."""
     _check_robot_spheres(robot_centers, robot_radii, human, nonempty=True)
     non_negative("margin", margin)
     with torch.no_grad():
@@ -485,12 +597,21 @@ def candidate_pairs(
         maybe = lower <= thresh + _LOWER_BOUND_SLACK * (1.0 + thresh.abs())
         ri, hi = torch.nonzero(maybe, as_tuple=True)
         if ri.numel() == 0:
-            return torch.nonzero(maybe)
+            pairs = torch.nonzero(maybe)
+            return pairs, (pairs.new_zeros(0, 3) if with_entries else None)
         # exact minimum distance over (B, W_x, A) for the remaining pairs
         dist = _distance3(robot_centers[:, :, ri].unsqueeze(2), human.mean[:, :, hi])
-        gap = dist.amin(dim=(0, 1, 2))  # (P,) from (B, W_x, A, P)
-        keep = gap <= thresh[ri, hi]
-        return torch.stack([ri[keep], hi[keep]], dim=-1)
+        near = dist.amin(0)  # (W_x, A, P') from (B, W_x, A, P')
+        keep = near.amin(dim=(0, 1)) <= thresh[ri, hi]  # (P',)
+        pairs = torch.stack([ri[keep], hi[keep]], dim=-1)
+        if not with_entries:
+            return pairs, None
+        # per entry: within reach by that action's own largest standard deviation there
+        s_max = human.max_std()[:, :, hi[keep]]  # (W_x, A, P)
+        rad = (robot_radii[ri[keep]] + human.radii[hi[keep]]).unsqueeze(0).unsqueeze(0)
+        close = near[:, :, keep] <= rad + PRUNE_SIGMAS * s_max + margin  # (W_x, A, P)
+        w_k, a_k, p_k = torch.nonzero(close, as_tuple=True)
+        return pairs, torch.stack([w_k, p_k, a_k], dim=-1)
 
 
 def _distance3(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -560,6 +681,7 @@ def human_collision_bound(
     pairs: torch.Tensor | None = None,
     *,
     exact: bool = True,
+    entries: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-waypoint collision bound: max over sphere pairs of the action-weighted pair bound.
 
@@ -589,6 +711,11 @@ def human_collision_bound(
             host synchronisation per iteration), except that an index beyond S_r or S_h is
             refused on the CPU.
         exact: refine the large pair bounds with the exact diagonal-Gaussian bound.
+        entries: (K, 3) (waypoint, pair, action) indices into ``W_x``, ``pairs`` and the
+            actions (from :func:`candidate_entries`, with these ``pairs``), int64 on the robot's
+            device, or None for every entry of every pair. Only these are evaluated: a pair's
+            left-out actions add nothing to its mixture, each at most Phi(-5) by construction,
+            so the bound is at most that below the full one.
 
     Returns:
         bound (B, W_x) in [0, 1] and the penetration cost (B,) ``sum_a p(a) sum relu(R -
@@ -598,7 +725,9 @@ def human_collision_bound(
         ShapeError: when ``robot_centers`` is not (B, W_x, S_r, 3) with the obstacle's W_x,
             ``robot_radii`` not (S_r,), either not of the obstacle's dtype and
             device, or ``pairs`` not a (P, 2) integer tensor on that device (or, on the CPU,
-            holding an index beyond S_r or S_h).
+            holding an index beyond S_r or S_h), or ``entries`` not a (K, 3) int64 tensor on
+            that device given with ``pairs`` (or, on the CPU, holding an index beyond W_x, P
+            or A).
     """
     _check_robot_spheres(robot_centers, robot_radii, human)
     if pairs is not None:
@@ -607,6 +736,15 @@ def human_collision_bound(
             raise ShapeError(
                 f"expected pairs int64 or int32 on {robot_centers.device}, got {pairs.dtype} on "
                 f"{pairs.device}"
+            )
+    if entries is not None:
+        if pairs is None:
+            raise ShapeError("expected pairs with the entries (they index the pairs), got None")
+        check_shape("entries", entries, ("K", 3))
+        if entries.dtype != torch.int64 or entries.device != robot_centers.device:
+            raise ShapeError(
+                f"expected entries int64 on {robot_centers.device}, got {entries.dtype} on "
+                f"{entries.device}"
             )
     b, w = robot_centers.shape[:2]
     if pairs is None:
@@ -617,7 +755,7 @@ def human_collision_bound(
             indexing="ij",
         )
         pairs = torch.stack([ii.reshape(-1), jj.reshape(-1)], dim=-1)
-    if pairs.shape[0] == 0:
+    if pairs.shape[0] == 0 or (entries is not None and entries.shape[0] == 0):
         zero = robot_centers.sum() * 0.0
         floor = min(human.residual, 1.0)
         return robot_centers.new_zeros(b, w) + zero + floor, robot_centers.new_zeros(b) + zero
@@ -626,22 +764,39 @@ def human_collision_bound(
     weights = human.weights
     need_grad = torch.is_grad_enabled() and robot_centers.requires_grad
     with torch.set_grad_enabled(torch.is_grad_enabled() and not need_grad):
-        bound, dist = _pair_bounds(
-            robot_centers[:, :, ri], mean_p.unsqueeze(0), var_p, inv_s_p, rad_p, exact
-        )  # (B, W_x, P, A)
-        mixed = bound @ weights + human.residual  # (B, W_x, P)
-        if not need_grad:
-            pen = torch.relu(rad_p - dist).square()  # (B, W_x, P, A)
-            return mixed.amax(-1).clamp(max=1.0), (pen @ weights).sum(dim=(1, 2))
+        if entries is None:
+            bound, dist = _pair_bounds(
+                robot_centers[:, :, ri], mean_p.unsqueeze(0), var_p, inv_s_p, rad_p, exact
+            )  # (B, W_x, P, A)
+            mixed = bound @ weights + human.residual  # (B, W_x, P)
+            if not need_grad:
+                pen = torch.relu(rad_p - dist).square()  # (B, W_x, P, A)
+                return mixed.amax(-1).clamp(max=1.0), (pen @ weights).sum(dim=(1, 2))
+            touch = (dist < rad_p).flatten(0, 1).any(0).any(-1)  # (P,)
+            touching = torch.nonzero(touch).squeeze(-1)  # (Q,)
+        else:
+            mean_k, var_k, inv_s_k, rad_k, w_k, wp_k, wr_k, p_k, kept = human.entry_tensors(
+                pairs, entries, robot_radii
+            )
+            c_k = robot_centers.reshape(b, -1, 3).index_select(1, wr_k)  # (B, K, 3)
+            bound_k, dist_k = _pair_bounds(c_k, mean_k, var_k, inv_s_k, rad_k, exact)
+            bound_k, dist_k, rad_1 = bound_k[..., 0], dist_k[..., 0], rad_k[:, 0]  # (B, K)
+            mixed = bound_k.new_zeros(b, w * pairs.shape[0]).index_add_(1, wp_k, bound_k * w_k)
+            mixed = mixed.view(b, w, -1) + human.residual  # (B, W_x, P)
+            if not need_grad:
+                pen = (torch.relu(rad_1 - dist_k).square() * w_k).sum(-1)
+                return mixed.amax(-1).clamp(max=1.0), pen
+            touching = torch.unique(p_k[(dist_k < rad_1).any(0)])  # (Q,)
         top = mixed.argmax(-1)  # (B, W_x) index into the pairs
-        touching = torch.nonzero((dist < rad_p).flatten(0, 1).any(0).any(-1)).squeeze(-1)  # (Q,)
     # the maximising pair of each waypoint, again with autograd
     w_idx = torch.arange(w, device=robot_centers.device).unsqueeze(0)  # (1, W_x)
     c_top = robot_centers[torch.arange(b, device=ri.device)[:, None], w_idx, ri[top]]
     bound_top, _ = _pair_bounds(
         c_top, mean_p[w_idx, top], var_p[w_idx, top], inv_s_p[w_idx, top], rad_p[top], exact
     )  # (B, W_x, A)
-    mixed_top = (bound_top * weights).sum(-1) + human.residual  # (B, W_x)
+    # the same entries as above: their weights, 0 for the ones left out
+    top_weights = weights if entries is None else kept[w_idx, top] * weights  # (B, W_x, A)
+    mixed_top = (bound_top * top_weights).sum(-1) + human.residual  # (B, W_x)
     # the penetrating pairs, again with autograd
     d_q = mean_p[:, touching].unsqueeze(0) - robot_centers[:, :, ri[touching]].unsqueeze(-2)
     pen_q = torch.relu(rad_p[touching] - d_q.norm(dim=-1)).square()  # (B, W_x, Q, A)

@@ -378,7 +378,7 @@ def unsafe_if_not_finite(bound: torch.Tensor, human: C.HumanObstacle) -> torch.T
     """The collision bound with every value that cannot be trusted set to 1 (unsafe).
 
     A NaN or inf in the predicted human does not show up as a NaN bound: the sphere-pair
-    pruning (:func:`costs.candidate_pairs`) drops every pair it cannot compare (for all
+    pruning (:func:`costs.candidate_entries`) drops every pair it cannot compare (for all
     times, as it reduces over them), and the bound without pairs is the dropped actions'
     weight, usually 0 ("no human"). So the bound counts as 1 everywhere when any mean,
     variance or weight of the human obstacle is not finite, and so does a non-finite bound
@@ -653,17 +653,20 @@ class TrajectoryOptimizer:
         q_goal: torch.Tensor,
         human: C.HumanObstacle | None,
         win_idx: torch.Tensor,
-        pairs: torch.Tensor | None,
+        pairs: tuple[torch.Tensor, torch.Tensor] | None,
         timer: _Timer,
         exact: bool = False,
         prune: float | None = None,
         look_idx: torch.Tensor | None = None,
     ) -> tuple[
-        dict[str, torch.Tensor], torch.Tensor | None, torch.Tensor | None, torch.Tensor | None
+        dict[str, torch.Tensor],
+        torch.Tensor | None,
+        torch.Tensor | None,
+        tuple[torch.Tensor, torch.Tensor] | None,
     ]:
         """Unweighted (B,) cost terms, the window bound (B, W_x), the min clearance (B, W) and
-        the sphere pairs used; ``prune`` (a margin [m]) first refreshes the pairs from this
-        trajectory's own sphere centres (:func:`costs.candidate_pairs`). With ``look_idx``
+        the sphere pairs and entries used; ``prune`` (a margin [m]) first refreshes them from
+        this trajectory's own sphere centres (:func:`costs.candidate_entries`). With ``look_idx``
         (waypoints after the window, :meth:`_lookahead_indices`) the human obstacle also covers
         those waypoints, after the window's points, and they add ``human_lookahead_penalty``;
         the returned bound stays the window's."""
@@ -689,9 +692,14 @@ class TrajectoryOptimizer:
                 centers_x = torch.cat([centers_x, centers[:, look_idx]], dim=1)
             with timer:
                 if prune is not None:
-                    pairs = C.candidate_pairs(centers_x.detach(), self.radii, human, prune)
+                    pairs = C.candidate_entries(centers_x.detach(), self.radii, human, prune)
                 bound, pen = C.human_collision_bound(
-                    centers_x, self.radii, human, pairs, exact=exact
+                    centers_x,
+                    self.radii,
+                    human,
+                    None if pairs is None else pairs[0],
+                    exact=exact,
+                    entries=None if pairs is None else pairs[1],
                 )
                 bound = unsafe_if_not_finite(bound, human)
             if look_idx is not None:
@@ -983,8 +991,10 @@ class TrajectoryOptimizer:
         with torch.no_grad():
             human = self._human_obstacle(forecast, times.to(self.device, self.dtype), forecast_t0)
             centers = self.robot.sphere_centers(q).unsqueeze(0)  # (1, N, S_r, 3)
-            pairs = C.candidate_pairs(centers, self.radii, human, 0.0)
-            bound, _ = C.human_collision_bound(centers, self.radii, human, pairs, exact=True)
+            pairs, entries = C.candidate_entries(centers, self.radii, human, 0.0)
+            bound, _ = C.human_collision_bound(
+                centers, self.radii, human, pairs, exact=True, entries=entries
+            )
             bound = unsafe_if_not_finite(bound, human)
         return bound[0]
 

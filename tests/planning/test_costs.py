@@ -564,3 +564,166 @@ def test_exact_bound_is_finite_for_near_zero_radii_and_far_tiny_variances(
             torch.zeros(3, dtype=dtype), max(r, G.RADIUS_FLOOR), d[0], var[0], 0.0
         )
         assert float(bound) == pytest.approx(float(ref), rel=1e-3, abs=1e-30), (mean, r)
+
+
+def _spread_scene(
+    seed: int, dtype: torch.dtype = torch.float64
+) -> tuple[torch.Tensor, torch.Tensor, C.HumanObstacle]:
+    """Robot spheres (3, 4, 7, 3) and a person with 5 actions whose spheres lie apart (as the
+    reaching predictor's targets do), some near the robot, most not."""
+    gen = torch.Generator().manual_seed(seed)
+    centers = 0.4 * torch.randn(3, 4, 7, 3, generator=gen, dtype=dtype)
+    radii = 0.03 + 0.05 * torch.rand(7, generator=gen, dtype=dtype)
+    offsets = 0.5 * torch.randn(1, 5, 1, 3, generator=gen, dtype=dtype)  # one per action
+    human = C.HumanObstacle(
+        mean=offsets + 0.2 * torch.randn(4, 5, 6, 3, generator=gen, dtype=dtype),
+        var=(0.01 + 0.04 * torch.rand(4, 5, 6, 3, generator=gen, dtype=dtype)) ** 2,
+        radii=0.03 + 0.06 * torch.rand(6, generator=gen, dtype=dtype),
+        weights=torch.tensor([0.4, 0.25, 0.15, 0.12, 0.08], dtype=dtype),
+    )
+    return centers, radii, human
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("margin", [0.0, 0.15])
+def test_candidate_entries_match_brute_force_distance_list(seed: int, margin: float) -> None:
+    centers, radii, human = _spread_scene(seed)
+    pairs, entries = C.candidate_entries(centers, radii, human, margin)
+    assert torch.equal(pairs, C.candidate_pairs(centers, radii, human, margin))
+    # brute force: every (waypoint, pair, action) whose smallest distance over trajectories
+    # is within reach by that sphere's own largest standard deviation there
+    expected = set()
+    for p, (r, h) in enumerate(pairs.tolist()):
+        for w in range(4):
+            for a in range(5):
+                dist = (centers[:, w, r] - human.mean[w, a, h]).norm(dim=-1).min()
+                s_max = human.var[w, a, h].max().sqrt()
+                if dist <= radii[r] + human.radii[h] + C.PRUNE_SIGMAS * s_max + margin:
+                    expected.add((w, p, a))
+    got = [tuple(e) for e in entries.tolist()]
+    assert len(got) == len(set(got)) and set(got) == expected
+    assert 0 < len(expected) < pairs.shape[0] * 4 * 5  # some kept, some left out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("exact", [True, False])
+def test_human_bound_on_entries_stays_within_the_pruning_level_of_the_full_bound(
+    seed: int, exact: bool
+) -> None:
+    centers, radii, human = _spread_scene(seed)
+    # brute force over every (b, w, robot sphere, human sphere) and every action, as in
+    # test_human_bound_is_max_over_pairs_of_weighted_sum_and_pruning_is_safe
+    ref = torch.zeros(3, 4, dtype=torch.float64)
+    for b in range(3):
+        for w in range(4):
+            for j in range(7):
+                for ll in range(6):
+                    d = human.mean[w, :, ll] - centers[b, w, j]
+                    r = (radii[j] + human.radii[ll]).expand(5)
+                    pb, _ = C.gaussian_ball_bound_diag(d, human.var[w, :, ll], r)
+                    ref[b, w] = max(ref[b, w], float((pb * human.weights).sum()))
+    assert float(ref.max()) > 1e-3  # the comparison is not vacuous
+    tail = math.erfc(C.PRUNE_SIGMAS / math.sqrt(2)) / 2
+    pairs, entries = C.candidate_entries(centers, radii, human, 0.0)
+    full, full_pen = C.human_collision_bound(centers, radii, human, exact=exact)
+    bound, pen = C.human_collision_bound(
+        centers, radii, human, pairs, exact=exact, entries=entries
+    )
+    assert bool((bound >= ref - tail - 1e-12).all())  # at most the pruning level below
+    assert bool((bound <= full + 1e-12).all())  # never above the bound of every entry
+    if exact:
+        assert torch.allclose(bound, ref, atol=C.EXACT_FROM + tail)
+    assert torch.allclose(pen, full_pen, rtol=1e-12, atol=0.0)  # penetrating entries are kept
+    # every entry given: the same values as the dense evaluation of the pairs
+    w, p, a = torch.meshgrid(
+        torch.arange(4), torch.arange(pairs.shape[0]), torch.arange(5), indexing="ij"
+    )
+    every = torch.stack([w.flatten(), p.flatten(), a.flatten()], dim=-1)
+    dense, _ = C.human_collision_bound(centers, radii, human, pairs, exact=exact)
+    all_in, _ = C.human_collision_bound(centers, radii, human, pairs, exact=exact, entries=every)
+    assert torch.allclose(all_in, dense, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("exact", [True, False])
+def test_human_bound_on_entries_with_gradient_equals_plain_evaluation(exact: bool) -> None:
+    # with autograd the maximising pair is evaluated again on its entries alone: the values
+    # must equal the no-grad evaluation, and the gradients finite differences
+    centers, radii, human = _spread_scene(1)
+    pairs, entries = C.candidate_entries(centers, radii, human, 0.15)
+    j, ll = (int(x) for x in pairs[0])
+    centers[1, 2, j] = human.mean[2, 0, ll] + 0.01  # one robot sphere penetrates a mean sphere
+
+    def bound_of(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return C.human_collision_bound(x, radii, human, pairs, exact=exact, entries=entries)
+
+    with torch.no_grad():
+        ref_bound, ref_pen = bound_of(centers)
+    assert float(ref_pen[1]) > 0.0 and bool(((ref_bound > 1e-6) & (ref_bound < 0.9)).any())
+    x = centers.clone().requires_grad_(True)
+    bound, pen = bound_of(x)
+    assert torch.allclose(bound, ref_bound, rtol=1e-12, atol=1e-15)
+    assert torch.allclose(pen, ref_pen, rtol=1e-12, atol=1e-15)
+    _fd_check(lambda y: bound_of(y)[0].sum(), centers, rtol=1e-3)
+    _fd_check(lambda y: bound_of(y)[1].sum(), centers, rtol=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("pairs", "entries", "match"),
+    [
+        (None, torch.tensor([[0, 0, 0]]), "expected pairs with the entries"),
+        (torch.tensor([[2, 0]]), torch.tensor([[0, 0]]), r"expected entries \(K, 3\)"),
+        (torch.tensor([[2, 0]]), torch.tensor([[0, 0, 0]], dtype=torch.int32), "int64"),
+        (torch.tensor([[2, 0]]), torch.tensor([[1, 0, 0]]), r"below \(1, 1, 1\) \(W_x, P, A\)"),
+        (torch.tensor([[2, 0]]), torch.tensor([[0, 1, 0]]), r"below \(1, 1, 1\) \(W_x, P, A\)"),
+        (torch.tensor([[2, 0]]), torch.tensor([[0, 0, 1]]), r"below \(1, 1, 1\) \(W_x, P, A\)"),
+    ],
+)
+def test_human_bound_refuses_bad_entries(
+    pairs: torch.Tensor | None, entries: torch.Tensor, match: str
+) -> None:
+    with pytest.raises(ShapeError, match=match):
+        C.human_collision_bound(
+            _THREE_SPHERES, torch.full((3,), 0.05), _one_sphere_human(), pairs, entries=entries
+        )
+
+
+def test_human_bound_on_entries_sees_the_sphere_inside_the_person() -> None:
+    human = _one_sphere_human()
+    pairs, entries = C.candidate_entries(_THREE_SPHERES, torch.full((3,), 0.05), human, 0.0)
+    assert pairs.tolist() == [[2, 0]] and entries.tolist() == [[0, 0, 0]]
+    bound, pen = C.human_collision_bound(
+        _THREE_SPHERES, torch.full((3,), 0.05), human, pairs, entries=entries
+    )
+    assert bound.tolist() == [[1.0]] and float(pen[0]) == pytest.approx(0.15**2)
+    # no entry: the dropped actions' weight alone, as without pairs
+    none, _ = C.human_collision_bound(
+        _THREE_SPHERES, torch.full((3,), 0.05), human, pairs, entries=entries[:0]
+    )
+    assert none.tolist() == [[0.0]]
+
+
+@pytest.mark.parametrize("exact", [True, False])
+def test_human_bound_on_entries_leaves_the_same_actions_out_with_a_gradient(exact: bool) -> None:
+    # one robot sphere, one human sphere, two actions: the second just beyond the pruning
+    # level (5.5 standard deviations: bound 1.9e-8), so its entry is left out
+    sigma, rad = 0.02, 0.05
+    human = C.HumanObstacle(
+        mean=torch.tensor([[[[0.12, 0.0, 0.0]], [[0.0, 2 * rad + 5.5 * sigma, 0.0]]]]).double(),
+        var=torch.full((1, 2, 1, 3), sigma**2, dtype=torch.float64),
+        radii=torch.tensor([rad], dtype=torch.float64),
+        weights=torch.tensor([0.5, 0.5], dtype=torch.float64),
+    )
+    centers = torch.zeros(1, 1, 1, 3, dtype=torch.float64)
+    radii = torch.tensor([rad], dtype=torch.float64)
+    pairs, entries = C.candidate_entries(centers, radii, human, 0.0)
+    assert entries.tolist() == [[0, 0, 0]]
+    full, _ = C.human_collision_bound(centers, radii, human, pairs, exact=exact)
+    with torch.no_grad():
+        plain, _ = C.human_collision_bound(
+            centers, radii, human, pairs, exact=exact, entries=entries
+        )
+    x = centers.clone().requires_grad_(True)
+    bound, _ = C.human_collision_bound(x, radii, human, pairs, exact=exact, entries=entries)
+    left_out = 0.5 * math.erfc(5.5 / math.sqrt(2)) / 2
+    assert float(full - plain) == pytest.approx(left_out, rel=1e-6)
+    assert torch.allclose(bound, plain, rtol=1e-12, atol=1e-15)
