@@ -660,18 +660,83 @@ def _pair_bounds(
     bound = 0.5 * torch.erfc(gap.clamp(max=GAP_CLAMP) * (1.0 / math.sqrt(2.0)))  # isotropic
     bound = torch.where(gap > 0.0, bound, torch.ones_like(bound))
     if exact:
-        sel = bound.detach() > EXACT_FROM
-        if bool(sel.any()):
-            shape3 = (*dist.shape, 3)
-            if d is None:  # only the selected differences
-                d_sel = mu.expand(shape3)[sel] - c.unsqueeze(-2).expand(shape3)[sel]
-            else:
-                d_sel = d[sel]
-            exact_b, _ = gaussian_ball_bound_diag(
-                d_sel, var.expand(shape3)[sel], rad.expand(dist.shape)[sel]
-            )
-            bound = bound.masked_scatter(sel, torch.minimum(exact_b, bound[sel]))
+        bound = _refine(bound, bound.detach() > EXACT_FROM, c, mu, var, rad, d)
     return bound, dist
+
+
+def _refine(
+    bound: torch.Tensor,
+    sel: torch.Tensor,
+    c: torch.Tensor,
+    mu: torch.Tensor,
+    var: torch.Tensor,
+    rad: torch.Tensor,
+    d: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """``bound`` (..., A) with its entries where ``sel`` (..., A) is true lowered to the exact
+    diagonal-Gaussian bound (:func:`gaussian_ball_bound_diag`); the other arguments as
+    :func:`_pair_bounds`, ``d`` the (..., A, 3) differences ``mu - c`` when at hand."""
+    if not bool(sel.any()):
+        return bound
+    shape3 = (*bound.shape, 3)
+    if d is None:  # only the selected differences
+        d_sel = mu.expand(shape3)[sel] - c.unsqueeze(-2).expand(shape3)[sel]
+    else:
+        d_sel = d[sel]
+    exact_b, _ = gaussian_ball_bound_diag(
+        d_sel, var.expand(shape3)[sel], rad.expand(bound.shape)[sel]
+    )
+    return bound.masked_scatter(sel, torch.minimum(exact_b, bound[sel]))
+
+
+def _mixture_refined_at_the_max(
+    bound: torch.Tensor,
+    c: torch.Tensor,
+    mu: torch.Tensor,
+    var: torch.Tensor,
+    rad: torch.Tensor,
+    weight: torch.Tensor,
+    flat_wp: torch.Tensor,
+    shape: tuple[int, int, int],
+) -> torch.Tensor:
+    """The per-pair mixtures (B, W_x, P) of the entries' isotropic bounds ``bound`` (B, K, 1),
+    refined (as ``exact=True``) only where the maximum over the pairs can depend on it.
+
+    The exact bound only lowers an entry's isotropic one, so a pair whose isotropic mixture
+    is at most the refined mixture of another pair at that waypoint cannot hold the maximum.
+    The isotropic maximiser of each waypoint is refined first; then every pair whose
+    isotropic mixture exceeds the maximiser's refined one. The maximum over the pairs is the
+    one of refining every entry above ``EXACT_FROM`` (the same numbers: each refined pair's
+    entries are refined alike and summed in the same order); the pairs left unrefined keep
+    their isotropic mixtures, which are no larger.
+
+    Args:
+        bound: (B, K, 1) isotropic entry bounds.
+        c, mu, var, rad: (B, K, 3), (K, 1, 3), (K, 1, 3), (K, 1) as :func:`_pair_bounds`.
+        weight: (K,) the entries' action weights.
+        flat_wp: (K,) the entries' flat (waypoint, pair) indices ``w P + p``.
+        shape: (B, W_x, P).
+
+    Returns:
+        (B, W_x, P) mixtures (without the residual weight).
+    """
+    b, w, n_p = shape
+
+    def mix(x: torch.Tensor) -> torch.Tensor:
+        return x.new_zeros(b, w * n_p).index_add_(1, flat_wp, x[..., 0] * weight)
+
+    iso = mix(bound)  # (B, W_x P)
+    big = bound > EXACT_FROM  # (B, K, 1)
+    wp_b = flat_wp.expand(b, -1)  # (B, K)
+    top = iso.view(b, w, n_p).argmax(-1)  # (B, W_x)
+    flat_top = top + n_p * torch.arange(w, device=top.device)  # (B, W_x) into W_x P
+    at_top = torch.zeros_like(iso, dtype=torch.bool).scatter_(1, flat_top, True)
+    first = at_top.gather(1, wp_b).unsqueeze(-1) & big
+    bound = _refine(bound, first, c, mu, var, rad)
+    low = mix(bound).gather(1, flat_top)  # (B, W_x) the maximisers' refined mixtures
+    over = (iso.view(b, w, n_p) > low.unsqueeze(-1)).view(b, -1) & ~at_top  # (B, W_x P)
+    bound = _refine(bound, over.gather(1, wp_b).unsqueeze(-1) & big, c, mu, var, rad)
+    return mix(bound).view(b, w, n_p)
 
 
 def human_collision_bound(
@@ -779,10 +844,18 @@ def human_collision_bound(
                 pairs, entries, robot_radii
             )
             c_k = robot_centers.reshape(b, -1, 3).index_select(1, wr_k)  # (B, K, 3)
-            bound_k, dist_k = _pair_bounds(c_k, mean_k, var_k, inv_s_k, rad_k, exact)
-            bound_k, dist_k, rad_1 = bound_k[..., 0], dist_k[..., 0], rad_k[:, 0]  # (B, K)
-            mixed = bound_k.new_zeros(b, w * pairs.shape[0]).index_add_(1, wp_k, bound_k * w_k)
-            mixed = mixed.view(b, w, -1) + human.residual  # (B, W_x, P)
+            # without a gradient, only the entries the maximum can depend on are refined
+            lazy = exact and not need_grad
+            bound_k, dist_k = _pair_bounds(c_k, mean_k, var_k, inv_s_k, rad_k, exact and not lazy)
+            if lazy:
+                mixed = _mixture_refined_at_the_max(
+                    bound_k, c_k, mean_k, var_k, rad_k, w_k, wp_k, (b, w, pairs.shape[0])
+                )
+            else:
+                mixed = bound_k.new_zeros(b, w * pairs.shape[0])
+                mixed = mixed.index_add_(1, wp_k, bound_k[..., 0] * w_k).view(b, w, -1)
+            mixed = mixed + human.residual  # (B, W_x, P)
+            dist_k, rad_1 = dist_k[..., 0], rad_k[:, 0]  # (B, K), (K,)
             if not need_grad:
                 pen = (torch.relu(rad_1 - dist_k).square() * w_k).sum(-1)
                 return mixed.amax(-1).clamp(max=1.0), pen

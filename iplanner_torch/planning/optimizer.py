@@ -653,7 +653,7 @@ class TrajectoryOptimizer:
         q_goal: torch.Tensor,
         human: C.HumanObstacle | None,
         win_idx: torch.Tensor,
-        pairs: tuple[torch.Tensor, torch.Tensor] | None,
+        pairs: tuple[torch.Tensor, torch.Tensor | None] | None,
         timer: _Timer,
         exact: bool = False,
         prune: float | None = None,
@@ -662,11 +662,11 @@ class TrajectoryOptimizer:
         dict[str, torch.Tensor],
         torch.Tensor | None,
         torch.Tensor | None,
-        tuple[torch.Tensor, torch.Tensor] | None,
+        tuple[torch.Tensor, torch.Tensor | None] | None,
     ]:
         """Unweighted (B,) cost terms, the window bound (B, W_x), the min clearance (B, W) and
         the sphere pairs and entries used; ``prune`` (a margin [m]) first refreshes them from
-        this trajectory's own sphere centres (:func:`costs.candidate_entries`). With ``look_idx``
+        this trajectory's own sphere centres (:meth:`_candidates`). With ``look_idx``
         (waypoints after the window, :meth:`_lookahead_indices`) the human obstacle also covers
         those waypoints, after the window's points, and they add ``human_lookahead_penalty``;
         the returned bound stays the window's."""
@@ -692,7 +692,7 @@ class TrajectoryOptimizer:
                 centers_x = torch.cat([centers_x, centers[:, look_idx]], dim=1)
             with timer:
                 if prune is not None:
-                    pairs = C.candidate_entries(centers_x.detach(), self.radii, human, prune)
+                    pairs = self._candidates(centers_x.detach(), human, prune)
                 bound, pen = C.human_collision_bound(
                     centers_x,
                     self.radii,
@@ -712,6 +712,16 @@ class TrajectoryOptimizer:
             terms["human_confidence_penalty"] = excess.square().sum(-1)
             terms["human_mean_penetration"] = pen
         return terms, bound, clearance, pairs
+
+    def _candidates(
+        self, centers: torch.Tensor, human: C.HumanObstacle, margin: float
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The sphere pairs to evaluate, and the (waypoint, pair, action) entries within them
+        when the forecast has more than one action (:func:`costs.candidate_entries`; with one
+        action the entries save less than their indexing costs, about 0.05 ms a call)."""
+        if human.weights.shape[0] > 1:
+            return C.candidate_entries(centers, self.radii, human, margin)
+        return C.candidate_pairs(centers, self.radii, human, margin), None
 
     def _excess(self, bound: torch.Tensor) -> torch.Tensor:
         """``log(bound / target)`` where positive, else 0 (same shape as ``bound``): what the
@@ -991,7 +1001,7 @@ class TrajectoryOptimizer:
         with torch.no_grad():
             human = self._human_obstacle(forecast, times.to(self.device, self.dtype), forecast_t0)
             centers = self.robot.sphere_centers(q).unsqueeze(0)  # (1, N, S_r, 3)
-            pairs, entries = C.candidate_entries(centers, self.radii, human, 0.0)
+            pairs, entries = self._candidates(centers, human, 0.0)
             bound, _ = C.human_collision_bound(
                 centers, self.radii, human, pairs, exact=True, entries=entries
             )

@@ -727,3 +727,32 @@ def test_human_bound_on_entries_leaves_the_same_actions_out_with_a_gradient(exac
     left_out = 0.5 * math.erfc(5.5 / math.sqrt(2)) / 2
     assert float(full - plain) == pytest.approx(left_out, rel=1e-6)
     assert torch.allclose(bound, plain, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_exact_bound_on_entries_refines_where_the_maximum_can_change_with_the_same_result(
+    seed: int,
+) -> None:
+    # without a gradient, only the isotropic maximiser and the pairs whose isotropic mixture
+    # exceeds its exact one are refined: the maximum must be that of refining every entry
+    centers, radii, human = _spread_scene(seed)
+    human.var[..., 0] *= 9.0  # anisotropic: the isotropic screen is loose along the other axes
+    pairs, entries = C.candidate_entries(centers, radii, human, 0.0)
+    with torch.no_grad():
+        bound, _ = C.human_collision_bound(centers, radii, human, pairs, entries=entries)
+    # every entry refined: the dense evaluation of the same entries, pair by pair
+    mean_p, var_p, inv_s_p, rad_p = human.pair_tensors(pairs, radii)
+    kept = torch.zeros(mean_p.shape[:3], dtype=torch.float64)
+    kept[entries[:, 0], entries[:, 1], entries[:, 2]] = 1.0
+    c = centers[:, :, pairs[:, 0]]
+    mixes = {}
+    for exact in (False, True):
+        b, _ = C._pair_bounds(c, mean_p.unsqueeze(0), var_p, inv_s_p, rad_p, exact)
+        mixes[exact] = (b * kept * human.weights).sum(-1)  # (B, W_x, P)
+    want = mixes[True].amax(-1)
+    assert torch.allclose(bound, want, rtol=1e-12, atol=1e-15)
+    # not vacuous: somewhere the isotropic maximiser's exact mixture is below the maximum, and
+    # the true maximiser's isotropic mixture above it (refining the first pair alone is wrong)
+    at_iso_top = mixes[True].gather(-1, mixes[False].argmax(-1, keepdim=True))[..., 0]
+    at_top_iso = mixes[False].gather(-1, mixes[True].argmax(-1, keepdim=True))[..., 0]
+    assert bool(((at_iso_top < want * (1 - 1e-6)) & (at_top_iso > want * (1 + 1e-6))).any())
