@@ -189,22 +189,31 @@ def test_screen_distance_matches_norm_of_difference() -> None:
     assert torch.allclose(C._distance3(a, b), (a - b).norm(dim=-1), rtol=1e-12, atol=0.0)
 
 
+def _brute_force_bound(
+    centers: torch.Tensor, radii: torch.Tensor, human: C.HumanObstacle
+) -> torch.Tensor:
+    """(B, W_x) the mixture bound by brute force: every (trajectory, waypoint, robot sphere,
+    human sphere) in loops, each action by the exact diagonal-Gaussian bound."""
+    b_n, w_n, s_r, _ = centers.shape
+    ref = torch.zeros(b_n, w_n, dtype=torch.float64)
+    for b in range(b_n):
+        for w in range(w_n):
+            for j in range(s_r):
+                for ll in range(human.radii.shape[0]):
+                    d = human.mean[w, :, ll] - centers[b, w, j]
+                    r = (radii[j] + human.radii[ll]).expand(human.weights.shape[0])
+                    pb, _ = C.gaussian_ball_bound_diag(d, human.var[w, :, ll], r)
+                    ref[b, w] = max(ref[b, w], float((pb * human.weights).sum()))
+    return ref
+
+
 def test_human_bound_is_max_over_pairs_of_weighted_sum_and_pruning_is_safe() -> None:
     human = _obstacle()
     gen = torch.Generator().manual_seed(7)
     centers = torch.randn(2, 3, 5, 3, generator=gen, dtype=torch.float64) * 0.5
     radii = torch.full((5,), 0.04, dtype=torch.float64)
     bound, _ = C.human_collision_bound(centers, radii, human)
-    # brute force over every (b, w, robot sphere, human sphere)
-    ref = torch.zeros(2, 3, dtype=torch.float64)
-    for b in range(2):
-        for w in range(3):
-            for j in range(5):
-                for ll in range(4):
-                    d = human.mean[w, :, ll] - centers[b, w, j]
-                    r = (radii[j] + human.radii[ll]).expand(2)
-                    pb, _ = C.gaussian_ball_bound_diag(d, human.var[w, :, ll], r)
-                    ref[b, w] = max(ref[b, w], float((pb * human.weights).sum()))
+    ref = _brute_force_bound(centers, radii, human)
     # pairs below EXACT_FROM keep the (larger) isotropic bound
     assert bool((bound >= ref.clamp(max=1.0) - 1e-12).all())
     assert torch.allclose(bound, ref.clamp(max=1.0), atol=C.EXACT_FROM)
@@ -611,17 +620,7 @@ def test_human_bound_on_entries_stays_within_the_pruning_level_of_the_full_bound
     seed: int, exact: bool
 ) -> None:
     centers, radii, human = _spread_scene(seed)
-    # brute force over every (b, w, robot sphere, human sphere) and every action, as in
-    # test_human_bound_is_max_over_pairs_of_weighted_sum_and_pruning_is_safe
-    ref = torch.zeros(3, 4, dtype=torch.float64)
-    for b in range(3):
-        for w in range(4):
-            for j in range(7):
-                for ll in range(6):
-                    d = human.mean[w, :, ll] - centers[b, w, j]
-                    r = (radii[j] + human.radii[ll]).expand(5)
-                    pb, _ = C.gaussian_ball_bound_diag(d, human.var[w, :, ll], r)
-                    ref[b, w] = max(ref[b, w], float((pb * human.weights).sum()))
+    ref = _brute_force_bound(centers, radii, human)
     assert float(ref.max()) > 1e-3  # the comparison is not vacuous
     tail = math.erfc(C.PRUNE_SIGMAS / math.sqrt(2)) / 2
     pairs, entries = C.candidate_entries(centers, radii, human, 0.0)
