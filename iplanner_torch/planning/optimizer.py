@@ -378,12 +378,13 @@ def unsafe_if_not_finite(bound: torch.Tensor, human: C.HumanObstacle) -> torch.T
     """The collision bound with every value that cannot be trusted set to 1 (unsafe).
 
     A NaN or inf in the predicted human does not show up as a NaN bound: the sphere-pair
-    pruning (:func:`costs.candidate_entries`) drops every pair it cannot compare (for all
-    times, as it reduces over them), and the bound without pairs is the dropped actions'
-    weight, usually 0 ("no human"). So the bound counts as 1 everywhere when any mean,
-    variance or weight of the human obstacle is not finite, and so does a non-finite bound
-    itself. Otherwise the values and their gradients are unchanged. (:class:`Forecast`
-    rejects non-finite values when built; this is the planner's own second line of defence.)
+    pruning (:func:`costs.candidate_pairs`, :func:`costs.candidate_entries`) drops every pair
+    it cannot compare (for all times, as it reduces over them), and the bound without pairs is
+    the dropped actions' weight, usually 0 ("no human"). So the bound counts as 1 everywhere
+    when any mean, variance or weight of the human obstacle is not finite, and so does a
+    non-finite bound itself. Otherwise the values and their gradients are unchanged.
+    (:class:`Forecast` rejects non-finite values when built; this is the planner's own second
+    line of defence.)
 
     Args:
         bound: (..., W_x) collision bounds in [0, 1].
