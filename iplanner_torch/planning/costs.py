@@ -403,23 +403,27 @@ class HumanObstacle:
         """
         key = (entries, pairs, robot_radii)
         if self._entry_cache is None or not _same_objects(self._entry_cache[0], key):
-            mean_p, var_p, inv_s_p, rad_p = self.pair_tensors(pairs, robot_radii)
+            # gathered from the obstacle itself, not from :meth:`pair_tensors`: a check
+            # without a gradient needs no (W_x, P, A) tensor of every entry of the pairs
+            w_x, n_p, n_a = self.mean.shape[0], pairs.shape[0], self.weights.shape[0]
             w_k, p_k, a_k = entries.unbind(-1)
             try:
-                mean = mean_p[w_k, p_k, a_k].unsqueeze(1)
-                var = var_p[w_k, p_k, a_k].unsqueeze(1)
-                inv_s = inv_s_p[w_k, p_k, a_k].unsqueeze(1)
-                rad = rad_p[p_k]
+                r_k, h_k = pairs[p_k, 0], pairs[p_k, 1]
+                mean = self.mean[w_k, a_k, h_k].unsqueeze(1)
+                var = self.var[w_k, a_k, h_k].unsqueeze(1)
+                rad = (robot_radii[r_k] + self.radii[h_k]).unsqueeze(1)
                 weight = self.weights[a_k]
             except IndexError as err:  # (the CPU's bounds check; free)
                 raise ShapeError(
                     f"expected entries of (waypoint, pair, action) indices below "
-                    f"({mean_p.shape[0]}, {pairs.shape[0]}, {self.weights.shape[0]}) "
-                    f"(W_x, P, A): {err}"
+                    f"({w_x}, {n_p}, {n_a}) (W_x, P, A), and pairs of (robot, human) sphere "
+                    f"indices below ({robot_radii.shape[0]}, {self.radii.shape[0]}) "
+                    f"(S_r, S_h): {err}"
                 ) from err
-            flat_wp = w_k * pairs.shape[0] + p_k
-            flat_wr = w_k * robot_radii.shape[0] + pairs[p_k, 0]
-            kept = torch.zeros(mean_p.shape[:3], dtype=weight.dtype, device=weight.device)
+            inv_s = var.amax(-1).rsqrt()
+            flat_wp = w_k * n_p + p_k
+            flat_wr = w_k * robot_radii.shape[0] + r_k
+            kept = torch.zeros(w_x, n_p, n_a, dtype=weight.dtype, device=weight.device)
             kept[w_k, p_k, a_k] = 1.0
             self._entry_cache = (
                 key,
@@ -689,6 +693,15 @@ def _refine(
     return bound.masked_scatter(sel, torch.minimum(exact_b, bound[sel]))
 
 
+def _entry_mixture(
+    bound: torch.Tensor, weight: torch.Tensor, flat_wp: torch.Tensor, shape: tuple[int, int, int]
+) -> torch.Tensor:
+    """(B, W_x, P) the per-pair sums of the entries' weighted bounds ``bound`` (B, K, 1), each
+    entry's at its flat (waypoint, pair) index ``flat_wp`` (K,); ``shape`` (B, W_x, P)."""
+    b, w, n_p = shape
+    return bound.new_zeros(b, w * n_p).index_add_(1, flat_wp, bound[..., 0] * weight).view(shape)
+
+
 def _mixture_refined_at_the_max(
     bound: torch.Tensor,
     c: torch.Tensor,
@@ -723,7 +736,7 @@ def _mixture_refined_at_the_max(
     b, w, n_p = shape
 
     def mix(x: torch.Tensor) -> torch.Tensor:
-        return x.new_zeros(b, w * n_p).index_add_(1, flat_wp, x[..., 0] * weight)
+        return _entry_mixture(x, weight, flat_wp, shape).view(b, -1)
 
     iso = mix(bound)  # (B, W_x P)
     big = bound > EXACT_FROM  # (B, K, 1)
@@ -736,7 +749,7 @@ def _mixture_refined_at_the_max(
     low = mix(bound).gather(1, flat_top)  # (B, W_x) the maximisers' refined mixtures
     over = (iso.view(b, w, n_p) > low.unsqueeze(-1)).view(b, -1) & ~at_top  # (B, W_x P)
     bound = _refine(bound, over.gather(1, wp_b).unsqueeze(-1) & big, c, mu, var, rad)
-    return mix(bound).view(b, w, n_p)
+    return _entry_mixture(bound, weight, flat_wp, shape)
 
 
 def human_collision_bound(
@@ -825,11 +838,11 @@ def human_collision_bound(
         floor = min(human.residual, 1.0)
         return robot_centers.new_zeros(b, w) + zero + floor, robot_centers.new_zeros(b) + zero
     ri = pairs[:, 0]
-    mean_p, var_p, inv_s_p, rad_p = human.pair_tensors(pairs, robot_radii)
     weights = human.weights
     need_grad = torch.is_grad_enabled() and robot_centers.requires_grad
     with torch.set_grad_enabled(torch.is_grad_enabled() and not need_grad):
         if entries is None:
+            mean_p, var_p, inv_s_p, rad_p = human.pair_tensors(pairs, robot_radii)
             bound, dist = _pair_bounds(
                 robot_centers[:, :, ri], mean_p.unsqueeze(0), var_p, inv_s_p, rad_p, exact
             )  # (B, W_x, P, A)
@@ -847,13 +860,13 @@ def human_collision_bound(
             # without a gradient, only the entries the maximum can depend on are refined
             lazy = exact and not need_grad
             bound_k, dist_k = _pair_bounds(c_k, mean_k, var_k, inv_s_k, rad_k, exact and not lazy)
+            shape = (b, w, pairs.shape[0])
             if lazy:
                 mixed = _mixture_refined_at_the_max(
-                    bound_k, c_k, mean_k, var_k, rad_k, w_k, wp_k, (b, w, pairs.shape[0])
+                    bound_k, c_k, mean_k, var_k, rad_k, w_k, wp_k, shape
                 )
             else:
-                mixed = bound_k.new_zeros(b, w * pairs.shape[0])
-                mixed = mixed.index_add_(1, wp_k, bound_k[..., 0] * w_k).view(b, w, -1)
+                mixed = _entry_mixture(bound_k, w_k, wp_k, shape)
             mixed = mixed + human.residual  # (B, W_x, P)
             dist_k, rad_1 = dist_k[..., 0], rad_k[:, 0]  # (B, K), (K,)
             if not need_grad:
@@ -861,6 +874,7 @@ def human_collision_bound(
                 return mixed.amax(-1).clamp(max=1.0), pen
             touching = torch.unique(p_k[(dist_k < rad_1).any(0)])  # (Q,)
         top = mixed.argmax(-1)  # (B, W_x) index into the pairs
+    mean_p, var_p, inv_s_p, rad_p = human.pair_tensors(pairs, robot_radii)  # cached
     # the maximising pair of each waypoint, again with autograd
     w_idx = torch.arange(w, device=robot_centers.device).unsqueeze(0)  # (1, W_x)
     c_top = robot_centers[torch.arange(b, device=ri.device)[:, None], w_idx, ri[top]]

@@ -675,6 +675,7 @@ def test_human_bound_on_entries_with_gradient_equals_plain_evaluation(exact: boo
         (torch.tensor([[2, 0]]), torch.tensor([[1, 0, 0]]), r"below \(1, 1, 1\) \(W_x, P, A\)"),
         (torch.tensor([[2, 0]]), torch.tensor([[0, 1, 0]]), r"below \(1, 1, 1\) \(W_x, P, A\)"),
         (torch.tensor([[2, 0]]), torch.tensor([[0, 0, 1]]), r"below \(1, 1, 1\) \(W_x, P, A\)"),
+        (torch.tensor([[5, 0]]), torch.tensor([[0, 0, 0]]), r"below \(3, 1\) \(S_r, S_h\)"),
     ],
 )
 def test_human_bound_refuses_bad_entries(
