@@ -113,16 +113,20 @@ def flag(name: str, value: object, *, error: type[Exception] = ConfigError) -> b
     return bool(value)
 
 
-#: the largest seed every generator takes (torch's manual_seed refuses larger ones)
-MAX_SEED = 2**63 - 1
+#: the largest seed: one 32-bit word. The random streams are numpy generators seeded by
+#: lists such as ``[seed, salt]`` and ``[seed, salt, k]``; numpy splits a larger int into
+#: several 32-bit words, so seed ``7 + 2**32`` with ``[seed, 0, 3]`` would draw the very
+#: numbers of seed 7 with ``[seed, 1, 0, 3]``. Lightning's seed_everything takes no more.
+MAX_SEED = 2**32 - 1
 
 
 def seed(value: object, *, error: type[Exception] = ConfigError, name: str = "seed") -> int:
     """A random seed as an int; ``error`` unless it is an integer in [0, :data:`MAX_SEED`]
-    (numpy's generators refuse negative seeds, torch's those beyond 64-bit signed)."""
+    (numpy's generators refuse negative seeds; a larger one would share another seed's
+    streams, see :data:`MAX_SEED`)."""
     out = integer(name, value, minimum=0, error=error)
     if out > MAX_SEED:
-        raise error(f"expected {name} an integer <= {MAX_SEED} (2^63 - 1), got {value!r}")
+        raise error(f"expected {name} an integer <= {MAX_SEED} (2^32 - 1), got {value!r}")
     return out
 
 

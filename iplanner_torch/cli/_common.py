@@ -403,7 +403,7 @@ def check_root_keys(cfg: DictConfig) -> None:
         from iplanner_torch.checks import MAX_SEED
 
         if not 0 <= cfg_scalar(cfg, "seed", int) <= MAX_SEED:
-            raise ConfigError(f"seed: expected an integer in [0, 2^63 - 1], got {cfg.seed}")
+            raise ConfigError(f"seed: expected an integer in [0, 2^32 - 1], got {cfg.seed}")
     absent = object()
     for key in PATH_KEYS:
         try:

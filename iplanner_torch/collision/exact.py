@@ -547,7 +547,7 @@ def mc_ball_probability(
         mean: (..., 3) Gaussian mean [m].
         cov: (..., 3, 3) Gaussian covariance [m^2], symmetric positive (semi)definite.
         n: samples per case.
-        seed: random seed, an integer in [0, 2^63 - 1] (same seed, same numbers).
+        seed: random seed, an integer in [0, 2^32 - 1] (same seed, same numbers).
         chunk: the most samples drawn at once per case.
 
     Returns:
@@ -557,7 +557,7 @@ def mc_ball_probability(
         ShapeError: as :func:`exact_ball_probability`.
         DataError: as :func:`exact_ball_probability`.
         ConfigError: when ``n`` or ``chunk`` is not a positive int, or ``seed`` is not an
-            integer in [0, 2^63 - 1].
+            integer in [0, 2^32 - 1].
     """
     integer("n", n, minimum=1)
     integer("chunk", chunk, minimum=1)
@@ -617,7 +617,7 @@ def exact_ball_probability(
         DataError: on NaN or Inf in any argument, a covariance with a negative eigenvalue, or
             one whose eigenvalues overflow float64.
         ConfigError: on an unknown method, ``max_terms`` / ``n_mc`` not a positive int, or
-            ``seed`` not an integer in [0, 2^63 - 1].
+            ``seed`` not an integer in [0, 2^32 - 1].
 
     Warns:
         NumericalWarning: where Imhof's integral misses :data:`ATOL` (see the module

@@ -49,7 +49,7 @@ class ReachingDataModule(L.LightningDataModule):
         window_cfg: window settings (default :class:`WindowCfg`).
         fractions: (train, val, test) fractions of demonstrations.
         batch_size: windows per batch.
-        seed: split and shuffling seed, an integer in [0, 2^63 - 1].
+        seed: split and shuffling seed, an integer in [0, 2^32 - 1].
         fps: frame rate for files that do not state one.
         num_workers: DataLoader workers (0 keeps everything in-process).
     """

@@ -90,7 +90,7 @@ class ExperimentCfg:
             for s in self.seeds
         ):
             raise ConfigError(
-                f"seeds: expected seeds as integers in [0, 2^63 - 1], got {self.seeds}"
+                f"seeds: expected seeds as integers in [0, 2^32 - 1], got {self.seeds}"
             )
         for name in ("seeds", "planners", "speeds", "noises"):
             values = list(getattr(self, name))

@@ -685,7 +685,7 @@ def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None
     Args:
         x: (B, T, D) windows, B >= 2, float32 or float64, finite.
         n_pairs: number of random pairs, >= 1.
-        seed: seed of the pair sampler, an integer in [0, 2^63 - 1].
+        seed: seed of the pair sampler, an integer in [0, 2^32 - 1].
         band: as in :func:`dtw_distance`.
 
     Returns:
@@ -693,7 +693,7 @@ def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None
 
     Raises:
         ShapeError: when fewer than two windows are given, or as :func:`dtw_distance`.
-        ConfigError: when ``n_pairs < 1``, ``seed`` is not an integer in [0, 2^63 - 1], or as
+        ConfigError: when ``n_pairs < 1``, ``seed`` is not an integer in [0, 2^32 - 1], or as
             :func:`dtw_distance` (band).
         DataError: when a window holds NaN or inf (naming window and frame), or as
             :func:`dtw_distance` (features so large that distances overflow).

@@ -86,7 +86,7 @@ class IVMClassifier:
         candidates: random candidates scored per import step, an integer >= 1; None scores
             all.
         newton_steps: Newton (bound) steps per candidate and per refit, an integer >= 1.
-        seed: seed of the candidate sampler, an integer in [0, 2^63 - 1].
+        seed: seed of the candidate sampler, an integer in [0, 2^32 - 1].
 
     Raises:
         ConfigError: when a setting is not of the type and range above (a float ``2.5`` or a

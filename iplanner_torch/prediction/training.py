@@ -71,7 +71,7 @@ __all__ = [
 
 
 #: the largest seed Lightning's ``seed_everything`` takes (numpy's seeds are 32-bit)
-MAX_SEED = 2**32 - 1
+MAX_SEED = checks.MAX_SEED
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -113,8 +113,7 @@ class TrainerCfg:
         checks.integer("devices", self.devices, minimum=1)
         checks.integer("log_every_n_steps", self.log_every_n_steps, minimum=1)
         # Lightning's seed_everything takes numpy's seeds only, 0 .. 2^32 - 1
-        if checks.seed(self.seed) > MAX_SEED:
-            raise ConfigError(f"expected seed <= {MAX_SEED} (2^32 - 1), got {self.seed}")
+        checks.seed(self.seed)
         checks.optional(checks.integer, "num_threads", self.num_threads, minimum=1)
 
     def cap_steps(self, steps: int) -> int:

@@ -281,7 +281,7 @@ def test_huge_covariances() -> None:
             assert 0.0 <= p.item() <= 1e-8, method
 
 
-@pytest.mark.parametrize("seed", [-1, 1.5, "a", True, 2**63])
+@pytest.mark.parametrize("seed", [-1, 1.5, "a", True, 2**32])
 def test_mc_seed_is_checked(seed: object) -> None:
     c, R, mu, cov, _ = _isotropic(2, 13)
     with pytest.raises(ConfigError, match="expected seed an integer"):

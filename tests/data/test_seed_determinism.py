@@ -82,7 +82,7 @@ def test_data_module_split_and_shuffle_follow_the_seed(reaches: Path) -> None:
     assert other_names != names
 
 
-@pytest.mark.parametrize("seed", [1.5, True, "1", -1, 2**63, None])
+@pytest.mark.parametrize("seed", [1.5, True, "1", -1, 2**32, None])
 def test_data_module_refuses_what_is_not_a_seed(reaches: Path, seed: object) -> None:
     """1.5, True and "1" were read as the seed 1 (the same split and batches as seed 1); -1
     failed only in setup(), with numpy's bare ValueError."""

@@ -677,9 +677,9 @@ def test_dropouts_never_give_the_predictor_a_joint_lost_in_the_whole_window(
 @pytest.mark.parametrize(
     ("field", "value", "match"),
     [
-        ("seeds", [0, -1], r"expected seeds as integers in \[0, 2\^63 - 1\]"),
-        ("seeds", [0.5], r"expected seeds as integers in \[0, 2\^63 - 1\]"),
-        ("seeds", [2**64], r"expected seeds as integers in \[0, 2\^63 - 1\]"),
+        ("seeds", [0, -1], r"expected seeds as integers in \[0, 2\^32 - 1\]"),
+        ("seeds", [0.5], r"expected seeds as integers in \[0, 2\^32 - 1\]"),
+        ("seeds", [2**32], r"expected seeds as integers in \[0, 2\^32 - 1\]"),
         ("noises", [float("nan")], r"expected noises in \[0, 1\] m"),
         ("noises", [-0.01], r"expected noises in \[0, 1\] m"),
         ("noises", [2.0], r"expected noises in \[0, 1\] m"),

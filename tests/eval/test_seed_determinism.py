@@ -125,7 +125,7 @@ def test_another_seed_another_person_and_tracker_noise(tmp_path: Path) -> None:
 
 
 def test_every_seed_the_experiment_grid_accepts_runs_an_episode(tmp_path: Path) -> None:
-    """The grid takes seeds up to 2^63 - 1; the tracker's seed is derived from the episode's
+    """The grid takes seeds up to 2^32 - 1; the tracker's seed is derived from the episode's
     and must stay in range for the largest one too (it was the episode seed + 1 and failed)."""
     assert ExperimentCfg(seeds=[MAX_SEED]).seeds == [MAX_SEED]
     res = run_episode(

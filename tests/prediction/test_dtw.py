@@ -442,7 +442,7 @@ def test_kernel_from_state_names_missing_arguments():
 @pytest.mark.parametrize("seed", [2**70, -1])
 def test_median_dtw_refuses_a_seed_out_of_range(seed: int) -> None:
     """2**70 raised a bare ValueError ("Overflow when unpacking long long") from the torch
-    generator; seeds are checked as everywhere else, as integers in [0, 2^63 - 1]."""
+    generator; seeds are checked as everywhere else, as integers in [0, 2^32 - 1]."""
     x = torch.randn(3, 4, 2, generator=torch.Generator().manual_seed(0))
     with pytest.raises(ConfigError, match="expected seed an integer"):
         median_dtw(x, seed=seed)

@@ -217,7 +217,7 @@ def test_config_seeds_and_bands_are_checked() -> None:
     for cls in (PredictorCfg, SVGPCfg, TrainerCfg):
         with pytest.raises(ConfigError, match="expected seed an integer >= 0, got -1"):
             cls(seed=-1)
-    with pytest.raises(ConfigError, match=r"expected seed <= 4294967295 \(2\^32 - 1\)"):
+    with pytest.raises(ConfigError, match=r"expected seed an integer <= 4294967295 \(2\^32 - 1\)"):
         TrainerCfg(seed=2**32)
     assert TrainerCfg(seed=2**32 - 1).seed == 2**32 - 1
     with pytest.raises(ConfigError, match="expected series_band an integer >= 0, got -1"):
