@@ -26,6 +26,7 @@ import hashlib
 import importlib
 import math
 import numbers
+import warnings
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -34,7 +35,13 @@ from typing import Any, Literal
 import torch
 
 from iplanner_torch import checks
-from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
+from iplanner_torch.errors import (
+    CheckpointError,
+    ConfigError,
+    DataError,
+    DataWarning,
+    ShapeError,
+)
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
 from iplanner_torch.types import MAX_POSITION_M, all_finite, check_finite, check_shape
@@ -742,7 +749,15 @@ class HumanMotionPredictor:
                 f"predictor checkpoint {path} has format version {version!r}; this code reads "
                 f"version {CHECKPOINT_VERSION} (retrain, or load it with the matching code)"
             )
-        if "digest" in d and not _equals(d["digest"], content_digest(d)):
+        if "digest" not in d:
+            warnings.warn(
+                f"predictor checkpoint {path} has no content digest (written before "
+                "checkpoints carried one): loaded without the check for damage; save it again "
+                "or retrain to add one",
+                DataWarning,
+                stacklevel=2,
+            )
+        elif not _equals(d["digest"], content_digest(d)):
             raise CheckpointError(
                 f"predictor checkpoint {path} is damaged: its contents do not match the "
                 "digest written with them (retrain, or restore the file)"

@@ -345,8 +345,8 @@ def _resume(ckpt: Path, key: str, build: Any, digest: str) -> Any:
     (:func:`_stamp`), is a CheckpointError naming it and the way out (the sub-model is
     retrained without it). A file stamped with another run's :func:`inputs_digest` (a
     training run started in the folder since and interrupted before it came to this
-    sub-model) gives None with a DataWarning: the caller trains the sub-model anew. Files
-    written before the stamps are used as they are.
+    sub-model) gives None with a DataWarning: the caller trains the sub-model anew. A file
+    written before the stamps is used as it is, unchecked, with a DataWarning.
     """
     try:
         d = torch.load(ckpt, map_location="cpu", weights_only=False)
@@ -358,7 +358,15 @@ def _resume(ckpt: Path, key: str, build: Any, digest: str) -> Any:
             raise CheckpointError(
                 "its contents do not match the digest written with them (the file is damaged)"
             )
-        if d.get("inputs_digest", digest) != digest:
+        if "model_digest" not in d:
+            warnings.warn(
+                f"{ckpt} carries no digests (written before checkpoints were stamped): "
+                "resumed from as it is, without the checks that it is undamaged and from this "
+                "training run's data and settings; delete it to retrain that sub-model",
+                DataWarning,
+                stacklevel=3,
+            )
+        elif d.get("inputs_digest", digest) != digest:
             warnings.warn(
                 f"{ckpt} was trained by another training run (other data or settings) than "
                 "this one: trained anew",

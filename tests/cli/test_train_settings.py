@@ -19,7 +19,7 @@ from iplanner_torch.cli._common import CONF_DIR, config_split
 from iplanner_torch.cli.train import train_from_config
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.data.windows import split_by_demonstration
-from iplanner_torch.errors import CheckpointError, ConfigError, DataError
+from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
 from iplanner_torch.eval.prediction import INPUTS_FILE, SplitRecord
 from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
@@ -139,7 +139,8 @@ def test_resume_refuses_other_trainer_settings_and_split(
                 del d["inputs_digest"], d["model_digest"]
                 torch.save(d, ckpt)
         stamps = {p.name: p.stat().st_mtime_ns for p in out.glob("*.ckpt")}
-        run(resume=True, max_steps=5)
+        with pytest.warns(DataWarning, match="carries no digests"):
+            run(resume=True, max_steps=5)
     finally:
         torch.set_num_threads(threads)
     sub_models = {
@@ -153,7 +154,6 @@ def test_a_split_that_holds_out_nothing_is_said(
 ) -> None:
     """5 reaches per target and a test fraction of 0.05 round to no held-out demonstration:
     training goes on, and says there are no held-out metrics instead of printing none."""
-    from iplanner_torch.errors import DataWarning
 
     def fake_train(data: Any, *, out_dir: Path, **kwargs: Any) -> Path:
         out_dir.mkdir(parents=True, exist_ok=True)

@@ -11,7 +11,13 @@ import torch
 
 from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
 from iplanner_torch.data.windows import WindowCfg, build_windows, compute_features
-from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
+from iplanner_torch.errors import (
+    CheckpointError,
+    ConfigError,
+    DataError,
+    DataWarning,
+    ShapeError,
+)
 from iplanner_torch.prediction.predictor import (
     CHECKPOINT_VERSION,
     HumanMotionPredictor,
@@ -367,7 +373,7 @@ def test_damaged_or_foreign_checkpoints_raise_checkpoint_errors(trained, tmp_pat
     gone = torch.load(path, weights_only=False)
     del gone["classifier"], gone["joint_names"], gone["digest"]  # as an older file
     torch.save(gone, tmp_path / "gone.ckpt")
-    with pytest.raises(CheckpointError, match="gone.ckpt is incomplete"):
+    with pytest.warns(DataWarning), pytest.raises(CheckpointError, match="gone.ckpt is incompl"):
         HumanMotionPredictor.load(tmp_path / "gone.ckpt", expect_joints=JOINTS)
     # a changed byte inside a tensor (torch reads it without complaint) breaks the digest
     d = torch.load(path, weights_only=False)
@@ -377,6 +383,13 @@ def test_damaged_or_foreign_checkpoints_raise_checkpoint_errors(trained, tmp_pat
     rotten = _rewrite(path, tmp_path / "rot.ckpt", digest=False, feat_mean=rot)
     with pytest.raises(CheckpointError, match="rot.ckpt is damaged: its contents do not match"):
         HumanMotionPredictor.load(rotten)
+    # written before checkpoints carried a digest: loaded, unchecked, with a DataWarning
+    older = torch.load(path, weights_only=False)
+    del older["digest"]
+    torch.save(older, tmp_path / "older.ckpt")
+    with pytest.warns(DataWarning, match="older.ckpt has no content digest.*without the check"):
+        loaded = HumanMotionPredictor.load(tmp_path / "older.ckpt")
+    assert torch.equal(loaded.feat_mean, HumanMotionPredictor.load(path).feat_mean)
     # saved without a classifier (both fields None): uniform weights, as documented
     plain = _rewrite(path, tmp_path / "plain.ckpt", classifier=None, classifier_class=None)
     assert HumanMotionPredictor.load(plain).classifier is None

@@ -140,6 +140,13 @@ def test_resume_never_mixes_in_sub_models_of_other_inputs(tmp_path: Path) -> Non
         with pytest.raises(CheckpointError, match="fails on its own training windows"):
             train(a, mixed, resume=True)
     assert any(issubclass(w.category, DataWarning) for w in caught)
+    # the unstamped sub-model is named: it is used without the checks
+    assert any(
+        issubclass(w.category, DataWarning)
+        and f"{gp.name} carries no digests" in str(w.message)
+        and "without the checks" in str(w.message)
+        for w in caught
+    )
     assert (mixed / "predictor.ckpt").read_bytes() == ckpt_a
     # the same folder with its own sub-models resumes to the same predictor
     shutil.copy(tmp_path / "a" / gp.name, mixed / gp.name)
