@@ -398,8 +398,9 @@ class HumanObstacle:
         Returns:
             mean (K, 1, 3) [m], var (K, 1, 3) [m^2], ``1 / s_max`` (K, 1) [1/m], ``R`` (K, 1)
             [m], the action weights (K,), the flat (waypoint, pair) index ``w P + p`` (K,),
-            the flat (waypoint, robot sphere) index ``w S_r + r`` (K,), the pair index (K,)
-            and (W_x, P, A) 1 at the entries, else 0.
+            the flat (waypoint, robot sphere) index ``w S_r + r`` (K,), the pair index (K,),
+            (W_x, P, A) 1 at the entries, else 0, and the means as coordinate planes (3, K)
+            [m].
         """
         key = (entries, pairs, robot_radii)
         if self._entry_cache is None or not _same_objects(self._entry_cache[0], key):
@@ -425,9 +426,10 @@ class HumanObstacle:
             flat_wr = w_k * robot_radii.shape[0] + r_k
             kept = torch.zeros(w_x, n_p, n_a, dtype=weight.dtype, device=weight.device)
             kept[w_k, p_k, a_k] = 1.0
+            planes = mean[:, 0].T.contiguous()  # (3, K)
             self._entry_cache = (
                 key,
-                (mean, var, inv_s, rad, weight, flat_wp, flat_wr, p_k, kept),
+                (mean, var, inv_s, rad, weight, flat_wp, flat_wr, p_k, kept, planes),
             )
         return self._entry_cache[1]
 
@@ -660,12 +662,41 @@ def _pair_bounds(
         dist = d.norm(dim=-1)  # (..., A)
     else:
         dist = _distance3(mu, c.unsqueeze(-2))
-    gap = (dist - rad) * inv_s
-    bound = 0.5 * torch.erfc(gap.clamp(max=GAP_CLAMP) * (1.0 / math.sqrt(2.0)))  # isotropic
-    bound = torch.where(gap > 0.0, bound, torch.ones_like(bound))
+    bound = _isotropic(dist, rad, inv_s)
     if exact:
         bound = _refine(bound, bound.detach() > EXACT_FROM, c, mu, var, rad, d)
     return bound, dist
+
+
+def _isotropic(dist: torch.Tensor, rad: torch.Tensor, inv_s: torch.Tensor) -> torch.Tensor:
+    """The isotropic bound ``Phi(-(dist - rad) inv_s)`` (1 where the gap is not positive) of
+    broadcast centre distances [m], radius sums [m] and ``1 / s_max`` [1/m]."""
+    gap = (dist - rad) * inv_s
+    bound = 0.5 * torch.erfc(gap.clamp(max=GAP_CLAMP) * (1.0 / math.sqrt(2.0)))
+    return torch.where(gap > 0.0, bound, torch.ones_like(bound))
+
+
+def _entry_planes(robot_centers: torch.Tensor, flat: torch.Tensor) -> torch.Tensor:
+    """(3, B, K) the coordinates of the robot sphere centres (B, W_x, S_r, 3) at the flat
+    (waypoint, sphere) indices ``flat`` (K,) ``w S_r + r``, one plane per coordinate.
+
+    Gathered as whole columns of the (3 B, W_x S_r) planes: ``index_select`` along the middle
+    dimension of (B, W_x S_r, 3), one (3,) slice per index, took about twice as long on the
+    CPU for the optimiser's 60,000 entries, and the planes give the distances without the
+    strided reads of :func:`_distance3`: gather and distances 1.3 ms against 6.8 ms there.
+    """
+    b = robot_centers.shape[0]
+    cols = robot_centers.permute(3, 0, 1, 2).reshape(3 * b, -1)  # (3 B, W_x S_r)
+    return cols.index_select(1, flat).view(3, b, -1)
+
+
+def _plane_distances(planes: torch.Tensor, mean_planes: torch.Tensor) -> torch.Tensor:
+    """(B, K) Euclidean distances of the robot centres ``planes`` (3, B, K) to the means
+    ``mean_planes`` (3, K), summed in the order of :func:`_distance3` (the same numbers)."""
+    sq = (mean_planes[0] - planes[0]).square_()
+    sq += (mean_planes[1] - planes[1]).square_()
+    sq += (mean_planes[2] - planes[2]).square_()
+    return sq.sqrt_()
 
 
 def _refine(
@@ -680,17 +711,18 @@ def _refine(
     """``bound`` (..., A) with its entries where ``sel`` (..., A) is true lowered to the exact
     diagonal-Gaussian bound (:func:`gaussian_ball_bound_diag`); the other arguments as
     :func:`_pair_bounds`, ``d`` the (..., A, 3) differences ``mu - c`` when at hand."""
-    if not bool(sel.any()):
+    idx = sel.nonzero(as_tuple=True)  # one scan of the mask, for every gather below
+    if idx[0].numel() == 0:
         return bound
     shape3 = (*bound.shape, 3)
     if d is None:  # only the selected differences
-        d_sel = mu.expand(shape3)[sel] - c.unsqueeze(-2).expand(shape3)[sel]
+        d_sel = mu.expand(shape3)[idx] - c.unsqueeze(-2).expand(shape3)[idx]
     else:
-        d_sel = d[sel]
+        d_sel = d[idx]
     exact_b, _ = gaussian_ball_bound_diag(
-        d_sel, var.expand(shape3)[sel], rad.expand(bound.shape)[sel]
+        d_sel, var.expand(shape3)[idx], rad.expand(bound.shape)[idx]
     )
-    return bound.masked_scatter(sel, torch.minimum(exact_b, bound[sel]))
+    return bound.index_put(idx, torch.minimum(exact_b, bound[idx]))
 
 
 def _entry_mixture(
@@ -853,13 +885,21 @@ def human_collision_bound(
             touch = (dist < rad_p).flatten(0, 1).any(0).any(-1)  # (P,)
             touching = torch.nonzero(touch).squeeze(-1)  # (Q,)
         else:
-            mean_k, var_k, inv_s_k, rad_k, w_k, wp_k, wr_k, p_k, kept = human.entry_tensors(
-                pairs, entries, robot_radii
+            mean_k, var_k, inv_s_k, rad_k, w_k, wp_k, wr_k, p_k, kept, mean_planes = (
+                human.entry_tensors(pairs, entries, robot_radii)
             )
-            c_k = robot_centers.reshape(b, -1, 3).index_select(1, wr_k)  # (B, K, 3)
+            planes = _entry_planes(robot_centers, wr_k)  # (3, B, K)
+            c_k = planes.permute(1, 2, 0)  # (B, K, 3), a view
             # without a gradient, only the entries the maximum can depend on are refined
             lazy = exact and not need_grad
-            bound_k, dist_k = _pair_bounds(c_k, mean_k, var_k, inv_s_k, rad_k, exact and not lazy)
+            if torch.is_grad_enabled() and (c_k.requires_grad or mean_k.requires_grad):
+                refine = exact and not lazy
+                bound_k, dist_k = _pair_bounds(c_k, mean_k, var_k, inv_s_k, rad_k, refine)
+            else:  # the planes' own arithmetic, the same numbers as _pair_bounds
+                dist_k = _plane_distances(planes, mean_planes).unsqueeze(-1)  # (B, K, 1)
+                bound_k = _isotropic(dist_k, rad_k, inv_s_k)
+                if exact and not lazy:
+                    bound_k = _refine(bound_k, bound_k > EXACT_FROM, c_k, mean_k, var_k, rad_k)
             shape = (b, w, pairs.shape[0])
             if lazy:
                 mixed = _mixture_refined_at_the_max(

@@ -666,6 +666,28 @@ def test_human_bound_on_entries_with_gradient_equals_plain_evaluation(exact: boo
     _fd_check(lambda y: bound_of(y)[1].sum(), centers, rtol=1e-3)
 
 
+@pytest.mark.parametrize("exact", [True, False])
+def test_human_bound_on_entries_differentiates_the_person_means(exact: bool) -> None:
+    # the entries' own arithmetic (coordinate planes) serves every call without autograd; the
+    # person's means with a gradient take the autograd path: the same values, and gradients
+    # that agree with finite differences
+    centers, radii, human = _spread_scene(2)
+    pairs, entries = C.candidate_entries(centers, radii, human, 0.15)
+
+    def bound_of(mean: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h = C.HumanObstacle(mean=mean, var=human.var, radii=human.radii, weights=human.weights)
+        return C.human_collision_bound(centers, radii, h, pairs, exact=exact, entries=entries)
+
+    with torch.no_grad():
+        ref_bound, ref_pen = bound_of(human.mean)
+    assert bool(((ref_bound > 1e-6) & (ref_bound < 0.9)).any())
+    bound, pen = bound_of(human.mean.clone().requires_grad_(True))
+    assert bound.requires_grad
+    assert torch.allclose(bound, ref_bound, rtol=1e-12, atol=1e-15)
+    assert torch.allclose(pen, ref_pen, rtol=1e-12, atol=1e-15)
+    _fd_check(lambda m: bound_of(m)[0].sum(), human.mean, rtol=1e-3)
+
+
 @pytest.mark.parametrize(
     ("pairs", "entries", "match"),
     [
