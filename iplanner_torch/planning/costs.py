@@ -673,7 +673,7 @@ def _isotropic(dist: torch.Tensor, rad: torch.Tensor, inv_s: torch.Tensor) -> to
     broadcast centre distances [m], radius sums [m] and ``1 / s_max`` [1/m]."""
     gap = (dist - rad) * inv_s
     bound = 0.5 * torch.erfc(gap.clamp(max=GAP_CLAMP) * (1.0 / math.sqrt(2.0)))
-    return torch.where(gap > 0.0, bound, torch.ones_like(bound))
+    return torch.where(gap > 0.0, bound, 1.0)
 
 
 def _entry_planes(robot_centers: torch.Tensor, flat: torch.Tensor) -> torch.Tensor:
