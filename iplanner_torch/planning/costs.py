@@ -605,15 +605,20 @@ def _candidates(
         if ri.numel() == 0:
             pairs = torch.nonzero(maybe)
             return pairs, (pairs.new_zeros(0, 3) if with_entries else None)
-        # exact minimum distance over (B, W_x, A) for the remaining pairs
-        dist = _distance3(robot_centers[:, :, ri].unsqueeze(2), human.mean[:, :, hi])
-        near = dist.amin(0)  # (W_x, A, P') from (B, W_x, A, P')
+        # exact minimum distance over (B, W_x, A) for the remaining pairs, gathered and summed
+        # coordinate plane by plane (as _distance3: the same numbers, without its strided reads)
+        r_pl = robot_centers.permute(3, 0, 1, 2).contiguous().index_select(-1, ri)
+        h_pl = human.mean.permute(3, 0, 1, 2).contiguous().index_select(-1, hi)
+        sq = (r_pl[0].unsqueeze(2) - h_pl[0]).square_()  # (B, W_x, A, P')
+        sq += (r_pl[1].unsqueeze(2) - h_pl[1]).square_()
+        sq += (r_pl[2].unsqueeze(2) - h_pl[2]).square_()
+        near = sq.amin(0).sqrt_()  # (W_x, A, P'); sqrt is monotone: the min of the distances
         keep = near.amin(dim=(0, 1)) <= thresh[ri, hi]  # (P',)
         pairs = torch.stack([ri[keep], hi[keep]], dim=-1)
         if not with_entries:
             return pairs, None
         # per entry: within reach by that action's own largest standard deviation there
-        s_max = human.max_std()[:, :, hi[keep]]  # (W_x, A, P)
+        s_max = human.max_std().index_select(-1, hi[keep])  # (W_x, A, P)
         rad = (robot_radii[ri[keep]] + human.radii[hi[keep]]).unsqueeze(0).unsqueeze(0)
         close = near[:, :, keep] <= rad + PRUNE_SIGMAS * s_max + margin  # (W_x, A, P)
         w_k, a_k, p_k = torch.nonzero(close, as_tuple=True)
