@@ -704,6 +704,16 @@ def _plane_distances(planes: torch.Tensor, mean_planes: torch.Tensor) -> torch.T
     return sq.sqrt_()
 
 
+def _any_leading(mask: torch.Tensor, n: int) -> torch.Tensor:
+    """``mask`` (bool) reduced with "any" over its first ``n`` dimensions.
+
+    The same as ``mask.flatten(0, n - 1).any(0)``, as the maximum of its bytes: on the
+    (8, about 62,000) penetration masks of 60 logged iterations of the Fetch arm, torch's
+    ``any`` over the leading dimension took 0.30 ms a mask on one CPU thread, this 0.034 ms.
+    """
+    return mask.flatten(0, n - 1).view(torch.uint8).amax(0).bool()
+
+
 def _refine(
     bound: torch.Tensor,
     sel: torch.Tensor,
@@ -887,7 +897,7 @@ def human_collision_bound(
             if not need_grad:
                 pen = torch.relu(rad_p - dist).square()  # (B, W_x, P, A)
                 return mixed.amax(-1).clamp(max=1.0), (pen @ weights).sum(dim=(1, 2))
-            touch = (dist < rad_p).flatten(0, 1).any(0).any(-1)  # (P,)
+            touch = _any_leading(dist < rad_p, 2).any(-1)  # (P,)
             touching = torch.nonzero(touch).squeeze(-1)  # (Q,)
         else:
             mean_k, var_k, inv_s_k, rad_k, w_k, wp_k, wr_k, p_k, kept, mean_planes = (
@@ -917,7 +927,7 @@ def human_collision_bound(
             if not need_grad:
                 pen = (torch.relu(rad_1 - dist_k).square() * w_k).sum(-1)
                 return mixed.amax(-1).clamp(max=1.0), pen
-            touching = torch.unique(p_k[(dist_k < rad_1).any(0)])  # (Q,)
+            touching = torch.unique(p_k[_any_leading(dist_k < rad_1, 1)])  # (Q,)
         top = mixed.argmax(-1)  # (B, W_x) index into the pairs
     mean_p, var_p, inv_s_p, rad_p = human.pair_tensors(pairs, robot_radii)  # cached
     # the maximising pair of each waypoint, again with autograd
