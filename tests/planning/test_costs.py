@@ -778,3 +778,17 @@ def test_exact_bound_on_entries_refines_where_the_maximum_can_change_with_the_sa
     at_iso_top = mixes[True].gather(-1, mixes[False].argmax(-1, keepdim=True))[..., 0]
     at_top_iso = mixes[False].gather(-1, mixes[True].argmax(-1, keepdim=True))[..., 0]
     assert bool(((at_iso_top < want * (1 - 1e-6)) & (at_top_iso > want * (1 + 1e-6))).any())
+
+
+def test_any_over_leading_dimensions_matches_torch_any() -> None:
+    gen = torch.Generator().manual_seed(3)
+    for shape, n in [
+        ((8, 50), 1),
+        ((4, 6, 7, 2), 2),
+        ((3, 5), 2),
+        ((1, 9), 1),
+        ((0, 4), 1),
+        ((3, 0), 1),
+    ]:
+        mask = torch.rand(shape, generator=gen) < 0.1
+        assert torch.equal(C._any_leading(mask, n), mask.flatten(0, n - 1).any(0))
