@@ -358,15 +358,7 @@ def _resume(ckpt: Path, key: str, build: Any, digest: str) -> Any:
             raise CheckpointError(
                 "its contents do not match the digest written with them (the file is damaged)"
             )
-        if "model_digest" not in d:
-            warnings.warn(
-                f"{ckpt} carries no digests (written before checkpoints were stamped): "
-                "resumed from as it is, without the checks that it is undamaged and from this "
-                "training run's data and settings; delete it to retrain that sub-model",
-                DataWarning,
-                stacklevel=3,
-            )
-        elif d.get("inputs_digest", digest) != digest:
+        if d.get("inputs_digest", digest) != digest:
             warnings.warn(
                 f"{ckpt} was trained by another training run (other data or settings) than "
                 "this one: trained anew",
@@ -374,6 +366,14 @@ def _resume(ckpt: Path, key: str, build: Any, digest: str) -> Any:
                 stacklevel=3,
             )
             return None
+        if "model_digest" not in d:  # both stamps came in together: an older file has neither
+            warnings.warn(
+                f"{ckpt} carries no digests (written before checkpoints were stamped): "
+                "resumed from as it is, without the checks that it is undamaged and from this "
+                "training run's data and settings; delete it to retrain that sub-model",
+                DataWarning,
+                stacklevel=3,
+            )
         return build(d)
     except Exception as err:  # noqa: BLE001 - a broken file is an error the user must see
         # our own CheckpointError says what is wrong already; another error is named by type
