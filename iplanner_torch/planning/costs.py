@@ -609,9 +609,7 @@ def _candidates(
         # coordinate plane by plane (as _distance3: the same numbers, without its strided reads)
         r_pl = robot_centers.permute(3, 0, 1, 2).contiguous().index_select(-1, ri)
         h_pl = human.mean.permute(3, 0, 1, 2).contiguous().index_select(-1, hi)
-        sq = (r_pl[0].unsqueeze(2) - h_pl[0]).square_()  # (B, W_x, A, P')
-        sq += (r_pl[1].unsqueeze(2) - h_pl[1]).square_()
-        sq += (r_pl[2].unsqueeze(2) - h_pl[2]).square_()
+        sq = _plane_squared_distances(r_pl.unsqueeze(3), h_pl)  # (B, W_x, A, P')
         near = sq.amin(0).sqrt_()  # (W_x, A, P'); sqrt is monotone: the min of the distances
         keep = near.amin(dim=(0, 1)) <= thresh[ri, hi]  # (P',)
         pairs = torch.stack([ri[keep], hi[keep]], dim=-1)
@@ -695,13 +693,19 @@ def _entry_planes(robot_centers: torch.Tensor, flat: torch.Tensor) -> torch.Tens
     return cols.index_select(1, flat).view(3, b, -1)
 
 
+def _plane_squared_distances(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Squared Euclidean distances of points given as coordinate planes ``a`` (3, ...) and
+    ``b`` (3, ...) (broadcast), summed in the order of :func:`_distance3` (the same numbers)."""
+    sq = (a[0] - b[0]).square_()
+    sq += (a[1] - b[1]).square_()
+    sq += (a[2] - b[2]).square_()
+    return sq
+
+
 def _plane_distances(planes: torch.Tensor, mean_planes: torch.Tensor) -> torch.Tensor:
     """(B, K) Euclidean distances of the robot centres ``planes`` (3, B, K) to the means
-    ``mean_planes`` (3, K), summed in the order of :func:`_distance3` (the same numbers)."""
-    sq = (mean_planes[0] - planes[0]).square_()
-    sq += (mean_planes[1] - planes[1]).square_()
-    sq += (mean_planes[2] - planes[2]).square_()
-    return sq.sqrt_()
+    ``mean_planes`` (3, K)."""
+    return _plane_squared_distances(mean_planes.unsqueeze(1), planes).sqrt_()
 
 
 def _any_leading(mask: torch.Tensor, n: int) -> torch.Tensor:

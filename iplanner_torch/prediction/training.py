@@ -70,10 +70,6 @@ __all__ = [
 ]
 
 
-#: the largest seed Lightning's ``seed_everything`` takes (numpy's seeds are 32-bit)
-MAX_SEED = checks.MAX_SEED
-
-
 @dataclass(frozen=True, kw_only=True)
 class TrainerCfg:
     """Lightning settings shared by every sub-model's training."""
