@@ -459,7 +459,8 @@ def check_run_keys(cfg: DictConfig) -> None:
     ``run.train_trainer`` a ``conf/trainer`` option, ``run.stall_fallback_s`` null or a number
     > 0 [s] (``EpisodeCfg.stall_fallback_s``), ``run.task_crossing_radius`` null or a number
     >= 0 [m], ``run.mask_by_order`` and ``run.rest_when_nothing_available`` bools,
-    ``run.reaction_s`` null or a number >= 0 [s].
+    ``run.reaction_s`` null or a number >= 0 [s], ``run.spread_tolerance`` null or a number
+    > 0.
 
     Raises:
         ConfigError: naming the key, what it expects and what it got.
@@ -498,6 +499,13 @@ def check_run_keys(cfg: DictConfig) -> None:
     for key in ("mask_by_order", "rest_when_nothing_available"):
         if key in run:
             cfg_scalar(run, key, bool)
+    if "spread_tolerance" in run:
+        value = run.spread_tolerance
+        if not (value is None or (fits_kind(value, float) and 0 < float(value) < math.inf)):
+            raise ConfigError(
+                "run.spread_tolerance: expected a number > 0 (a mean normalised squared error) "
+                f"or null (off), got {_plain(value)!r}"
+            )
 
 
 class _Tee:

@@ -367,6 +367,7 @@ RUN_EPISODE_KEYS = (
     "mask_by_order",
     "rest_when_nothing_available",
     "reaction_s",
+    "spread_tolerance",
 )
 #: run.* keys -> the EpisodeCfg fields they feed.
 RUN_EPISODE_PATHS = {

@@ -95,7 +95,13 @@ give 3 samples); plus
   1 m; < 0: overlap), where ``eval/min_distance`` is between the sphere models;
 * ``plan/*``: replanning cycles, overruns, waits, evasions (no safe trajectory and holding
   riskier than moving: ``PlanResult.evasive``), escapes (the evasions that stepped out of the
-  way: ``PlanResult.escape``) and solve times.
+  way: ``PlanResult.escape``) and solve times;
+* ``forecast/spread_scale_mean`` / ``_max`` (with ``spread_tolerance`` only): the factor the
+  spread calibration multiplied the planner's forecast variances by, over the cycles.
+
+The planner ``oracle`` in the blocking scenario may be made causal (``oracle_onset_delay_s``):
+it then learns of the arm's block only that long after the arm starts, and until then plans on
+the person held still at the true pose of each cycle.
 """
 
 from __future__ import annotations
@@ -113,6 +119,7 @@ from tqdm.auto import tqdm
 
 from iplanner_torch.checks import (
     MAX_SEED,
+    finite,
     flag,
     integer,
     is_real,
@@ -126,6 +133,7 @@ from iplanner_torch.errors import ConfigError, ShapeError
 from iplanner_torch.eval import metrics as M
 from iplanner_torch.planning.itomp import path_forecast, static_human_forecast
 from iplanner_torch.planning.replanner import PlannerCfg, build_replanner
+from iplanner_torch.prediction.calibration import CalibrationCfg, SpreadCalibrator
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.sim.env import SimCfg, SimEnv
 from iplanner_torch.sim.human import MotionSource, ReachingMotionSource, ScriptedHuman
@@ -262,6 +270,20 @@ class EpisodeCfg:
     # the lower end of a choice reaction. None or 0: off (the default: smoother in
     # reach_across, rougher in arrangement_2x2; see the module docstring)
     reaction_s: float | None = None
+    # online calibration of the predicting planners' forecast spread
+    # (:class:`~iplanner_torch.prediction.calibration.SpreadCalibrator`): each forecast is
+    # scored on the tracked frames that follow it, and while the last ``spread_memory_s``
+    # of them missed by more than this mean normalised squared error (1: calibrated), the next
+    # forecast's variances are multiplied by the excess, at most ``spread_max_scale``; None:
+    # off (the predictor's variances as they are). Metrics forecast/spread_scale_mean, _max.
+    spread_tolerance: float | None = None
+    spread_memory_s: float = 1.0
+    spread_max_scale: float = 16.0
+    # blocking scenario, planner ``oracle``: the oracle learns of the arm's block only this
+    # long after the arm started [s] (the event ``blocking_started``); until then it forecasts
+    # the person held at the true pose of now, as a perfect but causal predictor that needs
+    # this long to recognise the motion would. None: it knows from the start (the oracle)
+    oracle_onset_delay_s: float | None = None
 
     def __post_init__(self) -> None:
         for name, kind in (("scenario", ScenarioCfg), ("sim", SimCfg), ("planner", PlannerCfg)):
@@ -305,6 +327,26 @@ class EpisodeCfg:
         positive("still_radius", self.still_radius)
         optional(non_negative, "task_crossing_radius", self.task_crossing_radius)
         optional(non_negative, "reaction_s", self.reaction_s)
+        optional(positive, "spread_tolerance", self.spread_tolerance)
+        positive("spread_memory_s", self.spread_memory_s)
+        optional(non_negative, "oracle_onset_delay_s", self.oracle_onset_delay_s)
+        if self.oracle_onset_delay_s is not None and self.scenario.kind != "blocking":
+            raise ConfigError(
+                "oracle_onset_delay_s applies to the blocking scenario (scenario.kind=blocking), "
+                f"got it with scenario.kind={self.scenario.kind}"
+            )
+        if not finite("spread_max_scale", self.spread_max_scale) >= 1.0:
+            raise ConfigError(f"expected spread_max_scale >= 1, got {self.spread_max_scale!r}")
+
+    def calibration_cfg(self) -> CalibrationCfg | None:
+        """The spread calibration's settings, or None when it is off."""
+        if self.spread_tolerance is None:
+            return None
+        return CalibrationCfg(
+            tolerance=self.spread_tolerance,
+            memory_s=self.spread_memory_s,
+            max_scale=self.spread_max_scale,
+        )
 
     def scene_cfg(self) -> SceneCfg:
         """The workspace of the scenario."""
@@ -1074,6 +1116,14 @@ def _run_episode(
         if writer is not None:
             writer.task_event(t, kind, {"block": block})
 
+    def oracle_knows(t: float) -> bool:
+        """Whether the oracle knows the person's future at ``t`` (oracle_onset_delay_s)."""
+        delay = cfg.oracle_onset_delay_s
+        if delay is None:
+            return True
+        onset = next((te for te, kind, _ in events if kind == "blocking_started"), None)
+        return onset is not None and t >= onset + delay - 1e-9
+
     crossing = cfg.task_crossing_radius if forecasts_motion and not blocking else None
     spots = {i: scene.delivery_position(i) for i in scene.block_ids}
     deferred = 0  # fetches moved off a spot the person's next reach crosses
@@ -1183,6 +1233,12 @@ def _run_episode(
     still_frames = max(1, round(0.5 * sim_cfg.tracker_fps))
     rest_frames = max(2, round(REST_WINDOW_S * sim_cfg.tracker_fps))  # for reaction_s
     stall_cycles = 0
+    calibration = cfg.calibration_cfg() if use_prediction else None
+    calibrator = (
+        SpreadCalibrator(calibration, JOINT_NAMES, noise_std=sim_cfg.tracker_noise)
+        if calibration is not None
+        else None
+    )
     t_done: float | None = None
     t_goal: float | None = None
     step = 0
@@ -1249,8 +1305,23 @@ def _run_episode(
                             )
                             if bool((delay > 0).any()):
                                 forecast = forecast.delay_actions(delay)
+                    if calibrator is not None:  # scored unscaled, planned on widened
+                        stamps = tracker.times()  # (len,), the window's newest frames
+                        calibrator.observe(stamps, tracker.window()[-len(stamps) :])
+                        calibrator.record(forecast, t_obs)
+                        forecast = calibrator.apply(forecast)
                 elif blind:
                     forecast = None
+                elif oracle and not oracle_knows(t):  # the block not yet recognised
+                    t_obs = t
+                    now = tens(env.human_joints())  # (K, 3)
+                    forecast = path_forecast(
+                        now.expand(cfg.static_forecast_frames, *now.shape),
+                        cfg.static_forecast_dt,
+                        JOINT_NAMES,
+                        std=cfg.oracle_std,
+                        action="oracle",
+                    )
                 elif oracle:
                     t_obs = t
                     forecast = oracle_forecast(
@@ -1402,6 +1473,14 @@ def _run_episode(
                 "task/deferred_fetches": float(deferred),
                 "task/held_s": float(held_s),
                 "plan/mean_solve_ms": float(getattr(stats, "mean_solve_ms", 0.0)),
+                **(
+                    {
+                        "forecast/spread_scale_mean": float(np.mean(calibrator.scales or [1.0])),
+                        "forecast/spread_scale_max": float(max(calibrator.scales or [1.0])),
+                    }
+                    if calibrator is not None
+                    else {}
+                ),
                 "eval/completed": float(t_done is not None or (blocking and t_goal is not None)),
             }
         )

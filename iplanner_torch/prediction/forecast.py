@@ -14,6 +14,7 @@ from typing import Any
 
 import torch
 
+from iplanner_torch import checks
 from iplanner_torch.errors import DataError, ShapeError
 from iplanner_torch.types import MAX_POSITION_M, check_shape, resolve_device
 
@@ -297,6 +298,16 @@ class Forecast:
         mean = torch.where(h, self.mean[:, :, :1].expand_as(self.mean), self.mean)
         var = torch.where(h, self.var[:, :, :1].expand_as(self.var), self.var)
         return self._derive(mean=mean, var=var)
+
+    def scale_var(self, factor: float) -> Forecast:
+        """The forecast with every variance multiplied by ``factor`` (standard deviations by
+        its square root); weights and means unchanged.
+
+        Raises:
+            DataError: when ``factor`` is not a finite number > 0.
+        """
+        f = checks.positive("factor", factor, error=DataError)
+        return self._derive(var=self.var * f)
 
     def delay_actions(self, frames: torch.Tensor) -> Forecast:
         """The forecast with some actions' motion starting later.

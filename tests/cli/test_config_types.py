@@ -200,6 +200,16 @@ def test_console_script_reports_a_wrong_type_in_one_line(tmp_path: Path) -> None
             {"run": {"reaction_s": "soon"}},
             "run.reaction_s: expected a time >= 0 [s] or null (off), got 'soon'",
         ),
+        (
+            {"run": {"spread_tolerance": 0}},
+            "run.spread_tolerance: expected a number > 0 (a mean normalised squared error) or "
+            "null (off), got 0",
+        ),
+        (
+            {"run": {"spread_tolerance": "wide"}},
+            "run.spread_tolerance: expected a number > 0 (a mean normalised squared error) or "
+            "null (off), got 'wide'",
+        ),
     ],
 )
 def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
@@ -223,6 +233,7 @@ def test_root_keys_and_sweep_aliases_are_checked_by_the_typed_key(
     }
     check_root_keys(OmegaConf.create({"run": {**run, "task_crossing_radius": 0.1}}))
     check_root_keys(OmegaConf.create({"run": {**run, "reaction_s": 0.3}}))
+    check_root_keys(OmegaConf.create({"run": {**run, "spread_tolerance": 2}}))
     check_root_keys(OmegaConf.create({"run": run}))
     with pytest.raises(ConfigError) as err:
         check_root_keys(OmegaConf.create(root))

@@ -127,20 +127,25 @@ def test_bad_entry_on_the_command_line_is_one_line_before_anything_runs(
 @pytest.mark.parametrize(
     ("overrides", "want"),
     [
-        ([], (0.1, True, True, None)),
-        (["run.task_crossing_radius=null"], (None, True, True, None)),
+        ([], (0.1, True, True, None, None)),
+        (["run.task_crossing_radius=null"], (None, True, True, None, None)),
         (
             ["run.mask_by_order=false", "run.rest_when_nothing_available=false"],
-            (0.1, False, False, None),
+            (0.1, False, False, None, None),
         ),
-        (["experiment=reach_across", "run.task_crossing_radius=0.2"], (0.2, True, True, None)),
-        (["run.reaction_s=0.3"], (0.1, True, True, 0.3)),
-        (["experiment=reach_across", "run.reaction_s=0.25"], (0.1, True, True, 0.25)),
+        (
+            ["experiment=reach_across", "run.task_crossing_radius=0.2"],
+            (0.2, True, True, None, None),
+        ),
+        (["run.reaction_s=0.3"], (0.1, True, True, 0.3, None)),
+        (["experiment=reach_across", "run.reaction_s=0.25"], (0.1, True, True, 0.25, None)),
+        (["run.spread_tolerance=2"], (0.1, True, True, None, 2.0)),
+        (["experiment=speed_response", "run.spread_tolerance=1.5"], (0.1, True, True, None, 1.5)),
     ],
 )
 def test_task_choice_settings_reach_the_episode(overrides: list[str], want: tuple) -> None:
-    """The ``run.*`` keys of the person's reaches in the task choice feed every episode of the
-    main job and of an experiment."""
+    """The ``run.*`` keys of the person's reaches in the task choice (and of the forecast's
+    spread calibration) feed every episode of the main job and of an experiment."""
     cfg = compose(config_name="config", overrides=overrides)
     episode = instantiate(merged_episode_node(cfg, overrides), EpisodeCfg)
     got = (
@@ -148,5 +153,6 @@ def test_task_choice_settings_reach_the_episode(overrides: list[str], want: tupl
         episode.mask_by_order,
         episode.rest_when_nothing_available,
         episode.reaction_s,
+        episode.spread_tolerance,
     )
     assert got == want

@@ -435,6 +435,11 @@ def test_errors(tmp_path: Path) -> None:
         ({"reaction_s": -0.3}, "expected reaction_s >= 0"),
         ({"reaction_s": "0.3"}, "expected reaction_s >= 0"),
         ({"reaction_s": math.nan}, "expected reaction_s >= 0"),
+        ({"spread_tolerance": 0.0}, "expected spread_tolerance > 0"),
+        ({"spread_tolerance": "2"}, "expected spread_tolerance > 0"),
+        ({"spread_max_scale": 0.5}, "expected spread_max_scale >= 1"),
+        ({"spread_max_scale": math.inf}, "expected spread_max_scale a finite number"),
+        ({"spread_memory_s": math.nan}, "expected spread_memory_s > 0"),
         ({"scenario": {}}, "expected scenario a ScenarioCfg, got dict"),
         ({"sim": None}, "expected sim a SimCfg, got NoneType"),
         ({"planner": "iplanner"}, "expected planner a PlannerCfg, got str"),
@@ -966,3 +971,72 @@ def test_a_just_delivered_blocks_reach_starts_after_the_reaction_time(tmp_path: 
                 delayed[reaction] += int(d > 0)
     assert delayed[None] == 0
     assert delayed[0.3] > 0
+
+
+def test_spread_calibration_widens_the_forecasts_the_planner_gets(tmp_path: Path) -> None:
+    """``spread_tolerance``: a predictor that holds the last pose with 1 cm standard deviation
+    misses a reaching person by far more, so some forecasts reach the planner with their
+    variances multiplied by a factor > 1 (the same for every entry, at most
+    ``spread_max_scale``), reported in forecast/spread_scale_*; with None the planner gets the
+    predictor's variances and there is no such metric."""
+
+    class ForecastLog(fakes.LinearReplanner):
+        def step(self, t, q_now, forecast, *, forecast_t0):
+            self.forecasts.append((forecast_t0, forecast))
+            return super().step(t, q_now, forecast, forecast_t0=forecast_t0)
+
+    factors = {}
+    for tolerance in (None, 1.0):
+        cfg = replace(_cfg(8.0), spread_tolerance=tolerance, spread_max_scale=9.0)
+        log = ForecastLog(speed=1.5)
+        res = _fake_episode(tmp_path, cfg, "iplanner_ni", log, predictor=fakes.ConstantPredictor())
+        assert log.forecasts
+        seen = []
+        for _, f in log.forecasts:
+            ratio = f.var / 1e-4
+            torch.testing.assert_close(ratio, torch.full_like(ratio, float(ratio.flatten()[0])))
+            seen.append(float(ratio.flatten()[0]))
+        factors[tolerance] = seen
+        if tolerance is None:
+            assert "forecast/spread_scale_mean" not in res.metrics
+        else:
+            assert res.metrics["forecast/spread_scale_max"] == pytest.approx(max(seen), rel=1e-6)
+            assert res.metrics["forecast/spread_scale_mean"] == pytest.approx(
+                float(np.mean(seen)), rel=1e-6
+            )
+    assert factors[None] == pytest.approx([1.0] * len(factors[None]))
+    assert max(factors[1.0]) > 1.0
+    assert min(factors[1.0]) >= 1.0 and max(factors[1.0]) <= 9.0 + 1e-9
+
+
+def test_a_causal_oracle_learns_of_the_block_only_after_its_delay(tmp_path: Path) -> None:
+    """``oracle_onset_delay_s``: until that long after the arm starts (``blocking_started``)
+    the oracle's forecast holds the person still at the true pose of now; from then on it is
+    the true future, which moves. Without the delay the oracle foresees the block before it
+    starts. Refused outside the blocking scenario."""
+
+    class ForecastLog(fakes.LinearReplanner):
+        def step(self, t, q_now, forecast, *, forecast_t0):
+            self.forecasts.append((forecast_t0, forecast))
+            return super().step(t, q_now, forecast, forecast_t0=forecast_t0)
+
+    def spread(f) -> float:  # how far the forecast's joints move over its frames [m]
+        return float(np.ptp(f.mean[0, 0].numpy(), axis=0).max())
+
+    base = replace(_cfg(2.0), scenario=ScenarioCfg(name="b", kind="blocking"))
+    for delay in (None, 0.3):
+        log = ForecastLog(speed=1.5)
+        res = _fake_episode(tmp_path, replace(base, oracle_onset_delay_s=delay), "oracle", log)
+        onset = next(t for t, kind, _ in res.events if kind == "blocking_started")
+        before = [f for t0, f in log.forecasts if t0 < onset + (delay or 0.0) - 1e-9]
+        after = [f for t0, f in log.forecasts if t0 >= onset + (delay or 0.0) + 0.05]
+        assert before and after
+        assert any(spread(f) > 0.05 for f in after)
+        if delay is None:  # the true future: a cycle before the onset already sees the arm move
+            assert any(spread(f) > 0.05 for f in before)
+        else:
+            assert all(spread(f) == 0.0 for f in before)
+    with pytest.raises(ConfigError, match="oracle_onset_delay_s applies to the blocking"):
+        replace(_cfg(2.0), oracle_onset_delay_s=0.1)
+    with pytest.raises(ConfigError, match="expected oracle_onset_delay_s >= 0"):
+        replace(base, oracle_onset_delay_s=-0.1)
