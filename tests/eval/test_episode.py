@@ -980,15 +980,10 @@ def test_spread_calibration_widens_the_forecasts_the_planner_gets(tmp_path: Path
     ``spread_max_scale``), reported in forecast/spread_scale_*; with None the planner gets the
     predictor's variances and there is no such metric."""
 
-    class ForecastLog(fakes.LinearReplanner):
-        def step(self, t, q_now, forecast, *, forecast_t0):
-            self.forecasts.append((forecast_t0, forecast))
-            return super().step(t, q_now, forecast, forecast_t0=forecast_t0)
-
     factors = {}
     for tolerance in (None, 1.0):
         cfg = replace(_cfg(8.0), spread_tolerance=tolerance, spread_max_scale=9.0)
-        log = ForecastLog(speed=1.5)
+        log = fakes.LinearReplanner(speed=1.5)  # logs (cycle time, forecast)
         res = _fake_episode(tmp_path, cfg, "iplanner_ni", log, predictor=fakes.ConstantPredictor())
         assert log.forecasts
         seen = []
@@ -1015,17 +1010,12 @@ def test_a_causal_oracle_learns_of_the_block_only_after_its_delay(tmp_path: Path
     the true future, which moves. Without the delay the oracle foresees the block before it
     starts. Refused outside the blocking scenario."""
 
-    class ForecastLog(fakes.LinearReplanner):
-        def step(self, t, q_now, forecast, *, forecast_t0):
-            self.forecasts.append((forecast_t0, forecast))
-            return super().step(t, q_now, forecast, forecast_t0=forecast_t0)
-
     def spread(f) -> float:  # how far the forecast's joints move over its frames [m]
         return float(np.ptp(f.mean[0, 0].numpy(), axis=0).max())
 
     base = replace(_cfg(2.0), scenario=ScenarioCfg(name="b", kind="blocking"))
     for delay in (None, 0.3):
-        log = ForecastLog(speed=1.5)
+        log = fakes.LinearReplanner(speed=1.5)  # logs (cycle time, forecast)
         res = _fake_episode(tmp_path, replace(base, oracle_onset_delay_s=delay), "oracle", log)
         onset = next(t for t, kind, _ in res.events if kind == "blocking_started")
         before = [f for t0, f in log.forecasts if t0 < onset + (delay or 0.0) - 1e-9]
