@@ -1,7 +1,8 @@
 """The Submitit launchers of ``conf/hydra/launcher`` (the ``slurm`` extra): the SLURM config is
 one the plugin and Submitit accept, and a sweep runs and is summarised under Submitit's local
-executor. Skipped where ``hydra-submitit-launcher`` is not installed (``pip install -e
-".[slurm]"``; the ``dev`` extra installs it too)."""
+executor and under its SLURM executor on a stand-in cluster (``fake_slurm``). Skipped where
+``hydra-submitit-launcher`` is not installed (``pip install -e ".[slurm]"``; the ``dev`` extra
+installs it too)."""
 
 from __future__ import annotations
 
@@ -141,3 +142,47 @@ def test_the_slurm_launcher_off_a_cluster_is_one_line(tmp_path: Path) -> None:
     lines = res.stderr.strip().splitlines()
     assert lines[-1].startswith("error: ConfigError: hydra/launcher=slurm submits jobs to a SLURM")
     assert "no `srun` is on the PATH" in lines[-1] and "hydra/launcher=joblib" in lines[-1]
+
+
+def test_a_sweep_runs_through_sbatch_on_a_stand_in_cluster(tmp_path: Path) -> None:
+    """``hydra/launcher=slurm`` end to end against stand-in ``sbatch``, ``srun`` and ``sacct``
+    (:mod:`fake_slurm`): the sweep is submitted as one job array whose batch script carries
+    ``conf/hydra/launcher/slurm.yaml``'s resources and a partition from the command line, each
+    task runs in the environment SLURM gives it, and the sweep summary gathers the jobs."""
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
+    from fake_slurm import install
+
+    sweep = tmp_path / "sweep"
+    bin_dir = tmp_path / "bin"
+    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+    env.update(install(bin_dir, tmp_path / "slurm_state"))
+    env["PATH"] = f"{bin_dir}{os.pathsep}{env['PATH']}"
+    res = subprocess.run(
+        [sys.executable, "-m", "iplanner_torch.cli.experiment", "-m", "hydra/launcher=slurm",
+         "hydra.launcher.partition=debug", f"hydra.sweep.dir={sweep}", "tracker.noise=0,0.02",
+         "run.planners=[itomp]", "run.max_duration_s=2", "run.timeline_plots=false",
+         "progress=false"],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    scripts = list((sweep / ".submitit").rglob("*_submission.sh"))
+    assert len(scripts) == 1, scripts  # one array for the two jobs
+    text = scripts[0].read_text()
+    for flag in (
+        "#SBATCH --array=0-1%2",  # array_parallelism 64, at most the 2 tasks
+        "#SBATCH --partition=debug",
+        "#SBATCH --cpus-per-task=4",
+        "#SBATCH --mem=16GB",
+        "#SBATCH --time=120",
+    ):
+        assert flag in text, text
+    states = sorted((tmp_path / "slurm_state").glob("1001_*"))
+    assert [s.name for s in states] == ["1001_0", "1001_1"]
+    assert all(s.read_text() == "COMPLETED" for s in states)
+    for job in ("0", "1"):
+        assert (sweep / job / "results.csv").is_file()
+        assert len(list((sweep / job / "episodes").glob("*.mcap"))) == 1
+    import pandas as pd
+
+    rows = pd.read_csv(sweep / "summary" / "results.csv")
+    assert sorted(rows["noise"]) == [0.0, 0.02]
