@@ -1013,19 +1013,33 @@ def test_a_causal_oracle_learns_of_the_block_only_after_its_delay(tmp_path: Path
     def spread(f) -> float:  # how far the forecast's joints move over its frames [m]
         return float(np.ptp(f.mean[0, 0].numpy(), axis=0).max())
 
+    from iplanner_torch.recording.reader import read_episode
+
     base = replace(_cfg(2.0), scenario=ScenarioCfg(name="b", kind="blocking"))
     for delay in (None, 0.3):
         log = fakes.LinearReplanner(speed=1.5)  # logs (cycle time, forecast)
-        res = _fake_episode(tmp_path, replace(base, oracle_onset_delay_s=delay), "oracle", log)
+        path = tmp_path / f"oracle_{delay}.mcap"
+        cfg = replace(base, oracle_onset_delay_s=delay)
+        res = _fake_episode(tmp_path, cfg, "oracle", log, path=path)
         onset = next(t for t, kind, _ in res.events if kind == "blocking_started")
-        before = [f for t0, f in log.forecasts if t0 < onset + (delay or 0.0) - 1e-9]
+        before = [(t0, f) for t0, f in log.forecasts if t0 < onset + (delay or 0.0) - 1e-9]
         after = [f for t0, f in log.forecasts if t0 >= onset + (delay or 0.0) + 0.05]
         assert before and after
         assert any(spread(f) > 0.05 for f in after)
         if delay is None:  # the true future: a cycle before the onset already sees the arm move
-            assert any(spread(f) > 0.05 for f in before)
-        else:
-            assert all(spread(f) == 0.0 for f in before)
+            assert any(spread(f) > 0.05 for _, f in before)
+            continue
+        assert all(spread(f) == 0.0 for _, f in before)
+        # held at the true pose of its cycle (the last logged true pose at or before it; the
+        # person rests before the onset, so the two agree there)
+        t_true, true = (x.numpy() for x in read_episode(path).human_true())
+        compared = 0
+        for t0, f in before:
+            i = int(np.searchsorted(t_true, t0 + 1e-9)) - 1
+            if i >= 0 and t_true[i] < onset:
+                np.testing.assert_allclose(f.mean[0, 0, 0].numpy(), true[i], atol=1e-6)
+                compared += 1
+        assert compared >= 1
     with pytest.raises(ConfigError, match="oracle_onset_delay_s applies to the blocking"):
         replace(_cfg(2.0), oracle_onset_delay_s=0.1)
     with pytest.raises(ConfigError, match="expected oracle_onset_delay_s >= 0"):
