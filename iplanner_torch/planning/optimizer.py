@@ -144,6 +144,10 @@ class OptimizerCfg:
     # safe plans within ACC_TOL times it, so the executed motion is the one checked; None: no
     # limit
     acc_max: float | None = None
+    # share of the robot's joint velocity limits the plans may use (and the replanner's
+    # filtered tracking clips to): below 1 the arm moves slower everywhere, as a speed
+    # reduction for working beside a person; 1: the limits
+    speed_scale: float = 1.0
     # static-obstacle clearance below which the hinge cost starts [m]
     static_margin: float = 0.02
     # distance robot spheres may move before the pruned sphere pairs are refreshed [m]
@@ -198,6 +202,8 @@ class OptimizerCfg:
             if integer(name, getattr(self, name)) < 0:
                 raise ConfigError(f"expected {name} >= 0, got {getattr(self, name)}")
         positive("lr", self.lr)  # NaN and inf refused too
+        if not is_real(self.speed_scale) or not 0.0 < self.speed_scale <= 1.0:
+            raise ConfigError(f"expected speed_scale in (0, 1], got {self.speed_scale!r}")
         if not is_real(self.lr_final_ratio) or not 0.0 < self.lr_final_ratio <= 1.0:
             raise ConfigError(f"expected lr_final_ratio in (0, 1], got {self.lr_final_ratio!r}")
         if not is_real(self.perturbation_std) or not 0.0 <= self.perturbation_std < math.inf:
@@ -452,6 +458,8 @@ class TrajectoryOptimizer:
         self.q_min = robot.q_min.to(self.device, self.dtype)
         self.q_max = robot.q_max.to(self.device, self.dtype)
         self.v_max = robot.v_max.to(self.device, self.dtype)
+        if self.cfg.speed_scale != 1.0:
+            self.v_max = self.v_max * self.cfg.speed_scale
         self.radii = ref.to(self.device, self.dtype)
         self.num_joints = int(robot.num_joints)
 

@@ -1149,3 +1149,28 @@ def test_optimizer_refuses_a_non_robot_or_a_dict_cfg(point_robot: PointRobot) ->
     point_robot.sphere_radii = point_robot.sphere_radii.long()
     with pytest.raises(ShapeError, match="expected robot.sphere_radii of a floating dtype"):
         TrajectoryOptimizer(point_robot)
+
+
+def test_speed_scale_slows_every_plan_to_its_share_of_the_velocity_limits() -> None:
+    """``speed_scale``: the limits the optimiser plans to are that share of the robot's, the
+    shortest time from rest grows by its inverse, and a plan at the default duration keeps
+    every finite-difference joint speed within the scaled limits, where the unscaled plan of
+    the same move exceeds them (the setting binds)."""
+    arm = PlanarArm(dtype=torch.float64)
+    q_s = torch.tensor([0.1, -0.5, 0.3], dtype=torch.float64)
+    q_g = torch.tensor([1.2, 0.6, -0.9], dtype=torch.float64)
+    peaks, times = {}, {}
+    for scale in (1.0, 0.5):
+        opt = TrajectoryOptimizer(arm, OptimizerCfg(speed_scale=scale))
+        torch.testing.assert_close(opt.v_max, scale * arm.v_max)
+        times[scale] = opt.min_duration(q_s, q_g)
+        res = opt.solve(q_s, q_g)
+        assert res.feasible
+        speed = (res.q[1:] - res.q[:-1]).abs() / (res.times[1:] - res.times[:-1])[:, None]
+        peaks[scale] = (speed / arm.v_max).max().item()  # (W - 1, J) -> share of the limits
+    assert times[0.5] == pytest.approx(2.0 * times[1.0], rel=1e-12)
+    assert peaks[0.5] <= 0.5 * (1 + 1e-3)
+    assert peaks[1.0] > 0.5 * (1 + 1e-3)
+    for bad in (0.0, 1.5, math.nan, "0.5"):
+        with pytest.raises(ConfigError, match="expected speed_scale in"):
+            OptimizerCfg(speed_scale=bad)
