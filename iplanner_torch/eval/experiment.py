@@ -97,6 +97,11 @@ class ExperimentCfg:
             twice = sorted({str(v) for v in values if values.count(v) > 1})
             if twice:  # the same episode twice: counted twice, its log written over
                 raise ConfigError(f"{name}: {', '.join(twice)} given twice")
+        for scenario in self.scenarios:  # each scenario's episode settings, before any runs
+            try:
+                replace(self.episode, scenario=scenario)
+            except ConfigError as err:
+                raise ConfigError(f"scenario {scenario.name!r}: {err}") from err
 
 
 def _load_predictor(path: str, device: str) -> Any:

@@ -703,6 +703,19 @@ def test_experiment_grid_is_checked_before_it_runs(field: str, value: list, matc
         ExperimentCfg(**{field: value})
 
 
+def test_each_scenario_of_an_experiment_is_checked_with_the_episode_before_it_runs() -> None:
+    """A setting the episode refuses for one of the scenarios (the causal oracle's delay for a
+    delivery scenario) stops the experiment when it is made, naming that scenario, not when
+    the run reaches it after the others have written their results."""
+    from iplanner_torch.eval.experiment import ExperimentCfg
+
+    blocking = ScenarioCfg(name="b", kind="blocking")
+    episode = EpisodeCfg(scenario=blocking, oracle_onset_delay_s=0.1)
+    ExperimentCfg(scenarios=[blocking], episode=episode)  # fine alone
+    with pytest.raises(ConfigError, match=r"scenario 't': oracle_onset_delay_s applies to the"):
+        ExperimentCfg(scenarios=[blocking, ScenarioCfg(name="t")], episode=episode)
+
+
 def test_a_predictor_sets_the_tracker_window_and_must_match_the_tracker_rate() -> None:
     """The window is the predictor's ``n_prev`` (``n_p`` of a stand-in), else the sim's; a
     predictor trained at another frame rate than the tracker's is refused."""
