@@ -100,28 +100,35 @@ def test_the_slurm_config_is_one_submitit_accepts(
         executor.update_parameters(slurm_partitoin="gpu")
 
 
-def test_a_sweep_runs_on_submitits_local_executor(tmp_path: Path) -> None:
-    """``hydra/launcher=submitit_local``: each job runs in a process of its own that Submitit
-    starts, and the sweep summary gathers them, as with the basic and joblib launchers."""
-    pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
+def _two_job_sweep(tmp_path: Path, launcher: list[str], env: dict | None = None) -> Path:
+    """Run ``iplanner-experiment -m`` with the ``launcher`` overrides on a two-job sweep (ITOMP,
+    2 s, tracker noise 0 and 0.02) and check that it succeeded: each job's results and log,
+    and the sweep summary of both. Returns the sweep folder."""
     sweep = tmp_path / "sweep"
-    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+    full_env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg", **(env or {}))
     res = subprocess.run(
-        [sys.executable, "-m", "iplanner_torch.cli.experiment", "-m",
-         "hydra/launcher=submitit_local", f"hydra.sweep.dir={sweep}", "tracker.noise=0,0.02",
-         "run.planners=[itomp]", "run.max_duration_s=2", "run.timeline_plots=false",
-         "progress=false"],
-        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600,
+        [sys.executable, "-m", "iplanner_torch.cli.experiment", "-m", *launcher,
+         f"hydra.sweep.dir={sweep}", "tracker.noise=0,0.02", "run.planners=[itomp]",
+         "run.max_duration_s=2", "run.timeline_plots=false", "progress=false"],
+        cwd=tmp_path, env=full_env, capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert res.returncode == 0, res.stderr[-3000:]
     for job in ("0", "1"):
         assert (sweep / job / "results.csv").is_file()
         assert len(list((sweep / job / "episodes").glob("*.mcap"))) == 1
-    assert (sweep / ".submitit").is_dir()  # Submitit ran them
     import pandas as pd
 
     rows = pd.read_csv(sweep / "summary" / "results.csv")
     assert sorted(rows["noise"]) == [0.0, 0.02]
+    return sweep
+
+
+def test_a_sweep_runs_on_submitits_local_executor(tmp_path: Path) -> None:
+    """``hydra/launcher=submitit_local``: each job runs in a process of its own that Submitit
+    starts, and the sweep summary gathers them, as with the basic and joblib launchers."""
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
+    sweep = _two_job_sweep(tmp_path, ["hydra/launcher=submitit_local"])
+    assert (sweep / ".submitit").is_dir()  # Submitit ran them
 
 
 def test_the_slurm_launcher_off_a_cluster_is_one_line(tmp_path: Path) -> None:
@@ -152,19 +159,11 @@ def test_a_sweep_runs_through_sbatch_on_a_stand_in_cluster(tmp_path: Path) -> No
     pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
     from fake_slurm import install
 
-    sweep = tmp_path / "sweep"
     bin_dir = tmp_path / "bin"
-    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
-    env.update(install(bin_dir, tmp_path / "slurm_state"))
-    env["PATH"] = f"{bin_dir}{os.pathsep}{env['PATH']}"
-    res = subprocess.run(
-        [sys.executable, "-m", "iplanner_torch.cli.experiment", "-m", "hydra/launcher=slurm",
-         "hydra.launcher.partition=debug", f"hydra.sweep.dir={sweep}", "tracker.noise=0,0.02",
-         "run.planners=[itomp]", "run.max_duration_s=2", "run.timeline_plots=false",
-         "progress=false"],
-        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
-    assert res.returncode == 0, res.stderr[-3000:]
+    env = install(bin_dir, tmp_path / "slurm_state")
+    env["PATH"] = f"{bin_dir}{os.pathsep}{os.environ['PATH']}"
+    launcher = ["hydra/launcher=slurm", "hydra.launcher.partition=debug"]
+    sweep = _two_job_sweep(tmp_path, launcher, env)
     scripts = list((sweep / ".submitit").rglob("*_submission.sh"))
     assert len(scripts) == 1, scripts  # one array for the two jobs
     text = scripts[0].read_text()
@@ -179,10 +178,3 @@ def test_a_sweep_runs_through_sbatch_on_a_stand_in_cluster(tmp_path: Path) -> No
     states = sorted((tmp_path / "slurm_state").glob("1001_*"))
     assert [s.name for s in states] == ["1001_0", "1001_1"]
     assert all(s.read_text() == "COMPLETED" for s in states)
-    for job in ("0", "1"):
-        assert (sweep / job / "results.csv").is_file()
-        assert len(list((sweep / job / "episodes").glob("*.mcap"))) == 1
-    import pandas as pd
-
-    rows = pd.read_csv(sweep / "summary" / "results.csv")
-    assert sorted(rows["noise"]) == [0.0, 0.02]
