@@ -644,6 +644,7 @@ def _pair_bounds(
     inv_s: torch.Tensor,
     rad: torch.Tensor,
     exact: bool,
+    planes: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Pair bounds and centre distances for every action.
 
@@ -654,6 +655,10 @@ def _pair_bounds(
         inv_s: (..., A) ``1 / s_max``, the largest standard deviation's inverse [1/m].
         rad: (..., 1) or (..., A) sums of the two radii [m].
         exact: refine the large bounds with :func:`gaussian_ball_bound_diag`.
+        planes: for entries (``c`` (B, K, 3), ``mu`` (K, 1, 3)), the same points as
+            coordinate planes, (3, B, K) and (3, K): without autograd the distances are
+            summed plane by plane (:func:`_plane_distances`, the same numbers); None: from
+            ``c`` and ``mu``.
 
     Returns:
         bound (..., A) in [0, 1] and distance (..., A) [m] between centre and mean.
@@ -663,6 +668,8 @@ def _pair_bounds(
     if differentiable:
         d = mu - c.unsqueeze(-2)  # (..., A, 3)
         dist = d.norm(dim=-1)  # (..., A)
+    elif planes is not None:
+        dist = _plane_distances(*planes).unsqueeze(-1)  # (B, K, 1)
     else:
         dist = _distance3(mu, c.unsqueeze(-2))
     bound = _isotropic(dist, rad, inv_s)
@@ -914,14 +921,9 @@ def human_collision_bound(
             c_k = planes.permute(1, 2, 0)  # (B, K, 3), a view
             # without a gradient, only the entries the maximum can depend on are refined
             lazy = exact and not need_grad
-            if torch.is_grad_enabled() and (c_k.requires_grad or mean_k.requires_grad):
-                refine = exact and not lazy
-                bound_k, dist_k = _pair_bounds(c_k, mean_k, var_k, inv_s_k, rad_k, refine)
-            else:  # the planes' own arithmetic, the same numbers as _pair_bounds
-                dist_k = _plane_distances(planes, mean_planes).unsqueeze(-1)  # (B, K, 1)
-                bound_k = _isotropic(dist_k, rad_k, inv_s_k)
-                if exact and not lazy:
-                    bound_k = _refine(bound_k, bound_k > EXACT_FROM, c_k, mean_k, var_k, rad_k)
+            bound_k, dist_k = _pair_bounds(
+                c_k, mean_k, var_k, inv_s_k, rad_k, exact and not lazy, (planes, mean_planes)
+            )
             shape = (b, w, pairs.shape[0])
             if lazy:
                 mixed = _mixture_refined_at_the_max(
