@@ -485,27 +485,21 @@ def check_run_keys(cfg: DictConfig) -> None:
                 f"run.stall_fallback_s: expected a number > 0 [s] or null (never), got "
                 f"{_plain(stall)!r}"
             )
-    for key, what in (
-        ("task_crossing_radius", "a distance >= 0 [m]"),
-        ("reaction_s", "a time >= 0 [s]"),
+    for key, what, zero_ok in (  # null (off) or a finite number above 0 (or 0 itself)
+        ("task_crossing_radius", "a distance >= 0 [m]", True),
+        ("reaction_s", "a time >= 0 [s]", True),
+        ("spread_tolerance", "a number > 0 (a mean normalised squared error)", False),
     ):
         if key in run:
             value = run[key]
-            ok = value is None or (fits_kind(value, float) and 0 <= float(value) < math.inf)
-            if not ok:
+            number = fits_kind(value, float) and 0 <= float(value) < math.inf
+            if not (value is None or (number and (zero_ok or float(value) > 0))):
                 raise ConfigError(
                     f"run.{key}: expected {what} or null (off), got {_plain(value)!r}"
                 )
     for key in ("mask_by_order", "rest_when_nothing_available"):
         if key in run:
             cfg_scalar(run, key, bool)
-    if "spread_tolerance" in run:
-        value = run.spread_tolerance
-        if not (value is None or (fits_kind(value, float) and 0 < float(value) < math.inf)):
-            raise ConfigError(
-                "run.spread_tolerance: expected a number > 0 (a mean normalised squared error) "
-                f"or null (off), got {_plain(value)!r}"
-            )
 
 
 class _Tee:
