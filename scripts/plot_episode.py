@@ -25,6 +25,7 @@ from pathlib import Path
 from _report import fail, main_guard
 
 from iplanner_torch.errors import DataError, DataWarning
+from iplanner_torch.eval.report import episode_logs
 from iplanner_torch.eval.timeline import plot_episode_timeline, timeline_path
 
 
@@ -32,7 +33,7 @@ def _logs(paths: list[Path]) -> list[Path]:
     out: list[Path] = []
     for p in paths:
         if p.is_dir():
-            found = sorted(p.rglob("*.mcap"))
+            found = episode_logs(p)
             if not found:
                 fail(f"no .mcap episode logs below {p}")
             out += found

@@ -5,10 +5,11 @@ Usage::
 
     python scripts/smoothness_breakdown.py <run dir or .mcap> [--settle 1.0] [--episodes]
 
-Reads every ``*.mcap`` episode log under the run folder (or the one log given) and prints,
-per scenario, swept setting (speed, noise, confidence, when they vary, and in a multirun
-folder each command-line override its jobs differ in, e.g. ``planner.itomp_spread_mps``, as
-``iplanner-evaluate evaluate.mode=episode`` keeps them apart) and planner, the means of
+Reads every ``*.mcap`` episode log under the run folder (or the one log given; not those a
+resumed run set aside in ``interrupted/``) and prints, per scenario, swept setting (speed,
+noise, confidence, when they vary, and in a multirun folder each command-line override its
+jobs differ in, e.g. ``planner.itomp_spread_mps``, as ``iplanner-evaluate
+evaluate.mode=episode`` keeps them apart) and planner, the means of
 :func:`iplanner_torch.eval.smoothness.episode_breakdown`:
 
 - ``smoothness_log``: the paper's smoothness of the logged robot states (sampled more sparsely
@@ -41,7 +42,7 @@ from _report import fail, main_guard
 
 from iplanner_torch.cli.callbacks import split_columns, sweep_overrides
 from iplanner_torch.errors import DataError, DataWarning
-from iplanner_torch.eval.report import SWEPT_SETTINGS, report_groups, to_markdown
+from iplanner_torch.eval.report import SWEPT_SETTINGS, episode_logs, report_groups, to_markdown
 from iplanner_torch.eval.smoothness import episode_breakdown
 from iplanner_torch.recording import read_episode
 
@@ -72,7 +73,7 @@ def main() -> None:
         fail(f"--settle must be a number of seconds >= 0, got {args.settle}")
     if not args.run_dir.exists():
         fail(f"no *.mcap episode logs: {args.run_dir} not found")
-    paths = [args.run_dir] if args.run_dir.is_file() else sorted(args.run_dir.rglob("*.mcap"))
+    paths = [args.run_dir] if args.run_dir.is_file() else episode_logs(args.run_dir)
     if not paths:
         fail(f"no *.mcap episode logs under {args.run_dir}")
     rows = []

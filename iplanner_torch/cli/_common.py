@@ -700,8 +700,9 @@ def job_log_path() -> Path | None:
 
 
 #: what a single run's folder holds when the command stopped on a config error before any
-#: work: Hydra's record, the command's log and the resolved config (experiment)
-_BARE_RUN_FILES = frozenset({".hydra", "config_resolved.yaml"})
+#: work: Hydra's record, the command's log, the resolved config and the run's inputs
+#: (experiment)
+_BARE_RUN_FILES = frozenset({".hydra", "config_resolved.yaml", "run_inputs.json"})
 _HYDRA_RECORD_FILES = frozenset({"config.yaml", "hydra.yaml", "overrides.yaml"})
 #: a record at INFO or DEBUG level in Hydra's job log format: ``[time][logger][INFO] - ...``
 _QUIET_LOG_RECORD = re.compile(r"^\[[^\]]+\]\[[^\]]+\]\[(INFO|DEBUG)\] - ")
@@ -996,7 +997,8 @@ def _kept_episodes(log_path: Path | None) -> str:
     where = f" in {log_path.parent}" if log_path is not None else ""
     return (
         f"what was written before is kept{where} (finished episodes in results.csv, the "
-        "interrupted episode's log up to where it stopped)"
+        "interrupted episode's log up to where it stopped); the same command with "
+        "run.resume=true and that hydra.run.dir goes on from there"
     )
 
 

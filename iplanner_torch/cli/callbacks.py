@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from hydra.experimental.callback import Callback
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from iplanner_torch.cli import SPIN_SET_MARK
 
@@ -130,7 +130,8 @@ def episode_report(
 
 def run_rows(root: Path) -> Any:
     """The episode rows of a run or multirun folder: one per ``*.mcap`` below ``root`` (in
-    numbered order), then the ``results.csv`` rows of each run folder (``root`` itself or a job
+    numbered order, :func:`~iplanner_torch.eval.report.episode_logs`: not the ones a resumed
+    run set aside), then the ``results.csv`` rows of each run folder (``root`` itself or a job
     folder directly below it, one with ``.hydra/``) that holds no episode log, as a run with
     ``run.write_mcap=false`` leaves it. Each row has a ``path`` (its log, or that
     ``results.csv``), so :func:`sweep_overrides` can place it in its job. A gathered summary
@@ -141,16 +142,16 @@ def run_rows(root: Path) -> Any:
     """
     import pandas as pd
 
-    from iplanner_torch.eval.report import gather_results, natural_key
+    from iplanner_torch.eval.report import episode_logs, gather_results, natural_key
 
     root = Path(root)
     if not root.is_dir():
         return pd.DataFrame()
-    frames = [gather_results(root)] if any(root.rglob("*.mcap")) else []
+    frames = [gather_results(root)] if episode_logs(root) else []
     runs = [root, *sorted((d for d in root.iterdir() if d.is_dir()), key=natural_key)]
     for run in runs:
         csv = run / "results.csv"
-        if (run / ".hydra").is_dir() and csv.is_file() and not any(run.rglob("*.mcap")):
+        if (run / ".hydra").is_dir() and csv.is_file() and not episode_logs(run):
             rows = gather_results(csv)
             if not rows.empty:
                 frames.append(rows.assign(path=str(csv)))
@@ -594,9 +595,21 @@ class GatherSweepResults(Callback):
     with ``SystemExit(2)`` instead, which it lets through."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        used = used_sweep_dir_text(Path(str(config.hydra.sweep.dir)))
-        if used:
+        sweep_dir = Path(str(config.hydra.sweep.dir))
+        used = used_sweep_dir_text(sweep_dir)
+        # an experiment sweep with run.resume=true continues the earlier one: each job checks
+        # its folder against the run it resumes
+        resumes = OmegaConf.select(config, "hydra.job.name") == "experiment" and (
+            OmegaConf.select(config, "run.resume") is True
+        )
+        if used and not resumes:
             _refuse_sweep(used)
+        if resumes and not any(sweep_dir.glob("*/run_inputs.json")):
+            _refuse_sweep(
+                f"run.resume=true: {sweep_dir} holds no sweep to resume (no job folder with "
+                "run_inputs.json); name the folder of the sweep to continue with "
+                "hydra.sweep.dir=<folder>"
+            )
         passive_omp_waits(config, check_sweep_jobs(config))
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:

@@ -9,6 +9,8 @@ Examples::
     iplanner-experiment -m tracker.noise=0,0.02,0.05 human.speed=slow,medium,fast \\
         planner.confidence=0.9,0.95,0.99              # a sweep (one job per combination)
     iplanner-experiment -m hydra/launcher=joblib tracker.noise=0,0.02   # local processes
+    iplanner-experiment experiment=table_simulation hydra.run.dir=outputs/table \\
+        run.resume=true                                # go on with a run that stopped
 
 Without ``experiment=...`` the run uses the ``scenario`` group at the confidence
 ``planner.confidence`` (which follows ``scenario.confidence`` unless set), the planners in
@@ -27,7 +29,10 @@ a blocking scenario's from the reaching set), kept in
 but a command-line ``run.train_trainer``, ``seed`` or ``data.windows.*`` value it was not trained
 with is refused. Results: ``results.csv``, ``results.md``, plots, ``episodes/*.mcap`` and, unless
 ``run.timeline_plots=false``, one timeline plot per log (``episodes/<episode>.png``, see
-:mod:`iplanner_torch.eval.timeline`) in the run folder.
+:mod:`iplanner_torch.eval.timeline`) in the run folder, with ``run_inputs.json`` (the
+settings, code and predictors it began with). ``run.resume=true hydra.run.dir=<folder>``
+(``hydra.sweep.dir`` for ``-m``) continues a run that stopped with the same settings: its
+finished episodes are kept, the others run.
 """
 
 from __future__ import annotations
@@ -687,6 +692,184 @@ def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
     return out
 
 
+#: the file in a run folder that records what the run began with, for ``run.resume``
+RUN_INPUTS = "run_inputs.json"
+#: settings a resumed run may give otherwise: none of them changes an episode
+RESUME_FREE_KEYS = ("run.resume", "progress", "run.timeline_plots")
+
+
+def _flat_settings(node: Any, prefix: str = "") -> dict[str, Any]:
+    """Nested settings as ``{"a.b": value}`` (lists and scalars as they are)."""
+    if isinstance(node, dict):
+        out: dict[str, Any] = {}
+        for key, value in node.items():
+            out.update(_flat_settings(value, f"{prefix}{key}."))
+        return out
+    return {prefix[:-1]: node}
+
+
+def _code_commit() -> str | None:
+    """The git commit of this package's source, or None outside a git checkout."""
+    import subprocess
+
+    try:
+        res = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return res.stdout.strip() or None if res.returncode == 0 else None
+
+
+def run_inputs(cfg: DictConfig) -> dict[str, Any]:
+    """What a run begins with: its settings (the composed config, flattened and resolved,
+    without :data:`RESUME_FREE_KEYS`) and the code (package version and git commit). Saved in
+    the run folder as :data:`RUN_INPUTS`; ``run.resume=true`` compares them."""
+    from iplanner_torch import __version__
+
+    try:
+        tree = OmegaConf.to_container(cfg, resolve=True)
+    except Exception:  # noqa: BLE001 - a resolver only Hydra's app provides: as written
+        tree = OmegaConf.to_container(cfg, resolve=False)
+    settings = {k: v for k, v in _flat_settings(tree).items() if k not in RESUME_FREE_KEYS}
+    return {
+        "settings": settings,
+        "code": {"version": __version__, "commit": _code_commit()},
+        "predictors": {},
+    }
+
+
+def _write_json(path: Path, value: Any) -> None:
+    """``value`` as JSON at ``path``, whole or not at all."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(value, indent=1, sort_keys=True, default=str))
+    tmp.replace(path)
+
+
+def _read_run_inputs(out_dir: Path) -> dict[str, Any]:
+    from iplanner_torch.errors import ConfigError
+
+    path = out_dir / RUN_INPUTS
+    if not path.is_file():
+        raise ConfigError(
+            f"run.resume=true: {out_dir} holds no run to resume (no {RUN_INPUTS}); name the "
+            "folder of the run to continue with hydra.run.dir=<folder> (hydra.sweep.dir for -m)"
+        )
+    try:
+        inputs = json.loads(path.read_text())
+        if not isinstance(inputs, dict) or not isinstance(inputs.get("settings"), dict):
+            raise ValueError("no settings")
+    except (ValueError, OSError) as exc:
+        raise ConfigError(
+            f"run.resume=true: {path} cannot be read ({exc}), so the run cannot be resumed; "
+            "start a new run (another hydra.run.dir)"
+        ) from exc
+    inputs.setdefault("predictors", {})
+    return inputs
+
+
+def _shown(value: Any) -> str:
+    text = json.dumps(value, default=str)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> bool:
+    """Record a new run's inputs in its folder, or check a resumed one's against them.
+
+    Without ``run.resume``, a folder that holds an earlier run's results is refused, and
+    :data:`RUN_INPUTS` is written. With it, the folder must hold a run begun with the same
+    settings (all but :data:`RESUME_FREE_KEYS`); a different code version is warned of. A job
+    of a resumed sweep (``sweep_job``) whose folder holds no run (the sweep stopped before it
+    began) starts as a new run.
+
+    Returns:
+        Whether the run resumes an earlier one.
+
+    Raises:
+        ConfigError: a used folder without ``run.resume``; with it, a folder without a run
+            (but for a sweep's job), or one begun with other settings (the first differing
+            keys named).
+
+    Warns:
+        ConfigWarning: when resuming with another package version or git commit.
+    """
+    import warnings
+
+    from iplanner_torch.errors import ConfigError, ConfigWarning
+
+    now = run_inputs(cfg)
+    resume = cfg_scalar(cfg.run, "resume", bool)
+    if resume and sweep_job and not (out_dir / RUN_INPUTS).exists():
+        resume = _used_run_dir(out_dir) is not None  # results but no record: refused below
+    if not resume:
+        message = _used_run_dir(out_dir)
+        if message:
+            raise ConfigError(message)
+        _write_json(out_dir / RUN_INPUTS, now)
+        return False
+    earlier = _read_run_inputs(out_dir)
+    before, after = earlier["settings"], now["settings"]
+    changed = [
+        f"{k}: {_shown(before.get(k, '(unset)'))} -> {_shown(after.get(k, '(unset)'))}"
+        for k in sorted(set(before) | set(after))
+        if json.dumps(before.get(k), default=str) != json.dumps(after.get(k), default=str)
+    ]
+    if changed:
+        more = f" and {len(changed) - 4} more" if len(changed) > 4 else ""
+        raise ConfigError(
+            f"run.resume=true: the run in {out_dir} began with other settings "
+            f"({'; '.join(changed[:4])}{more}); resume it with its own settings, or start a "
+            "new run (another hydra.run.dir)"
+        )
+    code_before, code_now = earlier.get("code") or {}, now["code"]
+    if code_before != code_now:
+        warnings.warn(
+            f"run.resume=true: the run in {out_dir} began with other code (version "
+            f"{code_before.get('version')}, commit {code_before.get('commit')}; now "
+            f"{code_now['version']}, {code_now['commit']}): its kept and new episodes may "
+            "differ for that reason alone",
+            ConfigWarning,
+            stacklevel=2,
+        )
+    return True
+
+
+def record_predictors(out_dir: Path, scenario: str, paths: dict[str, str]) -> None:
+    """Record the checkpoints a scenario's episodes use (SHA-256 of each file) in the run's
+    :data:`RUN_INPUTS`; refuse checkpoints that differ from the ones recorded when the run
+    began that scenario (trained again since: the kept episodes used the others).
+
+    Raises:
+        ConfigError: naming the checkpoint that changed.
+    """
+    import hashlib
+
+    from iplanner_torch.errors import ConfigError
+
+    inputs = _read_run_inputs(out_dir)
+    digests = {
+        variant: hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        for variant, path in sorted(paths.items())
+        if Path(path).is_file()
+    }
+    recorded = inputs["predictors"].get(scenario)
+    if recorded is not None:
+        changed = [v for v in digests if recorded.get(v) not in (None, digests[v])]
+        if changed:
+            raise ConfigError(
+                f"run.resume=true: the predictor {paths[changed[0]]} of scenario "
+                f"{scenario!r} is not the one the run began with (trained again since?); "
+                "its kept episodes used the other, so start a new run (another hydra.run.dir)"
+            )
+    inputs["predictors"][scenario] = {**(recorded or {}), **digests}
+    _write_json(out_dir / RUN_INPUTS, inputs)
+
+
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 @friendly_errors
 def _app(cfg: DictConfig) -> None:
@@ -695,8 +878,9 @@ def _app(cfg: DictConfig) -> None:
 
     import pandas as pd
 
-    from iplanner_torch.eval.experiment import run_experiment
+    from iplanner_torch.eval.experiment import kept_episodes, run_experiment
     from iplanner_torch.eval.report import (
+        INTERRUPTED_DIR,
         comparison_table,  # the table iplanner-evaluate evaluate.mode=episode prints too
         gather_results,
         overrun_note,
@@ -710,28 +894,35 @@ def _app(cfg: DictConfig) -> None:
     # drown the console
     warnings.simplefilter("ignore", PlanningOverrunWarning)
     t0 = time.perf_counter()
-    out_dir = Path(HydraConfig.get().runtime.output_dir)
-    message = _used_run_dir(out_dir)
-    if message:
-        from iplanner_torch.errors import ConfigError
+    from hydra.types import RunMode
 
-        raise ConfigError(message)
+    from iplanner_torch.eval.timeline import timeline_path
+
+    hc = HydraConfig.get()
+    out_dir = Path(hc.runtime.output_dir)
+    resume = begin_run(cfg, out_dir, sweep_job=hc.mode == RunMode.MULTIRUN)
     (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
     experiment, variants, timeline_plots = check_run(cfg)
     n = len(experiment.scenarios) * len(experiment.planners) * len(experiment.seeds)
     n *= max(1, len(experiment.speeds)) * max(1, len(experiment.noises))
     print(f"experiment {experiment.name!r}: {n} episode(s)", flush=True)
     frames = []
+    episodes = out_dir / "episodes"
     for scenario in experiment.scenarios:
         paths = ensure_predictors(cfg, variants, scenario_data_node(cfg, scenario))
+        record_predictors(out_dir, scenario.name, paths)
         one = replace(experiment, scenarios=[scenario], predictor_paths=paths)
+        # one scenario's rows in its own folder when there are several
         sub = out_dir if len(experiment.scenarios) == 1 else out_dir / scenario.name
+        if resume:
+            kept = len(kept_episodes(one, sub, episodes))
+            print(f"resuming: {kept} finished episode(s) of scenario {scenario.name} kept")
         print(f"running scenario {scenario.name} ...", flush=True)
-        frames.append(run_experiment(one, sub))
-        if sub != out_dir:
-            for mcap in (sub / "episodes").glob("*.mcap"):
-                (out_dir / "episodes").mkdir(parents=True, exist_ok=True)
-                mcap.replace(out_dir / "episodes" / mcap.name)
+        frames.append(run_experiment(one, sub, episodes_dir=episodes, resume=resume))
+    set_aside = sorted((out_dir / INTERRUPTED_DIR).glob("*.mcap"))
+    if resume and set_aside:
+        where = out_dir / INTERRUPTED_DIR
+        print(f"{len(set_aside)} log(s) of unfinished episodes kept in {where}")
     df = pd.concat(frames, ignore_index=True)
     df = gather_results(df.to_dict("records"))
     # noise is plotted as a line over its values; swept speeds are categories the bar charts
@@ -750,8 +941,10 @@ def _app(cfg: DictConfig) -> None:
         print(note)
         print()
     mcaps = sorted((out_dir / "episodes").glob("*.mcap"))
+    # a resumed run draws the logs that have no plot yet
+    drawn = [m for m in mcaps if not (resume and timeline_path(m).exists())]
     timelines = (
-        write_timelines(mcaps, progress=cfg_scalar(cfg, "progress", bool))
+        write_timelines(drawn, progress=cfg_scalar(cfg, "progress", bool))
         if timeline_plots
         else []
     )
@@ -836,6 +1029,8 @@ def _refuse_used_run_dir(argv: list[str]) -> None:
     (:meth:`~iplanner_torch.cli.callbacks.GatherSweepResults.on_multirun_start`)."""
     if any(a in ("-m", "--multirun", "-c", "--cfg") or a.startswith("--cfg=") for a in argv):
         return
+    if any(re.fullmatch(r"\+{0,2}run\.resume=(true|True)", a) for a in argv):
+        return  # checked against the earlier run inside the run (begin_run)
     for arg in argv:
         if arg.startswith("hydra.run.dir="):
             value = arg.split("=", 1)[1].strip("'\"")

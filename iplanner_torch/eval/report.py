@@ -344,12 +344,31 @@ def _rows_of_csv(p: Path) -> list[dict[str, Any]]:
     return [_row_of_dict(r) for r in df.to_dict("records")]
 
 
+#: the folder of a run where a resumed run keeps the logs of the episodes that were cut
+#: short (``iplanner-experiment run.resume=true``); folder reads leave it out
+INTERRUPTED_DIR = "interrupted"
+
+
+def episode_logs(folder: Path) -> list[Path]:
+    """Every ``*.mcap`` below ``folder`` in numbered order (:func:`natural_key`), but for those
+    in an :data:`INTERRUPTED_DIR` folder: logs of episodes that were run again."""
+    folder = Path(folder)
+    return sorted(
+        (
+            f
+            for f in folder.rglob("*.mcap")
+            if INTERRUPTED_DIR not in f.relative_to(folder).parts[:-1]
+        ),
+        key=natural_key,
+    )
+
+
 def _rows_of_folder(folder: Path) -> list[dict[str, Any]]:
-    """The rows of every ``*.mcap`` below ``folder``, in numbered order (:func:`natural_key`);
-    a file that cannot be read or is not an episode log is left out, and all such files are
-    named in one :class:`DataWarning`."""
+    """The rows of every episode log below ``folder`` (:func:`episode_logs`); a file that
+    cannot be read or is not an episode log is left out, and all such files are named in one
+    :class:`DataWarning`."""
     rows, skipped = [], []
-    for f in sorted(folder.rglob("*.mcap"), key=natural_key):
+    for f in episode_logs(folder):
         try:
             rows.append(_row_of_path(f))
         except DataError as err:

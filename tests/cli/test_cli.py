@@ -454,6 +454,18 @@ def test_an_interrupted_experiment_keeps_what_it_wrote(tmp_path: Path, sig: str)
     # what it simulated before the signal (a busy machine may have simulated little)
     assert len(t) >= 1 and [e["kind"] for e in cut.events()][-1] == "interrupted"
     assert "interrupted: what was written before is kept" in (run / "experiment.log").read_text()
+    assert err.strip().splitlines()[-1].endswith("run.resume=true and that hydra.run.dir goes "
+                                                 "on from there")  # fmt: skip
+    # and so it does: the interrupted episode runs again, its cut log kept aside
+    again_args = ["run.planners=[itomp]", "run.seeds=[0,1]", "progress=false",
+                  f"hydra.run.dir={run}", "run.resume=true"]  # fmt: skip
+    res = _run(["iplanner-experiment", *again_args], tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert list(pd.read_csv(run / "results.csv")["seed"]) == [0, 1]
+    again = read_episode(second)
+    assert again.complete and "eval/smoothness" in again.metrics()
+    aside = read_episode(run / "interrupted" / second.name)
+    assert [e["kind"] for e in aside.events()][-1] == "interrupted"
 
 
 def test_evaluate_refuses_a_joint_selection_that_drops_checkpoint_joints(tmp_path: Path) -> None:

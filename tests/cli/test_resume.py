@@ -1,0 +1,148 @@
+"""``iplanner-experiment run.resume=true``: a run that stopped, continued in its folder, gives
+the table of the run made at once; other settings or predictors are refused."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from omegaconf import OmegaConf
+
+from iplanner_torch.cli import experiment as cli
+from iplanner_torch.errors import ConfigError, ConfigWarning
+
+#: a short run of two planners without predictors
+RUN = ["run.planners=[itomp,blind]", "run.seeds=[0,1]", "run.max_duration_s=2", "progress=false"]
+#: columns that measure this machine's speed, not the episode
+TIMING = ("sim/realtime_factor", "plan/mean_solve_ms", "prediction_ms", "plan/overruns")
+
+
+def _experiment(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+    cmd = [sys.executable, "-m", "iplanner_torch.cli.experiment", *args]
+    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=600)
+
+
+def _table(path: Path) -> pd.DataFrame:
+    df = pd.read_csv(path)
+    return df[[c for c in df.columns if c not in TIMING]]
+
+
+def test_resume_continues_a_stopped_run(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    res = _experiment([*RUN, f"hydra.run.dir={run}"], tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    full = _table(run / "results.csv")
+    assert len(full) == 4
+    # as if stopped in its second episode: one row, that episode's log cut short
+    pd.read_csv(run / "results.csv").iloc[:1].to_csv(run / "results.csv", index=False)
+    cut = run / "episodes" / "arrangement_1x4_medium_n0.01_itomp_s1.mcap"
+    os.truncate(cut, cut.stat().st_size // 2)
+    cut_size = cut.stat().st_size
+    stopped = (run / "results.csv").read_text()
+
+    # other settings: refused, naming them, before anything is replaced
+    res = _experiment([*RUN, f"hydra.run.dir={run}", "run.resume=true", "tracker.noise=0.02"],
+                      tmp_path)  # fmt: skip
+    assert res.returncode == 2
+    assert f"error: ConfigError: run.resume=true: the run in {run} began with other settings" in (
+        res.stderr
+    )
+    assert "sim.tracker_noise: 0.01 -> 0.02" in res.stderr
+    assert (run / "results.csv").read_text() == stopped and cut.exists()
+
+    res = _experiment([*RUN, f"hydra.run.dir={run}", "run.resume=true"], tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "resuming: 1 finished episode(s) of scenario arrangement_1x4 kept" in res.stdout
+    assert f"3 log(s) of unfinished episodes kept in {run / 'interrupted'}" in res.stdout
+    pd.testing.assert_frame_equal(_table(run / "results.csv"), full)
+    assert len(list((run / "episodes").glob("*.mcap"))) == 4
+    assert len(list((run / "episodes").glob("*.png"))) == 4  # each log's timeline plot
+    assert (run / "interrupted" / cut.name).stat().st_size == cut_size < cut.stat().st_size
+    assert "| itomp " in (run / "results.md").read_text()
+
+    # a folder without a run to resume
+    res = _experiment([*RUN, f"hydra.run.dir={tmp_path / 'none'}", "run.resume=true"], tmp_path)
+    assert res.returncode == 2
+    assert f"run.resume=true: {tmp_path / 'none'} holds no run to resume" in res.stderr
+
+
+def test_resume_continues_a_stopped_sweep(tmp_path: Path) -> None:
+    sweep = tmp_path / "sweep"
+    args = ["-m", "tracker.noise=0,0.02", "run.planners=[itomp]", "run.max_duration_s=2",
+            "progress=false", f"hydra.sweep.dir={sweep}"]  # fmt: skip
+    res = _experiment(args, tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    full = _table(sweep / "summary" / "results.csv")
+    (sweep / "1" / "results.csv").unlink()  # the second job stopped in its episode
+    res = _experiment(args, tmp_path)
+    assert res.returncode == 2 and "already holds the results of an earlier sweep" in res.stderr
+    res = _experiment([*args, "run.resume=true"], tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "resuming: 1 finished episode(s)" in res.stdout
+    assert "resuming: 0 finished episode(s)" in res.stdout
+    # the summary counts the episodes once: the set-aside log is left out
+    assert list((sweep / "1" / "interrupted").glob("*.mcap"))
+    got = _table(sweep / "summary" / "results.csv")
+    assert len(got) == 2
+    pd.testing.assert_frame_equal(got.drop(columns="path"), full.drop(columns="path"))
+    # a job the sweep never began starts afresh
+    shutil.rmtree(sweep / "1")
+    res = _experiment([*args, "run.resume=true"], tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.count("resuming:") == 1
+    got = _table(sweep / "summary" / "results.csv")
+    pd.testing.assert_frame_equal(got.drop(columns="path"), full.drop(columns="path"))
+    # a sweep folder that holds no sweep: refused before any job
+    res = _experiment([*args[:-1], f"hydra.sweep.dir={tmp_path / 'none'}", "run.resume=true"],
+                      tmp_path)  # fmt: skip
+    assert res.returncode == 2
+    assert f"run.resume=true: {tmp_path / 'none'} holds no sweep to resume" in res.stderr
+    assert not (tmp_path / "none").exists() or not any((tmp_path / "none").glob("*/*.mcap"))
+
+
+def _cfg(resume: bool, noise: float = 0.01) -> OmegaConf:
+    return OmegaConf.create({"run": {"resume": resume, "timeline_plots": True},
+                             "progress": True, "sim": {"noise": noise}})  # fmt: skip
+
+
+def test_begin_run_records_and_compares(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setattr(cli, "_code_commit", lambda: "abc")
+    assert cli.begin_run(_cfg(False), tmp_path) is False
+    inputs = json.loads((tmp_path / cli.RUN_INPUTS).read_text())
+    assert inputs["settings"] == {"sim.noise": 0.01}  # run.resume and the display keys left out
+    (tmp_path / "results.csv").write_text("planner\n")
+    with pytest.raises(ConfigError, match="already holds results.csv"):
+        cli.begin_run(_cfg(False), tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert cli.begin_run(_cfg(True), tmp_path) is True
+    with pytest.raises(ConfigError, match=r"other settings \(sim.noise: 0.01 -> 0.02\)"):
+        cli.begin_run(_cfg(True, 0.02), tmp_path)
+    monkeypatch.setattr(cli, "_code_commit", lambda: "def")
+    with pytest.warns(ConfigWarning, match="commit abc; now 0.1.0, def"):
+        cli.begin_run(_cfg(True), tmp_path)
+    (tmp_path / cli.RUN_INPUTS).write_text("{not json")
+    with pytest.raises(ConfigError, match="cannot be read"):
+        cli.begin_run(_cfg(True), tmp_path)
+
+
+def test_record_predictors_refuses_a_retrained_one(tmp_path: Path) -> None:
+    cli.begin_run(_cfg(False), tmp_path)
+    ckpt = tmp_path / "predictor.ckpt"
+    ckpt.write_bytes(b"first")
+    cli.record_predictors(tmp_path, "s", {"ni": str(ckpt)})
+    cli.record_predictors(tmp_path, "s", {"ni": str(ckpt)})  # the same: fine
+    cli.record_predictors(tmp_path, "t", {"ni": str(ckpt)})
+    ckpt.write_bytes(b"second")
+    with pytest.raises(ConfigError, match=f"the predictor {ckpt} of scenario 's' is not the one"):
+        cli.record_predictors(tmp_path, "s", {"ni": str(ckpt)})
+    recorded = json.loads((tmp_path / cli.RUN_INPUTS).read_text())["predictors"]
+    assert recorded["s"] == recorded["t"] and set(recorded) == {"s", "t"}
