@@ -699,11 +699,17 @@ RESUME_FREE_KEYS = ("run.resume", "progress", "run.timeline_plots")
 
 
 def _flat_settings(node: Any, prefix: str = "") -> dict[str, Any]:
-    """Nested settings as ``{"a.b": value}`` (lists and scalars as they are)."""
+    """Nested settings as ``{"a.b": value}``: a list of scalars as it is, a list that holds
+    mappings or lists by index (``{"a.scenarios[0].name": value}``)."""
     if isinstance(node, dict):
         out: dict[str, Any] = {}
         for key, value in node.items():
             out.update(_flat_settings(value, f"{prefix}{key}."))
+        return out
+    if isinstance(node, list) and any(isinstance(v, dict | list) for v in node):
+        out = {f"{prefix[:-1]}[]": len(node)}
+        for i, value in enumerate(node):
+            out.update(_flat_settings(value, f"{prefix[:-1]}[{i}]."))
         return out
     return {prefix[:-1]: node}
 
@@ -773,8 +779,12 @@ def _read_run_inputs(out_dir: Path) -> dict[str, Any]:
     return inputs
 
 
+def _as_json(value: Any) -> str:
+    return json.dumps(value, default=str, sort_keys=True)
+
+
 def _shown(value: Any) -> str:
-    text = json.dumps(value, default=str)
+    text = _as_json(value)
     return text if len(text) <= 60 else text[:57] + "..."
 
 
@@ -817,7 +827,7 @@ def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> boo
     changed = [
         f"{k}: {_shown(before.get(k, '(unset)'))} -> {_shown(after.get(k, '(unset)'))}"
         for k in sorted(set(before) | set(after))
-        if json.dumps(before.get(k), default=str) != json.dumps(after.get(k), default=str)
+        if _as_json(before.get(k)) != _as_json(after.get(k))
     ]
     if changed:
         more = f" and {len(changed) - 4} more" if len(changed) > 4 else ""

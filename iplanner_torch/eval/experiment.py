@@ -276,9 +276,10 @@ def run_experiment(
     of the episodes it finished. With ``resume`` the run continues such a run in the same
     folder: an episode with a row in its ``results.csv`` (and its log, when logs are written)
     keeps that row and is not run again, the others run. The log of an episode that began
-    but has no row (it was stopped) is moved to ``out_dir/interrupted/`` first
-    (:data:`~iplanner_torch.eval.report.INTERRUPTED_DIR`, which folder reads leave out). The caller
-    makes sure that the earlier run had the same settings (the CLI compares them).
+    but has no row (it was stopped) is moved first to ``interrupted/`` beside the logs'
+    folder (:data:`~iplanner_torch.eval.report.INTERRUPTED_DIR`, which folder reads leave
+    out). The caller makes sure that the earlier run had the same settings (the CLI compares
+    them).
 
     Args:
         cfg: the grid.
@@ -322,7 +323,7 @@ def run_experiment(
             continue
         log = episodes / f"{stem}.mcap"
         if resume and log.exists():  # begun, not finished: kept aside
-            set_aside(log, out_dir / INTERRUPTED_DIR)
+            set_aside(log, episodes.parent / INTERRUPTED_DIR)
         sim = replace(base.sim, tracker_noise=noise, human=replace(base.sim.human, speed=speed))
         variant = PLANNER_KINDS[kind]
         res = run_episode(

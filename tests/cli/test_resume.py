@@ -108,16 +108,23 @@ def test_resume_continues_a_stopped_sweep(tmp_path: Path) -> None:
     assert not (tmp_path / "none").exists() or not any((tmp_path / "none").glob("*/*.mcap"))
 
 
-def _cfg(resume: bool, noise: float = 0.01) -> OmegaConf:
-    return OmegaConf.create({"run": {"resume": resume, "timeline_plots": True},
-                             "progress": True, "sim": {"noise": noise}})  # fmt: skip
+def _cfg(resume: bool, noise: float = 0.01, confidence: float = 0.95) -> OmegaConf:
+    scenarios = [{"name": "a", "confidence": 0.9}, {"name": "b", "confidence": confidence}]
+    return OmegaConf.create({"run": {"resume": resume, "timeline_plots": True}, "seeds": [0, 1],
+                             "progress": True, "sim": {"noise": noise},
+                             "experiment": {"scenarios": scenarios}})  # fmt: skip
 
 
 def test_begin_run_records_and_compares(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.setattr(cli, "_code_commit", lambda: "abc")
     assert cli.begin_run(_cfg(False), tmp_path) is False
     inputs = json.loads((tmp_path / cli.RUN_INPUTS).read_text())
-    assert inputs["settings"] == {"sim.noise": 0.01}  # run.resume and the display keys left out
+    # run.resume and the display keys left out; lists of mappings by index
+    assert inputs["settings"] == {
+        "seeds": [0, 1], "sim.noise": 0.01, "experiment.scenarios[]": 2,
+        "experiment.scenarios[0].name": "a", "experiment.scenarios[0].confidence": 0.9,
+        "experiment.scenarios[1].name": "b", "experiment.scenarios[1].confidence": 0.95,
+    }  # fmt: skip
     (tmp_path / "results.csv").write_text("planner\n")
     with pytest.raises(ConfigError, match="already holds results.csv"):
         cli.begin_run(_cfg(False), tmp_path)
@@ -126,6 +133,10 @@ def test_begin_run_records_and_compares(tmp_path: Path, monkeypatch) -> None:
         assert cli.begin_run(_cfg(True), tmp_path) is True
     with pytest.raises(ConfigError, match=r"other settings \(sim.noise: 0.01 -> 0.02\)"):
         cli.begin_run(_cfg(True, 0.02), tmp_path)
+    with pytest.raises(
+        ConfigError, match=r"\(experiment.scenarios\[1\].confidence: 0.95 -> 0.9\)"
+    ):
+        cli.begin_run(_cfg(True, confidence=0.9), tmp_path)
     monkeypatch.setattr(cli, "_code_commit", lambda: "def")
     with pytest.warns(ConfigWarning, match="commit abc; now 0.1.0, def"):
         cli.begin_run(_cfg(True), tmp_path)
@@ -146,3 +157,28 @@ def test_record_predictors_refuses_a_retrained_one(tmp_path: Path) -> None:
         cli.record_predictors(tmp_path, "s", {"ni": str(ckpt)})
     recorded = json.loads((tmp_path / cli.RUN_INPUTS).read_text())["predictors"]
     assert recorded["s"] == recorded["t"] and set(recorded) == {"s", "t"}
+
+
+def test_resume_continues_a_run_of_several_scenarios(tmp_path: Path) -> None:
+    """An experiment of several scenarios keeps each scenario's rows in its own folder and
+    the logs of all in ``episodes/``: stopped during its last scenario, it goes on there."""
+    run = tmp_path / "run"
+    args = ["experiment=table_simulation", "experiment.planners=[itomp]", "experiment.seeds=[0]",
+            "experiment.episode.max_duration_s=1.5", "experiment.write_mcap=true",
+            "run.timeline_plots=false", "progress=false", f"hydra.run.dir={run}"]  # fmt: skip
+    res = _experiment(args, tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    full = _table(run / "results.csv")
+    assert len(full) == 9
+    # stopped in the last scenario's episode: its log written, no row; no final table
+    (run / "confidence_0.99" / "results.csv").unlink()
+    (run / "results.csv").unlink()
+    res = _experiment([*args, "run.resume=true"], tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.count("finished episode(s) of scenario") == 9
+    assert "resuming: 0 finished episode(s) of scenario confidence_0.99 kept" in res.stdout
+    assert f"1 log(s) of unfinished episodes kept in {run / 'interrupted'}" in res.stdout
+    assert [p.name for p in (run / "interrupted").iterdir()] == [
+        "confidence_0.99_medium_n0.01_itomp_s0.mcap"
+    ]
+    pd.testing.assert_frame_equal(_table(run / "results.csv"), full)
