@@ -905,11 +905,13 @@ def _app(cfg: DictConfig) -> None:
     warnings.simplefilter("ignore", PlanningOverrunWarning)
     t0 = time.perf_counter()
     from hydra.types import RunMode
+    from tqdm.auto import tqdm
 
     from iplanner_torch.eval.timeline import timeline_path
 
     hc = HydraConfig.get()
     out_dir = Path(hc.runtime.output_dir)
+    progress = cfg_scalar(cfg, "progress", bool)
     resume = begin_run(cfg, out_dir, sweep_job=hc.mode == RunMode.MULTIRUN)
     (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
     experiment, variants, timeline_plots = check_run(cfg)
@@ -918,6 +920,8 @@ def _app(cfg: DictConfig) -> None:
     print(f"experiment {experiment.name!r}: {n} episode(s)", flush=True)
     frames = []
     episodes = out_dir / "episodes"
+    # the whole run's episodes, with the time left (each episode has its own bar beneath)
+    bar = tqdm(total=n, desc="episodes", unit="episode", disable=n < 2 or not progress)
     for scenario in experiment.scenarios:
         paths = ensure_predictors(cfg, variants, scenario_data_node(cfg, scenario))
         record_predictors(out_dir, scenario.name, paths)
@@ -926,9 +930,12 @@ def _app(cfg: DictConfig) -> None:
         sub = out_dir if len(experiment.scenarios) == 1 else out_dir / scenario.name
         if resume:
             kept = len(kept_episodes(one, sub, episodes))
-            print(f"resuming: {kept} finished episode(s) of scenario {scenario.name} kept")
-        print(f"running scenario {scenario.name} ...", flush=True)
-        frames.append(run_experiment(one, sub, episodes_dir=episodes, resume=resume))
+            bar.write(f"resuming: {kept} finished episode(s) of scenario {scenario.name} kept")
+        bar.write(f"running scenario {scenario.name} ...")
+        frames.append(
+            run_experiment(one, sub, episodes_dir=episodes, resume=resume, on_done=bar.update)
+        )
+    bar.close()
     set_aside = sorted((out_dir / INTERRUPTED_DIR).glob("*.mcap"))
     if resume and set_aside:
         where = out_dir / INTERRUPTED_DIR
@@ -953,11 +960,7 @@ def _app(cfg: DictConfig) -> None:
     mcaps = sorted((out_dir / "episodes").glob("*.mcap"))
     # a resumed run draws the logs that have no plot yet
     drawn = [m for m in mcaps if not (resume and timeline_path(m).exists())]
-    timelines = (
-        write_timelines(drawn, progress=cfg_scalar(cfg, "progress", bool))
-        if timeline_plots
-        else []
-    )
+    timelines = write_timelines(drawn, progress=progress) if timeline_plots else []
     print(f"results: {out_dir / 'results.md'} and {out_dir / 'results.csv'}")
     pngs = [p for p in written if str(p).endswith(".png")]
     print(f"plots:   {', '.join(str(p) for p in pngs) if pngs else '(none)'}")

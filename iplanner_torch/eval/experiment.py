@@ -5,6 +5,7 @@ and fig. speed_response): planners x scenarios x human speeds x tracker noises x
 from __future__ import annotations
 
 import glob
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -269,6 +270,7 @@ def run_experiment(
     *,
     episodes_dir: Path | None = None,
     resume: bool = False,
+    on_done: Callable[[int], None] | None = None,
 ) -> pd.DataFrame:
     """Run every episode of the grid and gather one metric row per episode.
 
@@ -287,6 +289,9 @@ def run_experiment(
             ``episodes/*.mcap``.
         episodes_dir: where the MCAP logs go; None: ``out_dir/episodes``.
         resume: keep the episodes an earlier run in ``out_dir`` finished.
+        on_done: called with the number of episodes that have just been done: once with the
+            kept ones (when there are), then with 1 after each episode run (a progress bar's
+            ``update``).
 
     Returns:
         One row per episode: planner, robot, scenario, arrangement, task_order, confidence,
@@ -318,6 +323,8 @@ def run_experiment(
     base = cfg.episode
     grid = grid_episodes(cfg)
     stems = [e[0] for e in grid]
+    if on_done is not None and table:
+        on_done(len(table))
     for stem, scenario, speed, noise, kind, seed in grid:
         if stem in table:
             continue
@@ -349,6 +356,8 @@ def run_experiment(
         }
         # the kept rows of later episodes too: none is lost if the run stops again
         _write_rows([table[s] for s in stems if s in table], out_dir / "results.csv")
+        if on_done is not None:
+            on_done(1)
     rows = [table[s] for s in stems]
     _write_rows(rows, out_dir / "results.csv")
     return pd.DataFrame(rows)

@@ -80,9 +80,11 @@ def test_resumed_run_equals_the_run_made_at_once(full_run, tmp_path, monkeypatch
 
     monkeypatch.setattr(experiment_mod, "run_episode", counting)
     assert set(kept_episodes(_grid(), run)) == {episode_stem("s", "medium", 0.01, "itomp", 0)}
-    got = run_experiment(_grid(), run, resume=True)
+    done: list[int] = []
+    got = run_experiment(_grid(), run, resume=True, on_done=done.append)
     # the finished episode is kept, the other three run again
     assert ran == [("itomp", 1), ("blind", 0), ("blind", 1)]
+    assert done == [1, 1, 1, 1]  # the kept one, then each run
     assert kept_log.stat().st_mtime_ns == kept_time
     cols = _episode_columns(expected)
     pd.testing.assert_frame_equal(got[cols], expected[cols], check_dtype=False)
@@ -109,7 +111,9 @@ def test_a_finished_run_resumed_runs_nothing(full_run, tmp_path, monkeypatch) ->
     # as the CLI leaves it: the table rewritten by the report, metrics without "eval/"
     gather_results(expected.to_dict("records")).to_csv(run / "results.csv", index=False)
     monkeypatch.setattr(experiment_mod, "run_episode", None)  # calling it would fail
-    got = run_experiment(_grid(), run, resume=True)
+    done: list[int] = []
+    got = run_experiment(_grid(), run, resume=True, on_done=done.append)
+    assert done == [4]
     cols = _episode_columns(expected)
     pd.testing.assert_frame_equal(got[cols], expected[cols], check_dtype=False)
     assert not (run / "interrupted").exists()
