@@ -698,6 +698,19 @@ RUN_INPUTS = "run_inputs.json"
 RESUME_FREE_KEYS = ("run.resume", "progress", "run.timeline_plots")
 
 
+#: the .hydra/ record of the run a ``run.resume=true`` command names, read before Hydra
+#: writes its own there (:func:`_refuse_used_run_dir`): put back when the resume is refused
+_EARLIER_RECORD: dict[Path, bytes] = {}
+
+
+def _put_back_record(out_dir: Path) -> None:
+    """Restore the earlier run's ``.hydra/`` files that a refused resume's Hydra replaced."""
+    for path, data in _EARLIER_RECORD.items():
+        if path.parent.parent == out_dir.absolute():
+            with contextlib.suppress(OSError):
+                path.write_bytes(data)
+
+
 def _flat_settings(node: Any, prefix: str = "") -> dict[str, Any]:
     """Nested settings as ``{"a.b": value}``: a list of scalars as it is, a list that holds
     mappings or lists by index (``{"a.scenarios[0].name": value}``)."""
@@ -822,7 +835,11 @@ def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> boo
             raise ConfigError(message)
         _write_json(out_dir / RUN_INPUTS, now)
         return False
-    earlier = _read_run_inputs(out_dir)
+    try:
+        earlier = _read_run_inputs(out_dir)
+    except ConfigError:
+        _put_back_record(out_dir)
+        raise
     before, after = earlier["settings"], now["settings"]
     changed = [
         f"{k}: {_shown(before.get(k, '(unset)'))} -> {_shown(after.get(k, '(unset)'))}"
@@ -830,6 +847,7 @@ def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> boo
         if _as_json(before.get(k)) != _as_json(after.get(k))
     ]
     if changed:
+        _put_back_record(out_dir)
         more = f" and {len(changed) - 4} more" if len(changed) > 4 else ""
         raise ConfigError(
             f"run.resume=true: the run in {out_dir} began with other settings "
@@ -871,6 +889,7 @@ def record_predictors(out_dir: Path, scenario: str, paths: dict[str, str]) -> No
     if recorded is not None:
         changed = [v for v in digests if recorded.get(v) not in (None, digests[v])]
         if changed:
+            _put_back_record(out_dir)
             raise ConfigError(
                 f"run.resume=true: the predictor {paths[changed[0]]} of scenario "
                 f"{scenario!r} is not the one the run began with (trained again since?); "
@@ -1043,7 +1062,16 @@ def _refuse_used_run_dir(argv: list[str]) -> None:
     if any(a in ("-m", "--multirun", "-c", "--cfg") or a.startswith("--cfg=") for a in argv):
         return
     if any(re.fullmatch(r"\+{0,2}run\.resume=(true|True)", a) for a in argv):
-        return  # checked against the earlier run inside the run (begin_run)
+        # checked against the earlier run inside the run (begin_run), after Hydra has written
+        # its record of this command in the folder's .hydra/: kept here to be put back if the
+        # resume is refused
+        for arg in argv:
+            if arg.startswith("hydra.run.dir="):
+                record = Path(arg.split("=", 1)[1].strip("'\"")).absolute() / ".hydra"
+                _EARLIER_RECORD.update(
+                    {f: f.read_bytes() for f in sorted(record.glob("*.yaml")) if f.is_file()}
+                )
+        return
     for arg in argv:
         if arg.startswith("hydra.run.dir="):
             value = arg.split("=", 1)[1].strip("'\"")

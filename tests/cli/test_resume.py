@@ -47,6 +47,7 @@ def test_resume_continues_a_stopped_run(tmp_path: Path) -> None:
     os.truncate(cut, cut.stat().st_size // 2)
     cut_size = cut.stat().st_size
     stopped = (run / "results.csv").read_text()
+    record = {p.name: p.read_text() for p in (run / ".hydra").iterdir()}
 
     # other settings: refused, naming them, before anything is replaced
     res = _experiment([*RUN, f"hydra.run.dir={run}", "run.resume=true", "tracker.noise=0.02"],
@@ -57,6 +58,8 @@ def test_resume_continues_a_stopped_run(tmp_path: Path) -> None:
     )
     assert "sim.tracker_noise: 0.01 -> 0.02" in res.stderr
     assert (run / "results.csv").read_text() == stopped and cut.exists()
+    # Hydra's record of the command that made the run is put back
+    assert {p.name: p.read_text() for p in (run / ".hydra").iterdir()} == record
 
     res = _experiment([*RUN, f"hydra.run.dir={run}", "run.resume=true"], tmp_path)
     assert res.returncode == 0, res.stderr[-3000:]
