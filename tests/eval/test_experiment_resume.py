@@ -193,3 +193,21 @@ def test_results_written_whole_or_not_at_all(tmp_path, monkeypatch) -> None:
     with pytest.raises(KeyboardInterrupt):
         experiment_mod._write_rows([{"a": 2}, {"a": 3}, {"a": 4}], path)
     assert path.read_text() == before
+
+
+def test_without_logs_the_rows_alone_are_kept(full_run, tmp_path, monkeypatch) -> None:
+    """A grid that writes no logs keeps every finished row (there is no log to ask for); one
+    that writes them runs an episode again whose log is gone."""
+    from dataclasses import replace
+
+    full, expected = full_run
+    run = tmp_path / "run"
+    shutil.copytree(full, run)
+    shutil.rmtree(run / "episodes")
+    assert kept_episodes(_grid(), run) == {}
+    no_logs = replace(_grid(), write_mcap=False)
+    assert len(kept_episodes(no_logs, run)) == 4
+    monkeypatch.setattr(experiment_mod, "run_episode", None)  # calling it would fail
+    got = run_experiment(no_logs, run, resume=True)
+    cols = _episode_columns(expected)
+    pd.testing.assert_frame_equal(got[cols], expected[cols], check_dtype=False)
