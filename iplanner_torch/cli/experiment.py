@@ -808,7 +808,8 @@ def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> boo
     :data:`RUN_INPUTS` is written. With it, the folder must hold a run begun with the same
     settings (all but :data:`RESUME_FREE_KEYS`); a different code version is warned of. A job
     of a resumed sweep (``sweep_job``) whose folder holds no run (the sweep stopped before it
-    began) starts as a new run.
+    began) starts as a new run. A refused resume puts back the earlier run's ``.hydra/``
+    record, which Hydra replaced with this command's (:data:`_EARLIER_RECORD`).
 
     Returns:
         Whether the run resumes an earlier one.
@@ -821,6 +822,17 @@ def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> boo
     Warns:
         ConfigWarning: when resuming with another package version or git commit.
     """
+    from iplanner_torch.errors import ConfigError
+
+    try:
+        return _begin_run(cfg, out_dir, sweep_job)
+    except ConfigError:
+        _put_back_record(out_dir)
+        raise
+
+
+def _begin_run(cfg: DictConfig, out_dir: Path, sweep_job: bool) -> bool:
+    """:func:`begin_run`, without putting the record back."""
     import warnings
 
     from iplanner_torch.errors import ConfigError, ConfigWarning
@@ -835,11 +847,7 @@ def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> boo
             raise ConfigError(message)
         _write_json(out_dir / RUN_INPUTS, now)
         return False
-    try:
-        earlier = _read_run_inputs(out_dir)
-    except ConfigError:
-        _put_back_record(out_dir)
-        raise
+    earlier = _read_run_inputs(out_dir)
     before, after = earlier["settings"], now["settings"]
     changed = [
         f"{k}: {_shown(before.get(k, '(unset)'))} -> {_shown(after.get(k, '(unset)'))}"
@@ -847,7 +855,6 @@ def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> boo
         if _as_json(before.get(k)) != _as_json(after.get(k))
     ]
     if changed:
-        _put_back_record(out_dir)
         more = f" and {len(changed) - 4} more" if len(changed) > 4 else ""
         raise ConfigError(
             f"run.resume=true: the run in {out_dir} began with other settings "
@@ -862,7 +869,7 @@ def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> boo
             f"{code_now['version']}, {code_now['commit']}): its kept and new episodes may "
             "differ for that reason alone",
             ConfigWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
     return True
 
@@ -1061,7 +1068,8 @@ def _refuse_used_run_dir(argv: list[str]) -> None:
     (:meth:`~iplanner_torch.cli.callbacks.GatherSweepResults.on_multirun_start`)."""
     if any(a in ("-m", "--multirun", "-c", "--cfg") or a.startswith("--cfg=") for a in argv):
         return
-    if any(re.fullmatch(r"\+{0,2}run\.resume=(true|True)", a) for a in argv):
+    # (any value but false: a wrong one is named inside the run)
+    if any(re.fullmatch(r"\+{0,2}run\.resume=(?!(false|False)$).*", a) for a in argv):
         # checked against the earlier run inside the run (begin_run), after Hydra has written
         # its record of this command in the folder's .hydra/: kept here to be put back if the
         # resume is refused

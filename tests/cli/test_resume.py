@@ -60,6 +60,13 @@ def test_resume_continues_a_stopped_run(tmp_path: Path) -> None:
     assert (run / "results.csv").read_text() == stopped and cut.exists()
     # Hydra's record of the command that made the run is put back
     assert {p.name: p.read_text() for p in (run / ".hydra").iterdir()} == record
+    # so is it after a value that is no bool (named inside the run, not taken for a new run)
+    res = _experiment([*RUN, f"hydra.run.dir={run}", "run.resume=yes"], tmp_path)
+    assert res.returncode == 2
+    assert res.stderr.strip().splitlines()[-1] == (
+        "error: ConfigError: run.resume: expected bool, got 'yes'"
+    )
+    assert {p.name: p.read_text() for p in (run / ".hydra").iterdir()} == record
 
     res = _experiment([*RUN, f"hydra.run.dir={run}", "run.resume=true"], tmp_path)
     assert res.returncode == 0, res.stderr[-3000:]
