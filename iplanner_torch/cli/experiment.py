@@ -660,7 +660,8 @@ def check_run(cfg: DictConfig) -> tuple[Any, list[str], bool]:
 def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
     """What a sweep checks of each job before the first starts: the checks
     :func:`~iplanner_torch.cli._common.friendly_errors` makes of every command's config, then
-    :func:`check_run`.
+    :func:`check_run`, and in a sweep resumed with ``run.resume=true`` the settings the job's
+    folder began with (:func:`check_resumed_job`).
 
     Returns:
         For each folder of predictors the job reads, and trains when they are missing
@@ -676,6 +677,7 @@ def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
     check_added_keys(cfg)
     check_root_keys(cfg)
     experiment, variants, _ = check_run(cfg)
+    check_resumed_job(cfg)
     if not variants:
         return {}
     settings = f"seed={cfg_scalar(cfg, 'seed', int)} run.train_trainer={cfg.run.train_trainer}"
@@ -801,6 +803,49 @@ def _shown(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
+def _refuse_other_settings(out_dir: Path, before: dict[str, Any], after: dict[str, Any]) -> None:
+    """Raise a ConfigError naming the settings ``after`` has otherwise than ``before`` (the
+    settings the run in ``out_dir`` began with), if any."""
+    from iplanner_torch.errors import ConfigError
+
+    changed = [
+        f"{k}: {_shown(before.get(k, '(unset)'))} -> {_shown(after.get(k, '(unset)'))}"
+        for k in sorted(set(before) | set(after))
+        if _as_json(before.get(k)) != _as_json(after.get(k))
+    ]
+    if changed:
+        more = f" and {len(changed) - 4} more" if len(changed) > 4 else ""
+        raise ConfigError(
+            f"run.resume=true: the run in {out_dir} began with other settings "
+            f"({'; '.join(changed[:4])}{more}); resume it with its own settings, or start a "
+            "new run (another hydra.run.dir)"
+        )
+
+
+def check_resumed_job(cfg: DictConfig) -> None:
+    """For a job of a sweep resumed with ``run.resume=true``, checked before the sweep's first
+    job runs: refuse settings that differ from the ones the job's folder began with (a job
+    folder without a run is not checked: the job starts afresh).
+
+    Raises:
+        ConfigError: as :func:`begin_run`.
+    """
+    from hydra.types import RunMode
+
+    if not cfg_scalar(cfg.run, "resume", bool):
+        return
+    try:
+        hc = HydraConfig.get()
+        if hc.mode != RunMode.MULTIRUN:
+            return
+        folder = Path(str(hc.sweep.dir)) / str(hc.sweep.subdir)
+    except Exception:  # noqa: BLE001 - no job folder to name: the job checks itself
+        return
+    if (folder / RUN_INPUTS).exists():
+        earlier = _read_run_inputs(folder)
+        _refuse_other_settings(folder, earlier["settings"], run_inputs(cfg)["settings"])
+
+
 def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> bool:
     """Record a new run's inputs in its folder, or check a resumed one's against them.
 
@@ -848,19 +893,7 @@ def _begin_run(cfg: DictConfig, out_dir: Path, sweep_job: bool) -> bool:
         _write_json(out_dir / RUN_INPUTS, now)
         return False
     earlier = _read_run_inputs(out_dir)
-    before, after = earlier["settings"], now["settings"]
-    changed = [
-        f"{k}: {_shown(before.get(k, '(unset)'))} -> {_shown(after.get(k, '(unset)'))}"
-        for k in sorted(set(before) | set(after))
-        if _as_json(before.get(k)) != _as_json(after.get(k))
-    ]
-    if changed:
-        more = f" and {len(changed) - 4} more" if len(changed) > 4 else ""
-        raise ConfigError(
-            f"run.resume=true: the run in {out_dir} began with other settings "
-            f"({'; '.join(changed[:4])}{more}); resume it with its own settings, or start a "
-            "new run (another hydra.run.dir)"
-        )
+    _refuse_other_settings(out_dir, earlier["settings"], now["settings"])
     code_before, code_now = earlier.get("code") or {}, now["code"]
     if code_before != code_now:
         warnings.warn(

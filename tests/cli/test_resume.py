@@ -94,6 +94,16 @@ def test_resume_continues_a_stopped_sweep(tmp_path: Path) -> None:
     (sweep / "1" / "results.csv").unlink()  # the second job stopped in its episode
     res = _experiment(args, tmp_path)
     assert res.returncode == 2 and "already holds the results of an earlier sweep" in res.stderr
+    # other settings: every job refused before the first runs, the job folders untouched
+    record = {p: p.read_text() for p in sorted(sweep.glob("*/.hydra/*.yaml"))}
+    res = _experiment([*args, "run.resume=true", "run.max_duration_s=3"], tmp_path)
+    assert res.returncode == 2
+    assert "2 of 2 sweep job(s) would stop on a bad setting; no job was run" in res.stderr
+    assert (
+        f"ConfigError: run.resume=true: the run in {sweep / '1'} began with other settings "
+        "(run.max_duration_s: 2 -> 3" in res.stderr
+    )
+    assert {p: p.read_text() for p in sorted(sweep.glob("*/.hydra/*.yaml"))} == record
     res = _experiment([*args, "run.resume=true"], tmp_path)
     assert res.returncode == 0, res.stderr[-3000:]
     assert "resuming: 1 finished episode(s)" in res.stdout
