@@ -946,6 +946,8 @@ def _app(cfg: DictConfig) -> None:
     from dataclasses import replace
 
     import pandas as pd
+    from hydra.types import RunMode
+    from tqdm.auto import tqdm
 
     from iplanner_torch.eval.experiment import kept_episodes, run_experiment
     from iplanner_torch.eval.report import (
@@ -957,17 +959,13 @@ def _app(cfg: DictConfig) -> None:
         report_groups,
         write_sweep_report,
     )
+    from iplanner_torch.eval.timeline import timeline_path
     from iplanner_torch.planning.replanner import PlanningOverrunWarning
 
     # overruns are counted per episode (plan/overruns in results.csv); one line each would
     # drown the console
     warnings.simplefilter("ignore", PlanningOverrunWarning)
     t0 = time.perf_counter()
-    from hydra.types import RunMode
-    from tqdm.auto import tqdm
-
-    from iplanner_torch.eval.timeline import timeline_path
-
     hc = HydraConfig.get()
     out_dir = Path(hc.runtime.output_dir)
     progress = cfg_scalar(cfg, "progress", bool)
@@ -990,7 +988,8 @@ def _app(cfg: DictConfig) -> None:
         if resume:
             kept = len(kept_episodes(one, sub, episodes))
             bar.write(f"resuming: {kept} finished episode(s) of scenario {scenario.name} kept")
-        bar.write(f"running scenario {scenario.name} ...")
+        bar.write(f"running scenario {scenario.name} ...")  # above the bar, which redraws
+        sys.stdout.flush()
         frames.append(
             run_experiment(one, sub, episodes_dir=episodes, resume=resume, on_done=bar.update)
         )
