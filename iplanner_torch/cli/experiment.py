@@ -698,6 +698,17 @@ def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
 RUN_INPUTS = "run_inputs.json"
 #: settings a resumed run may give otherwise: none of them changes an episode
 RESUME_FREE_KEYS = ("run.resume", "progress", "run.timeline_plots")
+#: the grid's lists, which a resumed run may extend: every episode the run finished must be
+#: in the new grid (checked before any episode runs), and each episode is independent of the
+#: others
+RESUME_GRID_KEYS = (
+    "run.seeds",
+    "run.planners",
+    "experiment.seeds",
+    "experiment.planners",
+    "experiment.speeds",
+    "experiment.noises",
+)
 
 
 #: the .hydra/ record of the run a ``run.resume=true`` command names, read before Hydra
@@ -805,13 +816,24 @@ def _shown(value: Any) -> str:
 
 def _refuse_other_settings(out_dir: Path, before: dict[str, Any], after: dict[str, Any]) -> None:
     """Raise a ConfigError naming the settings ``after`` has otherwise than ``before`` (the
-    settings the run in ``out_dir`` began with), if any."""
+    settings the run in ``out_dir`` began with), if any, but for a grid list
+    (:data:`RESUME_GRID_KEYS`) that ``after`` extends (it holds every value of ``before``'s)."""
     from iplanner_torch.errors import ConfigError
+
+    def extends(key: str) -> bool:
+        old, new = before.get(key), after.get(key)
+        return (
+            key in RESUME_GRID_KEYS
+            and isinstance(old, list)
+            and isinstance(new, list)
+            and len(old) > 0  # an empty list of speeds or noises: the episode's own one
+            and all(_as_json(v) in {_as_json(w) for w in new} for v in old)
+        )
 
     changed = [
         f"{k}: {_shown(before.get(k, '(unset)'))} -> {_shown(after.get(k, '(unset)'))}"
         for k in sorted(set(before) | set(after))
-        if _as_json(before.get(k)) != _as_json(after.get(k))
+        if _as_json(before.get(k)) != _as_json(after.get(k)) and not extends(k)
     ]
     if changed:
         more = f" and {len(changed) - 4} more" if len(changed) > 4 else ""
@@ -851,7 +873,8 @@ def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> boo
 
     Without ``run.resume``, a folder that holds an earlier run's results is refused, and
     :data:`RUN_INPUTS` is written. With it, the folder must hold a run begun with the same
-    settings (all but :data:`RESUME_FREE_KEYS`); a different code version is warned of. A job
+    settings (all but :data:`RESUME_FREE_KEYS`, and the grid's lists may grow,
+    :data:`RESUME_GRID_KEYS`: :func:`extend_run`); a different code version is warned of. A job
     of a resumed sweep (``sweep_job``) whose folder holds no run (the sweep stopped before it
     began) starts as a new run. A refused resume puts back the earlier run's ``.hydra/``
     record, which Hydra replaced with this command's (:data:`_EARLIER_RECORD`).
@@ -905,6 +928,35 @@ def _begin_run(cfg: DictConfig, out_dir: Path, sweep_job: bool) -> bool:
             stacklevel=3,
         )
     return True
+
+
+def extend_run(cfg: DictConfig, out_dir: Path, experiment: Any) -> None:
+    """For a resumed run: check that every episode the run finished is in the grid of
+    ``experiment`` (the grid may have grown, :data:`RESUME_GRID_KEYS`), then record the
+    settings it goes on with in :data:`RUN_INPUTS`, before any episode runs.
+
+    Raises:
+        ConfigError: naming episodes of the run that the grid leaves out
+            (:func:`~iplanner_torch.eval.experiment.kept_episodes`).
+        DataError: a ``results.csv`` that cannot be read.
+    """
+    from dataclasses import replace
+
+    from iplanner_torch.errors import ConfigError
+    from iplanner_torch.eval.experiment import kept_episodes
+
+    episodes = out_dir / "episodes"
+    try:
+        for scenario in experiment.scenarios:
+            sub = out_dir if len(experiment.scenarios) == 1 else out_dir / scenario.name
+            kept_episodes(replace(experiment, scenarios=[scenario]), sub, episodes)
+    except ConfigError:
+        _put_back_record(out_dir)
+        raise
+    inputs = _read_run_inputs(out_dir)
+    settings = run_inputs(cfg)["settings"]
+    if inputs["settings"] != settings:  # a grid extended: the settings the run has now
+        _write_json(out_dir / RUN_INPUTS, {**inputs, "settings": settings})
 
 
 def record_predictors(out_dir: Path, scenario: str, paths: dict[str, str]) -> None:
@@ -972,6 +1024,8 @@ def _app(cfg: DictConfig) -> None:
     resume = begin_run(cfg, out_dir, sweep_job=hc.mode == RunMode.MULTIRUN)
     (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
     experiment, variants, timeline_plots = check_run(cfg)
+    if resume:
+        extend_run(cfg, out_dir, experiment)
     n = len(experiment.scenarios) * len(experiment.planners) * len(experiment.seeds)
     n *= max(1, len(experiment.speeds)) * max(1, len(experiment.noises))
     print(f"experiment {experiment.name!r}: {n} episode(s)", flush=True)

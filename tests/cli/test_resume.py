@@ -78,6 +78,21 @@ def test_resume_continues_a_stopped_run(tmp_path: Path) -> None:
     assert (run / "interrupted" / cut.name).stat().st_size == cut_size < cut.stat().st_size
     assert "| itomp " in (run / "results.md").read_text()
 
+    # the grid grows: a third seed runs, the four finished episodes are kept
+    res = _experiment([*RUN[:1], "run.seeds=[0,1,2]", *RUN[2:], f"hydra.run.dir={run}",
+                       "run.resume=true"], tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "resuming: 4 finished episode(s) of scenario arrangement_1x4 kept" in res.stdout
+    grown = _table(run / "results.csv")
+    assert list(grown["seed"]) == [0, 1, 2, 0, 1, 2]
+    pd.testing.assert_frame_equal(
+        grown[grown["seed"] < 2].reset_index(drop=True), full.reset_index(drop=True)
+    )
+    assert json.loads((run / cli.RUN_INPUTS).read_text())["settings"]["run.seeds"] == [0, 1, 2]
+    # and may not shrink again
+    res = _experiment([*RUN, f"hydra.run.dir={run}", "run.resume=true"], tmp_path)
+    assert res.returncode == 2 and "(run.seeds: [0, 1, 2] -> [0, 1])" in res.stderr
+
     # a folder without a run to resume
     res = _experiment([*RUN, f"hydra.run.dir={tmp_path / 'none'}", "run.resume=true"], tmp_path)
     assert res.returncode == 2
@@ -163,6 +178,28 @@ def test_begin_run_records_and_compares(tmp_path: Path, monkeypatch) -> None:
     (tmp_path / cli.RUN_INPUTS).write_text("{not json")
     with pytest.raises(ConfigError, match="cannot be read"):
         cli.begin_run(_cfg(True), tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("before", "after", "refused"),
+    [
+        ([0, 1], [0, 1, 2], False),
+        ([0, 1], [2, 1, 0], False),
+        ([0, 1], [0, 2], True),
+        ([], [0], True),  # an empty list of speeds means the episode's own speed
+    ],
+)
+def test_a_grid_list_may_grow(tmp_path: Path, before, after, refused) -> None:
+    for key in ("experiment.seeds", "experiment.speeds"):
+        args = (tmp_path, {key: before, "sim.noise": 0.01}, {key: after, "sim.noise": 0.01})
+        if refused:
+            with pytest.raises(ConfigError, match=rf"\({key}: "):
+                cli._refuse_other_settings(*args)
+        else:
+            cli._refuse_other_settings(*args)
+    # not a grid list
+    with pytest.raises(ConfigError, match=r"\(sim.seeds: "):
+        cli._refuse_other_settings(tmp_path, {"sim.seeds": [0]}, {"sim.seeds": [0, 1]})
 
 
 def test_record_predictors_refuses_a_retrained_one(tmp_path: Path) -> None:
