@@ -942,7 +942,7 @@ def extend_run(cfg: DictConfig, out_dir: Path, experiment: Any) -> None:
     """
     from dataclasses import replace
 
-    from iplanner_torch.errors import ConfigError
+    from iplanner_torch.errors import IPlannerError
     from iplanner_torch.eval.experiment import kept_episodes
 
     episodes = out_dir / "episodes"
@@ -950,7 +950,7 @@ def extend_run(cfg: DictConfig, out_dir: Path, experiment: Any) -> None:
         for scenario in experiment.scenarios:
             sub = out_dir if len(experiment.scenarios) == 1 else out_dir / scenario.name
             kept_episodes(replace(experiment, scenarios=[scenario]), sub, episodes)
-    except ConfigError:
+    except IPlannerError:  # refused, or a results.csv that does not read
         _put_back_record(out_dir)
         raise
     inputs = _read_run_inputs(out_dir)
