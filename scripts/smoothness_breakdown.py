@@ -3,7 +3,8 @@
 
 Usage::
 
-    python scripts/smoothness_breakdown.py <run dir or .mcap> [--settle 1.0] [--episodes]
+    python scripts/smoothness_breakdown.py <run dir or .mcap> [--settle 1.0] [--near 0.1]
+        [--episodes]
 
 Reads every ``*.mcap`` episode log under the run folder (or the one log given; not those a
 resumed run set aside in ``interrupted/``) and prints, per scenario, swept setting (speed,
@@ -22,7 +23,10 @@ evaluate.mode=episode`` keeps them apart) and planner, the means of
   that ran before the next plan took over;
 - ``plan_change``: the median, over successive plans, of the largest joint difference
   between a plan and the one before it where both run [rad]: how far replanning moves the
-  path.
+  path;
+- ``near_limit_time`` / ``near_limit_share``: the share of the time, and of the integral,
+  while plans ran whose collision bound passed ``--near`` of the confidence limit (empty for
+  logs without bounds).
 
 ``--episodes`` prints one row per episode as well. Logs that cannot be split, and truncated
 or damaged logs (read only up to their last complete chunk) unless ``--include-incomplete``,
@@ -54,6 +58,8 @@ COLUMNS = {
     "outside_waits": "smoothness_outside",
     "plan_executed": "plan_executed",
     "plan_change": "plan_change",
+    "near_limit_time": "near_limit_time_share",
+    "near_limit_share": "near_limit_share",
 }
 
 
@@ -62,6 +68,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("run_dir", type=Path, help="run folder, or one .mcap episode log")
     parser.add_argument("--settle", type=float, default=1.0, help="seconds after a wait")
+    parser.add_argument(
+        "--near", type=float, default=0.1, help="share of the confidence limit a plan is near"
+    )
     parser.add_argument("--episodes", action="store_true", help="one row per episode too")
     parser.add_argument(
         "--include-incomplete",
@@ -71,6 +80,8 @@ def main() -> None:
     args = parser.parse_args()
     if not (math.isfinite(args.settle) and args.settle >= 0.0):
         fail(f"--settle must be a number of seconds >= 0, got {args.settle}")
+    if not (math.isfinite(args.near) and 0.0 < args.near <= 1.0):
+        fail(f"--near must be a share of the confidence limit in (0, 1], got {args.near}")
     if not args.run_dir.exists():
         fail(f"no *.mcap episode logs: {args.run_dir} not found")
     paths = [args.run_dir] if args.run_dir.is_file() else episode_logs(args.run_dir)
@@ -88,7 +99,7 @@ def main() -> None:
                 continue
             for w in caught:
                 print(f"warning: {w.message}", file=sys.stderr)
-            b = episode_breakdown(ep, settle_s=args.settle)
+            b = episode_breakdown(ep, settle_s=args.settle, near_fraction=args.near)
         except DataError as exc:  # a log cut short (an interrupted run): left out, named
             text = str(exc)  # most name the file already
             skipped.append(text if text.startswith(f"{path}: ") else f"{path}: {text}")

@@ -11,13 +11,17 @@ ways:
   before the next plan takes over, i.e. how rough the plans are that the robot executes (the
   filtered tracking follows them up to its acceleration limit); and how far each plan moves
   the path from the one before it (``plan_change``), since a robot whose successive plans
-  take different ways round an obstacle is rough however smooth each plan is.
+  take different ways round an obstacle is rough however smooth each plan is;
+- by risk: the share of time and of the integral while plans run whose collision bound came
+  near the confidence limit (above ``near_fraction`` of ``1 - confidence``): the I-Planner's
+  confidence penalty makes a plan hurry past or bend round where the forecast puts the
+  person, and this says how much of the roughness that is.
 
-:func:`episode_breakdown` reads both from an episode log (``/robot/joint_state`` and
-``/planner/plan``); the log's robot state is sampled more sparsely than the metrics'
-trajectory, so its smoothness is lower than ``eval/smoothness`` and only ratios between
-planners measured the same way should be compared. ``scripts/smoothness_breakdown.py`` prints
-the breakdown of every log of a run.
+:func:`episode_breakdown` reads them from an episode log (``/robot/joint_state``,
+``/planner/plan`` and ``/planner/bound``); the log's robot state is sampled more sparsely
+than the metrics' trajectory, so its smoothness is lower than ``eval/smoothness`` and only
+ratios between planners measured the same way should be compared.
+``scripts/smoothness_breakdown.py`` prints the breakdown of every log of a run.
 """
 
 from __future__ import annotations
@@ -48,16 +52,22 @@ class PlanRecord:
         q: (W, J) waypoints [rad] (the shape is checked against the trajectory by
             :func:`smoothness_breakdown`).
         wait_s: the delay the plan reports (> 0: the plan stops and waits) [s], finite.
+        max_bound: the plan's largest collision bound over its waypoints, or NaN when not
+            known.
+        limit: the confidence limit ``1 - confidence`` the plan was held to, or NaN.
 
     Raises:
         ShapeError: for ``times`` or ``q`` that are not arrays of real numbers, or ``times``
             that is not 1-D with at least one entry.
-        DataError: for a ``wait_s`` that is not a finite number.
+        DataError: for a ``wait_s`` that is not a finite number, or a ``max_bound`` or
+            ``limit`` that is not a number (NaN allowed).
     """
 
     times: np.ndarray
     q: np.ndarray
     wait_s: float
+    max_bound: float = math.nan
+    limit: float = math.nan
 
     def __post_init__(self) -> None:
         times = real_array("times", self.times).astype(np.float64)
@@ -66,6 +76,11 @@ class PlanRecord:
         object.__setattr__(self, "times", times)
         object.__setattr__(self, "q", real_array("q", self.q).astype(np.float64))
         object.__setattr__(self, "wait_s", finite("wait_s", self.wait_s, error=DataError))
+        for name in ("max_bound", "limit"):
+            value = getattr(self, name)
+            if not is_real(value):
+                raise DataError(f"expected {name} a number (NaN: not known), got {value!r}")
+            object.__setattr__(self, name, float(value))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -84,6 +99,11 @@ class SmoothnessBreakdown:
         plan_change: median over successive plans of the largest joint difference between a
             plan's waypoints and the plan before it (linearly interpolated at their times,
             where the two overlap) [rad] (NaN when no two plans overlap).
+        near_limit_time_share: share of the duration while plans run (take-over to the next
+            take-over) whose ``max_bound`` exceeds ``near_fraction * limit`` (NaN when no plan
+            has both).
+        near_limit_share: share of the integral in that time (NaN as above, 0 for a
+            trajectory without acceleration).
     """
 
     smoothness: float
@@ -93,6 +113,8 @@ class SmoothnessBreakdown:
     smoothness_outside: float
     plan_executed: float
     plan_change: float
+    near_limit_time_share: float = math.nan
+    near_limit_share: float = math.nan
 
 
 def wait_windows(plans: Sequence[PlanRecord], settle_s: float = 1.0) -> list[tuple[float, float]]:
@@ -163,8 +185,44 @@ def plan_changes(plans: Sequence[PlanRecord]) -> np.ndarray:
     return np.asarray(out, dtype=np.float64)
 
 
+def near_limit_windows(
+    plans: Sequence[PlanRecord], near_fraction: float = 0.1
+) -> list[tuple[float, float]] | None:
+    """The times [s] while plans run whose collision bound came near the confidence limit:
+    from the take-over of each plan with ``max_bound > near_fraction * limit`` to the
+    take-over of the next plan (to its own last waypoint when none follows).
+
+    Args:
+        plans: the plans in take-over order.
+        near_fraction: the share of the limit above which a plan counts, in (0, 1].
+
+    Returns:
+        The half-open windows ``[start, end)``; None when no plan has a known ``max_bound``
+        and ``limit``.
+
+    Raises:
+        ConfigError: when ``near_fraction`` is not a number in (0, 1].
+    """
+    if not (is_real(near_fraction) and 0.0 < near_fraction <= 1.0):
+        raise ConfigError(f"expected near_fraction in (0, 1], got {near_fraction!r}")
+    known = [p for p in plans if math.isfinite(p.max_bound) and math.isfinite(p.limit)]
+    if not known:
+        return None
+    out = []
+    for k, plan in enumerate(plans):
+        if plan.max_bound > near_fraction * plan.limit:  # False for NaN
+            end = float(plans[k + 1].times[0]) if k + 1 < len(plans) else float(plan.times[-1])
+            out.append((float(plan.times[0]), end))
+    return out
+
+
 def smoothness_breakdown(
-    t: Any, q: Any, plans: Sequence[PlanRecord], *, settle_s: float = 1.0
+    t: Any,
+    q: Any,
+    plans: Sequence[PlanRecord],
+    *,
+    settle_s: float = 1.0,
+    near_fraction: float = 0.1,
 ) -> SmoothnessBreakdown:
     """Split the smoothness of an executed trajectory (module docstring).
 
@@ -173,10 +231,12 @@ def smoothness_breakdown(
         q: (T, J) executed joint positions [rad].
         plans: the plans in take-over order (each ``times`` (W,), ``q`` (W, J)).
         settle_s: see :func:`wait_windows` [s].
+        near_fraction: see :func:`near_limit_windows`.
 
     Raises:
         ShapeError: when a plan's ``q`` is not (W, J) with its ``times`` (W,).
-        ConfigError: when ``settle_s`` is not a number >= 0.
+        ConfigError: when ``settle_s`` is not a number >= 0 or ``near_fraction`` not in
+            (0, 1].
     """
     qdd, w = joint_accelerations(t, q)  # (T - 2, J), (T - 2,)
     n_j = qdd.shape[1]
@@ -194,6 +254,14 @@ def smoothness_breakdown(
     total_w, total_a = float(w.sum()), float(a2.sum())
     out_w = float(w[~inside].sum())
     changes = plan_changes(plans)  # (P,) [rad]
+    near_time = near_share = math.nan
+    windows = near_limit_windows(plans, near_fraction)
+    if windows is not None:
+        near = torch.zeros_like(t_in, dtype=torch.bool)
+        for start, end in windows:
+            near |= (t_in >= start) & (t_in < end)
+        near_time = float(w[near].sum()) / total_w
+        near_share = float(a2[near].sum()) / total_a if total_a > 0.0 else 0.0
     return SmoothnessBreakdown(
         smoothness=total_a / total_w,
         waits=sum(int(p.wait_s > 0.0) for p in plans),
@@ -202,12 +270,17 @@ def smoothness_breakdown(
         smoothness_outside=float(a2[~inside].sum()) / out_w if out_w > 0.0 else math.nan,
         plan_executed=_plan_executed(plans),
         plan_change=float(np.median(changes)) if changes.size else math.nan,
+        near_limit_time_share=near_time,
+        near_limit_share=near_share,
     )
 
 
-def episode_breakdown(episode: Any, *, settle_s: float = 1.0) -> SmoothnessBreakdown:
+def episode_breakdown(
+    episode: Any, *, settle_s: float = 1.0, near_fraction: float = 0.1
+) -> SmoothnessBreakdown:
     """:func:`smoothness_breakdown` of an episode read by
-    :func:`~iplanner_torch.recording.read_episode`.
+    :func:`~iplanner_torch.recording.read_episode`. Each plan's ``max_bound`` and ``limit``
+    come from the ``/planner/bound`` message of the same waypoint times (NaN without one).
 
     Raises:
         DataError: when the log has no plans, fewer than 3 robot states or states at repeated
@@ -220,15 +293,28 @@ def episode_breakdown(episode: Any, *, settle_s: float = 1.0) -> SmoothnessBreak
     frame = episode.frames.get("/planner/plan")
     if frame is None or frame.empty:
         raise DataError(f"{where}the log has no /planner/plan messages")
-    plans = [
-        PlanRecord(
-            times=np.asarray(row.times, dtype=np.float64),
-            q=np.asarray(row.q, dtype=np.float64),
-            wait_s=float(row.wait_s),
+    bounds: dict[float, tuple[float, float]] = {}  # first waypoint time -> (max, limit)
+    bound_frame = episode.frames.get("/planner/bound")
+    if bound_frame is not None and not bound_frame.empty:
+        for row in bound_frame.itertuples():
+            times, bound = np.asarray(row.times, dtype=np.float64), np.asarray(row.bound)
+            if times.size and bound.size and not np.isnan(bound).all():
+                key = round(float(times[0]), 9)
+                bounds[key] = (float(np.nanmax(bound)), 1.0 - float(row.confidence))
+    plans = []
+    for row in frame.itertuples():
+        times = np.asarray(row.times, dtype=np.float64)
+        max_bound, limit = bounds.get(round(float(times[0]), 9), (math.nan, math.nan))
+        plans.append(
+            PlanRecord(
+                times=times,
+                q=np.asarray(row.q, dtype=np.float64),
+                wait_s=float(row.wait_s),
+                max_bound=max_bound,
+                limit=limit,
+            )
         )
-        for row in frame.itertuples()
-    ]
     try:
-        return smoothness_breakdown(t, q, plans, settle_s=settle_s)
+        return smoothness_breakdown(t, q, plans, settle_s=settle_s, near_fraction=near_fraction)
     except DataError as err:  # e.g. robot states logged at repeated times
         raise DataError(f"{where}{err}") from err

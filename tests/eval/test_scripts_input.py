@@ -306,6 +306,12 @@ def test_breakdown_refuses_a_bad_settle_time(tmp_path, run_script, settle) -> No
     assert code == 2 and "--settle must be" in _one_error_line(err)
 
 
+@pytest.mark.parametrize("near", ["0", "-0.1", "1.5", "nan"])
+def test_breakdown_refuses_a_bad_near_share(tmp_path, run_script, near) -> None:
+    code, _, err = run_script("smoothness_breakdown", tmp_path, "--near", near)
+    assert code == 2 and "--near must be a share of the confidence limit" in _one_error_line(err)
+
+
 # --- human_sphere_gaps.py, render_episode.py and the shared error reporting ---------------------
 
 

@@ -88,19 +88,31 @@ def test_breakdown_errors() -> None:
         smoothness_breakdown(t, q, [bad])
 
 
-def test_episode_breakdown_reads_a_log(tmp_path: Path) -> None:
-    from iplanner_torch.recording import EpisodeWriter, read_episode
+def _write_log(path: Path, plans: list[PlanRecord], bounds_of: tuple[int, ...] = ()) -> None:
+    """An episode log of :func:`_executed` with ``plans``, each logged at its take-over, and
+    for the plans ``bounds_of`` a bound rising to the plan's ``max_bound`` at confidence 0.95."""
+    from iplanner_torch.recording import EpisodeWriter
 
     t, q = _executed()
-    path = tmp_path / "ep.mcap"
     with EpisodeWriter(path, metadata={"planner": "test"}) as log:
         k = 0
         for i in range(t.shape[0]):
-            while k < len(PLANS) and PLANS[k].times[0] <= t[i] + 1e-9:
-                p = PLANS[k]
+            while k < len(plans) and plans[k].times[0] <= t[i] + 1e-9:
+                p = plans[k]
                 log.plan(float(t[i]), p.times, p.q, True, p.wait_s, 1.0)
+                if k in bounds_of:
+                    bound = np.linspace(0.0, p.max_bound, p.times.shape[0])
+                    log.collision_bound(float(t[i]), p.times, bound, 0.95)
                 k += 1
             log.robot_state(float(t[i]), q[i], np.zeros(2), ["a", "b"])
+
+
+def test_episode_breakdown_reads_a_log(tmp_path: Path) -> None:
+    from iplanner_torch.recording import read_episode
+
+    t, q = _executed()
+    path = tmp_path / "ep.mcap"
+    _write_log(path, PLANS)
     b = episode_breakdown(read_episode(path))
     assert b == smoothness_breakdown(t, q, PLANS)
 
@@ -230,3 +242,49 @@ def test_plan_changes_against_closed_form() -> None:
     three = PlanRecord(times=np.linspace(0.5, 1.0, 3), q=np.zeros((3, 3)), wait_s=0.0)
     with pytest.raises(ShapeError, match=r"plans 0 and 1: expected q \(W, J\) with one J"):
         plan_changes([plans[0], three])
+
+
+def _with_bounds(plans: list[PlanRecord], max_bounds: list[float]) -> list[PlanRecord]:
+    return [
+        PlanRecord(times=p.times, q=p.q, wait_s=p.wait_s, max_bound=b, limit=0.05)
+        for p, b in zip(plans, max_bounds, strict=True)
+    ]
+
+
+def test_near_limit_share_against_closed_form() -> None:
+    """Plans A and C pass a tenth of the limit (0.005), B does not: the windows are A's run
+    [0, 2) s and C's [2.5, 5) s (its own end, no plan after it)."""
+    from iplanner_torch.eval.smoothness import near_limit_windows
+
+    plans = _with_bounds(PLANS, [0.03, 1e-4, 0.01])
+    assert near_limit_windows(plans, 0.1) == [(0.0, 2.0), (2.5, 5.0)]
+    assert near_limit_windows(plans, 0.5) == [(0.0, 2.0)]
+    assert near_limit_windows(PLANS) is None  # no bounds known
+    t, q = _executed()
+    b = smoothness_breakdown(t, q, plans)
+    # the 12 samples 2.52, ..., 2.96 s at A and the kink at 3.00 s at A / 2 of the 24 at A
+    # and two kinks in all, each standing for H seconds
+    assert b.near_limit_share == pytest.approx((12 + 0.25) / (24 + 0.5), rel=1e-9)
+    # samples 0.04, ..., 1.96 s (49, the first standing for 1.5 H) and 2.52, ..., 4.96 s (62)
+    assert b.near_limit_time_share == pytest.approx((49.5 + 62) * H / 10.0, rel=1e-9)
+    none = smoothness_breakdown(t, q, PLANS)
+    assert np.isnan(none.near_limit_share) and np.isnan(none.near_limit_time_share)
+    assert smoothness_breakdown(t, q, plans, near_fraction=1.0).near_limit_share == 0.0
+    with pytest.raises(ConfigError, match="near_fraction"):
+        smoothness_breakdown(t, q, plans, near_fraction=0.0)
+    with pytest.raises(DataError, match="max_bound"):
+        PlanRecord(times=[0.0], q=[[0.0]], wait_s=0.0, max_bound="high")
+
+
+def test_episode_breakdown_reads_the_bounds(tmp_path: Path) -> None:
+    """Each plan's largest bound and limit come from the bound message with its waypoint
+    times; a plan without one has none."""
+    from iplanner_torch.recording import read_episode
+
+    t, q = _executed()
+    path = tmp_path / "ep.mcap"
+    _write_log(path, _with_bounds(PLANS, [0.03, 1e-4, 0.01]), bounds_of=(0, 2))  # not B's
+    b = episode_breakdown(read_episode(path))
+    expected = _with_bounds(PLANS, [0.03, float("nan"), 0.01])
+    assert b == smoothness_breakdown(t, q, expected)
+    assert b.near_limit_share == pytest.approx((12 + 0.25) / (24 + 0.5), rel=1e-9)
