@@ -758,19 +758,24 @@ def _code_commit() -> str | None:
     return res.stdout.strip() or None if res.returncode == 0 else None
 
 
-def run_inputs(cfg: DictConfig) -> dict[str, Any]:
-    """What a run begins with: its settings (the composed config, flattened and resolved,
-    without :data:`RESUME_FREE_KEYS`) and the code (package version and git commit). Saved in
-    the run folder as :data:`RUN_INPUTS`; ``run.resume=true`` compares them."""
-    from iplanner_torch import __version__
-
+def run_settings(cfg: DictConfig) -> dict[str, Any]:
+    """A run's settings as :data:`RUN_INPUTS` records them: the composed config, flattened
+    and resolved, without :data:`RESUME_FREE_KEYS`."""
     try:
         tree = OmegaConf.to_container(cfg, resolve=True)
     except Exception:  # noqa: BLE001 - a resolver only Hydra's app provides: as written
         tree = OmegaConf.to_container(cfg, resolve=False)
-    settings = {k: v for k, v in _flat_settings(tree).items() if k not in RESUME_FREE_KEYS}
+    return {k: v for k, v in _flat_settings(tree).items() if k not in RESUME_FREE_KEYS}
+
+
+def run_inputs(cfg: DictConfig) -> dict[str, Any]:
+    """What a run begins with: its settings (:func:`run_settings`) and the code (package
+    version and git commit). Saved in the run folder as :data:`RUN_INPUTS`;
+    ``run.resume=true`` compares them."""
+    from iplanner_torch import __version__
+
     return {
-        "settings": settings,
+        "settings": run_settings(cfg),
         "code": {"version": __version__, "commit": _code_commit()},
         "predictors": {},
     }
@@ -865,7 +870,7 @@ def check_resumed_job(cfg: DictConfig) -> None:
         return
     if (folder / RUN_INPUTS).exists():
         earlier = _read_run_inputs(folder)
-        _refuse_other_settings(folder, earlier["settings"], run_inputs(cfg)["settings"])
+        _refuse_other_settings(folder, earlier["settings"], run_settings(cfg))
 
 
 def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> bool:
@@ -930,10 +935,13 @@ def _begin_run(cfg: DictConfig, out_dir: Path, sweep_job: bool) -> bool:
     return True
 
 
-def extend_run(cfg: DictConfig, out_dir: Path, experiment: Any) -> None:
+def extend_run(cfg: DictConfig, out_dir: Path, experiment: Any) -> dict[str, int]:
     """For a resumed run: check that every episode the run finished is in the grid of
     ``experiment`` (the grid may have grown, :data:`RESUME_GRID_KEYS`), then record the
     settings it goes on with in :data:`RUN_INPUTS`, before any episode runs.
+
+    Returns:
+        Per scenario name, how many finished episodes the run keeps.
 
     Raises:
         ConfigError: naming episodes of the run that the grid leaves out
@@ -946,17 +954,20 @@ def extend_run(cfg: DictConfig, out_dir: Path, experiment: Any) -> None:
     from iplanner_torch.eval.experiment import kept_episodes
 
     episodes = out_dir / "episodes"
+    kept = {}
     try:
         for scenario in experiment.scenarios:
             sub = out_dir if len(experiment.scenarios) == 1 else out_dir / scenario.name
-            kept_episodes(replace(experiment, scenarios=[scenario]), sub, episodes)
+            one = replace(experiment, scenarios=[scenario])
+            kept[scenario.name] = len(kept_episodes(one, sub, episodes))
     except IPlannerError:  # refused, or a results.csv that does not read
         _put_back_record(out_dir)
         raise
     inputs = _read_run_inputs(out_dir)
-    settings = run_inputs(cfg)["settings"]
+    settings = run_settings(cfg)
     if inputs["settings"] != settings:  # a grid extended: the settings the run has now
         _write_json(out_dir / RUN_INPUTS, {**inputs, "settings": settings})
+    return kept
 
 
 def record_predictors(out_dir: Path, scenario: str, paths: dict[str, str]) -> None:
@@ -1001,7 +1012,7 @@ def _app(cfg: DictConfig) -> None:
     from hydra.types import RunMode
     from tqdm.auto import tqdm
 
-    from iplanner_torch.eval.experiment import kept_episodes, run_experiment
+    from iplanner_torch.eval.experiment import run_experiment
     from iplanner_torch.eval.report import (
         INTERRUPTED_DIR,
         comparison_table,  # the table iplanner-evaluate evaluate.mode=episode prints too
@@ -1024,8 +1035,7 @@ def _app(cfg: DictConfig) -> None:
     resume = begin_run(cfg, out_dir, sweep_job=hc.mode == RunMode.MULTIRUN)
     (out_dir / "config_resolved.yaml").write_text(dump_config_safe(cfg))
     experiment, variants, timeline_plots = check_run(cfg)
-    if resume:
-        extend_run(cfg, out_dir, experiment)
+    kept = extend_run(cfg, out_dir, experiment) if resume else {}
     n = len(experiment.scenarios) * len(experiment.planners) * len(experiment.seeds)
     n *= max(1, len(experiment.speeds)) * max(1, len(experiment.noises))
     print(f"experiment {experiment.name!r}: {n} episode(s)", flush=True)
@@ -1040,8 +1050,10 @@ def _app(cfg: DictConfig) -> None:
         # one scenario's rows in its own folder when there are several
         sub = out_dir if len(experiment.scenarios) == 1 else out_dir / scenario.name
         if resume:
-            kept = len(kept_episodes(one, sub, episodes))
-            bar.write(f"resuming: {kept} finished episode(s) of scenario {scenario.name} kept")
+            bar.write(
+                f"resuming: {kept[scenario.name]} finished episode(s) of scenario "
+                f"{scenario.name} kept"
+            )
         bar.write(f"running scenario {scenario.name} ...")  # above the bar, which redraws
         sys.stdout.flush()
         frames.append(

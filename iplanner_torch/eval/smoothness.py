@@ -205,8 +205,7 @@ def near_limit_windows(
     """
     if not (is_real(near_fraction) and 0.0 < near_fraction <= 1.0):
         raise ConfigError(f"expected near_fraction in (0, 1], got {near_fraction!r}")
-    known = [p for p in plans if math.isfinite(p.max_bound) and math.isfinite(p.limit)]
-    if not known:
+    if not any(math.isfinite(p.max_bound) and math.isfinite(p.limit) for p in plans):
         return None
     out = []
     for k, plan in enumerate(plans):
