@@ -677,7 +677,7 @@ def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
     check_added_keys(cfg)
     check_root_keys(cfg)
     experiment, variants, _ = check_run(cfg)
-    check_resumed_job(cfg)
+    check_resumed_job(cfg, experiment, variants)
     if not variants:
         return {}
     settings = f"seed={cfg_scalar(cfg, 'seed', int)} run.train_trainer={cfg.run.train_trainer}"
@@ -849,13 +849,16 @@ def _refuse_other_settings(out_dir: Path, before: dict[str, Any], after: dict[st
         )
 
 
-def check_resumed_job(cfg: DictConfig) -> None:
+def check_resumed_job(cfg: DictConfig, experiment: Any, variants: list[str]) -> None:
     """For a job of a sweep resumed with ``run.resume=true``, checked before the sweep's first
-    job runs: refuse settings that differ from the ones the job's folder began with (a job
-    folder without a run is not checked: the job starts afresh).
+    job runs (before Hydra writes the job's record of this command in its folder's
+    ``.hydra/``): refuse settings that differ from the ones the job's folder began with, and a
+    predictor checkpoint of ``variants`` (present now) that differs from the one the job's
+    episodes used (:func:`record_predictors`). A job folder without a run is not checked: the
+    job starts afresh.
 
     Raises:
-        ConfigError: as :func:`begin_run`.
+        ConfigError: as :func:`begin_run` and :func:`record_predictors`.
     """
     from hydra.types import RunMode
 
@@ -868,9 +871,18 @@ def check_resumed_job(cfg: DictConfig) -> None:
         folder = Path(str(hc.sweep.dir)) / str(hc.sweep.subdir)
     except Exception:  # noqa: BLE001 - no job folder to name: the job checks itself
         return
-    if (folder / RUN_INPUTS).exists():
-        earlier = _read_run_inputs(folder)
-        _refuse_other_settings(folder, earlier["settings"], run_settings(cfg))
+    if not (folder / RUN_INPUTS).exists():
+        return
+    earlier = _read_run_inputs(folder)
+    _refuse_other_settings(folder, earlier["settings"], run_settings(cfg))
+    for scenario in experiment.scenarios:
+        recorded = earlier["predictors"].get(scenario.name)
+        if not recorded or not variants:
+            continue
+        data_node = scenario_data_node(cfg, scenario)
+        ckpts = repo_path(Path(cfg.paths.checkpoints) / Path(str(data_node.path)).name)
+        paths = {v: str(ckpts / VARIANT_OPTION[v] / "predictor.ckpt") for v in variants}
+        _refuse_changed_predictor(scenario.name, recorded, _digests(paths), paths)
 
 
 def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> bool:
@@ -970,6 +982,33 @@ def extend_run(cfg: DictConfig, out_dir: Path, experiment: Any) -> dict[str, int
     return kept
 
 
+def _digests(paths: dict[str, str]) -> dict[str, str]:
+    """SHA-256 of each checkpoint file of ``paths`` (variant -> path) that exists."""
+    import hashlib
+
+    return {
+        variant: hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        for variant, path in sorted(paths.items())
+        if Path(path).is_file()
+    }
+
+
+def _refuse_changed_predictor(
+    scenario: str, recorded: dict[str, str] | None, digests: dict[str, str], paths: dict[str, str]
+) -> None:
+    """Raise a ConfigError naming the first checkpoint whose digest differs from the one
+    ``recorded`` for it (a variant not recorded, or not present now, is not compared)."""
+    from iplanner_torch.errors import ConfigError
+
+    changed = [v for v in digests if (recorded or {}).get(v) not in (None, digests[v])]
+    if changed:
+        raise ConfigError(
+            f"run.resume=true: the predictor {paths[changed[0]]} of scenario {scenario!r} is "
+            "not the one the run began with (trained again since?); its kept episodes used "
+            "the other, so start a new run (another hydra.run.dir)"
+        )
+
+
 def record_predictors(out_dir: Path, scenario: str, paths: dict[str, str]) -> None:
     """Record the checkpoints a scenario's episodes use (SHA-256 of each file) in the run's
     :data:`RUN_INPUTS`; refuse checkpoints that differ from the ones recorded when the run
@@ -978,26 +1017,16 @@ def record_predictors(out_dir: Path, scenario: str, paths: dict[str, str]) -> No
     Raises:
         ConfigError: naming the checkpoint that changed.
     """
-    import hashlib
-
     from iplanner_torch.errors import ConfigError
 
     inputs = _read_run_inputs(out_dir)
-    digests = {
-        variant: hashlib.sha256(Path(path).read_bytes()).hexdigest()
-        for variant, path in sorted(paths.items())
-        if Path(path).is_file()
-    }
+    digests = _digests(paths)
     recorded = inputs["predictors"].get(scenario)
-    if recorded is not None:
-        changed = [v for v in digests if recorded.get(v) not in (None, digests[v])]
-        if changed:
-            _put_back_record(out_dir)
-            raise ConfigError(
-                f"run.resume=true: the predictor {paths[changed[0]]} of scenario "
-                f"{scenario!r} is not the one the run began with (trained again since?); "
-                "its kept episodes used the other, so start a new run (another hydra.run.dir)"
-            )
+    try:
+        _refuse_changed_predictor(scenario, recorded, digests, paths)
+    except ConfigError:
+        _put_back_record(out_dir)
+        raise
     inputs["predictors"][scenario] = {**(recorded or {}), **digests}
     _write_json(out_dir / RUN_INPUTS, inputs)
 

@@ -216,6 +216,38 @@ def test_record_predictors_refuses_a_retrained_one(tmp_path: Path) -> None:
     assert recorded["s"] == recorded["t"] and set(recorded) == {"s", "t"}
 
 
+def test_a_resumed_sweep_job_refuses_a_retrained_predictor_before_any_job(
+    tmp_path: Path, monkeypatch
+) -> None:
+    """The sweep's pre-check compares the job's recorded checkpoints with the files there now,
+    before Hydra writes the job's record of the command in its folder."""
+    from types import SimpleNamespace
+
+    from hydra.types import RunMode
+
+    job = tmp_path / "sweep" / "0"
+    job.mkdir(parents=True)
+    ckpt = tmp_path / "ckpt" / "ds" / "iplanner_ni" / "predictor.ckpt"
+    ckpt.parent.mkdir(parents=True)
+    ckpt.write_bytes(b"first")
+    cfg = OmegaConf.create({"run": {"resume": False, "train_data": "data"}, "progress": True,
+                            "paths": {"checkpoints": str(tmp_path / "ckpt")},
+                            "data": {"path": str(tmp_path / "ds")}})  # fmt: skip
+    cli.begin_run(cfg, job)
+    cli.record_predictors(job, "s", {"ni": str(ckpt)})
+    hc = SimpleNamespace(mode=RunMode.MULTIRUN, sweep=SimpleNamespace(dir=job.parent, subdir="0"))
+    monkeypatch.setattr(cli.HydraConfig, "get", staticmethod(lambda: hc))
+    cfg.run.resume = True
+    experiment = SimpleNamespace(scenarios=[SimpleNamespace(name="s")])
+    cli.check_resumed_job(cfg, experiment, ["ni"])  # the same checkpoint
+    cli.check_resumed_job(cfg, experiment, [])  # no predicting planner: nothing to compare
+    ckpt.write_bytes(b"second")
+    with pytest.raises(ConfigError, match=f"the predictor {ckpt} of scenario 's' is not the one"):
+        cli.check_resumed_job(cfg, experiment, ["ni"])
+    ckpt.unlink()  # missing: the job trains it, and compares it then (record_predictors)
+    cli.check_resumed_job(cfg, experiment, ["ni"])
+
+
 def test_resume_continues_a_run_of_several_scenarios(tmp_path: Path) -> None:
     """An experiment of several scenarios keeps each scenario's rows in its own folder and
     the logs of all in ``episodes/``: stopped during its last scenario, it goes on there."""
