@@ -70,6 +70,7 @@ from iplanner_torch.cli._common import (
 from iplanner_torch.cli._common import (
     task_overrides as _task_overrides,
 )
+from iplanner_torch.files import whole_file
 from iplanner_torch.types import resolve_device
 
 #: predictor variant of a planner (see eval.episode.PLANNER_KINDS) -> conf/predictor option
@@ -783,9 +784,8 @@ def run_inputs(cfg: DictConfig) -> dict[str, Any]:
 
 def _write_json(path: Path, value: Any) -> None:
     """``value`` as JSON at ``path``, whole or not at all."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(value, indent=1, sort_keys=True, default=str))
-    tmp.replace(path)
+    with whole_file(path) as tmp:
+        tmp.write_text(json.dumps(value, indent=1, sort_keys=True, default=str))
 
 
 def _read_run_inputs(out_dir: Path) -> dict[str, Any]:

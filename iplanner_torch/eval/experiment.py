@@ -21,6 +21,7 @@ from iplanner_torch.eval.episode import (
     run_episode,
 )
 from iplanner_torch.eval.report import INTERRUPTED_DIR
+from iplanner_torch.files import whole_file
 from iplanner_torch.robot.model import RobotCfg
 from iplanner_torch.sim.human import SPEED_FACTORS
 from iplanner_torch.sim.tasks import ScenarioCfg
@@ -213,9 +214,8 @@ def set_aside(log: Path, folder: Path) -> Path:
 def _write_rows(rows: list[dict[str, Any]], path: Path) -> None:
     """``rows`` to the CSV ``path`` whole or not at all (a temporary file replaces it), so that
     a run killed while writing keeps the rows of its finished episodes."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    pd.DataFrame(rows).to_csv(tmp, index=False)
-    tmp.replace(path)
+    with whole_file(path) as tmp:
+        pd.DataFrame(rows).to_csv(tmp, index=False)
 
 
 def grid_episodes(cfg: ExperimentCfg) -> list[tuple[str, ScenarioCfg, str, float, str, int]]:

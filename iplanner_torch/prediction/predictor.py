@@ -42,6 +42,7 @@ from iplanner_torch.errors import (
     DataWarning,
     ShapeError,
 )
+from iplanner_torch.files import whole_file
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
 from iplanner_torch.types import MAX_POSITION_M, all_finite, check_finite, check_shape
@@ -671,11 +672,10 @@ class HumanMotionPredictor:
         """Write the predictor to ``path`` (a torch file, conventionally ``predictor.ckpt``)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(path.suffix + ".tmp")
         d = self.to_checkpoint()
         d["digest"] = content_digest(d)  # checked by load: torch does not check its zip CRCs
-        torch.save(d, tmp)
-        tmp.replace(path)
+        with whole_file(path) as tmp:  # an earlier checkpoint stays whole until this one is
+            torch.save(d, tmp)
         return path
 
     @classmethod
