@@ -341,19 +341,19 @@ def run_experiment(
             writer_path=log if cfg.write_mcap else None,
             seed=seed,
         )
-        table[stem] = {
-            "planner": kind,
-            "robot": cfg.robot.name,
-            "scenario": scenario.name,
-            "arrangement": scenario.arrangement,
-            "task_order": scenario.task_order,
-            "confidence": scenario.confidence,
-            "noise": noise,
-            "dropout": sim.tracker_dropout,
-            "speed": speed,
-            "seed": seed,
-            **res.metrics,
-        }
+        settings = (
+            kind,
+            cfg.robot.name,
+            scenario.name,
+            scenario.arrangement,
+            scenario.task_order,
+            scenario.confidence,
+            noise,
+            sim.tracker_dropout,
+            speed,
+            seed,
+        )  # in the order of ROW_SETTINGS, whose names read_finished knows
+        table[stem] = {**dict(zip(ROW_SETTINGS, settings, strict=True)), **res.metrics}
         # the kept rows of later episodes too: none is lost if the run stops again
         _write_rows([table[s] for s in stems if s in table], out_dir / "results.csv")
         if on_done is not None:
