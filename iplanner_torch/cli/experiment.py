@@ -374,6 +374,7 @@ RUN_EPISODE_KEYS = (
     "rest_when_nothing_available",
     "reaction_s",
     "spread_tolerance",
+    "cv",
 )
 #: run.* keys -> the EpisodeCfg fields they feed.
 RUN_EPISODE_PATHS = {
@@ -419,6 +420,8 @@ def replaced_overrides(overrides: list[str], exp_node: DictConfig | None) -> lis
             instead = "each of experiment.scenarios has its confidence"
         else:
             path = ALIAS_PATHS.get(key) or RUN_EPISODE_PATHS.get(key)
+            if path is None and key.startswith("run.cv."):  # a field of EpisodeCfg.cv
+                path = key[len("run.") :]
             path = path or (key if head in ("sim", "planner") else None)
             if path == "sim.human.speed" and exp_node.get("speeds"):
                 instead = "set experiment.speeds"
@@ -614,7 +617,7 @@ def check_run(cfg: DictConfig) -> tuple[Any, list[str], bool]:
         ConfigError: naming the key, for the first setting that is wrong.
     """
     from iplanner_torch.errors import ConfigError
-    from iplanner_torch.eval.episode import PLANNER_KINDS
+    from iplanner_torch.eval.episode import CHECKPOINT_VARIANTS, PLANNER_KINDS
 
     overrides = _task_overrides()
     unused = unused_overrides(overrides, str(cfg.run.train_data))
@@ -652,7 +655,7 @@ def check_run(cfg: DictConfig) -> tuple[Any, list[str], bool]:
         raise ConfigError(
             f"{key}: unknown planners {unknown}; expected some of {sorted(PLANNER_KINDS)}"
         )
-    variants = sorted({v for p in planners if (v := PLANNER_KINDS[p]) is not None})
+    variants = sorted({v for p in planners if (v := PLANNER_KINDS[p]) in CHECKPOINT_VARIANTS})
     experiment = build_experiment(cfg, {})
     timeline_plots = cfg_scalar(cfg.run, "timeline_plots", bool)  # checked before any episode
     return experiment, variants, timeline_plots

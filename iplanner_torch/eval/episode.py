@@ -73,6 +73,13 @@ does. The person still moves and still counts for contacts and distances. How fa
 planners are from it shows how much the person is in the robot's way in a scene: a planner
 that is as smooth as ``blind`` has no roughness that better prediction could remove.
 
+The ``iplanner_cv`` planner is the I-Planner's optimiser given a constant-velocity forecast
+of the tracked joints (:class:`~iplanner_torch.prediction.constant_velocity.\
+ConstantVelocityPredictor`, ``EpisodeCfg.cv``): motion extrapolated, no learned actions, so
+it chooses its fetches as ITOMP does. Between ITOMP (the seen pose held still) and the
+I-Planner (learned actions and motions), it shows how much of the I-Planner's difference comes
+from forecasting motion at all.
+
 Torch runs with ``torch_threads`` threads during the episode (restored afterwards): the
 planner's tensors are small, so one thread avoids the thread-pool overhead that dominates them
 on a few cores.
@@ -134,6 +141,10 @@ from iplanner_torch.eval import metrics as M
 from iplanner_torch.planning.itomp import path_forecast, static_human_forecast
 from iplanner_torch.planning.replanner import PlannerCfg, build_replanner
 from iplanner_torch.prediction.calibration import CalibrationCfg, SpreadCalibrator
+from iplanner_torch.prediction.constant_velocity import (
+    ConstantVelocityCfg,
+    ConstantVelocityPredictor,
+)
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.sim.env import SimCfg, SimEnv
 from iplanner_torch.sim.human import MotionSource, ReachingMotionSource, ScriptedHuman
@@ -145,7 +156,7 @@ from iplanner_torch.types import torch_threads
 #: Joint indices of the hands: the joints the forecasts are scored and logged on.
 HAND_JOINTS: list[int] = [JOINT_INDEX["left_hand"], JOINT_INDEX["right_hand"]]
 
-PlannerKind = Literal["itomp", "iplanner_no_ni", "iplanner_ni", "oracle", "blind"]
+PlannerKind = Literal["itomp", "iplanner_no_ni", "iplanner_ni", "iplanner_cv", "oracle", "blind"]
 #: how far the tool point may end from a blocking scenario's crossing start or goal [m]
 CROSSING_TOLERANCE_M = 0.02
 
@@ -154,9 +165,13 @@ PLANNER_KINDS: dict[str, str | None] = {
     "itomp": None,
     "iplanner_no_ni": "no_ni",
     "iplanner_ni": "ni",
+    "iplanner_cv": "cv",
     "oracle": None,
     "blind": None,
 }
+#: The predictor variants read from trained checkpoints (``cv`` is built from
+#: ``EpisodeCfg.cv``).
+CHECKPOINT_VARIANTS: tuple[str, ...] = ("no_ni", "ni")
 #: The ``PlannerCfg.kind`` of the planners that are not I-Planners (``blind`` runs ITOMP's
 #: optimiser, given no forecast).
 _OPTIMIZER_KIND: dict[str, str] = {"itomp": "itomp", "oracle": "oracle", "blind": "itomp"}
@@ -207,6 +222,8 @@ class EpisodeCfg:
     static_forecast_dt: float = 0.1
     # per-coordinate standard deviation of the oracle's forecast [m]
     oracle_std: float = 0.01
+    # planner ``iplanner_cv``: its constant-velocity forecast (fit, horizon, spread)
+    cv: ConstantVelocityCfg = field(default_factory=ConstantVelocityCfg)
     # MHD horizon [s] and the hand motion below which a forecast is not scored [m]
     mhd_horizon_s: float = 1.0
     mhd_min_motion: float = 0.05
@@ -286,7 +303,12 @@ class EpisodeCfg:
     oracle_onset_delay_s: float | None = None
 
     def __post_init__(self) -> None:
-        for name, kind in (("scenario", ScenarioCfg), ("sim", SimCfg), ("planner", PlannerCfg)):
+        for name, kind in (
+            ("scenario", ScenarioCfg),
+            ("sim", SimCfg),
+            ("planner", PlannerCfg),
+            ("cv", ConstantVelocityCfg),
+        ):
             if not isinstance(getattr(self, name), kind):
                 raise ConfigError(
                     f"expected {name} a {kind.__name__}, got {type(getattr(self, name)).__name__}"
@@ -803,9 +825,11 @@ def run_episode(
     Args:
         cfg: the episode.
         robot: a :class:`iplanner_torch.robot.model.RobotModel`.
-        predictor: the human motion predictor (required for ``iplanner_*``).
-        planner_kind: ``itomp`` (observed pose only), ``iplanner_no_ni``, ``iplanner_ni`` or
-            ``oracle`` (the person's true future, :func:`oracle_forecast`).
+        predictor: the human motion predictor (required for ``iplanner_no_ni`` and
+            ``iplanner_ni``; ``iplanner_cv`` builds its own from ``cfg.cv`` when None).
+        planner_kind: ``itomp`` (observed pose only), ``iplanner_no_ni``, ``iplanner_ni``,
+            ``iplanner_cv`` (constant-velocity forecast), ``oracle`` (the person's true
+            future, :func:`oracle_forecast`) or ``blind`` (no person).
         writer_path: MCAP file to write, or None.
         seed: episode seed (human order, idles and motions, tracker noise, planner seed).
         replanner: a ready replanner; None builds one from ``cfg.planner``.
@@ -1023,6 +1047,8 @@ def _run_episode(
     forecasts_motion = use_prediction or oracle
     # ITOMP's conservative spread of the held pose (not the stalled I-Planner's fallback)
     itomp_spread = pcfg.itomp_spread_mps if planner_kind == "itomp" else 0.0
+    if planner_kind == "iplanner_cv" and predictor is None:
+        predictor = ConstantVelocityPredictor(cfg.cv, fps=cfg.sim.tracker_fps)
     if use_prediction and predictor is None:
         raise ConfigError(f"planner_kind {planner_kind!r} needs a predictor, got None")
     scenario = cfg.scenario

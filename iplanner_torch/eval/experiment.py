@@ -15,6 +15,7 @@ import pandas as pd
 from iplanner_torch import checks
 from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.eval.episode import (
+    CHECKPOINT_VARIANTS,
     PLANNER_KINDS,
     EpisodeCfg,
     check_predictor_rate,
@@ -41,7 +42,7 @@ class ExperimentCfg:
     device: str = "cpu"
     # scenarios (rows of the paper's table)
     scenarios: list[ScenarioCfg] = field(default_factory=lambda: [ScenarioCfg()])
-    # planner kinds: "itomp", "iplanner_no_ni", "iplanner_ni", "oracle", "blind"
+    # planner kinds: "itomp", "iplanner_no_ni", "iplanner_ni", "iplanner_cv", "oracle", "blind"
     planners: list[str] = field(default_factory=lambda: ["itomp", "iplanner_no_ni", "iplanner_ni"])
     # episode seeds
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
@@ -314,8 +315,8 @@ def run_experiment(
     predictors: dict[str, Any] = {}
     for kind in cfg.planners:
         variant = PLANNER_KINDS[kind]
-        if variant is None or variant in predictors:
-            continue
+        if variant not in CHECKPOINT_VARIANTS or variant in predictors:
+            continue  # (iplanner_cv's forecast is built by the episode)
         if variant not in cfg.predictor_paths:
             raise ConfigError(f"planner {kind!r} needs predictor_paths[{variant!r}], none given")
         predictors[variant] = _load_predictor(cfg.predictor_paths[variant], cfg.device)

@@ -102,9 +102,9 @@ PLANNERS: dict[str, str] = {
     "iplanner_ni": "I-Planner, NI",
 }
 
-#: Display order of the planners (the paper's three, then the two references: the oracle bound
-#: and the robot that ignores the person).
-PLANNER_ORDER: tuple[str, ...] = (*PLANNERS, "oracle", "blind")
+#: Display order of the planners (the paper's three, the I-Planner on a constant-velocity
+#: forecast, then the two references: the oracle bound and the robot that ignores the person).
+PLANNER_ORDER: tuple[str, ...] = (*PLANNERS, "iplanner_cv", "oracle", "blind")
 #: The human speeds in their natural order; summary rows and plots follow it.
 SPEED_ORDER: tuple[str, ...] = ("slow", "medium", "fast")
 

@@ -209,8 +209,9 @@ class PlannerCfg:
     # "itomp": the observed pose only; "iplanner": the predicted human; "oracle": the person's
     # true future (an upper bound on what prediction can give; no predictor)
     kind: Literal["itomp", "iplanner", "oracle"] = "iplanner"
-    # predictor variant the planner reads ("no_ni" or "ni"); None for itomp and oracle
-    predictor_variant: Literal["no_ni", "ni"] | None = "ni"
+    # predictor variant the planner reads ("no_ni" or "ni", trained; "cv": constant velocity);
+    # None for itomp and oracle
+    predictor_variant: Literal["no_ni", "ni", "cv"] | None = "ni"
     # delta_CL, the confidence level of the collision constraint
     confidence: float = 0.95
     # m, the replanning time step [s]; at least the replanner's goal_change_lead_s,
@@ -241,9 +242,9 @@ class PlannerCfg:
                 raise ConfigError(f"expected {name} a {kind.__name__}, got {type(value).__name__}")
         if self.kind not in ("itomp", "iplanner", "oracle"):
             raise ConfigError(f"expected kind 'itomp', 'iplanner' or 'oracle', got {self.kind!r}")
-        if self.kind == "iplanner" and self.predictor_variant not in ("no_ni", "ni"):
+        if self.kind == "iplanner" and self.predictor_variant not in ("no_ni", "ni", "cv"):
             raise ConfigError(
-                f"expected predictor_variant 'no_ni' or 'ni' for iplanner, "
+                f"expected predictor_variant 'no_ni', 'ni' or 'cv' for iplanner, "
                 f"got {self.predictor_variant!r}"
             )
         if not 0.0 < self.confidence < 1.0:
@@ -313,7 +314,14 @@ class PlannerCfg:
 
 
 #: The planner names of a run (``experiment.planners``), the keys of ``PlannerCfg.per_kind``.
-PLANNER_NAMES: tuple[str, ...] = ("itomp", "iplanner_no_ni", "iplanner_ni", "oracle", "blind")
+PLANNER_NAMES: tuple[str, ...] = (
+    "itomp",
+    "iplanner_no_ni",
+    "iplanner_ni",
+    "iplanner_cv",
+    "oracle",
+    "blind",
+)
 #: PlannerCfg fields each episode sets, which ``per_kind`` cannot change.
 PER_KIND_FIXED: tuple[str, ...] = (
     "kind",

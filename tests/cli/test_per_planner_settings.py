@@ -32,6 +32,7 @@ def test_every_planner_option_has_the_same_entries(option: str) -> None:
     assert OmegaConf.to_container(cfg.planner.per_kind) == {
         "iplanner_no_ni": {"replanner": {"fresh_fraction": 0.0}},
         "iplanner_ni": {"replanner": {"fresh_fraction": 0.0}},
+        "iplanner_cv": {"replanner": {"fresh_fraction": 0.0}},
     }
 
 
@@ -40,6 +41,7 @@ def test_defaults_differ_per_planner() -> None:
     assert _fresh([], "oracle") == 0.5
     assert _fresh([], "iplanner_ni") == 0.0
     assert _fresh([], "iplanner_no_ni") == 0.0
+    assert _fresh([], "iplanner_cv") == 0.0  # the I-Planners' settings, on another forecast
 
 
 def test_command_line_value_serves_every_planner() -> None:
@@ -95,7 +97,7 @@ def test_misspelt_entry_key_is_refused_with_its_path() -> None:
          "in [0, 1], got 3"),
         ("+planner.per_kind.rrt.replan_step_s=0.3",
          "error: ConfigError: planner.per_kind: unknown planner 'rrt'; expected one of "
-         "['itomp', 'iplanner_no_ni', 'iplanner_ni', 'oracle', 'blind']"),
+         "['itomp', 'iplanner_no_ni', 'iplanner_ni', 'iplanner_cv', 'oracle', 'blind']"),
     ],
 )  # fmt: skip
 def test_bad_entry_on_the_command_line_is_one_line_before_anything_runs(

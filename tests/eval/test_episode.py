@@ -370,6 +370,52 @@ def test_blind_plans_with_nobody_there(tmp_path: Path) -> None:
         ep.forecasts()
 
 
+def test_iplanner_cv_plans_on_the_tracked_motion_extended(tmp_path: Path) -> None:
+    """``iplanner_cv`` builds its constant-velocity predictor from ``EpisodeCfg.cv``: each
+    forecast is numpy's straight line through the last tracked frames of the log, extended;
+    with no next-action model it fetches as ITOMP does."""
+    from iplanner_torch.prediction.constant_velocity import ACTION, ConstantVelocityCfg
+    from iplanner_torch.recording.reader import read_episode
+
+    cfg = EpisodeCfg(
+        scenario=ScenarioCfg(task_order="(0,1)->(2,3)"),
+        max_duration_s=12.0,
+        cv=ConstantVelocityCfg(fit_frames=4, n_future=10, spread_mps=0.2),
+    )
+    replanner = fakes.LinearReplanner(speed=1.5)
+    path = tmp_path / "cv.mcap"
+    res = _fake_episode(tmp_path, cfg, "iplanner_cv", replanner, path=path, seed=1)
+    ep = read_episode(path)
+    assert ep.metadata["planner"] == "iplanner_cv"
+    t_tr, tracked = ep.human_tracked()
+    t_tr, tracked = t_tr.numpy(), tracked.numpy()
+    compared = moving = 0
+    for t0, forecast in replanner.forecasts:
+        assert forecast.action_names == (ACTION,) and forecast.mean.shape[2] == 10
+        i = int(np.searchsorted(t_tr, t0 + 1e-9))  # the frames seen up to t0
+        x_fit = tracked[i - 4 : i]
+        if i < 4 or not np.isfinite(x_fit).all() or abs(t_tr[i - 1] - t0) > 1e-6:
+            continue
+        # frames 1 / fps apart, as the predictor takes them (the tracker samples at the
+        # control ticks nearest to that)
+        t_fit = (np.arange(4) - 3) / cfg.sim.tracker_fps
+        ahead = forecast.times.numpy()
+        for k in (0, 5, 9):  # joints
+            for c in range(3):
+                slope, icpt = np.polyfit(t_fit, x_fit[:, k, c], 1)
+                np.testing.assert_allclose(
+                    forecast.mean[0, 0, :, k, c].numpy(), icpt + slope * ahead, atol=1e-4
+                )
+        compared += 1
+        moving += float(np.ptp(forecast.mean[0, 0].numpy(), axis=0).max()) > 0.02
+    assert compared >= 10 and moving >= 2
+    assert math.isfinite(res.metrics["eval/mhd"])
+    itomp = fakes.LinearReplanner(speed=1.5)
+    ref = _fake_episode(tmp_path, cfg, "itomp", itomp, seed=1)
+    fetched = [b for _, k, b in res.events if k == "fetch_started"]
+    assert fetched == [b for _, k, b in ref.events if k == "fetch_started"] and fetched
+
+
 def test_errors(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="needs a predictor"):
         run_episode(
@@ -493,7 +539,9 @@ def test_full_episode_completes_all_tasks(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["itomp", "iplanner_no_ni", "iplanner_ni", "oracle", "blind"])
+@pytest.mark.parametrize(
+    "kind", ["itomp", "iplanner_no_ni", "iplanner_ni", "iplanner_cv", "oracle", "blind"]
+)
 def test_real_kuka_episode_delivers_every_block(tmp_path: Path, kind: str) -> None:
     """The real ITOMP / I-Planner optimiser on the KUKA iiwa in MuJoCo (stand-in predictor)."""
     from iplanner_torch.recording.reader import read_episode
@@ -504,7 +552,9 @@ def test_real_kuka_episode_delivers_every_block(tmp_path: Path, kind: str) -> No
     res = run_episode(
         EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=60.0),
         robot=robot,
-        predictor=None if kind in ("itomp", "oracle", "blind") else fakes.ConstantPredictor(),
+        predictor=None
+        if kind in ("itomp", "iplanner_cv", "oracle", "blind")
+        else fakes.ConstantPredictor(),
         planner_kind=kind,  # type: ignore[arg-type]
         writer_path=path,
         seed=0,
