@@ -4,7 +4,7 @@ Modes (``evaluate.mode``)::
 
     iplanner-evaluate                                   # prediction: held-out metrics
     iplanner-evaluate evaluate.checkpoint=checkpoints/reaching/iplanner_no_ni/predictor.ckpt
-    iplanner-evaluate evaluate.mode=noise_sweep         # fig. result_prediction (NI vs no NI)
+    iplanner-evaluate evaluate.mode=noise_sweep         # fig. result_prediction (NI, no NI, CV)
     iplanner-evaluate evaluate.mode=episode evaluate.logs=outputs/experiment/<run>/episodes
     iplanner-evaluate evaluate.mode=episode evaluate.logs=outputs/experiment/<run>/results.csv
     iplanner-evaluate evaluate.mode=episode \\
@@ -24,7 +24,9 @@ held-out clean motion at each ``evaluate.noises`` level and replays it at each
 ``conf/predictor/<option>.yaml`` and ``trainer`` when missing; ``evaluate.checkpoint``,
 ``train.out_dir`` and ``predictor`` are not read, and refused; an existing checkpoint whose
 predictor settings differ from its option's in what tells the options apart, e.g.
-``svgp.noisy_input``, is refused), and writes CSV, PNG plots and a README; ``episode``
+``svgp.noisy_input``, is refused); the entry ``constant_velocity`` is the constant-velocity
+forecast of ``run.cv`` (no checkpoint; on the first checkpoint's windows, its class metrics
+NaN), the baseline. It writes CSV, PNG plots and a README; ``episode``
 summarises MCAP episode logs, or the episode rows of a results CSV (an experiment's
 ``results.csv``, or rows gathered from several runs; in a run or multirun folder, a run made
 with ``run.write_mcap=false`` is read from its ``results.csv``), with one row per episode, a
@@ -375,11 +377,17 @@ def _refuse_unread_sweep_overrides(cfg: DictConfig) -> None:
         raise ConfigError(
             f"evaluate.mode=noise_sweep does not read {' '.join(unread)}: it compares "
             f"<paths.checkpoints>/<data folder>/<option>/predictor.ckpt for each option of "
-            f"evaluate.compare (here {folder}/{{{','.join(str(o) for o in cfg.evaluate.compare)}"
+            f"evaluate.compare (here {folder}/{{{','.join(_learned(cfg))}"
             "}), training a missing one with conf/predictor/<option>.yaml; choose them with "
             "evaluate.compare and paths.checkpoints, or score one checkpoint with "
             "evaluate.mode=prediction evaluate.checkpoint=<file>"
         )
+
+
+def _learned(cfg: DictConfig) -> list[str]:
+    """The options of ``evaluate.compare`` read from checkpoints (all but
+    :data:`CV_OPTION`)."""
+    return [str(o) for o in cfg.evaluate.compare if str(o) != CV_OPTION]
 
 
 def _flat_settings(settings: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -504,6 +512,57 @@ def _noise_sweep_grid(cfg: DictConfig) -> tuple[list[str], list[float], list[str
     return compare, noises, speeds
 
 
+#: the entry of ``evaluate.compare`` that stands for the constant-velocity forecast (no
+#: checkpoint: built from ``run.cv``, on the windows of the compared checkpoints)
+CV_OPTION = "constant_velocity"
+
+
+def _cv_cfg(cfg: DictConfig) -> Any:
+    """The constant-velocity forecast's settings: ``run.cv`` (as ``iplanner-experiment``'s
+    planner ``iplanner_cv`` reads them).
+
+    Raises:
+        ConfigError: naming the ``run.cv`` key that is wrong.
+    """
+    from iplanner_torch.prediction.constant_velocity import ConstantVelocityCfg
+
+    return instantiate(cfg.run.cv, ConstantVelocityCfg, "run.cv")
+
+
+def _cv_predictor(cfg: DictConfig, cv_cfg: Any, held_out: list[Any], learned: list[Any]) -> Any:
+    """The constant-velocity predictor of a noise sweep, scored on the windows of the first
+    compared checkpoint (its ``n_prev``, ``n_future`` and window settings), else on
+    ``data.windows``; at the held-out data's frame rate and joints.
+
+    Raises:
+        ConfigError: when those windows hold fewer frames than ``run.cv.fit_frames``.
+    """
+    from dataclasses import replace
+
+    from omegaconf import OmegaConf
+
+    from iplanner_torch.prediction.constant_velocity import ConstantVelocityPredictor
+
+    if learned:
+        ref = learned[0]
+        n_prev, n_future, window_cfg = ref.n_prev, ref.n_future, ref.window_cfg
+    else:
+        window_cfg = OmegaConf.to_container(cfg.data.windows, resolve=True)
+        assert isinstance(window_cfg, dict)
+        window_cfg.pop("_target_", None)
+        n_prev, n_future = int(window_cfg["n_prev"]), int(window_cfg["n_future"])
+    try:
+        cv_cfg = replace(cv_cfg, n_prev=n_prev, n_future=n_future)
+    except ConfigError as err:
+        raise ConfigError(f"run.cv: on windows of {n_prev} frames: {err}") from None
+    return ConstantVelocityPredictor(
+        cv_cfg,
+        fps=held_out[0].fps,
+        joint_names=tuple(held_out[0].joint_names),
+        window_cfg=window_cfg,
+    )
+
+
 def _noise_sweep(cfg: DictConfig) -> None:
     from iplanner_torch.cli.experiment import option_node, training_lock
     from iplanner_torch.cli.train import train_from_config
@@ -516,10 +575,12 @@ def _noise_sweep(cfg: DictConfig) -> None:
 
     compare, noises, speeds = _noise_sweep_grid(cfg)
     _check_data_settings(cfg)  # before a checkpoint loads
+    cv_cfg = _cv_cfg(cfg) if CV_OPTION in compare else None  # checked before any work
     report_dir = _out_dir(cfg)
     device = _device(cfg)
     folder = Path(cfg.paths.checkpoints) / Path(cfg.data.path).name
-    ckpts = {o: repo_path(folder / o) / "predictor.ckpt" for o in compare}
+    learned = [o for o in compare if o != CV_OPTION]
+    ckpts = {o: repo_path(folder / o) / "predictor.ckpt" for o in learned}
     for ckpt in ckpts.values():
         if ckpt.is_dir():
             raise CheckpointError(f"{ckpt}: is a folder, not a checkpoint file")
@@ -527,7 +588,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
     # the trained ones first: their settings, windows and split are checked before anything
     # is trained
     loaded, recorded = {}, {}
-    options = _option_settings(cfg, compare) if len(missing) < len(ckpts) else {}
+    options = _option_settings(cfg, learned) if len(missing) < len(ckpts) else {}
     for option, ckpt in ckpts.items():
         if option not in missing:
             loaded[option] = HumanMotionPredictor.load(ckpt, map_location=device)
@@ -557,7 +618,9 @@ def _noise_sweep(cfg: DictConfig) -> None:
                 )
             loaded[option] = HumanMotionPredictor.load(ckpts[option], map_location=device)
             _check_joints(cfg, loaded[option], ckpts[option])
-    predictors = {option: loaded[option] for option in ckpts}  # in evaluate.compare's order
+    if cv_cfg is not None:
+        loaded[CV_OPTION] = _cv_predictor(cfg, cv_cfg, held_out, [loaded[o] for o in learned])
+    predictors = {option: loaded[option] for option in compare}  # in evaluate.compare's order
     df = prediction_vs_noise(
         predictors,
         held_out,
@@ -739,7 +802,7 @@ MODE_READS = {
     "prediction": ("data", "seed", "device", "paths", "evaluate.checkpoint"),
     "noise_sweep": (
         "data", "trainer", "seed", "device", "paths",
-        "evaluate.compare", "evaluate.noises", "evaluate.speeds",
+        "evaluate.compare", "evaluate.noises", "evaluate.speeds", "run.cv",
     ),
     "episode": ("evaluate.logs", "evaluate.labels", "evaluate.baseline"),
 }  # fmt: skip

@@ -6,6 +6,7 @@ Examples::
     iplanner-experiment robot=fetch scenario=arrangement_2x2 'run.seeds=[0,1,2]'
     iplanner-experiment experiment=table_simulation    # paper table performance_simulation
     iplanner-experiment experiment=speed_response      # paper fig. speed_response
+    iplanner-experiment 'run.planners=[itomp,iplanner_ni,iplanner_cv]'   # + constant velocity
     iplanner-experiment -m tracker.noise=0,0.02,0.05 human.speed=slow,medium,fast \\
         planner.confidence=0.9,0.95,0.99              # a sweep (one job per combination)
     iplanner-experiment -m hydra/launcher=joblib tracker.noise=0,0.02   # local processes
@@ -20,8 +21,10 @@ settings it does not override. The ``planner`` group holds the settings (confide
 every planner of the run is built with, each as its kind (the default option's settings serve all
 three planners of the main job), but for what its ``per_kind.<planner>`` entries set for one
 planner (by default the I-Planners' warm starts; a ``planner.<key>`` of the command line serves
-every planner); ``planner=<option>`` runs that planner alone. The I-Planner variants need
-predictors: by default (``run.train_data=tasks``) each scenario's predictors learn from task
+every planner); ``planner=<option>`` runs that planner alone. ``iplanner_cv`` plans on a
+constant-velocity forecast (``run.cv``), ``oracle`` on the true future, ``blind`` as if nobody
+were there: none of them needs a predictor. The learned I-Planner variants need predictors:
+by default (``run.train_data=tasks``) each scenario's predictors learn from task
 demonstrations of its arrangement and task order (``datasets/tasks_<...>``, generated when absent;
 a blocking scenario's from the reaching set), kept in
 ``checkpoints/<dataset>/iplanner_{ni,no_ni}/``; missing ones are trained first on a small budget

@@ -418,7 +418,10 @@ def evaluate_prediction(
     """Evaluate a predictor on held-out windows or demonstrations (paper fig. result_prediction).
 
     Args:
-        predictor: a :class:`HumanMotionPredictor`.
+        predictor: a :class:`HumanMotionPredictor`, or a forecaster with its ``predict``,
+            window settings and ``fps`` but no actions (``action_names`` empty, e.g.
+            :class:`~iplanner_torch.prediction.constant_velocity.ConstantVelocityPredictor`):
+            its class metrics are NaN.
         data: held-out windows, or demonstrations (cut with the predictor's window settings).
         batch_size: windows per forward pass.
         moving_threshold: the moving hand's largest distance from its current position
@@ -501,6 +504,9 @@ def evaluate_prediction(
     }
     for q in COVERAGE_LEVELS:
         res[f"coverage{round(q * 100)}"] = float(cat[f"inside{round(q * 100)}"].float().mean())
+    if not p_actions:  # no action model (a constant-velocity forecast): no class to score
+        for key in ("n_confident", "class_confident", "class_precision", "class_accuracy"):
+            res[key] = math.nan
     if not return_frame:
         return res
     import pandas as pd

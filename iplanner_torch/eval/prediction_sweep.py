@@ -36,6 +36,9 @@ PLOTTED: dict[str, tuple[str, float]] = {
     "mhd_1s": ("hand MHD over 1 s [cm]", 100.0),
     "coverage95": ("share inside the 95 % ellipsoids", 1.0),
 }
+#: plotted metrics drawn on a log scale: the determinants of reg_accuracy span orders of
+#: magnitude between predictors (a constant-velocity forecast's against a learned one's)
+LOG_SCALE = ("reg_accuracy",)
 
 
 def resample_speed(demo: Demonstration, factor: float) -> Demonstration:
@@ -234,6 +237,8 @@ def write_noise_report(df: pd.DataFrame, out_dir: str | Path, command: str = "")
                 )
         ax.set_xlabel("input noise sigma [cm]")
         ax.set_ylabel(label)
+        if metric in LOG_SCALE and bool((df[metric] > 0).all()):
+            ax.set_yscale("log")
         ax.grid(alpha=0.3)
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside right center", fontsize="small")

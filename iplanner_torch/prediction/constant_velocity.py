@@ -67,10 +67,19 @@ class ConstantVelocityPredictor:
         fps: the tracker's frame rate [Hz]: frames are ``1 / fps`` apart, in the window and in
             the forecast.
         joint_names: the K joint names (default: the skeleton's).
+        window_cfg: the settings of the held-out windows it is scored on
+            (:class:`~iplanner_torch.data.windows.WindowCfg` fields, as a trained predictor
+            records them; :func:`~iplanner_torch.eval.prediction.evaluate_prediction` reads
+            them), or None for the defaults.
 
     Raises:
         ConfigError: on an ``fps`` that is not a finite number > 0.
     """
+
+    #: the window features it reads: the joint positions, the first 3 K of any features
+    feature_kinds: tuple[str, ...] = ("position",)
+    #: no action model: one action in each forecast, no class to score, no next action
+    action_names: tuple[str, ...] = ()
 
     def __init__(
         self,
@@ -78,12 +87,40 @@ class ConstantVelocityPredictor:
         *,
         fps: float,
         joint_names: tuple[str, ...] = JOINT_NAMES,
+        window_cfg: dict[str, object] | None = None,
     ) -> None:
         self.cfg = cfg or ConstantVelocityCfg()
         self.fps = checks.positive("fps", fps)
         self.joint_names = tuple(joint_names)
         #: the frames the episode gives (read by the closed loop as a learned predictor's)
         self.n_prev = self.cfg.n_prev
+        self.n_future = self.cfg.n_future
+        self.window_cfg = dict(window_cfg) if window_cfg else None
+
+    def predict(self, f_prev: torch.Tensor, progress: torch.Tensor) -> Forecast:
+        """Forecast from window features, as a trained predictor's ``predict``.
+
+        Args:
+            f_prev: (B, n_prev, D) features whose first 3 K are the joint positions [m]
+                (:func:`~iplanner_torch.data.windows.compute_features`, lost joints imputed).
+            progress: (B,) progress states (not read).
+
+        Returns:
+            As :meth:`predict_positions`.
+
+        Raises:
+            ShapeError: when ``f_prev`` is not (B, n_prev, D >= 3 K).
+            DataError: as :meth:`predict_positions`.
+        """
+        k = len(self.joint_names)
+        check_shape("f_prev", f_prev, ("B", self.n_prev, "D"))
+        if f_prev.shape[-1] < 3 * k:
+            raise ShapeError(
+                f"expected f_prev (B, {self.n_prev}, D >= {3 * k}) with the {k} joints' "
+                f"positions first, got {tuple(f_prev.shape)}"
+            )
+        positions = f_prev[..., : 3 * k].reshape(*f_prev.shape[:2], k, 3)  # (B, n_prev, K, 3)
+        return self.predict_positions(positions, progress)
 
     def predict_positions(self, positions: torch.Tensor, progress: torch.Tensor) -> Forecast:
         """Forecast from tracked positions.

@@ -396,6 +396,32 @@ def test_noise_sweep_scores_the_recorded_split_and_draws_its_noise_with_seed(
     assert "held-out split: seed=1 data.split=[0.6,0.2,0.2] (recorded in" in out
 
 
+def test_noise_sweep_compares_the_constant_velocity_baseline_without_a_checkpoint(
+    trained: SimpleNamespace, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_training: None
+) -> None:
+    """``constant_velocity`` in ``evaluate.compare`` is scored on the windows of the compared
+    checkpoint (the same windows: n_prev 6, n_future 8, stride 2), with ``run.cv``'s
+    settings, and is neither loaded nor trained; its class metrics are NaN."""
+    import pandas as pd
+
+    shutil.copytree(trained.ckpt.parent, tmp_path / "ck" / "ds" / "iplanner_ni")
+    sweep = [*_sweep_args(trained, tmp_path), "evaluate.compare=[iplanner_ni,constant_velocity]",
+             "evaluate.noises=[0.0,0.02]", "evaluate.speeds=[medium]",
+             "run.cv.spread_mps=0.2"]  # fmt: skip
+    evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
+    df = pd.read_csv(tmp_path / "out" / "prediction_vs_noise.csv")
+    assert list(dict.fromkeys(df["predictor"])) == ["iplanner_ni", "constant_velocity"]
+    cv, ni = df[df["predictor"] == "constant_velocity"], df[df["predictor"] == "iplanner_ni"]
+    assert cv["n_windows"].tolist() == ni["n_windows"].tolist() and len(cv) == 2
+    assert cv["class_precision"].isna().all() and ni["class_precision"].notna().all()
+    assert (cv["mhd_1s"] > 0).all() and (cv["mhd_1s"] < 1.0).all()
+    assert not (tmp_path / "ck" / "ds" / "constant_velocity").exists()
+    # a fit longer than the checkpoint's windows: named, before any row is written
+    sweep[-1] = "run.cv.fit_frames=7"
+    with pytest.raises(ConfigError, match=r"run.cv: on windows of 6 frames: .*n_prev"):
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
+
+
 def test_noise_sweep_refuses_the_record_of_a_later_unfinished_training(
     trained: SimpleNamespace, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_training: None
 ) -> None:
@@ -448,7 +474,10 @@ def test_noise_sweep_refuses_checkpoints_of_another_option_in_an_options_folder(
     def sweep_stub(predictors: Any, demos: Any, **kwargs: Any) -> Any:
         import pandas as pd
 
-        swept.append({o: p.cfg.svgp.noisy_input for o, p in predictors.items()})
+        swept.append(
+            {o: type(p.cfg).__name__ if o == "constant_velocity" else p.cfg.svgp.noisy_input
+             for o, p in predictors.items()}
+        )  # fmt: skip
         return pd.DataFrame({"predictor": list(predictors)})
 
     monkeypatch.setattr(prediction_sweep, "prediction_vs_noise", sweep_stub)
@@ -478,7 +507,9 @@ def test_noise_sweep_refuses_checkpoints_of_another_option_in_an_options_folder(
     shutil.copytree(trained_no_ni, ck / "iplanner_no_ni")
     shutil.copytree(trained.ckpt.parent, ck / "iplanner_ni")
     evaluate._noise_sweep(_cfg(monkeypatch, *sweep, "seed=5"))  # seed draws only the noise
-    assert swept == [{"iplanner_no_ni": "none", "iplanner_ni": "simple"}]
+    # (the default list ends with the constant-velocity baseline, which has no checkpoint)
+    assert swept == [{"iplanner_no_ni": "none", "iplanner_ni": "simple",
+                      "constant_velocity": "ConstantVelocityCfg"}]  # fmt: skip
 
 
 def test_noise_sweep_refuses_motion_without_clean_positions_before_training(

@@ -400,3 +400,38 @@ def test_recorded_split_takes_only_the_record_of_the_checkpoints_training(tmp_pa
         recorded_split(ckpt, "abc", digest)
     with pytest.warns(DataWarning, match="later, unfinished training run.*drawn from seed"):
         assert recorded_split(ckpt, "abc", digest, split_given=True) is None
+
+
+def test_a_constant_velocity_forecast_of_linear_motion_scores_zero_error_and_no_class() -> None:
+    """Joints moving in straight lines at constant speed: the constant-velocity forecast is
+    exact (MHD and regression error 0), and without an action model the class metrics are
+    NaN rather than a score of labels it does not have."""
+    from iplanner_torch.prediction.constant_velocity import (
+        ConstantVelocityCfg,
+        ConstantVelocityPredictor,
+    )
+
+    fps, frames = 15.0, 40
+    t = np.arange(frames)[:, None, None] / fps
+    pose = np.array([[0.0, 0.0, 1.0], [0.3, 0.2, 1.0], [0.3, -0.2, 1.0]])
+    velocity = np.array([[0.0, 0.0, 0.0], [0.2, -0.1, 0.05], [-0.3, 0.0, 0.1]])
+    demo = Demonstration(
+        positions=pose[None] + velocity[None] * t,
+        labels=np.zeros(frames),
+        fps=fps,
+        joint_names=JOINTS,
+        action_names=("reach_0", "reach_1"),
+    )
+    cv = ConstantVelocityPredictor(
+        ConstantVelocityCfg(n_prev=4, fit_frames=4, n_future=15), fps=fps, joint_names=JOINTS
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no action-name mismatch warned of
+        res = evaluate_prediction(cv, [demo])
+    assert res["n_windows"] == frames - 4 - 15 + 1
+    assert res["mhd_1s"] == pytest.approx(0.0, abs=1e-6)
+    assert res["reg_precision"] == pytest.approx(0.0, abs=1e-9)
+    assert res["mhd_1s_moving"] == pytest.approx(0.0, abs=1e-6)  # the right hand moves 32 cm
+    for key in ("class_precision", "class_accuracy", "class_confident", "n_confident"):
+        assert math.isnan(res[key]), key
+    assert res["coverage95"] == 1.0  # every true position at its predicted mean
