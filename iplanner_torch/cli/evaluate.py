@@ -317,6 +317,8 @@ def _split_source(recorded: SplitRecord | None, ckpts: list[Path]) -> str:
 
     if recorded is not None:
         return f"recorded in {INPUTS_FILE} by the training"
+    if not ckpts:  # only the constant-velocity baseline: nothing was trained
+        return "from seed and data.split: no checkpoint is compared"
     if any((ckpt.parent / INPUTS_FILE).is_file() for ckpt in ckpts):
         return (
             f"from seed and data.split: the {INPUTS_FILE} beside the checkpoint does not record "

@@ -422,6 +422,27 @@ def test_noise_sweep_compares_the_constant_velocity_baseline_without_a_checkpoin
         evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
 
 
+def test_noise_sweep_of_the_constant_velocity_baseline_alone_trains_nothing(
+    trained: SimpleNamespace,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    no_training: None,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Without a checkpoint to compare, the split comes from seed and data.split and the
+    windows from data.windows; nothing is trained or written into paths.checkpoints."""
+    import pandas as pd
+
+    sweep = [*_sweep_args(trained, tmp_path), "evaluate.compare=[constant_velocity]",
+             "evaluate.noises=[0.0]", "evaluate.speeds=[medium]", "data.split=[0.6,0.2,0.2]",
+             "data.windows.n_prev=6", "data.windows.n_future=8"]  # fmt: skip
+    evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
+    assert "from seed and data.split: no checkpoint is compared" in capsys.readouterr().out
+    df = pd.read_csv(tmp_path / "out" / "prediction_vs_noise.csv")
+    assert df["predictor"].tolist() == ["constant_velocity"] and df["n_windows"].iloc[0] > 0
+    assert not (tmp_path / "ck").exists()
+
+
 def test_noise_sweep_refuses_the_record_of_a_later_unfinished_training(
     trained: SimpleNamespace, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_training: None
 ) -> None:
