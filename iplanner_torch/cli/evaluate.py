@@ -379,17 +379,17 @@ def _refuse_unread_sweep_overrides(cfg: DictConfig) -> None:
         raise ConfigError(
             f"evaluate.mode=noise_sweep does not read {' '.join(unread)}: it compares "
             f"<paths.checkpoints>/<data folder>/<option>/predictor.ckpt for each option of "
-            f"evaluate.compare (here {folder}/{{{','.join(_learned(cfg))}"
+            f"evaluate.compare (here {folder}/{{{','.join(_learned(cfg.evaluate.compare))}"
             "}), training a missing one with conf/predictor/<option>.yaml; choose them with "
             "evaluate.compare and paths.checkpoints, or score one checkpoint with "
             "evaluate.mode=prediction evaluate.checkpoint=<file>"
         )
 
 
-def _learned(cfg: DictConfig) -> list[str]:
+def _learned(compare: Any) -> list[str]:
     """The options of ``evaluate.compare`` read from checkpoints (all but
     :data:`CV_OPTION`)."""
-    return [str(o) for o in cfg.evaluate.compare if str(o) != CV_OPTION]
+    return [str(o) for o in compare if str(o) != CV_OPTION]
 
 
 def _flat_settings(settings: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -581,7 +581,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
     report_dir = _out_dir(cfg)
     device = _device(cfg)
     folder = Path(cfg.paths.checkpoints) / Path(cfg.data.path).name
-    learned = [o for o in compare if o != CV_OPTION]
+    learned = _learned(compare)
     ckpts = {o: repo_path(folder / o) / "predictor.ckpt" for o in learned}
     for ckpt in ckpts.values():
         if ckpt.is_dir():

@@ -127,6 +127,17 @@ def scenario_data_node(cfg: DictConfig, scenario: Any) -> DictConfig:
     return node
 
 
+def predictor_folder(cfg: DictConfig, data_node: DictConfig) -> Path:
+    """The folder of the predictors learned from the dataset ``data_node`` names:
+    ``<paths.checkpoints>/<dataset folder name>``."""
+    return repo_path(Path(cfg.paths.checkpoints) / Path(str(data_node.path)).name)
+
+
+def predictor_checkpoint(folder: Path, variant: str) -> Path:
+    """The checkpoint of predictor ``variant`` in ``folder`` (:func:`predictor_folder`)."""
+    return folder / VARIANT_OPTION[variant] / "predictor.ckpt"
+
+
 def ensure_predictors(
     cfg: DictConfig, variants: list[str], data_node: DictConfig
 ) -> dict[str, str]:
@@ -141,8 +152,8 @@ def ensure_predictors(
     given = {override_key(o) for o in _task_overrides()}
     windows_given = overridden_fields("data.windows")
     paths: dict[str, str] = {}
-    folder = repo_path(Path(cfg.paths.checkpoints) / Path(data_node.path).name)
-    missing = [v for v in variants if not (folder / VARIANT_OPTION[v] / "predictor.ckpt").exists()]
+    folder = predictor_folder(cfg, data_node)
+    missing = [v for v in variants if not predictor_checkpoint(folder, v).exists()]
     trains = bool(missing) and cfg_scalar(cfg.run, "train_if_missing", bool)
     with training_lock(folder) if trains else contextlib.nullcontext():
         for variant in variants:
@@ -194,8 +205,8 @@ def _ensure_predictor(
     from iplanner_torch.errors import CheckpointError
 
     option = VARIANT_OPTION[variant]
-    out_dir = folder / option
-    ckpt = out_dir / "predictor.ckpt"
+    ckpt = predictor_checkpoint(folder, variant)
+    out_dir = ckpt.parent
     if ckpt.is_dir():
         raise CheckpointError(f"{ckpt}: is a folder, not a checkpoint file")
     if not ckpt.exists():
@@ -684,7 +695,12 @@ def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
     check_added_keys(cfg)
     check_root_keys(cfg)
     experiment, variants, _ = check_run(cfg)
-    check_resumed_job(cfg, experiment, variants)
+    # the folder of each scenario's predictors (none to read without a predicting planner)
+    folders = {
+        s.name: predictor_folder(cfg, scenario_data_node(cfg, s))
+        for s in (experiment.scenarios if variants else [])
+    }
+    check_resumed_job(cfg, folders, variants)
     if not variants:
         return {}
     settings = f"seed={cfg_scalar(cfg, 'seed', int)} run.train_trainer={cfg.run.train_trainer}"
@@ -693,12 +709,7 @@ def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
             value = cfg.data.windows.get(field)
             value = OmegaConf.to_container(value) if OmegaConf.is_config(value) else value
             settings += f" data.windows.{field}={value}"
-    out = {}
-    for scenario in experiment.scenarios:
-        data_node = scenario_data_node(cfg, scenario)
-        folder = repo_path(Path(cfg.paths.checkpoints) / Path(str(data_node.path)).name)
-        out[f"predictors of {scenario.name}"] = (folder, settings)
-    return out
+    return {f"predictors of {name}": (folder, settings) for name, folder in folders.items()}
 
 
 #: the file in a run folder that records what the run began with, for ``run.resume``
@@ -855,13 +866,14 @@ def _refuse_other_settings(out_dir: Path, before: dict[str, Any], after: dict[st
         )
 
 
-def check_resumed_job(cfg: DictConfig, experiment: Any, variants: list[str]) -> None:
+def check_resumed_job(cfg: DictConfig, folders: dict[str, Path], variants: list[str]) -> None:
     """For a job of a sweep resumed with ``run.resume=true``, checked before the sweep's first
     job runs (before Hydra writes the job's record of this command in its folder's
     ``.hydra/``): refuse settings that differ from the ones the job's folder began with, and a
-    predictor checkpoint of ``variants`` (present now) that differs from the one the job's
-    episodes used (:func:`record_predictors`). A job folder without a run is not checked: the
-    job starts afresh.
+    predictor checkpoint of ``variants`` in each scenario's predictor folder (``folders``,
+    scenario name -> :func:`predictor_folder`; present now) that differs from the one the
+    job's episodes used (:func:`record_predictors`). A job folder without a run is not
+    checked: the job starts afresh.
 
     Raises:
         ConfigError: as :func:`begin_run` and :func:`record_predictors`.
@@ -881,14 +893,11 @@ def check_resumed_job(cfg: DictConfig, experiment: Any, variants: list[str]) -> 
         return
     earlier = _read_run_inputs(folder)
     _refuse_other_settings(folder, earlier["settings"], run_settings(cfg))
-    for scenario in experiment.scenarios:
-        recorded = earlier["predictors"].get(scenario.name)
-        if not recorded or not variants:
-            continue
-        data_node = scenario_data_node(cfg, scenario)
-        ckpts = repo_path(Path(cfg.paths.checkpoints) / Path(str(data_node.path)).name)
-        paths = {v: str(ckpts / VARIANT_OPTION[v] / "predictor.ckpt") for v in variants}
-        _refuse_changed_predictor(scenario.name, recorded, _digests(paths), paths)
+    for name, folder in folders.items():
+        recorded = earlier["predictors"].get(name)
+        if recorded:
+            paths = {v: str(predictor_checkpoint(folder, v)) for v in variants}
+            _refuse_changed_predictor(name, recorded, _digests(paths), paths)
 
 
 def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> bool:
@@ -953,6 +962,12 @@ def _begin_run(cfg: DictConfig, out_dir: Path, sweep_job: bool) -> bool:
     return True
 
 
+def scenario_dir(out_dir: Path, experiment: Any, scenario: Any) -> Path:
+    """Where a run keeps one scenario's ``results.csv``: the run folder itself, or a folder
+    per scenario when the experiment has several (its logs go to ``out_dir/episodes``)."""
+    return out_dir if len(experiment.scenarios) == 1 else out_dir / scenario.name
+
+
 def extend_run(cfg: DictConfig, out_dir: Path, experiment: Any) -> dict[str, int]:
     """For a resumed run: check that every episode the run finished is in the grid of
     ``experiment`` (the grid may have grown, :data:`RESUME_GRID_KEYS`), then record the
@@ -975,8 +990,8 @@ def extend_run(cfg: DictConfig, out_dir: Path, experiment: Any) -> dict[str, int
     kept = {}
     try:
         for scenario in experiment.scenarios:
-            sub = out_dir if len(experiment.scenarios) == 1 else out_dir / scenario.name
             one = replace(experiment, scenarios=[scenario])
+            sub = scenario_dir(out_dir, experiment, scenario)
             kept[scenario.name] = len(kept_episodes(one, sub, episodes))
     except IPlannerError:  # refused, or a results.csv that does not read
         _put_back_record(out_dir)
@@ -1082,8 +1097,7 @@ def _app(cfg: DictConfig) -> None:
         paths = ensure_predictors(cfg, variants, scenario_data_node(cfg, scenario))
         record_predictors(out_dir, scenario.name, paths)
         one = replace(experiment, scenarios=[scenario], predictor_paths=paths)
-        # one scenario's rows in its own folder when there are several
-        sub = out_dir if len(experiment.scenarios) == 1 else out_dir / scenario.name
+        sub = scenario_dir(out_dir, experiment, scenario)
         if resume:
             bar.write(
                 f"resuming: {kept[scenario.name]} finished episode(s) of scenario "

@@ -238,14 +238,15 @@ def test_a_resumed_sweep_job_refuses_a_retrained_predictor_before_any_job(
     hc = SimpleNamespace(mode=RunMode.MULTIRUN, sweep=SimpleNamespace(dir=job.parent, subdir="0"))
     monkeypatch.setattr(cli.HydraConfig, "get", staticmethod(lambda: hc))
     cfg.run.resume = True
-    experiment = SimpleNamespace(scenarios=[SimpleNamespace(name="s")])
-    cli.check_resumed_job(cfg, experiment, ["ni"])  # the same checkpoint
-    cli.check_resumed_job(cfg, experiment, [])  # no predicting planner: nothing to compare
+    folders = {"s": cli.predictor_folder(cfg, cfg.data)}
+    assert cli.predictor_checkpoint(folders["s"], "ni") == ckpt
+    cli.check_resumed_job(cfg, folders, ["ni"])  # the same checkpoint
+    cli.check_resumed_job(cfg, {}, [])  # no predicting planner: nothing to compare
     ckpt.write_bytes(b"second")
     with pytest.raises(ConfigError, match=f"the predictor {ckpt} of scenario 's' is not the one"):
-        cli.check_resumed_job(cfg, experiment, ["ni"])
+        cli.check_resumed_job(cfg, folders, ["ni"])
     ckpt.unlink()  # missing: the job trains it, and compares it then (record_predictors)
-    cli.check_resumed_job(cfg, experiment, ["ni"])
+    cli.check_resumed_job(cfg, folders, ["ni"])
 
 
 def test_resume_continues_a_run_of_several_scenarios(tmp_path: Path) -> None:
