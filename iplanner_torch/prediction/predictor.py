@@ -674,8 +674,11 @@ class HumanMotionPredictor:
         path.parent.mkdir(parents=True, exist_ok=True)
         d = self.to_checkpoint()
         d["digest"] = content_digest(d)  # checked by load: torch does not check its zip CRCs
-        with whole_file(path) as tmp:  # an earlier checkpoint stays whole until this one is
-            torch.save(d, tmp)
+        # an earlier checkpoint stays whole until this one is; written through a file object,
+        # the archive's inner folder is named "archive", not after the temporary file, so the
+        # same predictor gives the same bytes (a resumed run compares checkpoint digests)
+        with whole_file(path) as tmp, tmp.open("wb") as f:
+            torch.save(d, f)
         return path
 
     @classmethod

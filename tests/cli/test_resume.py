@@ -245,7 +245,7 @@ def test_a_resumed_sweep_job_refuses_a_retrained_predictor_before_any_job(
     ckpt.write_bytes(b"second")
     with pytest.raises(ConfigError, match=f"the predictor {ckpt} of scenario 's' is not the one"):
         cli.check_resumed_job(cfg, folders, ["ni"])
-    ckpt.unlink()  # missing: the job trains it, and compares it then (record_predictors)
+    ckpt.unlink()  # missing: the job trains it again, and compares it then (record_predictors)
     cli.check_resumed_job(cfg, folders, ["ni"])
 
 

@@ -460,6 +460,18 @@ def test_checkpoint_roundtrip_and_errors(trained, tmp_path: Path) -> None:
         HumanMotionPredictor.load(tmp_path / "missing.ckpt")
 
 
+def test_the_same_predictor_saves_the_same_bytes(trained, tmp_path: Path) -> None:
+    """A resumed run compares its checkpoints' SHA-256 with the ones it began with, so a
+    predictor trained again alike must write the same file: the bytes may not depend on the
+    file's name or on the temporary name it is written under."""
+    path, _ = trained
+    pred = HumanMotionPredictor.load(path)
+    first = pred.save(tmp_path / "a" / "predictor.ckpt").read_bytes()
+    again = pred.save(tmp_path / "a" / "predictor.ckpt").read_bytes()  # replaces the first
+    other = pred.save(tmp_path / "b" / "other_name.ckpt").read_bytes()
+    assert first == again == other
+
+
 def test_runs_on_device(trained, device: torch.device) -> None:
     path, w = trained
     pred = HumanMotionPredictor.load(path, map_location=device)
