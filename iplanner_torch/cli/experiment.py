@@ -695,14 +695,13 @@ def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
     check_added_keys(cfg)
     check_root_keys(cfg)
     experiment, variants, _ = check_run(cfg)
-    # the folder of each scenario's predictors (none to read without a predicting planner)
-    folders = {
-        s.name: predictor_folder(cfg, scenario_data_node(cfg, s))
-        for s in (experiment.scenarios if variants else [])
-    }
-    check_resumed_job(cfg, folders, variants)
+    # each scenario's dataset (none to read without a predicting planner)
+    scenarios = experiment.scenarios if variants else []
+    nodes = {s.name: scenario_data_node(cfg, s) for s in scenarios}
+    check_resumed_job(cfg, nodes, variants)
     if not variants:
         return {}
+    folders = {name: predictor_folder(cfg, node) for name, node in nodes.items()}
     settings = f"seed={cfg_scalar(cfg, 'seed', int)} run.train_trainer={cfg.run.train_trainer}"
     if str(cfg.run.train_data) == "data":  # the window settings a checkpoint is compared on
         for field in sorted(overridden_fields("data.windows")):
@@ -866,17 +865,24 @@ def _refuse_other_settings(out_dir: Path, before: dict[str, Any], after: dict[st
         )
 
 
-def check_resumed_job(cfg: DictConfig, folders: dict[str, Path], variants: list[str]) -> None:
+def check_resumed_job(
+    cfg: DictConfig, data_nodes: dict[str, DictConfig], variants: list[str]
+) -> None:
     """For a job of a sweep resumed with ``run.resume=true``, checked before the sweep's first
     job runs (before Hydra writes the job's record of this command in its folder's
     ``.hydra/``): refuse settings that differ from the ones the job's folder began with, and a
-    predictor checkpoint of ``variants`` in each scenario's predictor folder (``folders``,
-    scenario name -> :func:`predictor_folder`; present now) that differs from the one the
-    job's episodes used (:func:`record_predictors`). A job folder without a run is not
-    checked: the job starts afresh.
+    predictor checkpoint of ``variants`` in each scenario's predictor folder (``data_nodes``,
+    scenario name -> its dataset's node, :func:`scenario_data_node`;
+    :func:`predictor_folder`) that differs from the one the job's episodes used
+    (:func:`record_predictors`). A checkpoint the job used that is missing now is trained
+    again here (:func:`ensure_predictors`), so that one that comes out otherwise is refused
+    before any job runs; the same training gives the same file. A job folder without a run
+    is not checked: the job starts afresh.
 
     Raises:
-        ConfigError: as :func:`begin_run` and :func:`record_predictors`.
+        ConfigError: as :func:`begin_run` and :func:`record_predictors`, and as
+            :func:`ensure_predictors` for a missing checkpoint that may not be trained
+            (``run.train_if_missing=false``).
     """
     from hydra.types import RunMode
 
@@ -893,11 +899,15 @@ def check_resumed_job(cfg: DictConfig, folders: dict[str, Path], variants: list[
         return
     earlier = _read_run_inputs(folder)
     _refuse_other_settings(folder, earlier["settings"], run_settings(cfg))
-    for name, folder in folders.items():
+    for name, node in data_nodes.items():
         recorded = earlier["predictors"].get(name)
-        if recorded:
-            paths = {v: str(predictor_checkpoint(folder, v)) for v in variants}
-            _refuse_changed_predictor(name, recorded, _digests(paths), paths)
+        if not recorded:
+            continue
+        folder = predictor_folder(cfg, node)
+        paths = {v: str(predictor_checkpoint(folder, v)) for v in variants}
+        if any(v in recorded and not Path(p).is_file() for v, p in paths.items()):
+            paths = ensure_predictors(cfg, variants, node)  # deleted since: trained again
+        _refuse_changed_predictor(name, recorded, _digests(paths), paths)
 
 
 def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> bool:

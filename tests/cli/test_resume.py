@@ -220,7 +220,8 @@ def test_a_resumed_sweep_job_refuses_a_retrained_predictor_before_any_job(
     tmp_path: Path, monkeypatch
 ) -> None:
     """The sweep's pre-check compares the job's recorded checkpoints with the files there now,
-    before Hydra writes the job's record of the command in its folder."""
+    before Hydra writes the job's record of the command in its folder; a checkpoint deleted
+    since is trained again there first."""
     from types import SimpleNamespace
 
     from hydra.types import RunMode
@@ -238,15 +239,33 @@ def test_a_resumed_sweep_job_refuses_a_retrained_predictor_before_any_job(
     hc = SimpleNamespace(mode=RunMode.MULTIRUN, sweep=SimpleNamespace(dir=job.parent, subdir="0"))
     monkeypatch.setattr(cli.HydraConfig, "get", staticmethod(lambda: hc))
     cfg.run.resume = True
-    folders = {"s": cli.predictor_folder(cfg, cfg.data)}
-    assert cli.predictor_checkpoint(folders["s"], "ni") == ckpt
-    cli.check_resumed_job(cfg, folders, ["ni"])  # the same checkpoint
+    nodes = {"s": cfg.data}
+    assert cli.predictor_checkpoint(cli.predictor_folder(cfg, cfg.data), "ni") == ckpt
+    trained = []
+
+    def train(cfg, variants, node):  # as ensure_predictors: the same bytes, or others
+        trained.append((list(variants), node.path))
+        ckpt.write_bytes(retrained)
+        return {"ni": str(ckpt)}
+
+    monkeypatch.setattr(cli, "ensure_predictors", train)
+    cli.check_resumed_job(cfg, nodes, ["ni"])  # the same checkpoint
     cli.check_resumed_job(cfg, {}, [])  # no predicting planner: nothing to compare
     ckpt.write_bytes(b"second")
     with pytest.raises(ConfigError, match=f"the predictor {ckpt} of scenario 's' is not the one"):
-        cli.check_resumed_job(cfg, folders, ["ni"])
-    ckpt.unlink()  # missing: the job trains it again, and compares it then (record_predictors)
-    cli.check_resumed_job(cfg, folders, ["ni"])
+        cli.check_resumed_job(cfg, nodes, ["ni"])
+    assert trained == []  # present: nothing trained
+    # missing: trained again here, before any job; the same file goes on
+    ckpt.unlink()
+    retrained = b"first"
+    cli.check_resumed_job(cfg, nodes, ["ni"])
+    assert trained == [(["ni"], cfg.data.path)] and ckpt.read_bytes() == b"first"
+    # and one that comes out otherwise is refused before any job
+    ckpt.unlink()
+    retrained = b"third"
+    with pytest.raises(ConfigError, match=f"the predictor {ckpt} of scenario 's' is not the one"):
+        cli.check_resumed_job(cfg, nodes, ["ni"])
+    assert len(trained) == 2
 
 
 def test_resume_continues_a_run_of_several_scenarios(tmp_path: Path) -> None:
