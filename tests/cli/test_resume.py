@@ -241,7 +241,7 @@ def test_a_resumed_sweep_job_refuses_a_retrained_predictor_before_any_job(
     cfg.run.resume = True
     nodes = {"s": cfg.data}
     assert cli.predictor_checkpoint(cli.predictor_folder(cfg, cfg.data), "ni") == ckpt
-    trained = []
+    trained, retrained = [], b"first"
 
     def train(cfg, variants, node):  # as ensure_predictors: the same bytes, or others
         trained.append((list(variants), node.path))
@@ -257,7 +257,6 @@ def test_a_resumed_sweep_job_refuses_a_retrained_predictor_before_any_job(
     assert trained == []  # present: nothing trained
     # missing: trained again here, before any job; the same file goes on
     ckpt.unlink()
-    retrained = b"first"
     cli.check_resumed_job(cfg, nodes, ["ni"])
     assert trained == [(["ni"], cfg.data.path)] and ckpt.read_bytes() == b"first"
     # and one that comes out otherwise is refused before any job
