@@ -875,9 +875,11 @@ def check_resumed_job(
     scenario name -> its dataset's node, :func:`scenario_data_node`;
     :func:`predictor_folder`) that differs from the one the job's episodes used
     (:func:`record_predictors`). A checkpoint the job used that is missing now is trained
-    again here (:func:`ensure_predictors`), so that one that comes out otherwise is refused
-    before any job runs; the same training gives the same file. A job folder without a run
-    is not checked: the job starts afresh.
+    again here (:func:`ensure_predictors`) when the launcher runs the jobs on this machine
+    (:func:`_jobs_run_here`), so that one that comes out otherwise is refused before any job
+    runs; the same training gives the same file. With a cluster's launcher the job trains it
+    on its node and compares it then (the training stays off the node that submits). A job
+    folder without a run is not checked: the job starts afresh.
 
     Raises:
         ConfigError: as :func:`begin_run` and :func:`record_predictors`, and as
@@ -905,9 +907,20 @@ def check_resumed_job(
             continue
         folder = predictor_folder(cfg, node)
         paths = {v: str(predictor_checkpoint(folder, v)) for v in variants}
-        if any(v in recorded and not Path(p).is_file() for v, p in paths.items()):
+        missing = any(v in recorded and not Path(p).is_file() for v, p in paths.items())
+        if missing and _jobs_run_here(hc):
             paths = ensure_predictors(cfg, variants, node)  # deleted since: trained again
         _refuse_changed_predictor(name, recorded, _digests(paths), paths)
+
+
+def _jobs_run_here(hc: Any) -> bool:
+    """Whether the sweep's launcher (``hc.launcher``, of the Hydra config) runs its jobs on
+    this machine: Hydra's basic launcher, joblib's and Submitit's local one; not a cluster's
+    (Submitit's SLURM launcher) nor one this project does not know."""
+    from iplanner_torch.cli.callbacks import LOCAL_PARALLEL_LAUNCHERS
+
+    target = str((hc.launcher or {}).get("_target_", ""))
+    return target.endswith(("BasicLauncher", *LOCAL_PARALLEL_LAUNCHERS))
 
 
 def begin_run(cfg: DictConfig, out_dir: Path, *, sweep_job: bool = False) -> bool:

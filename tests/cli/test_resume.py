@@ -236,7 +236,9 @@ def test_a_resumed_sweep_job_refuses_a_retrained_predictor_before_any_job(
                             "data": {"path": str(tmp_path / "ds")}})  # fmt: skip
     cli.begin_run(cfg, job)
     cli.record_predictors(job, "s", {"ni": str(ckpt)})
-    hc = SimpleNamespace(mode=RunMode.MULTIRUN, sweep=SimpleNamespace(dir=job.parent, subdir="0"))
+    basic = {"_target_": "hydra._internal.core_plugins.basic_launcher.BasicLauncher"}
+    hc = SimpleNamespace(mode=RunMode.MULTIRUN, sweep=SimpleNamespace(dir=job.parent, subdir="0"),
+                         launcher=basic)  # fmt: skip
     monkeypatch.setattr(cli.HydraConfig, "get", staticmethod(lambda: hc))
     cfg.run.resume = True
     nodes = {"s": cfg.data}
@@ -265,6 +267,20 @@ def test_a_resumed_sweep_job_refuses_a_retrained_predictor_before_any_job(
     with pytest.raises(ConfigError, match=f"the predictor {ckpt} of scenario 's' is not the one"):
         cli.check_resumed_job(cfg, nodes, ["ni"])
     assert len(trained) == 2
+    # jobs on a cluster: trained there by the job, not on the node that submits
+    ckpt.unlink()
+    hc.launcher = {"_target_": "hydra_plugins.hydra_submitit_launcher.submitit_launcher."
+                   "SlurmLauncher"}  # fmt: skip
+    cli.check_resumed_job(cfg, nodes, ["ni"])
+    assert len(trained) == 2 and not ckpt.exists()
+    plugins = "hydra_plugins.hydra_"
+    for local in ("joblib_launcher.joblib_launcher.JoblibLauncher",
+                  "submitit_launcher.submitit_launcher.LocalLauncher"):  # fmt: skip
+        hc.launcher = {"_target_": plugins + local}
+        ckpt.unlink(missing_ok=True)
+        with pytest.raises(ConfigError, match="is not the one"):
+            cli.check_resumed_job(cfg, nodes, ["ni"])
+    assert len(trained) == 4
 
 
 def test_resume_continues_a_run_of_several_scenarios(tmp_path: Path) -> None:
