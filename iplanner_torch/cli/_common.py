@@ -259,6 +259,12 @@ def repo_path(path: str | Path) -> Path:
     return Path(path).expanduser().resolve()
 
 
+def predictor_folder(cfg: DictConfig, data_node: DictConfig) -> Path:
+    """The folder of the predictors learned from the dataset ``data_node`` names (``cfg.data``,
+    or a scenario's): ``<paths.checkpoints>/<dataset folder name>``, resolved."""
+    return repo_path(Path(str(cfg.paths.checkpoints)) / Path(str(data_node.path)).name)
+
+
 def _plain_text(rst: str) -> str:
     """A docstring's reStructuredText markup made terminal text: ``x`` -> x, ``Examples::``
     -> ``Examples:``, :role:`~a.b.c` -> c."""

@@ -80,6 +80,7 @@ from iplanner_torch.cli._common import (
     override_group,
     override_key,
     override_word,
+    predictor_folder,
     print_help_if_asked,
     refuse_unread_overrides,
     repo_path,
@@ -580,7 +581,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
     cv_cfg = _cv_cfg(cfg) if CV_OPTION in compare else None  # checked before any work
     report_dir = _out_dir(cfg)
     device = _device(cfg)
-    folder = Path(cfg.paths.checkpoints) / Path(cfg.data.path).name
+    folder = predictor_folder(cfg, cfg.data)
     learned = _learned(compare)
     ckpts = {o: repo_path(folder / o) / "predictor.ckpt" for o in learned}
     for ckpt in ckpts.values():
@@ -604,7 +605,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
     if missing:
         source = f"from seed and data.split, which {', '.join(missing)} will be trained on"
     # the parallel jobs of a sweep that lack the same dataset or predictor make it once
-    with training_lock(repo_path(folder)) if missing else contextlib.nullcontext():
+    with training_lock(folder) if missing else contextlib.nullcontext():
         held_out = _held_out(
             cfg, split, source, recorded=record is not None and not missing, generate=bool(missing)
         )
@@ -849,7 +850,7 @@ def _kept_when_interrupted(cfg: DictConfig) -> str:
     """What an interrupted evaluation keeps, for its ``interrupted: ...`` line."""
     text = "no results were written (they are written when the evaluation ends)"
     if str(cfg.evaluate.mode) == "noise_sweep":
-        folder = repo_path(Path(str(cfg.paths.checkpoints)) / Path(str(cfg.data.path)).name)
+        folder = predictor_folder(cfg, cfg.data)
         text += (
             "; the sub-models of a missing predictor trained before the signal are kept in "
             f"{folder}/<option>/ (*.ckpt)"

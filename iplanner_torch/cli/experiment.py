@@ -65,8 +65,8 @@ from iplanner_torch.cli._common import (
     overridden_fields,
     override_group,
     override_key,
+    predictor_folder,
     print_help_if_asked,
-    repo_path,
     run_app,
     setting_changes,
 )
@@ -125,12 +125,6 @@ def scenario_data_node(cfg: DictConfig, scenario: Any) -> DictConfig:
     slug = re.sub(r"[^0-9a-zA-Z_-]+", "", slug) or "x"
     node.path = str(Path(cfg.paths.datasets) / f"tasks_{scenario.arrangement}_{slug}")
     return node
-
-
-def predictor_folder(cfg: DictConfig, data_node: DictConfig) -> Path:
-    """The folder of the predictors learned from the dataset ``data_node`` names:
-    ``<paths.checkpoints>/<dataset folder name>``."""
-    return repo_path(Path(cfg.paths.checkpoints) / Path(str(data_node.path)).name)
 
 
 def predictor_checkpoint(folder: Path, variant: str) -> Path:
