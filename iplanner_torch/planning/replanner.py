@@ -28,7 +28,13 @@ near the velocity limits and caused many more waits.
 Every cycle first re-checks, against its new forecast, the plans already committed until its own
 plan takes over; when they break the confidence limit (the person did something the previous
 forecast did not expect) the new plan takes over after ``emergency_lead_s`` instead of ``m``
-(``ReplannerStats.emergencies``). After a cycle that ended in a wait, the next plan takes over
+(``ReplannerStats.emergencies``). With ``emergency_ahead_s`` the check goes on that long past
+``t + m``, with the robot stopping there at ``acc_max`` (:func:`braking_stop`): the new plan
+starts from the committed state at ``t + m`` and cannot turn away at once, so a committed plan
+that arrives where the person is predicted to come just after the hand-over (a delivery on
+the person's way back) leaves it no safe move unless it takes over early. A plan that only
+passes through a region the person may enter later can still stop before it, and does not
+count. After a cycle that ended in a wait, the next plan takes over
 ``wait_lead_s`` after its cycle and cycles follow at that pace while the waits last, so a wait
 ends soon after the way is free instead of up to ``2 m`` later (in arrangement_1x4, seeds 0-4,
 the I-Planner's mean efficiency went from 1.42 to 1.50 with 0.2 s).
@@ -110,6 +116,12 @@ class ReplannerCfg:
     # would take over (t + m); when they break the confidence limit the new plan takes over
     # after this lead [s] instead (an emergency re-plan); None: never
     emergency_lead_s: float | None = 0.2
+    # the check also covers this many seconds past t + m [s], with the robot stopping from the
+    # committed plans' state at t + m at acc_max (joint by joint): the new plan starts from
+    # that state and cannot turn away at once, so committed plans that bring the robot where
+    # the person is predicted to come just after the hand-over, too fast to stop clear of it or
+    # to stay, are replaced early too; 0: until t + m only
+    emergency_ahead_s: float = 0.2
     # configurations checked per second of that span
     emergency_check_hz: float = 20.0
     # after a cycle that ended in a wait, the next plan takes over this long after its cycle
@@ -134,22 +146,21 @@ class ReplannerCfg:
     tracking_max_gap_s: float = 0.1
 
     def __post_init__(self) -> None:
+        for name in ("budget_s", "goal_change_lead_s", "emergency_lead_s", "wait_lead_s"):
+            optional(finite, name, getattr(self, name))  # typed float | None
         for name in (
             "replan_step_s",
-            "budget_s",
             "min_duration_s",
             "fresh_fraction",
             "resync_tol",
-            "goal_change_lead_s",
-            "emergency_lead_s",
+            "emergency_ahead_s",
             "emergency_check_hz",
-            "wait_lead_s",
             "acc_max",
             "tracking_bandwidth",
             "tracking_dt",
             "tracking_max_gap_s",
-        ):  # the fields typed float | None may be None
-            optional(finite, name, getattr(self, name))
+        ):  # typed float: None is refused too
+            finite(name, getattr(self, name))
         for name in ("warm_start", "replan_on_goal_change", "plan_from_reference"):
             flag(name, getattr(self, name))
         if not 0.0 < self.replan_step_s <= MAX_REPLAN_STEP_S:
@@ -183,6 +194,11 @@ class ReplannerCfg:
         if self.wait_lead_s is not None and not 0.0 < self.wait_lead_s <= self.replan_step_s:
             raise ConfigError(
                 f"expected wait_lead_s in (0, replan_step_s] or None, got {self.wait_lead_s}"
+            )
+        if not 0.0 <= self.emergency_ahead_s <= MAX_REPLAN_STEP_S:
+            raise ConfigError(
+                f"expected emergency_ahead_s in [0, {MAX_REPLAN_STEP_S:g}] s, got "
+                f"{self.emergency_ahead_s}"
             )
         if not self.emergency_check_hz > 0.0:
             raise ConfigError(f"expected emergency_check_hz > 0, got {self.emergency_check_hz}")
@@ -330,6 +346,26 @@ PER_KIND_FIXED: tuple[str, ...] = (
     "per_kind",
     "optimizer.seed",
 )
+
+
+def braking_stop(
+    q: torch.Tensor, qd: torch.Tensor, s: torch.Tensor, acc_max: float
+) -> torch.Tensor:
+    """Positions of a robot that stops from ``(q, qd)``, each joint at ``acc_max`` until its
+    velocity is 0 and then holding, ``s`` seconds later.
+
+    Args:
+        q: (J,) positions [rad].
+        qd: (J,) velocities [rad/s].
+        s: (N,) times after the start [s], >= 0.
+        acc_max: the deceleration [rad/s^2], > 0.
+
+    Returns:
+        (N, J) positions [rad]: ``q + qd u - sign(qd) acc_max u^2 / 2`` with ``u = min(s,
+        |qd| / acc_max)`` per joint.
+    """
+    u = torch.minimum(s.unsqueeze(-1), qd.abs() / acc_max)  # (N, J)
+    return q + qd * u - 0.5 * acc_max * torch.sign(qd) * u.square()
 
 
 def _with_fields(obj: Any, changes: Mapping[str, Any], where: str) -> Any:
@@ -741,19 +777,35 @@ class Replanner:
         forecast_t0: float | None,
     ) -> bool:
         """Whether the plans that run from ``t + emergency_lead_s`` until ``t + lead`` break
-        the confidence limit under ``forecast`` (see ``ReplannerCfg.emergency_lead_s``)."""
+        the confidence limit under ``forecast``, or (``emergency_ahead_s`` > 0) a stop from
+        their state at ``t + lead`` does in the ``emergency_ahead_s`` after it (see
+        ``ReplannerCfg.emergency_lead_s`` and ``emergency_ahead_s``)."""
         early = self.cfg.emergency_lead_s
         if early is None or lead <= early + TIME_EPS:
             return False
         n = max(2, int(round((lead - early) * self.cfg.emergency_check_hz)) + 1)
         opt = self.optimizer
         ts = torch.linspace(t + early, t + lead, n, dtype=opt.dtype, device=opt.device)
-        q = plan.sample(ts)[0]  # (n, J)
         nxt = self._next_plan
-        if nxt is not None:  # the pending plan runs from its start on
-            later = ts > nxt.t_start + TIME_EPS
-            if bool(later.any()):
-                q = torch.where(later.unsqueeze(-1), nxt.sample(ts)[0], q)
+
+        def committed(times: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            q, qd = plan.sample(times)  # (n, J) each
+            if nxt is not None:  # the pending plan runs from its start on
+                later = (times > nxt.t_start + TIME_EPS).unsqueeze(-1)
+                if bool(later.any()):
+                    q_n, qd_n = nxt.sample(times)
+                    q, qd = torch.where(later, q_n, q), torch.where(later, qd_n, qd)
+            return q, qd
+
+        q = committed(ts)[0]
+        ahead = self.cfg.emergency_ahead_s
+        if ahead > 0.0:
+            k = max(1, int(round(ahead * self.cfg.emergency_check_hz)))
+            s = torch.linspace(0.0, ahead, k + 1, dtype=opt.dtype, device=opt.device)[1:]
+            q_h, qd_h = committed(ts[-1:])
+            stop = braking_stop(q_h[0], qd_h[0], s, self.cfg.acc_max)  # (k, J)
+            stop = torch.minimum(torch.maximum(stop, opt.q_min), opt.q_max)
+            q, ts = torch.cat([q, stop]), torch.cat([ts, ts[-1] + s])
         bound = opt.collision_bound(q, ts, forecast, t if forecast_t0 is None else forecast_t0)
         return bool(float(bound.max()) > 1.0 - opt.cfg.confidence)
 

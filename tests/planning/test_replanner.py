@@ -27,6 +27,7 @@ from iplanner_torch.planning.replanner import (
     PlanningOverrunWarning,
     Replanner,
     ReplannerCfg,
+    braking_stop,
     build_replanner,
 )
 from iplanner_torch.planning.trajectory import resample_linear
@@ -339,6 +340,79 @@ def test_a_committed_plan_the_new_forecast_rules_out_is_replaced_early(point_rob
         ReplannerCfg(replan_step_s=0.5, emergency_lead_s=0.7)
 
 
+def test_the_emergency_check_looks_past_the_hand_over_by_emergency_ahead_s(point_robot) -> None:
+    # The committed plan is clear of the person until its successor takes over at t + m.
+    # A: the person is predicted where the robot comes to rest if it brakes from its state at
+    # t + m: with emergency_ahead_s the check sees it and the new plan takes over early.
+    # B: the person is predicted further along the committed path, beyond where the robot can
+    # still stop: no emergency (the new plan can stop short of it).
+    opt = TrajectoryOptimizer(
+        point_robot,
+        OptimizerCfg(iterations=5, warm_iterations=2),
+        human_spheres=one_sphere_map(0.1),
+    )
+    q0, goal = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    t, m, early, acc = 0.2, 0.5, 0.1, 20.0
+    limit = 1.0 - opt.cfg.confidence
+    for case, ahead, emergency in (("A", 0.0, False), ("A", 0.2, True), ("B", 0.2, False)):
+        cfg = ReplannerCfg(
+            replan_step_s=m, goal_change_lead_s=0.2, emergency_lead_s=early,
+            emergency_ahead_s=ahead, acc_max=acc,
+        )  # fmt: skip
+        rp = Replanner(opt, cfg)
+        rp.reset(q0, goal, t=0.0)
+        rp.step(0.0, q0, None)  # plan from 0.2 s on, no person
+        committed = rp._current(t + m)
+        q_h, qd_h = committed.sample(t + m)
+        assert float(qd_h[0]) > 1.0  # moving fast at the hand-over
+        if case == "A":  # at rest after |qd| / acc of braking
+            person = q_h + qd_h.square() / (2.0 * acc) * torch.sign(qd_h)
+        else:
+            person = committed.sample(t + m + 0.2)[0]
+        fc = static_forecast([float(person[0]), float(person[1]), 0.0], 0.015)
+        ts = torch.linspace(t + early, t + m, 9)
+        qs = torch.stack([rp._current(float(x)).sample(float(x))[0] for x in ts])
+        assert float(opt.collision_bound(qs, ts, fc, forecast_t0=t).max()) < limit
+        at = opt.collision_bound(person.view(1, -1), torch.tensor([t + m + 0.2]), fc, t)
+        assert float(at[0]) > limit  # where the person is, the robot would not be safe
+        res = rp.step(t, rp.command(t)[0], fc, forecast_t0=t)
+        assert rp.stats.emergencies == int(emergency), case
+        assert float(res.times[0]) == pytest.approx(t + (early if emergency else m))
+    for bad in (-0.1, 10.5, math.nan):
+        with pytest.raises(ConfigError, match="emergency_ahead_s"):
+            ReplannerCfg(replan_step_s=0.5, emergency_ahead_s=bad)
+    assert (
+        ReplannerCfg(
+            replan_step_s=0.1, goal_change_lead_s=None, emergency_lead_s=None, wait_lead_s=None
+        ).emergency_ahead_s
+        == 0.2
+    )  # not bound to m
+
+
+def test_braking_stop_matches_a_stepwise_integration() -> None:
+    # each joint decelerates at acc_max until it stops, then holds: against a fine Euler
+    # integration of that motion
+    q = torch.tensor([0.3, -1.0, 2.0, 0.5], dtype=torch.float64)
+    qd = torch.tensor([1.5, -0.6, 0.0, 3.0], dtype=torch.float64)
+    acc, h = 4.0, 1e-5
+    s = torch.tensor([0.0, 0.05, 0.2, 0.5, 1.0], dtype=torch.float64)
+    pos, vel, got, t = q.clone(), qd.clone(), [], 0.0
+    for target in s.tolist():
+        while t < target - 1e-12:
+            step = min(h, target - t)
+            dv = torch.clamp(vel.abs(), max=acc * step) * torch.sign(vel)
+            pos = pos + (vel - 0.5 * dv) * step
+            vel = vel - dv
+            t += step
+        got.append(pos.clone())
+    ref = torch.stack(got)
+    out = braking_stop(q, qd, s, acc)
+    assert out.shape == (5, 4)
+    assert torch.allclose(out, ref, atol=1e-6)
+    assert torch.equal(out[0], q)
+    assert torch.allclose(out[-1], q + qd * qd.abs() / (2 * acc))  # at rest: v^2 / (2 a)
+
+
 def test_after_a_wait_the_next_plan_takes_over_after_wait_lead(point_robot) -> None:
     # a person right in front of the robot: the first cycle waits; with wait_lead_s the next
     # cycle's plan takes over 0.2 s after it runs (and the next cycle comes then) instead of m
@@ -375,7 +449,10 @@ def test_a_cycle_that_steps_out_of_the_way_counts_as_an_escape(point_robot) -> N
     )
     opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.1))
     coming = approaching(0.8, 0.8, -0.04, dtype=torch.float32)  # at the robot by 0.8 s
-    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, goal_change_lead_s=None))
+    # the first cycle's own window (with emergency_ahead_s, the hold the reset made already
+    # fails the check: that cycle would take over early and wait in a window still clear)
+    rp_cfg = ReplannerCfg(replan_step_s=0.5, goal_change_lead_s=None, emergency_ahead_s=0.0)
+    rp = Replanner(opt, rp_cfg)
     q0, goal = torch.zeros(2), torch.tensor([0.9, 0.0])
     rp.reset(q0, goal, t=0.0)
     res = rp.step(0.0, q0, coming, forecast_t0=0.0)
@@ -418,6 +495,7 @@ def test_non_finite_measurements_and_times_are_data_errors(point_robot: PointRob
         "budget_s",
         "min_duration_s",
         "resync_tol",
+        "emergency_ahead_s",
         "emergency_check_hz",
         "acc_max",
         "tracking_bandwidth",
@@ -429,6 +507,9 @@ def test_replanner_cfg_rejects_non_finite_values(field: str) -> None:
         ReplannerCfg(**{field: math.inf})
     with pytest.raises(ConfigError, match=field):
         ReplannerCfg(**{field: math.nan})
+    if field != "budget_s":  # typed float: None is no value (budget_s: None means m)
+        with pytest.raises(ConfigError, match=f"expected {field} a finite number, got None"):
+            ReplannerCfg(**{field: None})
 
 
 def test_planner_cfg_rejects_non_finite_values() -> None:
