@@ -36,8 +36,9 @@ then. Alone, before the other two settings, it cut the I-Planner's waits (iiwa, 
 scenarios: fewer in 5 of 7, still no contact) without a gain in efficiency, and it made the
 Fetch arm less safe (contact-free in 60 instead of 66 of 70 episodes); the three together
 (``task_crossing_radius`` below) left the iiwa without contact in 140 of 140 table episodes
-and the Fetch arm in 139 of 140 (138 before), at an efficiency of 1.64-1.83
-(``experiments/safety_seeds/README.md``).
+and the Fetch arm in 139 of 140 (138 before), at an efficiency of 1.64-1.83; with the
+replanner's emergency check past the hand-over (``ReplannerCfg.emergency_ahead_s``) both arms
+in 140 of 140 (``experiments/safety_seeds/README.md``).
 With ``reaction_s`` (off by default; 0.3 s is the lower end of a person's choice reaction
 time, the scripted person reacts after 0.4 s: ``HumanCfg.reaction_s``), while the person's
 tracked hands rest (:func:`hands_still`), the forecast of taking a block that the robot put on
