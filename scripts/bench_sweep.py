@@ -24,6 +24,13 @@ Figures (``run(quick) -> dict``):
 Each training is the quick predictor of ``bench_prediction`` (its ``training_inputs``: 8
 targets x 4 reaches, 40 SVGP steps) with ``TrainerCfg(num_threads=2)``.
 
+* ``sweep.grid_jobs2_s``: a grid of closed-loop episodes (ITOMP and ``blind``, 4 seeds of
+  6 simulated seconds; ``quick``: 2 seeds of 3 s) run by ``run_experiment`` in two worker
+  processes (``episode_pool(2)``, as ``run.jobs=2``), wall clock with the workers' start;
+  reference: the same grid one episode after the other in this process (``run.jobs=1``),
+  measured in the same run. The rows of the two runs are compared, and must be the same but
+  for the wall-clock columns.
+
 Usage::
 
     python scripts/bench_sweep.py
@@ -90,10 +97,58 @@ def _trainings(n: int, policy: str | None, spin: str | None = None) -> list[floa
     return out
 
 
+#: the wall-clock columns of an episode's row (all others must agree between the two runs)
+_TIMING = ("sim/realtime_factor", "plan/mean_solve_ms", "eval/prediction_ms", "plan/overruns")
+
+
+def _grid_jobs(quick: bool) -> dict[str, dict]:
+    """``sweep.grid_jobs2_s``: a grid of episodes in two workers against one after the other."""
+    import tempfile
+    import time
+    import warnings
+
+    import pandas as pd
+
+    from iplanner_torch.eval.episode import EpisodeCfg
+    from iplanner_torch.eval.experiment import ExperimentCfg, episode_pool, run_experiment
+    from iplanner_torch.sim.tasks import ScenarioCfg
+
+    warnings.filterwarnings("ignore", message="replanning cycle")
+    grid = ExperimentCfg(
+        name="bench",
+        planners=["itomp", "blind"],
+        seeds=[0, 1] if quick else [0, 1, 2, 3],
+        scenarios=[ScenarioCfg(name="s", task_order="(0,1)->(2,3)")],
+        episode=EpisodeCfg(max_duration_s=3.0 if quick else 6.0),
+        write_mcap=False,
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        serial = run_experiment(grid, Path(tmp) / "serial")
+        serial_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        with episode_pool(2) as pool:
+            workers = run_experiment(grid, Path(tmp) / "workers", executor=pool)
+        workers_s = time.perf_counter() - t0
+    cols = [c for c in serial.columns if c not in _TIMING]
+    pd.testing.assert_frame_equal(serial[cols], workers[cols])
+    return {
+        "sweep.grid_jobs2_s": {
+            "value": workers_s,
+            "unit": "s",
+            "reference": serial_s,
+            "reference_name": "the same grid one episode after the other (run.jobs=1)",
+            "ratio": workers_s / serial_s,
+            "episodes": len(serial),
+            "cores": os.cpu_count(),
+        }
+    }
+
+
 def run(quick: bool = False) -> dict[str, dict]:
     """Time one training alone (after a warm-up one), with the default and with passive
     waits, then two side by side with each (``quick`` changes nothing: the trainings are
-    small already)."""
+    small already); then a grid of episodes in two workers (``quick``: a smaller one)."""
     _trainings(1, None)  # warm-up: the first process compiles (and caches) numba's DTW
     single = _trainings(1, None)[0]
     single_passive = _trainings(1, "PASSIVE")[0]
@@ -109,6 +164,7 @@ def run(quick: bool = False) -> dict[str, dict]:
         busy.wait()
     cores = os.cpu_count()
     return {
+        **_grid_jobs(quick),
         "sweep.single_train_s": {"value": single, "unit": "s", "cores": cores},
         "sweep.single_train_passive_s": {
             "value": single_passive,
@@ -147,7 +203,7 @@ def run(quick: bool = False) -> dict[str, dict]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="same as the full run")
+    parser.add_argument("--quick", action="store_true", help="a smaller grid of episodes")
     args = parser.parse_args()
     print(json.dumps(run(args.quick), indent=2))
 

@@ -5,6 +5,7 @@ Examples::
     iplanner-experiment                                # the main job: one scenario, 3 planners
     iplanner-experiment robot=fetch scenario=arrangement_2x2 'run.seeds=[0,1,2]'
     iplanner-experiment experiment=table_simulation    # paper table performance_simulation
+    iplanner-experiment experiment=table_simulation run.jobs=2   # 2 episodes at once
     iplanner-experiment experiment=speed_response      # paper fig. speed_response
     iplanner-experiment 'run.planners=[itomp,iplanner_ni,iplanner_cv]'   # + constant velocity
     iplanner-experiment -m tracker.noise=0,0.02,0.05 human.speed=slow,medium,fast \\
@@ -35,7 +36,9 @@ with is refused. Results: ``results.csv``, ``results.md``, plots, ``episodes/*.m
 :mod:`iplanner_torch.eval.timeline`) in the run folder, with ``run_inputs.json`` (the
 settings, code and predictors it began with). ``run.resume=true hydra.run.dir=<folder>``
 (``hydra.sweep.dir`` for ``-m``) continues a run that stopped with the same settings: its
-finished episodes are kept, the others run.
+finished episodes are kept, the others run. ``run.jobs=N`` runs N episodes at once, each in a
+worker process (:func:`~iplanner_torch.eval.experiment.episode_pool`): the same rows and logs
+as one after the other, but for the wall-clock timings.
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ import re
 import sys
 import time
 from collections.abc import Iterator
+from concurrent.futures import Executor
 from pathlib import Path
 from typing import Any
 
@@ -666,7 +670,22 @@ def check_run(cfg: DictConfig) -> tuple[Any, list[str], bool]:
     variants = sorted({v for p in planners if (v := PLANNER_KINDS[p]) in CHECKPOINT_VARIANTS})
     experiment = build_experiment(cfg, {})
     timeline_plots = cfg_scalar(cfg.run, "timeline_plots", bool)  # checked before any episode
+    run_jobs(cfg)
     return experiment, variants, timeline_plots
+
+
+def run_jobs(cfg: DictConfig) -> int:
+    """``run.jobs``: how many episodes of the run go at once, each in a process of its own.
+
+    Raises:
+        ConfigError: unless it is an integer >= 1.
+    """
+    from iplanner_torch.errors import ConfigError
+
+    jobs = cfg_scalar(cfg.run, "jobs", int)
+    if jobs < 1:
+        raise ConfigError(f"run.jobs: expected an integer >= 1, got {jobs}")
+    return jobs
 
 
 def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
@@ -708,7 +727,7 @@ def check_job(cfg: DictConfig) -> dict[str, tuple[Path, str]]:
 #: the file in a run folder that records what the run began with, for ``run.resume``
 RUN_INPUTS = "run_inputs.json"
 #: settings a resumed run may give otherwise: none of them changes an episode
-RESUME_FREE_KEYS = ("run.resume", "progress", "run.timeline_plots")
+RESUME_FREE_KEYS = ("run.resume", "progress", "run.timeline_plots", "run.jobs")
 #: the grid's lists, which a resumed run may extend: every episode the run finished must be
 #: in the new grid (checked before any episode runs), and each episode is independent of the
 #: others
@@ -1079,7 +1098,7 @@ def _app(cfg: DictConfig) -> None:
     from hydra.types import RunMode
     from tqdm.auto import tqdm
 
-    from iplanner_torch.eval.experiment import run_experiment
+    from iplanner_torch.eval.experiment import episode_pool, run_experiment, stop_pool
     from iplanner_torch.eval.report import (
         INTERRUPTED_DIR,
         comparison_table,  # the table iplanner-evaluate evaluate.mode=episode prints too
@@ -1110,21 +1129,38 @@ def _app(cfg: DictConfig) -> None:
     episodes = out_dir / "episodes"
     # the whole run's episodes, with the time left (each episode has its own bar beneath)
     bar = tqdm(total=n, desc="episodes", unit="episode", disable=n < 2 or not progress)
-    for scenario in experiment.scenarios:
-        paths = ensure_predictors(cfg, variants, scenario_data_node(cfg, scenario))
-        record_predictors(out_dir, scenario.name, paths)
-        one = replace(experiment, scenarios=[scenario], predictor_paths=paths)
-        sub = scenario_dir(out_dir, experiment, scenario)
-        if resume:
-            bar.write(
-                f"resuming: {kept[scenario.name]} finished episode(s) of scenario "
-                f"{scenario.name} kept"
+    # the episodes left to run, each in a worker process of its own when run.jobs > 1
+    jobs = min(run_jobs(cfg), n - sum(kept.values()))
+    pool = episode_pool(jobs) if jobs > 1 else None
+    if pool is not None:
+        bar.write(f"{jobs} episodes at once, each in a process of its own (run.jobs)")
+    try:
+        for scenario in experiment.scenarios:
+            paths = ensure_predictors(cfg, variants, scenario_data_node(cfg, scenario))
+            record_predictors(out_dir, scenario.name, paths)
+            one = replace(experiment, scenarios=[scenario], predictor_paths=paths)
+            sub = scenario_dir(out_dir, experiment, scenario)
+            if resume:
+                bar.write(
+                    f"resuming: {kept[scenario.name]} finished episode(s) of scenario "
+                    f"{scenario.name} kept"
+                )
+            bar.write(f"running scenario {scenario.name} ...")  # above the bar, which redraws
+            sys.stdout.flush()
+            frames.append(
+                run_experiment(
+                    one,
+                    sub,
+                    episodes_dir=episodes,
+                    resume=resume,
+                    on_done=bar.update,
+                    executor=pool,
+                )
             )
-        bar.write(f"running scenario {scenario.name} ...")  # above the bar, which redraws
-        sys.stdout.flush()
-        frames.append(
-            run_experiment(one, sub, episodes_dir=episodes, resume=resume, on_done=bar.update)
-        )
+    except BaseException:  # an episode failed, or an interrupt: nothing more starts
+        if pool is not None:
+            stop_pool(pool)
+        raise
     bar.close()
     set_aside = sorted((out_dir / INTERRUPTED_DIR).glob("*.mcap"))
     if resume and set_aside:
@@ -1150,7 +1186,9 @@ def _app(cfg: DictConfig) -> None:
     mcaps = sorted((out_dir / "episodes").glob("*.mcap"))
     # a resumed run draws the logs that have no plot yet
     drawn = [m for m in mcaps if not (resume and timeline_path(m).exists())]
-    timelines = write_timelines(drawn, progress=progress) if timeline_plots else []
+    timelines = write_timelines(drawn, progress, pool) if timeline_plots else []
+    if pool is not None:
+        pool.shutdown()
     print(f"results: {out_dir / 'results.md'} and {out_dir / 'results.csv'}")
     pngs = [p for p in written if str(p).endswith(".png")]
     print(f"plots:   {', '.join(str(p) for p in pngs) if pngs else '(none)'}")
@@ -1164,14 +1202,22 @@ def _app(cfg: DictConfig) -> None:
     print(f"done in {time.perf_counter() - t0:.0f} s")
 
 
-def write_timelines(logs: list[Path], progress: bool = True) -> list[Path]:
+def write_timelines(
+    logs: list[Path], progress: bool = True, executor: Executor | None = None
+) -> list[Path]:
     """Draw the timeline of each episode log beside it (``<log stem>.png``).
 
     A log that cannot be drawn (cut short before its first messages, say) is named in a
     warning and left out; the others are drawn.
 
+    Args:
+        logs: the MCAP episode logs.
+        progress: show a progress bar (for two logs or more).
+        executor: draws the plots in its workers (the run's
+            :func:`~iplanner_torch.eval.experiment.episode_pool`); None: here.
+
     Returns:
-        The written PNG paths.
+        The written PNG paths, in the order of ``logs``.
     """
     import warnings
 
@@ -1180,10 +1226,18 @@ def write_timelines(logs: list[Path], progress: bool = True) -> list[Path]:
     from iplanner_torch.errors import DataError, DataWarning
     from iplanner_torch.eval.timeline import plot_episode_timeline, timeline_path
 
+    def draw(log: Path) -> Any:
+        if executor is None:
+            return plot_episode_timeline(log, timeline_path(log))
+        return executor.submit(plot_episode_timeline, log, timeline_path(log))
+
     written, failed = [], []
-    for log in tqdm(logs, desc="timeline plots", disable=not progress or len(logs) < 2):
+    drawing = [(log, draw(log)) for log in logs] if executor is not None else None
+    for i, log in enumerate(
+        tqdm(logs, desc="timeline plots", disable=not progress or len(logs) < 2)
+    ):
         try:
-            written.append(plot_episode_timeline(log, timeline_path(log)))
+            written.append(draw(log) if drawing is None else drawing[i][1].result())
         except DataError as exc:
             failed.append(f"{log.name} ({exc})")
     if failed:

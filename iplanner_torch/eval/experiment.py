@@ -4,8 +4,15 @@ and fig. speed_response): planners x scenarios x human speeds x tracker noises x
 
 from __future__ import annotations
 
+import contextlib
 import glob
+import importlib
+import multiprocessing
+import os
+import signal
+import warnings
 from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -107,6 +114,131 @@ class ExperimentCfg:
                 replace(self.episode, scenario=scenario)
             except ConfigError as err:
                 raise ConfigError(f"scenario {scenario.name!r}: {err}") from err
+
+
+def episode_pool(jobs: int) -> ProcessPoolExecutor:
+    """``jobs`` worker processes for the episodes of :func:`run_experiment` (its ``executor``).
+
+    The workers are started afresh (``spawn``: a forked torch can hang in its thread pool) and
+    take this process's warning filters as they are when the pool is made, so that a warning
+    this process silences stays silent there. Each worker loads the robot model and the
+    predictors once and keeps them for the episodes it runs. Shut the pool down when done
+    (``with episode_pool(2) as pool: ...``).
+
+    Raises:
+        ConfigError: when ``jobs`` is not an integer >= 1.
+    """
+    checks.integer("jobs", jobs, minimum=1)
+    return ProcessPoolExecutor(
+        max_workers=jobs,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_init_worker,
+        initargs=(_portable_filters(),),
+    )
+
+
+def stop_pool(pool: ProcessPoolExecutor) -> None:
+    """End ``pool`` soon: the waiting episodes are cancelled and the running ones interrupted
+    (each worker gets SIGINT; its log, cut short, reads up to its last chunk, and
+    ``run.resume`` runs that episode again), rather than waited for as ``pool.shutdown`` would.
+    A worker still running after 10 s is terminated."""
+    # (the pool has no public way to reach its processes before Python 3.14; they are taken
+    # before the shutdown, whose manager thread lets go of them)
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for process in processes:
+        if process.is_alive() and process.pid is not None:
+            with contextlib.suppress(OSError):
+                os.kill(process.pid, signal.SIGINT)
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.join(timeout=10.0)
+        if process.is_alive():
+            process.terminate()
+            process.join(timeout=5.0)
+    pool.shutdown(wait=True)
+
+
+#: set in a worker by its first interrupt: the episodes queued after it do not start
+_INTERRUPTED = False
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    """A worker's SIGINT handler: the episode it runs stops with a KeyboardInterrupt, and so
+    does each one after it (:data:`_INTERRUPTED`)."""
+    global _INTERRUPTED
+    _INTERRUPTED = True
+    raise KeyboardInterrupt
+
+
+def _portable_filters() -> list[tuple[str, str | None, str, str | None, int]]:
+    """This process's warning filters with their categories by name (a worker imports them)."""
+    out = []
+    for action, message, category, module, lineno in warnings.filters:
+        name = f"{category.__module__}:{category.__qualname__}"
+        # (a pattern is compiled, or a plain string when added by hand)
+        pattern = getattr(message, "pattern", message)
+        out.append((action, pattern, name, getattr(module, "pattern", module), lineno))
+    return out
+
+
+def _init_worker(filters: list[tuple[str, str | None, str, str | None, int]]) -> None:
+    """A worker's warning filters: the parent's (:func:`_portable_filters`), in its order; a
+    filter whose category cannot be imported here is left out. An interrupt stops the
+    worker's episode and those queued after it (:func:`_interrupt`)."""
+    kept = []
+    for action, message, name, module, lineno in filters:
+        mod, _, qualname = name.partition(":")
+        try:
+            category: Any = importlib.import_module(mod)
+            for part in qualname.split("."):
+                category = getattr(category, part)
+        except (ImportError, AttributeError):
+            continue
+        kept.append((action, message, category, module, lineno))
+    warnings.resetwarnings()
+    for action, message, category, module, lineno in reversed(kept):
+        warnings.filterwarnings(action, message or "", category, module or "", lineno)
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:  # (ignored as the parent does)
+        signal.signal(signal.SIGINT, _interrupt)
+
+
+#: a worker's robot models and predictors, loaded once (:func:`_episode_in_worker`)
+_WORKER_CACHE: dict[tuple[str, ...], Any] = {}
+
+
+def _episode_in_worker(
+    robot_cfg: RobotCfg,
+    device: str,
+    predictor_path: str | None,
+    cfg: EpisodeCfg,
+    kind: str,
+    log: Path | None,
+    seed: int,
+) -> dict[str, Any]:
+    """One episode in a worker of :func:`episode_pool`: its metrics."""
+    from iplanner_torch.robot.model import RobotModel
+
+    if _INTERRUPTED:  # queued before the interrupt: not started
+        raise KeyboardInterrupt
+
+    key = ("robot", repr(robot_cfg), device)
+    if key not in _WORKER_CACHE:
+        _WORKER_CACHE[key] = RobotModel.from_cfg(robot_cfg, device=device)
+    predictor = None
+    if predictor_path is not None:
+        pkey = ("predictor", predictor_path, device)
+        if pkey not in _WORKER_CACHE:
+            _WORKER_CACHE[pkey] = _load_predictor(predictor_path, device)
+        predictor = _WORKER_CACHE[pkey]
+    res = run_episode(
+        cfg,
+        robot=_WORKER_CACHE[key],
+        predictor=predictor,
+        planner_kind=kind,  # type: ignore[arg-type]
+        writer_path=log,
+        seed=seed,
+    )
+    return res.metrics
 
 
 def _load_predictor(path: str, device: str) -> Any:
@@ -234,6 +366,45 @@ def grid_episodes(cfg: ExperimentCfg) -> list[tuple[str, ScenarioCfg, str, float
     ]
 
 
+def _collect(
+    pending: dict[Future, tuple[str, tuple]],
+    record: Callable[[str, tuple, dict[str, Any]], None],
+) -> None:
+    """Record each episode run by an executor as it ends (:func:`run_experiment`). After the
+    first failure none of the waiting episodes starts; the running ones end and are recorded,
+    then that failure is raised. An interrupt (or any error here) cancels the waiting
+    episodes and is raised at once."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    error: BaseException | None = None
+    try:
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                stem, settings = pending.pop(future)
+                if future.cancelled():
+                    continue
+                exc = future.exception()
+                if exc is None:
+                    record(stem, settings, future.result())
+                    continue
+                if error is None:
+                    if isinstance(exc, BrokenProcessPool):
+                        exc = RuntimeError(
+                            f"episode {stem}: its worker process ended without a result "
+                            f"(killed, or out of memory?): {exc}"
+                        )
+                    error = exc
+                for other in pending:
+                    other.cancel()
+    except BaseException:
+        for other in pending:
+            other.cancel()
+        raise
+    if error is not None:
+        raise error
+
+
 def kept_episodes(
     cfg: ExperimentCfg, out_dir: Path, episodes_dir: Path | None = None
 ) -> dict[str, dict[str, Any]]:
@@ -272,6 +443,7 @@ def run_experiment(
     episodes_dir: Path | None = None,
     resume: bool = False,
     on_done: Callable[[int], None] | None = None,
+    executor: Executor | None = None,
 ) -> pd.DataFrame:
     """Run every episode of the grid and gather one metric row per episode.
 
@@ -293,6 +465,13 @@ def run_experiment(
         on_done: called with the number of episodes that have just been done: once with the
             kept ones (when there are), then with 1 after each episode run (a progress bar's
             ``update``).
+        executor: runs the episodes in other processes, as many at once as it has workers
+            (:func:`episode_pool`); None: here, one after the other. Each episode is decided
+            by its seed, so its row and log are the same either way but for the wall-clock
+            timings (which then measure a machine shared by the workers). The rows are
+            written after each episode as above, in the grid's order. When an episode fails,
+            no further episode starts; the ones running finish and keep their rows, then
+            the first error is raised.
 
     Returns:
         One row per episode: planner, robot, scenario, arrangement, task_order, confidence,
@@ -302,6 +481,8 @@ def run_experiment(
         ConfigError: when an I-Planner variant has no predictor checkpoint, or as
             :func:`kept_episodes` when resuming.
         DataError: as :func:`kept_episodes` when resuming.
+        RuntimeError: when a worker of ``executor`` ended without a result (killed, or out
+            of memory).
     """
     from iplanner_torch.robot.model import RobotModel
 
@@ -326,6 +507,15 @@ def run_experiment(
     stems = [e[0] for e in grid]
     if on_done is not None and table:
         on_done(len(table))
+
+    def record(stem: str, settings: tuple, metrics: dict[str, Any]) -> None:
+        table[stem] = {**dict(zip(ROW_SETTINGS, settings, strict=True)), **metrics}
+        # the kept rows of later episodes too: none is lost if the run stops again
+        _write_rows([table[s] for s in stems if s in table], out_dir / "results.csv")
+        if on_done is not None:
+            on_done(1)
+
+    pending: dict[Future, tuple[str, tuple]] = {}
     for stem, scenario, speed, noise, kind, seed in grid:
         if stem in table:
             continue
@@ -334,14 +524,6 @@ def run_experiment(
             set_aside(log, episodes.parent / INTERRUPTED_DIR)
         sim = replace(base.sim, tracker_noise=noise, human=replace(base.sim.human, speed=speed))
         variant = PLANNER_KINDS[kind]
-        res = run_episode(
-            replace(base, scenario=scenario, sim=sim),
-            robot=robot,
-            predictor=predictors.get(variant) if variant else None,
-            planner_kind=kind,  # type: ignore[arg-type]
-            writer_path=log if cfg.write_mcap else None,
-            seed=seed,
-        )
         settings = (
             kind,
             cfg.robot.name,
@@ -354,11 +536,30 @@ def run_experiment(
             speed,
             seed,
         )  # in the order of ROW_SETTINGS, whose names read_finished knows
-        table[stem] = {**dict(zip(ROW_SETTINGS, settings, strict=True)), **res.metrics}
-        # the kept rows of later episodes too: none is lost if the run stops again
-        _write_rows([table[s] for s in stems if s in table], out_dir / "results.csv")
-        if on_done is not None:
-            on_done(1)
+        episode = replace(base, scenario=scenario, sim=sim)
+        if executor is not None:  # (no per-episode progress bars from the workers)
+            future = executor.submit(
+                _episode_in_worker,
+                cfg.robot,
+                cfg.device,
+                cfg.predictor_paths[variant] if variant in predictors else None,
+                replace(episode, progress_bar=False),
+                kind,
+                log if cfg.write_mcap else None,
+                seed,
+            )
+            pending[future] = (stem, settings)
+            continue
+        res = run_episode(
+            episode,
+            robot=robot,
+            predictor=predictors.get(variant) if variant else None,
+            planner_kind=kind,  # type: ignore[arg-type]
+            writer_path=log if cfg.write_mcap else None,
+            seed=seed,
+        )
+        record(stem, settings, res.metrics)
+    _collect(pending, record)
     rows = [table[s] for s in stems]
     _write_rows(rows, out_dir / "results.csv")
     return pd.DataFrame(rows)

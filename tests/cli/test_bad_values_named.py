@@ -119,3 +119,22 @@ def test_null_is_refused_only_where_a_field_takes_no_none() -> None:
     cfg = _compose(["predictor.svgp.calibrate_floor=null"])
     with pytest.raises(ConfigError, match=r"^predictor\.svgp\.calibrate_floor: expected bool"):
         instantiate(cfg.predictor, PredictorCfg)
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("0", r"run\.jobs: expected an integer >= 1, got 0$"),
+        ("-2", r"run\.jobs: expected an integer >= 1, got -2$"),
+        ("1.5", r"run\.jobs: expected int, got 1\.5$"),
+        ("two", r"run\.jobs: expected int, got 'two'$"),
+        ("null", r"run\.jobs: expected int, got None$"),
+    ],
+)
+def test_run_jobs_is_named_by_its_key(value: str, message: str) -> None:
+    from iplanner_torch.cli.experiment import run_jobs
+
+    assert run_jobs(_compose([])) == 1
+    assert run_jobs(_compose(["run.jobs=2"])) == 2
+    with pytest.raises(ConfigError, match=f"^{message}"):
+        run_jobs(_compose([f"run.jobs={value}"]))

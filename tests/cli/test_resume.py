@@ -68,8 +68,10 @@ def test_resume_continues_a_stopped_run(tmp_path: Path) -> None:
     )
     assert {p.name: p.read_text() for p in (run / ".hydra").iterdir()} == record
 
-    res = _experiment([*RUN, f"hydra.run.dir={run}", "run.resume=true"], tmp_path)
+    # in two worker processes (run.jobs does not change an episode, so it may differ)
+    res = _experiment([*RUN, f"hydra.run.dir={run}", "run.resume=true", "run.jobs=2"], tmp_path)
     assert res.returncode == 0, res.stderr[-3000:]
+    assert "2 episodes at once, each in a process of its own (run.jobs)" in res.stdout
     assert "resuming: 1 finished episode(s) of scenario arrangement_1x4 kept" in res.stdout
     assert f"3 log(s) of unfinished episodes kept in {run / 'interrupted'}" in res.stdout
     pd.testing.assert_frame_equal(_table(run / "results.csv"), full)
