@@ -116,6 +116,10 @@ class ExperimentCfg:
                 raise ConfigError(f"scenario {scenario.name!r}: {err}") from err
 
 
+#: the start methods of the standard library (a process may have set another's)
+_STANDARD_METHODS = ("spawn", "fork", "forkserver")
+
+
 def episode_pool(jobs: int) -> ProcessPoolExecutor:
     """``jobs`` worker processes for the episodes of :func:`run_experiment` (its ``executor``).
 
@@ -129,6 +133,10 @@ def episode_pool(jobs: int) -> ProcessPoolExecutor:
         ConfigError: when ``jobs`` is not an integer >= 1.
     """
     checks.integer("jobs", jobs, minimum=1)
+    if multiprocessing.get_start_method(allow_none=True) not in (None, *_STANDARD_METHODS):
+        # a worker of another pool (joblib's loky, in a sweep's parallel job): a fresh Python
+        # started from here would look for that pool's own start method, and fail
+        multiprocessing.set_start_method("spawn", force=True)
     return ProcessPoolExecutor(
         max_workers=jobs,
         mp_context=multiprocessing.get_context("spawn"),
@@ -392,7 +400,8 @@ def _collect(
                     if isinstance(exc, BrokenProcessPool):
                         exc = RuntimeError(
                             f"episode {stem}: its worker process ended without a result "
-                            f"(killed, or out of memory?): {exc}"
+                            f"(killed, say for lack of memory, or it failed to start: see "
+                            f"its output above): {exc}"
                         )
                     error = exc
                 for other in pending:
@@ -481,8 +490,8 @@ def run_experiment(
         ConfigError: when an I-Planner variant has no predictor checkpoint, or as
             :func:`kept_episodes` when resuming.
         DataError: as :func:`kept_episodes` when resuming.
-        RuntimeError: when a worker of ``executor`` ended without a result (killed, or out
-            of memory).
+        RuntimeError: when a worker of ``executor`` ended without a result (killed, or it
+            failed to start).
     """
     from iplanner_torch.robot.model import RobotModel
 

@@ -1,6 +1,7 @@
 """A sweep of closed-loop episodes gives the same numbers whether its jobs run side by side
-(``hydra/launcher=joblib``) or one after another: each episode is a function of its seed and
-settings, not of the process it ran in."""
+(``hydra/launcher=joblib``, each with its episodes in worker processes, ``run.jobs=2``) or one
+after another: each episode is a function of its seed and settings, not of the process it ran
+in."""
 
 from __future__ import annotations
 
@@ -41,7 +42,10 @@ def _sweep(tmp_path: Path, name: str, *launcher: str) -> Path:
 
 @pytest.mark.slow
 def test_joblib_sweep_gives_the_episodes_of_a_serial_one(tmp_path: Path) -> None:
-    parallel = _sweep(tmp_path, "parallel", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2")
+    # each job running its episodes in two workers of its own too (run.jobs)
+    parallel = _sweep(
+        tmp_path, "parallel", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", "run.jobs=2"
+    )
     serial = _sweep(tmp_path, "serial")
     for job in ("0", "1"):
         a = pd.read_csv(parallel / job / "results.csv").sort_values("seed", ignore_index=True)

@@ -137,3 +137,36 @@ def test_stop_pool_interrupts_the_running_episode_and_starts_no_other(tmp_path) 
     assert futures[2].cancelled()
     # the interrupted episode's log reads up to where it stopped
     assert read_episode(logs[0]).frames["/robot/joint_state"].shape[0] > 0
+
+
+#: a process that another pool started, as a job of a sweep on hydra/launcher=joblib is (its
+#: start method joblib's loky, which a fresh Python does not know), runs a grid in workers
+_NESTED = """
+import multiprocessing, sys
+from pathlib import Path
+import joblib.externals.loky.backend.context  # registers the "loky" start method
+multiprocessing.set_start_method("loky", force=True)
+from iplanner_torch.eval.episode import EpisodeCfg
+from iplanner_torch.eval.experiment import ExperimentCfg, episode_pool, run_experiment
+from iplanner_torch.sim.tasks import ScenarioCfg
+grid = ExperimentCfg(name="nested", planners=["blind"], seeds=[0, 1],
+                     scenarios=[ScenarioCfg(name="s", task_order="0->1->2->3")],
+                     episode=EpisodeCfg(max_duration_s=1.0), write_mcap=False)
+with episode_pool(2) as pool:
+    df = run_experiment(grid, Path(sys.argv[1]), executor=pool)
+print(len(df))
+"""
+
+
+def test_workers_start_in_a_process_of_another_pool(tmp_path) -> None:
+    import subprocess
+    import sys
+
+    res = subprocess.run(
+        [sys.executable, "-c", _NESTED, str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.strip().splitlines()[-1] == "2"
