@@ -137,13 +137,21 @@ def _tolerance(dtype: torch.dtype) -> float:
 
 def _secular_residual(lam: torch.Tensor, d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor):
     """Return ``g = 1/||y|| - 1/R`` and ``g' = dg/dlambda`` for ``y = d / (1 + lambda s)``."""
-    w = 1.0 / (1.0 + lam * s)  # (3, N)
-    y2 = d2 * w * w  # (3, N) squared components of y
-    q = torch.rsqrt(y2.sum(0))  # (N,) 1/||y||
-    g = q - 1.0 / R
+    if _differentiable(lam, d2, s, R):  # (the implicit-function step of the bounds)
+        w = 1.0 / (1.0 + lam * s)  # (3, N)
+        y2 = d2 * w * w  # (3, N) squared components of y
+        q = torch.rsqrt(y2.sum(0))  # (N,) 1/||y||
+        # (y2 q^2) (s w) q, as below
+        return q - 1.0 / R, (y2 * (q * q) * (s * w)).sum(0) * q
+    # without autograd, in place where a step makes a new tensor anyway (the same numbers as
+    # above, with fewer allocations: the solver's steps run on about 100,000 pairs a call)
+    w = torch.mul(lam, s).add_(1.0).reciprocal_()  # (3, N) 1 / (1 + lambda s)
+    y2 = torch.mul(d2, w).mul_(w)  # (3, N) squared components of y
+    q = y2.sum(0).rsqrt_()  # (N,) 1/||y||
+    g = q - R.reciprocal()
     # (y2 q^2) (s w) q: the shares of ||y||^2 first, so that no product underflows before
     # the large q (up to 1/RADIUS_FLOOR) scales it back (y2 s w underflowed float32 far away)
-    gp = (y2 * (q * q) * (s * w)).sum(0) * q
+    gp = y2.mul_(q * q).mul_(w.mul_(s)).sum(0).mul_(q)
     return g, gp
 
 
@@ -151,7 +159,12 @@ def _newton_step(
     lam: torch.Tensor, d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor
 ) -> torch.Tensor:
     g, gp = _secular_residual(lam, d2, s, R)
-    return lam - g / gp
+    return lam - (g / gp if _differentiable(lam, d2, s, R) else g.div_(gp))
+
+
+def _differentiable(*tensors: torch.Tensor) -> bool:
+    """Whether autograd records operations on ``tensors`` here."""
+    return torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
 
 
 def _lambda_bracket(d2: torch.Tensor, s: torch.Tensor, R: torch.Tensor):
@@ -242,7 +255,9 @@ def secular_multiplier(d: torch.Tensor, var: torch.Tensor, rad: torch.Tensor) ->
         stand_in[..., 0] = (2.0 * rad).square()
         d2 = torch.where(outside.unsqueeze(-1), d2, stand_in)
         s = var.detach().expand(d2.shape)
-        lam = _solve_newton(d2.reshape(-1, 3).T, s.reshape(-1, 3).T, rad.reshape(-1))
+        lam = _solve_newton(
+            d2.reshape(-1, 3).T.contiguous(), s.reshape(-1, 3).T.contiguous(), rad.reshape(-1)
+        )
         return torch.where(outside, lam.view(shape), torch.zeros_like(rad))
 
 

@@ -182,6 +182,60 @@ def test_isotropic_screen_of_far_pairs_stays_an_upper_bound_in_float32() -> None
     assert float(bound[-1, 0]) == pytest.approx(floor, rel=1e-4)
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_isotropic_bound_is_the_masked_tail_to_the_bit(dtype: torch.dtype) -> None:
+    # the bound without a mask, against where(gap > 0, Phi(-gap), 1) (values and gradients)
+    # and against the normal tail in float64 (scipy); gaps at and around 0, the clamp, inf, NaN
+    from scipy.stats import norm
+
+    gen = torch.Generator().manual_seed(5)
+    special = [0.0, -0.0, 1e-30, -1e-30, 1e-7, 11.99, 12.0, 12.5, 50.0, math.inf, -math.inf]
+    gaps = torch.cat([torch.randn(2000, generator=gen, dtype=torch.float64) * 4.0,
+                      torch.tensor(special + [math.nan], dtype=torch.float64)])  # fmt: skip
+    rad = (0.05 + 0.1 * torch.rand(len(gaps), generator=gen, dtype=torch.float64)).to(dtype)
+    inv_s = (5.0 + 40.0 * torch.rand(len(gaps), generator=gen, dtype=torch.float64)).to(dtype)
+    dist = rad + gaps.to(dtype) / inv_s
+
+    def masked(d: torch.Tensor) -> torch.Tensor:
+        gap = (d - rad) * inv_s
+        bound = 0.5 * torch.erfc(gap.clamp(max=C.GAP_CLAMP) * (1.0 / math.sqrt(2.0)))
+        return torch.where(gap > 0.0, bound, 1.0)
+
+    with torch.no_grad():
+        fast = C._isotropic(dist, rad, inv_s)
+    assert torch.equal(fast, masked(dist)), (fast - masked(dist)).abs().max()
+    d1, d2 = dist.clone().requires_grad_(True), dist.clone().requires_grad_(True)
+    got, want = C._isotropic(d1, rad, inv_s), masked(d2)
+    assert torch.equal(got.detach(), want.detach())
+    (g1,) = torch.autograd.grad(got.sum(), d1)
+    (g2,) = torch.autograd.grad(want.sum(), d2)
+    assert torch.equal(g1, g2)
+    gap = ((dist - rad) * inv_s).double()
+    tail = torch.from_numpy(norm.sf(gap.clamp(max=C.GAP_CLAMP).numpy()))
+    expect = torch.where(gap > 0.0, tail, torch.ones_like(tail))
+    assert torch.allclose(fast.double(), expect, rtol=1e-5 if dtype == torch.float32 else 1e-12)
+    assert float(fast[-1]) == 1.0  # a NaN gap: unsafe
+
+
+def test_secular_residual_in_place_equals_its_differentiable_form() -> None:
+    from iplanner_torch.collision import gaussian as G
+
+    gen = torch.Generator().manual_seed(6)
+    for dtype in (torch.float32, torch.float64):
+        d2 = (torch.randn(3, 500, generator=gen, dtype=torch.float64) * 0.3).square().to(dtype)
+        s = ((0.02 + 0.2 * torch.rand(3, 500, generator=gen, dtype=torch.float64)) ** 2).to(dtype)
+        R = (0.05 + 0.2 * torch.rand(500, generator=gen, dtype=torch.float64)).to(dtype)
+        lam = (10.0 * torch.rand(500, generator=gen, dtype=torch.float64)).to(dtype)
+        inputs = [x.clone() for x in (lam, d2, s, R)]
+        with torch.no_grad():
+            fast = G._secular_residual(*inputs), G._newton_step(*inputs)
+        assert all(torch.equal(a, b) for a, b in zip(inputs, (lam, d2, s, R), strict=True))
+        lam_g = lam.clone().requires_grad_(True)  # the differentiable (out-of-place) form
+        slow = G._secular_residual(lam_g, d2, s, R), G._newton_step(lam_g, d2, s, R)
+        assert torch.equal(fast[0][0], slow[0][0]) and torch.equal(fast[0][1], slow[0][1])
+        assert torch.equal(fast[1], slow[1])
+
+
 def test_screen_distance_matches_norm_of_difference() -> None:
     gen = torch.Generator().manual_seed(3)
     a = torch.randn(4, 1, 6, 3, generator=gen, dtype=torch.float64)
