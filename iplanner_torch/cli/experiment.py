@@ -1098,7 +1098,12 @@ def _app(cfg: DictConfig) -> None:
     from hydra.types import RunMode
     from tqdm.auto import tqdm
 
-    from iplanner_torch.eval.experiment import episode_pool, run_experiment, stop_pool
+    from iplanner_torch.eval.experiment import (
+        episode_pool,
+        finish_experiments,
+        start_experiment,
+        stop_pool,
+    )
     from iplanner_torch.eval.report import (
         INTERRUPTED_DIR,
         comparison_table,  # the table iplanner-evaluate evaluate.mode=episode prints too
@@ -1125,7 +1130,6 @@ def _app(cfg: DictConfig) -> None:
     n = len(experiment.scenarios) * len(experiment.planners) * len(experiment.seeds)
     n *= max(1, len(experiment.speeds)) * max(1, len(experiment.noises))
     print(f"experiment {experiment.name!r}: {n} episode(s)", flush=True)
-    frames = []
     episodes = out_dir / "episodes"
     # the whole run's episodes, with the time left (each episode has its own bar beneath)
     bar = tqdm(total=n, desc="episodes", unit="episode", disable=n < 2 or not progress)
@@ -1134,8 +1138,11 @@ def _app(cfg: DictConfig) -> None:
     pool = episode_pool(jobs) if jobs > 1 else None
     if pool is not None:
         bar.write(f"{jobs} episodes at once, each in a process of its own (run.jobs)")
+    runs = []
     try:
         for scenario in experiment.scenarios:
+            if any(run.failed() for run in runs):  # stop here: it raises the failure
+                finish_experiments(runs)
             paths = ensure_predictors(cfg, variants, scenario_data_node(cfg, scenario))
             record_predictors(out_dir, scenario.name, paths)
             one = replace(experiment, scenarios=[scenario], predictor_paths=paths)
@@ -1145,10 +1152,13 @@ def _app(cfg: DictConfig) -> None:
                     f"resuming: {kept[scenario.name]} finished episode(s) of scenario "
                     f"{scenario.name} kept"
                 )
-            bar.write(f"running scenario {scenario.name} ...")  # above the bar, which redraws
+            # above the bar, which redraws; the workers take the episodes of every scenario
+            # from one queue (none waits for a scenario's last episode)
+            where = "running" if pool is None else "queued for the workers:"
+            bar.write(f"{where} scenario {scenario.name} ...")
             sys.stdout.flush()
-            frames.append(
-                run_experiment(
+            runs.append(
+                start_experiment(
                     one,
                     sub,
                     episodes_dir=episodes,
@@ -1157,6 +1167,7 @@ def _app(cfg: DictConfig) -> None:
                     executor=pool,
                 )
             )
+        frames = finish_experiments(runs)
     except BaseException:  # an episode failed, or an interrupt: nothing more starts
         if pool is not None:
             stop_pool(pool)

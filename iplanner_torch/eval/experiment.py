@@ -374,14 +374,11 @@ def grid_episodes(cfg: ExperimentCfg) -> list[tuple[str, ScenarioCfg, str, float
     ]
 
 
-def _collect(
-    pending: dict[Future, tuple[str, tuple]],
-    record: Callable[[str, tuple, dict[str, Any]], None],
-) -> None:
-    """Record each episode run by an executor as it ends (:func:`run_experiment`). After the
-    first failure none of the waiting episodes starts; the running ones end and are recorded,
-    then that failure is raised. An interrupt (or any error here) cancels the waiting
-    episodes and is raised at once."""
+def _collect(pending: dict[Future, tuple[ExperimentRun, str, tuple]]) -> None:
+    """Record each episode run by an executor as it ends, in its run
+    (:func:`finish_experiments`). After the first failure none of the waiting episodes
+    starts; the running ones end and are recorded, then that failure is raised. An interrupt
+    (or any error here) cancels the waiting episodes and is raised at once."""
     from concurrent.futures.process import BrokenProcessPool
 
     error: BaseException | None = None
@@ -389,12 +386,12 @@ def _collect(
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:
-                stem, settings = pending.pop(future)
+                run, stem, settings = pending.pop(future)
                 if future.cancelled():
                     continue
                 exc = future.exception()
                 if exc is None:
-                    record(stem, settings, future.result())
+                    run.record(stem, settings, future.result())
                     continue
                 if error is None:
                     if isinstance(exc, BrokenProcessPool):
@@ -445,6 +442,40 @@ def kept_episodes(
     }
 
 
+@dataclass(eq=False)
+class ExperimentRun:
+    """A grid begun by :func:`start_experiment`: its rows so far, and the episodes its
+    executor still runs. :func:`finish_experiments` waits for them."""
+
+    #: ``results.csv`` goes here
+    out_dir: Path
+    #: every episode of the grid, in its order (:func:`episode_stem`)
+    stems: list[str]
+    #: the finished (and kept) episodes' rows, by stem
+    table: dict[str, dict[str, Any]]
+    #: the executor's episodes not yet recorded: future -> (stem, settings)
+    pending: dict[Future, tuple[str, tuple]]
+    on_done: Callable[[int], None] | None = None
+
+    def record(self, stem: str, settings: tuple, metrics: dict[str, Any]) -> None:
+        """Add an episode's row and rewrite ``results.csv`` with every row so far."""
+        self.table[stem] = {**dict(zip(ROW_SETTINGS, settings, strict=True)), **metrics}
+        # the kept rows of later episodes too: none is lost if the run stops again
+        _write_rows([self.table[s] for s in self.stems if s in self.table], self.results)
+        if self.on_done is not None:
+            self.on_done(1)
+
+    @property
+    def results(self) -> Path:
+        return self.out_dir / "results.csv"
+
+    def failed(self) -> bool:
+        """Whether an episode of the executor's has already failed (without waiting)."""
+        return any(
+            f.done() and not f.cancelled() and f.exception() is not None for f in self.pending
+        )
+
+
 def run_experiment(
     cfg: ExperimentCfg,
     out_dir: Path,
@@ -454,7 +485,37 @@ def run_experiment(
     on_done: Callable[[int], None] | None = None,
     executor: Executor | None = None,
 ) -> pd.DataFrame:
-    """Run every episode of the grid and gather one metric row per episode.
+    """Run every episode of the grid and gather one metric row per episode:
+    :func:`start_experiment`, then :func:`finish_experiments` on it alone (see there).
+
+    Returns:
+        One row per episode: planner, robot, scenario, arrangement, task_order, confidence,
+        noise, dropout, speed, seed, then the episode's metrics.
+    """
+    run = start_experiment(
+        cfg,
+        out_dir,
+        episodes_dir=episodes_dir,
+        resume=resume,
+        on_done=on_done,
+        executor=executor,
+    )
+    return finish_experiments([run])[0]
+
+
+def start_experiment(
+    cfg: ExperimentCfg,
+    out_dir: Path,
+    *,
+    episodes_dir: Path | None = None,
+    resume: bool = False,
+    on_done: Callable[[int], None] | None = None,
+    executor: Executor | None = None,
+) -> ExperimentRun:
+    """Begin every episode of the grid, to gather one metric row per episode: without an
+    executor they run here, one after the other, before this returns; with one they are
+    queued for its workers, and :func:`finish_experiments` waits for them (grids begun with
+    one executor share its workers, so that none waits for another's last episode).
 
     ``results.csv`` is rewritten after each episode, so that a run that stops keeps the rows
     of the episodes it finished. With ``resume`` the run continues such a run in the same
@@ -478,20 +539,17 @@ def run_experiment(
             (:func:`episode_pool`); None: here, one after the other. Each episode is decided
             by its seed, so its row and log are the same either way but for the wall-clock
             timings (which then measure a machine shared by the workers). The rows are
-            written after each episode as above, in the grid's order. When an episode fails,
-            no further episode starts; the ones running finish and keep their rows, then
-            the first error is raised.
+            written after each episode as above, in the grid's order, by
+            :func:`finish_experiments`, which also says what an episode's failure does.
 
     Returns:
-        One row per episode: planner, robot, scenario, arrangement, task_order, confidence,
-        noise, dropout, speed, seed, then the episode's metrics.
+        The grid's run, for :func:`finish_experiments`.
 
     Raises:
         ConfigError: when an I-Planner variant has no predictor checkpoint, or as
             :func:`kept_episodes` when resuming.
         DataError: as :func:`kept_episodes` when resuming.
-        RuntimeError: when a worker of ``executor`` ended without a result (killed, or it
-            failed to start).
+        (and, without an executor, what an episode raises)
     """
     from iplanner_torch.robot.model import RobotModel
 
@@ -516,15 +574,7 @@ def run_experiment(
     stems = [e[0] for e in grid]
     if on_done is not None and table:
         on_done(len(table))
-
-    def record(stem: str, settings: tuple, metrics: dict[str, Any]) -> None:
-        table[stem] = {**dict(zip(ROW_SETTINGS, settings, strict=True)), **metrics}
-        # the kept rows of later episodes too: none is lost if the run stops again
-        _write_rows([table[s] for s in stems if s in table], out_dir / "results.csv")
-        if on_done is not None:
-            on_done(1)
-
-    pending: dict[Future, tuple[str, tuple]] = {}
+    run = ExperimentRun(out_dir=out_dir, stems=stems, table=table, pending={}, on_done=on_done)
     for stem, scenario, speed, noise, kind, seed in grid:
         if stem in table:
             continue
@@ -557,7 +607,7 @@ def run_experiment(
                 log if cfg.write_mcap else None,
                 seed,
             )
-            pending[future] = (stem, settings)
+            run.pending[future] = (stem, settings)
             continue
         res = run_episode(
             episode,
@@ -567,8 +617,34 @@ def run_experiment(
             writer_path=log if cfg.write_mcap else None,
             seed=seed,
         )
-        record(stem, settings, res.metrics)
-    _collect(pending, record)
-    rows = [table[s] for s in stems]
-    _write_rows(rows, out_dir / "results.csv")
-    return pd.DataFrame(rows)
+        run.record(stem, settings, res.metrics)
+    return run
+
+
+def finish_experiments(runs: list[ExperimentRun]) -> list[pd.DataFrame]:
+    """Wait for the episodes that the runs' executor still runs, record each as it ends, and
+    write each run's ``results.csv`` whole.
+
+    ``results.csv`` is rewritten after each episode, in the grid's order, so that a run that
+    stops keeps the rows of the episodes it finished. When an episode fails, no further
+    episode starts; the ones running finish and keep their rows, then the first error is
+    raised. An interrupt cancels the episodes not yet started and is raised at once.
+
+    Returns:
+        Per run, one row per episode: planner, robot, scenario, arrangement, task_order,
+        confidence, noise, dropout, speed, seed, then the episode's metrics.
+
+    Raises:
+        RuntimeError: when a worker ended without a result (killed, or it failed to start).
+        (and what an episode raised)
+    """
+    _collect(
+        {future: (run, *item) for run in runs for future, item in run.pending.items()},
+    )
+    frames = []
+    for run in runs:
+        run.pending.clear()
+        rows = [run.table[s] for s in run.stems]
+        _write_rows(rows, run.results)
+        frames.append(pd.DataFrame(rows))
+    return frames

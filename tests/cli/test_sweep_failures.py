@@ -78,12 +78,12 @@ def test_an_unexpected_error_in_a_sweep_job_fails_that_job_alone(tmp_path: Path)
     script = tmp_path / "crash.py"
     script.write_text(
         "import iplanner_torch.eval.experiment as E\n"
-        "run = E.run_experiment\n"
+        "start = E.start_experiment\n"
         "def crash(exp, out, **kw):\n"
         "    if exp.episode.sim.tracker_noise > 0:\n"
         "        raise ValueError('simulated bug')\n"
-        "    return run(exp, out, **kw)\n"
-        "E.run_experiment = crash\n"
+        "    return start(exp, out, **kw)\n"
+        "E.start_experiment = crash\n"
         "from iplanner_torch.cli.experiment import main\n"
         "main()\n"
     )

@@ -20,7 +20,9 @@ from iplanner_torch.eval.experiment import (
     _portable_filters,
     episode_pool,
     episode_stem,
+    finish_experiments,
     run_experiment,
+    start_experiment,
     stop_pool,
 )
 from iplanner_torch.planning.replanner import PlanningOverrunWarning
@@ -73,13 +75,39 @@ def test_workers_give_the_rows_and_logs_of_the_serial_run(serial_run, tmp_path) 
         pd.testing.assert_frame_equal(a.frames[topic], b.frames[topic])
 
 
+def test_grids_begun_on_one_pool_finish_together(serial_run, tmp_path) -> None:
+    # two grids (one seed each) queued on the same workers, then waited for at once: the
+    # rows of the serial run of both seeds
+    _, expected = serial_run
+    grids = {"a": replace(_grid(), seeds=[0]), "b": replace(_grid(), seeds=[1])}
+    with episode_pool(2) as pool:
+        runs = [start_experiment(g, tmp_path / k, executor=pool) for k, g in grids.items()]
+        assert all(len(run.pending) == 2 for run in runs)  # queued: start does not wait
+        frames = finish_experiments(runs)
+    assert all(not run.pending for run in runs)
+    for k, frame in zip(grids, frames, strict=True):
+        assert list(frame["seed"]) == [0 if k == "a" else 1] * 2
+        written = pd.read_csv(tmp_path / k / "results.csv")  # each grid's own file, whole
+        assert list(written["planner"]) == ["itomp", "blind"] == list(frame["planner"])
+        assert list(written["eval/smoothness"]) == list(frame["eval/smoothness"])
+    both = pd.concat(frames).sort_values(["planner", "seed"], ignore_index=True)
+    want = expected.sort_values(["planner", "seed"], ignore_index=True)
+    pd.testing.assert_frame_equal(_episodes(both), _episodes(want))
+
+
 def test_a_failed_episode_stops_the_run_and_the_finished_rows_stay(tmp_path) -> None:
     grid = _grid()
     # the first episode's log cannot be written: its path is a folder
     bad = episode_stem("s", "medium", 0.01, "itomp", 0)
     (tmp_path / "episodes" / f"{bad}.mcap").mkdir(parents=True)
-    with pytest.raises(DataError, match="is a folder"), episode_pool(2) as pool:
-        run_experiment(grid, tmp_path, executor=pool)
+    with episode_pool(2) as pool:
+        run = start_experiment(grid, tmp_path, executor=pool)
+        deadline = time.monotonic() + 120.0
+        while not run.failed() and time.monotonic() < deadline:  # seen without waiting
+            time.sleep(0.05)
+        assert run.failed()
+        with pytest.raises(DataError, match="is a folder"):
+            finish_experiments([run])
     rows = pd.read_csv(tmp_path / "results.csv")
     stems = [
         episode_stem(r.scenario, r.speed, r.noise, r.planner, r.seed) for r in rows.itertuples()
