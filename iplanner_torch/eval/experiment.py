@@ -168,14 +168,18 @@ def stop_pool(pool: ProcessPoolExecutor) -> None:
 
 #: set in a worker by its first interrupt: the episodes queued after it do not start
 _INTERRUPTED = False
+#: whether the worker is running an episode (:func:`_episode_in_worker`)
+_RUNNING = False
 
 
 def _interrupt(signum: int, frame: Any) -> None:
-    """A worker's SIGINT handler: the episode it runs stops with a KeyboardInterrupt, and so
-    does each one after it (:data:`_INTERRUPTED`)."""
+    """A worker's SIGINT handler: the episode it runs stops with a KeyboardInterrupt, and
+    each one after it does not start (:data:`_INTERRUPTED`). A worker waiting for work is
+    left to wait: interrupted there, it would end holding its pool's queue."""
     global _INTERRUPTED
     _INTERRUPTED = True
-    raise KeyboardInterrupt
+    if _RUNNING:
+        raise KeyboardInterrupt
 
 
 def _portable_filters() -> list[tuple[str, str | None, str, str | None, int]]:
@@ -226,6 +230,7 @@ def _episode_in_worker(
     """One episode in a worker of :func:`episode_pool`: its metrics."""
     from iplanner_torch.robot.model import RobotModel
 
+    global _RUNNING
     if _INTERRUPTED:  # queued before the interrupt: not started
         raise KeyboardInterrupt
 
@@ -238,14 +243,18 @@ def _episode_in_worker(
         if pkey not in _WORKER_CACHE:
             _WORKER_CACHE[pkey] = _load_predictor(predictor_path, device)
         predictor = _WORKER_CACHE[pkey]
-    res = run_episode(
-        cfg,
-        robot=_WORKER_CACHE[key],
-        predictor=predictor,
-        planner_kind=kind,  # type: ignore[arg-type]
-        writer_path=log,
-        seed=seed,
-    )
+    _RUNNING = True
+    try:
+        res = run_episode(
+            cfg,
+            robot=_WORKER_CACHE[key],
+            predictor=predictor,
+            planner_kind=kind,  # type: ignore[arg-type]
+            writer_path=log,
+            seed=seed,
+        )
+    finally:
+        _RUNNING = False
     return res.metrics
 
 
