@@ -1237,18 +1237,21 @@ def write_timelines(
     from iplanner_torch.errors import DataError, DataWarning
     from iplanner_torch.eval.timeline import plot_episode_timeline, timeline_path
 
-    def draw(log: Path) -> Any:
-        if executor is None:
-            return plot_episode_timeline(log, timeline_path(log))
-        return executor.submit(plot_episode_timeline, log, timeline_path(log))
-
+    # with an executor, every plot is queued at once and collected in order below
+    queued = (
+        None
+        if executor is None
+        else [executor.submit(plot_episode_timeline, log, timeline_path(log)) for log in logs]
+    )
     written, failed = [], []
-    drawing = [(log, draw(log)) for log in logs] if executor is not None else None
     for i, log in enumerate(
         tqdm(logs, desc="timeline plots", disable=not progress or len(logs) < 2)
     ):
         try:
-            written.append(draw(log) if drawing is None else drawing[i][1].result())
+            if queued is None:
+                written.append(plot_episode_timeline(log, timeline_path(log)))
+            else:
+                written.append(queued[i].result())
         except DataError as exc:
             failed.append(f"{log.name} ({exc})")
     if failed:
