@@ -28,8 +28,9 @@ were there: none of them needs a predictor. The learned I-Planner variants need 
 by default (``run.train_data=tasks``) each scenario's predictors learn from task
 demonstrations of its arrangement and task order (``datasets/tasks_<...>``, generated when absent;
 a blocking scenario's from the reaching set), kept in
-``checkpoints/<dataset>/iplanner_{ni,no_ni}/``; missing ones are trained first on a small budget
-(``run.train_trainer``) when ``run.train_if_missing`` is true; an existing one is used as it is,
+``checkpoints/<dataset>/iplanner_{ni,no_ni}/``; missing ones (every scenario's) are trained on a
+small budget (``run.train_trainer``) before any episode runs when ``run.train_if_missing`` is
+true; an existing one is used as it is,
 but a command-line ``run.train_trainer``, ``seed`` or ``data.windows.*`` value it was not trained
 with is refused. Results: ``results.csv``, ``results.md``, plots, ``episodes/*.mcap`` and, unless
 ``run.timeline_plots=false``, one timeline plot per log (``episodes/<episode>.png``, see
@@ -1133,6 +1134,13 @@ def _app(cfg: DictConfig) -> None:
     episodes = out_dir / "episodes"
     # the whole run's episodes, with the time left (each episode has its own bar beneath)
     bar = tqdm(total=n, desc="episodes", unit="episode", disable=n < 2 or not progress)
+    # every scenario's predictors before any episode: one trained while the workers run
+    # episodes would share the cores with them and slow their wall-clock columns
+    predictors = {}
+    for scenario in experiment.scenarios:
+        paths = ensure_predictors(cfg, variants, scenario_data_node(cfg, scenario))
+        record_predictors(out_dir, scenario.name, paths)
+        predictors[scenario.name] = paths
     # the episodes left to run, each in a worker process of its own when run.jobs > 1
     jobs = min(run_jobs(cfg), n - sum(kept.values()))
     pool = episode_pool(jobs) if jobs > 1 else None
@@ -1141,10 +1149,7 @@ def _app(cfg: DictConfig) -> None:
     runs = []
     try:
         for scenario in experiment.scenarios:
-            if any(run.failed() for run in runs):  # stop here: it raises the failure
-                finish_experiments(runs)
-            paths = ensure_predictors(cfg, variants, scenario_data_node(cfg, scenario))
-            record_predictors(out_dir, scenario.name, paths)
+            paths = predictors[scenario.name]
             one = replace(experiment, scenarios=[scenario], predictor_paths=paths)
             sub = scenario_dir(out_dir, experiment, scenario)
             if resume:
