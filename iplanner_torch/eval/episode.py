@@ -103,7 +103,8 @@ give 3 samples); plus
   1 m; < 0: overlap), where ``eval/min_distance`` is between the sphere models;
 * ``plan/*``: replanning cycles, overruns, waits, evasions (no safe trajectory and holding
   riskier than moving: ``PlanResult.evasive``), escapes (the evasions that stepped out of the
-  way: ``PlanResult.escape``) and solve times;
+  way: ``PlanResult.escape``), solve times and the solves cut short at their budget
+  (``plan/cut_short``, with ``ReplannerCfg.stop_at_budget``; else 0);
 * ``forecast/spread_scale_mean`` / ``_max`` (with ``spread_tolerance`` only): the factor the
   spread calibration multiplied the planner's forecast variances by, over the cycles.
 
@@ -1491,6 +1492,7 @@ def _run_episode(
                 "sim/body_distance": float(env.min_body_distance),
                 "plan/cycles": float(getattr(stats, "cycles", 0)),
                 "plan/overruns": float(getattr(stats, "overruns", 0)),
+                "plan/cut_short": float(getattr(stats, "cut_short", 0)),
                 "plan/waits": float(getattr(stats, "waits", 0)),
                 "plan/wait_s": float(getattr(stats, "wait_s", 0.0)),
                 "plan/evasions": float(getattr(stats, "evasions", 0)),

@@ -288,7 +288,7 @@ class PlanResult:
         cost_terms: the accepted trajectory's unweighted cost terms and diagnostics.
         timings: milliseconds: ``predict_ms`` (forecast to human spheres at the waypoint
             times), ``collision_ms`` (bound evaluations, forward), ``optimiser_ms`` (the rest),
-            ``total_ms``.
+            ``total_ms``; and ``iterations``, the optimiser iterations run.
         evasive: no trajectory met the constraint and waiting would have been riskier than
             moving: the plan is the candidate with the smallest peak bound (no wait), or the
             escape.
@@ -462,6 +462,9 @@ class TrajectoryOptimizer:
             self.v_max = self.v_max * self.cfg.speed_scale
         self.radii = ref.to(self.device, self.dtype)
         self.num_joints = int(robot.num_joints)
+        # wall-clock seconds of the last solve's acceptance check: what a solve with a
+        # deadline keeps for its own (0 before the first)
+        self._accept_s = 0.0
 
     # ----------------------------------------------------------------- set-up helpers
     def _spheres_for(self, joint_names: tuple[str, ...]) -> C.SphereMap:
@@ -777,6 +780,7 @@ class TrajectoryOptimizer:
         q_init: torch.Tensor | None = None,
         qd_start: torch.Tensor | None = None,
         arrive: float | None = None,
+        deadline: float | None = None,
     ) -> PlanResult:
         """Plan from ``q_start`` at ``t0`` to ``q_goal`` at ``t0 + duration``.
 
@@ -797,9 +801,15 @@ class TrajectoryOptimizer:
             qd_start: (J,) velocity at the start [rad/s] (continuity with the previous plan).
             arrive: absolute time [s] from which the plan holds the goal (the waypoints at or
                 after it are pinned to ``q_goal``); None means the last waypoint.
+            deadline: a :func:`time.perf_counter` instant by which the solve should return:
+                no further iteration starts once the next one (as long as the mean of this
+                solve's so far) and the acceptance check (as long as the last solve's) would
+                end after it; the first iteration always runs, and the acceptance check runs
+                in full. The plan then depends on this machine's speed and load. None: every
+                iteration runs (the same inputs give the same plan).
 
         Returns:
-            The accepted plan.
+            The accepted plan; ``timings["iterations"]`` counts the iterations run.
 
         Raises:
             ShapeError: on inputs of the wrong shape.
@@ -843,6 +853,8 @@ class TrajectoryOptimizer:
                 raise ConfigError(f"expected window (t_a, t_b) [s], got {window!r}") from err
             finite_time("window end", t_b)  # the order: _window_indices
             finite_time("window start", t_a)
+        if deadline is not None:
+            finite_time("deadline", deadline)
         q_start = q_start.to(self.device, self.dtype)
         q_goal = q_goal.to(self.device, self.dtype)
         if qd_start is not None:
@@ -907,7 +919,14 @@ class TrajectoryOptimizer:
         decay = cfg.lr_final_ratio ** (1.0 / max(iterations - 1, 1))
         pairs = None
         x = q0[:, 1:n_goal]
+        ran = 0
+        t_iter = time.perf_counter()
         for it in range(iterations):
+            if deadline is not None and it > 0:
+                now = time.perf_counter()
+                if now + (now - t_iter) / it + self._accept_s > deadline:
+                    break
+            ran = it + 1
             x = d_inv @ (z - b_vec)  # (B, n_free, J)
             q = torch.cat([head, x, tail], dim=1)  # (B, W, J)
             prune = cfg.prune_margin if it % cfg.prune_every == 0 else None
@@ -948,6 +967,7 @@ class TrajectoryOptimizer:
             q_all = torch.cat([head, x, tail], dim=1)  # (B, W, J)
             if not all_finite(q_all):
                 raise PlanningError("the optimisation produced non-finite waypoints")
+            t_accept = time.perf_counter()
             result = self._accept(
                 q_all,
                 times,
@@ -960,13 +980,14 @@ class TrajectoryOptimizer:
                 collision_timer,
                 look_idx,
             )
+            self._accept_s = time.perf_counter() - t_accept
         total = 1e3 * (time.perf_counter() - t_begin)
         result.timings = {
             "predict_ms": predict_timer.ms,
             "collision_ms": collision_timer.ms,
             "optimiser_ms": total - predict_timer.ms - collision_timer.ms,
             "total_ms": total,
-            "iterations": float(iterations),
+            "iterations": float(ran),
         }
         return result
 

@@ -98,6 +98,12 @@ class ReplannerCfg:
     replan_step_s: float = 0.5
     # wall-clock budget of one solve [s]; None means replan_step_s
     budget_s: float | None = None
+    # each solve stops iterating where it would pass its budget (the acceptance check still
+    # runs in full), as a robot's planner must: the episode keeps pace with real time where
+    # the solves are too slow, but the plans then depend on the machine's speed and load (the
+    # same seed no longer gives the same numbers); False: every iteration runs, an overrun is
+    # counted
+    stop_at_budget: bool = False
     # shortest span of a plan [s] (a plan near its goal still covers the window), at most
     # MAX_HORIZON_S
     min_duration_s: float = 1.0
@@ -161,7 +167,12 @@ class ReplannerCfg:
             "tracking_max_gap_s",
         ):  # typed float: None is refused too
             finite(name, getattr(self, name))
-        for name in ("warm_start", "replan_on_goal_change", "plan_from_reference"):
+        for name in (
+            "warm_start",
+            "replan_on_goal_change",
+            "plan_from_reference",
+            "stop_at_budget",
+        ):
             flag(name, getattr(self, name))
         if not 0.0 < self.replan_step_s <= MAX_REPLAN_STEP_S:
             raise ConfigError(
@@ -452,6 +463,8 @@ class ReplannerStats:
             holding).
         emergencies: cycles whose new forecast put the plans already committed above the
             confidence limit, so that the new plan took over after ``emergency_lead_s``.
+        cut_short: solves that stopped iterating at their budget
+            (``ReplannerCfg.stop_at_budget``).
         solve_ms: wall-clock milliseconds of each solve.
     """
 
@@ -462,6 +475,7 @@ class ReplannerStats:
     evasions: int = 0
     escapes: int = 0
     emergencies: int = 0
+    cut_short: int = 0
     solve_ms: list[float] = field(default_factory=list)
 
     @property
@@ -726,6 +740,7 @@ class Replanner:
         # waits push the goal time back; the optimiser plans at most MAX_HORIZON_S ahead
         duration = min(max(travel, self.cfg.min_duration_s), MAX_HORIZON_S)
         q_init = self._warm_start(q_s, qd_s, t_plan, duration, travel)
+        budget = min(self.budget_s, lead)
         t_wall = time.perf_counter()
         result = opt.solve(
             q_s,
@@ -738,11 +753,14 @@ class Replanner:
             q_init=q_init,
             qd_start=qd_s,
             arrive=t_plan + travel,
+            deadline=t_wall + budget if self.cfg.stop_at_budget else None,
         )
         wall = time.perf_counter() - t_wall
         self.stats.cycles += 1
         self.stats.solve_ms.append(1e3 * wall)
-        budget = min(self.budget_s, lead)
+        planned = opt.cfg.iterations if q_init is None else opt.cfg.warm_iterations
+        if result.timings.get("iterations", planned) < planned:
+            self.stats.cut_short += 1
         if wall > budget:
             self.stats.overruns += 1
             warnings.warn(

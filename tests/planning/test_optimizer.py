@@ -1174,3 +1174,56 @@ def test_speed_scale_slows_every_plan_to_its_share_of_the_velocity_limits() -> N
     for bad in (0.0, 1.5, math.nan, "0.5"):
         with pytest.raises(ConfigError, match="expected speed_scale in"):
             OptimizerCfg(speed_scale=bad)
+
+
+class _TimedOptimizer(TrajectoryOptimizer):
+    """On a fake clock, every optimiser iteration takes 10 ms and every acceptance check
+    30 ms (the clock only moves here, so the counts do not depend on the machine)."""
+
+    def __init__(self, *args, clock, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.clock, self._accepting = clock, False
+
+    def _terms(self, *args, **kwargs):
+        if not self._accepting:
+            self.clock.now += 0.010
+        return super()._terms(*args, **kwargs)
+
+    def _accept(self, *args, **kwargs):
+        self._accepting = True
+        self.clock.now += 0.030
+        try:
+            return super()._accept(*args, **kwargs)
+        finally:
+            self._accepting = False
+
+
+def test_a_deadline_stops_the_iterations_before_it_is_passed(
+    point_robot: PointRobot, fake_clock
+) -> None:
+    """No iteration starts that would, with the acceptance check, end after the deadline; the
+    first always runs; a deadline never reached changes nothing."""
+    import iplanner_torch.planning.optimizer as optimizer_module
+
+    clock = fake_clock(optimizer_module)
+    cfg = OptimizerCfg(iterations=20)
+    opt = _TimedOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.1), clock=clock)
+    args = (torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0]))
+    fc = static_forecast([0.0, 0.05, 0.0], 0.05)
+    full = opt.solve(*args, forecast=fc)  # no deadline: every iteration, and the check's time
+    assert full.timings["iterations"] == 20
+    # 10 ms an iteration and 30 ms for the check: 9 iterations end at 90 ms, the check at
+    # 120 ms; a 10th would end the solve at 130 ms
+    start = clock.now
+    cut = opt.solve(*args, forecast=fc, deadline=start + 0.125)
+    assert cut.timings["iterations"] == 9
+    assert clock.now - start == pytest.approx(0.120)
+    cut = opt.solve(*args, forecast=fc, deadline=clock.now + 0.135)
+    assert cut.timings["iterations"] == 10
+    assert opt.solve(*args, forecast=fc, deadline=clock.now - 1.0).timings["iterations"] == 1
+    late = opt.solve(*args, forecast=fc, deadline=clock.now + 1e6)
+    assert late.timings["iterations"] == 20
+    assert torch.equal(late.candidates, full.candidates) and torch.equal(late.q, full.q)
+    for bad in (math.nan, math.inf):
+        with pytest.raises(ConfigError, match="deadline"):
+            opt.solve(*args, forecast=fc, deadline=bad)

@@ -224,6 +224,34 @@ def test_overruns_are_counted_and_warned(point_robot: PointRobot, fake_clock: An
     assert rp.stats.mean_solve_ms == pytest.approx(40.0)
 
 
+def test_stop_at_budget_gives_each_solve_its_budget_as_deadline(
+    point_robot: PointRobot, fake_clock: Any
+) -> None:
+    """With ``stop_at_budget`` a solve's deadline is its start plus its budget (the lead's,
+    when shorter); a solve that then stops early counts as cut short. Without it, no deadline."""
+    q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0])
+    opt = _spy(point_robot, fake_clock)  # the replanner's clock stands at 100 s
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, budget_s=0.05, stop_at_budget=True))
+    rp.reset(q0, qg, t=0.0)
+    rp.step(0.0, q0, None)
+    rp.set_goal(torch.tensor([1.0, 0.5]), t=0.3)  # its cycle's lead: goal_change_lead_s
+    rp.step(0.3, rp.command(0.3)[0], None)
+    assert [c["deadline"] for c in opt.calls] == [pytest.approx(100.05)] * 2
+    # the optimiser's own clock is real: a deadline 100 s after its epoch has long passed, so
+    # every solve runs its first iteration alone (of 5 cold, 2 warm)
+    assert rp.stats.cycles == 2 and rp.stats.cut_short == 2
+    # a budget longer than the leads: the first cycle's (a new goal's, 0.2 s), then m
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, budget_s=1.0, stop_at_budget=True))
+    rp.reset(q0, qg, t=0.0)
+    rp.step(0.0, q0, None)
+    rp.step(0.2, rp.command(0.2)[0], None)
+    assert [c["deadline"] for c in opt.calls[2:]] == [pytest.approx(100.2), pytest.approx(100.5)]
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, budget_s=0.05))
+    rp.reset(q0, qg, t=0.0)
+    rp.step(0.0, q0, None)
+    assert opt.calls[-1]["deadline"] is None and rp.stats.cut_short == 0
+
+
 def test_wait_delays_the_goal_and_is_counted(point_robot: PointRobot) -> None:
     cfg = OptimizerCfg(iterations=0, warm_iterations=0, horizon_s=2.0, perturbation_std=0.0)
     opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=one_sphere_map(0.1))
@@ -522,7 +550,9 @@ def test_planner_cfg_rejects_non_finite_values() -> None:
             PlannerCfg(itomp_spread_mps=bad)
 
 
-@pytest.mark.parametrize("field", ["warm_start", "replan_on_goal_change", "plan_from_reference"])
+@pytest.mark.parametrize(
+    "field", ["warm_start", "replan_on_goal_change", "plan_from_reference", "stop_at_budget"]
+)
 @pytest.mark.parametrize("value", ["no", 2, None, 1.0])
 def test_replanner_cfg_flags_are_true_or_false(field: str, value: object) -> None:
     with pytest.raises(ConfigError, match=f"expected {field} True or False, got {value!r}"):
