@@ -1132,8 +1132,6 @@ def _app(cfg: DictConfig) -> None:
     n *= max(1, len(experiment.speeds)) * max(1, len(experiment.noises))
     print(f"experiment {experiment.name!r}: {n} episode(s)", flush=True)
     episodes = out_dir / "episodes"
-    # the whole run's episodes, with the time left (each episode has its own bar beneath)
-    bar = tqdm(total=n, desc="episodes", unit="episode", disable=n < 2 or not progress)
     # every scenario's predictors before any episode: one trained while the workers run
     # episodes would share the cores with them and slow their wall-clock columns
     predictors = {}
@@ -1141,6 +1139,8 @@ def _app(cfg: DictConfig) -> None:
         paths = ensure_predictors(cfg, variants, scenario_data_node(cfg, scenario))
         record_predictors(out_dir, scenario.name, paths)
         predictors[scenario.name] = paths
+    # the whole run's episodes, with the time left (each episode has its own bar beneath)
+    bar = tqdm(total=n, desc="episodes", unit="episode", disable=n < 2 or not progress)
     # the episodes left to run, each in a worker process of its own when run.jobs > 1
     jobs = min(run_jobs(cfg), n - sum(kept.values()))
     pool = episode_pool(jobs) if jobs > 1 else None
