@@ -616,7 +616,8 @@ def incomplete_logs_note(df: pd.DataFrame) -> str:
 
 def overrun_note(df: pd.DataFrame) -> str:
     """A sentence naming, per planner, the replanning solves that overran their wall-clock
-    budget, and the slowest episode's realtime factor ('' when no solve overran).
+    budget, and the slowest episode's realtime factor; then one naming the solves stopped at
+    their budget (``ReplannerCfg.stop_at_budget``); '' when there are neither.
 
     The episode loop counts an overrun (``plan/overruns``) but adopts the plan at its
     simulated time all the same, as if the planner were faster than the machine that ran
@@ -624,11 +625,14 @@ def overrun_note(df: pd.DataFrame) -> str:
 
     Args:
         df: per-episode results (:func:`gather_results`) with a ``planner`` column; uses
-            ``plan/overruns``, ``plan/cycles``, ``plan/mean_solve_ms`` and
-            ``sim/realtime_factor`` where present (NaN entries are skipped).
+            ``plan/overruns``, ``plan/cut_short``, ``plan/cycles``, ``plan/mean_solve_ms``
+            and ``sim/realtime_factor`` where present (NaN entries are skipped).
     """
-    if "planner" not in df.columns or "plan/overruns" not in df.columns:
+    if "planner" not in df.columns:
         return ""
+    cut = _cut_short_note(df)
+    if "plan/overruns" not in df.columns:
+        return cut
 
     def num(g: pd.DataFrame, col: str) -> pd.Series:
         if col not in g.columns:
@@ -652,14 +656,39 @@ def overrun_note(df: pd.DataFrame) -> str:
             part += f" (mean solve {mean_ms:.0f} ms)"
         parts.append(part)
     if not parts:
-        return ""
+        return cut
     note = "replanning solves over their wall-clock budget: " + ", ".join(parts) + "."
     rt = num(df, "sim/realtime_factor").dropna()
     if len(rt) and float(rt.min()) < 1.0:
         note += f" The slowest episode ran at {float(rt.min()):.2f}x real time."
-    return note + (
+    note += (
         " Each of those plans was adopted on time all the same, as if the planner were "
         "faster (plan/overruns, plan/mean_solve_ms, sim/realtime_factor in results.csv)."
+    )
+    return f"{note} {cut}" if cut else note
+
+
+def _cut_short_note(df: pd.DataFrame) -> str:
+    """The sentence of :func:`overrun_note` on the solves stopped at their budget."""
+    if "plan/cut_short" not in df.columns:
+        return ""
+    parts = []
+    for planner in ordered_values("planner", df["planner"].dropna().unique()):
+        g = df[df["planner"] == planner]
+        n_cut = int(pd.to_numeric(g["plan/cut_short"], errors="coerce").sum(skipna=True))
+        if n_cut <= 0:
+            continue
+        part = f"{planner} {n_cut}"
+        if "plan/cycles" in g.columns:
+            cycles = pd.to_numeric(g["plan/cycles"], errors="coerce")
+            if cycles.notna().any():
+                part += f" of {int(cycles.sum(skipna=True))}"
+        parts.append(part)
+    if not parts:
+        return ""
+    return (
+        "Solves stopped iterating at their budget (planner.replanner.stop_at_budget; "
+        "plan/cut_short): " + ", ".join(parts) + "."
     )
 
 

@@ -854,6 +854,22 @@ def test_overrun_note_names_the_planners_whose_solves_overran(tmp_path: Path) ->
     assert note in (tmp_path / "results.md").read_text()
 
 
+def test_overrun_note_names_the_solves_stopped_at_their_budget() -> None:
+    """``plan/cut_short`` (stop_at_budget) gets a sentence of its own, after the overruns' or
+    alone; zero counts and older results without the column add nothing."""
+    df = _overrun_rows([3.0, 4.0], [0.6, 1.2])
+    df["plan/cut_short"] = [0.0, 0.0, 8.0, 25.0]
+    note = overrun_note(df)
+    cut = "Solves stopped iterating at their budget (planner.replanner.stop_at_budget; "
+    assert note.startswith("replanning solves over their wall-clock budget: iplanner_ni 7 of 40")
+    assert note.endswith(f"results.csv). {cut}plan/cut_short): iplanner_ni 33 of 40.")
+    df["plan/overruns"] = 0.0
+    assert overrun_note(df) == f"{cut}plan/cut_short): iplanner_ni 33 of 40."
+    assert overrun_note(df.drop(columns=["plan/overruns"])).startswith(cut)
+    df["plan/cut_short"] = 0.0
+    assert overrun_note(df) == ""
+
+
 def test_a_log_cut_after_its_metrics_keeps_its_contact(tmp_path: Path) -> None:
     """Only the summary and footer lost: every message, the metrics included, was read, so
     the episode is complete (with a warning) and counts as contact-free."""
