@@ -30,10 +30,10 @@ demonstrations of its arrangement and task order (``datasets/tasks_<...>``, gene
 a blocking scenario's from the reaching set), kept in
 ``checkpoints/<dataset>/iplanner_{ni,no_ni}/``; missing ones (every scenario's) are trained on a
 small budget (``run.train_trainer``) before any episode runs when ``run.train_if_missing`` is
-true; an existing one is used as it is,
-but a command-line ``run.train_trainer``, ``seed`` or ``data.windows.*`` value it was not trained
-with is refused. Results: ``results.csv``, ``results.md``, plots, ``episodes/*.mcap`` and, unless
-``run.timeline_plots=false``, one timeline plot per log (``episodes/<episode>.png``, see
+true; an existing one is used as it is, but a command-line ``run.train_trainer``, ``seed`` or
+``data.windows.*`` value it was not trained with is refused. Results: ``results.csv``,
+``results.md``, plots, ``episodes/*.mcap`` and, unless ``run.timeline_plots=false``, one
+timeline plot per log (``episodes/<episode>.png``, see
 :mod:`iplanner_torch.eval.timeline`) in the run folder, with ``run_inputs.json`` (the
 settings, code and predictors it began with). ``run.resume=true hydra.run.dir=<folder>``
 (``hydra.sweep.dir`` for ``-m``) continues a run that stopped with the same settings: its
