@@ -295,6 +295,8 @@ class PlanResult:
         escape: an evasive plan that steps out of the person's way instead of heading for
             the goal: no candidate was less risky than holding
             (:meth:`TrajectoryOptimizer._escape`).
+        cut_short: the solve stopped iterating at its deadline
+            (:meth:`TrajectoryOptimizer.solve`'s ``deadline``).
     """
 
     feasible: bool
@@ -309,6 +311,7 @@ class PlanResult:
     timings: dict[str, float]
     evasive: bool = False
     escape: bool = False
+    cut_short: bool = False
 
     def trajectory(self) -> Trajectory:
         """The plan as an executable :class:`Trajectory`."""
@@ -809,7 +812,8 @@ class TrajectoryOptimizer:
                 iteration runs (the same inputs give the same plan).
 
         Returns:
-            The accepted plan; ``timings["iterations"]`` counts the iterations run.
+            The accepted plan; ``timings["iterations"]`` counts the iterations run, and
+            ``cut_short`` says whether the deadline stopped them.
 
         Raises:
             ShapeError: on inputs of the wrong shape.
@@ -981,6 +985,7 @@ class TrajectoryOptimizer:
                 look_idx,
             )
             self._accept_s = time.perf_counter() - t_accept
+        result.cut_short = ran < iterations
         total = 1e3 * (time.perf_counter() - t_begin)
         result.timings = {
             "predict_ms": predict_timer.ms,

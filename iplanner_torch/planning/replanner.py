@@ -758,9 +758,7 @@ class Replanner:
         wall = time.perf_counter() - t_wall
         self.stats.cycles += 1
         self.stats.solve_ms.append(1e3 * wall)
-        planned = opt.cfg.iterations if q_init is None else opt.cfg.warm_iterations
-        if result.timings.get("iterations", planned) < planned:
-            self.stats.cut_short += 1
+        self.stats.cut_short += int(result.cut_short)
         if wall > budget:
             self.stats.overruns += 1
             warnings.warn(
