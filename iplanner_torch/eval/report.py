@@ -630,35 +630,18 @@ def overrun_note(df: pd.DataFrame) -> str:
     """
     if "planner" not in df.columns:
         return ""
-    cut = _cut_short_note(df)
-    if "plan/overruns" not in df.columns:
-        return cut
-
-    def num(g: pd.DataFrame, col: str) -> pd.Series:
-        if col not in g.columns:
-            return pd.Series(math.nan, index=g.index)
-        return pd.to_numeric(g[col], errors="coerce")
-
-    parts = []
-    for planner in ordered_values("planner", df["planner"].dropna().unique()):
-        g = df[df["planner"] == planner]
-        over = num(g, "plan/overruns")
-        n_over = int(over.sum(skipna=True))
-        if n_over <= 0:
-            continue
-        cycles, solve = num(g, "plan/cycles"), num(g, "plan/mean_solve_ms")
-        part = f"{planner} {n_over}"
-        if cycles.notna().any():
-            part += f" of {int(cycles.sum(skipna=True))}"
-        both = cycles.notna() & solve.notna() & (cycles > 0)
-        if both.any():
-            mean_ms = float((solve[both] * cycles[both]).sum() / cycles[both].sum())
-            part += f" (mean solve {mean_ms:.0f} ms)"
-        parts.append(part)
+    cut_parts = _solve_counts(df, "plan/cut_short")
+    cut = (
+        "Solves stopped iterating at their budget (planner.replanner.stop_at_budget; "
+        "plan/cut_short): " + ", ".join(cut_parts) + "."
+        if cut_parts
+        else ""
+    )
+    parts = _solve_counts(df, "plan/overruns", mean_solve=True)
     if not parts:
         return cut
     note = "replanning solves over their wall-clock budget: " + ", ".join(parts) + "."
-    rt = num(df, "sim/realtime_factor").dropna()
+    rt = _numeric(df, "sim/realtime_factor").dropna()
     if len(rt) and float(rt.min()) < 1.0:
         note += f" The slowest episode ran at {float(rt.min()):.2f}x real time."
     note += (
@@ -668,28 +651,37 @@ def overrun_note(df: pd.DataFrame) -> str:
     return f"{note} {cut}" if cut else note
 
 
-def _cut_short_note(df: pd.DataFrame) -> str:
-    """The sentence of :func:`overrun_note` on the solves stopped at their budget."""
-    if "plan/cut_short" not in df.columns:
-        return ""
+def _numeric(g: pd.DataFrame, col: str) -> pd.Series:
+    """``g[col]`` as numbers (NaN where absent or not a number)."""
+    if col not in g.columns:
+        return pd.Series(math.nan, index=g.index)
+    return pd.to_numeric(g[col], errors="coerce")
+
+
+def _solve_counts(df: pd.DataFrame, column: str, *, mean_solve: bool = False) -> list[str]:
+    """Per planner with a positive sum of the solve counter ``column``: ``"<planner> <n>"``,
+    then `` of <cycles>`` where ``plan/cycles`` is known and, with ``mean_solve``, the
+    cycle-weighted mean of ``plan/mean_solve_ms`` (NaN entries are skipped); [] without the
+    column."""
+    if column not in df.columns:
+        return []
     parts = []
     for planner in ordered_values("planner", df["planner"].dropna().unique()):
         g = df[df["planner"] == planner]
-        n_cut = int(pd.to_numeric(g["plan/cut_short"], errors="coerce").sum(skipna=True))
-        if n_cut <= 0:
+        n = int(_numeric(g, column).sum(skipna=True))
+        if n <= 0:
             continue
-        part = f"{planner} {n_cut}"
-        if "plan/cycles" in g.columns:
-            cycles = pd.to_numeric(g["plan/cycles"], errors="coerce")
-            if cycles.notna().any():
-                part += f" of {int(cycles.sum(skipna=True))}"
+        cycles = _numeric(g, "plan/cycles")
+        part = f"{planner} {n}"
+        if cycles.notna().any():
+            part += f" of {int(cycles.sum(skipna=True))}"
+        solve = _numeric(g, "plan/mean_solve_ms")
+        both = cycles.notna() & solve.notna() & (cycles > 0)
+        if mean_solve and both.any():
+            mean_ms = float((solve[both] * cycles[both]).sum() / cycles[both].sum())
+            part += f" (mean solve {mean_ms:.0f} ms)"
         parts.append(part)
-    if not parts:
-        return ""
-    return (
-        "Solves stopped iterating at their budget (planner.replanner.stop_at_budget; "
-        "plan/cut_short): " + ", ".join(parts) + "."
-    )
+    return parts
 
 
 #: episode settings a run or sweep may vary; summaries keep their values apart
