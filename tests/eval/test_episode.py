@@ -1107,3 +1107,34 @@ def test_a_causal_oracle_learns_of_the_block_only_after_its_delay(tmp_path: Path
         replace(_cfg(2.0), oracle_onset_delay_s=0.1)
     with pytest.raises(ConfigError, match="expected oracle_onset_delay_s >= 0"):
         replace(base, oracle_onset_delay_s=-0.1)
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+@pytest.mark.parametrize("kind", ["itomp", "oracle"])
+def test_real_kuka_episode_on_cuda_follows_the_cpu_one(tmp_path: Path, kind: str) -> None:
+    """The closed loop with the robot model and the planner on CUDA (as ``device=cuda`` runs
+    it) moves the arm as on the CPU: the same task events, and joint paths within 0.02 rad
+    (float32 sums in another order may tip an iteration's acceptance, not the motion)."""
+    from iplanner_torch.recording.reader import read_episode
+    from iplanner_torch.robot.model import RobotModel
+
+    cfg = EpisodeCfg(scenario=ScenarioCfg(task_order="(0,1)->(2,3)"), max_duration_s=4.0)
+    runs, qs = {}, {}
+    for dev in ("cpu", "cuda"):
+        path = tmp_path / f"{dev}.mcap"
+        runs[dev] = run_episode(
+            cfg,
+            robot=RobotModel.load("kuka_iiwa14", device=dev),
+            predictor=None,
+            planner_kind=kind,  # type: ignore[arg-type]
+            writer_path=path,
+            seed=0,
+        )
+        qs[dev] = read_episode(path).robot_q()[1]  # (T, J)
+    assert [k for _, k, _ in runs["cuda"].events] == [k for _, k, _ in runs["cpu"].events]
+    assert qs["cuda"].shape == qs["cpu"].shape
+    assert float((qs["cuda"] - qs["cpu"]).abs().max()) < 0.02
+    assert (qs["cpu"][-1] - qs["cpu"][0]).abs().max() > 0.1  # the arm moved
+    for name in ("eval/min_distance", "plan/mean_solve_ms"):
+        assert math.isfinite(runs["cuda"].metrics[name]), name
