@@ -52,4 +52,7 @@ stage bench_gpu 300 python3 scripts/bench_gpu.py --json "$out/gpu.json" --force
 stage main_job 240 python3 -m iplanner_torch.cli.experiment device=cuda progress=false \
   hydra.run.dir=/tmp/main_job
 cp /tmp/main_job/*.csv "$out/" 2>/dev/null
-stage tests_all 600 python3 -m pytest -q -p no:cacheprovider -n 14 -m "not slow"
+# one torch thread per worker (14 workers of 16 threads each were oversubscribed); -v names
+# each test as it ends, so that a failure is known even when the stage runs out of time
+OMP_NUM_THREADS=1 stage tests_all 600 python3 -m pytest -v -p no:cacheprovider -n 14 -m "not slow"
+grep -E "FAILED|ERROR" "$out/tests_all.log" > "$out/tests_all_failed.txt"

@@ -569,7 +569,10 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     episode = instantiate(
         episode_node, EpisodeCfg, name="experiment.episode" if overridden else "run"
     )
-    device = str(resolve_device(str(cfg.device)))
+    # "auto" keeps the closed loop on the CPU: at the planner's sizes (8 to 64 trajectories)
+    # a replanning cycle on CUDA is bound by kernel launches, and the episodes ran at half
+    # the CPU's speed on an H200 (experiments/bench/README.md); device=cuda asks for CUDA
+    device = "cpu" if str(cfg.device) == "auto" else str(resolve_device(str(cfg.device)))
     exp_node = cfg.get("experiment")
     if exp_node is None:
         scenario = replace(

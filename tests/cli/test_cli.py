@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import torch
 
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.recording import read_episode
@@ -703,3 +704,25 @@ def test_one_line_warnings_leaves_other_libraries_format(monkeypatch: pytest.Mon
     assert warnings.formatwarning("u", UserWarning, "/x/lib.py", 7).startswith(
         "/x/lib.py:7: UserWarning: u"
     )
+
+
+def test_device_auto_keeps_the_closed_loop_on_the_cpu(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where CUDA is present, ``device=auto`` still runs the experiment's closed loop on the
+    CPU (faster at the planner's batch sizes); ``device=cuda`` puts it on CUDA."""
+    from hydra import compose, initialize_config_dir
+
+    from iplanner_torch.cli._common import CONF_DIR
+    from iplanner_torch.cli.experiment import build_experiment
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    with initialize_config_dir(version_base="1.3", config_dir=CONF_DIR):
+        for overrides, want in (
+            ([], "cpu"),
+            (["device=auto", "experiment=speed_response"], "cpu"),
+            (["device=cuda"], "cuda"),
+            (["device=cuda:0", "experiment=speed_response"], "cuda:0"),
+            (["device=cpu"], "cpu"),
+        ):
+            exp = build_experiment(compose("config", overrides=overrides), {})
+            assert exp.device == want, overrides
