@@ -6,22 +6,24 @@ over CUDA time (> 1: the GPU is faster). The CPU side runs with one torch thread
 episodes do (``EpisodeCfg.torch_threads``); ``--cpu-threads N`` changes that. Figures:
 
 - ``gpu.fk.<robot>.spheres[_backward]_<B>x20_ms``: the robot's spheres at B x 20
-  configurations (forward; forward and backward), B = 1024 and 16384.
+  configurations (forward; forward and backward), B = 1024 and 16384 (``--quick``: 1024).
 - ``gpu.replan.cycle_b<B>_ms``: one warm-started replanning cycle of the KUKA iiwa
   (``scripts/bench_planning.py``'s cycle), B = 8, 64 and 512 trajectories.
 - ``gpu.training_s``: training the predictor (``scripts/bench_prediction.py``'s data).
 - ``gpu.prediction.single_ms`` and ``gpu.prediction.batch<N>_per_s``: forecasts of one window
   and of N windows by that predictor.
-- ``gpu.sim.realtime_factor[_<planner>]``: closed-loop episodes of the iiwa delivery scene
+- ``gpu.sim.realtime_factor_<planner>``: closed-loop episodes of the iiwa delivery scene
   with the planner, the robot model and the predictor on the device (``run_episode``), for
   ITOMP and the I-Planner NI with the predictor trained above.
 
 Each check also compares the CUDA result with the CPU one (``max_abs_diff``), so that a fast
-but wrong path shows. Without CUDA the script stops with exit code 2.
+but wrong path shows. Without CUDA the script stops with exit code 2; ``--device cpu`` runs it
+on the CPU against itself, as a smoke test.
 
 Usage::
 
-    python scripts/bench_gpu.py [--quick] [--json experiments/bench/gpu.json --force]
+    python scripts/bench_gpu.py [--quick] [--only fk,replan,prediction,sim]
+        [--json experiments/bench/gpu.json --force] [--cpu-threads 1] [--device cuda]
 """
 
 from __future__ import annotations
@@ -43,9 +45,11 @@ sys.path.insert(0, str(HERE))
 from _report import commit_short, fail  # noqa: E402
 from _timing import median_seconds  # noqa: E402
 
-from iplanner_torch.types import torch_threads  # noqa: E402
+from iplanner_torch.errors import ConfigError  # noqa: E402
+from iplanner_torch.types import resolve_device, torch_threads  # noqa: E402
 
 CPU = torch.device("cpu")
+AREAS = ("fk", "replan", "prediction", "sim")
 
 
 def _ms(fn: Callable[[], object], device: torch.device, reps: int, warmup: int = 2) -> float:
@@ -75,7 +79,7 @@ def bench_fk(cuda: torch.device, quick: bool) -> dict[str, dict]:
         devs = {"cpu": CPU, "cuda": cuda}
         models = {k: RobotModel.load(name, device=d) for k, d in devs.items()}
         gen = torch.Generator().manual_seed(0)
-        for b in (1024, 16384):
+        for b in (1024,) if quick else (1024, 16384):
             q = models["cpu"].q_home + 0.5 * torch.randn(
                 b, 20, models["cpu"].num_joints, generator=gen
             )  # (B, W, J)
@@ -147,17 +151,17 @@ def bench_prediction(cuda: torch.device, quick: bool, tmp: Path) -> tuple[dict, 
 
     w_train, w_val, test, wc, cfg = training_inputs(quick)
     secs, paths = {}, {}
-    for acc in ("cpu", cuda.type):
+    for key, acc in (("cpu", "cpu"), ("device", cuda.type)):
         t0 = time.perf_counter()
-        paths[acc] = train_predictor(
+        paths[key] = train_predictor(
             (w_train, w_val),
             predictor_cfg=cfg,
             trainer_cfg=TrainerCfg(accelerator=acc, tensorboard=False),
-            out_dir=tmp / acc,
+            out_dir=tmp / key,
             progress=False,
         )
-        secs[acc] = time.perf_counter() - t0
-    out = {"gpu.training_s": _figure(secs[cuda.type], "s", secs["cpu"], n_windows=len(w_train))}
+        secs[key] = time.perf_counter() - t0
+    out = {"gpu.training_s": _figure(secs["device"], "s", secs["cpu"], n_windows=len(w_train))}
     pred_cpu = HumanMotionPredictor.load(paths["cpu"])
     pred_gpu = HumanMotionPredictor.load(paths["cpu"]).to(cuda)
     w_test = build_windows(test, wc)
@@ -238,24 +242,34 @@ def main(argv: list[str] | None = None) -> int:
         default="fk,replan,prediction,sim",
         help="comma-separated: fk, replan, prediction, sim",
     )
+    parser.add_argument(
+        "--device",
+        default="cuda",
+        help="the device measured against the CPU (default cuda; 'cpu' runs the script as a "
+        "smoke test, its ratios near 1)",
+    )
     args = parser.parse_args(argv)
-    if not torch.cuda.is_available():
-        fail("no CUDA device here: scripts/bench_gpu.py measures the CUDA paths")
     if args.cpu_threads < 1:
         parser.error(f"--cpu-threads must be >= 1, got {args.cpu_threads}")
+    areas = [a.strip() for a in args.only.split(",") if a.strip()]
+    bad = [a for a in areas if a not in AREAS]
+    if bad or not areas:
+        what = f"unknown area(s) {', '.join(bad)}" if bad else "no area"
+        parser.error(f"--only {args.only!r}: {what}; the areas are {', '.join(AREAS)}")
+    if args.json is not None and args.json.is_dir():
+        parser.error(f"--json {args.json} is a folder; give the JSON file to write")
     if args.json is not None and args.json.exists() and not args.force:
         fail(f"{args.json} exists (stored results); pass --force to replace it")
-    areas = [a.strip() for a in args.only.split(",") if a.strip()]
-    bad = [a for a in areas if a not in ("fk", "replan", "prediction", "sim")]
-    if bad or not areas:
-        parser.error(f"--only {args.only!r}: unknown area(s) {bad}")
-    cuda = torch.device("cuda")
+    try:
+        cuda = resolve_device(args.device)
+    except ConfigError as err:
+        fail(f"--device {args.device}: {err}")
     torch.manual_seed(0)
     figures: dict[str, dict] = {}
     failed: list[str] = []
     with torch_threads(args.cpu_threads), tempfile.TemporaryDirectory() as tmp:
         predictor_path = None
-        for area in ("fk", "replan", "prediction", "sim"):
+        for area in AREAS:
             if area not in areas:
                 continue
             print(f"[{area}] running ...", flush=True)
@@ -282,7 +296,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             print(f"[{area}] done in {time.perf_counter() - t0:.1f} s", flush=True)
     width = max((len(k) for k in figures), default=10)
-    print(f"\n{'figure'.ljust(width)}  {'cuda':>11}  {'cpu':>11}  unit            cpu/cuda")
+    print(f"\n{'figure'.ljust(width)}  {str(cuda):>11}  {'cpu':>11}  unit            speed-up")
     for name, fig in figures.items():
         sp = fig["ratio"]
         print(
@@ -294,7 +308,8 @@ def main(argv: list[str] | None = None) -> int:
             "command": "python scripts/bench_gpu.py " + " ".join(argv or sys.argv[1:]),
             "commit": commit_short() or "unknown",
             "torch": torch.__version__,
-            "cuda": torch.cuda.get_device_name(0),
+            "device": str(cuda),
+            "cuda": torch.cuda.get_device_name(0) if cuda.type == "cuda" else None,
             "cpu": platform.processor() or platform.machine(),
             "cpu_threads": args.cpu_threads,
             "failed_areas": failed,

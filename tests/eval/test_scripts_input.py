@@ -244,6 +244,56 @@ def test_bench_refuses_a_json_folder_and_writes_no_json_without_figures(
     assert not figures.with_suffix(".meta.json").exists()
 
 
+# --- bench_gpu.py: arguments, no CUDA, and a run on the CPU against itself ---------------------
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--only", "dtw"], "unknown area(s) dtw; the areas are fk, replan, prediction, sim"),
+        (["--only", ","], "no area"),
+        (["--cpu-threads", "0"], "--cpu-threads must be >= 1"),
+        (["--device", "tpu"], "--device tpu: unknown device 'tpu'"),
+    ],
+)
+def test_bench_gpu_refuses_bad_arguments(tmp_path, run_script, args, message) -> None:
+    figures = tmp_path / "gpu.json"
+    figures.write_text('{"kept": 1}\n')
+    code, _, err = run_script("bench_gpu", *args, "--json", figures, "--force")
+    assert code == 2 and message in err
+    assert figures.read_text() == '{"kept": 1}\n'
+    code, _, err = run_script("bench_gpu", "--json", figures)  # a record is kept
+    assert code == 2 and "exists (stored results); pass --force" in err
+
+
+def test_bench_gpu_without_cuda_says_so(run_script, monkeypatch) -> None:
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    code, _, err = run_script("bench_gpu")
+    assert code == 2
+    assert "--device cuda: device 'cuda' requested but CUDA is not available" in err
+
+
+def test_bench_gpu_on_the_cpu_compares_equal_numbers(tmp_path, run_script) -> None:
+    """``--device cpu``: the spheres are computed twice on the CPU, the same numbers, and the
+    figures are written with the reference beside each."""
+    figures = tmp_path / "gpu.json"
+    code, out, _ = run_script(
+        "bench_gpu", "--device", "cpu", "--quick", "--only", "fk", "--json", figures
+    )
+    assert code == 0, out
+    got = json.loads(figures.read_text())
+    names = {f"gpu.fk.{r}.spheres{k}_{b}x20_ms" for r in ("kuka_iiwa14", "fetch")
+             for k in ("", "_backward") for b in (1024,)}  # fmt: skip
+    assert set(got) == names
+    for fig in got.values():
+        assert fig["max_abs_diff_m"] == 0.0
+        assert fig["ratio"] == pytest.approx(fig["reference"] / fig["value"])
+    meta = json.loads(figures.with_suffix(".meta.json").read_text())
+    assert meta["device"] == "cpu" and meta["failed_areas"] == []
+
+
 # --- smoothness_breakdown.py: truncated logs, one log, bad numbers ------------------------------
 
 
