@@ -294,6 +294,37 @@ def test_bench_gpu_on_the_cpu_compares_equal_numbers(tmp_path, run_script) -> No
     assert meta["device"] == "cpu" and meta["failed_areas"] == []
 
 
+# --- count_cycle_ops.py ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--trajectories", "0"], "--trajectories must be >= 1"),
+        (["--top", "-1"], "--top must be >= 0"),
+        (["--robot", "ur5"], "unknown robot 'ur5'"),
+    ],
+)
+def test_count_cycle_ops_refuses_bad_arguments(run_script, args, message) -> None:
+    code, _, err = run_script("count_cycle_ops", *args)
+    assert code == 2 and message in err
+
+
+def test_count_cycle_ops_counts_the_same_operations_at_any_batch(run_script) -> None:
+    """The operation count of a warm cycle does not grow with the batch (within 1 %: the
+    launches a CUDA cycle pays for), and the optimiser's gradient and the kinematics lead the list."""
+    totals = {}
+    for b in (2, 16):
+        code, out, _ = run_script("count_cycle_ops", "--trajectories", b, "--top", "3")
+        assert code == 0
+        head, *lines = out.strip().splitlines()
+        assert head.startswith(f"one warm cycle, kuka_iiwa14, B = {b}: ")
+        totals[b] = int(head.split(": ", 1)[1].split(" operations")[0])
+        assert len(lines) == 3 and all(int(line.split()[0]) > 0 for line in lines)
+        assert any("planning/optimizer.py" in line for line in lines)
+    assert totals[2] > 1000 and abs(totals[16] - totals[2]) <= 0.01 * totals[2]
+
+
 # --- smoothness_breakdown.py: truncated logs, one log, bad numbers ------------------------------
 
 
