@@ -312,7 +312,7 @@ def test_count_cycle_ops_refuses_bad_arguments(run_script, args, message) -> Non
 
 def test_count_cycle_ops_counts_the_same_operations_at_any_batch(run_script) -> None:
     """The operation count of a warm cycle does not grow with the batch (within 1 %: the
-    launches a CUDA cycle pays for), and the optimiser's gradient and the kinematics lead the list."""
+    launches a CUDA cycle pays for), and the optimiser is among the lines listed first."""
     totals = {}
     for b in (2, 16):
         code, out, _ = run_script("count_cycle_ops", "--trajectories", b, "--top", "3")
