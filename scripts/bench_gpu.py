@@ -35,7 +35,6 @@ import sys
 import tempfile
 import time
 import warnings
-from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -43,18 +42,13 @@ import torch
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from _report import commit_short, fail  # noqa: E402
-from _timing import median_seconds  # noqa: E402
+from bench_robot import _median_ms  # noqa: E402
 
 from iplanner_torch.errors import ConfigError  # noqa: E402
 from iplanner_torch.types import resolve_device, torch_threads  # noqa: E402
 
 CPU = torch.device("cpu")
 AREAS = ("fk", "replan", "prediction", "sim")
-
-
-def _ms(fn: Callable[[], object], device: torch.device, reps: int, warmup: int = 2) -> float:
-    sync = (lambda: torch.cuda.synchronize(device)) if device.type == "cuda" else None
-    return 1e3 * median_seconds(fn, reps, warmup=warmup, sync=sync)
 
 
 def _figure(value: float, unit: str, ref: float, *, rate: bool = False, **extra) -> dict:
@@ -96,8 +90,8 @@ def bench_fk(cuda: torch.device, quick: bool) -> dict[str, dict]:
                     y = x.detach().requires_grad_(True)
                     m.sphere_centers(y).square().sum().backward()
 
-                times["fwd"][key] = _ms(fwd, dev, reps)
-                times["bwd"][key] = _ms(bwd, dev, reps)
+                times["fwd"][key] = _median_ms(fwd, dev, reps, 2)
+                times["bwd"][key] = _median_ms(bwd, dev, reps, 2)
             with torch.no_grad():
                 diff = (
                     (
@@ -167,16 +161,16 @@ def bench_prediction(cuda: torch.device, quick: bool, tmp: Path) -> tuple[dict, 
     w_test = build_windows(test, wc)
     reps = 10 if quick else 50
     f1, p1 = w_test.f_prev[:1], w_test.progress[:1]
-    t_cpu = _ms(lambda: pred_cpu.predict(f1, p1), CPU, reps)
-    t_gpu = _ms(lambda: pred_gpu.predict(f1.to(cuda), p1.to(cuda)), cuda, reps)
+    t_cpu = _median_ms(lambda: pred_cpu.predict(f1, p1), CPU, reps, 2)
+    t_gpu = _median_ms(lambda: pred_gpu.predict(f1.to(cuda), p1.to(cuda)), cuda, reps, 2)
     out["gpu.prediction.single_ms"] = _figure(t_gpu, "ms", t_cpu)
     for n in (1024, 8192):
         idx = torch.arange(n) % len(w_test)
         f, p = w_test.f_prev[idx], torch.zeros(n, dtype=torch.int64)
         fg, pg = f.to(cuda), p.to(cuda)
         r = 2 if quick else 5
-        t_cpu = _ms(lambda f=f, p=p: pred_cpu.predict(f, p), CPU, r, warmup=1)
-        t_gpu = _ms(lambda fg=fg, pg=pg: pred_gpu.predict(fg, pg), cuda, r, warmup=1)
+        t_cpu = _median_ms(lambda f=f, p=p: pred_cpu.predict(f, p), CPU, r, 1)
+        t_gpu = _median_ms(lambda fg=fg, pg=pg: pred_gpu.predict(fg, pg), cuda, r, 1)
         a, g = pred_cpu.predict(f, p), pred_gpu.predict(fg, pg)
         diff = (g.mean.cpu() - a.mean).abs().max().item()
         wdiff = (g.weights.cpu() - a.weights).abs().max().item()

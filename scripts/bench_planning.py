@@ -75,9 +75,12 @@ def synthetic_forecast(num_actions: int = 10, n_f: int = 30, dt: float = 1 / 15)
     )
 
 
-def _cycle_times(
-    robot, b: int, forecast: Forecast, repeats: int, layout: SphereLayout = "inner"
-) -> dict[str, float]:
+def started_replanner(
+    robot, b: int, forecast: Forecast, layout: SphereLayout = "inner"
+) -> tuple[Replanner, TrajectoryOptimizer, torch.Tensor, torch.Tensor]:
+    """The benchmark's replanner (B = ``b``, W = 20, 6 warm iterations) after its cold start
+    at t = 0 towards a goal 1.2 and 0.4 rad away in joints 0 and 3: ``(replanner, its
+    optimiser, start (J,), goal (J,))``. Also the cycle of ``count_cycle_ops.py``."""
     rcfg = ReplannerCfg(replan_step_s=0.5)  # filtered tracking, committed-plan check on
     cfg = OptimizerCfg(
         num_trajectories=b,
@@ -95,6 +98,13 @@ def _cycle_times(
     qg[3] += 0.4
     rp.reset(q0, qg, t=0.0)
     rp.step(0.0, q0, forecast)  # cold start
+    return rp, opt, q0, qg
+
+
+def _cycle_times(
+    robot, b: int, forecast: Forecast, repeats: int, layout: SphereLayout = "inner"
+) -> dict[str, float]:
+    rp, opt, q0, qg = started_replanner(robot, b, forecast, layout)
     totals, ratios = [], []
     parts: dict[str, list[float]] = {"predict_ms": [], "collision_ms": [], "optimiser_ms": []}
     t = 0.5

@@ -54,30 +54,12 @@ class _Counter(TorchDispatchMode):
 
 def count(robot_name: str, trajectories: int) -> collections.Counter[tuple[str, str]]:
     """``{(operation, file:line): count}`` of one warm cycle."""
-    from bench_planning import synthetic_forecast
+    from bench_planning import started_replanner, synthetic_forecast
 
-    from iplanner_torch.planning.optimizer import OptimizerCfg, TrajectoryOptimizer
-    from iplanner_torch.planning.replanner import Replanner, ReplannerCfg
     from iplanner_torch.robot.model import RobotModel
 
-    robot = RobotModel.load(robot_name)
     forecast = synthetic_forecast()
-    rcfg = ReplannerCfg(replan_step_s=0.5)
-    cfg = OptimizerCfg(
-        num_trajectories=trajectories,
-        num_waypoints=20,
-        iterations=20,
-        warm_iterations=6,
-        acc_max=rcfg.acc_max,
-        human_spheres="inner",
-    )
-    rp = Replanner(TrajectoryOptimizer(robot, cfg), rcfg)
-    q0 = robot.q_home.clone()
-    goal = q0.clone()
-    goal[0] += 1.2
-    goal[3] += 0.4
-    rp.reset(q0, goal, t=0.0)
-    rp.step(0.0, q0, forecast)  # cold
+    rp = started_replanner(RobotModel.load(robot_name), trajectories, forecast)[0]
     t = 0.5
     for _ in range(3):
         rp.step(t, rp.command(t)[0], forecast, forecast_t0=t)
