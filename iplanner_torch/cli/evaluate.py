@@ -48,7 +48,9 @@ are counted as more episodes, with a ``DataWarning``.
 Each mode refuses the overrides it does not read (:data:`MODE_READS`): ``prediction`` the
 ``trainer`` group and ``predictor.*`` keys (the checkpoint defines them), ``episode``
 everything but ``evaluate.logs``, ``labels``, ``baseline`` and ``out_dir``, and every mode the
-closed-loop groups of ``iplanner-experiment``.
+closed-loop groups of ``iplanner-experiment``. A given ``evaluate.out_dir`` that already
+holds the files the mode writes (:data:`MODE_WRITES`: an earlier report) is refused before
+anything is evaluated, rather than written over.
 """
 
 from __future__ import annotations
@@ -108,6 +110,15 @@ def _given() -> dict[str, str]:
     return {override_key(o): o for o in _task_overrides()}
 
 
+#: the files each mode writes into its folder (glob patterns): a given ``evaluate.out_dir``
+#: that holds one of them is refused, not written over
+MODE_WRITES = {
+    "prediction": ("prediction_metrics.json",),
+    "noise_sweep": ("prediction_vs_noise.csv", "prediction_vs_noise.png"),
+    "episode": ("results.csv", "results.md", "compare_*.png", "paired_*.png", "sweep_*.png"),
+}
+
+
 def _out_dir(cfg: DictConfig) -> Path:
     """The folder the tables and plots go to, created now so that a bad path fails before the
     evaluation runs rather than after it."""
@@ -121,6 +132,24 @@ def _out_dir(cfg: DictConfig) -> Path:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ConfigError(f"evaluate.out_dir={path}: cannot create it ({exc})") from None
+    return path
+
+
+def _refuse_earlier(path: Path, mode: str) -> Path:
+    """``path``, the report folder of ``mode``, when it holds none of the files that mode
+    writes (:data:`MODE_WRITES`).
+
+    Raises:
+        ConfigError: naming the files of an earlier report there, which this one would
+            replace.
+    """
+    earlier = sorted({q.name for pattern in MODE_WRITES[mode] for q in path.glob(pattern)})
+    if earlier:
+        raise ConfigError(
+            f"evaluate.out_dir={path} already holds {', '.join(earlier)} of an earlier report, "
+            "which this one would replace; choose another evaluate.out_dir (or leave it unset: "
+            "a new run folder), or move those files away"
+        )
     return path
 
 
@@ -349,7 +378,7 @@ def _prediction(cfg: DictConfig) -> None:
 
     _refuse_unread("prediction")
     ckpt = _checkpoint(repo_path(cfg.evaluate.checkpoint), cfg)
-    out = _out_dir(cfg) / "prediction_metrics.json"
+    out = _refuse_earlier(_out_dir(cfg), "prediction") / "prediction_metrics.json"
     _check_data_settings(cfg)  # before the checkpoint loads
     predictor = HumanMotionPredictor.load(ckpt, map_location=_device(cfg))
     _check_joints(cfg, predictor, ckpt)
@@ -579,7 +608,7 @@ def _noise_sweep(cfg: DictConfig) -> None:
     compare, noises, speeds = _noise_sweep_grid(cfg)
     _check_data_settings(cfg)  # before a checkpoint loads
     cv_cfg = _cv_cfg(cfg) if CV_OPTION in compare else None  # checked before any work
-    report_dir = _out_dir(cfg)
+    report_dir = _refuse_earlier(_out_dir(cfg), "noise_sweep")
     device = _device(cfg)
     folder = predictor_folder(cfg, cfg.data)
     learned = _learned(compare)
@@ -715,6 +744,7 @@ def _episode(cfg: DictConfig) -> None:
             "episodes/), whose results.csv and results.md this report would replace; choose "
             "another evaluate.out_dir (or leave it unset: a new run folder)"
         )
+    _refuse_earlier(out_dir, "episode")
     frames, swept = [], []
     for i, path in enumerate(paths):
         df = _episode_rows(path)

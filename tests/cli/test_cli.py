@@ -324,6 +324,19 @@ def test_evaluate_episode_reports_a_results_csv(tmp_path: Path) -> None:
     assert res.returncode == 2, res.stderr[-3000:]
     assert "is the folder of an iplanner-experiment run (it holds episodes/)" in res.stderr
     assert (run / "results.csv").read_bytes() == before and not (run / "results.md").exists()
+    # a folder with an earlier report (a sweep's summary/, an evaluate report): kept as it is
+    summary = tmp_path / "summary"
+    summary.mkdir()
+    rows.to_csv(summary / "results.csv", index=False)
+    (summary / "compare_smoothness.png").write_bytes(b"png")
+    res = _run(["iplanner-evaluate", "evaluate.mode=episode",
+                f"evaluate.logs={summary / 'results.csv'}", f"evaluate.out_dir={summary}"],
+               tmp_path)  # fmt: skip
+    assert res.returncode == 2, res.stderr[-3000:]
+    assert (f"error: ConfigError: evaluate.out_dir={summary} already holds "
+            "compare_smoothness.png, results.csv of an earlier report") in res.stderr  # fmt: skip
+    assert (summary / "results.csv").read_bytes() == before
+    assert sorted(p.name for p in summary.iterdir()) == ["compare_smoothness.png", "results.csv"]
 
 
 def test_evaluate_episode_compares_labelled_runs_seed_by_seed(tmp_path: Path) -> None:

@@ -4,6 +4,7 @@ read, and an empty held-out split, before it trains anything."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import re
@@ -86,9 +87,15 @@ def scored(monkeypatch: pytest.MonkeyPatch) -> list[SimpleNamespace]:
     return calls
 
 
+#: numbers the report folders of _prediction_args
+_REPORTS = itertools.count()
+
+
 def _prediction_args(trained: SimpleNamespace, out: Path, ckpt: Path | None = None) -> list[str]:
+    """The overrides that evaluate ``ckpt`` (the trained one by default) into a new report
+    folder under ``out``: a folder that holds an earlier report is refused."""
     return [f"data.path={trained.ds}", f"evaluate.checkpoint={ckpt or trained.ckpt}",
-            f"evaluate.out_dir={out}"]  # fmt: skip
+            f"evaluate.out_dir={out / f'report{next(_REPORTS)}'}"]  # fmt: skip
 
 
 def test_prediction_scores_the_split_its_checkpoint_recorded(
@@ -130,6 +137,7 @@ def test_prediction_scores_the_split_its_checkpoint_recorded(
         assert scored[-1].names == seed0, ckpt
         assert source in capsys.readouterr().out
         empty = r"seed=0 data.split=\[0.8,0.1,0.1\] \(from seed and data.split.*leaves no held-out"
+        args = _prediction_args(trained, tmp_path, ckpt)
         with pytest.raises(ConfigError, match=empty), warnings.catch_warnings():
             warnings.simplefilter("ignore", DataWarning)
             evaluate._prediction(_cfg(monkeypatch, *args, *seed))
@@ -182,6 +190,23 @@ def test_prediction_refuses_the_record_of_a_later_unfinished_training(
     out = capsys.readouterr().out
     assert "held-out split: seed=1 data.split=[0.6,0.2,0.2] (from seed and data.split: the " in out
     assert "no training_inputs.json" not in out
+
+
+def test_prediction_does_not_write_over_an_earlier_report(
+    trained: SimpleNamespace, scored: list, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A given evaluate.out_dir that holds prediction_metrics.json is refused, before the
+    checkpoint is scored, and the file is kept; another folder is written."""
+    earlier = tmp_path / "prediction_metrics.json"
+    earlier.write_text('{"mhd_1s": 0.1}')
+    args = [*_prediction_args(trained, tmp_path)[:-1], f"evaluate.out_dir={tmp_path}"]
+    with pytest.raises(ConfigError, match=rf"^evaluate.out_dir={re.escape(str(tmp_path))} "
+                       r"already holds prediction_metrics.json of an earlier report, which "
+                       r"this one would replace; choose another evaluate.out_dir"):  # fmt: skip
+        evaluate._prediction(_cfg(monkeypatch, *args))
+    assert not scored and earlier.read_text() == '{"mhd_1s": 0.1}'
+    evaluate._prediction(_cfg(monkeypatch, *_prediction_args(trained, tmp_path)))
+    assert len(scored) == 1 and earlier.read_text() == '{"mhd_1s": 0.1}'
 
 
 def test_prediction_refuses_another_split_on_the_command_line(
@@ -416,10 +441,17 @@ def test_noise_sweep_compares_the_constant_velocity_baseline_without_a_checkpoin
     assert cv["class_precision"].isna().all() and ni["class_precision"].notna().all()
     assert (cv["mhd_1s"] > 0).all() and (cv["mhd_1s"] < 1.0).all()
     assert not (tmp_path / "ck" / "ds" / "constant_velocity").exists()
+    # that report is not written over
+    with pytest.raises(ConfigError, match=r"out already holds prediction_vs_noise.csv, "
+                       r"prediction_vs_noise.png of an earlier report"):  # fmt: skip
+        evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
+    assert pd.read_csv(tmp_path / "out" / "prediction_vs_noise.csv").equals(df)
     # a fit longer than the checkpoint's windows: named, before any row is written
     sweep[-1] = "run.cv.fit_frames=7"
+    sweep[sweep.index(f"evaluate.out_dir={tmp_path / 'out'}")] = f"evaluate.out_dir={tmp_path}"
     with pytest.raises(ConfigError, match=r"run.cv: on windows of 6 frames: .*n_prev"):
         evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
+    assert not (tmp_path / "prediction_vs_noise.csv").exists()
 
 
 def test_noise_sweep_of_the_constant_velocity_baseline_alone_trains_nothing(
