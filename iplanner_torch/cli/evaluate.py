@@ -114,7 +114,7 @@ def _given() -> dict[str, str]:
 #: that holds one of them is refused, not written over
 MODE_WRITES = {
     "prediction": ("prediction_metrics.json",),
-    "noise_sweep": ("prediction_vs_noise.csv", "prediction_vs_noise.png"),
+    "noise_sweep": ("prediction_vs_noise.csv", "prediction_vs_noise.png", "README.md"),
     "episode": ("results.csv", "results.md", "compare_*.png", "paired_*.png", "sweep_*.png"),
 }
 

@@ -442,7 +442,7 @@ def test_noise_sweep_compares_the_constant_velocity_baseline_without_a_checkpoin
     assert (cv["mhd_1s"] > 0).all() and (cv["mhd_1s"] < 1.0).all()
     assert not (tmp_path / "ck" / "ds" / "constant_velocity").exists()
     # that report is not written over
-    with pytest.raises(ConfigError, match=r"out already holds prediction_vs_noise.csv, "
+    with pytest.raises(ConfigError, match=r"out already holds README.md, prediction_vs_noise.csv, "
                        r"prediction_vs_noise.png of an earlier report"):  # fmt: skip
         evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
     assert pd.read_csv(tmp_path / "out" / "prediction_vs_noise.csv").equals(df)
