@@ -10,7 +10,11 @@ as the task events say) and draw N snapshots evenly spaced in time; ``--video`` 
 animation (GIF with Pillow, or MP4 when imageio with ffmpeg is installed)::
 
     python scripts/render_episode.py --mcap runs/ep.mcap --frames 6 --camera overview \
-        --overlay --video runs/ep.gif
+        --overlay --video runs/ep.gif                     # runs/ep.frames.png, runs/ep.gif
+
+The episode's sheet goes beside its log as ``<log stem>.frames.png`` by default (the
+``<log stem>.png`` there is the episode's timeline plot, ``plot_episode.py``). A file that
+exists already (the sheet, the video, the scene's record) is replaced only with ``--force``.
 
 Rendering needs a GL backend: ``MUJOCO_GL=osmesa`` (package libosmesa6) or ``MUJOCO_GL=egl``
 (Mesa's software EGL, package libegl-mesa0, or a GPU driver); without a display, the one
@@ -278,7 +282,39 @@ def _check_args(args: argparse.Namespace) -> argparse.Namespace:
         image_types = FigureCanvasBase.get_supported_filetypes()
         if args.out.suffix.lower().lstrip(".") not in image_types:
             fail(f"--out {args.out}: not an image type ({', '.join(sorted(image_types))})")
+    elif args.scene:
+        args.out = SCENE_RECORD
+    else:
+        args.out = frames_path(args.mcap)
+    if args.video is not None and args.video.suffix.lower() == ".mp4" and not _has_imageio():
+        args.video = args.video.with_suffix(".gif")
+        print(f"imageio is not installed: writing {args.video} instead of an MP4")
+    existing = [str(p) for p in (args.out, args.video) if p is not None and p.exists()]
+    if existing and not args.force:
+        fail(
+            f"{' and '.join(existing)} exist(s): pass --force to replace, or choose another --out"
+        )
     return args
+
+
+#: the scene mode's default output: the record of experiments/scenes/
+SCENE_RECORD = ROOT / "experiments" / "scenes" / "overview.png"
+
+
+def frames_path(log: Path) -> Path:
+    """The default snapshot sheet of an episode log: beside it, ``<log stem>.frames.png``
+    (``<log stem>.png`` is its timeline plot,
+    :func:`iplanner_torch.eval.timeline.timeline_path`)."""
+    return log.with_name(f"{log.stem}.frames.png")
+
+
+def _has_imageio() -> bool:
+    """Whether imageio, which writes MP4 files, can be imported."""
+    try:
+        import imageio.v3  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 @main_guard
@@ -287,7 +323,9 @@ def main(argv: list[str] | None = None) -> int:
     mode = parser.add_mutually_exclusive_group(required=True)
     mode.add_argument("--scene", action="store_true", help="contact sheet of the workspaces")
     mode.add_argument("--mcap", type=Path, help="episode log to replay")
-    parser.add_argument("--out", type=Path, help="PNG to write (default per mode)")
+    parser.add_argument(
+        "--out", type=Path, help="PNG to write (scene: the record; episode: <log>.frames.png)"
+    )
     parser.add_argument("--frames", type=int, default=6, help="snapshots of an episode")
     parser.add_argument("--camera", choices=CAMERA_NAMES, default="overview")
     parser.add_argument("--overlay", action="store_true", help="draw robot / predicted spheres")
@@ -296,6 +334,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fps", type=float, default=10.0, help="animation frame rate")
     parser.add_argument("--width", type=int, help="image width [px] (scene 480, episode 640)")
     parser.add_argument("--height", type=int, help="image height [px] (scene 360, episode 480)")
+    parser.add_argument("--force", action="store_true", help="replace existing output files")
     args = _check_args(parser.parse_args(argv))
     ep = None if args.scene else read_episode(args.mcap)
     if ep is not None and not ep.frames:
@@ -307,13 +346,11 @@ def main(argv: list[str] | None = None) -> int:
             "(MUJOCO_GL=egl)"
         )
     if ep is None:
-        out = args.out or ROOT / "experiments" / "scenes" / "overview.png"
-        written = [render_scene_sheet(out, args.width or 480, args.height or 360)]
+        written = [render_scene_sheet(args.out, args.width or 480, args.height or 360)]
     else:
-        out = args.out or args.mcap.with_suffix(".png")
         written = render_episode(
             ep,
-            out,
+            args.out,
             frames=args.frames,
             camera=args.camera,
             overlay=args.overlay,

@@ -446,6 +446,29 @@ def test_render_refuses_bad_settings_before_rendering(tmp_path, run_script, args
     assert code == 2 and message in _one_error_line(err)
 
 
+def test_render_keeps_existing_files_without_force(tmp_path, run_script) -> None:
+    """The episode's sheet goes to ``<stem>.frames.png``, not over its timeline plot
+    ``<stem>.png``; an existing sheet or video is refused, before the log is read, unless
+    --force is given."""
+    log = tmp_path / "ep.mcap"
+    log.write_bytes(b"")  # cut before anything was written: the render stops at reading it
+    (tmp_path / "ep.png").write_bytes(b"timeline")
+    with pytest.warns(UserWarning, match="truncated"):
+        code, _, err = run_script("render_episode", "--mcap", log)
+    assert code == 2 and "the log has no messages" in _one_error_line(err)
+    assert (tmp_path / "ep.png").read_bytes() == b"timeline"
+    for given, existing in (([], "ep.frames.png"), (["--video", tmp_path / "v.gif"], "v.gif")):
+        (tmp_path / existing).write_bytes(b"earlier")
+        code, _, err = run_script("render_episode", "--mcap", log, *given)
+        line = _one_error_line(err)
+        assert code == 2 and f"{tmp_path / existing} exist(s): pass --force" in line, line
+        with pytest.warns(UserWarning, match="truncated"):
+            code, _, err = run_script("render_episode", "--mcap", log, *given, "--force")
+        assert code == 2 and "the log has no messages" in _one_error_line(err)
+        assert (tmp_path / existing).read_bytes() == b"earlier"
+        (tmp_path / existing).unlink()
+
+
 def test_render_says_a_log_has_no_messages(tmp_path, run_script) -> None:
     (tmp_path / "empty.mcap").write_bytes(b"")  # cut before anything was written
     with pytest.warns(UserWarning, match="truncated"):
