@@ -1130,7 +1130,8 @@ def _read_lego_trial(path: Path) -> np.ndarray:
     """The numbers of one LEGO trial file, (T, 18) float64 (x, y, z of :data:`LEGO_JOINTS`).
 
     Read as ``numpy.loadtxt`` read it: entries separated by white space, blank lines skipped,
-    ``#`` starts a comment to the end of the line, ``nan`` for a lost joint; a last line
+    ``#`` starts a comment to the end of the line, ``nan`` for a lost joint, a leading UTF-8
+    byte-order mark dropped (as the CSV reader drops it); a last line
     without a line terminator is dropped with a :class:`DataWarning`. Errors name the file
     line a text editor shows and the entry's place in it.
 
@@ -1140,7 +1141,8 @@ def _read_lego_trial(path: Path) -> np.ndarray:
             beyond :data:`~iplanner_torch.types.MAX_POSITION_M` (other units, or junk).
     """
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        # a byte-order mark (a file saved by Windows Notepad or Excel) is dropped
+        text = path.read_text(encoding="utf-8-sig", errors="replace")
     except OSError as exc:
         raise DataError(f"{path}: unreadable LEGO trial ({exc})") from exc
     tokens: list[str] = []

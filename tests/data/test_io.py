@@ -922,6 +922,20 @@ def test_lego_trial_reads_what_numpy_read(tmp_path, newline):
     assert d.num_frames == 6 and np.isnan(d.positions).sum() == 3
 
 
+def test_a_lego_trial_with_a_byte_order_mark_reads_as_without(tmp_path):
+    """A UTF-8 byte-order mark before the first number (a file saved by Notepad or Excel) is
+    dropped, as the CSV reader drops it: it was refused as ``'\\ufeff0.1' is not a number``."""
+    rows = [_lego_row("0.25", at=i) for i in range(3)]
+    plain, marked = tmp_path / "a" / "trial1.txt", tmp_path / "b" / "trial1.txt"
+    for p, head in ((plain, b""), (marked, b"\xef\xbb\xbf")):
+        p.parent.mkdir()
+        p.write_bytes(head + ("\n".join(rows) + "\n").encode())
+    (d,) = load_lego_assembly(marked)
+    (ref,) = load_lego_assembly(plain)
+    np.testing.assert_array_equal(d.positions, ref.positions)
+    assert d.num_frames == 3
+
+
 @pytest.mark.parametrize("text", ["", "\n\n", "# only a comment\n"])
 def test_an_empty_lego_trial_names_itself_once(tmp_path, text):
     """It read '.../b_bad.txt: unreadable LEGO trial (.../b_bad.txt: empty file)'."""
