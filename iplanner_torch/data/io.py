@@ -948,8 +948,8 @@ def load_demonstration(
         missing = [j for j in joints if j not in demo.joint_names]
         if missing:
             raise DataError(
-                f"{path}: field 'joint_names' lacks unknown joint(s) {missing}; "
-                f"the file has {list(demo.joint_names)}"
+                f"{path}: no joint(s) {missing} in the file, which was asked to give them "
+                f"(joints=); its joints (field 'joint_names'): {list(demo.joint_names)}"
             )
         demo = demo.select_joints(list(joints))
     if len(lost_joints(demo)) == demo.num_joints:

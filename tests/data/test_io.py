@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from pathlib import Path
 
@@ -682,6 +683,15 @@ def test_error_loader_joints_argument(tmp_path, joints, message):
         load_demonstration(p, joints=joints)
     with pytest.raises(ConfigError, match=rf"^joints= {message}"):  # checked before the files
         load_demonstrations(tmp_path / "absent", joints=joints)
+
+
+def test_error_loader_joints_not_in_the_file(tmp_path):
+    """Joints asked for that the file does not have are named with the file's joints."""
+    p = _user_csv(tmp_path / "my.csv", ("t", "label"))
+    with pytest.raises(DataError, match=r"my\.csv: no joint\(s\) \['nope'\] in the file, which "
+                       r"was asked to give them \(joints=\); its joints \(field 'joint_names'\): "
+                       rf"{re.escape(str(list(_CSV_JOINTS)))}$"):  # fmt: skip
+        load_demonstration(p, joints=[_CSV_JOINTS[0], "nope"])
 
 
 def test_csv_numbers_read_back_bit_identical(tmp_path):
