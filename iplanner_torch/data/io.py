@@ -350,7 +350,9 @@ def _read_npz(path: Path) -> dict[str, Any]:
         # np.load would fall back to unpickling and suggest allow_pickle: never load pickles
         raise DataError(f"{path}: not a valid NPZ demonstration file: not a zip archive")
     try:
-        with np.load(path, allow_pickle=False) as z:
+        # the file opened here, so that it is closed when the archive is damaged (np.load
+        # given a path leaves its own file open when the zip cannot be read)
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             data = {}
             for k in z.files:
                 try:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import math
 import re
@@ -188,9 +189,15 @@ def test_error_empty_files(tmp_path):
 
 
 def test_error_corrupt_file(tmp_path):
+    """A damaged archive is refused, and the file it opened is closed (numpy's ``np.load`` of
+    a path left it open: a ResourceWarning at the next garbage collection)."""
     (tmp_path / "c.npz").write_bytes(b"PK\x03\x04 this is not a zip archive")
-    with pytest.raises(DataError, match="c.npz: not a valid NPZ demonstration file: corrupt"):
-        load_demonstrations(tmp_path / "c.npz")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(DataError, match="c.npz: not a valid NPZ demonstration file: corrupt"):
+            load_demonstrations(tmp_path / "c.npz")
+        gc.collect()
+    assert not [w for w in caught if issubclass(w.category, ResourceWarning)]
     (tmp_path / "c.csv").write_text("t,label,a_x,a_y,a_z\n0,0,1,2,abc\n")
     with pytest.raises(DataError, match="c.csv: line 2: unreadable or corrupt CSV row"):
         load_demonstrations(tmp_path / "c.csv", fps=10)
