@@ -211,8 +211,9 @@ def _ensure_predictor(
     if not ckpt.exists():
         if not cfg_scalar(cfg.run, "train_if_missing", bool):
             raise CheckpointError(
-                f"{ckpt}: no trained predictor; run `iplanner-train predictor={option} "
-                f"train.out_dir={out_dir}` on {data_node.path}"
+                f"{ckpt}: no trained predictor; train it on {data_node.path} with "
+                f"`{train_command(cfg, data_node, option, out_dir)}`, or leave "
+                "run.train_if_missing=true to have this run train it"
             )
         print(
             f"training predictor {option} on {data_node.path} "
@@ -245,6 +246,35 @@ def _ensure_predictor(
                 "anew with them, or set paths.checkpoints=<another folder>"
             )
     return str(ckpt)
+
+
+def train_command(cfg: DictConfig, data_node: DictConfig, option: str, out_dir: Path) -> str:
+    """The ``iplanner-train`` command that trains predictor ``option`` into ``out_dir`` as
+    this run would (:func:`_ensure_predictor`): on the dataset of ``data_node`` (its
+    ``conf/data`` option and path; for task demonstrations also the task order and
+    arrangement that generate it when missing), with ``run.train_trainer``."""
+    from iplanner_torch.cli._common import override_word
+
+    if data_node is cfg.data:  # run.train_data=data: the run's own data group option
+        try:
+            data_option = str(HydraConfig.get().runtime.choices.get("data") or "reaching")
+        except ValueError:  # no Hydra run (a library call)
+            data_option = "reaching"
+    else:
+        data_option = "tasks" if "order" in data_node.get("generator", {}) else "reaching"
+    words = [override_word("data", data_option), override_word("data.path", data_node.path)]
+    if data_option == "tasks" and data_node is not cfg.data:
+        gen = data_node.generator
+        words += [
+            override_word("data.generator.order", str(gen.order)),
+            override_word("data.generator.arrangement", str(gen.arrangement)),
+        ]
+    words += [
+        override_word("predictor", option),
+        override_word("trainer", str(cfg.run.train_trainer)),
+        override_word("train.out_dir", out_dir),
+    ]
+    return " ".join(["iplanner-train", *words])
 
 
 def checkpoint_differences(ckpt: Path, data_node: DictConfig, keys: set[str]) -> list[str]:

@@ -616,6 +616,36 @@ def test_the_robot_group_configures_every_experiment() -> None:
             build_experiment(compose("config", overrides=bad), {})
 
 
+def test_the_training_command_of_a_missing_predictor_trains_what_the_run_reads() -> None:
+    """The command a run without its predictor names (run.train_if_missing=false) composes,
+    as iplanner-train's config, the dataset, generator, predictor, trainer and folder the
+    run would train with; it used to leave the data out, and so trained on the reaching set
+    into the folder of a task dataset."""
+    import shlex
+
+    from hydra import compose, initialize_config_dir
+
+    from iplanner_torch.cli._common import CONF_DIR, predictor_folder
+    from iplanner_torch.cli.experiment import build_experiment, scenario_data_node, train_command
+
+    with initialize_config_dir(version_base="1.3", config_dir=CONF_DIR):
+        for overrides, data in (
+            ([], "tasks"),
+            (["experiment=speed_response"], "reaching"),
+            (["run.train_trainer=default", "robot=fetch"], "tasks"),
+        ):
+            cfg = compose("config", overrides=overrides)
+            node = scenario_data_node(cfg, build_experiment(cfg, {}).scenarios[0])
+            out = predictor_folder(cfg, node) / "iplanner_no_ni"
+            words = shlex.split(train_command(cfg, node, "iplanner_no_ni", out))
+            assert words[0] == "iplanner-train" and f"data={data}" in words, words
+            train = compose("config", overrides=words[1:])
+            assert train.data.path == node.path and train.train.out_dir == str(out), words
+            assert train.data.generator == node.generator, words
+            trainer = compose("config", overrides=[f"trainer={cfg.run.train_trainer}"]).trainer
+            assert train.trainer == trainer and train.predictor.svgp.noisy_input == "none"
+
+
 def test_data_generate_checks_every_setting_before_it_touches_the_folder(tmp_path: Path) -> None:
     """A bad generator setting with data.overwrite=true is refused with one line, exit 2, and
     the earlier dataset is left as it was (it used to be deleted first)."""
