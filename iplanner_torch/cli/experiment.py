@@ -1241,8 +1241,16 @@ def _app(cfg: DictConfig) -> None:
     print(f"results: {out_dir / 'results.md'} and {out_dir / 'results.csv'}")
     pngs = [p for p in written if str(p).endswith(".png")]
     print(f"plots:   {', '.join(str(p) for p in pngs) if pngs else '(none)'}")
-    print(f"logs:    {len(mcaps)} MCAP episode log(s) in {out_dir / 'episodes'}")
-    print("         read one with iplanner_torch.recording.read_episode, or open it in Foxglove")
+    if mcaps:
+        print(f"logs:    {len(mcaps)} MCAP episode log(s) in {out_dir / 'episodes'}")
+        print(
+            "         read one with iplanner_torch.recording.read_episode, or open it in Foxglove"
+        )
+    elif not experiment.write_mcap:
+        key = "run" if cfg.get("experiment") is None else "experiment"
+        print(f"logs:    none ({key}.write_mcap=false)")
+    else:
+        print(f"logs:    none in {out_dir / 'episodes'}")
     if timelines:
         print(
             f"         and {len(timelines)} timeline plot(s) beside them "

@@ -205,6 +205,7 @@ def test_experiment_itomp_short_episode(tmp_path: Path) -> None:
     # its timeline plot beside it (run.timeline_plots defaults to true)
     assert mcaps[0].with_suffix(".png").stat().st_size > 10_000
     assert "and 1 timeline plot(s) beside them" in res.stdout
+    assert f"logs:    1 MCAP episode log(s) in {tmp_path / 'run' / 'episodes'}" in res.stdout
     assert (tmp_path / "run" / "results.md").exists()
     log = (tmp_path / "run" / "experiment.log").read_text()
     assert "experiment 'main': 1 episode(s)" in log and "smoothness" in log

@@ -54,3 +54,6 @@ def test_every_scenarios_predictors_come_before_the_first_episode(tmp_path: Path
     assert events == ["predictors"] * 9 + ["episodes"] * 9
     assert "2 episodes at once, each in a process of its own (run.jobs)" in res.stdout
     assert len(pd.read_csv(run / "results.csv")) == 9
+    # no episodes/ folder is named where no log was written
+    assert "logs:    none (experiment.write_mcap=false)" in res.stdout
+    assert not (run / "episodes").exists() and "MCAP episode log(s)" not in res.stdout
