@@ -177,9 +177,10 @@ def gather_episode_logs(root: Path, out_dir: Path) -> list[Path]:
     return episode_report(df, out_dir, split_by=swept)
 
 
-#: per-job metrics files a sweep of iplanner-train (held-out metrics of the trained predictor)
-#: or iplanner-evaluate evaluate.mode=prediction writes into its job folder
-JOB_METRICS_FILES = ("heldout_metrics.json", "prediction_metrics.json")
+#: per-job metrics files a sweep of iplanner-train (held-out metrics of the trained predictor),
+#: iplanner-evaluate evaluate.mode=prediction or iplanner-data (the dataset's counts) writes
+#: into its job folder
+JOB_METRICS_FILES = ("heldout_metrics.json", "prediction_metrics.json", "dataset_summary.json")
 
 #: metrics drawn in a metrics sweep's plot, when the jobs report them, with their titles
 #: (see :mod:`iplanner_torch.eval.prediction`)
@@ -253,8 +254,9 @@ def gather_job_metrics(root: Path, out_dir: Path, *, echo: bool = False) -> list
         encoding="utf-8",
     )
     written = [csv, md]
-    if echo:
-        shown = df[front + [c for c in PLOTTED_METRICS if c in df.columns]]
+    if echo:  # the plotted metrics; a dataset sweep's counts (it has none of them)
+        plotted = [c for c in PLOTTED_METRICS if c in df.columns]
+        shown = df[front + (plotted or [c for c in df.columns if c not in (*front, "path")])]
         print(shown.to_string(index=False, float_format=lambda x: f"{x:.4g}"), flush=True)
     plot = _plot_job_metrics(df, swept, out_dir / "metrics.png")
     if plot is not None:

@@ -137,10 +137,35 @@ def _generate(cfg: DictConfig) -> None:
         card = " and its dataset card" if had_card else ""
         print(f"deleted {len(old) - had_card} earlier demonstration files{card} in {out_dir}")
     mb = summary.bytes_on_disk / 1e6
+    seconds = time.perf_counter() - t0
     print(
         f"wrote {summary.n_demonstrations} demonstrations ({summary.n_frames} frames, {mb:.1f} MB)"
-        f" to {out_dir} in {time.perf_counter() - t0:.1f} s; dataset card: {out_dir / 'README.md'}"
+        f" to {out_dir} in {seconds:.1f} s; dataset card: {out_dir / 'README.md'}"
     )
+    _write_job_record(
+        dataset=str(out_dir),
+        demonstrations=summary.n_demonstrations,
+        frames=summary.n_frames,
+        megabytes=round(mb, 3),
+        seconds=round(seconds, 2),
+    )
+
+
+#: the record each iplanner-data run writes into its own run folder, gathered into a
+#: sweep's summary table (:data:`~iplanner_torch.cli.callbacks.JOB_METRICS_FILES`)
+JOB_RECORD = "dataset_summary.json"
+
+
+def _write_job_record(**values: Any) -> None:
+    """``values`` as :data:`JOB_RECORD` in the run's folder (none outside a Hydra run)."""
+    import json
+
+    from hydra.core.hydra_config import HydraConfig
+
+    if not HydraConfig.initialized():
+        return
+    job_dir = Path(HydraConfig.get().runtime.output_dir)
+    (job_dir / JOB_RECORD).write_text(json.dumps(values, indent=2) + "\n", encoding="utf-8")
 
 
 def _kept_on_interrupt(cfg: DictConfig) -> str:
@@ -193,6 +218,10 @@ def _info(cfg: DictConfig) -> None:
     actions = demos[0].action_names if demos else ()
     nan = sum(int(np.isnan(d.positions).sum()) for d in demos)
     print(f"{path}: {len(demos)} demonstrations, {frames} frames")
+    _write_job_record(
+        dataset=str(path), demonstrations=len(demos), frames=frames, joints=len(joints),
+        actions=len(actions), nan_values=nan,
+    )  # fmt: skip
     print(f"  joints ({len(joints)}): {', '.join(joints)}")
     print(f"  actions ({len(actions)}): {', '.join(actions)}")
     print(f"  fps: {sorted({d.fps for d in demos})}; NaN values: {nan}")
@@ -244,14 +273,44 @@ def main() -> None:
         groups=("data",),
         root_keys="progress=true|false (a generated set draws from data.generator.seed)",
     )
-    if args and not args[0].startswith("-") and "=" not in args[0]:
-        if args[0] not in COMMANDS:
-            msg = f"error: unknown command {args[0]!r}; expected one of {COMMANDS}"
+    at = command_index(args)
+    if at is not None:
+        if args[at] not in COMMANDS:
+            msg = f"error: unknown command {args[at]!r}; expected one of {COMMANDS}"
             print(msg, file=sys.stderr)
             raise SystemExit(2)
-        _command = args.pop(0)
+        _command = args.pop(at)
         sys.argv = [sys.argv[0], *args]
     run_app(_app)
+
+
+#: Hydra's flags that take the next word as their value (``--cfg job``, ``-cn config``)
+_VALUE_FLAGS = frozenset(
+    ("--cfg", "-c", "--package", "-p", "--config-path", "-cp", "--config-name", "-cn",
+     "--config-dir", "-cd", "--experimental-rerun")
+)  # fmt: skip
+#: the values of Hydra's ``--info`` (``-i``), whose value may be left out
+_INFO_VALUES = frozenset(("all", "config", "defaults", "defaults-tree", "plugins", "searchpath"))
+
+
+def command_index(args: list[str]) -> int | None:
+    """The place of the command word in ``args`` (``generate`` in ``-m generate seed=1``):
+    the first word that is not a flag, a flag's value, nor an override (``key=value``,
+    ``~key``); None when there is none (``generate`` by default)."""
+    value_next = False
+    for i, arg in enumerate(args):
+        if value_next:
+            value_next = False
+            continue
+        if arg.startswith("-"):
+            value_next = arg in _VALUE_FLAGS or (
+                arg in ("--info", "-i") and i + 1 < len(args) and args[i + 1] in _INFO_VALUES
+            )
+            continue
+        if "=" in arg or arg.startswith("~"):
+            continue
+        return i
+    return None
 
 
 if __name__ == "__main__":

@@ -258,6 +258,63 @@ def test_a_training_sweep_trains_one_predictor_per_job_and_summarises_them(
     assert (sweep / "summary" / "metrics.png").exists()
 
 
+def test_a_dataset_sweep_ends_with_a_table_of_its_jobs(tmp_path: Path) -> None:
+    """``iplanner-data generate -m`` and ``iplanner-data info -m``: each job records its
+    dataset's counts in its folder (dataset_summary.json), and the sweep prints them as a
+    table and writes summary/results.csv; the counts are those the datasets hold (read back
+    with load_demonstrations). A data sweep ended with Hydra's lines alone."""
+    from iplanner_torch.data.io import load_demonstrations
+
+    sweep, info = tmp_path / "sweep", tmp_path / "info"
+    gen = ["iplanner-data", "generate", "-m", "data.generator.seed=1,2",
+           f"data.path={tmp_path}/ds${{hydra:job.num}}", "data.generator.n_targets=2",
+           "data.generator.reaches_per_target=1", f"hydra.sweep.dir={sweep}",
+           "progress=false"]  # fmt: skip
+    res = _run(gen, tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    head = ["job", "data.generator.seed", "dataset", "demonstrations", "frames", "megabytes",
+            "seconds"]  # fmt: skip
+    assert head in [line.split() for line in res.stdout.splitlines()], res.stdout
+    assert f"sweep summary: {sweep / 'summary' / 'results.md'}" in res.stdout
+    df = pd.read_csv(sweep / "summary" / "results.csv")
+    assert list(df["data.generator.seed"]) == [1, 2]
+    for job, row in df.iterrows():
+        demos = load_demonstrations(tmp_path / f"ds{job}")
+        assert row["dataset"] == str(tmp_path / f"ds{job}")
+        assert row["demonstrations"] == len(demos)
+        assert row["frames"] == sum(d.num_frames for d in demos)
+    # the command word after -m (it was taken for an override: "cannot parse override 'info'")
+    res = _run(["iplanner-data", "-m", "info", f"data.path={tmp_path / 'ds0'},{tmp_path / 'ds1'}",
+                f"hydra.sweep.dir={info}"], tmp_path)  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = pd.read_csv(info / "summary" / "results.csv")
+    assert list(rows["frames"]) == list(df["frames"]) and list(rows["joints"]) == [10, 10]
+    assert "nan_values" in res.stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "at"),
+    [
+        (["generate", "seed=1"], 0),
+        (["-m", "info", "data.path=a,b"], 1),
+        (["--multirun", "data.generator.seed=1,2", "generate"], 2),
+        (["--cfg", "job", "info"], 2),
+        (["-cn", "config", "~data.fps", "info"], 3),
+        (["--info", "all", "generate"], 2),
+        (["--info", "info"], 1),
+        (["data.path=x", "+data.fps=15", "-m"], None),
+        ([], None),
+        (["-m", "genrate"], 1),  # named as an unknown command by main()
+    ],
+)
+def test_the_data_command_word_is_found_among_hydras_flags(
+    args: list[str], at: int | None
+) -> None:
+    from iplanner_torch.cli.data import command_index
+
+    assert command_index(args) == at
+
+
 JOBLIB = "hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher"
 LOCAL = "hydra_plugins.hydra_submitit_launcher.submitit_launcher.LocalLauncher"
 SLURM = "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher"
