@@ -791,7 +791,11 @@ def _record_inputs(
             f"cannot resume in {out_dir}: {err}; run with train.resume=false"
         ) from None
     if before is not None:
-        changed = sorted(k for k in RESUME_RECORD_KEYS if before.get(k) != inputs[k])
+        changed = [
+            _record_change(k, before.get(k), inputs[k])
+            for k in RESUME_RECORD_KEYS
+            if before.get(k) != inputs[k]
+        ]
         for key, fields in (
             ("trainer_cfg", RESUME_TRAINER_FIELDS),
             ("split", RESUME_SPLIT_FIELDS),
@@ -801,7 +805,7 @@ def _record_inputs(
                 continue
             differ = [f"{f} {was.get(f)!r} -> {now[f]!r}" for f in fields if was.get(f) != now[f]]
             if differ:
-                changed.append(f"{key} ({', '.join(differ)})")
+                changed.append(f"{_RECORD_NAMES[key]} ({', '.join(differ)})")
         if changed:
             values = " (recorded -> now)" if any("->" in c for c in changed) else ""
             raise CheckpointError(
@@ -818,6 +822,44 @@ def _record_inputs(
         )
     path.write_text(json.dumps(inputs, indent=2) + "\n", encoding="utf-8")
     return inputs_digest(inputs)
+
+
+#: how a resume refusal names the parts of a training record
+_RECORD_NAMES = {
+    "fingerprint": "training data",
+    "action_names": "actions",
+    "joint_names": "joints",
+    "predictor_cfg": "predictor settings",
+    "window_cfg": "window settings (data.windows)",
+    "trainer_cfg": "trainer settings",
+    "split": "split",
+}
+
+
+def _flat(value: Any, prefix: str = "") -> dict[str, Any]:
+    """A nested dict as ``{"svgp.num_inducing": 16, ...}``."""
+    if not isinstance(value, dict):
+        return {prefix: value}
+    out: dict[str, Any] = {}
+    for k, v in value.items():
+        out.update(_flat(v, f"{prefix}.{k}" if prefix else str(k)))
+    return out
+
+
+def _record_change(key: str, was: Any, now: Any) -> str:
+    """What differs in part ``key`` of a training record, in words: ``training data (other
+    demonstrations, or other windows of them)``, ``joints [...] -> [...]``, ``predictor
+    settings (svgp.num_inducing 16 -> 8)``."""
+    name = _RECORD_NAMES.get(key, key)
+    if key == "fingerprint":
+        return f"{name} (other demonstrations, or other windows of them)"
+    if isinstance(was, dict) and isinstance(now, dict):
+        a, b = _flat(was), _flat(now)
+        keys = [k for k in dict.fromkeys([*a, *b]) if a.get(k) != b.get(k)]
+        shown = [f"{k} {a.get(k)!r} -> {b.get(k)!r}" for k in keys[:4]]
+        more = f", and {len(keys) - 4} more" if len(keys) > 4 else ""
+        return f"{name} ({', '.join(shown)}{more})"
+    return f"{name} ({was!r} -> {now!r})"
 
 
 def _train_classifier(

@@ -4,6 +4,7 @@ demonstration (seed, fractions, held-out names) and the trainer settings."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -100,10 +101,12 @@ def test_resume_refuses_other_trainer_settings_and_split(
     windows, cfg, split = tiny_reaching.windows, tiny_reaching.cfg, tiny_reaching.split
     out = tmp_path / "ck"
 
-    def run(resume: bool = False, split: SplitRecord = split, **trainer: Any) -> Path:
+    def run(
+        resume: bool = False, split: SplitRecord = split, predictor: Any = cfg, **trainer: Any
+    ) -> Path:
         return train_predictor(
             windows,
-            predictor_cfg=cfg,
+            predictor_cfg=predictor,
             trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False, **trainer),
             out_dir=out,
             progress=False,
@@ -121,11 +124,19 @@ def test_resume_refuses_other_trainer_settings_and_split(
         assert inputs["trainer_cfg"]["max_steps"] == 8
         stamps = {p.name: p.stat().st_mtime_ns for p in out.glob("*.ckpt")}
         with pytest.raises(CheckpointError, match=rf"^cannot resume in {out}: its sub-models were "
-                           r"trained with other trainer_cfg \(max_steps 8 -> 5\) than this run's "
+                           r"trained with other trainer settings \(max_steps 8 -> 5\) than this "
+                           r"run's "
                            r"\(recorded -> now\).*train.resume=false$"):  # fmt: skip
             run(resume=True, max_steps=5)
-        with pytest.raises(CheckpointError, match=r"other trainer_cfg \(seed 0 -> 3\)"):
+        with pytest.raises(CheckpointError, match=r"other trainer settings \(seed 0 -> 3\)"):
             run(resume=True, max_steps=8, seed=3)
+        # the settings that differ are named by their keys, not as the record's field
+        imp, ind = cfg.ivm_max_import, cfg.svgp.num_inducing
+        fewer = replace(cfg, ivm_max_import=imp + 1, svgp=replace(cfg.svgp, num_inducing=ind + 2))
+        named = (rf"other predictor settings \(svgp.num_inducing {ind} -> {ind + 2}, "
+                 rf"ivm_max_import {imp} -> {imp + 1}\) than")  # fmt: skip
+        with pytest.raises(CheckpointError, match=named):
+            run(resume=True, max_steps=8, predictor=fewer)
         other = SplitRecord(seed=1, fractions=(0.5, 0.25, 0.25), held_out=split.held_out)
         with pytest.raises(CheckpointError, match=r"other split \(fractions \[0.6, 0.2, 0.2\] "
                            r"-> \[0.5, 0.25, 0.25\]\)"):  # fmt: skip

@@ -109,9 +109,11 @@ def test_resume_never_mixes_in_sub_models_of_other_inputs(tmp_path: Path) -> Non
     ckpt_a = (tmp_path / "a" / "predictor.ckpt").read_bytes()
     recorded = (tmp_path / "a" / "training_inputs.json").read_text()
     assert '"fingerprint"' in recorded and '"n_future": 8' in recorded
-    with pytest.raises(CheckpointError, match="trained with other fingerprint, window_cfg"):
+    with pytest.raises(CheckpointError, match=r"trained with other training data \(other "
+                       r"demonstrations, or other windows of them\), window settings "
+                       r"\(data.windows\) \(n_future 8 -> 5\) than"):  # fmt: skip
         train(b, tmp_path / "a", resume=True)
-    with pytest.raises(CheckpointError, match="other predictor_cfg"):
+    with pytest.raises(CheckpointError, match=r"other predictor settings \(svgp.noisy_input "):
         train_predictor(
             a, predictor_cfg=_cfg("nigp"), trainer_cfg=tcfg, out_dir=tmp_path / "a",
             progress=False, resume=True,
