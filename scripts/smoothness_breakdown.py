@@ -29,8 +29,9 @@ evaluate.mode=episode`` keeps them apart) and planner, the means of
   logs without bounds).
 
 ``--episodes`` prints one row per episode as well. Logs that cannot be split, and truncated
-or damaged logs (read only up to their last complete chunk) unless ``--include-incomplete``,
-are left out and named.
+or damaged logs (read only up to their last complete chunk) and those of episodes interrupted
+before their end (``Episode.interrupted``) unless ``--include-incomplete``, are left out and
+named.
 """
 
 from __future__ import annotations
@@ -75,7 +76,7 @@ def main() -> None:
     parser.add_argument(
         "--include-incomplete",
         action="store_true",
-        help="count truncated or damaged logs too (what was read of them)",
+        help="count truncated, damaged or interrupted logs too (what was read of them)",
     )
     args = parser.parse_args()
     if not (math.isfinite(args.settle) and args.settle >= 0.0):
@@ -96,6 +97,12 @@ def main() -> None:
                 ep = read_episode(path)
             if not ep.complete and not args.include_incomplete:
                 skipped.append(f"{path}: truncated or damaged (--include-incomplete counts it)")
+                continue
+            if ep.interrupted and not args.include_incomplete:
+                skipped.append(
+                    f"{path}: the episode was interrupted before its end (--include-incomplete "
+                    "counts it)"
+                )
                 continue
             for w in caught:
                 print(f"warning: {w.message}", file=sys.stderr)

@@ -226,6 +226,7 @@ def _row_of_path(p: Path) -> dict[str, Any]:
         row = _flatten(ep.metadata)
         row.update({_metric_name(k): v for k, v in _flatten(ep.metrics()).items()})
         row["complete"] = ep.complete
+        row["interrupted"] = ep.interrupted
     elif p.suffix == ".json":
         try:
             record = json.loads(p.read_text(encoding="utf-8"))
@@ -596,21 +597,29 @@ def _has_touched(df: pd.DataFrame) -> bool:
 
 
 def incomplete_logs_note(df: pd.DataFrame) -> str:
-    """A sentence naming how many episodes came from truncated or damaged logs ('' if none).
+    """A sentence naming how many episodes came from truncated or damaged logs, and how many
+    were interrupted before their end ('' if none).
 
     Args:
         df: per-episode results (:func:`gather_results`; its ``complete`` column is False for
-            a log read only up to its last complete chunk).
+            a log read only up to its last complete chunk, its ``interrupted`` column True for
+            a whole log of an episode stopped by Ctrl-C or an error).
     """
     if "complete" not in df.columns:
         return ""
-    bad = int(df["complete"].eq(False).sum())
-    if bad == 0:
+    cut = df["complete"].eq(False)
+    stopped = df["interrupted"].eq(True) & ~cut if "interrupted" in df.columns else cut & False
+    bad = int(cut.sum())
+    if bad + int(stopped.sum()) == 0:
         return ""
-    unknown = int(episode_contact(df[df["complete"].eq(False)]).isna().sum())
+    unknown = int(episode_contact(df[cut | stopped]).isna().sum())
+    what = [f"truncated or damaged episode logs: {bad} of {len(df)}"] if bad else []
+    if stopped.any():
+        what.append(f"episodes interrupted before their end: {int(stopped.sum())} of {len(df)}")
+    them = "them" if len(what) == 1 else "those"
     return (
-        f"truncated or damaged episode logs: {bad} of {len(df)}; the contact of {unknown} of "
-        "them is unknown (counted in contact_unknown, not in contact_free)."
+        f"{'; '.join(what)}; the contact of {unknown} of {them} is unknown (counted in "
+        "contact_unknown, not in contact_free)."
     )
 
 

@@ -274,6 +274,8 @@ def episode_timeline(episode: Episode | str | Path) -> Timeline:
         )
         or Path(episode.path).stem
     )
+    if episode.interrupted:  # a whole file whose episode was stopped (Ctrl-C, an error)
+        title += f"  (interrupted at t = {end_t:.1f} s: no metrics)"
     return Timeline(
         scene_t=scene_t,
         gap_m=gap,

@@ -348,7 +348,9 @@ class Episode:
         complete: whether every data record is there: False when the file was cut or
             damaged before the end of its data section (it is then read up to its last
             complete chunk), or its episode metadata record is missing. A file cut or damaged
-            only in its summary section is complete (and read with a warning).
+            only in its summary section is complete (and read with a warning). An episode
+            stopped by Ctrl-C or an error closes its file properly: that log is complete,
+            and :attr:`interrupted` says the episode is not.
         foreign: whether the file is another program's MCAP file rather than an episode log:
             every data record is there but no ``iplanner.episode`` metadata record
             (:data:`EPISODE_METADATA_NAME`) is (``complete`` is then False: which episode it
@@ -486,6 +488,16 @@ class Episode:
         """Task events in file order, each ``{"t": ..., "kind": ..., "detail": {...}}``."""
         df = self.frames.get("/task/events")
         return [] if df is None else df.to_dict("records")
+
+    @property
+    def interrupted(self) -> bool:
+        """Whether the episode was stopped before its end (Ctrl-C, an exception): its
+        writer, closed on the error, logged an ``interrupted`` task event. Such a file is
+        whole (``complete`` can be True) but the episode is not: it has no metrics."""
+        df = self.frames.get("/task/events")
+        return (
+            df is not None and "kind" in df.columns and bool((df["kind"] == "interrupted").any())
+        )
 
     def metrics(self) -> dict[str, Any]:
         """The last ``/episode/metrics`` message's dict ({} when none was logged)."""

@@ -817,6 +817,43 @@ def test_a_truncated_log_counts_as_unknown_contact_in_every_table(tmp_path: Path
     assert note in md and "| itomp | 3 | 1 | 1 | 2 |" in md
 
 
+def _stopped_log(path: Path) -> Path:
+    """A whole log of an episode stopped by Ctrl-C: its writer closed on the interrupt (an
+    ``interrupted`` event), before the metrics."""
+    joints = [f"j{i}" for i in range(7)]
+    meta = {"scenario": "s1", "planner": "itomp", "seed": 0}
+    with pytest.raises(KeyboardInterrupt):
+        with EpisodeWriter(path, metadata=meta) as log:
+            log.robot_state(0.0, [0.0] * 7, [0.0] * 7, joints)
+            raise KeyboardInterrupt
+    return path
+
+
+def test_an_interrupted_episode_counts_as_unknown_and_is_named(tmp_path: Path) -> None:
+    """Its log is whole (complete) but it has no metrics: the note names it apart from the
+    cut logs (it was counted in contact_unknown and named nowhere)."""
+    logs = tmp_path / "logs"
+    _episode_log(logs / "0.mcap", FREE)
+    stopped = read_episode(_stopped_log(logs / "1.mcap"))
+    assert stopped.complete and stopped.interrupted and stopped.metrics() == {}
+    assert not read_episode(logs / "0.mcap").interrupted
+    df = gather_results(logs)
+    assert list(df["complete"]) == [True, True] and list(df["interrupted"]) == [False, True]
+    row = comparison_table(df).iloc[0]
+    assert (row.episodes, row.contact_free, row.contact_unknown) == (2, 1, 1)
+    assert incomplete_logs_note(df) == (
+        "episodes interrupted before their end: 1 of 2; the contact of 1 of them is unknown "
+        "(counted in contact_unknown, not in contact_free)."
+    )
+    _cut(_episode_log(logs / "2.mcap", FREE))
+    with pytest.warns(DataWarning, match="truncated or damaged"):
+        df = gather_results(logs)
+    assert incomplete_logs_note(df).startswith(
+        "truncated or damaged episode logs: 1 of 3; episodes interrupted before their end: 1 "
+        "of 3; the contact of 2 of those is unknown"
+    )
+
+
 def _overrun_rows(overruns: list[float], realtime: list[float]) -> pd.DataFrame:
     rows = [
         {"scenario": "s", "planner": "itomp", "seed": i, "smoothness": 3.0,

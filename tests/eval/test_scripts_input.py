@@ -356,6 +356,18 @@ def test_breakdown_leaves_truncated_logs_out_and_names_them(tmp_path, run_script
     code, out, err = run_script("smoothness_breakdown", tmp_path, "--include-incomplete")
     assert code == 0 and [r[2] for r in _table_rows(out)] == ["2"]
     assert "warning: " in err and "truncated" in err
+    # a whole log of an episode stopped by Ctrl-C (it was counted as a finished episode)
+    with (
+        pytest.raises(KeyboardInterrupt),
+        EpisodeWriter(
+            tmp_path / "stopped.mcap", metadata={"scenario": "s1", "planner": "itomp", "seed": 2}
+        ) as log,
+    ):
+        log.robot_state(0.0, [0.0, 0.0], [0.0, 0.0], ["a", "b"])
+        raise KeyboardInterrupt
+    code, out, err = run_script("smoothness_breakdown", tmp_path)
+    assert code == 0 and [r[2] for r in _table_rows(out)] == ["1"]
+    assert "stopped.mcap: the episode was interrupted before its end" in err
 
 
 def test_breakdown_reads_one_log_and_names_a_missing_path(tmp_path, run_script) -> None:
