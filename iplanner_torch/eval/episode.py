@@ -236,7 +236,8 @@ class EpisodeCfg:
     # logged frame by frame at the tracker's own times
     log_hz: float = 15.0
     # rate of the log's 3D scene (/scene: robot and human spheres, the latest forecast's
-    # joint ellipsoids at SCENE_HORIZONS_S) for Foxglove's 3D panel [Hz]; 0: none
+    # joint ellipsoids at SCENE_HORIZONS_S) for Foxglove's 3D panel [Hz], as a whole number of
+    # control steps, as log_hz (40 Hz at 0.01 s: every 2nd step, 50 Hz); 0: none
     scene_hz: float = 5.0
     # blocking scenario: seconds the episode runs after the robot reached its goal
     blocking_tail_s: float = 0.5
