@@ -369,7 +369,17 @@ class HumanMotionPredictor:
 
     # -------------------------------------------------------------------------- inference
     def normalise_features(self, f_prev: torch.Tensor) -> torch.Tensor:
-        """(B, n_p, D) features -> normalised features (classifier input)."""
+        """(B, n_p, D) features -> normalised features (classifier input).
+
+        Raises:
+            ShapeError: unless ``f_prev`` is a floating (B, n_p, D) tensor.
+        """
+        check_shape("f_prev", f_prev, ("B", self.n_prev, self.num_features))
+        _check_floating("f_prev", f_prev)
+        return self._normalise(f_prev)
+
+    def _normalise(self, f_prev: torch.Tensor) -> torch.Tensor:
+        """:meth:`normalise_features` without the checks."""
         return (f_prev - self.feat_mean) / self.feat_std
 
     def model_for(self, progress: int, action: int) -> SVGPRegressor | None:
@@ -378,7 +388,19 @@ class HumanMotionPredictor:
         return reg if reg is not None else self.pooled.get(int(action))
 
     def action_weights(self, f_prev: torch.Tensor, progress: torch.Tensor) -> torch.Tensor:
-        """(B, A) p(c | F_prev, p) (eq. IVMclassifier); uniform without a classifier."""
+        """(B, A) p(c | F_prev, p) (eq. IVMclassifier) of (B, n_p, D) windows at progress
+        states (B,) long; uniform without a classifier.
+
+        Raises:
+            ShapeError: as :meth:`predict`, for shapes, dtypes and an empty batch.
+            ConfigError: as :meth:`predict`, for progress states out of range.
+            DataError: as :meth:`predict`, for windows that are not finite.
+        """
+        f_prev, progress = self._checked_windows(f_prev, progress, positions_checked=False)
+        return self._action_weights(f_prev, progress)
+
+    def _action_weights(self, f_prev: torch.Tensor, progress: torch.Tensor) -> torch.Tensor:
+        """:meth:`action_weights` of checked windows."""
         b = f_prev.shape[0]
         if self.classifier is None:
             return torch.full(
@@ -387,7 +409,7 @@ class HumanMotionPredictor:
                 dtype=f_prev.dtype,
                 device=f_prev.device,
             )
-        x = self.normalise_features(f_prev)
+        x = self._normalise(f_prev)
         if not hasattr(self.classifier, "to"):  # a CPU-only classifier: evaluate it there
             x, progress = x.cpu(), progress.cpu()
         w = self.classifier.predict_proba(x, progress)
@@ -475,12 +497,11 @@ class HumanMotionPredictor:
         """
         return self._predict(f_prev, progress, positions_checked=False)
 
-    def _predict(
+    def _checked_windows(
         self, f_prev: torch.Tensor, progress: torch.Tensor, *, positions_checked: bool
-    ) -> Forecast:
-        """:meth:`predict`; ``positions_checked``: the caller has already refused positions
-        beyond :data:`MAX_POSITION_M` (:meth:`predict_positions`), so only finiteness is
-        checked here."""
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``f_prev`` (B, n_p, D) as float32 and ``progress`` (B,) on the predictor's device,
+        checked as :meth:`predict` checks them (``positions_checked``: only finiteness)."""
         check_shape("f_prev", f_prev, ("B", self.n_prev, self.num_features))
         if f_prev.shape[0] == 0:
             raise ShapeError(
@@ -492,10 +513,21 @@ class HumanMotionPredictor:
         f_prev = f_prev.detach().to(self.device, torch.float32)
         progress = self._check_progress(progress.to(self.device))
         self._check_window_values(f_prev, check_range=not positions_checked)
+        return f_prev, progress
+
+    def _predict(
+        self, f_prev: torch.Tensor, progress: torch.Tensor, *, positions_checked: bool
+    ) -> Forecast:
+        """:meth:`predict`; ``positions_checked``: the caller has already refused positions
+        beyond :data:`MAX_POSITION_M` (:meth:`predict_positions`), so only finiteness is
+        checked here."""
+        f_prev, progress = self._checked_windows(
+            f_prev, progress, positions_checked=positions_checked
+        )
         b, k, a_n = f_prev.shape[0], self.num_joints, self.num_actions
         pose = f_prev[:, -1, : 3 * k].reshape(b, k, 3)  # (B, K, 3) current pose
         x = gp_inputs(f_prev, k, self.cfg.gp_input)  # (B, n_p * D)
-        weights = self.action_weights(f_prev, progress)
+        weights = self._action_weights(f_prev, progress)
         uniq = torch.unique(progress).tolist()
         banks = {p: self._bank(int(p)) for p in uniq}
         if all(len(have) == a_n for _, have in banks.values()):

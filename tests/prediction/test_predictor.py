@@ -258,6 +258,33 @@ def test_empty_batch_and_bad_progress_raise(trained) -> None:
     torch.testing.assert_close(fc.mean, pred.predict(w.f_prev[:2], w.progress[:2]).mean)
 
 
+def test_action_weights_and_normalise_features_check_their_input(trained) -> None:
+    """The public classifier entry points check windows and progress as predict does (a
+    wrong feature count was torch's size-mismatch error, numpy input a TypeError, and
+    progress out of range and an empty batch gave weights)."""
+    path, w = trained
+    pred = HumanMotionPredictor.load(path)
+    f, prog = w.f_prev[:2], w.progress[:2]
+    weights = pred.action_weights(f, prog)
+    assert weights.shape == (2, pred.num_actions)
+    torch.testing.assert_close(weights, pred.predict(f, prog).weights)
+    with pytest.raises(ShapeError, match="f_prev"):
+        pred.action_weights(f[..., :5], prog)
+    with pytest.raises(ShapeError, match="expected at least one window in f_prev"):
+        pred.action_weights(f[:0], prog[:0])
+    with pytest.raises(ConfigError, match=r"expected progress bitmasks >= 0 .*\(window 0\)"):
+        pred.action_weights(f, torch.tensor([-5, 1]))
+    bad = f.clone()
+    bad[0, 1, 2] = float("nan")
+    with pytest.raises(DataError, match="f_prev is NaN/Inf at window 0, frame 1"):
+        pred.action_weights(bad, prog)
+    with pytest.raises(ShapeError, match="f_prev"):
+        pred.normalise_features(f.numpy())
+    with pytest.raises(ShapeError, match="f_prev"):
+        pred.normalise_features(f[:, :, :5])
+    torch.testing.assert_close(pred.normalise_features(f), (f - pred.feat_mean) / pred.feat_std)
+
+
 def test_predict_refuses_non_float_windows_and_far_positions(trained) -> None:
     """As predict_positions: complex (the imaginary part used to be dropped with only torch's
     warning), integer and bool windows are refused, and so are positions beyond 100 m."""
