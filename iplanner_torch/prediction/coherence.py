@@ -23,6 +23,7 @@ over those actions for an unseen p; the task planner uses it.
 
 from __future__ import annotations
 
+import operator
 from typing import Any
 
 import torch
@@ -38,6 +39,31 @@ def _check_int(name: str, t: Tensor, n: int | None = None) -> None:
     check_shape(name, t, (n if n is not None else "B",))
     if t.dtype != torch.int64:
         raise ShapeError(f"expected {name} int64, got {t.dtype}")
+
+
+def _pair(p: Any, c: Any, num_actions: int) -> tuple[int, int]:
+    """``(p, c)`` as ints: a progress bitmask >= 0 and an action in [0, num_actions).
+
+    Raises:
+        ConfigError: for anything else (``int()`` used to truncate 0.5 to 0 and take -1 or 9).
+    """
+    out = []
+    for name, v in (("progress", p), ("current action", c)):
+        try:
+            if isinstance(v, bool):
+                raise TypeError
+            out.append(operator.index(v))
+        except TypeError:
+            raise ConfigError(
+                f"NextActionModel: expected the {name} an integer, got {v!r}"
+            ) from None
+    if out[0] < 0:
+        raise ConfigError(f"NextActionModel: expected the progress bitmask >= 0, got {out[0]}")
+    if not 0 <= out[1] < num_actions:
+        raise ConfigError(
+            f"NextActionModel: expected the current action in [0, {num_actions}), got {out[1]}"
+        )
+    return out[0], out[1]
 
 
 class NextActionModel:
@@ -134,10 +160,12 @@ class NextActionModel:
 
         Raises:
             CheckpointError: before fit.
+            ConfigError: for a ``p`` or ``c`` that is not an integer (a bool or a float
+                included), a negative ``p``, or a ``c`` outside [0, A).
         """
         if self.num_actions == 0:
             raise CheckpointError("NextActionModel is not fitted: call fit() or from_state_dict()")
-        p, c = int(p), int(c)
+        p, c = _pair(p, c, self.num_actions)
         a = self.num_actions
         others = torch.arange(a) != c
         allowed = self._not_completed(p) & others
@@ -165,6 +193,10 @@ class NextActionModel:
 
         Returns:
             (B, A) float64 probabilities (on progress's device), rows sum to 1.
+
+        Raises:
+            ShapeError: unless both are (B,) int64.
+            ConfigError: as :meth:`next_action_prob`, naming the first bad row.
         """
         _check_int("progress", progress)
         _check_int("current", current, progress.shape[0])

@@ -101,3 +101,33 @@ def test_state_dict_round_trip_and_errors():
         NextActionModel().fit(pp, cc, nn, num_actions=3)
     with pytest.raises(ConfigError, match="smoothing >= 0"):
         NextActionModel().fit(pp, cc, nn, num_actions=4, smoothing=-1.0)
+
+
+@pytest.mark.parametrize(
+    ("p", "c", "message"),
+    [
+        (0, 9, r"current action in \[0, 4\), got 9"),
+        (0, -1, r"current action in \[0, 4\), got -1"),
+        (-2, 0, r"progress bitmask >= 0, got -2"),
+        (0.5, 0, r"progress an integer, got 0.5"),
+        (0, 1.0, r"current action an integer, got 1.0"),
+        (True, 0, r"progress an integer, got True"),
+    ],
+)
+def test_out_of_range_pairs_are_refused(p, c, message):
+    """They gave a plausible distribution (int() truncated 0.5, and -1 or 9 picked no row)."""
+    m = _fit(0.5)
+    with pytest.raises(ConfigError, match=f"^NextActionModel: expected the {message}$"):
+        m.next_action_prob(p, c)
+    if isinstance(p, int) and isinstance(c, int) and not isinstance(p, bool):
+        with pytest.raises(ConfigError, match=message):
+            m.prob(torch.tensor([0, p]), torch.tensor([0, c]))
+
+
+def test_integer_kinds_are_taken() -> None:
+    """numpy and 0-d torch integers are integers (operator.index)."""
+    import numpy as np
+
+    m = _fit(0.5)
+    want = m.next_action_prob(1, 3)
+    assert torch.equal(m.next_action_prob(np.int64(1), torch.tensor(3)), want)
