@@ -46,6 +46,15 @@ def _check_waypoints(q: torch.Tensor, qd_start: torch.Tensor | None = None) -> N
     check_shape("q", q, ("...", "W", "J"))
     if qd_start is not None:
         check_shape("qd_start", qd_start, ("...", q.shape[-1]))
+        lead, given = tuple(q.shape[:-2]), tuple(qd_start.shape[:-1])
+        # broadcastable to q's leading dimensions (a Python test, no torch call)
+        if len(given) > len(lead) or any(
+            s not in (1, t) for s, t in zip(reversed(given), reversed(lead), strict=False)
+        ):
+            raise ShapeError(
+                f"expected qd_start (..., J) whose leading dimensions broadcast to those of q "
+                f"{tuple(q.shape)}: {lead}, got {tuple(qd_start.shape)}"
+            )
         if q.shape[-2] < 2:
             raise ShapeError(
                 f"expected q (..., W, J) with W >= 2 when qd_start is given, got {tuple(q.shape)}"
@@ -79,7 +88,8 @@ def accelerations(
     Args:
         q: (..., W, J) joint positions [rad].
         dt: seconds between waypoints, finite and > 0.
-        qd_start: (..., J) or (J,) velocity at the first waypoint [rad/s]; when given, the
+        qd_start: (..., J) or (J,) velocity at the first waypoint [rad/s], its leading
+            dimensions broadcastable to those of ``q``; when given, the
             acceleration at the first waypoint ``2 ((q_1 - q_0) / dt - qd_start) / dt`` is
             prepended: the change from ``qd_start`` to the first segment's mean velocity,
             which is the velocity half a step later (exact for a constant acceleration, as the
@@ -90,7 +100,8 @@ def accelerations(
 
     Raises:
         ShapeError: when ``q`` has fewer than 2 dimensions (no joint axis), ``qd_start`` does
-            not end in J, or ``qd_start`` is given with fewer than 2 waypoints.
+            not end in J or its leading dimensions do not broadcast to ``q``'s, or
+            ``qd_start`` is given with fewer than 2 waypoints.
         ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
     _check_waypoints(q, qd_start)

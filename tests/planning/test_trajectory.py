@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -274,3 +275,24 @@ def test_uniform_times_beyond_the_dtype_range_are_a_config_error() -> None:
     with pytest.raises(ConfigError, match=r"expected waypoint times within torch.float32's"):
         uniform_times(0.0, 1e300, 5, torch.zeros(1))
     assert uniform_times(0.0, 1e300, 5, torch.zeros(1, dtype=torch.float64))[-1] == 1e300
+
+
+def test_accelerations_refuse_a_start_velocity_that_does_not_broadcast() -> None:
+    """It was torch's size-mismatch or expand error; one that broadcasts is taken, and a
+    batch of start velocities gives each trajectory its own first row."""
+    q = torch.randn(3, 8, 7, dtype=torch.float64)
+    for bad in (torch.zeros(5, 7), torch.zeros(2, 3, 7)):
+        with pytest.raises(ShapeError, match=r"qd_start .*broadcast to those of q \(3, 8, 7\): "
+                           rf"\(3,\), got {re.escape(str(tuple(bad.shape)))}"):  # fmt: skip
+            accelerations(q, 0.1, bad.double())
+    with pytest.raises(ShapeError, match=r"broadcast to those of q \(8, 7\): \(\), got \(3, 7\)"):
+        accelerations(q[0], 0.1, torch.zeros(3, 7, dtype=torch.float64))
+    qd = torch.randn(3, 7, dtype=torch.float64)
+    acc = accelerations(q, 0.1, qd)
+    assert acc.shape == (3, 7, 7)
+    for b in range(3):
+        torch.testing.assert_close(acc[b], accelerations(q[b], 0.1, qd[b]))
+    torch.testing.assert_close(
+        accelerations(q, 0.1, qd[:1]), accelerations(q, 0.1, qd[:1].expand(3, 7))
+    )
+    torch.testing.assert_close(accelerations(q, 0.1, qd[0]), accelerations(q, 0.1, qd[:1]))
