@@ -733,11 +733,12 @@ class HumanMotionPredictor:
                 a path the system cannot look up (a name too long), a checkpoint of another
                 format version than ``CHECKPOINT_VERSION``, a sub-model class that cannot be
                 imported, a field missing or of the wrong type, or a checkpoint of another joint
-                set than ``expect_joints``.
+                set than ``expect_joints``; for a ``path`` that is not a str or os.PathLike
+                (None, a number).
             ConfigError: when ``map_location`` is not a device, is ``meta`` (no data), or is
                 one this machine lacks; when ``expect_joints`` is not a list or tuple.
         """
-        path = Path(path)
+        path = checks.path_argument(path, "of a predictor checkpoint", error=CheckpointError)
         if map_location is not None:
             try:
                 device = torch.device(map_location)

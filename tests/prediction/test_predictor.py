@@ -422,6 +422,10 @@ def test_damaged_or_foreign_checkpoints_raise_checkpoint_errors(trained, tmp_pat
     assert HumanMotionPredictor.load(plain).classifier is None
     with pytest.raises(CheckpointError, match="is a directory, not a checkpoint file"):
         HumanMotionPredictor.load(tmp_path)
+    for bad in (None, 3, ["a.ckpt"]):  # Path() raised a bare TypeError
+        with pytest.raises(CheckpointError, match=r"expected path a file path \(str or "
+                           r"os.PathLike\) of a predictor checkpoint, got "):  # fmt: skip
+            HumanMotionPredictor.load(bad)
     with pytest.raises(ConfigError, match="expected map_location a torch device.*'bogus'"):
         HumanMotionPredictor.load(path, map_location="bogus")
     # the meta device has no data: a setting error, not a damaged file
