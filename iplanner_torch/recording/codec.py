@@ -27,11 +27,14 @@ from __future__ import annotations
 
 import json
 import math
+import reprlib
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 import torch
+
+from iplanner_torch.errors import DataError
 
 
 def as_numpy(x: Any, dtype: type = np.float64) -> np.ndarray:
@@ -61,8 +64,18 @@ def encode_array(x: Any) -> Any:
 
 
 def decode_array(value: Any) -> np.ndarray:
-    """The float64 array of a value written by :func:`encode_array` (None -> NaN)."""
-    return np.array(value, dtype=np.float64)
+    """The float64 array of a value written by :func:`encode_array` (None -> NaN).
+
+    Raises:
+        DataError: for a value that is not such an array (ragged lists, text other than
+            ``"inf"`` / ``"-inf"``, a dict): numpy's ValueError or TypeError, named.
+    """
+    try:
+        return np.array(value, dtype=np.float64)
+    except (ValueError, TypeError) as err:
+        raise DataError(
+            f"not an array of numbers as encode_array writes them ({err}): {reprlib.repr(value)}"
+        ) from None
 
 
 def encode_scalar(x: Any) -> Any:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from iplanner_torch.errors import DataError
 from iplanner_torch.recording.codec import (
     decode_array,
     decode_value,
@@ -74,3 +75,10 @@ def test_codec_1_reads_null_and_inf_strings_as_floats() -> None:
     assert math.isnan(back["a"]) and back["b"] == [math.inf, -math.inf] and back["c"] == "~x"
     with pytest.raises(ValueError, match="unknown value codec '3'"):
         decode_value({}, "3")
+
+
+@pytest.mark.parametrize("value", [[[1.0, 2.0], [3.0]], "abc", {"a": 1}, ["1", "x"]])
+def test_decode_array_names_a_value_that_is_no_array(value) -> None:
+    """numpy's ValueError or TypeError became a DataError naming the value."""
+    with pytest.raises(DataError, match=r"^not an array of numbers as encode_array writes them"):
+        decode_array(value)
