@@ -134,15 +134,26 @@ def ellipsoid_pose(
     Raises:
         ConfigError: when ``confidence`` is not in (0, 1).
         ShapeError: when ``cov`` is not (..., 3, 3).
-        DataError: when ``cov`` holds NaN or an infinity (or its eigendecomposition fails).
+        DataError: when ``cov`` holds NaN or an infinity (or its eigendecomposition fails),
+            is not symmetric, or has a negative eigenvalue, each beyond rounding (1e-6 of its
+            largest entry).
     """
     if not 0.0 < confidence < 1.0:
         raise ConfigError(f"expected confidence in (0, 1), got {confidence}")
-    return _ellipsoid_axes(as_numpy(cov), float(chi2.ppf(confidence, df=3)))
+    return _ellipsoid_axes(as_numpy(cov), float(chi2.ppf(confidence, df=3)), check=True)
 
 
-def _ellipsoid_axes(c: np.ndarray, k2: float) -> tuple[np.ndarray, np.ndarray]:
-    """Semi-axes (..., 3) and quaternions (..., 4) of covariances c (..., 3, 3) at scale k2."""
+#: how far from symmetric and positive semi-definite (relative to the largest entry) a
+#: covariance given to :func:`ellipsoid_pose` may be: rounding
+_PSD_TOL = 1e-6
+
+
+def _ellipsoid_axes(
+    c: np.ndarray, k2: float, *, check: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """Semi-axes (..., 3) and quaternions (..., 4) of covariances c (..., 3, 3) at scale k2;
+    ``check``: refuse covariances that are not symmetric positive semi-definite beyond
+    rounding (the writer's own, moment-matched ones are clipped at 0 instead)."""
     if c.shape[-2:] != (3, 3):
         raise ShapeError(f"expected cov (..., 3, 3), got {c.shape}")
     if not np.isfinite(c).all():
@@ -154,6 +165,22 @@ def _ellipsoid_axes(c: np.ndarray, k2: float) -> tuple[np.ndarray, np.ndarray]:
             s, u = np.linalg.eigh(0.5 * (c + np.swapaxes(c, -1, -2)))
     except np.linalg.LinAlgError as err:
         raise DataError(f"cannot decompose cov (values too large?): {err}") from err
+    if check and len(c):
+        scale = np.abs(c).max(axis=(-1, -2))  # (E,)
+        tol = _PSD_TOL * np.maximum(scale, np.finfo(np.float64).tiny)
+        skew = np.abs(c - np.swapaxes(c, -1, -2)).max(axis=(-1, -2))
+        if (skew > tol).any():
+            i = int(np.argmax(skew > tol))
+            raise DataError(
+                f"expected cov symmetric, got one whose entries differ from their transposes' "
+                f"by {skew[i]:.3g} (covariance {i} of the flattened batch)"
+            )
+        if (s[:, 0] < -tol).any():
+            i = int(np.argmax(s[:, 0] < -tol))
+            raise DataError(
+                f"expected cov positive semi-definite, got an eigenvalue of {s[i, 0]:.3g} "
+                f"(covariance {i} of the flattened batch)"
+            )
     u[np.linalg.det(u) < 0, :, 2] *= -1.0  # proper rotations
     semi = np.sqrt(k2 * np.clip(s, 0.0, None))
     quat = Rotation.from_matrix(u).as_quat() if len(u) else np.zeros((0, 4))
@@ -707,11 +734,17 @@ class EpisodeWriter:
             t: simulation time [s].
             times: (W,) waypoint times [s].
             bound: (W,) upper bound of the collision probability at each waypoint.
-            confidence: the confidence level (safe where bound <= 1 - confidence).
+            confidence: the confidence level (safe where bound <= 1 - confidence), in (0, 1).
+
+        Raises:
+            ShapeError: for shapes other than those above.
+            DataError: for a ``confidence`` that is not a number in (0, 1).
         """
         tw = _as_tensor("times", times, ("W",))
         b = _as_tensor("bound", bound, (tw.shape[0],))
         confidence = self._number("confidence", confidence)
+        if not 0.0 < confidence < 1.0:  # as the planner and ellipsoid_pose take it
+            raise DataError(f"{self.path}: expected confidence in (0, 1), got {confidence}")
         ns, msg = self._stamped(t)
         msg["times"] = encode_array(tw)
         msg["bound"] = encode_array(b)

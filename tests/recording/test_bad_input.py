@@ -284,6 +284,10 @@ def test_a_task_event_detail_nested_too_deep_is_a_data_error(tmp_path: Path) -> 
          r"expected true \(K, 3\) of numbers, got \[\[0, 0, 0\], \[1, 1\]\]"),
         (lambda log: log.collision_bound(0.0, [0, 1], [0, 0], "high"), DataError,
          r"w.mcap: expected confidence a number, got 'high'"),
+        (lambda log: log.collision_bound(0.0, [0, 1], [0, 0], 2.0), DataError,
+         r"w.mcap: expected confidence in \(0, 1\), got 2.0"),
+        (lambda log: log.collision_bound(0.0, [0, 1], [0, 0], 0.0), DataError,
+         r"w.mcap: expected confidence in \(0, 1\), got 0.0"),
         (lambda log: log.plan(0.0, [0.0], [[1.0]], "false", 0.0, 1.0), DataError,
          r"w.mcap: expected feasible True or False, got 'false'"),
         (lambda log: log.plan(0.0, [0.0], [[1.0]], 1, 0.0, 1.0), DataError,
@@ -357,7 +361,8 @@ def test_a_task_event_detail_nested_too_deep_is_a_data_error(tmp_path: Path) -> 
          r"expected ellipsoids a sequence of SceneEllipsoid or tuples, got None"),
     ],
     ids=["t_str", "t_numeric_str", "t_none", "q_str", "qd_numeric_str", "true_ragged",
-         "confidence_str", "feasible_str", "feasible_int", "wait_s_none", "solve_ms_str",
+         "confidence_str", "confidence_above_1", "confidence_0", "feasible_str",
+         "feasible_int", "wait_s_none", "solve_ms_str",
          "dt_str", "joint_names_int", "joint_names_bytes", "action_names_none",
          "translation_str", "parent_int", "child_none", "metrics_list", "detail_list",
          "t_beyond_uint64_ns", "cov_nan", "cov_inf", "axes_nan", "mean_str", "rgba_3",
@@ -478,6 +483,24 @@ def test_log_times_stop_at_the_largest_unsigned_64_bit_time(tmp_path: Path) -> N
 def test_ellipsoid_pose_refuses_covariances_with_nan() -> None:
     with pytest.raises(DataError, match="expected cov finite, got NaN or an infinity"):
         ellipsoid_pose(np.full((2, 3, 3), np.nan), 0.95)
+
+
+def test_ellipsoid_pose_refuses_covariances_that_are_no_covariances() -> None:
+    """A negative definite one gave semi-axes 0 (its eigenvalues clipped) and an asymmetric
+    one was symmetrised, both without a word; rounding stays accepted."""
+    good = np.diag([0.04, 0.01, 0.0025])
+    batch = np.stack([good, -np.eye(3) * 0.01])
+    with pytest.raises(DataError, match=r"positive semi-definite, got an eigenvalue of -0.01 "
+                       r"\(covariance 1 of the flattened batch\)"):  # fmt: skip
+        ellipsoid_pose(batch, 0.95)
+    skew = good.copy()
+    skew[0, 1] = 0.005
+    with pytest.raises(DataError, match=r"expected cov symmetric, .* by 0.005 \(covariance 0"):
+        ellipsoid_pose(skew, 0.95)
+    near = good + 1e-12 * np.array([[0, 1, 0], [0, 0, 0], [0, 0, -1]])  # rounding
+    semi, _ = ellipsoid_pose(near, 0.95)
+    np.testing.assert_allclose(semi, ellipsoid_pose(good, 0.95)[0], rtol=1e-9)
+    assert ellipsoid_pose(np.zeros((3, 3)), 0.95)[0].tolist() == [0.0, 0.0, 0.0]
 
 
 def test_a_refused_message_fixes_no_channel_names(tmp_path: Path) -> None:
