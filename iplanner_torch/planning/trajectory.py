@@ -361,14 +361,15 @@ def resample_linear(q: torch.Tensor, times: torch.Tensor, new_times: torch.Tenso
     Args:
         q: (B, W, J) joint positions [rad] at ``times``.
         times: (W,) strictly increasing times [s], W >= 2.
-        new_times: (W',) query times [s].
+        new_times: (W',) query times [s]; those outside ``times`` (an infinity included)
+            hold the end poses.
 
     Returns:
         (B, W', J) joint positions [rad].
 
     Raises:
         ShapeError: on inputs of the wrong shape, or fewer than 2 times.
-        DataError: when ``times`` holds NaN or inf.
+        DataError: when ``times`` holds NaN or inf, or ``new_times`` NaN.
         ConfigError: when ``times`` is not strictly increasing.
     """
     check_shape("q", q, ("B", "W", "J"))
@@ -379,8 +380,12 @@ def resample_linear(q: torch.Tensor, times: torch.Tensor, new_times: torch.Tenso
     # strictly increasing times hold no NaN and can only be infinite at their ends: one host
     # synchronisation tests both
     ends = torch.isfinite(times[0]) & torch.isfinite(times[-1])
-    if not bool((times[1:] > times[:-1]).all() & ends):
+    queries = ~torch.isnan(new_times).any()  # (NaN would give NaN rows)
+    if not bool((times[1:] > times[:-1]).all() & ends & queries):
         check_finite("times", times, ("waypoint",))
+        if not bool(queries):
+            i = int(torch.isnan(new_times).nonzero()[0, 0])
+            raise DataError(f"new_times is NaN at query {i}")
         raise ConfigError("expected strictly increasing times")
     tq = new_times.clamp(times[0], times[-1])
     idx = (torch.searchsorted(times, tq, right=True) - 1).clamp(0, times.shape[0] - 2)

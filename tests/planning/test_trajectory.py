@@ -186,6 +186,13 @@ def test_resample_linear_validates_its_times() -> None:
         resample_linear(q, torch.tensor([0.0, math.nan, 2.0]), new_t)
     with pytest.raises(ShapeError, match=r"expected times \(3\), got \(2,\)"):
         resample_linear(q, torch.tensor([0.0, 1.0]), new_t)
+    # a NaN query gave a NaN row; infinite ones hold the end poses
+    with pytest.raises(DataError, match=r"^new_times is NaN at query 1$"):
+        resample_linear(q, torch.tensor([0.0, 1.0, 2.0]), torch.tensor([0.5, math.nan]))
+    ramp = torch.tensor([[[0.0, 0.0], [1.0, 2.0], [2.0, 4.0]]])
+    ends = torch.tensor([-math.inf, math.inf])
+    held = resample_linear(ramp, torch.tensor([0.0, 1.0, 2.0]), ends)
+    assert held.tolist() == [[[0.0, 0.0], [2.0, 4.0]]]
 
 
 @pytest.mark.parametrize("dtype", [torch.bool, torch.int64])
