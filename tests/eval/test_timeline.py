@@ -262,6 +262,20 @@ def test_a_log_cut_short_is_drawn_as_far_as_it_goes(tmp_path: Path) -> None:
     assert (tmp_path / "cut.png").stat().st_size > 0
 
 
+def test_an_interrupted_episode_says_where_it_stopped(tmp_path: Path) -> None:
+    """A whole log whose episode was stopped by Ctrl-C: its title names the stop."""
+    path = tmp_path / "stopped.mcap"
+    with pytest.raises(KeyboardInterrupt):
+        with EpisodeWriter(path, metadata={"planner": "itomp", "seed": 1}) as log:
+            for i in range(30):
+                log.robot_state(0.1 * i, np.zeros(2), np.ones(2), ["a", "b"])
+            raise KeyboardInterrupt
+    tl = episode_timeline(path)
+    assert tl.complete and tl.title == "itomp · seed 1  (interrupted at t = 2.9 s: no metrics)"
+    _write(tmp_path / "whole.mcap")
+    assert "interrupted" not in episode_timeline(tmp_path / "whole.mcap").title
+
+
 def _script():
     sys.path.insert(0, str(SCRIPTS))
     try:
