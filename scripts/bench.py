@@ -8,12 +8,14 @@ reference they were measured against in the same run (``reference``, ``ratio``).
 Usage::
 
     python scripts/bench.py                       # full run, prints a table
-    python scripts/bench.py --quick               # reduced sizes (CI smoke)
+    python scripts/bench.py --quick               # reduced sizes (a smoke run)
     python scripts/bench.py --json experiments/bench/cpu.json --force  # replace the record
     python scripts/bench.py --only collision,robot
 
 ``--json`` refuses a file that exists (and its ``.meta.json``), before any benchmark runs,
-unless ``--force`` is given: a stored record is replaced only on purpose.
+unless ``--force`` is given: a stored record is replaced only on purpose. Each area's figures
+are printed as it ends; an interrupt (Ctrl-C or SIGTERM) prints those measured so far, writes
+no JSON and exits 130.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import argparse
 import importlib.util
 import json
 import platform
+import signal
 import sys
 import time
 import traceback
@@ -52,6 +55,42 @@ def _fmt(v: object) -> str:
     if isinstance(v, float):
         return f"{v:.4g}"
     return str(v)
+
+
+#: keys of a figure that hold the number it was measured against in the same run
+_REFERENCE_VALUES = ("reference_s", "reference_ms", "reference_us", "reference_pairs_per_s")
+
+
+def reference_text(fig: dict) -> str:
+    """What a figure was measured against, for the table: its reference (a number, with
+    ``reference_name`` when given, or what the reference is) and ratio; a figure measured
+    against no reference in the run shows its goal, or ``(absolute)``."""
+    parts = []
+    ref = fig.get("reference")
+    numeric = next((fig[k] for k in _REFERENCE_VALUES if k in fig), None)
+    if isinstance(ref, int | float) and not isinstance(ref, bool):
+        parts.append(f"ref {_fmt(ref)}")
+    elif numeric is not None:
+        parts.append(f"ref {_fmt(numeric)}")
+    if isinstance(ref, str):
+        parts.append(f"against {ref}")
+    elif "reference_name" in fig:
+        parts.append(f"({fig['reference_name']})")
+    if "ratio" in fig:
+        parts.append(f"ratio {_fmt(fig['ratio'])}")
+    if not parts:
+        return f"goal {_fmt(fig['goal'])}" if "goal" in fig else "(absolute)"
+    return "  ".join(parts)
+
+
+def print_figures(figures: dict[str, dict]) -> None:
+    """The table of ``figures``: name, value, unit and :func:`reference_text`."""
+    width = max((len(k) for k in figures), default=10)
+    print(f"{'figure'.ljust(width)}  {'value':>12}  unit          reference / ratio")
+    for name, fig in figures.items():
+        value = _fmt(fig.get("value"))
+        unit = str(fig.get("unit", ""))
+        print(f"{name.ljust(width)}  {value:>12}  {unit:<12}  {reference_text(fig)}", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -88,32 +127,40 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(args.threads)
     figures: dict[str, dict] = {}
     failed: list[str] = []
-    for area in areas:
-        module = _load(area)
-        if module is None:
-            print(f"[{area}] no benchmark module, skipped", flush=True)
-            continue
-        print(f"[{area}] running{' (quick)' if args.quick else ''} ...", flush=True)
-        t0 = time.perf_counter()
-        try:
-            result = module.run(quick=args.quick)
-        except Exception:  # noqa: BLE001 - report and continue with the other areas
-            traceback.print_exc()
-            failed.append(area)
-            continue
-        print(f"[{area}] done in {time.perf_counter() - t0:.1f} s", flush=True)
-        figures.update(result)
-    width = max((len(k) for k in figures), default=10)
+    # SIGTERM (timeout, a job scheduler) stops the run as Ctrl-C does: the figures measured
+    # so far are printed rather than lost
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        for area in areas:
+            module = _load(area)
+            if module is None:
+                print(f"[{area}] no benchmark module, skipped", flush=True)
+                continue
+            print(f"[{area}] running{' (quick)' if args.quick else ''} ...", flush=True)
+            t0 = time.perf_counter()
+            try:
+                result = module.run(quick=args.quick)
+            except Exception:  # noqa: BLE001 - report and continue with the other areas
+                traceback.print_exc()
+                failed.append(area)
+                continue
+            print(f"[{area}] done in {time.perf_counter() - t0:.1f} s", flush=True)
+            print_figures(result)  # each area's figures as soon as they are measured
+            figures.update(result)
+    except KeyboardInterrupt:
+        print()
+        if figures:
+            print_figures(figures)
+        kept = f"; {args.json} not written" if args.json is not None else ""
+        print(
+            f"interrupted in area {area!r}: {len(figures)} figure(s) above{kept}",
+            file=sys.stderr,
+        )
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     print()
-    print(f"{'figure'.ljust(width)}  {'value':>12}  unit          reference / ratio")
-    for name, fig in figures.items():
-        extra = ""
-        if "reference" in fig:
-            extra = f"ref {_fmt(fig['reference'])}"
-        if "ratio" in fig:
-            extra += f"  ratio {_fmt(fig['ratio'])}"
-        value = _fmt(fig.get("value"))
-        print(f"{name.ljust(width)}  {value:>12}  {str(fig.get('unit', '')):<12}  {extra}")
+    print_figures(figures)
     if args.json is not None:
         if not figures:
             print(f"error: no figure was produced; {args.json} not written", file=sys.stderr)

@@ -541,6 +541,41 @@ def test_bench_json_written_with_figures(tmp_path, run_script, bench, monkeypatc
     assert json.loads(figures.read_text()) == {"x.ms": {"value": 1.0, "unit": "ms"}}
 
 
+def test_bench_prints_each_area_and_keeps_the_figures_of_an_interrupted_run(
+    tmp_path, run_script, bench, monkeypatch
+) -> None:
+    """Each area's figures are printed when it ends, with what they were measured against;
+    an interrupt in a later area prints those measured so far (they were lost: the table came
+    only at the end), exits 130 and writes no JSON."""
+    calls = []
+
+    class Area:
+        @staticmethod
+        def run(quick: bool) -> dict:
+            calls.append(quick)
+            if len(calls) == 2:
+                raise KeyboardInterrupt
+            return {
+                "a.pairs_per_s": {"value": 10.0, "unit": "pairs/s", "reference_pairs_per_s": 4.0,
+                                  "reference_name": "the plain loop", "ratio": 2.5},
+                "a.goal_s": {"value": 3.0, "unit": "s", "goal": "< 600 s"},
+                "a.vs": {"value": 2.0, "unit": "x", "reference": "numpy", "reference_s": 0.5},
+                "a.bare": {"value": 1.0, "unit": "ms"},
+            }  # fmt: skip
+
+    monkeypatch.setattr(bench, "_load", lambda area: Area)
+    target = tmp_path / "cpu.json"
+    code, out, err = run_script("bench", "--only", "dtw,robot", "--json", target, module=bench)
+    assert code == 130 and not target.exists()
+    assert "interrupted in area 'robot': 4 figure(s) above; " in err and "not written" in err
+    rows = {ln.split()[0]: ln for ln in out.splitlines() if ln.startswith("a.")}
+    assert rows["a.pairs_per_s"].endswith("ref 4  (the plain loop)  ratio 2.5")
+    assert rows["a.goal_s"].endswith("goal < 600 s")
+    assert rows["a.vs"].endswith("ref 0.5  against numpy")
+    assert rows["a.bare"].endswith("(absolute)")
+    assert out.index("[dtw] done") < out.index("a.pairs_per_s") < out.index("[robot] running")
+
+
 def test_bench_prints_the_figures_when_the_json_cannot_be_written(
     tmp_path, run_script, bench, monkeypatch
 ) -> None:
