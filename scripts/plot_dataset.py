@@ -3,12 +3,13 @@
 Writes ``experiments/dataset/reaches.png`` (hand paths in top and side view with the skeleton at
 the target, and hand speed against time, by target) and ``experiments/dataset/README.md`` (the
 command, and the generation time and size of the default dataset measured by this script);
-``--out <folder>`` writes them there instead.
+``--out <folder>`` writes them there instead. Files that exist are replaced only with
+``--force``.
 
 Usage::
 
-    python scripts/plot_dataset.py            # plots and measures the default dataset
-    python scripts/plot_dataset.py --no-measure
+    python scripts/plot_dataset.py --force    # plots and measures: replaces the record
+    python scripts/plot_dataset.py --no-measure --force
     python scripts/plot_dataset.py --no-measure --out /tmp/preview   # leaves the record as is
 """
 
@@ -91,9 +92,14 @@ def main() -> None:
     parser.add_argument(
         "--out", type=Path, default=OUT, help=f"folder for reaches.png and README.md ({OUT})"
     )
+    parser.add_argument("--force", action="store_true", help="replace existing files")
     args = parser.parse_args()
     if args.out.exists() and not args.out.is_dir():
         fail(f"--out must be a folder: {args.out} is a file")
+    writes = [args.out / "reaches.png"] + ([] if args.no_measure else [args.out / "README.md"])
+    existing = [str(p) for p in writes if p.exists()]
+    if existing and not args.force:  # the default folder is the committed record
+        fail(f"{' and '.join(existing)} exist(s): pass --force to replace, or --out <folder>")
     args.out.mkdir(parents=True, exist_ok=True)
     plot_reaches(args.out / "reaches.png", ReachingCfg())
     print(f"wrote {args.out / 'reaches.png'}")
@@ -115,7 +121,7 @@ def main() -> None:
         commit = "unknown"
     text = f"""# Synthetic reaching dataset
 
-Command (from the repository root): `python scripts/plot_dataset.py`
+Command (from the repository root): `python scripts/plot_dataset.py --force`
 
 Commit: {commit}. Machine: {platform.processor() or platform.machine()}, shared CPU.
 

@@ -1,7 +1,9 @@
 """Draw each robot's bounding spheres at the home pose (matplotlib 3D), in the table frame.
 
 Usage:
-    python scripts/plot_robot_spheres.py [--out experiments/robot_spheres]
+    python scripts/plot_robot_spheres.py [--out experiments/robot_spheres] [--force]
+
+Files that exist (the committed record, by default) are replaced only with ``--force``.
 """
 
 from __future__ import annotations
@@ -79,9 +81,15 @@ def main() -> None:
         default=OUT,
         help=f"folder for kuka_iiwa14.png and fetch.png (default {OUT})",
     )
+    parser.add_argument("--force", action="store_true", help="replace existing files")
     args = parser.parse_args()
     if args.out.exists() and not args.out.is_dir():
         fail(f"--out must be a folder: {args.out} is a file")
+    existing = [
+        str(args.out / f) for f in ("kuka_iiwa14.png", "fetch.png") if (args.out / f).exists()
+    ]
+    if existing and not args.force:  # the default folder is the committed record
+        fail(f"{' and '.join(existing)} exist(s): pass --force to replace, or --out <folder>")
     for name, file in (("kuka_iiwa14", "kuka_iiwa14.png"), ("fetch", "fetch.png")):
         plot_robot(name, args.out / file)
         print(args.out / file)

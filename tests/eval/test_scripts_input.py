@@ -607,3 +607,18 @@ def test_help_describes_a_script_with_its_whole_first_paragraph(
     first = " ".join(doc.split("\n\n")[0].split())
     assert len(doc.split("\n\n")[0].strip().splitlines()) > 1  # the case this test is about
     assert first in " ".join(out.split())
+
+
+@pytest.mark.parametrize(
+    ("script", "file", "args"),
+    [("plot_robot_spheres", "fetch.png", []), ("plot_dataset", "reaches.png", ["--no-measure"])],
+)
+def test_plot_scripts_keep_existing_files_without_force(
+    tmp_path, run_script, script, file, args
+) -> None:
+    """Their default folders are committed records, which they replaced without a word."""
+    (tmp_path / file).write_bytes(b"earlier")
+    code, _, err = run_script(script, "--out", tmp_path, *args)
+    line = _one_error_line(err)
+    assert code == 2 and f"{tmp_path / file}" in line and "pass --force" in line, line
+    assert (tmp_path / file).read_bytes() == b"earlier"
