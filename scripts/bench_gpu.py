@@ -252,8 +252,15 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--only {args.only!r}: {what}; the areas are {', '.join(AREAS)}")
     if args.json is not None and args.json.is_dir():
         parser.error(f"--json {args.json} is a folder; give the JSON file to write")
-    if args.json is not None and args.json.exists() and not args.force:
-        fail(f"{args.json} exists (stored results); pass --force to replace it")
+    if "sim" in areas and "prediction" not in areas:  # sim runs the predictor prediction trains
+        parser.error(f"--only {args.only!r}: the sim area needs the prediction area; add it")
+    if args.json is not None and not args.force:
+        existing = [p for p in (args.json, args.json.with_suffix(".meta.json")) if p.exists()]
+        if existing:
+            fail(
+                f"{' and '.join(map(str, existing))} exist{'s' if len(existing) == 1 else ''} "
+                "(stored results); pass --force to replace, or --json <another file>"
+            )
     try:
         cuda = resolve_device(args.device)
     except ConfigError as err:
@@ -297,7 +304,10 @@ def main(argv: list[str] | None = None) -> int:
             f"{name.ljust(width)}  {fig['value']:11.4g}  {fig['reference']:11.4g}  "
             f"{fig['unit']:<14}  {sp:.3g}x"
         )
-    if args.json is not None and figures:
+    if args.json is not None and not figures:
+        print(f"error: no figure was produced; {args.json} not written", file=sys.stderr)
+        return 2
+    if args.json is not None:
         meta = {
             "command": "python scripts/bench_gpu.py " + " ".join(argv or sys.argv[1:]),
             "commit": commit_short() or "unknown",

@@ -254,6 +254,8 @@ def test_bench_refuses_a_json_folder_and_writes_no_json_without_figures(
         (["--only", ","], "no area"),
         (["--cpu-threads", "0"], "--cpu-threads must be >= 1"),
         (["--device", "tpu"], "--device tpu: unknown device 'tpu'"),
+        # it printed "[sim] ... skipped", an empty table, and exited 0
+        (["--only", "sim", "--device", "cpu"], "the sim area needs the prediction area"),
     ],
 )
 def test_bench_gpu_refuses_bad_arguments(tmp_path, run_script, args, message) -> None:
@@ -264,6 +266,10 @@ def test_bench_gpu_refuses_bad_arguments(tmp_path, run_script, args, message) ->
     assert figures.read_text() == '{"kept": 1}\n'
     code, _, err = run_script("bench_gpu", "--json", figures)  # a record is kept
     assert code == 2 and "exists (stored results); pass --force" in err
+    figures.unlink()  # and so is its .meta.json alone
+    figures.with_suffix(".meta.json").write_text("{}\n")
+    code, _, err = run_script("bench_gpu", "--json", figures)
+    assert code == 2 and "gpu.meta.json exists (stored results); pass --force" in err
 
 
 def test_bench_gpu_without_cuda_says_so(run_script, monkeypatch) -> None:
