@@ -276,6 +276,23 @@ def _check_args(args: argparse.Namespace) -> argparse.Namespace:
         fail(f"--fps must be a finite number > 0, got {args.fps}")
     if args.video is not None and args.video.suffix.lower() not in VIDEO_SUFFIXES:
         fail(f"--video {args.video}: give a file ending in {' or '.join(VIDEO_SUFFIXES)}")
+    if args.scene:  # the contact sheet of the workspaces: the episode settings have no use
+        unused = [
+            flag
+            for flag, given in (
+                ("--video", args.video is not None),
+                ("--overlay", args.overlay),
+                ("--robot", args.robot is not None),
+                ("--frames", args.frames != 6),
+                ("--camera", args.camera != "overview"),
+                ("--fps", args.fps != 10.0),
+            )
+            if given
+        ]
+        if unused:
+            fail(f"{', '.join(unused)}: for an episode (--mcap); --scene draws every camera")
+    if args.out is not None and args.out.is_dir():
+        fail(f"--out {args.out} is a folder; give the image file to write")
     if args.out is not None:
         if args.out.suffix == "":
             args.out = args.out.with_suffix(".png")
@@ -292,7 +309,8 @@ def _check_args(args: argparse.Namespace) -> argparse.Namespace:
     existing = [str(p) for p in (args.out, args.video) if p is not None and p.exists()]
     if existing and not args.force:
         fail(
-            f"{' and '.join(existing)} exist(s): pass --force to replace, or choose another --out"
+            f"{' and '.join(existing)} exist(s): pass --force to replace, or choose another "
+            "--out or --video"
         )
     return args
 

@@ -487,6 +487,29 @@ def test_render_keeps_existing_files_without_force(tmp_path, run_script) -> None
         (tmp_path / existing).unlink()
 
 
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--video", "v.gif"], "--video: for an episode (--mcap)"),
+        (["--overlay", "--frames", "3"], "--overlay, --frames: for an episode (--mcap)"),
+        (["--camera", "top"], "--camera: for an episode"),
+    ],
+)
+def test_render_scene_refuses_the_episode_settings(tmp_path, run_script, args, message) -> None:
+    """They were left unused without a word (no GIF written for --video)."""
+    code, _, err = run_script("render_episode", "--scene", "--out", tmp_path / "s.png", *args)
+    assert code == 2 and message in _one_error_line(err)
+    assert not (tmp_path / "s.png").exists()
+
+
+def test_render_refuses_a_folder_as_out(tmp_path, run_script) -> None:
+    """It wrote <folder>.png beside the folder."""
+    (tmp_path / "sheets").mkdir()
+    code, _, err = run_script("render_episode", "--mcap", tmp_path / "x.mcap", "--out",
+                              tmp_path / "sheets")  # fmt: skip
+    assert code == 2 and "is a folder; give the image file to write" in _one_error_line(err)
+
+
 def test_render_says_a_log_has_no_messages(tmp_path, run_script) -> None:
     (tmp_path / "empty.mcap").write_bytes(b"")  # cut before anything was written
     with pytest.warns(UserWarning, match="truncated"):
