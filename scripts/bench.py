@@ -32,6 +32,8 @@ from pathlib import Path
 
 import torch
 
+from iplanner_torch.errors import IPlannerError
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # the bench modules share scripts/_timing.py
 from _report import commit_short, fail  # noqa: E402
@@ -140,6 +142,10 @@ def main(argv: list[str] | None = None) -> int:
             t0 = time.perf_counter()
             try:
                 result = module.run(quick=args.quick)
+            except IPlannerError as err:  # a bad input (IPLANNER_PREDICTOR): one line
+                print(f"[{area}] error: {type(err).__name__}: {err}", file=sys.stderr, flush=True)
+                failed.append(area)
+                continue
             except Exception:  # noqa: BLE001 - report and continue with the other areas
                 traceback.print_exc()
                 failed.append(area)

@@ -25,6 +25,7 @@ import time
 import warnings
 
 import numpy as np
+from _report import main_guard
 
 
 def _physics_only(robot, seconds: float) -> float:
@@ -114,7 +115,9 @@ def run(quick: bool, predictor_path: str | None = None) -> dict[str, dict]:
     }
 
 
-if __name__ == "__main__":
+@main_guard
+def main() -> None:
+    """The command line: a bad checkpoint is one ``error:`` line, exit 2."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     size = parser.add_mutually_exclusive_group()
     size.add_argument("--quick", action="store_true", help="a few simulated seconds (default)")
@@ -122,3 +125,7 @@ if __name__ == "__main__":
     parser.add_argument("--predictor", default=None, help="predictor checkpoint (I-Planner)")
     args = parser.parse_args()
     print(json.dumps(run(quick=not args.full, predictor_path=args.predictor), indent=2))
+
+
+if __name__ == "__main__":
+    main()

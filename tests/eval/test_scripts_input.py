@@ -651,3 +651,29 @@ def test_plot_scripts_keep_existing_files_without_force(
     line = _one_error_line(err)
     assert code == 2 and f"{tmp_path / file}" in line and "pass --force" in line, line
     assert (tmp_path / file).read_bytes() == b"earlier"
+
+
+def test_bench_sim_names_a_bad_checkpoint_in_one_line(tmp_path, run_script) -> None:
+    """It ended in a CheckpointError traceback, exit 1."""
+    (tmp_path / "bad.ckpt").write_bytes(b"not a checkpoint")
+    for path in (tmp_path / "gone.ckpt", tmp_path / "bad.ckpt"):
+        code, out, err = run_script("bench_sim", "--predictor", path)
+        assert code == 2 and _one_error_line(err).startswith("error: CheckpointError: "), err
+        assert "Traceback" not in err and not out
+
+
+def test_bench_names_an_area_failing_on_bad_input_in_one_line(
+    tmp_path, run_script, bench, monkeypatch
+) -> None:
+    """A bad IPLANNER_PREDICTOR failed the sim area with a traceback."""
+    from iplanner_torch.errors import CheckpointError
+
+    class Bad:
+        @staticmethod
+        def run(quick: bool) -> dict:
+            raise CheckpointError("predictor checkpoint /x.ckpt does not exist")
+
+    monkeypatch.setattr(bench, "_load", lambda area: Bad)
+    code, _, err = run_script("bench", "--only", "sim", module=bench)
+    assert code == 1 and "Traceback" not in err
+    assert "[sim] error: CheckpointError: predictor checkpoint /x.ckpt does not exist" in err
