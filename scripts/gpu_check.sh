@@ -17,6 +17,8 @@
 set -u
 out=${1:?usage: bash scripts/gpu_check.sh OUT_DIR}
 mkdir -p "$out"
+: > "$out/stages.txt"  # this run's stages only
+job=$(mktemp -d /tmp/main_job.XXXXXX)  # a fresh, empty run folder (one with results is refused)
 export PYTHONUNBUFFERED=1
 if compgen -G ".whl/*.whl" > /dev/null; then
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
@@ -51,8 +53,8 @@ cat "$out/env.txt"
 stage tests_cuda 240 python3 -m pytest -q -p no:cacheprovider -n 8 -k "cuda or gpu" -m "not slow"
 stage bench_gpu 300 python3 scripts/bench_gpu.py --json "$out/gpu.json" --force
 stage main_job 240 python3 -m iplanner_torch.cli.experiment device=cuda progress=false \
-  hydra.run.dir=/tmp/main_job
-cp /tmp/main_job/*.csv "$out/" 2>/dev/null
+  "hydra.run.dir=$job"
+cp "$job"/*.csv "$out/" 2>/dev/null
 # one torch thread per worker (14 workers of 16 threads each were oversubscribed); -v names
 # each test as it ends, so that a failure is known even when the stage runs out of time
 OMP_NUM_THREADS=1 stage tests_all 600 python3 -m pytest -v -p no:cacheprovider -n 14 -m "not slow"
