@@ -66,6 +66,17 @@ def read_results(path: Path) -> pd.DataFrame:
     return df
 
 
+def machine_text() -> str:
+    """The machine this report is made on, in words: its CPU cores and its GPU, if any (the
+    episodes' own machine is not recorded in their rows)."""
+    import os
+
+    import torch
+
+    gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "no GPU"
+    return f"{os.cpu_count()}-core CPU, {gpu} (where this report was made)"
+
+
 def main_guard(main: Callable[..., T]) -> Callable[..., T]:
     """``main`` reporting :class:`~iplanner_torch.errors.IPlannerError` and ``OSError`` as
     ``error: <Type>: message`` on standard error with exit code 2 (no traceback)."""
@@ -195,7 +206,7 @@ def write_readme(
         "",
         f"Command: `{command}`  ",
         f"Report: `{report}`  ",
-        f"Commit: {commit_short()}. Machine: the 2-core CPU, no GPU. {len(episodes)} episodes.",
+        f"Commit: {commit_short()}. Machine: {machine_text()}. {len(episodes)} episodes.",
         "",
     ]
     if note:

@@ -87,7 +87,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         counts = count(args.robot, args.trajectories)
     except ConfigError as err:
-        fail(str(err))
+        text = str(err)
+        fail(f"--robot {args.robot}: {text.split(': ', 1)[-1]}" if "robot" in text else text)
     total = sum(counts.values())
     by_line: collections.Counter[str] = collections.Counter()
     for (name, where), n in counts.items():

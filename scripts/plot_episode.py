@@ -51,6 +51,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, help="folder for the PNGs (default: beside each log)")
     parser.add_argument("--force", action="store_true", help="replace existing PNGs")
     args = parser.parse_args()
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        fail(f"--out must be a folder: {args.out} is a file")
     logs = _logs(args.paths)
     targets = [
         (log, args.out / f"{log.stem}.png" if args.out else timeline_path(log)) for log in logs

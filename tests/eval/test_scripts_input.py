@@ -308,7 +308,7 @@ def test_bench_gpu_on_the_cpu_compares_equal_numbers(tmp_path, run_script) -> No
     [
         (["--trajectories", "0"], "--trajectories must be >= 1"),
         (["--top", "-1"], "--top must be >= 0"),
-        (["--robot", "ur5"], "unknown robot 'ur5'"),
+        (["--robot", "ur5"], "error: --robot ur5: unknown robot 'ur5'"),  # was "name: ..."
     ],
 )
 def test_count_cycle_ops_refuses_bad_arguments(run_script, args, message) -> None:
@@ -677,3 +677,10 @@ def test_bench_names_an_area_failing_on_bad_input_in_one_line(
     code, _, err = run_script("bench", "--only", "sim", module=bench)
     assert code == 1 and "Traceback" not in err
     assert "[sim] error: CheckpointError: predictor checkpoint /x.ckpt does not exist" in err
+
+
+def test_plot_episode_refuses_a_file_as_out(tmp_path, run_script) -> None:
+    """It was a FileExistsError; the other scripts say what --out must be."""
+    (tmp_path / "afile").write_text("")
+    code, _, err = run_script("plot_episode", tmp_path, "--out", tmp_path / "afile")
+    assert code == 2 and "--out must be a folder" in _one_error_line(err)
