@@ -129,7 +129,10 @@ def joint_limit_violation(
     Args:
         q: (B, W, J) joint positions [rad].
         q_min: (J,) lower limits [rad] (-inf for continuous joints).
-        q_max: (J,) upper limits [rad] (+inf for continuous joints).
+        q_max: (J,) upper limits [rad] (+inf for continuous joints), each above its
+            ``q_min``: that is not checked here (it runs in every optimiser iteration, without
+            a host synchronisation); a robot's limits are checked when its description is
+            built (``JointSpec``: lower < upper).
 
     Returns:
         (B,) [rad^2].
