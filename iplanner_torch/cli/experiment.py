@@ -577,6 +577,26 @@ def merged_episode_node(cfg: DictConfig, overrides: list[str] | None = None) -> 
     return node
 
 
+def _check_scenario_name(name: str) -> None:
+    """Refuse a ``scenario=<option>`` whose scenario is named otherwise (a new file that sets
+    no ``name`` of its own: it took ScenarioCfg's default, or the file it starts from), unless
+    the command line sets ``scenario.name``: the name labels the table, results.csv and the
+    logs, and the episodes of another scenario would be filed under it."""
+    from iplanner_torch.cli._common import _group_choice
+    from iplanner_torch.errors import ConfigError
+
+    choice = _group_choice("scenario")
+    if choice is None or choice == name:
+        return
+    if any(override_key(o) == "scenario.name" for o in _task_overrides()):
+        return
+    raise ConfigError(
+        f"scenario={choice}: its scenario is named {name!r} (not set in its file: from "
+        f"ScenarioCfg's default or the file it starts from), which labels the results; add "
+        f"'name: {choice}' to conf/scenario/{choice}.yaml"
+    )
+
+
 def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     """The :class:`~iplanner_torch.eval.experiment.ExperimentCfg` this run describes."""
     from dataclasses import replace
@@ -584,13 +604,18 @@ def build_experiment(cfg: DictConfig, predictor_paths: dict[str, str]) -> Any:
     from iplanner_torch.errors import ConfigError
     from iplanner_torch.eval.episode import EpisodeCfg
     from iplanner_torch.eval.experiment import ExperimentCfg
+    from iplanner_torch.planning.replanner import PlannerCfg
     from iplanner_torch.robot.model import RobotCfg
+    from iplanner_torch.sim.env import SimCfg
+    from iplanner_torch.sim.tasks import ScenarioCfg
 
     robot = instantiate(cfg.robot, RobotCfg, name="robot")
-    # each group on its own first, so that a bad value is named with its group
-    instantiate(cfg.scenario, name="scenario")
-    instantiate(cfg.sim, name="sim")
-    instantiate(cfg.planner, name="planner")
+    # each group on its own first, so that a bad value is named with its group (a new file
+    # of the group without '_target_' is told what to add)
+    scenario = instantiate(cfg.scenario, ScenarioCfg, name="scenario")
+    _check_scenario_name(scenario.name)
+    instantiate(cfg.sim, SimCfg, name="sim")
+    instantiate(cfg.planner, PlannerCfg, name="planner")
     if not cfg_scalar(cfg.run, "max_duration_s", float) > 0:
         raise ConfigError(f"run.max_duration_s: expected > 0 [s], got {cfg.run.max_duration_s}")
 

@@ -770,3 +770,22 @@ def test_device_auto_keeps_the_closed_loop_on_the_cpu(monkeypatch: pytest.Monkey
         ):
             exp = build_experiment(compose("config", overrides=overrides), {})
             assert exp.device == want, overrides
+
+
+def test_a_scenario_option_named_otherwise_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A new conf/scenario file without its own name took ScenarioCfg's default
+    ('arrangement_1x4'), and its episodes were filed under that scenario; a name set on the
+    command line is taken."""
+    import iplanner_torch.cli._common as common
+    import iplanner_torch.cli.experiment as experiment
+    from iplanner_torch.errors import ConfigError
+
+    monkeypatch.setattr(common, "_group_choice", lambda key: "mine")
+    monkeypatch.setattr(experiment, "_task_overrides", lambda: ["scenario=mine"])
+    named = r"'arrangement_1x4' .*; add 'name: mine' to conf/scenario/mine.yaml$"
+    with pytest.raises(ConfigError, match=r"^scenario=mine: its scenario is named " + named):
+        experiment._check_scenario_name("arrangement_1x4")
+    experiment._check_scenario_name("mine")
+    given = ["scenario=mine", "+scenario.name=x"]
+    monkeypatch.setattr(experiment, "_task_overrides", lambda: given)
+    experiment._check_scenario_name("x")
