@@ -77,6 +77,19 @@ def machine_text() -> str:
     return f"{os.cpu_count()}-core CPU, {gpu} (where this report was made)"
 
 
+def refuse_stored_json(json_path: Path | None, force: bool) -> None:
+    """Exit 2 (one ``error:`` line) when ``json_path`` or its ``.meta.json`` exists and
+    ``force`` is not given: a benchmark record is replaced only on purpose."""
+    if json_path is None or force:
+        return
+    existing = [p for p in (json_path, json_path.with_suffix(".meta.json")) if p.exists()]
+    if existing:
+        fail(
+            f"{' and '.join(map(str, existing))} exist{'s' if len(existing) == 1 else ''} "
+            "(stored results); pass --force to replace, or --json <another file>"
+        )
+
+
 def main_guard(main: Callable[..., T]) -> Callable[..., T]:
     """``main`` reporting :class:`~iplanner_torch.errors.IPlannerError` and ``OSError`` as
     ``error: <Type>: message`` on standard error with exit code 2 (no traceback)."""

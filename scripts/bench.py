@@ -36,7 +36,7 @@ from iplanner_torch.errors import IPlannerError
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # the bench modules share scripts/_timing.py
-from _report import commit_short, fail  # noqa: E402
+from _report import commit_short, refuse_stored_json  # noqa: E402
 
 AREAS = ("dtw", "prediction", "robot", "collision", "planning", "sim", "sweep")
 
@@ -118,13 +118,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--threads must be >= 1, got {args.threads}")
     if args.json is not None and args.json.is_dir():
         parser.error(f"--json {args.json} is a folder; give the JSON file to write")
-    if args.json is not None and not args.force:
-        existing = [p for p in (args.json, args.json.with_suffix(".meta.json")) if p.exists()]
-        if existing:
-            fail(
-                f"{' and '.join(map(str, existing))} exist{'s' if len(existing) == 1 else ''} "
-                "(stored benchmark results); pass --force to replace, or --json <another file>"
-            )
+    refuse_stored_json(args.json, args.force)
     if args.threads is not None:
         torch.set_num_threads(args.threads)
     figures: dict[str, dict] = {}

@@ -41,7 +41,7 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _report import commit_short, fail  # noqa: E402
+from _report import commit_short, fail, refuse_stored_json  # noqa: E402
 from bench_robot import _median_ms  # noqa: E402
 
 from iplanner_torch.errors import ConfigError  # noqa: E402
@@ -254,13 +254,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--json {args.json} is a folder; give the JSON file to write")
     if "sim" in areas and "prediction" not in areas:  # sim runs the predictor prediction trains
         parser.error(f"--only {args.only!r}: the sim area needs the prediction area; add it")
-    if args.json is not None and not args.force:
-        existing = [p for p in (args.json, args.json.with_suffix(".meta.json")) if p.exists()]
-        if existing:
-            fail(
-                f"{' and '.join(map(str, existing))} exist{'s' if len(existing) == 1 else ''} "
-                "(stored results); pass --force to replace, or --json <another file>"
-            )
+    refuse_stored_json(args.json, args.force)
     try:
         cuda = resolve_device(args.device)
     except ConfigError as err:
