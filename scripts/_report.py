@@ -7,7 +7,7 @@ import argparse
 import functools
 import subprocess
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn, TypeVar
 
@@ -75,6 +75,14 @@ def machine_text() -> str:
 
     gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "no GPU"
     return f"{os.cpu_count()}-core CPU, {gpu} (where this report was made)"
+
+
+def refuse_existing(paths: Iterable[Path | None], force: bool, instead: str) -> None:
+    """Exit 2 (one ``error:`` line) naming the files of ``paths`` that exist, unless ``force``:
+    ``<files> exist(s): pass --force to replace, or <instead>``."""
+    existing = [str(p) for p in paths if p is not None and p.exists()]
+    if existing and not force:
+        fail(f"{' and '.join(existing)} exist(s): pass --force to replace, or {instead}")
 
 
 def refuse_stored_json(json_path: Path | None, force: bool) -> None:

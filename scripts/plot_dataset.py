@@ -26,7 +26,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from _report import fail, main_guard  # noqa: E402
+from _report import fail, main_guard, refuse_existing  # noqa: E402
 
 from iplanner_torch.data.reaching import (  # noqa: E402
     ReachingCfg,
@@ -97,9 +97,7 @@ def main() -> None:
     if args.out.exists() and not args.out.is_dir():
         fail(f"--out must be a folder: {args.out} is a file")
     writes = [args.out / "reaches.png"] + ([] if args.no_measure else [args.out / "README.md"])
-    existing = [str(p) for p in writes if p.exists()]
-    if existing and not args.force:  # the default folder is the committed record
-        fail(f"{' and '.join(existing)} exist(s): pass --force to replace, or --out <folder>")
+    refuse_existing(writes, args.force, "--out <folder>")  # the default: the committed record
     args.out.mkdir(parents=True, exist_ok=True)
     plot_reaches(args.out / "reaches.png", ReachingCfg())
     print(f"wrote {args.out / 'reaches.png'}")

@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from _report import fail, main_guard  # noqa: E402
+from _report import fail, main_guard, refuse_existing  # noqa: E402
 
 from iplanner_torch.robot.model import RobotModel  # noqa: E402
 
@@ -85,11 +85,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.out.exists() and not args.out.is_dir():
         fail(f"--out must be a folder: {args.out} is a file")
-    existing = [
-        str(args.out / f) for f in ("kuka_iiwa14.png", "fetch.png") if (args.out / f).exists()
-    ]
-    if existing and not args.force:  # the default folder is the committed record
-        fail(f"{' and '.join(existing)} exist(s): pass --force to replace, or --out <folder>")
+    files = [args.out / f for f in ("kuka_iiwa14.png", "fetch.png")]
+    refuse_existing(files, args.force, "--out <folder>")  # the default: the committed record
     for name, file in (("kuka_iiwa14", "kuka_iiwa14.png"), ("fetch", "fetch.png")):
         plot_robot(name, args.out / file)
         print(args.out / file)

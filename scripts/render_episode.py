@@ -32,7 +32,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import torch
-from _report import fail, main_guard
+from _report import fail, main_guard, refuse_existing
 from matplotlib.backend_bases import FigureCanvasBase
 
 from iplanner_torch.data.skeleton import JOINT_INDEX
@@ -306,12 +306,7 @@ def _check_args(args: argparse.Namespace) -> argparse.Namespace:
     if args.video is not None and args.video.suffix.lower() == ".mp4" and not _has_imageio():
         args.video = args.video.with_suffix(".gif")
         print(f"imageio is not installed: writing {args.video} instead of an MP4")
-    existing = [str(p) for p in (args.out, args.video) if p is not None and p.exists()]
-    if existing and not args.force:
-        fail(
-            f"{' and '.join(existing)} exist(s): pass --force to replace, or choose another "
-            "--out or --video"
-        )
+    refuse_existing((args.out, args.video), args.force, "choose another --out or --video")
     return args
 
 
