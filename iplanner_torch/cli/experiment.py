@@ -253,13 +253,10 @@ def train_command(cfg: DictConfig, data_node: DictConfig, option: str, out_dir: 
     this run would (:func:`_ensure_predictor`): on the dataset of ``data_node`` (its
     ``conf/data`` option and path; for task demonstrations also the task order and
     arrangement that generate it when missing), with ``run.train_trainer``."""
-    from iplanner_torch.cli._common import override_word
+    from iplanner_torch.cli._common import _group_choice, override_word
 
     if data_node is cfg.data:  # run.train_data=data: the run's own data group option
-        try:
-            data_option = str(HydraConfig.get().runtime.choices.get("data") or "reaching")
-        except ValueError:  # no Hydra run (a library call)
-            data_option = "reaching"
+        data_option = _group_choice("data") or "reaching"  # (None outside a Hydra run)
     else:
         data_option = "tasks" if "order" in data_node.get("generator", {}) else "reaching"
     words = [override_word("data", data_option), override_word("data.path", data_node.path)]
