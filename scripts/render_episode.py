@@ -247,16 +247,14 @@ def _predicted_joints(forecasts, t: float) -> tuple[np.ndarray, np.ndarray, tupl
 
 
 def _write_video(frames: list[np.ndarray], path: Path, fps: float) -> Path:
+    """``frames`` as an MP4 (imageio) or a GIF (Pillow); an ``.mp4`` without imageio was
+    made a ``.gif`` by :func:`_check_args`, before any frame was rendered."""
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == ".mp4":
-        try:
-            import imageio.v3 as iio
-        except ImportError:
-            path = path.with_suffix(".gif")
-            print(f"imageio is not installed: writing {path} instead of an MP4")
-        else:
-            iio.imwrite(path, np.stack(frames), fps=fps)
-            return path
+        import imageio.v3 as iio
+
+        iio.imwrite(path, np.stack(frames), fps=fps)
+        return path
     from PIL import Image
 
     images = [Image.fromarray(f) for f in frames]
