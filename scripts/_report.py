@@ -85,10 +85,29 @@ def refuse_existing(paths: Iterable[Path | None], force: bool, instead: str) -> 
         fail(f"{' and '.join(existing)} exist(s): pass --force to replace, or {instead}")
 
 
+def refuse_unwritable(path: Path) -> None:
+    """Exit 2 (one ``error:`` line) when ``path`` could not be written: its nearest existing
+    folder is a file, or not writable. Checked before a long run, whose figures would
+    otherwise only reach the terminal."""
+    import os
+
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        fail(f"cannot write {path}: {folder} is not a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        fail(f"cannot write {path}: {folder} is not writable")
+
+
 def refuse_stored_json(json_path: Path | None, force: bool) -> None:
     """Exit 2 (one ``error:`` line) when ``json_path`` or its ``.meta.json`` exists and
-    ``force`` is not given: a benchmark record is replaced only on purpose."""
-    if json_path is None or force:
+    ``force`` is not given (a benchmark record is replaced only on purpose), or when it
+    could not be written (:func:`refuse_unwritable`)."""
+    if json_path is None:
+        return
+    refuse_unwritable(json_path)
+    if force:
         return
     existing = [p for p in (json_path, json_path.with_suffix(".meta.json")) if p.exists()]
     if existing:

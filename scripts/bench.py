@@ -13,7 +13,8 @@ Usage::
     python scripts/bench.py --only collision,robot
 
 ``--json`` refuses a file that exists (and its ``.meta.json``), before any benchmark runs,
-unless ``--force`` is given: a stored record is replaced only on purpose. Each area's figures
+unless ``--force`` is given: a stored record is replaced only on purpose; a path it could
+not write (under a file, in a read-only folder) is refused then too. Each area's figures
 are printed as it ends; an interrupt (Ctrl-C or SIGTERM) prints those measured so far, writes
 no JSON and exits 130.
 """

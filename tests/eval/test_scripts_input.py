@@ -608,19 +608,35 @@ def test_bench_prints_each_area_and_keeps_the_figures_of_an_interrupted_run(
 def test_bench_prints_the_figures_when_the_json_cannot_be_written(
     tmp_path, run_script, bench, monkeypatch
 ) -> None:
-    """A long run's figures are not lost to a path it cannot write (here through a file)."""
+    """A long run's figures are not lost to a path it can no longer write (here a file put
+    where its folder was to be while the benchmarks ran)."""
+    target = tmp_path / "later" / "cpu.json"
 
     class One:
         @staticmethod
         def run(quick: bool) -> dict:
+            (tmp_path / "later").write_text("")
             return {"x.ms": {"value": 1.0, "unit": "ms"}}
 
     monkeypatch.setattr(bench, "_load", lambda area: One)
-    (tmp_path / "afile").write_text("")
-    target = tmp_path / "afile" / "cpu.json"
     code, out, err = run_script("bench", "--only", "dtw", "--json", target, module=bench)
     assert code == 2 and "error: FileExistsError" in err and "the figures are above" in err
     assert '"x.ms"' in out and not target.exists()
+
+
+@pytest.mark.parametrize("force", [False, True])
+@pytest.mark.parametrize("script", ["bench", "bench_gpu"])
+def test_bench_refuses_a_json_it_cannot_write_before_running(
+    tmp_path, run_script, bench, script: str, force: bool
+) -> None:
+    """A --json path under a file was found only after the whole run (the ``bench`` fixture
+    fails any benchmark that starts)."""
+    (tmp_path / "afile").write_text("kept")
+    target = tmp_path / "afile" / "sub" / "cpu.json"
+    args = ("--json", target, *(("--force",) if force else ()))
+    code, out, err = run_script(script, *args, **({"module": bench} if script == "bench" else {}))
+    assert code == 2 and f"cannot write {target}: {tmp_path / 'afile'} is not a folder" in err
+    assert (tmp_path / "afile").read_text() == "kept" and "running" not in out
 
 
 @pytest.mark.parametrize("name", ["plot_episode", "safety_seeds_report"])
