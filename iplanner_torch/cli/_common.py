@@ -567,7 +567,8 @@ def check_added_keys(cfg: DictConfig, overrides: list[str] | None = None) -> Non
     A key added under a node built into a settings class (one with ``_target_``:
     ``planner.optimizer``, ``experiment.episode``, ...) is left to that class, which refuses
     fields it does not have; so are the keys of :data:`OPTIONAL_KEYS`, config group choices
-    (``+experiment=speed_response``) and ``hydra.*``. ``++key=value`` is refused only when
+    (``+experiment=speed_response``) and ``hydra.*`` (:func:`check_added_hydra_keys`).
+    ``++key=value`` is refused only when
     the key is not in the config composed without it (a key that exists is overridden);
     when that config cannot be composed here, ``++`` overrides are left alone.
 
@@ -632,6 +633,58 @@ def check_added_keys(cfg: DictConfig, overrides: list[str] | None = None) -> Non
     best = _closest(leaf, candidates)
     hint = "" if best is None else f" (did you mean {'.'.join(filter(None, (prefix, best)))!r}?)"
     raise ConfigError(f"unknown key {key!r}{hint}: added by {text}, which nothing reads")
+
+
+def check_added_hydra_keys(
+    hydra_cfg: DictConfig | None = None, overrides: list[str] | None = None
+) -> None:
+    """Refuse a ``+hydra.<key>=value`` or ``++hydra.<key>=value`` override that adds a field
+    Hydra's settings class there does not have: Hydra adds it without a word, so
+    ``+hydra.launcher.n_job=2`` would run the sweep's jobs one at a time. Keys added under a
+    free mapping (``hydra.job.env_set``, a launcher's ``additional_parameters``) pass.
+
+    Args:
+        hydra_cfg: Hydra's own config (default: this run's, ``HydraConfig.get()``).
+        overrides: the ``hydra.*`` overrides (default: this run's ``overrides.hydra``).
+
+    Raises:
+        ConfigError: ``unknown key 'hydra.launcher.n_job' (did you mean
+            'hydra.launcher.n_jobs'?): added by +hydra.launcher.n_job=2, which Hydra does
+            not read``.
+    """
+    import dataclasses
+
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    if hydra_cfg is None:
+        try:
+            hydra_cfg = HydraConfig.get()
+        except ValueError:  # outside a Hydra run (tests)
+            return
+    given = list(hydra_cfg.overrides.hydra) if overrides is None else overrides
+    if not any(o.lstrip().startswith("+") for o in given):
+        return
+    try:
+        parsed = OverridesParser.create().parse_overrides(given)
+    except Exception:  # noqa: BLE001 - Hydra has parsed them already; nothing to add here
+        return
+    for text, override in zip(given, parsed, strict=True):
+        key = override.key_or_group
+        if not (override.is_add() or override.is_force_add()) or not key.startswith("hydra."):
+            continue
+        prefix, _, leaf = key[len("hydra.") :].rpartition(".")
+        parent = OmegaConf.select(hydra_cfg, prefix, default=None) if prefix else hydra_cfg
+        kind = OmegaConf.get_type(parent) if isinstance(parent, DictConfig) else None
+        if kind is None or not dataclasses.is_dataclass(kind):
+            continue  # a free mapping (env_set, additional_parameters) or nothing to check
+        fields = [f.name for f in dataclasses.fields(kind)]
+        if leaf in fields:
+            continue
+        best = _closest(leaf, fields)
+        where = ".".join(filter(None, ("hydra", prefix)))
+        hint = "" if best is None else f" (did you mean '{where}.{best}'?)"
+        raise ConfigError(f"unknown key {key!r}{hint}: added by {text}, which Hydra does not read")
 
 
 def _no_option_chosen(group: str) -> bool:
@@ -859,6 +912,7 @@ def friendly_errors(
             try:
                 if args and isinstance(args[0], DictConfig):
                     check_added_keys(args[0])
+                    check_added_hydra_keys()
                     if before is not None:
                         before(args[0])
                     check_root_keys(args[0])

@@ -503,3 +503,44 @@ def test_a_progress_bar_before_the_error_keeps_the_run_folder(
     assert folder.exists() is bool(printed)
     if printed:
         assert printed in (folder / "train.log").read_text()
+
+
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (["hydra/launcher=joblib", "+hydra.launcher.n_job=2"],
+         "unknown key 'hydra.launcher.n_job' (did you mean 'hydra.launcher.n_jobs'?): added by "
+         "+hydra.launcher.n_job=2, which Hydra does not read"),
+        (["++hydra.job.chdri=true"],
+         "unknown key 'hydra.job.chdri' (did you mean 'hydra.job.chdir'?): added by "
+         "++hydra.job.chdri=true, which Hydra does not read"),
+        (["+hydra.nosuch=1"],
+         "unknown key 'hydra.nosuch': added by +hydra.nosuch=1, which Hydra does not read"),
+    ],
+)  # fmt: skip
+def test_a_hydra_key_added_where_hydra_reads_none_is_refused(
+    args: list[str],
+    line: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture,
+) -> None:
+    """Hydra adds ``+hydra.<key>`` to its own settings without a word: a misspelt
+    ``+hydra.launcher.n_job=2`` ran the sweep's jobs one at a time."""
+    run = [f"hydra.run.dir={tmp_path / 'run'}", f"paths.datasets={tmp_path / 'data'}"]
+    code, lines = _main("data", ["info", *args, *run], monkeypatch, capsys)
+    assert code == 2
+    assert lines == [f"error: ConfigError: {line}"]
+    assert not (tmp_path / "data").exists()
+
+
+def test_hydra_keys_added_under_a_free_mapping_pass(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    """``hydra.job.env_set`` takes any key; ``++`` of a field Hydra has overrides it. The run
+    goes on to the next check (no dataset here)."""
+    run = [f"hydra.run.dir={tmp_path / 'run'}", f"data.path={tmp_path / 'none'}"]
+    args = ["info", "+hydra.job.env_set.FOO=1", "++hydra.job.chdir=false", *run]
+    code, lines = _main("data", args, monkeypatch, capsys)
+    assert code == 2
+    assert len(lines) == 1 and lines[0].startswith("error: DataError:"), lines
