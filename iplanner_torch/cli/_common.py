@@ -568,9 +568,9 @@ def check_added_keys(cfg: DictConfig, overrides: list[str] | None = None) -> Non
     ``planner.optimizer``, ``experiment.episode``, ...) is left to that class, which refuses
     fields it does not have; so are the keys of :data:`OPTIONAL_KEYS`, config group choices
     (``+experiment=speed_response``) and ``hydra.*`` (:func:`check_added_hydra_keys`).
-    ``++key=value`` is refused only when
-    the key is not in the config composed without it (a key that exists is overridden);
-    when that config cannot be composed here, ``++`` overrides are left alone.
+    ``++key=value`` is refused only when the key is not in the config composed without it
+    (a key that exists is overridden); when that config cannot be composed here, ``++``
+    overrides are left alone.
 
     Args:
         cfg: the composed config.
