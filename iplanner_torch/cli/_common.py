@@ -307,7 +307,9 @@ def command_help(
         lines.append(f"  {name:15s} " + ", ".join(shown))
     launchers = sorted(f.stem for f in (conf / "hydra" / "launcher").glob("*.yaml"))
     lines += [
-        f"  {'hydra/launcher':15s} basic*, joblib, " + ", ".join(launchers),
+        f"  {'hydra/launcher':15s} basic*, joblib, "
+        + ", ".join([*launchers, "submitit_local"])
+        + " (slurm, submitit_local: pip install -e '.[slurm]')",
         "",
         f"Root keys: {root_keys}.",
         "Any key of these that the command reads can be overridden as key=value (others",

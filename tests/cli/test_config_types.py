@@ -312,7 +312,9 @@ def test_help_lists_groups_options_and_defaults() -> None:
     assert (
         groups["experiment"].startswith("null*, ") and "table_simulation" in groups["experiment"]
     )
-    assert "slurm" in groups["hydra/launcher"] and "joblib" in groups["hydra/launcher"]
+    assert groups["hydra/launcher"] == (
+        "basic*, joblib, slurm, submitit_local (slurm, submitit_local: pip install -e '.[slurm]')"
+    )  # submitit_local, the README's way to run a sweep as a cluster does, was not listed
     assert "Root keys: seed=<int>, device=auto|cpu|cuda, progress=true|false." in lines
 
 
