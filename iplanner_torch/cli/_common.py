@@ -736,6 +736,22 @@ def _composed_without(drop: list[str], overrides: list[str]) -> DictConfig | Non
         return None
 
 
+def write_job_record(name: str, values: dict[str, Any]) -> Path | None:
+    """``values`` as JSON file ``name`` in this run's own folder, which a sweep gathers into
+    its summary table (:data:`~iplanner_torch.cli.callbacks.JOB_METRICS_FILES`); floats of
+    other kinds (numpy, torch) are written as floats. None (nothing written) outside a Hydra
+    run."""
+    import json
+
+    from hydra.core.hydra_config import HydraConfig
+
+    if not HydraConfig.initialized():
+        return None
+    path = Path(HydraConfig.get().runtime.output_dir) / name
+    path.write_text(json.dumps(values, indent=2, default=float) + "\n", encoding="utf-8")
+    return path
+
+
 def multirun_job_dir() -> Path | None:
     """This job's folder when it is one job of a multirun (``-m``), else None."""
     try:

@@ -78,6 +78,7 @@ from iplanner_torch.cli._common import (
     repo_path,
     run_app,
     shell_command,
+    write_job_record,
 )
 from iplanner_torch.errors import ConfigError, DataError
 
@@ -142,30 +143,21 @@ def _generate(cfg: DictConfig) -> None:
         f"wrote {summary.n_demonstrations} demonstrations ({summary.n_frames} frames, {mb:.1f} MB)"
         f" to {out_dir} in {seconds:.1f} s; dataset card: {out_dir / 'README.md'}"
     )
-    _write_job_record(
-        dataset=str(out_dir),
-        demonstrations=summary.n_demonstrations,
-        frames=summary.n_frames,
-        megabytes=round(mb, 3),
-        seconds=round(seconds, 2),
+    write_job_record(
+        JOB_RECORD,
+        {
+            "dataset": str(out_dir),
+            "demonstrations": summary.n_demonstrations,
+            "frames": summary.n_frames,
+            "megabytes": round(mb, 3),
+            "seconds": round(seconds, 2),
+        },
     )
 
 
 #: the record each iplanner-data run writes into its own run folder, gathered into a
 #: sweep's summary table (:data:`~iplanner_torch.cli.callbacks.JOB_METRICS_FILES`)
 JOB_RECORD = "dataset_summary.json"
-
-
-def _write_job_record(**values: Any) -> None:
-    """``values`` as :data:`JOB_RECORD` in the run's folder (none outside a Hydra run)."""
-    import json
-
-    from hydra.core.hydra_config import HydraConfig
-
-    if not HydraConfig.initialized():
-        return
-    job_dir = Path(HydraConfig.get().runtime.output_dir)
-    (job_dir / JOB_RECORD).write_text(json.dumps(values, indent=2) + "\n", encoding="utf-8")
 
 
 def _kept_on_interrupt(cfg: DictConfig) -> str:
@@ -218,9 +210,10 @@ def _info(cfg: DictConfig) -> None:
     actions = demos[0].action_names if demos else ()
     nan = sum(int(np.isnan(d.positions).sum()) for d in demos)
     print(f"{path}: {len(demos)} demonstrations, {frames} frames")
-    _write_job_record(
-        dataset=str(path), demonstrations=len(demos), frames=frames, joints=len(joints),
-        actions=len(actions), nan_values=nan,
+    write_job_record(
+        JOB_RECORD,
+        {"dataset": str(path), "demonstrations": len(demos), "frames": frames,
+         "joints": len(joints), "actions": len(actions), "nan_values": nan},
     )  # fmt: skip
     print(f"  joints ({len(joints)}): {', '.join(joints)}")
     print(f"  actions ({len(actions)}): {', '.join(actions)}")

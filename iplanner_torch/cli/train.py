@@ -34,7 +34,6 @@ from pathlib import Path
 from typing import Any
 
 import hydra
-from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
@@ -53,6 +52,7 @@ from iplanner_torch.cli._common import (
     refuse_unread_overrides,
     repo_path,
     run_app,
+    write_job_record,
 )
 from iplanner_torch.errors import ConfigError
 
@@ -254,9 +254,7 @@ def _app(cfg: DictConfig) -> None:
     out_dir = repo_path(cfg.train.out_dir)
     ckpt, metrics = train_from_config(cfg, cfg.predictor, out_dir, trainer_node=cfg.trainer)
     # a copy in the run's own folder, which a sweep gathers into its summary
-    job_dir = Path(HydraConfig.get().runtime.output_dir)
-    record = {"checkpoint": str(ckpt), **metrics}
-    (job_dir / "heldout_metrics.json").write_text(json.dumps(record, indent=2, default=float))
+    write_job_record("heldout_metrics.json", {"checkpoint": str(ckpt), **metrics})
     print(f"predictor checkpoint: {ckpt}")
     print(f"logs: {out_dir / 'logs'}")
     for key, value in metrics.items():
