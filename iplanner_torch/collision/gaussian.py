@@ -885,7 +885,7 @@ def trajectory_collision_bound(
     weights: torch.Tensor,
     *,
     method: Method = "min",
-    reduce: Literal["max", "none"] = "max",
+    reduce: Literal["max", "sum", "none"] = "max",
     prune_sigma: float | None = DEFAULT_PRUNE_SIGMA,
     max_pairs_per_chunk: int = 2_000_000,
 ) -> torch.Tensor:
@@ -896,6 +896,12 @@ def trajectory_collision_bound(
     (S_r = 0 or S_h = 0) the bound is 0 (nothing can collide); B = 0 or W = 0 give an empty
     result. Inputs as :func:`pairwise_bound_matrix`.
 
+    The paper's maximum (the planner's acceptance test) bounds each pair's probability of
+    touching, not the probability that some pair touches, which can be larger: a robot
+    sphere between two independently predicted hands is touched by one or the other more
+    often than by either. ``reduce="sum"`` gives Boole's bound over the pairs, an upper bound
+    on that probability too (pruned pairs keep their cheap bound, never a lower one).
+
     Args:
         robot_centers: (B, W, S_r, 3) robot sphere centres [m], float32 or float64.
         robot_radii: (S_r,) robot sphere radii [m].
@@ -904,8 +910,8 @@ def trajectory_collision_bound(
         human_radii: (S_h,) human sphere radii [m].
         weights: (A,) or (W, A) action probabilities (>= 0, summing to at most 1).
         method: ``"min"``, ``"volume"`` or ``"halfspace"``.
-        reduce: ``"max"`` -> (B, W); ``"none"`` -> (B, W, S_r, S_h) as
-            :func:`pairwise_bound_matrix`.
+        reduce: ``"max"`` (the paper's) or ``"sum"`` (over the pairs) -> (B, W); ``"none"``
+            -> (B, W, S_r, S_h) as :func:`pairwise_bound_matrix`.
         prune_sigma: see :func:`sphere_collision_bound`.
         max_pairs_per_chunk: memory cap, see :func:`pairwise_bound_matrix`.
 
@@ -919,8 +925,8 @@ def trajectory_collision_bound(
         ConfigError: on an unknown method or reduce, ``prune_sigma <= 0`` or a non-positive
             chunk size.
     """
-    if reduce not in ("max", "none"):
-        raise ConfigError(f"expected reduce in ('max', 'none'), got {reduce!r}")
+    if reduce not in ("max", "sum", "none"):
+        raise ConfigError(f"expected reduce in ('max', 'sum', 'none'), got {reduce!r}")
     pair = pairwise_bound_matrix(
         robot_centers,
         robot_radii,
@@ -936,4 +942,6 @@ def trajectory_collision_bound(
         return pair
     if pair.shape[2] == 0 or pair.shape[3] == 0:  # no sphere pair: the maximum of none is 0
         return pair.new_zeros(pair.shape[:2])
+    if reduce == "sum":
+        return pair.flatten(2).sum(-1).clamp(0.0, 1.0)
     return pair.flatten(2).amax(-1).clamp(0.0, 1.0)

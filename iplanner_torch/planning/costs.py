@@ -1002,7 +1002,11 @@ def forecast_to_obstacle(
     """The forecast's human spheres at given times (linear interpolation between frames).
 
     Frame ``f`` of the forecast lies at ``forecast_t0 + (f + 1) dt``; earlier times take the
-    first frame and later times the last (the prediction does not extend further).
+    first frame and later times the last (the prediction does not extend further). That hold
+    is not conservative: past the horizon the person stays where the last frame puts them and
+    the spread stops growing. ``forecast_t0`` is the last tracker frame, at or before the
+    plan's start, so the end of a 1 s execution window of a 1 s forecast, and the checks past
+    it (``ReplannerCfg.emergency_ahead_s``, ``OptimizerCfg.check_ahead_s``), can fall there.
 
     Args:
         forecast: the predictor's output; batch entry ``index`` is used.

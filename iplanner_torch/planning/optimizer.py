@@ -14,9 +14,11 @@ the execution window enters as a quadratic penalty on ``log(bound / target)`` ab
 ``target`` a fraction of ``1 - delta`` so that solutions land inside the feasible set; the
 constraint is then checked exactly (all sphere pairs) when a trajectory is accepted. When no
 trajectory meets it, the plan follows the best one up to its last safe waypoint and waits there
-(sec. 5), reporting the delay; when holding there is riskier than moving along a candidate,
-the least risky candidate runs instead (an evasion). Beyond the paper, opt-in:
-``OptimizerCfg.safe_hold`` stops a wait earlier when its hold would itself break the
+(sec. 5), reporting the delay. Beyond the paper, always on: when holding there is itself
+above the limit and moving along a candidate has a lower peak bound, the least risky
+candidate runs instead (an evasion, ``OptimizeResult.evasive``; its bound is above the limit
+too, but below the hold's). Beyond the paper, opt-in (the ``conf/planner`` files turn the
+first on): ``OptimizerCfg.safe_hold`` stops a wait earlier when its hold would itself break the
 constraint, and ``OptimizerCfg.escape_within_s`` steps out of the person's way when holding
 breaks it within that time and no candidate is less risky. Also beyond the paper,
 ``CostWeights.human_lookahead_penalty`` puts the same penalty, as a soft cost only, on the

@@ -218,6 +218,30 @@ def test_trajectory_bound_equals_brute_force_loop(diag: bool) -> None:
                     want[b, i] = max(float(want[b, i]), total)
     torch.testing.assert_close(pair, want_pair, rtol=1e-6, atol=1e-12)
     torch.testing.assert_close(got, want.clamp(0, 1), rtol=1e-6, atol=1e-12)
+    total = G.trajectory_collision_bound(rc, rr, hm, h_cov, hr, w, reduce="sum", prune_sigma=None)
+    torch.testing.assert_close(total, want_pair.sum((2, 3)).clamp(0, 1), rtol=1e-6, atol=1e-12)
+
+
+def test_the_pair_maximum_is_no_bound_on_touching_any_pair_and_the_sum_is() -> None:
+    """A robot sphere between two hands predicted independently, 12 cm either side (1 cm std):
+    Monte Carlo over both hands at once is the reference. The paper's maximum over pairs is
+    below the probability that one hand or the other touches; Boole's sum is above it."""
+    rc = torch.zeros(1, 1, 1, 3, dtype=F64)  # (B, W, S_r, 3)
+    rr = torch.tensor([0.05], dtype=F64)
+    hm = torch.tensor([[[[0.12, 0.0, 0.0], [-0.12, 0.0, 0.0]]]], dtype=F64)  # (W, A, S_h, 3)
+    hv = torch.full((1, 1, 2, 3), 0.01**2, dtype=F64)
+    hr = torch.tensor([0.05, 0.05], dtype=F64)
+    w = torch.ones(1, dtype=F64)
+    n = 400_000
+    hands = hm[0, 0] + 0.01 * torch.randn(n, 2, 3, generator=torch.Generator().manual_seed(5))
+    touched = (hands.norm(dim=-1) < 0.1).any(-1).to(F64)  # (n,)
+    p_any = float(touched.mean())
+    se = math.sqrt(p_any * (1 - p_any) / n)
+    paper = float(G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, prune_sigma=None))
+    union = float(G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, reduce="sum"))
+    assert paper < p_any - 5 * se, (paper, p_any)
+    assert union >= p_any - 5 * se, (union, p_any)
+    assert union == pytest.approx(2 * paper, rel=1e-6)  # the two pairs are mirror images
 
 
 def test_batched_equals_looped_and_chunking() -> None:
@@ -283,7 +307,7 @@ def test_errors() -> None:
     with pytest.raises(ConfigError, match="expected method"):
         G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, method="area")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="expected reduce"):
-        G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, reduce="sum")  # type: ignore[arg-type]
+        G.trajectory_collision_bound(rc, rr, hm, hv, hr, w, reduce="mean")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="expected solver"):
         G.sphere_collision_bound_diag(rc, rr[0], rc, rc, rr[0], solver="golden")  # type: ignore[arg-type]
     with pytest.raises(ShapeError, match=r"expected cov \(\.\.\., 3, 3\)"):
