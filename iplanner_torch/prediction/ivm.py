@@ -9,10 +9,12 @@ Training minimises the regularised negative log-likelihood
 
     H(b, a) = -sum_i log p(y_i | x_i) + lam / 2 sum_c a_c^T (K_SS + s I) a_c
 
-where ``s >= 0`` is the smallest shift that makes the training Gram positive semi-definite
-(``s = 0`` up to jitter for positive definite kernels; the DTW kernel is not one, and without
-the shift H would be unbounded below). Because the eigenvalues of a principal submatrix
-interlace those of the whole Gram, ``K_SS + s I`` is PSD for every S.
+(the negative log-likelihood summed over the N points, where Zhu and Hastie average it: this
+``lam`` is theirs times N), where ``s >= 0`` is the smallest shift that makes the training
+Gram positive semi-definite (``s = 0`` up to jitter for positive definite kernels; the DTW
+kernel is not one, and without the shift H would be unbounded below). Because the
+eigenvalues of a principal submatrix interlace those of the whole Gram, ``K_SS + s I`` is PSD
+for every S.
 
 Optimiser. Newton steps use Boehning's bound on the softmax Hessian,
 ``diag(p) - p p^T <= (I - 1 1^T / C) / 2``, so each step solves one fixed ``(m+1) x (m+1)``

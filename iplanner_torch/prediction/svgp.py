@@ -477,8 +477,7 @@ class SVGPRegressor(nn.Module):
         seed = int(torch.randint(0, 2**31 - 1, (1,), generator=g))
         med = float(dtw.median_dtw(w, 64, seed))
         if cfg.kernel == "gak":
-            # GAK sigma of the order of the typical per-frame distance (Cuturi 2011)
-            return max(math.sqrt(med / window[0]), 1e-3)
+            return dtw.gak_sigma(med, window[0])
         return max(med, 1e-6)
 
     @property
@@ -538,14 +537,15 @@ class SVGPRegressor(nn.Module):
         """Negative collapsed ELBO (Titsias 2009) per datum and channel, normalised units.
 
         ``log N(y_c | 0, Q + Lam) - tr(Lam^-1 (K - Q)) / 2`` summed over channels, with
-        ``Q = K_XZ K_ZZ^-1 K_ZX`` and ``Lam = diag(floor + e_i)``; on a subset of the data it
-        is scaled by ``num_data / B``.
+        ``Q = K_XZ K_ZZ^-1 K_ZX`` and ``Lam = diag(floor + e_i)``, divided by ``B * C``: per
+        datum, so that a batch's loss estimates the whole data's on the same scale (it does
+        not depend on ``num_data``).
 
         Args:
             xn: (B, D_in) normalised inputs.
             yn: (B, C) normalised outputs.
             extra: (B,) extra observation noise ``e_i`` (normalised units), or None.
-            num_data: N, the size of the full training set.
+            num_data: N, the size of the full training set (unused: the loss is per datum).
 
         Returns:
             () the loss.

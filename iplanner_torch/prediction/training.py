@@ -519,7 +519,7 @@ def _classifier_kernel_factory(cfg: PredictorCfg) -> Any:
             return dtw.RBFKernel(bw)
         if bw is None:
             med = dtw.median_dtw(x, 256, cfg.seed)
-            bw = med if cfg.classifier_kernel == "dtw" else max(math.sqrt(med / x.shape[1]), 1e-3)
+            bw = med if cfg.classifier_kernel == "dtw" else dtw.gak_sigma(med, x.shape[1])
         if cfg.classifier_kernel == "dtw":
             return dtw.DTWKernel(bw)
         return dtw.GlobalAlignmentKernel(bw)

@@ -12,7 +12,13 @@ from scipy.optimize import minimize
 
 from iplanner_torch.data.windows import compute_features
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
-from iplanner_torch.prediction.dtw import DTWKernel, GlobalAlignmentKernel, RBFKernel, median_dtw
+from iplanner_torch.prediction.dtw import (
+    DTWKernel,
+    GlobalAlignmentKernel,
+    RBFKernel,
+    gak_sigma,
+    median_dtw,
+)
 from iplanner_torch.prediction.ivm import ActionClassifier, IVMClassifier, feature_columns
 
 pytestmark = pytest.mark.usefixtures("one_thread")
@@ -58,6 +64,30 @@ def test_gak_and_rbf_kernels_learn(data):
     for kernel in (GlobalAlignmentKernel(2.0), RBFKernel(3.0)):
         ivm = IVMClassifier(kernel, num_classes=3, max_import=20).fit(x, y)
         assert (ivm.predict(xt) == yt).float().mean() >= 0.90, kernel
+
+
+def test_gak_learns_with_its_automatic_bandwidth(data):
+    """Training's GAK bandwidth (``classifier_bandwidth`` unset) follows Cuturi's rule,
+    median DTW / sqrt(T); sqrt(median DTW / T), the rule before, classified 87 % of these."""
+    from iplanner_torch.prediction.predictor import PredictorCfg
+    from iplanner_torch.prediction.training import _classifier_kernel_factory
+
+    (x, y), (xt, yt) = data
+    kernel = _classifier_kernel_factory(PredictorCfg(classifier_kernel="gak", seed=0))(x)
+    med = median_dtw(x, 256, 0)
+    assert isinstance(kernel, GlobalAlignmentKernel)
+    assert kernel.sigma == pytest.approx(med / math.sqrt(x.shape[1]))
+    ivm = IVMClassifier(kernel, num_classes=3, max_import=20).fit(x, y)
+    assert (ivm.predict(xt) == yt).float().mean() >= 0.97
+
+
+def test_gak_sigma_rule() -> None:
+    assert gak_sigma(12.0, 9) == pytest.approx(4.0)
+    assert gak_sigma(0.0, 5) == 1e-3  # all windows alike: a floor, not 0
+    with pytest.raises(ConfigError, match="length"):
+        gak_sigma(1.0, 0)
+    with pytest.raises(ConfigError, match="median_distance"):
+        gak_sigma(float("nan"), 4)
 
 
 def test_same_seed_same_model(data):
