@@ -685,6 +685,13 @@ class EpisodeWriter:
             dt: seconds between predicted frames.
             joint_names: the K joint names (default ``joint_0`` ... ``joint_{K-1}``; the same
                 in every forecast).
+
+        Raises:
+            ShapeError: for shapes other than those above, or no action, frame or joint.
+            DataError: for values a :class:`Forecast` refuses (NaN or infinite, a mean
+                coordinate beyond ``MAX_POSITION_M``, weights that are not probabilities),
+                checked before anything is written: the reader builds one Forecast of all
+                the messages, which one such message would have made unreadable.
         """
         w = _as_tensor("weights", weights, ("A",))
         m = _as_tensor("mean", mean, (w.shape[0], "n_f", "K", 3))
@@ -700,6 +707,17 @@ class EpisodeWriter:
         actions = self._checked_names(topic, "action_names", action_names, w.shape[0])
         joints = self._checked_names(topic, "joint_names", names, k)
         dt = self._number("dt", dt)
+        try:  # the reader's checks (:meth:`EpisodeLog.forecasts`), before the message is taken
+            Forecast(
+                weights=torch.from_numpy(w[None]),  # (1, A): float64, as the reader's
+                mean=torch.from_numpy(m[None]),
+                var=torch.from_numpy(v[None]),
+                dt=dt,
+                joint_names=joints,
+                action_names=actions,
+            )
+        except (DataError, ShapeError) as err:
+            raise DataError(f"{self.path}: forecast at t={t} not written: {err}") from None
         ns, msg = self._stamped(t)
         msg["dt"] = dt
         msg["action_names"] = actions

@@ -608,6 +608,31 @@ def test_an_empty_forecast_is_refused_before_it_makes_the_log_unreadable(tmp_pat
     assert ep.forecasts()[1].mean.shape == (1, 1, 2, 1, 3) and len(ep.robot_q()[0]) == 1
 
 
+@pytest.mark.parametrize(
+    ("weights", "mean", "message"),
+    [
+        ([float("nan"), 0.5], 0.0, "forecast weights is NaN/Inf for action 'a'"),
+        ([0.9, 0.5], 0.0, "forecast weights of batch 0 are not probabilities"),
+        ([0.5, 0.5], float("inf"), "forecast mean is NaN/Inf for joint 'joint_0'"),
+        ([0.5, 0.5], 1e4, "forecast mean is 10000 m for joint 'joint_0'"),
+    ],
+)
+def test_a_forecast_the_reader_would_refuse_is_refused_before_it_is_written(
+    tmp_path: Path, weights: list[float], mean: float, message: str
+) -> None:
+    """A forecast with NaN weights was written without a word, and the reader, which builds
+    one Forecast of all of them, then refused every forecast of the log."""
+    path = tmp_path / "f.mcap"
+    var = np.full((2, 2, 1, 3), 0.01)
+    with EpisodeWriter(path, metadata={}) as log:
+        log.forecast(0.1, [0.5, 0.5], np.zeros((2, 2, 1, 3)), var, ["a", "b"], 0.1)
+        with pytest.raises(DataError, match=rf"f.mcap: forecast at t=0.2 not written: {message}"):
+            log.forecast(0.2, weights, np.full((2, 2, 1, 3), mean), var, ["a", "b"], 0.1)
+        log.forecast(0.3, [0.2, 0.8], np.zeros((2, 2, 1, 3)), var, ["a", "b"], 0.1)
+    t, fc = read_episode(path).forecasts()
+    assert t.tolist() == [0.1, 0.3] and fc.weights[1].tolist() == pytest.approx([0.2, 0.8])
+
+
 def test_unencodable_metrics_and_event_details_are_data_errors(tmp_path: Path) -> None:
     """A numpy array of strings in a metric or event detail escaped as a bare ValueError, and
     the refused call had already moved the log's last time (where an interruption is put)."""
