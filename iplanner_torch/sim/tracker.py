@@ -106,16 +106,10 @@ class Tracker:
             ShapeError: when ``joints`` is not (K, 3) of real numbers, or K differs from
                 the stored frames'.
         """
-        try:
-            joints = np.asarray(joints)
-        except ValueError as err:  # ragged nested lists
-            raise ShapeError(f"expected joints (K, 3), got a ragged sequence: {err}") from err
+        # a tensor on any device, with a gradient or not, is taken as its values
+        joints = checks.real_array("joints", joints)
         if joints.ndim != 2 or joints.shape[1] != 3:
             raise ShapeError(f"expected joints (K, 3), got {tuple(joints.shape)}")
-        if joints.dtype.kind not in "iuf":  # bool, complex, strings, objects
-            raise ShapeError(
-                f"expected real joint positions (a real numeric dtype), got {joints.dtype}"
-            )
         if self._frames and joints.shape[0] != self._frames[-1].shape[0]:
             raise ShapeError(
                 f"expected joints ({self._frames[-1].shape[0]}, 3) like the stored frames, got "

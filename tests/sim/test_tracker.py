@@ -115,7 +115,7 @@ def test_rejects_bad_times_joints_and_settings() -> None:
     assert np.isfinite(tracker.times()).all() and tracker.num_frames == 1
     with pytest.raises(ShapeError, match=r"\(10, 3\) like the stored frames, got K = 12"):
         tracker.observe(1.0, np.zeros((12, 3)))
-    with pytest.raises(ShapeError, match="numeric dtype"):
+    with pytest.raises(ShapeError, match="joints an array of real numbers, got dtype <U1"):
         tracker.observe(1.0, np.full((10, 3), "a"))
     with pytest.raises(ShapeError, match="ragged"):
         tracker.observe(1.0, [[0.0, 0.0, 0.0], [0.0, 0.0]])
@@ -176,6 +176,17 @@ def test_a_non_finite_true_joint_is_a_lost_joint() -> None:
 def test_only_real_joint_positions_are_taken(dtype: type) -> None:
     """Complex positions would lose their imaginary part when the window is read."""
     tracker = Tracker(TrackerCfg(), seed=0)
-    with pytest.raises(ShapeError, match="real joint positions"):
+    with pytest.raises(ShapeError, match="joints an array of real numbers"):
         tracker.observe(0.0, rest_pose().astype(dtype))
     assert tracker.num_frames == 0
+
+
+def test_a_tensor_with_a_gradient_is_taken_as_its_values() -> None:
+    """``torch.Tensor`` joints that need a gradient failed inside numpy with a RuntimeError."""
+    import torch
+
+    pose = rest_pose()
+    a, b = Tracker(TrackerCfg(), seed=0), Tracker(TrackerCfg(), seed=0)
+    assert a.observe(0.0, pose)
+    assert b.observe(0.0, torch.tensor(pose, requires_grad=True))
+    np.testing.assert_array_equal(a.window(), b.window())
