@@ -865,10 +865,15 @@ class SVGPRegressor(nn.Module):
         return k @ c["w"]
 
     def _check_dtype(self, t: torch.Tensor, name: str = "x") -> None:
-        """ShapeError unless ``t`` has the regressor's dtype (its normalisation's)."""
+        """ShapeError unless ``t`` has the regressor's dtype and device (its
+        normalisation's)."""
         if t.dtype != self.x_mean.dtype:
             raise ShapeError(
                 f"expected {name} {self.x_mean.dtype} (the regressor's), got {t.dtype}"
+            )
+        if t.device != self.x_mean.device:
+            raise ShapeError(
+                f"expected {name} on {self.x_mean.device} (the regressor's), got {t.device}"
             )
 
     def predict(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -882,7 +887,7 @@ class SVGPRegressor(nn.Module):
             and the input-noise term (see the module docstring). A NaN input gives NaN.
 
         Raises:
-            ShapeError: when ``x`` is not (B, D_in) of the regressor's dtype.
+            ShapeError: when ``x`` is not (B, D_in) of the regressor's dtype and device.
         """
         check_shape("x", x, ("B", self.input_dim))
         self._check_dtype(x)
@@ -911,7 +916,12 @@ class SVGPRegressor(nn.Module):
 
         Returns:
             Same as :meth:`predict`.
+
+        Raises:
+            ShapeError: as :meth:`predict`.
         """
+        check_shape("x", x, ("B", self.input_dim))
+        self._check_dtype(x)
         self.eval()
         with torch.no_grad(), gpytorch.settings.fast_pred_var(False):
             out = self.model(self.normalise_x(x))

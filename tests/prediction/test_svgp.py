@@ -415,6 +415,14 @@ def test_inputs_of_another_dtype_are_refused() -> None:
     reg = SVGPRegressor.from_data(SVGPCfg(num_inducing=8, max_steps=2), x, y)
     with pytest.raises(ShapeError, match=r"expected x torch.float32 \(the regressor's\)"):
         reg.predict(x.double())
+    # the reference path and other devices: raw RuntimeErrors from deep inside GPyTorch
+    with pytest.raises(ShapeError, match=r"expected x torch.float32 \(the regressor's\)"):
+        reg.predict_gpytorch(x.double())
+    with pytest.raises(ShapeError, match=r"expected x \(B, 1\)"):
+        reg.predict_gpytorch(x[:, None])
+    for predict in (reg.predict, reg.predict_gpytorch):
+        with pytest.raises(ShapeError, match=r"expected x on cpu \(the regressor's\), got meta"):
+            predict(x.to("meta"))
     with pytest.raises(ShapeError, match="expected y torch.float32"):
         reg.fit(x, y.double())
     with pytest.raises(ShapeError, match="one floating dtype"):
