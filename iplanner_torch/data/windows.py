@@ -227,10 +227,22 @@ def progress_bitmask(
         (T,) int64 bitmask, on the labels' device.
 
     Raises:
+        ShapeError: when ``labels`` is not (T,) of an integer dtype (floats would be cut to
+            integers, NaN to a large negative one).
         ConfigError: for an action index outside 0..62.
+        DataError: for a label below -1.
     """
-    lab = torch.as_tensor(labels).long()
-    check_shape("labels", lab, ("T",))
+    raw = torch.as_tensor(labels)
+    check_shape("labels", raw, ("T",))
+    if raw.is_floating_point() or raw.is_complex() or raw.dtype == torch.bool:
+        raise ShapeError(f"expected labels (T,) of an integer dtype, got {raw.dtype}")
+    lab = raw.long()
+    if lab.numel() and int(lab.min()) < -1:
+        first = int(torch.nonzero(lab < -1)[0, 0])
+        raise DataError(
+            f"labels: frame {first} has label {int(lab[first])}; expected an action index "
+            ">= 0, or -1 for an unlabelled frame"
+        )
     t_len = lab.shape[0]
     out = torch.zeros(t_len, dtype=torch.int64, device=lab.device)
     if t_len < 2:

@@ -156,6 +156,16 @@ def test_progress_bitmask_brute_force():
     assert (labels == -1).sum() > 10
 
 
+def test_progress_bitmask_refuses_labels_that_are_not_action_indices() -> None:
+    """NaN, 1.5 and -5 were taken without a word (NaN cut to a large negative integer)."""
+    for bad in ([0.0, float("nan"), 1.0], np.array([0.0, 1.5]), [True, False]):
+        with pytest.raises(ShapeError, match="expected labels \\(T,\\) of an integer dtype"):
+            progress_bitmask(bad)
+    with pytest.raises(DataError, match="frame 2 has label -5; expected an action index >= 0"):
+        progress_bitmask(np.array([0, -1, -5, 1]))
+    assert progress_bitmask(np.array([0, 0, -1, 1], dtype=np.int32)).tolist() == [0, 0, 1, 1]
+
+
 @pytest.mark.parametrize(
     ("labels", "want"),
     [
