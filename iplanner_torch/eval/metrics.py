@@ -245,19 +245,34 @@ def modified_hausdorff(a: Any, b: Any) -> float:
 
 
 def modified_hausdorff_batch(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """:func:`modified_hausdorff` for a batch of point-set pairs (no checks: a hot path).
+    """:func:`modified_hausdorff` for a batch of point-set pairs.
 
     Distances are taken between the points themselves in the inputs' dtype, so identical
-    sets give exactly 0 in float32 as in float64.
+    sets give exactly 0 in float32 as in float64. Shapes, dtypes and devices are checked
+    (no host synchronisation); the values are not (a hot path).
 
     Args:
-        a: (B, N, 3) points [m].
-        b: (B, M, 3) points [m].
+        a: (B, N, 3) points [m], N >= 1, of a floating dtype.
+        b: (B, M, 3) points [m], M >= 1, of ``a``'s dtype and device.
 
     Returns:
         (B,) ``max(mean_i min_j |a_i - b_j|, mean_j min_i |a_i - b_j|)`` [m]; NaN for a pair
         in which a point has a NaN coordinate.
+
+    Raises:
+        ShapeError: for other shapes, an empty point set, or dtypes or devices that differ.
     """
+    check_shape("a", a, ("B", "N", 3))
+    check_shape("b", b, (a.shape[0], "M", 3))
+    if a.shape[1] == 0 or b.shape[1] == 0:
+        raise ShapeError(
+            f"expected non-empty point sets, got a {tuple(a.shape)}, b {tuple(b.shape)}"
+        )
+    if not a.is_floating_point() or a.dtype != b.dtype or a.device != b.device:
+        raise ShapeError(
+            f"expected a and b of one floating dtype on one device, got {a.dtype} on {a.device} "
+            f"and {b.dtype} on {b.device}"
+        )
     # the direct difference, not the matrix-product expansion (which cancels to ~1e-4 m in
     # float32): identical paths give exactly 0
     d = torch.cdist(a, b, compute_mode="donot_use_mm_for_euclid_dist")  # (B, N, M)

@@ -249,6 +249,20 @@ def test_episode_metrics_of_fewer_than_three_samples_have_nan_smoothness() -> No
         )  # fmt: skip
 
 
+def test_modified_hausdorff_batch_checks_its_shapes() -> None:
+    """It had no checks: a wrong rank returned a result, other sizes failed in torch.cdist."""
+    a, b = torch.zeros(2, 5, 3), torch.zeros(2, 4, 3)
+    with pytest.raises(ShapeError, match=r"expected a \(B, N, 3\), got \(10, 3\)"):
+        modified_hausdorff_batch(a.reshape(10, 3), b)
+    with pytest.raises(ShapeError, match=r"expected b \(2, M, 3\)"):
+        modified_hausdorff_batch(a, torch.zeros(2, 4, 2))
+    with pytest.raises(ShapeError, match="non-empty point sets"):
+        modified_hausdorff_batch(a, b[:, :0])
+    with pytest.raises(ShapeError, match="one floating dtype on one device"):
+        modified_hausdorff_batch(a, b.double())
+    assert modified_hausdorff_batch(a, b).tolist() == [0.0, 0.0]
+
+
 def test_modified_hausdorff_of_identical_paths_is_exactly_zero() -> None:
     """More than 25 points: the distances are still taken directly (the matrix-product
     expansion left about 2e-4 m between a float32 path and itself)."""
