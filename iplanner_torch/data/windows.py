@@ -82,10 +82,21 @@ def impute_nan(positions: torch.Tensor, joint_names: Sequence[str] | None = None
         (..., T, K, 3) positions without NaN.
 
     Raises:
+        ShapeError: when ``positions`` is not (..., T, K, 3) of a floating dtype, or
+            ``joint_names`` does not name K joints.
         DataError: when a joint is lost in every frame and no other joint is observed (or
             ``joint_names`` is not given).
     """
     x = positions
+    if not isinstance(x, torch.Tensor) or x.dim() < 3 or x.shape[-1] != 3:
+        got = tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
+        raise ShapeError(f"expected positions (..., T, K, 3), got {got}")
+    if not x.is_floating_point():
+        raise ShapeError(f"expected positions of a floating dtype, got {x.dtype}")
+    if joint_names is not None and len(joint_names) != x.shape[-2]:
+        raise ShapeError(
+            f"expected {x.shape[-2]} joint_names (K of positions), got {len(joint_names)}"
+        )
     obs = torch.isfinite(x).all(dim=-1)  # (..., T, K)
     if bool(obs.all()):
         return x

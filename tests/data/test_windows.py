@@ -156,6 +156,22 @@ def test_progress_bitmask_brute_force():
     assert (labels == -1).sum() > 10
 
 
+def test_impute_nan_checks_its_input() -> None:
+    """(T, 3) with a NaN failed with an IndexError; integer positions were taken."""
+    x = torch.zeros(40, 3)
+    x[3, 0] = float("nan")
+    with pytest.raises(ShapeError, match=r"expected positions \(\.\.\., T, K, 3\), got \(40, 3\)"):
+        impute_nan(x)
+    with pytest.raises(
+        ShapeError, match=r"expected positions \(\.\.\., T, K, 3\), got \(10, 4, 4\)"
+    ):
+        impute_nan(torch.full((10, 4, 4), float("nan")))
+    with pytest.raises(ShapeError, match="floating dtype, got torch.int64"):
+        impute_nan(torch.zeros(10, 2, 3, dtype=torch.long))
+    with pytest.raises(ShapeError, match="expected 2 joint_names"):
+        impute_nan(torch.zeros(10, 2, 3), ["a"])
+
+
 def test_progress_bitmask_refuses_labels_that_are_not_action_indices() -> None:
     """NaN, 1.5 and -5 were taken without a word (NaN cut to a large negative integer)."""
     for bad in ([0.0, float("nan"), 1.0], np.array([0.0, 1.5]), [True, False]):
