@@ -790,8 +790,9 @@ class TrajectoryOptimizer:
         """Plan from ``q_start`` at ``t0`` to ``q_goal`` at ``t0 + duration``.
 
         Args:
-            q_start: (J,) start configuration [rad] (pinned).
-            q_goal: (J,) goal configuration [rad] (pinned at the last waypoint).
+            q_start: (J,) start configuration [rad] (pinned), of any floating dtype and
+                device: it is moved to the optimiser's (its robot model's), as the plan is.
+            q_goal: (J,) goal configuration [rad] (pinned at the last waypoint), the same.
             forecast: the predicted human (batch entry 0), or None for no human.
             forecast_t0: time of the last observed frame of the forecast [s].
             t0: time of the first waypoint [s].

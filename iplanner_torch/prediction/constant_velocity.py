@@ -131,7 +131,8 @@ class ConstantVelocityPredictor:
 
         Returns:
             Forecast with weights (B, 1), mean and var (B, 1, n_future, K, 3), action
-            :data:`ACTION`, ``dt = 1 / fps``.
+            :data:`ACTION`, ``dt = 1 / fps``, of ``positions``' dtype and device (a trained
+            predictor's are float32 on its own device).
 
         Raises:
             ShapeError: when ``positions`` is not (B >= 1, n_prev, K, 3) of a floating dtype,

@@ -485,7 +485,9 @@ class HumanMotionPredictor:
                 uses the fallbacks of the module docstring). Gradients are not tracked.
 
         Returns:
-            The Forecast: weights (B, A), mean/var (B, A, n_f, K, 3) in the world frame.
+            The Forecast: weights (B, A), mean/var (B, A, n_f, K, 3) in the world frame,
+            float32 on the predictor's device whatever the inputs' floating dtype (the
+            models' own).
 
         Raises:
             ShapeError: for wrong shapes, no window (B = 0), an ``f_prev`` that is not of a

@@ -307,10 +307,15 @@ class RobotModel:
         """Origin of every link frame in the world frame.
 
         Args:
-            q: (..., J) joint positions [rad].
+            q: (..., J) joint positions [rad]. Not checked for NaN: a non-finite
+                configuration gives NaN positions.
 
         Returns:
-            link name -> (..., 3) position [m], for every name in :attr:`link_names`.
+            link name -> (..., 3) position [m], for every name in :attr:`link_names`, of
+            ``q``'s dtype and on its device.
+
+        Raises:
+            ShapeError: when the last dimension of ``q`` is not J or ``q`` is not floating.
         """
         qf, lead = self._flat(q)
         _, positions, _ = self._fk.frames(qf)
@@ -323,10 +328,14 @@ class RobotModel:
         """Rotation and origin of every link frame in the world frame.
 
         Args:
-            q: (..., J) joint positions [rad].
+            q: (..., J) joint positions [rad]. Not checked for NaN: a non-finite
+                configuration gives NaN poses.
 
         Returns:
             link name -> ((..., 3, 3) rotation, (..., 3) position [m]).
+
+        Raises:
+            ShapeError: when the last dimension of ``q`` is not J or ``q`` is not floating.
         """
         qf, lead = self._flat(q)
         rotations, positions, _ = self._fk.frames(qf)
@@ -345,6 +354,9 @@ class RobotModel:
 
         Returns:
             (..., 3) tool point [m].
+
+        Raises:
+            ShapeError: when the last dimension of ``q`` is not J or ``q`` is not floating.
         """
         qf, lead = self._flat(q)
         _, positions, _ = self._fk.frames(qf)
@@ -354,10 +366,14 @@ class RobotModel:
         """Analytic Jacobian of :meth:`ee_position`: column i is ``a_i x (p_ee - o_i)``.
 
         Args:
-            q: (..., J) joint positions [rad].
+            q: (..., J) joint positions [rad]. Not checked for NaN (called every IK
+                iteration): a non-finite configuration gives a NaN Jacobian.
 
         Returns:
             (..., 3, J) d p_ee / d q [m/rad].
+
+        Raises:
+            ShapeError: when the last dimension of ``q`` is not J or ``q`` is not floating.
         """
         qf, lead = self._flat(q)
         axes, origins, p_ee = self._fk.joint_axes(qf)
