@@ -77,6 +77,16 @@ def check_shape(name: str, x: torch.Tensor, expected: Sequence[int | str | None]
             raise ShapeError(f"expected {name} {pretty}, got {shape}")
 
 
+def check_device(reference: str, x: torch.Tensor, **others: torch.Tensor | None) -> None:
+    """Raise :class:`ShapeError` unless every tensor of ``others`` is on ``x``'s device (no
+    host synchronisation: for the hot paths too). ``reference`` names ``x`` in the message:
+    ``expected q_min on cpu (where q is), got cuda:0``. None entries are skipped."""
+    dev = x.device
+    for name, t in others.items():
+        if t is not None and t.device != dev:
+            raise ShapeError(f"expected {name} on {dev} (where {reference} is), got {t.device}")
+
+
 def all_finite(*xs: torch.Tensor) -> bool:
     """Whether every entry of every tensor in ``xs`` is finite; one host synchronisation.
 

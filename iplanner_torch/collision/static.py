@@ -22,7 +22,7 @@ import torch
 
 from iplanner_torch.checks import finite, finite_tuple, is_real
 from iplanner_torch.errors import ConfigError, ShapeError
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_device, check_shape
 
 
 def _check_spheres(centers: torch.Tensor, radii: torch.Tensor) -> None:
@@ -32,6 +32,8 @@ def _check_spheres(centers: torch.Tensor, radii: torch.Tensor) -> None:
     if not isinstance(radii, torch.Tensor):
         raise ShapeError(f"expected radii to be a torch.Tensor, got {type(radii).__name__}")
     _check_dtypes(centers, radii)
+    if radii.dim() > 0:  # a 0-d tensor goes with a tensor on any device, as a number does
+        check_device("centers", centers, radii=radii)
     lead = tuple(centers.shape[:-1])
     shape = tuple(radii.shape)
     # broadcastable to ``lead`` (a Python test: torch.broadcast_shapes costs tens of us)
@@ -87,6 +89,13 @@ def sphere_box_distance(
     check_shape("box_half_extents", box_half_extents, (3,))
     if box_rotation is not None:
         check_shape("box_rotation", box_rotation, (3, 3))
+    check_device(
+        "centers",
+        centers,
+        box_center=box_center,
+        box_half_extents=box_half_extents,
+        box_rotation=box_rotation,
+    )
     if validate:
         parts = [box_center, box_half_extents]
         if box_rotation is not None:
@@ -147,6 +156,12 @@ def sphere_plane_distance(
     """
     _check_spheres(centers, radii)
     check_shape("normal", normal, (3,))
+    check_device(
+        "centers",
+        centers,
+        normal=normal,
+        offset=offset if isinstance(offset, torch.Tensor) else None,
+    )
     if isinstance(offset, torch.Tensor):
         if offset.numel() != 1:
             raise ShapeError(

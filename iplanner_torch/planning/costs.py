@@ -35,7 +35,7 @@ from iplanner_torch.collision.gaussian import RADIUS_FLOOR, secular_multiplier
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.planning.trajectory import accelerations, velocities
 from iplanner_torch.prediction.forecast import Forecast
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_device, check_shape
 
 #: Mahalanobis distance beyond which a pair is pruned: its bound is below Phi(-5) < 3e-7.
 PRUNE_SIGMAS = 5.0
@@ -138,11 +138,12 @@ def joint_limit_violation(
         (B,) [rad^2].
 
     Raises:
-        ShapeError: when ``q`` is not (B, W, J) or a limit is not (J,).
+        ShapeError: when ``q`` is not (B, W, J) or a limit is not (J,) on its device.
     """
     check_shape("q", q, ("B", "W", "J"))
     check_shape("q_min", q_min, (q.shape[-1],))
     check_shape("q_max", q_max, (q.shape[-1],))
+    check_device("q", q, q_min=q_min, q_max=q_max)
     over = torch.relu(q - q_max) + torch.relu(q_min - q)
     return over.square().sum(dim=(-2, -1))
 
@@ -159,11 +160,12 @@ def joint_vel_limit_violation(q: torch.Tensor, dt: float, v_max: torch.Tensor) -
         (B,) [(rad/s)^2].
 
     Raises:
-        ShapeError: when ``q`` is not (B, W, J) or ``v_max`` is not (J,).
+        ShapeError: when ``q`` is not (B, W, J) or ``v_max`` is not (J,) on its device.
         ConfigError: when ``dt`` (a Python number) is not finite and > 0.
     """
     check_shape("q", q, ("B", "W", "J"))
     check_shape("v_max", v_max, (q.shape[-1],))
+    check_device("q", q, v_max=v_max)
     return torch.relu(velocities(q, dt).abs() - v_max).square().sum(dim=(-2, -1))
 
 
@@ -228,10 +230,11 @@ def goal_distance(q_last: torch.Tensor, q_goal: torch.Tensor) -> torch.Tensor:
         (B,) [rad^2].
 
     Raises:
-        ShapeError: when ``q_last`` is not (B, J) or ``q_goal`` not (J,).
+        ShapeError: when ``q_last`` is not (B, J) or ``q_goal`` not (J,) on its device.
     """
     check_shape("q_last", q_last, ("B", "J"))
     check_shape("q_goal", q_goal, (q_last.shape[-1],))
+    check_device("q_last", q_last, q_goal=q_goal)
     return (q_last - q_goal).square().sum(-1)
 
 
@@ -246,10 +249,11 @@ def goal_distance_ee(ee: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         (B,) [m^2].
 
     Raises:
-        ShapeError: when ``ee`` is not (B, 3) or ``target`` not (3,).
+        ShapeError: when ``ee`` is not (B, 3) or ``target`` not (3,) on its device.
     """
     check_shape("ee", ee, ("B", 3))
     check_shape("target", target, (3,))
+    check_device("ee", ee, target=target)
     return (ee - target).square().sum(-1)
 
 

@@ -372,10 +372,16 @@ class HumanMotionPredictor:
         """(B, n_p, D) features -> normalised features (classifier input).
 
         Raises:
-            ShapeError: unless ``f_prev`` is a floating (B, n_p, D) tensor.
+            ShapeError: unless ``f_prev`` is a floating (B, n_p, D) tensor on the predictor's
+                device.
         """
         check_shape("f_prev", f_prev, ("B", self.n_prev, self.num_features))
         _check_floating("f_prev", f_prev)
+        if f_prev.device != self.feat_mean.device:
+            raise ShapeError(
+                f"expected f_prev on {self.feat_mean.device} (the predictor's), got "
+                f"{f_prev.device}"
+            )
         return self._normalise(f_prev)
 
     def _normalise(self, f_prev: torch.Tensor) -> torch.Tensor:

@@ -178,6 +178,7 @@ def test_integer_centres_are_refused_not_rounded() -> None:
         ),
         (torch.zeros(1, 1), r"broadcastable to centers\[\.\.\., 0\] \(1,\), got \(1, 1\)"),
         (torch.tensor([True]), "expected radii of a real dtype, got torch.bool"),
+        (torch.ones(1, device="meta"), r"expected radii on cpu \(where centers is\), got meta"),
     ],
 )
 def test_sphere_distances_refuse_bad_radii(radii: object, match: str) -> None:
@@ -187,6 +188,21 @@ def test_sphere_distances_refuse_bad_radii(radii: object, match: str) -> None:
         sphere_box_distance(_UP, radii, torch.zeros(3), torch.full((3,), 0.5))  # type: ignore[arg-type]
     with pytest.raises(ShapeError, match=match):
         sphere_plane_distance(_UP, radii, torch.tensor([0.0, 0.0, 1.0]), 0.0)  # type: ignore[arg-type]
+
+
+def test_sphere_distances_refuse_a_shape_on_another_device() -> None:
+    """torch's "Tensor on device meta is not on the expected device cpu!" before."""
+    meta = {"device": "meta"}
+    with pytest.raises(
+        ShapeError, match=r"expected box_center on cpu \(where centers is\), got meta"
+    ):
+        sphere_box_distance(
+            _UP, torch.ones(1), torch.zeros(3, **meta), torch.ones(3), validate=False
+        )
+    with pytest.raises(ShapeError, match=r"expected normal on cpu \(where centers is\), got meta"):
+        sphere_plane_distance(_UP, torch.ones(1), torch.ones(3, **meta), 0.0, validate=False)
+    got = sphere_plane_distance(_UP, torch.tensor(0.1), torch.tensor([0.0, 0.0, 1.0]), 0.0)
+    assert got.shape == _UP.shape[:-1]  # a 0-d radius goes with centres anywhere
 
 
 @pytest.mark.parametrize(

@@ -594,6 +594,27 @@ def test_human_obstacle_checks_its_tensors(
             lambda: C.goal_distance_ee(torch.zeros(1, 2), torch.zeros(3)),
             r"expected ee \(B, 3\), got \(1, 2\)",
         ),
+        # another device: torch's "Tensor on device meta is not on the expected device cpu!"
+        (
+            lambda: C.joint_limit_violation(
+                torch.zeros(1, 5, 2), torch.zeros(2, device="meta"), torch.ones(2)
+            ),
+            r"expected q_min on cpu \(where q is\), got meta",
+        ),
+        (
+            lambda: C.joint_vel_limit_violation(
+                torch.zeros(1, 5, 2), 0.1, torch.ones(2, device="meta")
+            ),
+            r"expected v_max on cpu \(where q is\), got meta",
+        ),
+        (
+            lambda: C.goal_distance(torch.zeros(1, 2), torch.zeros(2, device="meta")),
+            r"expected q_goal on cpu \(where q_last is\), got meta",
+        ),
+        (
+            lambda: C.goal_distance_ee(torch.zeros(1, 3), torch.zeros(3, device="meta")),
+            r"expected target on cpu \(where ee is\), got meta",
+        ),
     ],
 )
 def test_cost_terms_refuse_mismatched_joint_axes(call, match: str) -> None:

@@ -282,6 +282,8 @@ def test_action_weights_and_normalise_features_check_their_input(trained) -> Non
         pred.normalise_features(f.numpy())
     with pytest.raises(ShapeError, match="f_prev"):
         pred.normalise_features(f[:, :, :5])
+    with pytest.raises(ShapeError, match=r"expected f_prev on cpu \(the predictor's\), got meta"):
+        pred.normalise_features(f.to("meta"))
     torch.testing.assert_close(pred.normalise_features(f), (f - pred.feat_mean) / pred.feat_std)
 
 
