@@ -5,7 +5,7 @@ Examples::
     iplanner-train                                   # predictor=iplanner_ni on datasets/reaching
     iplanner-train predictor=iplanner_no_ni trainer=fast
     iplanner-train train.resume=true                 # skip sub-models already trained
-    iplanner-train data=lego 'data.windows.joints=[right_hand]'
+    iplanner-train data=lego 'data.windows.joints=[right_hand]' train.out_dir=ck/lego_right
     # a sweep: one predictor per job, each in its own folder (ck/0, ck/1, ck/2)
     iplanner-train -m predictor.svgp.num_inducing=8,16,32 'train.out_dir=ck/${hydra:job.num}'
 
@@ -13,7 +13,8 @@ Writes ``<train.out_dir>/predictor.ckpt`` (default ``checkpoints/<dataset>/<pred
 sub-models' Lightning checkpoints, CSV / TensorBoard logs and ``training_inputs.json`` (what
 they were trained on: data, predictor, window and trainer settings, and the split by
 demonstration, ``seed`` and ``data.split``, with the names of the held-out demonstrations,
-which ``iplanner-evaluate`` scores; a resume on other data or settings is refused), then
+which ``iplanner-evaluate`` scores; a resume on other data or settings is refused, and so is
+a folder whose predictor was trained on other inputs unless ``train.overwrite=true``), then
 prints held-out metrics. It reads ``data``, ``predictor``, ``trainer``, ``train``, ``seed``,
 ``paths`` and ``progress``; any other override (``device``: training runs on
 ``trainer.accelerator``) is refused. A missing or empty dataset folder is generated only when
@@ -121,6 +122,7 @@ def train_from_config(
         progress=cfg_scalar(cfg, "progress", bool),
         resume=cfg_scalar(cfg.train, "resume", bool),
         split=split,
+        overwrite=cfg_scalar(cfg.train, "overwrite", bool),
     )
     seconds = time.perf_counter() - t0
     metrics: dict = {"train_seconds": seconds, "train_windows": len(train_w)}
@@ -180,6 +182,7 @@ def check_training(
         dataset_generator(data_node, name="data.generator")
     cfg_scalar(cfg, "progress", bool)
     cfg_scalar(cfg.train, "resume", bool)
+    cfg_scalar(cfg.train, "overwrite", bool)
     return predictor_cfg, trainer_cfg, window_cfg, drawn
 
 

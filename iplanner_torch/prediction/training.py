@@ -566,6 +566,7 @@ def train_predictor(
     progress: bool = True,
     resume: bool = False,
     split: SplitRecord | None = None,
+    overwrite: bool = False,
 ) -> Path:
     """Train the classifier, the next-action model and all GPs; write ``predictor.ckpt``.
 
@@ -583,6 +584,11 @@ def train_predictor(
         split: how the demonstrations behind ``data`` were split, recorded in
             ``training_inputs.json`` so that evaluation scores the ones held out
             (:func:`iplanner_torch.eval.prediction.recorded_split`); None: not recorded.
+        overwrite: replace a ``predictor.ckpt`` in ``out_dir`` trained on other inputs.
+            Without it (and without ``resume``) such a folder is refused before anything is
+            written: only a predictor of the same recorded inputs (data fingerprint, actions,
+            joints, predictor, window, trainer and split settings, as a resume compares
+            them), which the same seed trains anew to the same numbers, is replaced.
 
     Returns:
         The path of ``predictor.ckpt``.
@@ -592,7 +598,9 @@ def train_predictor(
             on this machine; checked before anything is written to ``out_dir``.
         DataError: for empty data.
         CheckpointError: (``resume``) when the folder's sub-models were trained on other
-            inputs, or a reused sub-model cannot be read; or when the assembled predictor
+            inputs, or a reused sub-model cannot be read; (neither ``resume`` nor
+            ``overwrite``) when the folder holds a predictor trained on other inputs, or one
+            whose training record is missing or unreadable; or when the assembled predictor
             fails on its own training windows (a sub-model of another shape). An existing
             ``predictor.ckpt`` is then left as it was.
     """
@@ -606,6 +614,7 @@ def train_predictor(
             progress=progress,
             resume=resume,
             split=split,
+            overwrite=overwrite,
         )
 
 
@@ -618,6 +627,7 @@ def _train_predictor(
     progress: bool,
     resume: bool,
     split: SplitRecord | None,
+    overwrite: bool,
 ) -> Path:
     """:func:`train_predictor` on the thread count it set."""
     _quiet()
@@ -632,7 +642,9 @@ def _train_predictor(
     feat_std = train.f_prev.reshape(-1, d).std(0).clamp_min(1e-6)
     progress_actions = train.cfg.progress_indices(train.action_names)
     fingerprint = dataset_fingerprint(train.f_prev, train.xi_next, train.current)
-    digest = _record_inputs(out_dir, fingerprint, train, cfg, trainer_cfg, split, resume)
+    digest = _record_inputs(
+        out_dir, fingerprint, train, cfg, trainer_cfg, split, resume, overwrite
+    )
 
     groups: dict[tuple[int, int], torch.Tensor] = {}
     for p in torch.unique(train.progress).tolist():
@@ -756,18 +768,22 @@ def _record_inputs(
     tcfg: TrainerCfg,
     split: SplitRecord | None,
     resume: bool,
+    overwrite: bool = False,
 ) -> str:
     """Write ``out_dir / INPUTS_FILE`` (training data fingerprint, action names, predictor,
     window and trainer settings, and the split when given). With ``resume``, first compare it
     with the file already there: sub-models trained on other data or settings must not be mixed
     into this predictor. The trainer settings (:data:`RESUME_TRAINER_FIELDS`) and the split
     (seed, fractions) are compared only where the file records them (it did not always).
+    Without ``resume`` or ``overwrite``, a ``predictor.ckpt`` already in ``out_dir`` is kept
+    unless its record shows the same inputs (:func:`train_predictor`).
 
     Returns:
         The record's :func:`inputs_digest`.
 
     Raises:
-        CheckpointError: (``resume``) when the recorded inputs differ, naming what differs.
+        CheckpointError: (``resume``) when the recorded inputs differ, naming what differs;
+            (neither) when a predictor of other inputs, or of no readable record, is there.
     """
     inputs = json.loads(
         json.dumps(
@@ -784,6 +800,8 @@ def _record_inputs(
         )
     )
     path = out_dir / INPUTS_FILE
+    if not resume and not overwrite:
+        _refuse_replacing(out_dir, inputs)
     try:
         before = read_training_inputs(out_dir) if resume else None
     except CheckpointError as err:
@@ -791,21 +809,7 @@ def _record_inputs(
             f"cannot resume in {out_dir}: {err}; run with train.resume=false"
         ) from None
     if before is not None:
-        changed = [
-            _record_change(k, before.get(k), inputs[k])
-            for k in RESUME_RECORD_KEYS
-            if before.get(k) != inputs[k]
-        ]
-        for key, fields in (
-            ("trainer_cfg", RESUME_TRAINER_FIELDS),
-            ("split", RESUME_SPLIT_FIELDS),
-        ):
-            was, now = before.get(key), inputs.get(key)
-            if not isinstance(was, dict) or now is None:  # not recorded then, or not given now
-                continue
-            differ = [f"{f} {was.get(f)!r} -> {now[f]!r}" for f in fields if was.get(f) != now[f]]
-            if differ:
-                changed.append(f"{_RECORD_NAMES[key]} ({', '.join(differ)})")
+        changed = _record_differences(before, inputs)
         if changed:
             values = " (recorded -> now)" if any("->" in c for c in changed) else ""
             raise CheckpointError(
@@ -822,6 +826,59 @@ def _record_inputs(
         )
     path.write_text(json.dumps(inputs, indent=2) + "\n", encoding="utf-8")
     return inputs_digest(inputs)
+
+
+def _record_differences(before: dict[str, Any], inputs: dict[str, Any]) -> list[str]:
+    """What differs between two training records, in words (:func:`_record_change`): the
+    parts of :data:`RESUME_RECORD_KEYS`, and the trainer and split fields where both records
+    hold them."""
+    changed = [
+        _record_change(k, before.get(k), inputs[k])
+        for k in RESUME_RECORD_KEYS
+        if before.get(k) != inputs[k]
+    ]
+    for key, fields in (
+        ("trainer_cfg", RESUME_TRAINER_FIELDS),
+        ("split", RESUME_SPLIT_FIELDS),
+    ):
+        was, now = before.get(key), inputs.get(key)
+        if not isinstance(was, dict) or now is None:  # not recorded then, or not given now
+            continue
+        differ = [f"{f} {was.get(f)!r} -> {now[f]!r}" for f in fields if was.get(f) != now[f]]
+        if differ:
+            changed.append(f"{_RECORD_NAMES[key]} ({', '.join(differ)})")
+    return changed
+
+
+def _refuse_replacing(out_dir: Path, inputs: dict[str, Any]) -> None:
+    """CheckpointError when ``out_dir`` holds a ``predictor.ckpt`` that this training would
+    replace and its record does not show the same inputs (``inputs``): a predictor of other
+    data, joints or settings would be lost without a word."""
+    if not (out_dir / "predictor.ckpt").is_file():
+        return
+    way_out = (
+        "choose another train.out_dir, or add train.overwrite=true to replace it "
+        "(its sub-model checkpoints and logs too)"
+    )
+    try:
+        before = read_training_inputs(out_dir)
+    except CheckpointError as err:
+        raise CheckpointError(
+            f"{out_dir} holds a predictor.ckpt whose training record cannot be read ({err}), "
+            f"so this run cannot tell whether it would replace it by the same; {way_out}"
+        ) from None
+    if before is None:
+        raise CheckpointError(
+            f"{out_dir} holds a predictor.ckpt without {INPUTS_FILE}, so this run cannot tell "
+            f"whether it would replace it by the same; {way_out}"
+        )
+    changed = _record_differences(before, inputs)
+    if changed:
+        values = " (recorded -> now)" if any("->" in c for c in changed) else ""
+        raise CheckpointError(
+            f"{out_dir} holds a predictor trained with other {', '.join(changed)} than this "
+            f"run's{values}; {way_out}"
+        )
 
 
 #: how a resume refusal names the parts of a training record

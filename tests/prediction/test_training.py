@@ -162,6 +162,45 @@ def test_resume_never_mixes_in_sub_models_of_other_inputs(tmp_path: Path) -> Non
     torch.testing.assert_close(fc.mean, fc_a.mean)
 
 
+def test_a_predictor_of_other_inputs_is_not_replaced_without_overwrite(tmp_path: Path) -> None:
+    """Training into a folder that held a predictor of other joints (or data, or settings)
+    replaced it, its sub-models and logs without a word. It is refused now, before anything
+    is written, unless ``overwrite``; the same inputs train anew to the same predictor."""
+    tcfg = TrainerCfg(accelerator="cpu", tensorboard=False)
+
+    def train(windows, **kw) -> Path:
+        return train_predictor(
+            windows, predictor_cfg=_cfg(), trainer_cfg=tcfg, out_dir=tmp_path, progress=False,
+            **kw,
+        )  # fmt: skip
+
+    three = _windows(("torso", "left_hand", "right_hand"))
+    one = _windows(("right_hand",))
+    train(three)
+    kept = {p.name: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    with pytest.raises(
+        CheckpointError,
+        match=r"holds a predictor trained with other training data .*joints \(\['torso', "
+        r"'left_hand', 'right_hand'\] -> \['right_hand'\]\).*add train.overwrite=true",
+    ):
+        train(one)
+    assert {p.name: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == kept
+    # the same inputs: trained anew, to the same numbers
+    fc = HumanMotionPredictor.load(train(three)).predict(
+        three[1].f_prev[:2], three[1].progress[:2]
+    )
+    fc0 = HumanMotionPredictor.load(tmp_path / "predictor.ckpt")
+    assert (tmp_path / "predictor.ckpt").read_bytes() == kept["predictor.ckpt"]
+    assert fc0.joint_names == ("torso", "left_hand", "right_hand") and fc.mean.shape[-2] == 3
+    # a folder whose record is missing cannot be compared: refused too
+    (tmp_path / "training_inputs.json").unlink()
+    with pytest.raises(CheckpointError, match="without training_inputs.json, so this run"):
+        train(three)
+    # with overwrite: replaced
+    path = train(one, overwrite=True)
+    assert HumanMotionPredictor.load(path).joint_names == ("right_hand",)
+
+
 def test_single_wrist_dataset_with_nigp(tmp_path: Path) -> None:
     tr, va = _windows(("right_hand",))
     path = train_predictor(
