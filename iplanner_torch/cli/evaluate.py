@@ -308,12 +308,24 @@ def _held_out(
 
     Raises:
         ConfigError: when the split holds none out.
+        DataError: (``recorded``) when none of the demonstrations the training held out is
+            in ``data``: the checkpoint was trained on other data, and its "held-out"
+            metrics here would be those of demonstrations it may never have been split from.
     """
+    from iplanner_torch.errors import DataError
     from iplanner_torch.eval.prediction import held_out_demonstrations
 
     demos = load_dataset(
         cfg.data, generate_if_missing=generate, progress=cfg_scalar(cfg, "progress", bool)
     )
+    if recorded and split.held_out and not set(split.held_out) & {d.name for d in demos}:
+        shown = ", ".join(sorted(split.held_out)[:3])
+        raise DataError(
+            f"none of the {len(split.held_out)} demonstration(s) the checkpoint's training held "
+            f"out ({shown}{', ...' if len(split.held_out) > 3 else ''}) is among the "
+            f"{len(demos)} of {cfg.data.path}: it was trained on other data; give that data "
+            "(data=<option> data.path=<folder>, as its training was given)"
+        )
     test = held_out_demonstrations(demos, split)
     if not test:
         raise ConfigError(

@@ -209,6 +209,30 @@ def test_prediction_does_not_write_over_an_earlier_report(
     assert len(scored) == 1 and earlier.read_text() == '{"mhd_1s": 0.1}'
 
 
+def test_prediction_refuses_data_that_holds_none_of_the_held_out_demonstrations(
+    trained: SimpleNamespace, scored: list, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A checkpoint scored on other data (the reaching default for a LEGO predictor) printed
+    its "held-out" metrics of demonstrations it may have been trained on, with warnings,
+    and exited 0."""
+    import shutil
+
+    from iplanner_torch.errors import DataError
+
+    other = tmp_path / "other"
+    shutil.copytree(trained.ds, other)
+    for npz in other.glob("*.npz"):
+        npz.rename(npz.with_name("x_" + npz.name))
+    args = [f"data.path={other}", *_prediction_args(trained, tmp_path)[1:]]
+    shown = ", ".join(sorted(trained.held_out)[:3])
+    with pytest.raises(DataError, match=re.escape(
+        f"none of the {len(trained.held_out)} demonstration(s) the checkpoint's training held "
+        f"out ({shown}) is among the 10 of {other}: it was trained on other data"
+    )):  # fmt: skip
+        evaluate._prediction(_cfg(monkeypatch, *args))
+    assert not scored
+
+
 def test_prediction_refuses_another_split_on_the_command_line(
     trained: SimpleNamespace, scored: list, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
