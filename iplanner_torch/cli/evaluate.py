@@ -67,6 +67,7 @@ from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
+    _group_choice,
     cfg_list,
     cfg_scalar,
     check_added_keys,
@@ -163,6 +164,7 @@ def _checkpoint(path: Path, cfg: DictConfig) -> Path:
         # iplanner-train writes <train.out_dir>/predictor.ckpt
         out_dir = path.parent if path.name == "predictor.ckpt" else path.with_suffix("")
         train = shell_command("iplanner-train", f"predictor={predictor}")
+        train += f" {override_word('data', _group_choice('data') or 'reaching')}"
         train += f" {override_word('data.path', cfg.data.path)}"
         train += f" {override_word('train.out_dir', out_dir)}"
         use = ""
@@ -530,9 +532,24 @@ def _check_predictor_option(
             f"{ckpt} was trained with other predictor settings than conf/predictor/"
             f"{option}.yaml, so the sweep would report it as {option}: "
             f"{'; '.join(differ)} (recorded -> config). Retrain it into that folder "
-            f"(`iplanner-train data.path={cfg.data.path} predictor={option} "
-            f"train.out_dir={ckpt.parent}`), or delete {ckpt.parent} to have the sweep train it"
+            f"(`{_retrain_command(cfg, option, ckpt.parent)}`), or delete {ckpt.parent} to "
+            "have the sweep train it"
         )
+
+
+def _retrain_command(cfg: DictConfig, option: str, out_dir: Path) -> str:
+    """The ``iplanner-train`` command that trains predictor ``option`` into ``out_dir`` as
+    the noise sweep would (its data option and folder, ``trainer``), replacing the predictor
+    there (``train.overwrite=true``)."""
+    words = [
+        override_word("data", _group_choice("data") or "reaching"),
+        override_word("data.path", cfg.data.path),
+        override_word("predictor", option),
+        override_word("trainer", _group_choice("trainer") or "default"),
+        override_word("train.out_dir", out_dir),
+        "train.overwrite=true",
+    ]
+    return " ".join(["iplanner-train", *words])
 
 
 def _noise_sweep_grid(cfg: DictConfig) -> tuple[list[str], list[float], list[str]]:

@@ -259,7 +259,8 @@ def _other_run(ckpt: str | Path, inputs: dict[str, Any], split_given: bool) -> N
         return
     raise CheckpointError(
         f"{text}, and the split seed and data.split draw may include demonstrations it was "
-        f"trained on; retrain it (iplanner-train ... train.out_dir={Path(ckpt).parent}), or "
+        f"trained on; retrain it (iplanner-train ... train.out_dir={Path(ckpt).parent} "
+        "train.overwrite=true), or "
         "pass the seed and data.split it was trained with (seed=<int> data.split=[...]) to "
         "score the demonstrations they hold out"
     )

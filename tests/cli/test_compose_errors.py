@@ -360,6 +360,13 @@ def test_the_commands_that_errors_suggest_run_as_suggested(
     assert lines[0].endswith(
         f"then run with evaluate.checkpoint={tmp_path / 'ck' / 'mine' / 'predictor.ckpt'}"
     )
+    assert "data=reaching" in train
+    # the data option is repeated: without data=lego, iplanner-train read a LEGO folder as
+    # native files and failed
+    args = [*args[:1], "data=lego", f"hydra.run.dir={tmp_path / 'run3'}"]
+    code, lines = _main("evaluate", args, monkeypatch, capsys)
+    assert code == 2 and len(lines) == 1, lines
+    assert "data=lego" in shlex.split(re.search(r"train one with `([^`]+)`", lines[0]).group(1))
 
     code, lines = _main("experiment", ["run.seeds=3", f"hydra.run.dir={tmp_path / 'r3'}"],
                         monkeypatch, capsys)  # fmt: skip

@@ -572,8 +572,9 @@ def test_noise_sweep_refuses_checkpoints_of_another_option_in_an_options_folder(
             rf"^{ckpt} was trained with other predictor settings than conf/predictor/"
             rf"{option}.yaml, so the sweep would report it as {option}: svgp.noisy_input: "
             rf"'{recorded}' -> '{config}' \(recorded -> "
-            rf"config\). Retrain it into that folder \(`iplanner-train data.path={trained.ds} "
-            rf"predictor={option} train.out_dir={ckpt.parent}`\), or delete {ckpt.parent}"
+            rf"config\). Retrain it into that folder \(`iplanner-train data=reaching "
+            rf"data.path={trained.ds} predictor={option} trainer=default "
+            rf"train.out_dir={ckpt.parent} train.overwrite=true`\), or delete {ckpt.parent}"
         )):  # fmt: skip
             evaluate._noise_sweep(_cfg(monkeypatch, *sweep, f"evaluate.compare=[{option}]"))
     shutil.rmtree(ck / "iplanner_no_ni")  # the missing one would be trained: refused first
