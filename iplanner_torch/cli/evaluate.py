@@ -345,6 +345,8 @@ def _recorded_split(ckpt: Path, predictor: Any) -> SplitRecord | None:
     (:func:`~iplanner_torch.eval.prediction.recorded_split`): a record of another training run
     (one started in its folder since, and interrupted) is refused, unless the command line
     gives ``seed``, which then draws the split (with a warning)."""
+    from dataclasses import asdict, is_dataclass
+
     from iplanner_torch.eval.prediction import recorded_split
 
     return recorded_split(
@@ -352,6 +354,9 @@ def _recorded_split(ckpt: Path, predictor: Any) -> SplitRecord | None:
         predictor.fingerprint,
         getattr(predictor, "inputs_digest", ""),
         split_given="seed" in _given(),
+        predictor_cfg=asdict(predictor.cfg)
+        if is_dataclass(getattr(predictor, "cfg", None))
+        else None,
     )
 
 

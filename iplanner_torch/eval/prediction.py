@@ -147,7 +147,12 @@ def read_training_inputs(folder: str | Path) -> dict[str, Any] | None:
 
 
 def recorded_split(
-    ckpt: str | Path, fingerprint: str, digest: str = "", *, split_given: bool = False
+    ckpt: str | Path,
+    fingerprint: str,
+    digest: str = "",
+    *,
+    split_given: bool = False,
+    predictor_cfg: dict[str, Any] | None = None,
 ) -> SplitRecord | None:
     """The split recorded in :data:`INPUTS_FILE` beside ``ckpt``, when that file records the
     training of this checkpoint: its :func:`inputs_digest` is the one the checkpoint keeps
@@ -167,6 +172,8 @@ def recorded_split(
             none: trained before checkpoints kept it).
         split_given: the split to fall back on is given explicitly (``seed`` on the command
             line), so a record of another run is passed over with a warning.
+        predictor_cfg: the checkpoint's predictor settings (``asdict(predictor.cfg)``), to
+            name those a record of another run differs in; None: not named.
 
     Returns:
         The record, or None when there is none for this checkpoint: trained before the split
@@ -191,7 +198,7 @@ def recorded_split(
     if inputs is None:
         return None
     if digest and inputs_digest(inputs) != digest:
-        _other_run(ckpt, inputs, split_given)
+        _other_run(ckpt, inputs, split_given, predictor_cfg)
         return None
     if not digest and inputs.get("fingerprint") != fingerprint:
         return None
@@ -233,9 +240,25 @@ def _unreadable_split(ckpt: str | Path, err: Exception) -> None:
     )
 
 
-def _other_run(ckpt: str | Path, inputs: dict[str, Any], split_given: bool) -> None:
+def _flat_settings(value: Any, prefix: str = "") -> dict[str, Any]:
+    """A nested dict as ``{"svgp.noisy_input": "simple", ...}``."""
+    if not isinstance(value, dict):
+        return {prefix: value}
+    out: dict[str, Any] = {}
+    for k, v in value.items():
+        out.update(_flat_settings(v, f"{prefix}.{k}" if prefix else str(k)))
+    return out
+
+
+def _other_run(
+    ckpt: str | Path,
+    inputs: dict[str, Any],
+    split_given: bool,
+    predictor_cfg: dict[str, Any] | None = None,
+) -> None:
     """Refuse (or, with ``split_given``, warn about) the :data:`INPUTS_FILE` record beside
-    ``ckpt`` that another training run than the checkpoint's wrote (:func:`recorded_split`)."""
+    ``ckpt`` that another training run than the checkpoint's wrote (:func:`recorded_split`),
+    naming the predictor settings it differs in when ``predictor_cfg`` is given."""
     path = Path(ckpt).parent / INPUTS_FILE
     split = inputs.get("split")
     try:
@@ -243,11 +266,20 @@ def _other_run(ckpt: str | Path, inputs: dict[str, Any], split_given: bool) -> N
         records = f" (it records the split {drawn})"
     except Exception:  # noqa: BLE001 - what it records is only named when it reads
         records = ""
+    differ = ""
+    if predictor_cfg is not None and isinstance(inputs.get("predictor_cfg"), dict):
+        rec = _flat_settings(inputs["predictor_cfg"])
+        own = _flat_settings(json.loads(json.dumps(predictor_cfg, default=str)))
+        keys = [k for k in dict.fromkeys([*rec, *own]) if rec.get(k) != own.get(k)]
+        if keys:
+            shown = ", ".join(f"{k} {rec.get(k)!r} (record) / {own.get(k)!r}" for k in keys[:4])
+            differ = f"; predictor settings: {shown}{', ...' if len(keys) > 4 else ''}"
     text = (
-        f"{path} belongs to a later, unfinished training run, not to {ckpt}{records}: its "
-        "inputs differ from those the checkpoint was trained under (a training started in "
-        "this folder after the checkpoint was written and interrupted before it wrote its "
-        "own), so it does not say which demonstrations the checkpoint held out"
+        f"{path} is not the record of {ckpt}{records}: its inputs differ from those the "
+        f"checkpoint was trained under{differ}. Either a training started in this folder "
+        "after the checkpoint was written and was interrupted before it wrote its own, or the "
+        "checkpoint was copied here from another folder; so the record does not say which "
+        "demonstrations the checkpoint held out"
     )
     if split_given:
         warnings.warn(

@@ -142,7 +142,10 @@ def test_prediction_scores_the_split_its_checkpoint_recorded(
             warnings.simplefilter("ignore", DataWarning)
             evaluate._prediction(_cfg(monkeypatch, *args, *seed))
     args = _prediction_args(trained, tmp_path, other / "predictor.ckpt")
-    with pytest.raises(CheckpointError, match="belongs to a later, unfinished training run"):
+    with pytest.raises(
+        CheckpointError,
+        match="is not the record of .*or the checkpoint was copied",
+    ):
         evaluate._prediction(_cfg(monkeypatch, *args, split))
 
 
@@ -174,15 +177,15 @@ def test_prediction_refuses_the_record_of_a_later_unfinished_training(
     seed0 = _interrupted_retrain(trained, folder, seed=0)
     assert seed0 != sorted(trained.held_out)
     args = _prediction_args(trained, tmp_path / "out", folder / "predictor.ckpt")
-    refusal = (rf"^{re.escape(str(folder / INPUTS_FILE))} belongs to a later, unfinished "
-               r"training run, not to .*predictor.ckpt \(it records the split seed=0 "
+    refusal = (rf"^{re.escape(str(folder / INPUTS_FILE))} is not the record of "
+               r".*predictor.ckpt \(it records the split seed=0 "
                r"data.split=\[0.6,0.2,0.2\]\).*may include demonstrations it was trained on; "
                r"retrain it .*, or pass the seed and data.split it was trained with")  # fmt: skip
     for given in ([], ["data.split=[0.6,0.2,0.2]"]):
         with pytest.raises(CheckpointError, match=refusal):
             evaluate._prediction(_cfg(monkeypatch, *args, *given))
     assert not scored
-    warned = (r"belongs to a later, unfinished training run.*the held-out split is drawn from "
+    warned = (r"is not the record of .*the held-out split is drawn from "
               r"seed and data.split as the command line gives them")  # fmt: skip
     with pytest.warns(DataWarning, match=warned):
         evaluate._prediction(_cfg(monkeypatch, *args, "seed=1", "data.split=[0.6,0.2,0.2]"))
@@ -506,7 +509,10 @@ def test_noise_sweep_refuses_the_record_of_a_later_unfinished_training(
     _interrupted_retrain(trained, tmp_path / "ck" / "ds" / "iplanner_ni", seed=0)
     sweep = [*_sweep_args(trained, tmp_path), "evaluate.compare=[iplanner_ni]",
              "evaluate.noises=[0.0,0.02]", "evaluate.speeds=[medium]"]  # fmt: skip
-    with pytest.raises(CheckpointError, match="belongs to a later, unfinished training run"):
+    with pytest.raises(
+        CheckpointError,
+        match="is not the record of .*or the checkpoint was copied",
+    ):
         evaluate._noise_sweep(_cfg(monkeypatch, *sweep))
 
 

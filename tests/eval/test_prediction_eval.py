@@ -394,12 +394,19 @@ def test_recorded_split_takes_only_the_record_of_the_checkpoints_training(tmp_pa
     assert recorded_split(ckpt, "abc").seed == 0  # a checkpoint without a digest: as before
     with pytest.raises(
         CheckpointError,
-        match=rf"{INPUTS_FILE} belongs to a later, unfinished training run, not to .*"
+        match=rf"{INPUTS_FILE} is not the record of .*"
         r"predictor.ckpt \(it records the split seed=0 data.split=\[0.6,0.2,0.2\]\).*retrain",
     ):
         recorded_split(ckpt, "abc", digest)
-    with pytest.warns(DataWarning, match="later, unfinished training run.*drawn from seed"):
+    with pytest.warns(DataWarning, match="was interrupted before.*drawn from seed"):
         assert recorded_split(ckpt, "abc", digest, split_given=True) is None
+    # a checkpoint copied beside another predictor's record: the settings that differ are named
+    other = {**later, "predictor_cfg": {"svgp": {"noisy_input": "none", "num_inducing": 8}}}
+    (tmp_path / INPUTS_FILE).write_text(json.dumps(other))
+    own_cfg = {"svgp": {"noisy_input": "simple", "num_inducing": 8}}
+    with pytest.raises(CheckpointError, match=r"predictor settings: svgp.noisy_input 'none' "
+                       r"\(record\) / 'simple'\. Either a training"):  # fmt: skip
+        recorded_split(ckpt, "abc", digest, predictor_cfg=own_cfg)
 
 
 def test_a_constant_velocity_forecast_of_linear_motion_scores_zero_error_and_no_class() -> None:
