@@ -293,3 +293,20 @@ def test_plane_integer_normal() -> None:
     """An integer normal raised a bare RuntimeError from linalg.vector_norm."""
     got = sphere_plane_distance(_UP, _R, torch.tensor([0, 0, 2]), 0.0)
     torch.testing.assert_close(got, sphere_plane_distance(_UP, _R, torch.tensor([0, 0, 1.0]), 0.0))
+
+
+def test_a_scene_box_rotated_about_z_measures_in_the_box_frame() -> None:
+    """A box turned 30 degrees about z (long axis along (cos 30, sin 30, 0)): a point on that
+    axis is 0.1 m inside, a point on the world y axis 0.5 cos 30 - 0.1 m outside (by hand in
+    the box frame, p_box = R^T p). Applying the rotation transposed put the first 0.68 m
+    clear."""
+    c, s = math.cos(math.pi / 6), math.sin(math.pi / 6)
+    box = Box(
+        center=(0.0, 0.0, 0.0),
+        half_extents=(1.0, 0.1, 0.1),
+        rotation=((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0)),
+    )
+    points = torch.tensor([[0.9 * c, 0.9 * s, 0.0], [0.0, 0.5, 0.0]], dtype=torch.float64)
+    got = StaticScene(boxes=(box,)).distances(points, torch.zeros(2, dtype=torch.float64))
+    want = torch.tensor([[-0.1], [0.5 * c - 0.1]], dtype=torch.float64)
+    torch.testing.assert_close(got, want, rtol=0, atol=1e-12)

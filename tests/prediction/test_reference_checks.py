@@ -33,6 +33,7 @@ from iplanner_torch.prediction.dtw import (
     dtw_paired,
     gak_log,
     gak_log_paired,
+    median_dtw,
 )
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.prediction.ivm import IVMClassifier
@@ -97,6 +98,31 @@ def test_dtw_is_the_cheapest_warping_path(t1: int, t2: int, band: int | None) ->
                 assert got[a, b] == pytest.approx(want, rel=1e-12), (a, b, squared)
     paired = dtw_paired(x[:3], y[:3], band=band).numpy()
     np.testing.assert_allclose(paired, np.diag(dtw_distance(x, y[:3], band=band).numpy()))
+
+
+def test_median_dtw_of_two_windows_is_their_brute_force_distance() -> None:
+    """With two windows every pair drawn is the one distinct pair, so the median is their DTW
+    distance (the cheapest warping path); pairing a window with itself (distance 0) would drag
+    it towards 0."""
+    g = torch.Generator().manual_seed(5)
+    x = torch.randn(2, 5, 2, generator=g, dtype=F64)
+    d = cdist(x[0].numpy(), x[1].numpy())
+    want = min(sum(d[i, j] for i, j in p) for p in _admissible(5, 5, None))
+    assert median_dtw(x, 501, seed=3) == pytest.approx(want, rel=1e-12)
+
+
+def test_dtw_of_a_set_with_itself_in_small_tiles_equals_a_copy() -> None:
+    """``dtw_distance(x, x)`` takes the symmetric path (one triangle, mirrored); tiles of a few
+    cells must still fill the whole matrix: the same numbers as ``dtw_distance(x, x.clone())``,
+    and every entry the brute-force cheapest path."""
+    g = torch.Generator().manual_seed(6)
+    x = torch.randn(10, 4, 2, generator=g, dtype=F64)
+    same = dtw_distance(x, x, max_cells=128)
+    torch.testing.assert_close(same, dtw_distance(x, x.clone(), max_cells=128), rtol=1e-12, atol=0)
+    paths = _admissible(4, 4, None)
+    for a, b in ((0, 9), (9, 0), (3, 7)):
+        d = cdist(x[a].numpy(), x[b].numpy())
+        assert float(same[a, b]) == pytest.approx(min(sum(d[i, j] for i, j in p) for p in paths))
 
 
 @pytest.mark.parametrize("band", [None, 0, 1])
