@@ -127,6 +127,32 @@ def test_each_tracked_frame_is_scored_on_the_forecast_frame_at_its_time() -> Non
     assert z == pytest.approx((2.0 - 1.0) ** 2 / 1e-2 / 3)  # x off by 1 m, y and z exact
 
 
+def test_frames_that_arrive_one_at_a_time_score_every_frame_of_the_forecast() -> None:
+    """The planner's use: one tracked frame per call. A forecast is kept until no frame can
+    score it any more (``horizon_s`` after its start), so each of the 10 frames is scored,
+    z = (0.05 k)^2 / 0.01 / 3 by hand; forgetting it after its first frame scored one."""
+    cfg = CalibrationCfg(joints=("left_hand",), horizon_s=1.0, tolerance=1.0, memory_s=10.0)
+    cal = SpreadCalibrator(cfg, JOINT_NAMES, noise_std=0.0)
+    j = JOINT_NAMES.index("left_hand")
+    mean = torch.zeros(1, 1, 10, K, 3, dtype=torch.float64)
+    f = Forecast(
+        weights=torch.ones(1, 1, dtype=torch.float64),
+        mean=mean,
+        var=torch.full_like(mean, 1e-2),
+        dt=DT,
+        joint_names=JOINT_NAMES,
+        action_names=("a",),
+    )
+    cal.record(f, 0.0)
+    for k in range(1, 11):
+        frame = np.zeros((1, K, 3))
+        frame[0, j, 0] = 0.05 * k
+        cal.observe(np.array([0.1 * k]), frame)
+    got = [z for _, z in cal._residuals]
+    assert got == pytest.approx([(0.05 * k) ** 2 / 1e-2 / 3 for k in range(1, 11)])
+    assert cal.scale() == pytest.approx(sum(got) / 10)
+
+
 def test_residuals_older_than_the_memory_leave_the_scale() -> None:
     cfg = CalibrationCfg(joints=("right_hand",), tolerance=1.0, memory_s=0.5, max_scale=1e9)
     cal = SpreadCalibrator(cfg, JOINT_NAMES, noise_std=0.0)

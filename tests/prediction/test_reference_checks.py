@@ -100,6 +100,22 @@ def test_dtw_is_the_cheapest_warping_path(t1: int, t2: int, band: int | None) ->
     np.testing.assert_allclose(paired, np.diag(dtw_distance(x, y[:3], band=band).numpy()))
 
 
+def test_next_action_of_an_unseen_pair_by_hand() -> None:
+    """(p=0, c=0) -> 1 five times, (0, 1) -> 2 five times; the unseen pair (0, 2) takes the
+    histogram of p = 0 summed over c, [0, 5, 5], without its count of n = c = 2, [0, 5, 0],
+    plus the smoothing 1 on the allowed actions 0 and 1: [1, 6, 0] / 7. (Keeping the count of
+    n = c gave 5/12 to "the next action is the current one", impossible by definition.)"""
+    five = torch.zeros(5, dtype=torch.int64)
+    model = NextActionModel().fit(
+        torch.cat([five, five]),
+        torch.cat([five, five + 1]),
+        torch.cat([five + 1, five + 2]),
+        num_actions=3,
+    )
+    got = model.next_action_prob(0, 2)
+    torch.testing.assert_close(got, torch.tensor([1 / 7, 6 / 7, 0.0], dtype=torch.float64))
+
+
 def test_median_dtw_of_two_windows_is_their_brute_force_distance() -> None:
     """With two windows every pair drawn is the one distinct pair, so the median is their DTW
     distance (the cheapest warping path); pairing a window with itself (distance 0) would drag
