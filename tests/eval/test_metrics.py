@@ -388,3 +388,20 @@ def test_episode_metrics_refuse_an_mhd_or_time_that_is_not_a_number(name: str) -
     key = f"eval/{name}"
     assert episode_metrics(**args, **{name: np.float32(2.0)})[key] == 2.0
     assert math.isnan(episode_metrics(**args, **{name: math.nan})[key])
+
+
+def test_spheres_that_just_touch_count_as_a_contact() -> None:
+    """``eval/contact`` is ``min_distance <= 0``: two spheres of radius 0.5 m with centres
+    1 m apart (exactly representable) touch, at distance 0; 1 mm further apart they do not."""
+    t = torch.tensor([0.0, 0.1, 0.2], dtype=torch.float64)
+    q = torch.zeros(3, 2, dtype=torch.float64)
+    radii = torch.tensor([0.5], dtype=torch.float64)
+    robot = torch.zeros(3, 1, 3, dtype=torch.float64)
+    for gap, contact in ((1.0, 1.0), (1.001, 0.0)):
+        human = torch.tensor([gap, 0.0, 0.0], dtype=torch.float64).expand(3, 1, 3)
+        m = episode_metrics(
+            t=t, q=q, robot_centers=robot, robot_radii=radii, human_centers=human,
+            human_radii=radii,
+        )  # fmt: skip
+        assert m["eval/contact"] == contact, (gap, m["eval/min_distance"])
+    assert m["eval/min_distance"] == pytest.approx(0.001)

@@ -288,3 +288,26 @@ def test_episode_breakdown_reads_the_bounds(tmp_path: Path) -> None:
     expected = _with_bounds(PLANS, [0.03, float("nan"), 0.01])
     assert b == smoothness_breakdown(t, q, expected)
     assert b.near_limit_share == pytest.approx((12 + 0.25) / (24 + 0.5), rel=1e-9)
+
+
+def test_plan_executed_counts_only_the_waypoints_run_before_the_take_over() -> None:
+    """A plan q = t^3 on t = 0..4 (1 s apart) replaced at t = 2 runs its interior waypoint
+    t = 1 only: acceleration (q(2) - 2 q(1) + q(0)) / 1 = 6, squared 36; the plan after it
+    rests (0). Counting the waypoint at the take-over too (t = 2: 12, squared 144) gave 45."""
+    times = np.arange(5.0)
+    cubic = PlanRecord(times=times, q=np.stack([times**3, np.zeros(5)], 1), wait_s=0.0)
+    rest = PlanRecord(times=np.array([2.0, 3.0, 4.0]), q=np.full((3, 2), 8.0), wait_s=0.0)
+    t, q = _executed()
+    b = smoothness_breakdown(t, q, [cubic, rest])
+    assert b.plan_executed == pytest.approx((36.0 + 0.0) / 2, rel=1e-12)
+
+
+def test_plan_change_is_the_median_not_the_mean() -> None:
+    """Changes 0.1, 0.2 and 7.6 (q = t, t + 0.1, t + 0.3, then 3 t whose waypoints in the
+    previous span reach t = 3.95: 3 t - (t + 0.3) = 7.6): one plan far off does not set the
+    typical change, 0.2 (the mean would be 2.63)."""
+    plans = [_line(0.0, 2.0, 1.0, 0.0), _line(1.0, 3.0, 1.0, 0.1), _line(2.5, 4.0, 1.0, 0.3),
+             _line(3.5, 5.0, 3.0, 0.0)]  # fmt: skip
+    np.testing.assert_allclose(plan_changes(plans), [0.1, 0.2, 7.6], rtol=1e-12)
+    t, q = _executed()
+    assert smoothness_breakdown(t, q, plans).plan_change == pytest.approx(0.2, rel=1e-12)
