@@ -384,6 +384,29 @@ def test_candidate_pairs_match_brute_force_distance_list(scale: float, margin: f
         assert 0 < len(expected) < s_r * s_h
 
 
+def test_candidate_pairs_keep_a_pair_of_widely_spread_actions() -> None:
+    """Two actions put the human sphere at x = -1 and x = +1 m (std 1 cm), the robot sphere
+    sits on the second: the cheap lower bound must take the spread of the actions' means
+    into account (without it the pair was pruned and the bound read 0 where the person is
+    with probability 0.5). The pruned bound equals the one over all pairs."""
+    centers = torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64).view(1, 1, 1, 3)
+    radii = torch.tensor([0.05], dtype=torch.float64)
+    human = C.HumanObstacle(
+        mean=torch.tensor([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], dtype=torch.float64).view(
+            1, 2, 1, 3
+        ),
+        var=torch.full((1, 2, 1, 3), 1e-4, dtype=torch.float64),
+        radii=torch.tensor([0.05], dtype=torch.float64),
+        weights=torch.tensor([0.5, 0.5], dtype=torch.float64),
+    )
+    pairs = C.candidate_pairs(centers, radii, human, 0.0)
+    assert pairs.tolist() == [[0, 0]]
+    pruned, _ = C.human_collision_bound(centers, radii, human, pairs)
+    everything, _ = C.human_collision_bound(centers, radii, human)
+    torch.testing.assert_close(pruned, everything)
+    assert float(everything) == pytest.approx(0.5, abs=1e-6)
+
+
 @pytest.mark.parametrize("value", [True, False])
 def test_cost_weights_refuse_bools(value: bool) -> None:
     with pytest.raises(
@@ -867,3 +890,12 @@ def test_any_over_leading_dimensions_matches_torch_any() -> None:
     ]:
         mask = torch.rand(shape, generator=gen) < 0.1
         assert torch.equal(C._any_leading(mask, n), mask.flatten(0, n - 1).any(0))
+
+
+def test_joint_velocity_limit_counts_both_directions() -> None:
+    """q = [0, -1, -1] at dt 0.1: -10 rad/s against a limit of 1, (10 - 1)^2 = 81; moving
+    the other way costs the same. Only the positive direction was penalised by a mutant."""
+    v_max = torch.ones(1)
+    down = torch.tensor([0.0, -1.0, -1.0]).view(1, 3, 1)
+    assert float(C.joint_vel_limit_violation(down, 0.1, v_max)) == pytest.approx(81.0)
+    assert float(C.joint_vel_limit_violation(-down, 0.1, v_max)) == pytest.approx(81.0)
