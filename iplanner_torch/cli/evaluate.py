@@ -392,7 +392,7 @@ def _device(cfg: DictConfig) -> Any:
 
 
 def _prediction(cfg: DictConfig) -> None:
-    from iplanner_torch.eval.prediction import evaluate_prediction
+    from iplanner_torch.eval.prediction import evaluate_prediction, metric_line
     from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
     _refuse_unread("prediction")
@@ -409,7 +409,7 @@ def _prediction(cfg: DictConfig) -> None:
     out.write_text(json.dumps(metrics, indent=2, default=float))
     print(f"{ckpt} on held-out demonstrations of {cfg.data.path}:")
     for key, value in metrics.items():
-        print(f"  {key:28s} {value:.4g}" if isinstance(value, float) else f"  {key:28s} {value}")
+        print(metric_line(key, value))
     print(f"wrote {out}")
 
 

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import hydra
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from iplanner_torch.cli._common import (
@@ -260,11 +261,11 @@ def _app(cfg: DictConfig) -> None:
     write_job_record("heldout_metrics.json", {"checkpoint": str(ckpt), **metrics})
     print(f"predictor checkpoint: {ckpt}")
     print(f"logs: {out_dir / 'logs'}")
+    print(f"run folder: {HydraConfig.get().runtime.output_dir} (train.log, .hydra/ config)")
+    from iplanner_torch.eval.prediction import metric_line
+
     for key, value in metrics.items():
-        if isinstance(value, float):
-            print(f"  {key:28s} {value:.4g}")
-        else:
-            print(f"  {key:28s} {value}")
+        print(metric_line(key, value))
 
 
 def main() -> None:

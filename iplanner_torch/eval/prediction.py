@@ -3,7 +3,9 @@
 Metrics, per held-out window (averaged over windows unless stated):
 
 * ``class_precision``: among windows whose top action probability exceeds 0.5, the share whose
-  top action is the true current action (``class_confident`` is that share of windows).
+  top action is the true current action (``class_confident`` is that share of windows);
+  ``class_accuracy``: that share among all windows. With one action (a recording labelled
+  as one, such as the LEGO trials) both are 1 by construction.
 * ``reg_precision``: ``int_0^T sum_i ||p_pred,i(t) - p_true,i(t)||^2 dt`` [m^2 s] with the
   mixture mean (sum over actions of weight x mean), rectangle rule on the n_f frames.
 * ``reg_accuracy``: ``int_0^T sum_i det K_i(t) dt`` [m^6 s] with ``K_i`` the diagonal covariance
@@ -296,6 +298,32 @@ def _other_run(
         "pass the seed and data.split it was trained with (seed=<int> data.split=[...]) to "
         "score the demonstrations they hold out"
     )
+
+
+#: the unit of each metric :func:`evaluate_prediction` returns (and of the training's own),
+#: printed beside its value
+METRIC_UNITS: dict[str, str] = {
+    "n_windows": "windows",
+    "n_confident": "windows",
+    "class_confident": "share",
+    "class_precision": "share",
+    "class_accuracy": "share",
+    "reg_precision": "m^2 s",
+    "reg_accuracy": "m^6 s",
+    "mhd_1s": "m",
+    "mhd_1s_moving": "m",
+    **{f"coverage{round(q * 100)}": "share" for q in COVERAGE_LEVELS},
+    "train_seconds": "s",
+    "train_windows": "windows",
+}
+
+
+def metric_line(key: str, value: Any) -> str:
+    """``  mhd_1s                       0.03275 m``: a metric as the commands print it, with
+    its unit (:data:`METRIC_UNITS`) when it has one."""
+    text = f"{value:.4g}" if isinstance(value, float) else str(value)
+    unit = METRIC_UNITS.get(key, "")
+    return f"  {key:28s} {text}{f' {unit}' if unit else ''}"
 
 
 def held_out_demonstrations(

@@ -529,6 +529,10 @@ def test_train_writes_a_checkpoint_and_held_out_metrics_and_resumes(tmp_path: Pa
     metrics = json.loads((ck / "heldout_metrics.json").read_text())
     for key in ("train_windows", "n_windows", "class_precision", "mhd_1s", "coverage95"):
         assert key in metrics and f"  {key}" in res.stdout, key
+    # each printed with its unit, the same number as the file's
+    line = next(ln for ln in res.stdout.splitlines() if ln.startswith("  mhd_1s "))
+    assert line.split()[1:] == [f"{metrics['mhd_1s']:.4g}", "m"], line
+    assert f"run folder: {tmp_path / 'h1'}" in res.stdout
     assert metrics["n_windows"] > 0 and 0.0 <= metrics["coverage95"] <= 1.0
     assert sorted(p.name for p in ck.glob("gp_*.ckpt")) and (ck / "classifier.ckpt").exists()
     pred = HumanMotionPredictor.load(ck / "predictor.ckpt")
