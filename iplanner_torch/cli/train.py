@@ -28,6 +28,7 @@ that would train into one ``train.out_dir``, and ends with ``summary/results.csv
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from dataclasses import replace
@@ -114,6 +115,20 @@ def train_from_config(
             "lower data.windows.n_prev or n_future"
         )
     val_w = build_windows(val, window_cfg) if val else None
+    horizon_s = window_cfg.n_future / float(train_w.fps)
+    if horizon_s < 1.0 - 1e-6:  # said before the training, not after it (as evaluation does)
+        import warnings
+
+        from iplanner_torch.errors import DataWarning
+
+        warnings.warn(
+            f"data.windows.n_future={window_cfg.n_future} at {train_w.fps:g} fps forecasts "
+            f"{horizon_s:.2g} s: the held-out mhd_1s, mhd_1s_moving and the 'moving' test "
+            f"will cover those {horizon_s:.2g} s, not 1 s; for 1 s set "
+            f"data.windows.n_future={math.ceil(train_w.fps - 1e-9)} (and n_prev to match)",
+            DataWarning,
+            stacklevel=2,
+        )
     t0 = time.perf_counter()
     ckpt = train_predictor(
         (train_w, val_w),
@@ -128,8 +143,12 @@ def train_from_config(
     seconds = time.perf_counter() - t0
     metrics: dict = {"train_seconds": seconds, "train_windows": len(train_w)}
     if test:
+        import warnings
+
         predictor = HumanMotionPredictor.load(ckpt)
-        metrics.update(evaluate_prediction(predictor, test))
+        with warnings.catch_warnings():  # the short horizon was named before the training
+            warnings.filterwarnings("ignore", message="the predictor forecasts .* frames at")
+            metrics.update(evaluate_prediction(predictor, test))
     else:
         import warnings
 

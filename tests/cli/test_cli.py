@@ -793,3 +793,21 @@ def test_a_scenario_option_named_otherwise_is_refused(monkeypatch: pytest.Monkey
     given = ["scenario=mine", "+scenario.name=x"]
     monkeypatch.setattr(experiment, "_task_overrides", lambda: given)
     experiment._check_scenario_name("x")
+
+
+def test_train_names_a_forecast_shorter_than_a_second_once(tmp_path: Path) -> None:
+    """8 future frames at 15 fps forecast 0.53 s, which mhd_1s then covers: said once, by the
+    training (before it trains), not again by the held-out evaluation after it."""
+    ds = tmp_path / "ds"
+    gen = ["iplanner-data", "generate", f"data.path={ds}", "progress=false",
+           "data.generator.n_targets=2", "data.generator.reaches_per_target=5"]  # fmt: skip
+    assert _run(gen, tmp_path).returncode == 0
+    train = ["iplanner-train", "trainer=fast", f"data.path={ds}", "progress=false",
+             f"train.out_dir={tmp_path / 'ck'}", "data.split=[0.6,0.2,0.2]",
+             "data.windows.n_future=8", f"hydra.run.dir={tmp_path / 'h'}"]  # fmt: skip
+    res = _run(train, tmp_path)
+    assert res.returncode == 0, res.stderr
+    said = [ln for ln in res.stderr.splitlines() if "not 1 s" in ln]
+    assert len(said) == 1, res.stderr
+    assert "data.windows.n_future=8 at 15 fps forecasts 0.53 s" in said[0]
+    assert "data.windows.n_future=15 (and n_prev to match)" in said[0]
