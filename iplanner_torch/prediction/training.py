@@ -791,6 +791,7 @@ def _record_inputs(
                 "fingerprint": fingerprint,
                 "action_names": list(train.action_names),
                 "joint_names": list(train.joint_names),
+                "fps": float(train.fps),
                 "predictor_cfg": asdict(cfg),
                 "window_cfg": asdict(train.cfg),
                 "trainer_cfg": asdict(tcfg),
@@ -837,6 +838,8 @@ def _record_differences(before: dict[str, Any], inputs: dict[str, Any]) -> list[
         for k in RESUME_RECORD_KEYS
         if before.get(k) != inputs[k]
     ]
+    if "fps" in before and before["fps"] != inputs.get("fps"):  # recorded since it is
+        changed.append(f"frame rate ({before['fps']!r} -> {inputs.get('fps')!r} fps)")
     for key, fields in (
         ("trainer_cfg", RESUME_TRAINER_FIELDS),
         ("split", RESUME_SPLIT_FIELDS),

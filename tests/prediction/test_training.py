@@ -494,3 +494,18 @@ def test_resume_refuses_a_sub_model_changed_after_it_was_written(tmp_path: Path)
         assert f"{gp}: its contents do not match" in str(e.value)  # the type is named once
         assert (tmp_path / "predictor.ckpt").read_bytes() == good
         gp.write_bytes(original)
+
+
+def test_a_resume_at_another_frame_rate_names_it(tmp_path: Path) -> None:
+    """The same demonstrations read at another frame rate: the refusal said only "other
+    training data"; it names the frame rate now (recorded -> now)."""
+    import dataclasses as dc
+
+    tcfg = TrainerCfg(accelerator="cpu", tensorboard=False)
+    tr, va = _windows(("torso", "left_hand", "right_hand"))
+    train_predictor((tr, va), predictor_cfg=_cfg(), trainer_cfg=tcfg, out_dir=tmp_path,
+                    progress=False)  # fmt: skip
+    faster = dc.replace(tr, fps=30.0)
+    with pytest.raises(CheckpointError, match=r"frame rate \(15\.0 -> 30\.0 fps\)"):
+        train_predictor((faster, va), predictor_cfg=_cfg(), trainer_cfg=tcfg, out_dir=tmp_path,
+                        progress=False, resume=True)  # fmt: skip
