@@ -813,7 +813,16 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
         if ts.shape != (t,):
             raise DataError(f"{path}: field 'timestamps' must be ({t},), got {ts.shape}")
         if not np.all(np.isfinite(ts)) or np.any(np.diff(ts) <= 0):
-            raise DataError(f"{path}: field 'timestamps' must be finite and strictly increasing")
+            bad = ~np.isfinite(ts)
+            if bad.any():
+                k = int(np.argmax(bad))
+                where = f"frame {k} (counting from 0) has t = {ts[k]}"
+            else:
+                k = int(np.argmax(np.diff(ts) <= 0)) + 1
+                where = f"frame {k} (counting from 0) has t = {ts[k]:g} s after {ts[k - 1]:g} s"
+            raise DataError(
+                f"{path}: field 'timestamps' must be finite and strictly increasing; {where}"
+            )
     clean = raw["clean_positions"]
     if clean is not None and np.shape(clean) != pos.shape:
         raise DataError(

@@ -150,7 +150,15 @@ def test_error_non_monotonic_timestamps(tmp_path):
     ts = np.arange(12) / 15.0
     ts[5] = ts[3]
     p = _npz(tmp_path / "x.npz", timestamps=ts)
-    with pytest.raises(DataError, match="x.npz: field 'timestamps' must be finite and strictly"):
+    with pytest.raises(
+        DataError,
+        match=r"x.npz: field 'timestamps' must be finite and strictly "
+        r"increasing; frame 5 \(counting from 0\) has t = 0.2 s after 0.266667",
+    ):
+        load_demonstrations(p)
+    ts[5] = np.nan
+    p = _npz(tmp_path / "y.npz", timestamps=ts)
+    with pytest.raises(DataError, match=r"y.npz: .*; frame 5 \(counting from 0\) has t = nan"):
         load_demonstrations(p)
 
 
