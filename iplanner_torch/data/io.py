@@ -1152,10 +1152,18 @@ def _read_lego_trial(path: Path) -> np.ndarray:
             beyond :data:`~iplanner_torch.types.MAX_POSITION_M` (other units, or junk).
     """
     try:
-        # a byte-order mark (a file saved by Windows Notepad or Excel) is dropped
-        text = path.read_text(encoding="utf-8-sig", errors="replace")
+        raw = path.read_bytes()
     except OSError as exc:
         raise DataError(f"{path}: unreadable LEGO trial ({exc})") from exc
+    nul = raw.find(b"\x00")
+    if nul >= 0:  # binary content (text has no NUL): named, not echoed to the terminal
+        raise DataError(
+            f"{path}: not a text file (a NUL byte at byte {nul}); a LEGO trial holds lines "
+            f"of {_LEGO_NUMBERS} numbers"
+        )
+    # a byte-order mark (a file saved by Windows Notepad or Excel) is dropped; a byte that is
+    # not UTF-8 (a comment in another encoding) is replaced
+    text = raw.decode("utf-8-sig", errors="replace")
     tokens: list[str] = []
     line_of: list[int] = []  # the file line (1-based) of each row
     lines = _drop_cut_last_line(  # stacklevel 4: the caller of load_lego_assembly

@@ -961,6 +961,23 @@ def test_a_lego_trial_with_a_byte_order_mark_reads_as_without(tmp_path):
     assert d.num_frames == 3
 
 
+def test_a_binary_lego_trial_is_named_not_echoed(tmp_path):
+    """Random bytes saved as a trial gave a 'no line terminator' warning and then echoed the
+    bytes as a number that is not one; a comment in another encoding still reads."""
+    import warnings
+
+    p = tmp_path / "trial1.txt"
+    p.write_bytes(b"0.1 \x00\xff\xfe junk" * 20)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no warning before the error
+        with pytest.raises(DataError, match=r"trial1\.txt: not a text file \(a NUL byte at "
+                           r"byte 4\); a LEGO trial holds lines of 18 numbers$"):  # fmt: skip
+            load_lego_assembly(p)
+    p.write_bytes("# Gr\u00f6\u00dfe in cm\n".encode("latin-1") + (_lego_row() + "\n").encode())
+    (d,) = load_lego_assembly(p)
+    assert d.num_frames == 1
+
+
 @pytest.mark.parametrize("text", ["", "\n\n", "# only a comment\n"])
 def test_an_empty_lego_trial_names_itself_once(tmp_path, text):
     """It read '.../b_bad.txt: unreadable LEGO trial (.../b_bad.txt: empty file)'."""
