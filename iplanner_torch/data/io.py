@@ -1147,9 +1147,10 @@ def _read_lego_trial(path: Path) -> np.ndarray:
     line a text editor shows and the entry's place in it.
 
     Raises:
-        DataError: for an unreadable file, an entry that is not a number (``abc``, ``1,2``),
-            a line of other than 18 numbers, no rows at all, or a value that is infinite or
-            beyond :data:`~iplanner_torch.types.MAX_POSITION_M` (other units, or junk).
+        DataError: for an unreadable file, a binary one (a NUL byte), an entry that is not a
+            number (``abc``, ``1,2``), a line of other than 18 numbers, no rows at all, or a
+            value that is infinite or beyond :data:`~iplanner_torch.types.MAX_POSITION_M`
+            (other units, or junk).
     """
     try:
         raw = path.read_bytes()
