@@ -1089,3 +1089,54 @@ def test_csv_without_a_column_header_row_says_so(tmp_path, header, line):
     ) as info:
         load_demonstrations(p, fps=10)
     assert len(str(info.value)) < len(str(p)) + 160
+
+
+def test_timestamps_are_checked_by_their_median_spacing_within_the_tolerance(tmp_path):
+    """The spacing test takes the median, so one pause does not refuse a 15 Hz file (its mean
+    spacing is 1.7 frames); 12 Hz under fps 15 (20 % off) is refused; two equal times are
+    not increasing."""
+    ts = np.arange(12) / 15.0
+    ts[8:] += 1.0  # a 1 s pause after frame 7
+    (d,) = load_demonstrations(_npz(tmp_path / "pause.npz", timestamps=ts))
+    np.testing.assert_array_equal(d.timestamps, ts)
+    with pytest.raises(DataError, match=r"slow\.npz: field 'timestamps' is spaced 0\.08333 s"):
+        load_demonstrations(_npz(tmp_path / "slow.npz", timestamps=np.arange(12) / 12.0))
+    same = np.arange(12) / 15.0
+    same[3] = same[2]
+    with pytest.raises(DataError, match=r"same\.npz: .*strictly increasing; frame 3 \(counting "
+                       r"from 0\) has t = 0\.133333 s after 0\.133333 s"):  # fmt: skip
+        load_demonstrations(_npz(tmp_path / "same.npz", timestamps=same))
+
+
+def test_csv_labels_without_action_names_name_one_action_per_label(tmp_path):
+    """Labels 0 and 1 without names in the header: actions action_0 and action_1 (the largest
+    label + 1 of them), and the labels kept."""
+    p = tmp_path / "x.csv"
+    p.write_text('# {"fps": 15.0}\nt,label,a_x,a_y,a_z\n0,0,1,2,3\n0.0666667,1,1,2,3\n')
+    (d,) = load_demonstrations(p)
+    assert d.action_names == ("action_0", "action_1") and d.labels.tolist() == [0, 1]
+
+
+def _lego_tree(root: Path, rows: list[str]) -> Path:
+    """``root/Task1/Human2/trial3.txt`` holding ``rows``."""
+    trial = root / "Task1" / "Human2" / "trial3.txt"
+    trial.parent.mkdir(parents=True)
+    trial.write_text("\n".join(rows) + "\n")
+    return trial
+
+
+def test_lego_metadata_names_task_human_and_trial_from_the_folders(tmp_path):
+    _lego_tree(tmp_path, [_lego_row()] * 3)
+    (d,) = load_lego_assembly(tmp_path, fps=30.0)
+    assert d.name == "Task1/Human2/trial3"
+    assert (d.metadata["task"], d.metadata["human"]) == ("Task1", "Human2")
+
+
+def test_a_lego_trial_with_one_coordinate_lost_everywhere_is_refused(tmp_path):
+    """Every joint has a NaN coordinate in every frame (only x lost): no joint is ever
+    observed, as when all of them are NaN."""
+    row = " ".join("nan" if i % 3 == 0 else "0.1" for i in range(18))
+    _lego_tree(tmp_path, [row] * 3)
+    with pytest.raises(DataError, match=r"trial3\.txt: field 'positions' is NaN in every frame "
+                       r"for every joint"):  # fmt: skip
+        load_lego_assembly(tmp_path, fps=30.0)
