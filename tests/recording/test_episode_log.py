@@ -663,3 +663,37 @@ def test_a_changed_byte_in_the_episode_metadata_is_caught(log_path: Path, tmp_pa
         ep = read_episode(tmp_path / "m.mcap")
     assert ep.metadata == {} and not ep.complete
     assert len(ep.frames["/robot/joint_state"]) == len(full.frames["/robot/joint_state"])
+
+
+def test_round_trips_of_what_a_reader_could_reorder_or_pad(tmp_path: Path) -> None:
+    """Read back as written: a /tf rotation in x, y, z, w order; the last of two metrics
+    messages; bounds of 2 and 3 waypoints padded with NaN (a 0 would read as a contact)."""
+    from iplanner_torch.recording import EpisodeWriter, read_episode
+
+    path = tmp_path / "r.mcap"
+    quat = (0.1, 0.2, 0.3, math.sqrt(1 - 0.14))
+    with EpisodeWriter(path, metadata={}) as log:
+        log.frame_transform(0.5, "world", "robot", (1.0, 2.0, 3.0), quat)
+        log.collision_bound(0.1, [0.0, 0.1], [0.01, 0.02], 0.95)
+        log.collision_bound(0.2, [0.0, 0.1, 0.2], [0.03, 0.04, 0.05], 0.95)
+        log.metrics(1.0, {"eval/smoothness": 1.0})
+        log.metrics(2.0, {"eval/smoothness": 2.0})
+    ep = read_episode(path)
+    tf = ep.frames["/tf"]
+    row = tf[tf["child_frame_id"] == "robot"].iloc[0]
+    np.testing.assert_allclose(row["rotation_xyzw"], quat, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(row["translation"], (1.0, 2.0, 3.0))
+    assert ep.metrics() == {"eval/smoothness": 2.0}
+    _, times, bound, _ = ep.bounds()
+    assert bound.shape == (2, 3) and math.isnan(float(bound[0, 2])) and math.isnan(times[0, 2])
+    torch.testing.assert_close(bound[1], torch.tensor([0.03, 0.04, 0.05], dtype=torch.float64))
+
+
+def test_codec_keeps_bools_and_integers_of_numpy_as_such() -> None:
+    """A numpy bool mask reads back as bools and a numpy integer as an int ("3", not "3.0")."""
+    import json
+
+    from iplanner_torch.recording.codec import encode_value
+
+    got = encode_value({"mask": np.array([True, False]), "n": np.int64(3), "b": np.bool_(True)})
+    assert json.dumps(got) == '{"mask": [true, false], "n": 3, "b": true}'
