@@ -1277,3 +1277,21 @@ def test_a_plot_that_cannot_be_saved_costs_neither_the_tables_nor_the_other_plot
     # results.md names the paired plots that were drawn, not the one that failed
     md = (tmp_path / "results.md").read_text()
     assert "`paired_smoothness.png`" in md and "paired_min_distance.png" not in md
+
+
+def test_boundaries_of_contact_and_of_a_paired_win() -> None:
+    """``min_distance == 0`` (spheres that just touch) is a contact where no ``contact``
+    column says otherwise; a paired difference of 0 is no win, 1 is one."""
+    df = pd.DataFrame({"min_distance": [0.0, 0.001, -0.01, math.nan]})
+    assert episode_contact(df).tolist()[:3] == [1.0, 0.0, 1.0]
+    assert math.isnan(episode_contact(df).iloc[3])
+    runs = pd.DataFrame(
+        {
+            "scenario": ["s"] * 4,
+            "seed": [0, 1, 0, 1],
+            "planner": ["itomp", "itomp", "iplanner_ni", "iplanner_ni"],
+            "min_distance": [0.02, 0.02, 0.02, 0.03],
+        }
+    )
+    (row,) = paired_differences(runs, "min_distance").itertuples()
+    assert (row.pairs, row.wins) == (2, 1)
