@@ -62,3 +62,32 @@ def test_swivel_turns_the_elbow_about_the_shoulder_hand_axis() -> None:
     right, _ = solve_elbow(shoulder, hand, 0.3, 0.27, np.array([np.pi / 2]), -1.0)
     assert left[0, 1] > 0.1 and right[0, 1] < -0.1
     np.testing.assert_allclose(left[0, [0, 2]], right[0, [0, 2]], atol=1e-12)
+
+
+def test_shoulders_hang_below_the_neck_on_their_own_side() -> None:
+    """Left shoulder at +y, right at -y, both ``shoulder_drop`` below the neck (upright)."""
+    from iplanner_torch.data.kinematic_human import BodyParams
+
+    body = BodyParams()
+    head, neck, _, _, left, right = body.trunk_offsets()
+    for shoulder, side in ((left, 1.0), (right, -1.0)):
+        np.testing.assert_allclose(
+            shoulder - neck, [0.0, side * body.shoulder_half_width, -body.shoulder_drop]
+        )
+    assert head[2] > neck[2]
+
+
+def test_lean_for_target_by_hand() -> None:
+    """Upright, the left shoulder sits at waist + (0, 0.18, 0.25 + torso_neck - 0.03): a
+    target 0.5 arm lengths to its left is reached without leaning with the left arm, and is
+    out of reach of the right arm even leaning (max_pitch); a target 2 m away takes
+    max_pitch."""
+    from iplanner_torch.data.kinematic_human import BodyParams, lean_for_target
+
+    body = BodyParams()
+    left = body.waist + body.trunk_offsets()[4]
+    target = left + np.array([0.0, 0.5 * body.arm_length, 0.0])
+    assert lean_for_target(body, "left", target, 0.0) == 0.0
+    assert lean_for_target(body, "right", target, 0.0, max_pitch=0.6) == 0.6
+    far = body.waist + np.array([2.0, 0.0, 0.0])
+    assert lean_for_target(body, "left", far, 0.0, max_pitch=0.45) == 0.45
