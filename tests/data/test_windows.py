@@ -363,3 +363,32 @@ def test_window_joints_must_be_a_list_not_one_string():
     with pytest.raises(ConfigError, match=single + r"write it as a list: \[right_hand\]$"):
         WindowCfg(joints="right_hand")
     assert WindowCfg(joints=["right_hand"]).joints == ("right_hand",)
+
+
+def _tiny_demo(name: str, labels: list[int], metadata: dict | None = None) -> Demonstration:
+    return Demonstration(
+        positions=np.zeros((len(labels), 10, 3)),
+        labels=np.array(labels),
+        fps=FPS,
+        joint_names=JOINT_NAMES,
+        action_names=("idle", "reach_0", "reach_1", "return"),
+        name=name,
+        metadata=metadata or {},
+    )
+
+
+def test_split_sizes_of_one_group_by_hand():
+    """Ten demonstrations of one target, (0.8, 0.1, 0.1): round(1) for val and for test,
+    the remaining 8 for training."""
+    demos = [_tiny_demo(f"d{i}", [0, 1], {"target": 0}) for i in range(10)]
+    assert tuple(map(len, split_by_demonstration(demos, (0.8, 0.1, 0.1), seed=0))) == (8, 1, 1)
+
+
+def test_split_strata_by_the_first_action_past_idle():
+    """Without a target, a demonstration is grouped by its first action other than idle and
+    return: 4 that start idle and reach 1, 4 that start idle and reach 2, split half and half
+    with no validation share, put 2 of each in the test split (not 4 of one)."""
+    demos = [_tiny_demo(f"a{i}", [0, 0, 1]) for i in range(4)]
+    demos += [_tiny_demo(f"b{i}", [0, 0, 2]) for i in range(4)]
+    _, _, test = split_by_demonstration(demos, (0.5, 0.0, 0.5), seed=1)
+    assert sorted(d.name[0] for d in test) == ["a", "a", "b", "b"]
