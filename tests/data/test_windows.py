@@ -394,3 +394,20 @@ def test_split_strata_by_the_first_action_past_idle():
     for seed in range(10):
         _, _, test = split_by_demonstration(demos, (0.5, 0.0, 0.5), seed=seed)
         assert sorted(d.name[0] for d in test) == ["a", "a", "b", "b"], seed
+
+
+def test_a_joint_lost_everywhere_takes_its_nearest_neighbour_along_the_bones():
+    """In (torso, left_elbow, left_hand) a hand lost in every frame takes the elbow's path
+    (its neighbour along the bones), not the torso's; in the whole skeleton a lost neck takes
+    one of the joints next to it (head, torso, shoulders), never a hand."""
+    t = torch.arange(6.0)[:, None]  # (T, 1)
+    x = torch.stack([t * 0 + 1.0, t * 0 + 2.0, t * 0 + 3.0], 1).expand(6, 3, 3).clone()
+    x[:, 2] = float("nan")
+    out = impute_nan(x, ("torso", "left_elbow", "left_hand"))
+    torch.testing.assert_close(out[:, 2], out[:, 1])
+    full = torch.arange(10.0).view(1, 10, 1).expand(4, 10, 3).clone()
+    neck = JOINT_NAMES.index("neck")
+    full[:, neck] = float("nan")
+    filled = float(impute_nan(full, JOINT_NAMES)[0, neck, 0])
+    near = {"head", "torso", "left_shoulder", "right_shoulder"}
+    assert JOINT_NAMES[int(filled)] in near
