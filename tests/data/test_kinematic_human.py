@@ -91,3 +91,23 @@ def test_lean_for_target_by_hand() -> None:
     assert lean_for_target(body, "right", target, 0.0, max_pitch=0.6) == 0.6
     far = body.waist + np.array([2.0, 0.0, 0.0])
     assert lean_for_target(body, "left", far, 0.0, max_pitch=0.45) == 0.45
+
+
+def test_a_leaning_reach_twists_the_reaching_shoulder_forward_and_ends_on_time() -> None:
+    """A left reach with ``lean``: the trunk yaw turns the left shoulder ahead (larger x) of
+    the right at the end of the move, and the right one for a right reach (positions from
+    the plan, as the generator reads them); the plan ends when its last move does."""
+    from iplanner_torch.data.kinematic_human import BodyParams, MotionPlan, plan_hand_move
+    from iplanner_torch.data.skeleton import JOINT_INDEX
+
+    for arm, ahead in (("left", "left_shoulder"), ("right", "right_shoulder")):
+        plan = MotionPlan(body=BodyParams())
+        side = 1.0 if arm == "left" else -1.0
+        first = plan_hand_move(plan, arm, np.array([0.1, 0.3 * side, 0.05]), 0.5,
+                               np.random.default_rng(0), lean=True)  # fmt: skip
+        second = plan_hand_move(plan, arm, np.array([0.0, 0.2 * side, 0.1]), first.t1 + 0.2,
+                                np.random.default_rng(1), lean=True)  # fmt: skip
+        assert plan.end_time == second.t1 == second.t0 + second.duration
+        pose = plan.positions(np.array([first.t1]))[0]
+        other = "right_shoulder" if ahead == "left_shoulder" else "left_shoulder"
+        assert pose[JOINT_INDEX[ahead], 0] > pose[JOINT_INDEX[other], 0], arm
