@@ -236,3 +236,18 @@ def test_a_huge_length_field_is_named_in_the_warning(tmp_path: Path) -> None:
     text = str(caught[0].message)
     assert "OverflowError: a length field declares more bytes than can be read (damaged)" in text
     assert not ep.complete and ep.robot_q()[1].tolist() == [[0.0], [1.0], [2.0]]
+
+
+def test_scene_sphere_rows_must_increase() -> None:
+    """A damaged entity naming one sphere row twice ("0,0") is refused, as a decreasing list
+    is; increasing rows within the count pass."""
+    from iplanner_torch.recording.reader import SPHERE_COUNT_KEY, SPHERE_ROWS_KEY, _sphere_slots
+
+    def entity(rows: str) -> dict:
+        meta = [{"key": SPHERE_COUNT_KEY, "value": "3"}, {"key": SPHERE_ROWS_KEY, "value": rows}]
+        return {"id": "robot", "metadata": meta}
+
+    assert _sphere_slots(entity("0,2"), 2) == (3, [0, 2])
+    for rows in ("0,0", "2,1", "0,3"):
+        with pytest.raises(ValueError, match="are not 2 increasing rows"):
+            _sphere_slots(entity(rows), 2)
