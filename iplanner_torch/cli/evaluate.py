@@ -441,15 +441,11 @@ def _learned(compare: Any) -> list[str]:
     return [str(o) for o in compare if str(o) != CV_OPTION]
 
 
-def _flat_settings(settings: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Nested settings as dotted keys: ``{"svgp.noisy_input": "simple", "seed": 0, ...}``."""
-    out: dict[str, Any] = {}
-    for key, value in settings.items():
-        if isinstance(value, dict):
-            out.update(_flat_settings(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
+def _flat_settings(value: Any) -> dict[str, Any]:
+    """:func:`~iplanner_torch.eval.prediction.flat_settings` (imported when used)."""
+    from iplanner_torch.eval.prediction import flat_settings
+
+    return flat_settings(value)
 
 
 def _follows_seed(node: DictConfig) -> set[str]:

@@ -242,13 +242,14 @@ def _unreadable_split(ckpt: str | Path, err: Exception) -> None:
     )
 
 
-def _flat_settings(value: Any, prefix: str = "") -> dict[str, Any]:
-    """A nested dict as ``{"svgp.noisy_input": "simple", ...}``."""
+def flat_settings(value: Any, prefix: str = "") -> dict[str, Any]:
+    """Nested settings (a dict of dicts) as dotted keys: ``{"svgp.noisy_input": "simple",
+    "seed": 0, ...}``; an empty dict gives no key."""
     if not isinstance(value, dict):
         return {prefix: value}
     out: dict[str, Any] = {}
     for k, v in value.items():
-        out.update(_flat_settings(v, f"{prefix}.{k}" if prefix else str(k)))
+        out.update(flat_settings(v, f"{prefix}.{k}" if prefix else str(k)))
     return out
 
 
@@ -270,8 +271,8 @@ def _other_run(
         records = ""
     differ = ""
     if predictor_cfg is not None and isinstance(inputs.get("predictor_cfg"), dict):
-        rec = _flat_settings(inputs["predictor_cfg"])
-        own = _flat_settings(json.loads(json.dumps(predictor_cfg, default=str)))
+        rec = flat_settings(inputs["predictor_cfg"])
+        own = flat_settings(json.loads(json.dumps(predictor_cfg, default=str)))
         keys = [k for k in dict.fromkeys([*rec, *own]) if rec.get(k) != own.get(k)]
         if keys:
             shown = ", ".join(f"{k} {rec.get(k)!r} (record) / {own.get(k)!r}" for k in keys[:4])

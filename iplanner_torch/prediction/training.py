@@ -45,6 +45,7 @@ from iplanner_torch.eval.prediction import (
     RESUME_SPLIT_FIELDS,
     RESUME_TRAINER_FIELDS,
     SplitRecord,
+    flat_settings,
     inputs_digest,
     read_training_inputs,
 )
@@ -896,16 +897,6 @@ _RECORD_NAMES = {
 }
 
 
-def _flat(value: Any, prefix: str = "") -> dict[str, Any]:
-    """A nested dict as ``{"svgp.num_inducing": 16, ...}``."""
-    if not isinstance(value, dict):
-        return {prefix: value}
-    out: dict[str, Any] = {}
-    for k, v in value.items():
-        out.update(_flat(v, f"{prefix}.{k}" if prefix else str(k)))
-    return out
-
-
 def _record_change(key: str, was: Any, now: Any) -> str:
     """What differs in part ``key`` of a training record, in words: ``training data (other
     demonstrations, or other windows of them)``, ``joints [...] -> [...]``, ``predictor
@@ -914,7 +905,7 @@ def _record_change(key: str, was: Any, now: Any) -> str:
     if key == "fingerprint":
         return f"{name} (other demonstrations, or other windows of them)"
     if isinstance(was, dict) and isinstance(now, dict):
-        a, b = _flat(was), _flat(now)
+        a, b = flat_settings(was), flat_settings(now)
         keys = [k for k in dict.fromkeys([*a, *b]) if a.get(k) != b.get(k)]
         shown = [f"{k} {a.get(k)!r} -> {b.get(k)!r}" for k in keys[:4]]
         more = f", and {len(keys) - 4} more" if len(keys) > 4 else ""
