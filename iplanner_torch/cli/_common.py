@@ -560,6 +560,23 @@ _MEMORY_HINT = (
 OPTIONAL_KEYS = frozenset({"data.fps", "data.format"})
 
 
+def _additions(given: list[str]) -> list[tuple[str, Any]]:
+    """The ``+key=value`` and ``++key=value`` overrides of ``given``, each with Hydra's parse
+    of it; none when there is no ``+`` or Hydra's parser refuses them (Hydra has parsed them
+    already, and says what is wrong itself)."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    if not any(o.lstrip().startswith("+") for o in given):
+        return []
+    try:
+        parsed = OverridesParser.create().parse_overrides(given)
+    except Exception:  # noqa: BLE001 - see the docstring
+        return []
+    return [
+        (text, o) for text, o in zip(given, parsed, strict=True) if o.is_add() or o.is_force_add()
+    ]
+
+
 def check_added_keys(cfg: DictConfig, overrides: list[str] | None = None) -> None:
     """Refuse a key that a ``+key=value`` or ``++key=value`` override adds where nothing reads
     it: at the root, or in a node the command reads key by key (``tracker``, ``human``,
@@ -582,19 +599,11 @@ def check_added_keys(cfg: DictConfig, overrides: list[str] | None = None) -> Non
         ConfigError: ``unknown key 'tracker.nosie' (did you mean 'tracker.noise'?): added by
             +tracker.nosie=0.05, which nothing reads``.
     """
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
     given = task_overrides() if overrides is None else overrides
-    if not any(o.lstrip().startswith("+") for o in given):
-        return
-    try:
-        parsed = OverridesParser.create().parse_overrides(given)
-    except Exception:  # noqa: BLE001 - Hydra has parsed them already; nothing to add here
-        return
     added = []
-    for text, override in zip(given, parsed, strict=True):
+    for text, override in _additions(given):
         key = override.key_or_group
-        if not (override.is_add() or override.is_force_add()) or override.package is not None:
+        if override.package is not None:
             continue
         if key.startswith("hydra.") or key == "hydra" or "/" in key or key in OPTIONAL_KEYS:
             continue
@@ -657,7 +666,6 @@ def check_added_hydra_keys(
     import dataclasses
 
     from hydra.core.hydra_config import HydraConfig
-    from hydra.core.override_parser.overrides_parser import OverridesParser
 
     if hydra_cfg is None:
         try:
@@ -665,15 +673,9 @@ def check_added_hydra_keys(
         except ValueError:  # outside a Hydra run (tests)
             return
     given = list(hydra_cfg.overrides.hydra) if overrides is None else overrides
-    if not any(o.lstrip().startswith("+") for o in given):
-        return
-    try:
-        parsed = OverridesParser.create().parse_overrides(given)
-    except Exception:  # noqa: BLE001 - Hydra has parsed them already; nothing to add here
-        return
-    for text, override in zip(given, parsed, strict=True):
+    for text, override in _additions(given):
         key = override.key_or_group
-        if not (override.is_add() or override.is_force_add()) or not key.startswith("hydra."):
+        if not key.startswith("hydra."):
             continue
         prefix, _, leaf = key[len("hydra.") :].rpartition(".")
         parent = OmegaConf.select(hydra_cfg, prefix, default=None) if prefix else hydra_cfg
