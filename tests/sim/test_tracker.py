@@ -190,3 +190,17 @@ def test_a_tensor_with_a_gradient_is_taken_as_its_values() -> None:
     assert a.observe(0.0, pose)
     assert b.observe(0.0, torch.tensor(pose, requires_grad=True))
     np.testing.assert_array_equal(a.window(), b.window())
+
+
+def test_the_held_pose_is_the_noisy_frame_and_the_padding_the_oldest() -> None:
+    """``latest_pose`` is what the tracker saw (noisy), not the truth; before the window
+    fills, the oldest frame is repeated in front, not the newest."""
+    tr = Tracker(TrackerCfg(noise_sigma=0.05, window=4), seed=0)
+    first, second = rest_pose(), rest_pose() + 1.0
+    tr.observe(0.0, first)
+    tr.observe(1.0 / 15.0, second)
+    win = tr.window()
+    np.testing.assert_array_equal(tr.latest_pose(), win[-1])
+    assert not np.allclose(tr.latest_pose(), second, atol=1e-3)  # noisy, 5 cm
+    np.testing.assert_array_equal(win[:3], np.stack([win[0]] * 3))
+    assert np.abs(win[0] - first).max() < 0.5 and np.abs(win[3] - second).max() < 0.5
