@@ -170,3 +170,20 @@ def test_a_fetch_of_a_block_absent_from_the_scene_is_refused(block) -> None:
         ConfigError, match=rf"block id of the 1x4 scene \(0, 1, 2, 3\), got {block!r}"
     ):
         FetchTask.create(block, SceneCfg(), FetchCfg(), 0.0)
+
+
+def test_next_feasible_puts_unnamed_ids_last_and_takes_the_smallest_allowed() -> None:
+    """Groups [[0], [1]] with ids (0, 1, 2): 2, which the order does not name, comes after
+    both. An order without groups that allows {1, 2}: the smallest, 1."""
+
+    class Grouped:
+        groups = ((0,), (1,))
+
+    class Free:
+        @staticmethod
+        def allowed_next(done: set[int]) -> set[int]:
+            return {1, 2}
+
+    assert next_feasible(Grouped(), set(), (0, 1, 2)) == 0
+    assert next_feasible(Grouped(), {0, 1}, (0, 1, 2)) == 2
+    assert next_feasible(Free(), set(), (0, 1, 2, 3)) == 1
