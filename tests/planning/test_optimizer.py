@@ -612,7 +612,9 @@ def test_min_duration_from_rest_is_the_line_at_two_thirds_of_the_limits() -> Non
 
 @pytest.mark.parametrize(
     "qd_s",
-    [[1.5, 0.0, 0.0], [-1.0, 0.8, 0.3], [0.0, 0.0, 0.0]],
+    # the last starts above the velocity limit (2): the cubic may keep that speed, not stop
+    # the search at its longest duration (675 s)
+    [[1.5, 0.0, 0.0], [-1.0, 0.8, 0.3], [0.0, 0.0, 0.0], [3.0, 0.0, -2.5]],
 )
 def test_min_duration_keeps_the_cubic_within_velocity_and_acceleration_limits(qd_s) -> None:
     """With a start velocity and an acceleration limit, the cubic of the returned duration
@@ -1227,3 +1229,16 @@ def test_a_deadline_stops_the_iterations_before_it_is_passed(
     for bad in (math.nan, math.inf):
         with pytest.raises(ConfigError, match="deadline"):
             opt.solve(*args, forecast=fc, deadline=bad)
+
+
+def test_window_indices_by_hand() -> None:
+    """Waypoints at 0, 0.25, ..., 1 s and the window (0, 0.6): the segments that overlap it
+    end at waypoints 1, 2 and 3 (the one over 0.5-0.75 s crosses the window's end and is
+    checked); (0.3, 0.3) gives the segment that holds 0.3 s; no window, every waypoint but
+    the pinned start."""
+    arm = PlanarArm(dtype=torch.float64)
+    opt = TrajectoryOptimizer(arm, OptimizerCfg())
+    times = torch.linspace(0.0, 1.0, 5, dtype=torch.float64)
+    assert opt._window_indices(times, (0.0, 0.6)).tolist() == [1, 2, 3]
+    assert opt._window_indices(times, (0.3, 0.3)).tolist() == [2]
+    assert opt._window_indices(times, None).tolist() == [1, 2, 3, 4]
