@@ -406,3 +406,36 @@ def test_reach_crossings_against_points_sampled_along_the_reaches() -> None:
 def test_reach_crossings_bad_input(args: tuple, error: type, match: str) -> None:
     with pytest.raises(error, match=match):
         reach_crossings(*args)
+
+
+class _AnyOrder:
+    @staticmethod
+    def allowed_next(done: set[int]) -> set[int]:
+        return {0, 1, 2} - set(done)
+
+
+def test_next_probabilities_drop_negative_entries() -> None:
+    """A table entry [0.6, -0.2, 0.6] (a fit's rounding) is no probability of -0.2: the
+    negative entry is dropped and the rest renormalised, [0.5, 0, 0.5]."""
+    probs = {0: [0.6, -0.2, 0.6]}
+    planner = TaskPlanner(TaskMDPCfg(num_objects=3), _AnyOrder(), next_action_probs=probs)
+    np.testing.assert_allclose(planner.human_next_probs(0), [0.5, 0.0, 0.5])
+
+
+def test_an_update_into_a_finished_state_adds_no_future() -> None:
+    """The one object fetched: nothing is left to do, so the update is alpha * reward (the
+    largest Q of no action would be -inf)."""
+    cfg = TaskMDPCfg(num_objects=1, alpha=0.5)
+    planner = TaskPlanner(cfg, StrictOrder([0]))
+    planner.update(0, 0, 1.0, encode_state(set(), {0}, 1))
+    assert planner.q[0][0] == pytest.approx(0.5)
+
+
+def test_an_untrained_policy_follows_the_preparation_reward() -> None:
+    """No Q-values yet: the object the person is predicted to take next (probability 1 on
+    object 2, H the identity) is fetched, not the first one."""
+    probs = {0: [0.0, 0.0, 1.0]}
+    planner = TaskPlanner(
+        TaskMDPCfg(num_objects=3), _AnyOrder(), next_action_probs=probs, h_table=np.eye(3)
+    )
+    assert planner.policy(set(), set()) == 2
