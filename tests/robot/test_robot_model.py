@@ -392,3 +392,27 @@ def test_constructor_rejects_a_non_finite_base_yaw(yaw: object) -> None:
     desc = RobotModel.load("kuka_iiwa14").description
     with pytest.raises(ConfigError, match="expected a finite base_yaw"):
         RobotModel(desc, base_yaw=yaw)  # type: ignore[arg-type]
+
+
+def test_one_ik_step_is_the_damped_least_squares_step() -> None:
+    """One iteration from the middle of the limits towards a point 3 cm off the tool: the
+    step ``J^T (J J^T + lambda^2 I)^-1 e``, with J by central differences of the tool point
+    and the solve in numpy (lambda = 0.1 m, of the order of J J^T's small eigenvalues, so a
+    lambda in place of lambda^2 shows)."""
+    model = RobotModel.load("kuka_iiwa14", dtype=torch.float64)
+    q0 = 0.5 * (model.q_min + model.q_max) + 0.3
+    p0 = model.ee_position(q0).numpy()
+    target = p0 + np.array([0.03, -0.02, 0.01])
+    h = 1e-6
+    jac = np.stack(
+        [
+            (model.ee_position(q0 + h * e).numpy() - model.ee_position(q0 - h * e).numpy())
+            / (2 * h)
+            for e in torch.eye(model.num_joints, dtype=torch.float64)
+        ],
+        axis=1,
+    )  # (3, J)
+    lam = 0.1
+    step = jac.T @ np.linalg.solve(jac @ jac.T + lam**2 * np.eye(3), target - p0)
+    got = model.ik(torch.from_numpy(target), q0, iters=1, tol=0.0, damping=lam, max_step=10.0)
+    np.testing.assert_allclose(got.numpy(), q0.numpy() + step, rtol=0, atol=1e-8)
