@@ -669,3 +669,21 @@ def test_a_resync_moves_the_filtered_command_to_the_measured_pose(
     rp.step(0.5, pushed, None)
     q_cmd, _ = rp.command(0.5)
     torch.testing.assert_close(q_cmd, pushed.to(q_cmd), rtol=0, atol=1e-6)
+
+
+def test_the_emergency_check_runs_the_pending_plan_only_from_its_start(
+    point_robot: PointRobot,
+) -> None:
+    """The running plan holds at A, clear of the person; a pending one holds at B, on the
+    person, from its start. Starting after the checked span (0.1-0.5 s), it is not checked:
+    no emergency; starting at 0.3 s, it is, from there: an emergency."""
+    opt = TrajectoryOptimizer(point_robot, OptimizerCfg(), human_spheres=one_sphere_map(0.1))
+    cfg = ReplannerCfg(replan_step_s=0.5, emergency_lead_s=0.1, emergency_ahead_s=0.0)
+    rp = Replanner(opt, cfg)
+    a, b = torch.tensor([-1.5, 0.0]), torch.tensor([1.0, 0.0])
+    rp.reset(a, b, t=0.0)
+    fc = static_forecast([1.0, 0.0, 0.0], 0.02)
+    running = rp._hold(a, 0.0)
+    for start, unsafe in ((0.8, False), (0.3, True)):
+        rp._next_plan = rp._hold(b, start)
+        assert rp._committed_unsafe(0.0, 0.5, running, fc, 0.0) is unsafe, start
