@@ -687,3 +687,25 @@ def test_the_emergency_check_runs_the_pending_plan_only_from_its_start(
     for start, unsafe in ((0.8, False), (0.3, True)):
         rp._next_plan = rp._hold(b, start)
         assert rp._committed_unsafe(0.0, 0.5, running, fc, 0.0) is unsafe, start
+
+
+def test_fresh_candidates_are_drawn_anew_each_cycle(point_robot: PointRobot) -> None:
+    """With ``fresh_fraction`` > 0 every warm-started cycle draws its fresh candidates with
+    a seed of its own (the same seed would give the same perturbations every cycle)."""
+    opt = _spy(point_robot)
+    seeds: list[int] = []
+    draw = opt.initial_trajectories
+
+    def recording(q_s, q_g, n, seed, *args, **kwargs):
+        seeds.append(seed)
+        return draw(q_s, q_g, n, seed, *args, **kwargs)
+
+    opt.initial_trajectories = recording  # type: ignore[method-assign]
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, fresh_fraction=0.5))
+    q0 = torch.tensor([-1.0, 0.0])
+    rp.reset(q0, torch.tensor([1.0, 0.0]), t=0.0)
+    for k in range(4):
+        t = 0.5 * k
+        rp.step(t, rp.command(t)[0] if k else q0, None)
+    fresh = seeds[-3:]  # the warm-started cycles' draws
+    assert len(seeds) >= 3 and len(set(fresh)) == 3, seeds
