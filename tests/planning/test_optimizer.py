@@ -103,6 +103,11 @@ def test_infeasible_goal_inside_the_human_waits(point_robot: PointRobot) -> None
     assert mc_ball_probability(d, torch.full((3,), 0.05**2), 0.2, n=50_000) <= 0.01
     assert float(res.bound.max()) <= 1 - cfg.confidence
     assert res.wait_s == pytest.approx(float(res.times[-1] - res.times[h]))
+    # an execution window past the plan's end: the wait still ends with the plan
+    late = opt.solve(q_s, q_g, forecast=static_forecast([1.0, 0.0, 0.0], 0.05), duration=2.0,
+                     window=(0.0, 5.0))  # fmt: skip
+    assert not late.feasible and late.hold_index is not None
+    assert late.wait_s == pytest.approx(float(late.times[-1] - late.times[late.hold_index]))
 
 
 def test_itomp_avoids_the_observed_pose(point_robot: PointRobot) -> None:
