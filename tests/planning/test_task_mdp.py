@@ -439,3 +439,11 @@ def test_an_untrained_policy_follows_the_preparation_reward() -> None:
         TaskMDPCfg(num_objects=3), _AnyOrder(), next_action_probs=probs, h_table=np.eye(3)
     )
     assert planner.policy(set(), set()) == 2
+
+
+def test_a_point_exactly_at_the_radius_is_crossed() -> None:
+    """Within ``radius`` includes the radius: (0.5, 0.25) lies 0.25 m off the reach from
+    (0, 0) to (1, 0) (all exact in binary), so radius 0.25 crosses it and 0.24 does not."""
+    starts, ends, points = [[0.0, 0.0]], [[1.0, 0.0]], [[0.5, 0.25]]
+    assert reach_crossings(starts, ends, points, 0.25).tolist() == [True]
+    assert reach_crossings(starts, ends, points, 0.24).tolist() == [False]
