@@ -709,3 +709,16 @@ def test_fresh_candidates_are_drawn_anew_each_cycle(point_robot: PointRobot) -> 
         rp.step(t, rp.command(t)[0] if k else q0, None)
     fresh = seeds[-3:]  # the warm-started cycles' draws
     assert len(seeds) >= 3 and len(set(fresh)) == 3, seeds
+
+
+def test_the_goal_time_follows_the_arrival_each_plan_was_given(point_robot: PointRobot) -> None:
+    """After every cycle the goal time is no earlier than the arrival the cycle's solve was
+    given (``arrive``): a goal time left behind would make the next cycle rush."""
+    opt = _spy(point_robot)
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5))
+    q0 = torch.tensor([-1.0, 0.0])
+    rp.reset(q0, torch.tensor([1.0, 0.0]), t=0.0)
+    rp._t_goal = 0.1  # as if an earlier goal change had asked for an arrival now
+    rp.step(0.0, q0, None)
+    assert rp._t_goal >= opt.calls[-1]["arrive"] - 1e-12
+    assert opt.calls[-1]["arrive"] > 0.6  # the line at 2/3 of the limits takes that long
