@@ -442,3 +442,31 @@ def test_a_constant_velocity_forecast_of_linear_motion_scores_zero_error_and_no_
     for key in ("class_precision", "class_accuracy", "class_confident", "n_confident"):
         assert math.isnan(res[key]), key
     assert res["coverage95"] == 1.0  # every true position at its predicted mean
+
+
+def test_a_top_probability_of_exactly_one_half_is_not_confident() -> None:
+    """``class_precision`` counts windows whose top probability *exceeds* 0.5: a forecast
+    split 0.5 / 0.5 is not confident, one of 0.6 is."""
+    from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
+    from iplanner_torch.eval.prediction import evaluate_prediction
+
+    demos = reaching_demonstrations(ReachingCfg(n_targets=2), 0, 0)[:1]
+    windows = build_windows(demos, WindowCfg(n_prev=5, n_future=15, stride=4))
+    a = len(windows.action_names)
+
+    class Split:
+        fps, n_future, progress_actions = windows.fps, 15, None
+        action_names = windows.action_names
+
+        def predict(self, f_prev: torch.Tensor, progress: torch.Tensor) -> Forecast:
+            b = f_prev.shape[0]
+            w = torch.zeros(b, a)
+            w[:, :2] = torch.tensor([0.5, 0.5])
+            w[::2, :2] = torch.tensor([0.6, 0.4])
+            mean = torch.zeros(b, a, 15, windows.xi_next.shape[2], 3)
+            var = torch.full_like(mean, 0.01)
+            names = {"joint_names": windows.joint_names, "action_names": self.action_names}
+            return Forecast(weights=w, mean=mean, var=var, dt=1 / 15, **names)
+
+    got = evaluate_prediction(Split(), windows)
+    assert got["n_confident"] == (len(windows) + 1) // 2 and len(windows) > 2
