@@ -137,6 +137,17 @@ def test_itomp_avoids_the_observed_pose(point_robot: PointRobot) -> None:
         path_forecast(path, 0.1, ("j",), std=0.0, action="a")
     with pytest.raises(ConfigError, match="n_f"):
         static_human_forecast(pose, 0, 0.1, ("j",))
+    with pytest.raises(ConfigError, match=r"expected path with n_f >= 1 frames, got \(0, 1, 3\)"):
+        path_forecast(torch.zeros(0, 1, 3), 0.1, ("j",), std=0.01, action="a")
+    # a pose observed at t0 = 5 s: the plan starts at 5 s, as solve's with the pose seen then
+    later = opt.solve_observed(torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0]), pose=pose,
+                               joint_names=("j",), duration=3.0, t0=5.0)  # fmt: skip
+    fc = opt.forecast_from_pose(pose, ("j",))
+    same = opt.solve(torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.0]), forecast=fc,
+                     forecast_t0=5.0, t0=5.0, duration=3.0)  # fmt: skip
+    torch.testing.assert_close(later.bound, same.bound)
+    torch.testing.assert_close(later.q, same.q)
+    assert float(later.times[0]) == 5.0
 
 
 def test_itomp_spread_grows_the_held_pose_and_the_bound_covers_it(
