@@ -497,6 +497,14 @@ def test_ellipsoid_pose_refuses_covariances_that_are_no_covariances() -> None:
     skew[0, 1] = 0.005
     with pytest.raises(DataError, match=r"expected cov symmetric, .* by 0.005 \(covariance 0"):
         ellipsoid_pose(skew, 0.95)
+    # the tolerance is 1e-6 of the largest entry (0.04): 1e-7 of skew or of a negative
+    # eigenvalue (2.5 times it) is refused, rounding (1e-12) is not
+    small_skew = good.copy()
+    small_skew[0, 1] = 1e-7
+    with pytest.raises(DataError, match="expected cov symmetric"):
+        ellipsoid_pose(small_skew, 0.95)
+    with pytest.raises(DataError, match="positive semi-definite, got an eigenvalue of -1e-07"):
+        ellipsoid_pose(np.diag([0.04, 0.01, -1e-7]), 0.95)
     near = good + 1e-12 * np.array([[0, 1, 0], [0, 0, 0], [0, 0, -1]])  # rounding
     semi, _ = ellipsoid_pose(near, 0.95)
     np.testing.assert_allclose(semi, ellipsoid_pose(good, 0.95)[0], rtol=1e-9)

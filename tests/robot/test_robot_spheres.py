@@ -130,6 +130,9 @@ def test_fit_errors() -> None:
         fit_link_spheres(PRIMITIVES[0], max_excess=0.0)
     with pytest.raises(ConfigError, match="cannot cover a cylinder"):
         fit_link_spheres(Cylinder(a=(0, 0, 0), b=(0, 0, 0.5), radius=0.1), max_excess=0.02)
+    # shorter than its diameter (6 cm against 8): one sphere would stick out 3 cm > 2 cm
+    with pytest.raises(ConfigError, match=r"length 0\.0600 m .*length >= 2 radius"):
+        fit_link_spheres(Cylinder(a=(0, 0, 0), b=(0, 0, 0.06), radius=0.04), max_excess=0.02)
     with pytest.raises(ConfigError, match="at least one"):
         fit_link_spheres([], max_excess=0.02)
     with pytest.raises(ConfigError, match="radius > 0"):
