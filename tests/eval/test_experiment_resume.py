@@ -178,6 +178,19 @@ def test_set_aside_numbers_a_taken_name(tmp_path) -> None:
         "a_s0.1.mcap", "a_s0.1.png", "a_s0.2.mcap", "a_s0.2.png", "a_s0.mcap", "a_s0.png",
     ]  # fmt: skip
     assert (folder / "a_s0x.mcap").read_text() == "another episode"
+    # a file of the stem with two suffixes (a writer's temporary) is not the episode's
+    (folder / "a_s0.mcap").write_text("log")
+    (folder / "a_s0.mcap.tmp").write_text("temporary")
+    set_aside(folder / "a_s0.mcap", aside)
+    assert (folder / "a_s0.mcap.tmp").read_text() == "temporary"
+
+
+def test_episode_stems_tell_noise_levels_apart() -> None:
+    """Every noise level of a grid names its own logs (0.01 and 0.02 would both be 'n0.0'
+    with one decimal, and their logs would overwrite each other)."""
+    stems = {episode_stem("s", "medium", n, "itomp", 0) for n in (0.0, 0.005, 0.01, 0.02, 0.1)}
+    assert len(stems) == 5
+    assert episode_stem("s", "medium", 0.01, "itomp", 3) == "s_medium_n0.01_itomp_s3"
 
 
 def test_results_written_whole_or_not_at_all(tmp_path, monkeypatch) -> None:
