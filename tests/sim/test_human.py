@@ -105,6 +105,22 @@ def test_progress_bitmask_maps_take_to_predictor_actions() -> None:
     names = ("idle", "reach_0", "reach_1", "reach_2", "return")
     assert human.progress_bitmask(names) == (1 << 1) | (1 << 2)
     assert human.progress_bitmask(("Take_1", "take_0")) == 0b11
+    # names that say nothing of the blocks: block i is action i
+    assert human.progress_bitmask(("a", "b", "c")) == 0b11
+
+
+def test_the_seated_torso_sits_at_seat_x() -> None:
+    """``seat_x`` places the torso, the rest of the body moved with it (bodies of other
+    sizes would otherwise sit elsewhere)."""
+    from iplanner_torch.data.skeleton import JOINT_INDEX
+    from iplanner_torch.sim.human import ReachingMotionSource
+
+    for seed in range(3):
+        free = ReachingMotionSource(seed).rest_pose()
+        seated = ReachingMotionSource(seed, seat_x=-0.45).rest_pose()
+        assert seated[JOINT_INDEX["torso"], 0] == pytest.approx(-0.45)
+        np.testing.assert_allclose(seated - seated[JOINT_INDEX["torso"]],
+                                   free - free[JOINT_INDEX["torso"]], atol=1e-12)  # fmt: skip
 
 
 def test_faster_human_finishes_sooner_and_seed_repeats() -> None:
