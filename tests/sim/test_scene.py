@@ -300,3 +300,15 @@ def test_pose_human_refuses_joints_it_cannot_place(arm) -> None:
         with pytest.raises(DataError, match="finite joints"):
             pose_human(model, data, h, joints)
     np.testing.assert_array_equal(data.mocap_pos, mocap)  # nothing was moved
+
+
+def test_the_chair_seat_is_at_seat_height_above_the_floor(arm) -> None:
+    """The seat's top is about 0.47 m above the floor plane and below the table top
+    (z = 0), for two table heights: a chair floating above the table was a colliding geom."""
+    for height in (0.72, 0.8):
+        model = build_scene(SceneCfg(table_height=height), arm)
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
+        floor = data.geom("floor").xpos[2]
+        seat = data.geom("chair_seat").xpos[2] + model.geom("chair_seat").size[2]
+        assert seat - floor == pytest.approx(0.47, abs=1e-9) and seat < 0.0
