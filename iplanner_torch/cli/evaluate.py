@@ -512,7 +512,7 @@ def _check_predictor_option(
     """
     from dataclasses import asdict
 
-    from iplanner_torch.cli.experiment import option_node
+    from iplanner_torch.cli.experiment import option_node, train_command
     from iplanner_torch.prediction.svgp import UNREAD_BY_NOISY_INPUT
 
     now = options[option]
@@ -529,28 +529,16 @@ def _check_predictor_option(
     keys -= {f"svgp.{k}" for k in unread}
     differ = setting_changes(saved, now, keys)
     if differ:
+        trainer = _group_choice("trainer") or "default"  # the sweep trains with `trainer`
+        retrain = train_command(
+            cfg, cfg.data, option, ckpt.parent, trainer=trainer, overwrite=True
+        )
         raise ConfigError(
             f"{ckpt} was trained with other predictor settings than conf/predictor/"
             f"{option}.yaml, so the sweep would report it as {option}: "
             f"{'; '.join(differ)} (recorded -> config). Retrain it into that folder "
-            f"(`{_retrain_command(cfg, option, ckpt.parent)}`), or delete {ckpt.parent} to "
-            "have the sweep train it"
+            f"(`{retrain}`), or delete {ckpt.parent} to have the sweep train it"
         )
-
-
-def _retrain_command(cfg: DictConfig, option: str, out_dir: Path) -> str:
-    """The ``iplanner-train`` command that trains predictor ``option`` into ``out_dir`` as
-    the noise sweep would (its data option and folder, ``trainer``), replacing the predictor
-    there (``train.overwrite=true``)."""
-    words = [
-        override_word("data", _group_choice("data") or "reaching"),
-        override_word("data.path", cfg.data.path),
-        override_word("predictor", option),
-        override_word("trainer", _group_choice("trainer") or "default"),
-        override_word("train.out_dir", out_dir),
-        "train.overwrite=true",
-    ]
-    return " ".join(["iplanner-train", *words])
 
 
 def _noise_sweep_grid(cfg: DictConfig) -> tuple[list[str], list[float], list[str]]:

@@ -248,11 +248,21 @@ def _ensure_predictor(
     return str(ckpt)
 
 
-def train_command(cfg: DictConfig, data_node: DictConfig, option: str, out_dir: Path) -> str:
+def train_command(
+    cfg: DictConfig,
+    data_node: DictConfig,
+    option: str,
+    out_dir: Path,
+    *,
+    trainer: str | None = None,
+    overwrite: bool = False,
+) -> str:
     """The ``iplanner-train`` command that trains predictor ``option`` into ``out_dir`` as
     this run would (:func:`_ensure_predictor`): on the dataset of ``data_node`` (its
     ``conf/data`` option and path; for task demonstrations also the task order and
-    arrangement that generate it when missing), with ``run.train_trainer``."""
+    arrangement that generate it when missing), with ``trainer`` (default
+    ``run.train_trainer``); ``overwrite`` adds ``train.overwrite=true`` (the command replaces
+    the predictor there)."""
     from iplanner_torch.cli._common import _group_choice, override_word
 
     if data_node is cfg.data:  # run.train_data=data: the run's own data group option
@@ -268,8 +278,9 @@ def train_command(cfg: DictConfig, data_node: DictConfig, option: str, out_dir: 
         ]
     words += [
         override_word("predictor", option),
-        override_word("trainer", str(cfg.run.train_trainer)),
+        override_word("trainer", str(cfg.run.train_trainer) if trainer is None else trainer),
         override_word("train.out_dir", out_dir),
+        *(["train.overwrite=true"] if overwrite else []),
     ]
     return " ".join(["iplanner-train", *words])
 
