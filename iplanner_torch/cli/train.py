@@ -31,6 +31,7 @@ import json
 import math
 import sys
 import time
+import warnings
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -57,7 +58,7 @@ from iplanner_torch.cli._common import (
     run_app,
     write_job_record,
 )
-from iplanner_torch.errors import ConfigError
+from iplanner_torch.errors import ConfigError, DataError, DataWarning
 
 
 def train_from_config(
@@ -93,8 +94,6 @@ def train_from_config(
     )
     train, val, test = split_by_demonstration(demos, drawn.fractions, drawn.seed)
     if not train:
-        from iplanner_torch.errors import DataError
-
         raise DataError(
             f"data.split={list(drawn.fractions)} leaves none of the {len(demos)} "
             "demonstrations to train on; give the train share (the first) more"
@@ -103,8 +102,6 @@ def train_from_config(
     split = replace(drawn, held_out=tuple(d.name for d in test))
     train_w = build_windows(train, window_cfg)
     if len(train_w) == 0:
-        from iplanner_torch.errors import DataError
-
         longest = max(d.num_frames for d in train)
         labelled = max(int((d.labels >= 0).sum()) for d in train)
         raise DataError(
@@ -117,10 +114,6 @@ def train_from_config(
     val_w = build_windows(val, window_cfg) if val else None
     horizon_s = window_cfg.n_future / float(train_w.fps)
     if horizon_s < 1.0 - 1e-6:  # said before the training, not after it (as evaluation does)
-        import warnings
-
-        from iplanner_torch.errors import DataWarning
-
         warnings.warn(
             f"data.windows.n_future={window_cfg.n_future} at {train_w.fps:g} fps forecasts "
             f"{horizon_s:.2g} s: the held-out mhd_1s, mhd_1s_moving and the 'moving' test "
@@ -143,17 +136,11 @@ def train_from_config(
     seconds = time.perf_counter() - t0
     metrics: dict = {"train_seconds": seconds, "train_windows": len(train_w)}
     if test:
-        import warnings
-
         predictor = HumanMotionPredictor.load(ckpt)
         with warnings.catch_warnings():  # the short horizon was named before the training
             warnings.filterwarnings("ignore", message="the predictor forecasts .* frames at")
             metrics.update(evaluate_prediction(predictor, test))
     else:
-        import warnings
-
-        from iplanner_torch.errors import DataWarning
-
         warnings.warn(
             f"data.split={list(drawn.fractions)} holds out none of the {len(demos)} "
             "demonstrations (each group of one target or first action is cut by rounding), so "
