@@ -110,6 +110,34 @@ def test_infeasible_goal_inside_the_human_waits(point_robot: PointRobot) -> None
     assert late.wait_s == pytest.approx(float(late.times[-1] - late.times[late.hold_index]))
 
 
+def test_a_wait_holds_at_the_last_safe_waypoint_of_the_path() -> None:
+    # A straight path (x = 0.09 k, k = 0..10) through a person resting at x = 0.6 (std 0.02,
+    # contact radius 0.15), not optimised. The paper's wait (sec. 5) follows the path up to
+    # its last waypoint before the first unsafe one and holds there: the waypoints' collision
+    # probabilities, by Monte Carlo, say which that is.
+    robot = PointRobot(dtype=torch.float64)
+    w = 11
+    s = torch.linspace(0.0, 1.0, w, dtype=torch.float64)
+    path = torch.stack([0.9 * s, torch.zeros_like(s)], -1)
+    cfg = OptimizerCfg(num_trajectories=2, num_waypoints=w, warm_iterations=0,
+                       collision_substeps=1)  # fmt: skip
+    opt = TrajectoryOptimizer(robot, cfg, human_spheres=one_sphere_map(0.1))
+    fc = static_forecast([0.6, 0.0, 0.0], 0.02, dtype=torch.float64)
+    res = opt.solve(path[0], path[-1], forecast=fc, duration=1.0, q_init=torch.stack([path, path]))
+    person = torch.tensor([0.6, 0.0, 0.0], dtype=torch.float64)
+    var = torch.full((3,), 0.02**2, dtype=torch.float64)
+    risk = [
+        mc_ball_probability(person - torch.cat([q, q.new_zeros(1)]), var, 0.15, n=50_000)
+        for q in path
+    ]
+    first_unsafe = next(k for k, p in enumerate(risk) if p > 1 - cfg.confidence)
+    assert first_unsafe == 5  # the geometry above: x = 0.45 is 0.15 from the person
+    assert not res.feasible and res.hold_index == first_unsafe - 1
+    assert torch.equal(res.q[:first_unsafe], path[:first_unsafe])
+    assert torch.equal(res.q[first_unsafe:], path[first_unsafe - 1].expand(w - first_unsafe, 2))
+    assert res.wait_s == pytest.approx(float(res.times[-1] - res.times[first_unsafe - 1]))
+
+
 def test_itomp_avoids_the_observed_pose(point_robot: PointRobot) -> None:
     pose = torch.tensor([[0.0, 0.0, 0.0]])
     fc = static_human_forecast(pose, n_f=10, dt=0.1, joint_names=("j",))
