@@ -411,3 +411,19 @@ def test_a_joint_lost_everywhere_takes_its_nearest_neighbour_along_the_bones():
     filled = float(impute_nan(full, JOINT_NAMES)[0, neck, 0])
     near = {"head", "torso", "left_shoulder", "right_shoulder"}
     assert JOINT_NAMES[int(filled)] in near
+
+
+def test_joints_as_near_as_each_other_are_taken_in_name_order():
+    """A lost neck's four neighbours (head, left_shoulder, right_shoulder, torso) are one
+    bone away: the head's trajectory is taken, in any order of the joint names; without the
+    head, the left shoulder's."""
+    names = list(JOINT_NAMES)
+    for order in (names, names[::-1], names[3:] + names[:3]):
+        x = torch.arange(float(len(order))).view(1, -1, 1).expand(5, -1, 3).clone()
+        neck = order.index("neck")
+        x[:, neck] = float("nan")
+        out = impute_nan(x, order)
+        torch.testing.assert_close(out[:, neck], x[:, order.index("head")])
+        x[:, order.index("head")] = float("nan")
+        out = impute_nan(x, order)
+        torch.testing.assert_close(out[:, neck], x[:, order.index("left_shoulder")])
