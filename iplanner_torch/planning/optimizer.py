@@ -786,6 +786,7 @@ class TrajectoryOptimizer:
         qd_start: torch.Tensor | None = None,
         arrive: float | None = None,
         deadline: float | None = None,
+        seed: int | None = None,
     ) -> PlanResult:
         """Plan from ``q_start`` at ``t0`` to ``q_goal`` at ``t0 + duration``.
 
@@ -813,6 +814,9 @@ class TrajectoryOptimizer:
                 end after it; the first iteration always runs, and the acceptance check runs
                 in full. The plan then depends on this machine's speed and load. None: every
                 iteration runs (the same inputs give the same plan).
+            seed: seed of the cold initial trajectories (:meth:`initial_trajectories`; unused
+                with ``q_init``); None uses ``cfg.seed``. The replanner gives each cycle its
+                own (:func:`~iplanner_torch.seeds.derive_seed`).
 
         Returns:
             The accepted plan; ``timings["iterations"]`` counts the iterations run, and
@@ -902,7 +906,7 @@ class TrajectoryOptimizer:
                 q_start,
                 q_goal,
                 cfg.num_trajectories,
-                cfg.seed,
+                cfg.seed if seed is None else seed,
                 duration,
                 qd_start=qd_start,
                 arrival=n_goal,

@@ -75,6 +75,7 @@ from iplanner_torch.planning.optimizer import (
 )
 from iplanner_torch.planning.trajectory import Trajectory, resample_linear
 from iplanner_torch.prediction.forecast import Forecast
+from iplanner_torch.seeds import PLANNER_COLD_START, PLANNER_FRESH, derive_seed
 from iplanner_torch.types import check_finite, check_shape
 
 #: Tolerance on times [s] (cycle times accumulate rounding errors).
@@ -754,6 +755,7 @@ class Replanner:
             qd_start=qd_s,
             arrive=t_plan + travel,
             deadline=t_wall + budget if self.cfg.stop_at_budget else None,
+            seed=derive_seed(opt.cfg.seed, PLANNER_COLD_START, self.stats.cycles),
         )
         wall = time.perf_counter() - t_wall
         self.stats.cycles += 1
@@ -851,7 +853,7 @@ class Replanner:
         q_init = q_init + fade.view(1, w, 1) * (q_s.to(q_init) - q_init[:, :1])
         n_fresh = int(round(self.cfg.fresh_fraction * b))
         if n_fresh > 0:  # the least-acceleration path and smooth perturbations of it
-            seed = opt.cfg.seed + self.stats.cycles + 1
+            seed = derive_seed(opt.cfg.seed, PLANNER_FRESH, self.stats.cycles)
             fresh = opt.initial_trajectories(
                 q_s,
                 self._goal,

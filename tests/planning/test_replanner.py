@@ -711,6 +711,45 @@ def test_fresh_candidates_are_drawn_anew_each_cycle(point_robot: PointRobot) -> 
     assert len(seeds) >= 3 and len(set(fresh)) == 3, seeds
 
 
+def test_episodes_and_goal_changes_draw_initial_trajectories_of_their_own(
+    point_robot: PointRobot,
+) -> None:
+    """Episodes of neighbouring seeds share no draw of initial trajectories (with ``seed +
+    cycle`` episode s's cycle k + 1 drew episode s + 1's cycle k), and the cold start after a
+    goal change draws anew (not the episode's first draw again): the perturbations
+    themselves (each seed's draw on a path resting at the origin), not only their seeds."""
+    draws: dict[int, list[torch.Tensor]] = {}
+    for episode_seed in (0, 1):
+        opt = _spy(point_robot)
+        opt.cfg = replace(opt.cfg, seed=episode_seed)
+        draw = opt.initial_trajectories
+        got: list[torch.Tensor] = []
+
+        def recording(q_s, q_g, n, seed, *args, _draw=draw, _got=got, **kwargs):
+            # the perturbations this seed draws, on a path that stays at the origin
+            still = torch.zeros_like(q_s)
+            _got.append(_draw(still, still, n, seed))
+            return _draw(q_s, q_g, n, seed, *args, **kwargs)
+
+        opt.initial_trajectories = recording  # type: ignore[method-assign]
+        rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, fresh_fraction=0.5))
+        q0, goals = torch.tensor([-1.0, 0.0]), (torch.tensor([1.0, 0.0]), torch.tensor([0.5, 0.5]))
+        rp.reset(q0, goals[0], t=0.0)
+        for k in range(6):
+            t = 0.5 * k
+            if k == 3:
+                rp.set_goal(goals[1], t=t)
+            rp.step(t, rp.command(t)[0] if k else q0, None)
+        assert len(got) == 6 and [len(d) for d in got] == [8, 4, 4, 8, 4, 4]
+        draws[episode_seed] = got
+    # the first trajectory of each draw is the unperturbed path
+    every = [d[1:] for seed_draws in draws.values() for d in seed_draws]
+    for i in range(len(every)):
+        for j in range(i):
+            if every[i].shape == every[j].shape:
+                assert not torch.allclose(every[i], every[j]), (i, j)
+
+
 def test_the_goal_time_follows_the_arrival_each_plan_was_given(point_robot: PointRobot) -> None:
     """After every cycle the goal time is no earlier than the arrival the cycle's solve was
     given (``arrive``): a goal time left behind would make the next cycle rush."""
