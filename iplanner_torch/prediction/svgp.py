@@ -75,6 +75,7 @@ from torch import nn
 
 from iplanner_torch import checks
 from iplanner_torch.errors import CheckpointError, ConfigError, ShapeError
+from iplanner_torch.seeds import SVGP_MINIBATCHES, derive_seed
 from iplanner_torch.types import check_shape
 
 KernelName = Literal["rbf", "matern", "gak", "dtw"]
@@ -694,16 +695,25 @@ class SVGPRegressor(nn.Module):
             if r > 0:
                 extra = self.extra_train_noise(x, noise_map)
             steps = self.cfg.steps_for(x.shape[0]) if r == 0 else self.cfg.nigp_refit_steps
-            losses += self.train_steps(x, y, extra, steps=steps, progress=progress)
+            losses += self.train_steps(x, y, extra, steps=steps, progress=progress, round_index=r)
             self.finalise(x, y, extra)
         return losses
 
-    def batch_indices(self, n: int, steps: int, device: torch.device) -> list[torch.Tensor]:
-        """Seeded point subsets of every step (all points when ``n <= batch_size``)."""
+    def batch_indices(
+        self, n: int, steps: int, device: torch.device, round_index: int = 0
+    ) -> list[torch.Tensor]:
+        """Seeded point subsets of every step (all points when ``n <= batch_size``).
+
+        Each training round (the noisy-input refits are rounds 1, 2, ...) draws its own
+        minibatches, from a stream of ``cfg.seed`` apart from the one that chose the
+        inducing points (:func:`~iplanner_torch.seeds.derive_seed`).
+        """
         bs = min(self.cfg.batch_size, n)
         if bs >= n:
             return [torch.arange(n, device=device)] * steps
-        g = torch.Generator().manual_seed(self.cfg.seed)
+        g = torch.Generator().manual_seed(
+            derive_seed(self.cfg.seed, SVGP_MINIBATCHES, round_index)
+        )
         return [torch.randperm(n, generator=g)[:bs].to(device) for _ in range(steps)]
 
     def train_steps(
@@ -714,8 +724,10 @@ class SVGPRegressor(nn.Module):
         *,
         steps: int,
         progress: bool = False,
+        round_index: int = 0,
     ) -> list[float]:
-        """Adam on the collapsed bound for ``steps`` steps (q is not touched)."""
+        """Adam on the collapsed bound for ``steps`` steps (q is not touched); the
+        minibatches are those of training round ``round_index`` (:meth:`batch_indices`)."""
         if steps == 0:
             return []
         n = x.shape[0]
@@ -723,7 +735,7 @@ class SVGPRegressor(nn.Module):
         opt = torch.optim.Adam(self.trainable_parameters(), lr=self.cfg.lr)
         self.train()
         losses = []
-        batches = self.batch_indices(n, steps, x.device)
+        batches = self.batch_indices(n, steps, x.device, round_index)
         it: Any = batches
         if progress:
             from tqdm import tqdm

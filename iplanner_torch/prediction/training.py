@@ -138,6 +138,8 @@ class SVGPModule(L.LightningModule):
         calibrate: raise the noise floor on the validation windows at the end
             (:meth:`SVGPRegressor.calibrate`, when ``cfg.calibrate_floor``).
         inputs_digest: the training run's :func:`inputs_digest`, written into the checkpoint.
+        round_index: the training round (0, then the noisy-input refits), whose minibatches
+            are drawn (:meth:`SVGPRegressor.batch_indices`).
     """
 
     def __init__(
@@ -151,10 +153,12 @@ class SVGPModule(L.LightningModule):
         y_val: torch.Tensor | None = None,
         calibrate: bool = True,
         inputs_digest: str = "",
+        round_index: int = 0,
     ) -> None:
         super().__init__()
         self.reg = reg
         self.steps = int(steps)
+        self.round_index = int(round_index)
         self.calibrate = bool(calibrate)
         self.inputs_digest = inputs_digest
         self.register_buffer("x", x, persistent=False)
@@ -172,7 +176,9 @@ class SVGPModule(L.LightningModule):
         self._yn = self.reg.normalise_y(self.y)
 
     def train_dataloader(self) -> DataLoader:
-        idx = self.reg.batch_indices(self.x.shape[0], max(self.steps, 1), torch.device("cpu"))
+        idx = self.reg.batch_indices(
+            self.x.shape[0], max(self.steps, 1), torch.device("cpu"), self.round_index
+        )
         return DataLoader(_IndexBatches(idx), batch_size=None, shuffle=False)
 
     def training_step(self, batch: torch.Tensor, batch_idx: int) -> torch.Tensor:
@@ -443,7 +449,7 @@ def train_svgp(
         # the floor is calibrated once, after the last round
         module = SVGPModule(
             reg, x, y, extra, steps, x_val, y_val,
-            calibrate=r == rounds - 1, inputs_digest=inputs_digest,
+            calibrate=r == rounds - 1, inputs_digest=inputs_digest, round_index=r,
         )  # fmt: skip
         if steps > 0:
             trainer = _trainer(

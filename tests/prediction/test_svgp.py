@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 import torch
 
 from iplanner_torch.errors import CheckpointError, ConfigError, ShapeError
 from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
+from iplanner_torch.prediction.training import TrainerCfg, train_svgp
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 
@@ -168,6 +170,58 @@ def test_nigp_noise_of_linear_function_is_sigma2_a2() -> None:
     assert float(rel.median()) < 0.05
     assert float(rel.max()) < 0.25
     assert math.isclose(float(reg.test_extra_noise * ys2), expected, rel_tol=0.25)
+
+
+def test_each_training_round_draws_minibatches_of_its_own() -> None:
+    """The noisy-input refits (rounds 1, ...) do not replay round 0's minibatches, and the
+    first minibatches are not the subset that set the bandwidth and the inducing points
+    (one stream each): with 60 points in batches of 16, ``fit`` asks for rounds 0 and 1 and
+    gets different subsets; the same round gives the same subsets again."""
+    x, y, _ = _toy(60, 9)
+    cfg = SVGPCfg(num_inducing=8, noisy_input="nigp", nigp_iterations=1, batch_size=16,
+                  epochs=1, max_steps=4, nigp_refit_steps=4, seed=2)  # fmt: skip
+    reg = SVGPRegressor.from_data(cfg, x, y)
+    asked: list[tuple[int, list[torch.Tensor]]] = []
+    draw = reg.batch_indices
+
+    def recording(n, steps, device, round_index=0):
+        out = draw(n, steps, device, round_index)
+        asked.append((round_index, out))
+        return out
+
+    reg.batch_indices = recording  # type: ignore[method-assign]
+    reg.fit(x, y)
+    assert [r for r, _ in asked] == [0, 1]
+    (_, first), (_, second) = asked
+    assert all(len(b) == 16 and len(set(b.tolist())) == 16 for b in first + second)
+    assert not any(torch.equal(a, b) for a, b in zip(first, second))
+    assert all(torch.equal(a, b) for a, b in zip(first, draw(60, 4, torch.device("cpu"), 0)))
+    # from_data's stream: a permutation of the 60 points for the bandwidth, one for the
+    # inducing points; no minibatch is the start of either
+    g = torch.Generator().manual_seed(cfg.seed)
+    used = [torch.randperm(60, generator=g)[:16] for _ in range(2)]
+    assert not any(torch.equal(a, b) for a in first + second for b in used)
+
+
+def test_lightning_rounds_draw_minibatches_of_their_own(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The Lightning path (``train_svgp``, what ``iplanner-train`` runs) asks each round for
+    its own minibatches, as ``fit`` does."""
+    x, y, _ = _toy(60, 9)
+    cfg = SVGPCfg(num_inducing=8, noisy_input="nigp", nigp_iterations=2, batch_size=16,
+                  epochs=1, max_steps=4, nigp_refit_steps=2, seed=2)  # fmt: skip
+    rounds: list[int] = []
+    draw = SVGPRegressor.batch_indices
+
+    def recording(self, n, steps, device, round_index=0):
+        rounds.append(round_index)
+        return draw(self, n, steps, device, round_index)
+
+    monkeypatch.setattr(SVGPRegressor, "batch_indices", recording)
+    tcfg = TrainerCfg(accelerator="cpu", tensorboard=False)
+    train_svgp(x, y, cfg=cfg, tcfg=tcfg, out_dir=tmp_path, name="g", progress=False)
+    assert rounds == [0, 1, 2]
 
 
 def test_nigp_closed_form_gradient_matches_autograd() -> None:
