@@ -500,9 +500,13 @@ def check_sweep_jobs(config: DictConfig) -> int | None:
     from hydra.core.hydra_config import HydraConfig
     from omegaconf import open_dict
 
-    from iplanner_torch.cli._common import composition_error_text
+    from iplanner_torch.cli._common import check_added_hydra_keys, composition_error_text
     from iplanner_torch.errors import IPlannerError
 
+    try:  # +hydra.launcher.n_job=2 would otherwise run the jobs one at a time
+        check_added_hydra_keys(config.hydra)
+    except IPlannerError as exc:
+        _refuse_sweep(str(exc))
     jobs = sweep_job_overrides(config)
     if not jobs:
         return None if jobs is None else 0

@@ -104,7 +104,8 @@ def _generate_settings(cfg: DictConfig) -> tuple[bool, Any, Any]:
 
 def check_job(cfg: DictConfig) -> dict[str, Path]:
     """What a sweep checks of each ``iplanner-data`` job before the first starts: the overrides
-    it does not read and, for ``generate``, every setting of the set.
+    it does not read and, for ``generate``, every setting of the set; for ``info``, the
+    settings it reads before any file (:func:`_info_settings`).
 
     Returns:
         ``{"data.path": folder}`` for ``generate`` (two jobs would write the same set), ``{}``
@@ -117,6 +118,7 @@ def check_job(cfg: DictConfig) -> dict[str, Path]:
     _refuse_unread(cfg)
     check_root_keys(cfg)
     if _command != "generate":
+        _info_settings(cfg)
         return {}
     _generate_settings(cfg)
     return {"data.path": repo_path(cfg.data.path)}
@@ -174,21 +176,31 @@ def _kept_on_interrupt(cfg: DictConfig) -> str:
     )
 
 
-def _info(cfg: DictConfig) -> None:
-    from iplanner_torch.data.io import demonstration_files, lost_joints
+def _info_settings(cfg: DictConfig) -> tuple[str, tuple[str, ...] | None]:
+    """The settings ``info`` reads, checked before any file is: the data format and, from
+    the window settings training reads (``data.windows.joints`` selects the joints, so info
+    accepts what training accepts), the selected joints (None: all).
 
-    path = repo_path(cfg.data.path)
+    Raises:
+        ConfigError: naming the key, for the first setting that is wrong.
+    """
     fmt = data_format(cfg.data)
     data_fps(cfg.data)
     if cfg.data.get("generator") is not None:  # checked as training checks it
         dataset_generator(cfg.data, name="data.generator")
-    # the window settings training reads (data.windows.joints selects the joints), so info
-    # accepts what it accepts
     selected = None
     if "windows" in cfg.data:
         from iplanner_torch.data.windows import WindowCfg
 
         selected = instantiate(cfg.data.windows, WindowCfg, name="data.windows").joints
+    return fmt, selected
+
+
+def _info(cfg: DictConfig) -> None:
+    from iplanner_torch.data.io import demonstration_files, lost_joints
+
+    path = repo_path(cfg.data.path)
+    fmt, selected = _info_settings(cfg)
     if fmt == "native" and not path.exists():
         hint = "set data.path=<folder>"
         if cfg.data.get("generator") is not None:
@@ -307,4 +319,7 @@ def command_index(args: list[str]) -> int | None:
 
 
 if __name__ == "__main__":
+    # one module under both names: a sweep's check of its jobs imports this one by name
+    # (callbacks.JOB_CHECKS) and must read the command word this run was given
+    sys.modules.setdefault("iplanner_torch.cli.data", sys.modules[__name__])
     main()

@@ -166,6 +166,33 @@ def test_a_bad_value_in_one_job_of_a_sweep_is_named_before_any_job_runs(
     assert sorted(p.name for p in tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    ("args", "error"),
+    [
+        (["hydra/launcher=joblib", "+hydra.launcher.n_job=2"],
+         "error: ConfigError: unknown key 'hydra.launcher.n_job' (did you mean "
+         "'hydra.launcher.n_jobs'?): added by +hydra.launcher.n_job=2, which Hydra does not read"),
+        (["data.windows.joints=right_hand"],
+         "ConfigError: data.windows.joints: expected a list of joint names, got the single "
+         "string 'right_hand'"),
+        (["+data.format=foo"], "ConfigError: data.format: expected one of native, lego_assembly"),
+    ],
+)  # fmt: skip
+def test_a_sweep_refuses_what_a_single_run_refuses_before_any_job_runs(
+    tmp_path: Path, args: list[str], error: str
+) -> None:
+    """A misspelt launcher key (the jobs would run one at a time) and the data settings
+    ``iplanner-data info`` reads are refused as a single run refuses them, before a job
+    starts (no job folder), not after every job has failed."""
+    sweep = tmp_path / "sweep"
+    paths = f"data.path={tmp_path / 'a'},{tmp_path / 'b'}"
+    res = _run(["iplanner-data", "info", "-m", *args, paths, f"hydra.sweep.dir={sweep}"],
+               tmp_path)  # fmt: skip
+    assert res.returncode == 2, res.stderr[-2000:]
+    assert error in res.stderr and "Traceback" not in res.stderr
+    assert not sweep.exists() or not any(p.is_dir() for p in sweep.iterdir())
+
+
 def _job(sweep: Path, name: str, overrides: list[str], metrics: dict | None) -> None:
     job = sweep / name
     (job / ".hydra").mkdir(parents=True)
