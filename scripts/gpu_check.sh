@@ -15,7 +15,12 @@
 # package index, put their wheels (for its Python) in .whl/ and they are installed into
 # /tmp/site first.
 set -u
-out=${1:?usage: bash scripts/gpu_check.sh OUT_DIR}
+usage="usage: bash scripts/gpu_check.sh OUT_DIR  (the CUDA tests, bench_gpu.py, the main job on CUDA and the default test run; logs under OUT_DIR)"
+case "${1:-}" in
+  -h|--help) echo "$usage"; exit 0 ;;
+  -*|"") echo "$usage" >&2; exit 2 ;;
+esac
+out=$1
 mkdir -p "$out"
 : > "$out/stages.txt"  # this run's stages only
 job=$(mktemp -d /tmp/main_job.XXXXXX)  # a fresh, empty run folder (one with results is refused)

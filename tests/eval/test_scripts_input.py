@@ -700,3 +700,23 @@ def test_plot_episode_refuses_a_file_as_out(tmp_path, run_script) -> None:
     (tmp_path / "afile").write_text("")
     code, _, err = run_script("plot_episode", tmp_path, "--out", tmp_path / "afile")
     assert code == 2 and "--out must be a folder" in _one_error_line(err)
+
+
+@pytest.mark.parametrize(("args", "code"), [(["--help"], 0), (["-h"], 0), ([], 2), (["-x"], 2)])
+def test_gpu_check_answers_help_and_bad_arguments_with_its_usage(
+    tmp_path: Path, args: list[str], code: int
+) -> None:
+    """``bash scripts/gpu_check.sh --help`` printed mkdir's help and then ran its stages with
+    ``--help`` as the output folder; now it prints its usage and starts nothing."""
+    import subprocess
+
+    res = subprocess.run(
+        ["bash", str(SCRIPTS / "gpu_check.sh"), *args],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert res.returncode == code
+    assert "usage: bash scripts/gpu_check.sh OUT_DIR" in (res.stdout if code == 0 else res.stderr)
+    assert list(tmp_path.iterdir()) == []
