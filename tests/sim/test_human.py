@@ -69,6 +69,33 @@ def test_hand_reaches_the_block_when_it_grasps() -> None:
     assert human.action_label == "take_1"
 
 
+def test_the_grasp_comes_at_the_first_frame_within_5_mm_of_the_closest_approach() -> None:
+    """The person grasps at the first frame of the reach whose hand is within 5 mm of its
+    closest approach to the block: found here on the fake motion's own frames (which start at
+    the held pose, so the start blend changes nothing), a few frames before the hand comes to
+    rest on the block."""
+    human = _human(order=(1, 0, 2, 3), idle_s=(0.0, 0.0))
+    rest = human.joint_positions()
+    t, start, grasped = 0.0, None, None
+    while grasped is None:
+        t = round(t + 0.01, 10)
+        for e in human.update(t, {1}):
+            if e.kind == "human_take_started":
+                start = e.time
+            if e.kind == "human_grasped":
+                grasped = e.time
+        assert t < 10.0
+    cfg = HumanCfg()
+    frames = FakeMotion().reach("left", TARGETS[1], None, speed=cfg.speed_factor,
+                                hold_s=cfg.hold_s, start_pose=rest)  # fmt: skip
+    dist = np.linalg.norm(frames[:, JOINT_INDEX["left_hand"]] - TARGETS[1], axis=-1)
+    k = next(i for i, d in enumerate(dist) if d <= dist.min() + 0.005)
+    assert 0 < k < int(np.argmin(dist))  # within 5 mm before the hand comes to rest
+    # the first update on the 10 ms grid at or after frame k
+    steps = int(np.ceil(round(k / FakeMotion.fps / 0.01, 9)))
+    assert start is not None and grasped == pytest.approx(start + 0.01 * steps, abs=1e-9)
+
+
 def _grouped_human(flexible: bool) -> ScriptedHuman:
     """A human under ``(0,1)->(2,3)`` whose personal order starts with block 1."""
     from iplanner_torch.sim.tasks import parse_order
