@@ -162,6 +162,22 @@ def test_faster_human_finishes_sooner_and_seed_repeats() -> None:
     assert a == b
 
 
+@pytest.mark.parametrize("idle", [(0.0, 0.0), (0.5, 0.5), (0.2, 0.9)])
+def test_each_take_starts_an_idle_pause_after_the_last_ends(idle: tuple[float, float]) -> None:
+    """With every block delivered and no reaction time the person pauses ``idle_s`` (drawn
+    uniformly from its range) before the first take and after each: take i starts when the
+    pause after take i - 1 ends, up to one 10 ms step."""
+    human = _human(order=(1, 0, 2, 3), idle_s=idle, reaction_s=0.0)
+    events = _run(human, set(TARGETS), 60.0)
+    starts = [e.time for e in events if e.kind == "human_take_started"]
+    ends = [0.0] + [e.time for e in events if e.kind == "human_took"]
+    assert len(starts) == 4 and len(ends) == 5
+    pauses = [s - e for s, e in zip(starts, ends)]
+    assert all(idle[0] - 1e-9 <= p <= idle[1] + 0.01 + 1e-9 for p in pauses), pauses
+    if idle[0] < idle[1]:  # drawn, not the same pause every time
+        assert max(pauses) - min(pauses) > 0.02
+
+
 def test_blocking_mode_moves_the_arm_into_the_path() -> None:
     cfg = dict(mode="blocking", blocking_start_s=0.3, blocking_target=(0.1, -0.1, 0.25))
     human = ScriptedHuman(HumanCfg(**cfg), FakeMotion(), task_order=None, targets={}, seed=0)
