@@ -672,7 +672,9 @@ def check_added_hydra_keys(
             hydra_cfg = HydraConfig.get()
         except ValueError:  # outside a Hydra run (tests)
             return
-    given = list(hydra_cfg.overrides.hydra) if overrides is None else overrides
+    if overrides is None:  # none recorded (a config built by hand): nothing was added
+        overrides = list(OmegaConf.select(hydra_cfg, "overrides.hydra", default=None) or [])
+    given = overrides
     for text, override in _additions(given):
         key = override.key_or_group
         if not key.startswith("hydra."):
