@@ -342,3 +342,34 @@ def test_cover_of_a_huge_scale_raises_config_error() -> None:
     the sphere-count ConfigError of any other scale too large for MAX_HUMAN_SPHERES."""
     with pytest.raises(ConfigError, match="'cover' sphere layout would take about"):
         HumanSphereMap.from_segments(JOINT_NAMES, layout="cover", scale=1e300)
+
+
+@pytest.mark.parametrize(
+    ("radius", "length", "max_gap"),
+    [(0.05, 0.13, 0.01), (0.02, 0.5, 0.02), (0.08, 0.3, 0.005), (0.04, 0.05, 0.03)],
+)
+def test_cover_takes_the_fewest_intervals_within_max_gap(
+    radius: float, length: float, max_gap: float
+) -> None:
+    """The docstring's ``m``: the fewest intervals whose radius ``sqrt(r^2 + (L / 2m)^2)``
+    stays within ``r + max_gap``, found here by counting up. E.g. r = 0.05, L = 0.13, gap
+    0.01: m = 1 gives hypot(0.05, 0.065) = 0.082 > 0.06, m = 2 gives hypot(0.05, 0.0325) =
+    0.0596 <= 0.06, so 3 spheres of that radius."""
+    seg = Segment(
+        name="arm",
+        joint_a="left_shoulder",
+        joint_b="left_elbow",
+        radius=radius,
+        n_spheres=1,
+        length=length,
+    )
+    m = 1
+    while math.hypot(radius, length / (2 * m)) > radius + max_gap:
+        m += 1
+    smap = HumanSphereMap.from_segments(
+        JOINT_NAMES, [seg], layout="cover", max_gap=max_gap, length_scale=1.0
+    )
+    assert smap.num_spheres == m + 1
+    expected_r = math.hypot(radius, length / (2 * m))
+    assert smap.radii.tolist() == pytest.approx([expected_r] * (m + 1), rel=1e-6)
+    assert expected_r <= radius + max_gap
