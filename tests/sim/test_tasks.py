@@ -187,3 +187,31 @@ def test_next_feasible_puts_unnamed_ids_last_and_takes_the_smallest_allowed() ->
     assert next_feasible(Grouped(), set(), (0, 1, 2)) == 0
     assert next_feasible(Grouped(), {0, 1}, (0, 1, 2)) == 2
     assert next_feasible(Free(), set(), (0, 1, 2, 3)) == 1
+
+
+def test_fetch_grasp_points_lie_clearance_above_the_top_face() -> None:
+    """Block 5 of the 2x4 scene (row 1, column 1) with 8 cm blocks, a 25 cm column pitch and a
+    3 cm clearance: x from the row, y = (1.5 - 1) * 0.25 = 0.125, and the grasp point 0.08
+    (top face of a block resting on the table) + 0.03 = 0.11 m high, above the block and
+    above its delivery spot alike."""
+    from iplanner_torch.sim.scene import SceneCfg
+    from iplanner_torch.sim.tasks import FetchPhase, FetchTask
+
+    scene = SceneCfg(arrangement="2x4", block_size=0.08, column_pitch=0.25)
+    task = FetchTask.create(5, scene, FetchCfg(grasp_clearance=0.03), 1.5)
+    assert task.phase is FetchPhase.APPROACH and task.t_start == 1.5
+    np.testing.assert_allclose(task.pick_point, [scene.block_rows_x[1], 0.125, 0.11])
+    np.testing.assert_allclose(task.place_point, [scene.delivery_rows_x[1], 0.125, 0.11])
+
+
+def test_next_feasible_falls_back_to_the_smallest_remaining_block() -> None:
+    """An order without groups that allows nothing of what is left (here nothing at all) does
+    not end the episode early: the smallest undelivered id, 1, comes next (-1 means done)."""
+
+    class Stuck:
+        @staticmethod
+        def allowed_next(done: set[int]) -> set[int]:
+            return set()
+
+    assert next_feasible(Stuck(), {0}, (0, 1, 2, 3)) == 1
+    assert next_feasible(Stuck(), {0, 1, 3}, (3, 2, 1, 0)) == 2
