@@ -112,6 +112,9 @@ def test_contact_when_arm_goes_through_the_human(arm) -> None:
         listed.append(len(env.robot_human_contacts()))
     assert env.contact_onsets >= 1
     assert env.contact_steps == sum(seen) >= 1
+    # an onset is a step in contact after one without (none before the path: checked above)
+    onsets = sum(now and not before for before, now in zip([False] + seen[:-1], seen))
+    assert env.contact_onsets == onsets < env.contact_steps
     assert max(listed) >= 1
     # MuJoCo's contacts and its distances agree: the body distance went below zero
     assert env.min_body_distance < 0.0
@@ -123,6 +126,22 @@ def test_no_contact_far_from_the_human(arm) -> None:
         env.step(arm.q_home.numpy(), np.zeros(3))
     assert env.contact_steps == 0
     assert env.min_body_distance > 0.05
+
+
+def test_body_distance_where_no_bounding_spheres_overlap(arm) -> None:
+    """The robot at home, the person at rest: every pair's bounding spheres lie apart (the
+    pruning's lower bounds are all > 0), and the body distance is still the smallest pair
+    distance found by trying every pair, not the BODY_DISTANCE_MAX cap."""
+    env = _env(arm)
+    for _ in range(100):
+        env.step(arm.q_home.numpy(), np.zeros(3))
+    m, d = env.model, env.data
+    r, h = env._robot_geoms, env._human_geoms
+    centres = np.linalg.norm(d.geom_xpos[r][:, None] - d.geom_xpos[h][None], axis=-1)
+    assert (centres - m.geom_rbound[r][:, None] - m.geom_rbound[h][None]).min() > 0.0
+    brute = float(env.geom_distances().min())
+    assert 0.05 < brute < 1.0
+    assert env.body_distance() == pytest.approx(brute, abs=1e-12)
 
 
 def _axis(env: SimEnv, g: int, n: int) -> tuple[np.ndarray, float]:
@@ -176,11 +195,17 @@ def test_pick_and_deliver_by_a_scripted_path(arm) -> None:
     assert kinds[:3] == ["fetch_started", "picked", "delivered"]
     assert env.block_state[1] in ("delivered", "human", "taken")
     # the block was carried: it left its far position and lies on its spot now
+    grasped = 0
     for _ in range(300):
-        events += env.step(q.numpy(), np.zeros(3)).events
+        step_events = env.step(q.numpy(), np.zeros(3)).events
+        events += step_events
         if env.block_state[1] == "delivered":
             np.testing.assert_allclose(env.block_position(1), env.scene_cfg.delivery_position(1))
+        if any(e.kind == "human_grasped" and e.block == 1 for e in step_events):
+            grasped += 1
+            assert 1 not in env.delivered  # in the person's hand, no longer on its spot
     assert "human_take_started" in [e.kind for e in events]
+    assert grasped == 1
     with pytest.raises(ConfigError, match="far position"):
         env.start_fetch(1)
 
