@@ -311,3 +311,36 @@ def test_plan_change_is_the_median_not_the_mean() -> None:
     np.testing.assert_allclose(plan_changes(plans), [0.1, 0.2, 7.6], rtol=1e-12)
     t, q = _executed()
     assert smoothness_breakdown(t, q, plans).plan_change == pytest.approx(0.2, rel=1e-12)
+
+
+def test_a_sample_at_the_wait_windows_end_is_inside_it() -> None:
+    """The wait window of PLANS is [2.0, 3.5] s (B waits from 2.0 s, C does not and takes
+    over at 2.5 s, + 1 s settle), ends included. q = max(0, t - 3.5) on t = 0, 0.5, ..., 10:
+    the three-point second difference is 0 everywhere but at t = 3.5 s, 2 (0 / 0.5 before,
+    0.5 / 0.5 after, over 1 s), so all of the integral is the wait's; the interior samples
+    2.0, 2.5, 3.0 and 3.5 s (0.5 s each) make 2 s of the 10."""
+    t = np.arange(21) * 0.5
+    q = np.stack([np.maximum(0.0, t - 3.5), np.zeros_like(t)], 1)
+    b = smoothness_breakdown(t, q, PLANS, settle_s=1.0)
+    assert b.smoothness == pytest.approx(2.0**2 * 0.5 / 10.0, rel=1e-12)
+    assert b.wait_share == 1.0
+    assert b.wait_time_share == pytest.approx(4 * 0.5 / 10.0, rel=1e-12)
+
+
+def test_a_bound_equal_to_the_threshold_is_not_near_the_limit() -> None:
+    """A plan is near the limit when its bound exceeds near_fraction * limit: with limit 0.5
+    and near_fraction 0.5 (threshold 0.25, all binary-exact) a plan at 0.25 is not near, one
+    at 0.25 + 2^-10 is (its run from 2.5 s to its own last waypoint, 5 s)."""
+    from iplanner_torch.eval.smoothness import near_limit_windows
+
+    def bounded(bound_b: float, bound_c: float) -> list[PlanRecord]:
+        return [
+            PlanRecord(times=p.times, q=p.q, wait_s=p.wait_s, max_bound=b, limit=0.5)
+            for p, b in zip(PLANS, [0.0, bound_b, bound_c], strict=True)
+        ]
+
+    assert near_limit_windows(bounded(0.25, 0.25), 0.5) == []
+    assert near_limit_windows(bounded(0.25, 0.25 + 2**-10), 0.5) == [(2.5, 5.0)]
+    t, q = _executed()
+    b = smoothness_breakdown(t, q, bounded(0.25, 0.25), near_fraction=0.5)
+    assert b.near_limit_time_share == 0.0 and b.near_limit_share == 0.0
