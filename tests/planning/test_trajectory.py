@@ -303,3 +303,17 @@ def test_accelerations_refuse_a_start_velocity_that_does_not_broadcast() -> None
         accelerations(q, 0.1, qd[:1]), accelerations(q, 0.1, qd[:1].expand(3, 7))
     )
     torch.testing.assert_close(accelerations(q, 0.1, qd[0]), accelerations(q, 0.1, qd[:1]))
+
+
+def test_a_hold_lasts_at_least_a_millisecond() -> None:
+    """An ``until`` a microsecond after the held waypoint (0.5 s) still holds to 0.5 + 1e-3 s;
+    an ``until`` farther away is kept as given."""
+    f64 = torch.float64
+    traj = Trajectory(
+        q=torch.tensor([[0.0], [1.0], [2.0]], dtype=f64),
+        times=torch.tensor([0.0, 0.5, 1.0], dtype=f64),
+    )
+    short = traj.with_hold(1, until=0.5 + 1e-6)
+    assert short.times.tolist() == pytest.approx([0.0, 0.5, 0.501], abs=1e-12)
+    assert torch.equal(short.q[-1], traj.q[1])
+    assert traj.with_hold(1, until=0.75).times.tolist() == [0.0, 0.5, 0.75]
