@@ -216,3 +216,83 @@ def test_a_folder_that_no_longer_matches_its_card_is_said(tmp_path):
         assert len(load_dataset(node, progress=False)) == 3
     assert said in info()
     assert read_card_counts(tmp_path / "absent") is None
+
+
+def test_a_right_demonstration_count_with_a_wrong_frame_count_is_a_mismatch(tmp_path):
+    """Every count the card records must agree: 4 demonstrations read as recorded but 99
+    frames of the 100 recorded is a mismatch, and the message names both counts."""
+    from iplanner_torch.data.dataset_card import card_mismatch
+
+    summary = DatasetSummary(
+        out_dir=tmp_path, files=(), n_demonstrations=4, n_frames=100, seconds=0.0, bytes_on_disk=0
+    )
+    write_dataset_card(summary, title="t", facts=(), command="regenerate")
+    assert card_mismatch(tmp_path, 4, 100) is None
+    said = card_mismatch(tmp_path, 4, 99)
+    assert said is not None
+    assert (
+        "records 4 demonstrations, 100 frames but the folder holds 4 demonstrations, 99 frames"
+        in said
+    )
+
+
+def _staged(tmp_path: Path) -> tuple[Path, DatasetSummary]:
+    """An existing dataset folder ``out`` and a complete new dataset staged beside it: two
+    demonstrations, one in a sub-folder, and the card (which sorts before them by name)."""
+    from iplanner_torch.data.dataset_card import staged_dataset
+
+    out = tmp_path / "out"
+    out.mkdir()
+    with staged_dataset(out) as staging:
+        files = [staging / "a.csv", staging / "sub" / "b.csv"]
+        for f in files:
+            f.parent.mkdir(exist_ok=True)
+            f.write_text("a_x,a_y,a_z\n1,2,3\n")
+    summary = DatasetSummary.of_files(staging, files, n_frames=2, seconds=0.0)
+    write_dataset_card(summary, title="t", facts=(), command="regenerate")
+    return out, summary
+
+
+def test_the_card_moves_into_place_last(tmp_path, monkeypatch):
+    """A folder whose card is new holds the whole new dataset: the card is moved after every
+    demonstration file."""
+    from iplanner_torch.data import dataset_card
+
+    out, summary = _staged(tmp_path)
+    moves: list[Path] = []
+    real_move = dataset_card.shutil.move
+
+    def move(src, dest):
+        moves.append(Path(dest))
+        return real_move(src, dest)
+
+    monkeypatch.setattr(dataset_card.shutil, "move", move)
+    done = dataset_card.finish_staged_dataset(summary, out)
+    assert sorted(moves) == sorted([out / "a.csv", out / "sub" / "b.csv", out / "README.md"])
+    assert moves[-1] == out / "README.md"
+    assert done.files == (out / "a.csv", out / "sub" / "b.csv")
+    assert not summary.out_dir.exists()
+
+
+def test_a_move_failing_part_way_keeps_the_rest_of_the_staged_dataset(tmp_path, monkeypatch):
+    """When the second move fails, one new file is already in place: the staging folder is
+    kept with the files not moved yet (deleting it would lose them), and the error is
+    raised."""
+    from iplanner_torch.data import dataset_card
+
+    out, summary = _staged(tmp_path)
+    staging = summary.out_dir
+    calls = []
+    real_move = dataset_card.shutil.move
+
+    def move(src, dest):
+        calls.append(dest)
+        if len(calls) == 2:
+            raise OSError("disk gone")
+        return real_move(src, dest)
+
+    monkeypatch.setattr(dataset_card.shutil, "move", move)
+    with pytest.raises(OSError, match="disk gone"):
+        dataset_card.finish_staged_dataset(summary, out)
+    assert _files(out) == {"a.csv"}
+    assert _files(staging) == {"sub/b.csv", "README.md"}
