@@ -132,8 +132,8 @@ def main() -> None:
     paired_body = [
         "Paired by seed: each planner minus ITOMP in the same scenario and seed (same",
         "person, noise and task order). `mean_diff` with its 95% Student-t interval",
-        "(`ci_low`, `ci_high`) and the two-sided paired t-test's `p_value`; `wins` counts",
-        "seeds where the difference is > 0 (a larger distance, or a rougher trajectory).",
+        "(`ci_low`, `ci_high`) and the two-sided paired t-test's `p_value`; `better` counts",
+        "seeds where the planner did better (a larger distance, a smoother trajectory).",
         "",
         to_markdown(pairs),
         "",

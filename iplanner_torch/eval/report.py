@@ -72,6 +72,19 @@ __all__ = [
 ]
 
 #: Metrics summarised by default, in display order, with their axis labels.
+#: Whether a larger value of a metric is the better one (the paired tables' ``better`` count):
+#: farther from the person and more efficient, but smoother, less jerky, a closer forecast and
+#: a faster prediction are smaller.
+HIGHER_IS_BETTER: dict[str, bool] = {
+    "min_distance": True,
+    "body_distance": True,
+    "efficiency": True,
+    "smoothness": False,
+    "jerkiness": False,
+    "mhd": False,
+    "prediction_ms": False,
+}
+
 DEFAULT_METRICS: dict[str, str] = {
     "smoothness": "smoothness [rad²/s⁴]",
     "jerkiness": "jerkiness [rad²/s⁴]",
@@ -820,8 +833,10 @@ def paired_differences(
         keys, ``planner``, ``pairs`` (pairs where both values are known), ``mean_diff``,
         ``ci_low``, ``ci_high`` (Student-t interval of the mean difference; NaN for fewer than
         two pairs), ``p_value`` (two-sided paired t-test; NaN for fewer than two pairs; when
-        every difference is the same, 1 if it is 0 and 0 otherwise) and ``wins`` (pairs with a
-        difference > 0).
+        every difference is the same, 1 if it is 0 and 0 otherwise) and ``better`` (pairs
+        where the planner did better than the baseline: a difference > 0 where a larger value
+        is better, < 0 where a smaller one is, :data:`HIGHER_IS_BETTER`; ties are not counted;
+        NaN for a metric not in that table).
 
     Raises:
         ConfigError: when a column is missing, ``baseline`` has no episodes, ``level`` is not
@@ -860,9 +875,12 @@ def paired_differences(
             else:  # every difference is the same
                 lo = hi = row["mean_diff"]
                 p = 1.0 if row["mean_diff"] == 0.0 else 0.0
-        row.update(ci_low=lo, ci_high=hi, p_value=p, wins=int((d > 0).sum()))
+        higher = HIGHER_IS_BETTER.get(metric)
+        better = math.nan if higher is None else int(((d > 0) if higher else (d < 0)).sum())
+        row.update(ci_low=lo, ci_high=hi, p_value=p, better=better)
         rows.append(row)
-    columns = [*group_by, "planner", "pairs", "mean_diff", "ci_low", "ci_high", "p_value", "wins"]
+    columns = [*group_by, "planner", "pairs", "mean_diff", "ci_low", "ci_high", "p_value"]
+    columns.append("better")
     if not rows:
         return pd.DataFrame(columns=columns)
     out = pd.DataFrame.from_records(rows, columns=columns)
@@ -1307,7 +1325,7 @@ def paired_table(
         if m in df.columns
     ]
     cols = [*group_by, "planner", "metric", "pairs", "mean_diff", "ci_low", "ci_high"]
-    cols += ["p_value", "wins"]
+    cols += ["p_value", "better"]
     if not parts:
         return pd.DataFrame(columns=cols)
     return pd.concat(parts, ignore_index=True)[cols]
@@ -1399,8 +1417,9 @@ def _paired_section(
     lines += [
         f"Each planner minus {name} in the same setting and seed (same person, noise and task "
         "order), in the units of the mean ± std table: mean difference with its 95% "
-        "Student-t interval, the paired t-test's p-value, and `wins`, the seeds where the "
-        "difference is > 0 (a larger distance, or a rougher trajectory).",
+        "Student-t interval, the paired t-test's p-value, and `better`, the seeds where the "
+        "planner did better (a larger distance or efficiency, a smoother or less jerky "
+        "trajectory; ties not counted).",
         "",
         to_markdown(table),
     ]

@@ -1038,7 +1038,7 @@ def test_paired_differences_match_a_paired_t_test() -> None:
     df = df[~((df.planner == "iplanner_ni") & (df.seed == 10))]  # an episode that never ran
     out = paired_differences(df, "min_distance", level=0.9)
     assert list(out.columns) == ["scenario", "planner", "pairs", "mean_diff", "ci_low",
-                                 "ci_high", "p_value", "wins"]  # fmt: skip
+                                 "ci_high", "p_value", "better"]  # fmt: skip
     assert list(out.scenario) == ["b_scen", "b_scen", "a_scen", "a_scen"]  # first seen first
     assert list(out.planner) == ["iplanner_no_ni", "iplanner_ni"] * 2  # PLANNER_ORDER
     for _, row in out.iterrows():
@@ -1057,7 +1057,7 @@ def test_paired_differences_match_a_paired_t_test() -> None:
         assert row.p_value == pytest.approx(ref.pvalue, rel=1e-9)
         ci = ref.confidence_interval(0.9)
         assert (row.ci_low, row.ci_high) == (pytest.approx(ci.low), pytest.approx(ci.high))
-        assert row.wins == int((d > 0).sum())
+        assert row.better == int((d > 0).sum())  # farther from the person
     ni = out[out.planner == "iplanner_ni"]
     assert (ni.ci_low > 0).all() and (ni.p_value < 0.01).all()  # the 2 cm shift is found
 
@@ -1073,7 +1073,8 @@ def test_paired_differences_refuse_what_cannot_be_paired() -> None:
     )
     out = paired_differences(df, "x")
     assert out.loc[0, "mean_diff"] == 1.0 and out.loc[0, "p_value"] == 0.0  # no spread
-    assert out.loc[0, "ci_low"] == out.loc[0, "ci_high"] == 1.0 and out.loc[0, "wins"] == 2
+    assert out.loc[0, "ci_low"] == out.loc[0, "ci_high"] == 1.0
+    assert math.isnan(out.loc[0, "better"])  # "x": which way is better is not known
     one = paired_differences(df[df.seed == 0], "x")
     assert one.loc[0, "pairs"] == 1 and math.isnan(one.loc[0, "ci_low"])
     with pytest.raises(ConfigError, match="no episodes of the baseline planner 'oracle'"):
@@ -1294,4 +1295,4 @@ def test_boundaries_of_contact_and_of_a_paired_win() -> None:
         }
     )
     (row,) = paired_differences(runs, "min_distance").itertuples()
-    assert (row.pairs, row.wins) == (2, 1)
+    assert (row.pairs, row.better) == (2, 1)

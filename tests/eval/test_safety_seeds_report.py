@@ -111,14 +111,14 @@ def test_paired_section_is_each_planner_minus_itomp_per_seed() -> None:
     a = _rows("itomp", range(4), [0] * 4)
     b = _rows("iplanner_ni", range(4), [0] * 4)
     b["eval/min_distance"] += [0.01, 0.02, 0.01, 0.02]  # +1.5 cm mean
-    b["eval/smoothness"] = [12.0, 9.0, 13.0, 10.0]  # +1 mean, rougher in 2 of 4
+    b["eval/smoothness"] = [12.0, 9.0, 13.0, 10.0]  # +1 mean: rougher in 2, smoother in 1
     df = pd.concat([a, b], ignore_index=True).rename(columns=lambda c: c.removeprefix("eval/"))
     t = mod.paired(df).set_index("metric")
     assert list(t.index) == ["distance cm", "smoothness"] and set(t.planner) == {"iplanner_ni"}
     dist, smooth = t.loc["distance cm"], t.loc["smoothness"]
-    assert dist.pairs == 4 and abs(dist.mean_diff - 1.5) < 1e-9 and dist.wins == 4
+    assert dist.pairs == 4 and abs(dist.mean_diff - 1.5) < 1e-9 and dist.better == 4
     assert dist.ci_low < 1.5 < dist.ci_high and dist.p_value < 0.05
-    assert abs(smooth.mean_diff - 1.0) < 1e-9 and smooth.wins == 2 and smooth.p_value > 0.05
+    assert abs(smooth.mean_diff - 1.0) < 1e-9 and smooth.better == 1 and smooth.p_value > 0.05
     assert mod.paired(b.rename(columns=lambda c: c.removeprefix("eval/"))).empty  # no ITOMP
 
 
