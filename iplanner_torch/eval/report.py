@@ -1054,6 +1054,32 @@ def _spread(values: pd.Series) -> tuple[float, float, float]:
     return mean, low, max(min(mean + std, float(v.max())), mean)
 
 
+#: Colours of the planners in every plot (matplotlib's tab10, by :data:`PLANNER_ORDER`), so
+#: that a planner keeps its colour whichever others a plot shows; other hues (a labelled run
+#: ``itomp@spread`` next to ITOMP, a speed) take the spare ones.
+PLANNER_COLOURS: dict[str, str] = {p: f"C{i}" for i, p in enumerate(PLANNER_ORDER)}
+_SPARE_COLOURS = ("C6", "C7", "C8", "C9", "#aec7e8", "#ffbb78", "#98df8a", "#ff9896")
+
+
+def hue_colours(values: Sequence[Any]) -> dict[Any, str]:
+    """A colour for each of ``values`` (planner keys, or other hues), in order: a planner,
+    or a labelled run of one (``iplanner_ni@held``), takes :data:`PLANNER_COLOURS`'s unless
+    an earlier value took it; the rest take spare colours in turn."""
+    out: dict[Any, str] = {}
+    used: set[str] = set()
+    for v in dict.fromkeys(values):
+        key = str(v)
+        c = PLANNER_COLOURS.get(key) or PLANNER_COLOURS.get(key.split("@")[0])
+        if c is not None and c not in used:
+            out[v] = c
+            used.add(c)
+    spare = iter([c for c in _SPARE_COLOURS if c not in used])
+    for v in dict.fromkeys(values):
+        if v not in out:
+            out[v] = next(spare, None) or _SPARE_COLOURS[len(out) % len(_SPARE_COLOURS)]
+    return out
+
+
 def _legend_outside(ax: Any, **kwargs: Any) -> Any:
     """A legend to the right of ``ax``, outside its plotting area (so it covers no bar, line
     or marker); ``fig.tight_layout()`` then makes room for it."""
@@ -1111,6 +1137,7 @@ def plot_comparison(
         ax = fig.add_subplot()
         width = 0.8 / max(1, len(bars))
         counts = []
+        colours = hue_colours(bars)
         for j, b in enumerate(bars):
             spreads = []
             for x in xs:
@@ -1126,7 +1153,7 @@ def plot_comparison(
                 yerr=np.vstack([means - lows, highs - means]),  # NaN (one episode): none
                 capsize=3,
                 label=PLANNERS.get(str(b), str(b)),
-                color=f"C{j}",
+                color=colours[b],
             )
         ax.set_xticks(np.arange(len(xs)))
         ax.set_xticklabels(
@@ -1147,7 +1174,7 @@ def plot_comparison(
         fig.tight_layout()
         out_dir.mkdir(parents=True, exist_ok=True)
         path = out_dir / f"compare_{m}.png"
-        fig.savefig(path, dpi=110)
+        fig.savefig(path, dpi=110, bbox_inches="tight")
         paths.append(path)
     return paths
 
@@ -1186,7 +1213,8 @@ def plot_paired(
     mean = table["mean_diff"].to_numpy(dtype=float)
     lo = mean - table["ci_low"].to_numpy(dtype=float)
     hi = table["ci_high"].to_numpy(dtype=float) - mean
-    colours = [f"C{list(dict.fromkeys(table.planner)).index(p)}" for p in table.planner]
+    by_planner = hue_colours(list(table.planner))
+    colours = [by_planner[p] for p in table.planner]
     for yi, m, a, b, c in zip(y, mean, lo, hi, colours):
         err = None if np.isnan(a) else [[a], [b]]  # fewer than two pairs: the point only
         ax.errorbar(m, yi, xerr=err, fmt="o", color=c, capsize=3)
@@ -1199,7 +1227,7 @@ def plot_paired(
     fig.tight_layout()
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out_path, dpi=110)
+    fig.savefig(out_path, dpi=110, bbox_inches="tight")
     return out_path
 
 
@@ -1261,7 +1289,8 @@ def plot_sweep(
                 panel = panel[panel[facet_row].map(_hashable) == _hashable(rv)]
             if facet_col:
                 panel = panel[panel[facet_col].map(_hashable) == _hashable(cv)]
-            for j, h in enumerate(hues):
+            colours = hue_colours(hues)
+            for h in hues:
                 g = panel[panel[hue] == h]
                 if not g["_y"].notna().any():  # no value (ITOMP has no MHD): no line, no label
                     continue
@@ -1273,8 +1302,8 @@ def plot_sweep(
                 low = np.where(np.isnan(low), mean, low)  # one episode: no band
                 high = np.where(np.isnan(high), mean, high)
                 label = PLANNERS.get(str(h), str(h))
-                ax.plot(xs, mean, marker="o", color=f"C{j}", label=label)
-                ax.fill_between(xs, low, high, color=f"C{j}", alpha=0.2, lw=0)
+                ax.plot(xs, mean, marker="o", color=colours[h], label=label)
+                ax.fill_between(xs, low, high, color=colours[h], alpha=0.2, lw=0)
             title = ", ".join(
                 f"{c} {val}" for c, val in ((facet_row, rv), (facet_col, cv)) if c is not None
             )
@@ -1294,7 +1323,7 @@ def plot_sweep(
         fontsize="medium",
     )
     fig.tight_layout()
-    fig.savefig(out_path, dpi=110)
+    fig.savefig(out_path, dpi=110, bbox_inches="tight")
     return out_path
 
 

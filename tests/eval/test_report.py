@@ -24,6 +24,7 @@ from iplanner_torch.eval.report import (
     episode_contact,
     format_table,
     gather_results,
+    hue_colours,
     incomplete_logs_note,
     natural_key,
     ordered_values,
@@ -1296,3 +1297,34 @@ def test_boundaries_of_contact_and_of_a_paired_win() -> None:
     )
     (row,) = paired_differences(runs, "min_distance").itertuples()
     assert (row.pairs, row.better) == (2, 1)
+
+
+def test_a_planner_keeps_its_colour_whichever_others_a_plot_shows(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The I-Planner NI is green (tab10's third) in a plot of all planners, in a paired plot
+    that leaves ITOMP out and in one with the oracle alone beside it; a labelled second run
+    of a planner and a hue that is no planner take spare colours."""
+    assert hue_colours(["itomp", "iplanner_no_ni", "iplanner_ni", "oracle"]) == {
+        "itomp": "C0", "iplanner_no_ni": "C1", "iplanner_ni": "C2", "oracle": "C4"
+    }  # fmt: skip
+    assert hue_colours(["oracle", "iplanner_ni"]) == {"oracle": "C4", "iplanner_ni": "C2"}
+    both = hue_colours(["itomp", "itomp@spread", "iplanner_ni@held"])
+    assert both == {"itomp": "C0", "itomp@spread": "C6", "iplanner_ni@held": "C2"}
+    assert hue_colours(["slow", "medium"]) == {"slow": "C6", "medium": "C7"}
+    # what the bar charts draw: the NI's bars in green with and without ITOMP beside them
+    import matplotlib.axes
+
+    drawn: list[tuple[str, str]] = []
+    bar = matplotlib.axes.Axes.bar
+
+    def recording(self, *args, **kwargs):
+        drawn.append((kwargs.get("label"), kwargs.get("color")))
+        return bar(self, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.axes.Axes, "bar", recording)
+    rows = [{"scenario": "s", "planner": p, "seed": 0, "smoothness": 1.0}
+            for p in ("itomp", "iplanner_ni")]  # fmt: skip
+    plot_comparison(pd.DataFrame(rows), tmp_path / "a", metrics=("smoothness",))
+    plot_comparison(pd.DataFrame(rows[1:]), tmp_path / "b", metrics=("smoothness",))
+    assert drawn == [("ITOMP", "C0"), ("I-Planner, NI", "C2"), ("I-Planner, NI", "C2")]
