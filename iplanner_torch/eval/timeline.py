@@ -47,6 +47,20 @@ __all__ = [
 ]
 
 
+def _display_name(planner: object) -> object:
+    """The planner's name as the tables and bar charts give it (``I-Planner, NI``)."""
+    from iplanner_torch.eval.report import PLANNERS
+
+    return PLANNERS.get(str(planner), planner) if planner is not None else None
+
+
+def _is_number(value: object) -> bool:
+    try:
+        return value is not None and np.isfinite(float(value))  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+
+
 def action_colours(n: int) -> list[tuple[float, ...]]:
     """``n`` different colours for the actions, by index, none of them red (kept for the
     waits): the tab20 palette's dark colours, then its light ones (18 in all); more actions
@@ -261,13 +275,15 @@ def episode_timeline(episode: Episode | str | Path) -> Timeline:
         )
     end_t = float(max(ends))
     meta = episode.metadata
+    noise = meta.get("noise")
     title = (
         " · ".join(
             str(v)
             for v in (
-                meta.get("planner"),
+                _display_name(meta.get("planner")),
                 meta.get("scenario"),
                 meta.get("speed"),
+                f"noise {100 * float(noise):g} cm" if _is_number(noise) else None,
                 f"seed {meta['seed']}" if "seed" in meta else None,
             )
             if v is not None and v == v

@@ -66,7 +66,7 @@ def _write(
 ) -> dict:
     """A short log with known values (forecasts over ``actions``; ``metrics`` as the
     episode's metrics message, none when None); returns them."""
-    meta = {"scenario": "s1", "planner": planner, "speed": "medium", "seed": 4}
+    meta = {"scenario": "s1", "planner": planner, "speed": "medium", "noise": 0.02, "seed": 4}
     t_robot = np.round(np.arange(0.0, 3.0 + 1e-9, 0.1), 10)
     qd = np.stack([np.sin(t_robot), np.cos(t_robot), 0.5 * t_robot], 1)  # (T, 3)
     plans = [  # t, feasible, wait_s, bound per waypoint, confidence
@@ -134,7 +134,8 @@ def test_the_timeline_holds_what_the_log_was_given(tmp_path: Path) -> None:
         )
     )
     assert tl.end_t == pytest.approx(3.0)
-    assert tl.title == "iplanner_ni · s1 · medium · seed 4"
+    # the planner as the tables name it, and the tracker noise the file name carries
+    assert tl.title == "I-Planner, NI · s1 · medium · noise 2 cm · seed 4"
     assert tl.complete and not tl.notes
 
 
@@ -271,7 +272,7 @@ def test_an_interrupted_episode_says_where_it_stopped(tmp_path: Path) -> None:
                 log.robot_state(0.1 * i, np.zeros(2), np.ones(2), ["a", "b"])
             raise KeyboardInterrupt
     tl = episode_timeline(path)
-    assert tl.complete and tl.title == "itomp · seed 1  (interrupted at t = 2.9 s: no metrics)"
+    assert tl.complete and tl.title == "ITOMP · seed 1  (interrupted at t = 2.9 s: no metrics)"
     _write(tmp_path / "whole.mcap")
     assert "interrupted" not in episode_timeline(tmp_path / "whole.mcap").title
 
