@@ -930,12 +930,24 @@ def comparison_table(df: pd.DataFrame, group_by: Sequence[str] | None = None) ->
 
 
 def _fmt(v: Any, digits: int) -> str:
+    """``v`` for a table: floats to ``digits`` significant digits, those of magnitude 1 and
+    above with their trailing zeros (-1.00, not -1, which reads as a count or a sentinel;
+    1.80 beside 1.79) and those of 10^digits and above as whole numbers (2520, not 2.52e+03);
+    smaller ones as short as they are (a setting such as 0.95 or 0.1 stays as written)."""
     if isinstance(v, bool | np.bool_):
         return str(bool(v))
     if isinstance(v, int | np.integer):
         return str(int(v))
     if isinstance(v, float | np.floating):
-        return "–" if math.isnan(v) else f"{float(v):.{digits}g}"
+        x = float(v)
+        if math.isnan(x):
+            return "–"
+        if math.isinf(x):
+            return str(x)
+        text = f"{x:#.{digits}g}" if abs(x) >= 1.0 else f"{x:.{digits}g}"
+        if "e+" in text:  # 10^digits and above (999.6 too, which rounds up to it)
+            return f"{x:.0f}"
+        return text[:-1] if text.endswith(".") else text
     return str(v)
 
 

@@ -70,7 +70,7 @@ def test_a_swept_override_is_kept_apart_and_seed_splits_are_not(tmp_path: Path) 
     summary = md.split("## Mean ± std")[1]  # after the printed table, mean ± std per group
     rows = [ln for ln in summary.splitlines() if ln.startswith("| s |")]
     assert len(rows) == 2
-    assert "| 42 ± 2.83 |" in rows[0] and "| 65 ± 7.07 |" in rows[1]
+    assert "| 42.0 ± 2.83 |" in rows[0] and "| 65.0 ± 7.07 |" in rows[1]
 
 
 def test_jobs_that_wrote_no_logs_are_gathered_from_their_results_csv(tmp_path: Path) -> None:

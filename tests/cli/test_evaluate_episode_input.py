@@ -98,8 +98,8 @@ def test_a_sweep_summary_csv_keeps_its_swept_override_apart(
     caught = _evaluate(monkeypatch, sweep / "summary" / "results.csv", tmp_path / "from_csv")
     rows = _summary_rows(tmp_path / "from_csv")
     assert len(rows) == 2
-    assert "| 0 | itomp | 2 |" in rows[0] and "| 42 ± 2.83 |" in rows[0]
-    assert "| 0.1 | itomp | 2 |" in rows[1] and "| 65 ± 7.07 |" in rows[1]
+    assert "| 0 | itomp | 2 |" in rows[0] and "| 42.0 ± 2.83 |" in rows[0]
+    assert "| 0.1 | itomp | 2 |" in rows[1] and "| 65.0 ± 7.07 |" in rows[1]
     printed = capsys.readouterr().out
     assert "planner.itomp_spread_mps" in printed.splitlines()[0]
     assert not _repeats(caught)

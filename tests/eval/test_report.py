@@ -993,11 +993,11 @@ def test_results_md_holds_the_table_the_console_prints(tmp_path: Path) -> None:
         assert cells == re.split(r"\s{2,}", console_row.strip())
     row = dict(zip(header, [c.strip() for c in table[3].strip("|").split("|")]))
     assert (row["distance cm"], row["body cm"], row["MHD cm"], row["waits"]) == (
-        "10.9", "12.9", "4", "5",
+        "10.9", "12.9", "4.00", "5.00",  # means to 3 digits, trailing zeros kept
     )  # fmt: skip
     # the summary with standard deviations is still there, after it, in SI units
     assert md.index("## Comparison") < md.index("## Mean ± std")
-    assert "| s1 | iplanner_ni | 2 | 2 | 0 | 2 | 2 ± 0 | 0.109 ± 0 |" in md
+    assert "| s1 | iplanner_ni | 2 | 2 | 0 | 2 | 2.00 ± 0 | 0.109 ± 0 |" in md
 
 
 def test_the_log_metadatas_second_names_give_no_second_column(tmp_path: Path) -> None:
