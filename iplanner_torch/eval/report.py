@@ -1215,8 +1215,15 @@ def plot_paired(
     """
     _check_columns(table, ["planner", "mean_diff", "ci_low", "ci_high"], "paired columns")
     groups = list(table.columns[: list(table.columns).index("planner")])
+
+    def setting(column: str, value: Any) -> str:  # "noise 0.02": which number is which
+        text = _fmt(value, 3)
+        return text if column == "scenario" else f"{column} {text}"
+
     labels = [
-        " / ".join([*(str(r[c]) for c in groups), PLANNERS.get(str(r.planner), str(r.planner))])
+        ", ".join(
+            [*(setting(c, r[c]) for c in groups), PLANNERS.get(str(r.planner), str(r.planner))]
+        )
         for _, r in table.iterrows()
     ]
     y = np.arange(len(table))[::-1]
@@ -1235,6 +1242,9 @@ def plot_paired(
     ax.set_yticklabels(labels, fontsize="small")
     base = PLANNERS.get(baseline, baseline)
     ax.set_xlabel(f"{_label(metric)}: planner minus {base}, {100 * level:g}% interval")
+    pairs = table["pairs"] if "pairs" in table.columns else None
+    counted = "" if pairs is None else f" ({int(pd.to_numeric(pairs).sum())} pairs of episodes)"
+    ax.set_title(f"{_label(metric).split(' [')[0]}, paired by seed{counted}", fontsize="medium")
     ax.grid(axis="x", alpha=0.3)
     fig.tight_layout()
     out_path = Path(out_path)

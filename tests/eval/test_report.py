@@ -1181,6 +1181,16 @@ def test_plot_paired_names_the_baseline(tmp_path: Path, monkeypatch: pytest.Monk
         "closest distance [m]: planner minus ITOMP, 95% interval",
         "closest distance [m]: planner minus itomp@spread, 95% interval",
     ]
+    assert (
+        figures[0].axes[0].get_title() == "closest distance, paired by seed (5 pairs of episodes)"
+    )
+    # rows name their settings: which number is the noise and which the confidence
+    swept = table.assign(noise=[0.02], confidence=[0.9])[
+        ["scenario", "noise", "confidence", *table.columns[1:]]
+    ]
+    plot_paired(swept, "min_distance", tmp_path / "r.png")
+    rows = [t.get_text() for t in figures[-1].axes[0].get_yticklabels()]
+    assert rows == ["a, noise 0.02, confidence 0.9, I-Planner, NI"]
 
 
 def test_plot_paired_draws_rows_without_an_interval(tmp_path: Path) -> None:
