@@ -25,6 +25,13 @@ from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.reaching import add_tracker_noise
 from iplanner_torch.errors import ConfigError, DataError
 
+#: predictor names as the plots give them (the planners' display names; the baseline's own)
+_NAMES = {
+    "iplanner_no_ni": "I-Planner, no NI",
+    "iplanner_ni": "I-Planner, NI",
+    "constant_velocity": "constant velocity",
+}
+
 #: human speed names and their time-scaling factors (> 1: faster)
 SPEEDS: dict[str, float] = {"slow": 0.5, "medium": 1.0, "fast": 2.0}
 
@@ -233,7 +240,7 @@ def write_noise_report(df: pd.DataFrame, out_dir: str | Path, command: str = "")
                     color=colour,
                     markerfacecolor=colour if filled else "none",
                     markersize=5 if filled else 8,
-                    label=f"{name}, {speed}",
+                    label=f"{_NAMES.get(str(name), name)}, {speed}",
                 )
         ax.set_xlabel("input noise sigma [cm]")
         ax.set_ylabel(label)
@@ -242,6 +249,10 @@ def write_noise_report(df: pd.DataFrame, out_dir: str | Path, command: str = "")
         ax.grid(alpha=0.3)
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside right center", fontsize="small")
+    fig.suptitle(
+        "Forecast quality against tracker noise (colour: human speed; line style: predictor)",
+        fontsize="medium",
+    )
     png = out_dir / "prediction_vs_noise.png"
     fig.savefig(png, dpi=110)
     plt.close(fig)
