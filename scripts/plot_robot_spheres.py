@@ -34,7 +34,7 @@ def plot_robot(name: str, path: Path) -> None:
     owners = sorted(set(model.sphere_link), key=model.sphere_link.index)
     colours = plt.cm.tab10(np.linspace(0, 1, max(len(owners), 2)))
     fig = plt.figure(figsize=(7, 7))
-    ax = fig.add_subplot(projection="3d")
+    ax = fig.add_subplot(projection="3d", computed_zorder=False)  # the tool point on top
     u, v = np.mgrid[0 : 2 * np.pi : 16j, 0 : np.pi : 10j]
     for c, r, link in zip(centers, radii, model.sphere_link):
         col = colours[owners.index(link)]
@@ -48,7 +48,8 @@ def plot_robot(name: str, path: Path) -> None:
         )
     ax.plot(chain[:, 0], chain[:, 1], chain[:, 2], "k-o", markersize=3, label="link frames")
     ee = model.ee_position(model.q_home).numpy()
-    ax.scatter(*ee, color="red", s=30, label="tool point")
+    # on top of the spheres that enclose it (drawn last, no depth shading), or it is hidden
+    ax.scatter(*ee, color="red", s=60, label="tool point", depthshade=False, zorder=10)
     # Table top (z = 0) and the seated human's position (x = -0.45) for orientation.
     tx, ty = np.meshgrid([-0.6, 0.6], [-0.6, 0.6])
     ax.plot_surface(tx, ty, np.zeros_like(tx), color="tan", alpha=0.25)
