@@ -36,6 +36,7 @@ from _report import fail, main_guard, refuse_existing
 from matplotlib.backend_bases import FigureCanvasBase
 
 from iplanner_torch.data.skeleton import JOINT_INDEX
+from iplanner_torch.eval.report import PLANNERS
 from iplanner_torch.recording import Episode, read_episode
 from iplanner_torch.robot.model import RobotModel
 from iplanner_torch.sim.human import ReachingMotionSource
@@ -210,11 +211,30 @@ def render_episode(
 
     written = []
     times = np.linspace(t0, t1, frames)
+    heading = " · ".join(
+        str(v)
+        for v in (
+            PLANNERS.get(str(meta.get("planner")), meta.get("planner")),
+            meta.get("scenario"),
+            f"seed {meta['seed']}" if "seed" in meta else None,
+            Path(ep.path).name,
+        )
+        if v is not None
+    )
+    if overlay:
+        heading += "\nred: the robot's spheres" + (
+            "; blue: the latest forecast's joints at the end of its horizon (most likely "
+            "action), radius 4 cm + 2 std"
+            if forecasts is not None
+            else ""
+        )
+    # rows without blank tiles where the count allows: 4 frames in one row, 6 in two of 3
+    columns = frames if frames <= 4 else (4 if frames % 4 == 0 else 3)
     with SceneRenderer(ws.model, width=width, height=height) as r:
         shots = [snapshot(r, float(t), camera) for t in times]
         written.append(
             save_contact_sheet(
-                shots, [f"t = {t:.2f} s" for t in times], out, columns=min(3, frames)
+                shots, [f"t = {t:.2f} s" for t in times], out, columns=columns, heading=heading
             )
         )
         if video is not None:

@@ -265,7 +265,12 @@ def gl_available() -> bool:
 
 
 def save_contact_sheet(
-    frames: list[np.ndarray], titles: list[str], path: Path, *, columns: int = 3
+    frames: list[np.ndarray],
+    titles: list[str],
+    path: Path,
+    *,
+    columns: int = 3,
+    heading: str | None = None,
 ) -> Path:
     """Write frames as a titled PNG grid.
 
@@ -274,6 +279,7 @@ def save_contact_sheet(
         titles: one title per frame.
         path: the PNG to write (parent folders are created).
         columns: frames per row.
+        heading: a line (or lines) above the grid: what the frames show, or None.
 
     Returns:
         ``path``.
@@ -298,8 +304,13 @@ def save_contact_sheet(
     cols = min(columns, len(frames))
     rows = math.ceil(len(frames) / cols)
     dpi = 100
-    fig = Figure(figsize=(cols * w / dpi, rows * (h / dpi + 0.3)), dpi=dpi, layout="constrained")
+    top = 0.0 if heading is None else 0.25 * (heading.count("\n") + 1)
+    fig = Figure(
+        figsize=(cols * w / dpi, rows * (h / dpi + 0.3) + top), dpi=dpi, layout="constrained"
+    )
     FigureCanvasAgg(fig)
+    if heading is not None:
+        fig.suptitle(heading, fontsize=10)
     for i, (frame, title) in enumerate(zip(frames, titles)):
         ax = fig.add_subplot(rows, cols, i + 1)
         ax.imshow(frame)

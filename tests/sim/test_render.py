@@ -180,6 +180,10 @@ def test_contact_sheet(tmp_path: Path) -> None:
     path = save_contact_sheet(frames, ["a", "b", "c", "d"], tmp_path / "s" / "sheet.png")
     img = matplotlib.image.imread(path)
     assert img.shape[1] == 3 * 80 and img.shape[0] >= 2 * 60
+    # a heading of two lines takes room of its own above the frames (0.25 in a line)
+    headed = save_contact_sheet(frames, ["a", "b", "c", "d"], tmp_path / "h.png",
+                                heading="planner · seed 0\nred: the robot's spheres")  # fmt: skip
+    assert matplotlib.image.imread(headed).shape[0] == img.shape[0] + 50
     with pytest.raises(ConfigError, match="as many titles as frames"):
         save_contact_sheet(frames, ["a"], tmp_path / "x.png")
     with pytest.raises(ShapeError, match=r"expected every frame \(60, 80, 3\)"):
