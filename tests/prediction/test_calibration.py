@@ -233,15 +233,22 @@ def test_unknown_joints_wrong_shapes_and_bad_noise_are_refused() -> None:
         cal.record(other, 0.0)
 
 
+def _hand_at_the_origin(memory_s: float) -> tuple[SpreadCalibrator, int]:
+    """A calibrator of the right hand alone (tolerance 1, no noise, no scale cap) that has
+    recorded a forecast at t = 0 of the hand resting at the origin with variance 1e-2; and
+    the hand's joint index."""
+    cfg = CalibrationCfg(joints=("right_hand",), tolerance=1.0, memory_s=memory_s, max_scale=1e9)
+    cal = SpreadCalibrator(cfg, JOINT_NAMES, noise_std=0.0)
+    cal.record(_mixture(np.zeros((1, 3)), np.full((1, 3), 1e-2), [1.0]), 0.0)
+    return cal, JOINT_NAMES.index("right_hand")
+
+
 def test_overlapping_windows_do_not_score_the_boundary_frame_twice() -> None:
     """A tracker window that repeats the last frame seen (here 0.2 s) scores only the frames
     after it. By hand, var 1e-2 and no noise: 0.1 s is 1 m off on each axis, z = 1 / 1e-2 =
     100; 0.2 s and 0.3 s are exact, z = 0. Residuals (100, 0, 0): scale 100 / 3 at tolerance
     1; scoring 0.2 s twice would give (100, 0, 0, 0): 25."""
-    cfg = CalibrationCfg(joints=("right_hand",), tolerance=1.0, memory_s=10.0, max_scale=1e9)
-    cal = SpreadCalibrator(cfg, JOINT_NAMES, noise_std=0.0)
-    j = JOINT_NAMES.index("right_hand")
-    cal.record(_mixture(np.zeros((1, 3)), np.full((1, 3), 1e-2), [1.0]), 0.0)
+    cal, j = _hand_at_the_origin(memory_s=10.0)
     frames = np.zeros((3, K, 3))
     frames[0, j] = 1.0
     cal.observe(np.array([0.1, 0.2]), frames[:2])
@@ -255,10 +262,7 @@ def test_a_residual_exactly_memory_s_old_still_counts() -> None:
     """``memory_s`` keeps residuals "at most this old": with memory 0.5 s, the residual of
     0.5 s (z = 100, 1 m off per axis at var 1e-2) is exactly 0.5 s old when 1.0 s (z = 0) is
     observed, so both count: scale (100 + 0) / 2 = 50 at tolerance 1 (binary-exact times)."""
-    cfg = CalibrationCfg(joints=("right_hand",), tolerance=1.0, memory_s=0.5, max_scale=1e9)
-    cal = SpreadCalibrator(cfg, JOINT_NAMES, noise_std=0.0)
-    j = JOINT_NAMES.index("right_hand")
-    cal.record(_mixture(np.zeros((1, 3)), np.full((1, 3), 1e-2), [1.0]), 0.0)
+    cal, j = _hand_at_the_origin(memory_s=0.5)
     far = np.zeros((1, K, 3))
     far[0, j] = 1.0
     cal.observe(np.array([0.5]), far)  # forecast frame 4, at 0.0 + 5 * 0.1 s

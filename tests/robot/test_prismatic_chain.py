@@ -36,43 +36,14 @@ def _toy() -> RobotDescription:
         for name in ("base", "slider", "arm", "tool")
     )
     gains = {"velocity": 1.0, "effort": 10.0, "kp": 100.0, "kv": 10.0}
-    joints = (
-        JointSpec(
-            name="lift",
-            type="prismatic",
-            parent="base",
-            child="slider",
-            xyz=(0.1, 0.02, 0.3),
-            rpy=(0.2, -0.3, 0.5),
-            axis=axis,
-            lower=-0.2,
-            upper=0.4,
-            **gains,
-        ),
-        JointSpec(
-            name="j1",
-            type="revolute",
-            parent="slider",
-            child="arm",
-            xyz=(0.1, 0, 0.05),
-            rpy=(0.0, 0.4, -0.2),
-            axis=(0, 1, 0),
-            lower=-2,
-            upper=2,
-            **gains,
-        ),
-        JointSpec(
-            name="j2",
-            type="revolute",
-            parent="arm",
-            child="tool",
-            xyz=(0.2, 0, 0),
-            axis=(0, 0, 1),
-            lower=-2,
-            upper=2,
-            **gains,
-        ),
-    )
+    tilt = (0.2, -0.3, 0.5)  # the slide's frame, rotated about all three axes
+    rows = [  # name, type, parent, child, xyz, rpy, axis, lower, upper
+        ("lift", "prismatic", "base", "slider", (0.1, 0.02, 0.3), tilt, axis, -0.2, 0.4),
+        ("j1", "revolute", "slider", "arm", (0.1, 0, 0.05), (0.0, 0.4, -0.2), (0, 1, 0), -2, 2),
+        ("j2", "revolute", "arm", "tool", (0.2, 0, 0), (0.0, 0.0, 0.0), (0, 0, 1), -2, 2),
+    ]  # fmt: skip
+    fields = ("name", "type", "parent", "child", "xyz", "rpy", "axis", "lower", "upper")
+    joints = tuple(JointSpec(**dict(zip(fields, row)), **gains) for row in rows)
     return RobotDescription(
         name="toy",
         links=links,
