@@ -674,8 +674,7 @@ def check_added_hydra_keys(
             return
     if overrides is None:  # none recorded (a config built by hand): nothing was added
         overrides = list(OmegaConf.select(hydra_cfg, "overrides.hydra", default=None) or [])
-    given = overrides
-    for text, override in _additions(given):
+    for text, override in _additions(overrides):
         key = override.key_or_group
         if not key.startswith("hydra."):
             continue

@@ -71,7 +71,6 @@ __all__ = [
     "side_by_side",
 ]
 
-#: Metrics summarised by default, in display order, with their axis labels.
 #: Whether a larger value of a metric is the better one (the paired tables' ``better`` count):
 #: farther from the person and more efficient, but smoother, less jerky, a closer forecast and
 #: a faster prediction are smaller.
@@ -85,6 +84,7 @@ HIGHER_IS_BETTER: dict[str, bool] = {
     "prediction_ms": False,
 }
 
+#: Metrics summarised by default, in display order, with their axis labels.
 DEFAULT_METRICS: dict[str, str] = {
     "smoothness": "smoothness [rad²/s⁴]",
     "jerkiness": "jerkiness [rad²/s⁴]",
