@@ -374,8 +374,8 @@ def test_evaluate_episode_compares_labelled_runs_seed_by_seed(tmp_path: Path) ->
         if ln.startswith("| s1 |")
     }
     # iplanner_ni@held - itomp@wide per seed: -30, -19, -35 (mean -28); itomp@held: -20, -6, -28
-    assert "| -28 |" in rows[("iplanner_ni@held", "smoothness")]
-    assert "| -18 |" in rows[("itomp@held", "smoothness")]
+    assert "| -28.0 |" in rows[("iplanner_ni@held", "smoothness")]
+    assert "| -18.0 |" in rows[("itomp@held", "smoothness")]
     res = _run(["iplanner-evaluate", "evaluate.mode=episode", logs, "evaluate.labels=[held]",
                 f"evaluate.out_dir={tmp_path / 'out2'}"], tmp_path)  # fmt: skip
     assert res.returncode == 2 and "evaluate.labels: expected 2 different" in res.stderr
