@@ -301,7 +301,7 @@ def test_evaluate_episode_reports_a_results_csv(tmp_path: Path) -> None:
     at = next(i for i, ln in enumerate(lines) if ln.startswith("scenario"))
     names = [h.strip() for h in lines[at].split("  ") if h.strip()]
     table = {ln.split()[1]: dict(zip(names, ln.split())) for ln in lines[at + 2 : at + 4]}
-    assert table["itomp"]["smoothness"] == "42" and table["iplanner_ni"]["distance cm"] == "11"
+    assert table["itomp"]["smoothness"] == "42.0" and table["iplanner_ni"]["distance cm"] == "11.0"
     assert table["itomp"]["episodes"] == "2" and table["iplanner_ni"]["contact_free"] == "2"
     assert (tmp_path / "out" / "results.md").is_file()
     rows.drop(columns="planner").to_csv(tmp_path / "bad.csv", index=False)
