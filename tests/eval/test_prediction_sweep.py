@@ -160,7 +160,7 @@ def test_noise_plot_shows_predictors_with_equal_curves_and_keeps_its_legend_off_
         lines = {ln.get_label(): ln for ln in ax.get_lines()}
         assert len(lines) == 6
         for speed in ("slow", "medium", "fast"):
-            a, b = lines[f"iplanner_no_ni, {speed}"], lines[f"iplanner_ni, {speed}"]
+            a, b = lines[f"I-Planner, no NI, {speed}"], lines[f"I-Planner, NI, {speed}"]
             np.testing.assert_array_equal(a.get_ydata(), b.get_ydata())  # the same values
             assert a.get_linestyle() != b.get_linestyle() and a.get_marker() != b.get_marker()
             assert to_hex(a.get_color()) == to_hex(b.get_color())  # colour: the speed
