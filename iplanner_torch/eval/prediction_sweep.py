@@ -24,13 +24,10 @@ import pandas as pd
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.reaching import add_tracker_noise
 from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.eval.report import PLANNERS
 
 #: predictor names as the plots give them (the planners' display names; the baseline's own)
-_NAMES = {
-    "iplanner_no_ni": "I-Planner, no NI",
-    "iplanner_ni": "I-Planner, NI",
-    "constant_velocity": "constant velocity",
-}
+_NAMES = {**PLANNERS, "constant_velocity": "constant velocity"}
 
 #: human speed names and their time-scaling factors (> 1: faster)
 SPEEDS: dict[str, float] = {"slow": 0.5, "medium": 1.0, "fast": 2.0}

@@ -27,6 +27,7 @@ A log cut short (``episode.complete`` False) is drawn as far as it goes, and say
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,7 +36,9 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.ticker import LogFormatter
 
+from iplanner_torch.checks import is_real
 from iplanner_torch.errors import DataError
+from iplanner_torch.eval.report import PLANNERS
 from iplanner_torch.recording.reader import Episode, read_episode
 
 __all__ = [
@@ -45,20 +48,6 @@ __all__ = [
     "plot_episode_timeline",
     "timeline_path",
 ]
-
-
-def _display_name(planner: object) -> object:
-    """The planner's name as the tables and bar charts give it (``I-Planner, NI``)."""
-    from iplanner_torch.eval.report import PLANNERS
-
-    return PLANNERS.get(str(planner), planner) if planner is not None else None
-
-
-def _is_number(value: object) -> bool:
-    try:
-        return value is not None and np.isfinite(float(value))  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        return False
 
 
 def action_colours(n: int) -> list[tuple[float, ...]]:
@@ -275,15 +264,17 @@ def episode_timeline(episode: Episode | str | Path) -> Timeline:
         )
     end_t = float(max(ends))
     meta = episode.metadata
-    noise = meta.get("noise")
+    noise, planner = meta.get("noise"), meta.get("planner")
     title = (
         " · ".join(
             str(v)
             for v in (
-                _display_name(meta.get("planner")),
+                PLANNERS.get(str(planner), planner),  # as the tables name it
                 meta.get("scenario"),
                 meta.get("speed"),
-                f"noise {100 * float(noise):g} cm" if _is_number(noise) else None,
+                f"noise {100 * float(noise):g} cm"
+                if is_real(noise) and math.isfinite(noise)
+                else None,
                 f"seed {meta['seed']}" if "seed" in meta else None,
             )
             if v is not None and v == v
