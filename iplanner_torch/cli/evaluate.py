@@ -726,6 +726,7 @@ def _episode(cfg: DictConfig) -> None:
 
     from iplanner_torch.cli.callbacks import episode_report, split_columns, sweep_overrides
     from iplanner_torch.eval.report import (
+        comparison_key,
         comparison_table,
         incomplete_logs_note,
         overrun_note,
@@ -794,7 +795,9 @@ def _episode(cfg: DictConfig) -> None:
     groups = report_groups(df)
     extra = split_columns(df, groups, swept)
     groups = (*groups[:-1], *extra, groups[-1]) if extra else groups
-    print_table(comparison_table(df, groups))
+    table = comparison_table(df, groups)
+    print_table(table)
+    print(comparison_key(table))
     for note in (incomplete_logs_note(df), overrun_note(df)):
         if note:
             print(note)

@@ -1173,6 +1173,7 @@ def _app(cfg: DictConfig) -> None:
     )
     from iplanner_torch.eval.report import (
         INTERRUPTED_DIR,
+        comparison_key,
         comparison_table,  # the table iplanner-evaluate evaluate.mode=episode prints too
         gather_results,
         overrun_note,
@@ -1260,6 +1261,8 @@ def _app(cfg: DictConfig) -> None:
     )
     print()
     print_table(table)
+    print()
+    print(comparison_key(table))
     print()
     note = overrun_note(df)
     if note:

@@ -58,6 +58,7 @@ __all__ = [
     "to_markdown",
     "format_table",
     "print_table",
+    "comparison_key",
     "plot_comparison",
     "spread_note",
     "plot_sweep",
@@ -1016,6 +1017,37 @@ def format_table(df: pd.DataFrame, digits: int = 3) -> str:
 def print_table(df: pd.DataFrame, digits: int = 3) -> None:
     """Print :func:`format_table` of ``df``."""
     print(format_table(df, digits), end="")
+
+
+#: one line per column of :func:`comparison_table` that needs saying, for the console
+_CONSOLE_KEY: dict[str, str] = {
+    "contact_free": "episodes whose sphere models never overlapped",
+    "contact_unknown": "episodes whose contact is unknown",
+    "completed": "episodes that finished their tasks",
+    "touched": "episodes with a MuJoCo robot-human contact",
+    "pred. ms": "wall-clock time of one forecast [ms]",
+    "MHD cm": "forecast hand path over 1 s against the true one [cm]",
+    "smoothness": "mean squared joint acceleration [rad²/s⁴]; lower is smoother",
+    "jerkiness": "peak squared joint acceleration [rad²/s⁴]",
+    "distance cm": "closest distance of the sphere models [cm]; below 0 they overlapped",
+    "body cm": "closest distance of the MuJoCo geoms [cm]",
+    "efficiency": "the person's task time alone over that with the robot (> 1: it helps)",
+    "waits": "plans per episode that stopped and waited for the person",
+}
+
+
+def comparison_key(table: pd.DataFrame) -> str:
+    """The key printed under :func:`comparison_table` on the console: one line for each of
+    its columns that :data:`_CONSOLE_KEY` explains, in the table's order, and what ``–``
+    means (``results.md`` has the same in :data:`COMPARISON_NOTE`). ``""`` for a table with
+    none of those columns."""
+    cols = [c for c in table.columns if c in _CONSOLE_KEY]
+    if not cols:
+        return ""
+    width = max(len(c) for c in cols)
+    lines = [f"  {c:<{width}}  {_CONSOLE_KEY[c]}" for c in cols]
+    head = "key (episode counts, then means over episodes; – where none has a value):"
+    return "\n".join([head, *lines])
 
 
 # ---------------------------------------------------------------------------------------------

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -197,6 +198,9 @@ def test_experiment_itomp_short_episode(tmp_path: Path) -> None:
     )
     assert res.returncode == 0, res.stderr[-3000:]
     assert "itomp" in res.stdout and "smoothness" in res.stdout
+    # the key under the table says what its columns are, in their units
+    assert "\nkey (episode counts, then means over episodes" in res.stdout
+    assert re.search(r"\n  distance cm +closest distance of the sphere models \[cm\]", res.stdout)
     mcaps = sorted((tmp_path / "run" / "episodes").glob("*.mcap"))
     assert len(mcaps) == 1
     episode = read_episode(mcaps[0])
@@ -272,6 +276,7 @@ def test_evaluate_episode_table_counts_a_truncated_log_as_unknown(tmp_path: Path
     assert (cells["episodes"], cells["contact_free"], cells["contact_unknown"]) == ("2", "1", "1")
     assert cells["completed"] == "1"
     assert cells["distance cm"] == "6.04" and cells["MHD cm"] == "4.58"
+    assert lines[at + 3].startswith("key (episode counts")  # the key, right under the table
     assert "truncated or damaged episode logs: 1 of 2" in res.stdout
 
 

@@ -20,6 +20,8 @@ from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.eval.report import (
     PAPER_SCENARIOS,
     PLANNERS,
+    TABLE_COLUMNS,
+    comparison_key,
     comparison_table,
     episode_contact,
     format_table,
@@ -964,6 +966,29 @@ def test_comparison_table_shows_the_paper_units_and_completed_episodes() -> None
     assert summary_table(df).iloc[0]["completed"] == 2
     # without a completed column there is nothing to count
     assert "completed" not in comparison_table(gather_results([{"planner": "a", "x": 1.0}]))
+
+
+def test_console_key_explains_every_column_of_the_comparison_table() -> None:
+    """The console printed the comparison table without a key to its columns; the key has a
+    line for each count and each metric the table shows, in its order, and none for a
+    column it does not show."""
+    rows = [{"scenario": "s1", "planner": "itomp", "seed": 0, "eval/min_distance": 0.05,
+             "eval/contact": 0.0, "eval/completed": 1.0}]  # fmt: skip
+    table = comparison_table(gather_results(rows))
+    lines = comparison_key(table).splitlines()
+    assert lines[0].startswith("key (") and "–" in lines[0]
+    named = [line.split("  ")[1] for line in lines[1:]]
+    counts = ["contact_free", "contact_unknown", "completed", "touched"]
+    assert named == [c for c in table.columns if c in counts or c in {
+        h for h, _ in TABLE_COLUMNS.values()}]  # fmt: skip
+    # every metric header the table can have is explained, with its unit where it has one
+    for header, _ in TABLE_COLUMNS.values():
+        text = comparison_key(pd.DataFrame(columns=["planner", header]))
+        assert text.splitlines()[1].split("  ")[1] == header
+        if header.endswith((" cm", " ms")):
+            assert f"[{header.split()[-1]}]" in text
+    assert "below 0 they overlapped" in comparison_key(table)
+    assert comparison_key(pd.DataFrame(columns=["planner", "x"])) == ""
 
 
 def test_results_md_holds_the_table_the_console_prints(tmp_path: Path) -> None:
