@@ -76,7 +76,7 @@ from torch import nn
 from iplanner_torch import checks
 from iplanner_torch.errors import CheckpointError, ConfigError, ShapeError
 from iplanner_torch.seeds import SVGP_MINIBATCHES, derive_seed
-from iplanner_torch.types import check_shape
+from iplanner_torch.types import check_shape, torch_threads
 
 KernelName = Literal["rbf", "matern", "gak", "dtw"]
 NoisyInput = Literal["none", "simple", "nigp"]
@@ -846,7 +846,18 @@ class SVGPRegressor(nn.Module):
         means ``mw`` (M, C), ``p = I - S`` (M, M), the mean weights ``w = L^-T mw`` (M, C),
         ``outputscale`` and ``noise = floor + e_test``; computed in float64, stored in the
         model's dtype.
+
+        They are computed on one CPU thread whatever torch's setting: the thread count splits
+        the Cholesky factor's and the solve's sums, so it would fix their last bits, and every
+        later forecast reads them. Loaded in a process with two threads (``iplanner-experiment``)
+        or with one (a ``hydra/launcher=joblib`` job, whose workers get
+        ``OMP_NUM_THREADS=1``), the same predictor gave forecasts that differed in the last
+        float32 bit, and so episodes of the same seed that differed.
         """
+        with torch_threads(1):
+            self._refresh_cache()
+
+    def _refresh_cache(self) -> None:
         dt = torch.float64
         vs = self.model.variational_strategy
         z = vs.inducing_points.detach()

@@ -483,3 +483,30 @@ def test_inputs_of_another_dtype_are_refused() -> None:
         SVGPRegressor.from_data(SVGPCfg(num_inducing=8), x, y.round().long())
     with pytest.raises(ShapeError, match="one floating dtype"):
         SVGPRegressor.from_data(SVGPCfg(num_inducing=8), x.round().long(), y.round().long())
+
+
+def test_fast_path_tensors_do_not_depend_on_the_thread_count() -> None:
+    """The forecast's cached tensors came out of a Cholesky factor and a triangular solve
+    whose last bits depended on torch's CPU thread count: the same predictor loaded with two
+    threads (``iplanner-experiment``) or one (a joblib sweep job) forecast differently, and
+    episodes of the same seed differed. They are now computed on one thread whatever the
+    setting. M = 256: large enough that two threads split the factor's sums."""
+    from iplanner_torch.types import torch_threads
+
+    x, y, _ = _toy(300, 3, torch.float64)
+    reg = SVGPRegressor.from_data(SVGPCfg(num_inducing=256, noisy_input="none"), x, y)
+    z = reg.model.variational_strategy.inducing_points.detach()
+    kzz = reg.model.covar_module(z).to_dense().detach()
+    factors = []
+    for threads in (2, 1):
+        with torch_threads(threads):
+            factors.append(torch.linalg.cholesky(kzz + 1e-6 * torch.eye(256, dtype=kzz.dtype)))
+    if torch.equal(*factors):  # one core, or a library that does not split this factor
+        pytest.skip("this machine's Cholesky factor does not depend on the thread count")
+    caches = []
+    for threads in (2, 1):
+        with torch_threads(threads):
+            reg.refresh_cache()
+        caches.append({k: v.clone() for k, v in reg._cache.items()})
+    for key, value in caches[0].items():
+        assert torch.equal(value, caches[1][key]), key
