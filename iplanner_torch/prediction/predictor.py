@@ -344,11 +344,16 @@ class HumanMotionPredictor:
     def prepare(self) -> HumanMotionPredictor:
         """(Re)compute every GP's fast-path tensors and the per-progress-state banks.
 
-        Call after changing ``gps`` or ``pooled`` in place.
+        Call after changing ``gps`` or ``pooled`` in place. The tensors are computed on one
+        CPU thread, whatever torch's setting: the thread count fixes their last bits, and
+        every forecast reads them. Loaded under two threads (``iplanner-experiment``) and
+        under one (a ``hydra/launcher=joblib`` job, whose workers get ``OMP_NUM_THREADS=1``),
+        the same checkpoint gave forecasts that differed in the last float32 bit, and so
+        episodes of the same seed that differed.
         """
         self._banks = {}
         for reg in list(self.gps.values()) + list(self.pooled.values()):
-            reg.refresh_cache()
+            reg.refresh_cache(threads=1)
         for p in sorted({p for p, _ in self.gps}):
             self._bank(p)
         return self

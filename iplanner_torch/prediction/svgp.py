@@ -839,7 +839,7 @@ class SVGPRegressor(nn.Module):
 
     # ---------------------------------------------------------------------------- prediction
     @torch.no_grad()
-    def refresh_cache(self) -> None:
+    def refresh_cache(self, threads: int | None = None) -> None:
         """Precompute the fast-path tensors from the current parameters.
 
         ``z`` (M, D_in), ``t = L^-T`` (M, M) so that ``w = k t`` is ``L^-1 k``, the whitened
@@ -847,14 +847,18 @@ class SVGPRegressor(nn.Module):
         ``outputscale`` and ``noise = floor + e_test``; computed in float64, stored in the
         model's dtype.
 
-        They are computed on one CPU thread whatever torch's setting: the thread count splits
-        the Cholesky factor's and the solve's sums, so it would fix their last bits, and every
-        later forecast reads them. Loaded in a process with two threads (``iplanner-experiment``)
-        or with one (a ``hydra/launcher=joblib`` job, whose workers get
-        ``OMP_NUM_THREADS=1``), the same predictor gave forecasts that differed in the last
-        float32 bit, and so episodes of the same seed that differed.
+        Args:
+            threads: torch CPU threads to compute them on (restored after); None: torch's
+                setting. The count splits the Cholesky factor's and the solve's sums, so it
+                fixes their last bits, and every later forecast reads them:
+                :meth:`HumanMotionPredictor.prepare` passes 1.
+
+        Raises:
+            ConfigError: when ``threads`` is not None or an integer >= 1.
         """
-        with torch_threads(1):
+        if threads is not None:
+            checks.integer("threads", threads, minimum=1)
+        with torch_threads(threads):
             self._refresh_cache()
 
     def _refresh_cache(self) -> None:

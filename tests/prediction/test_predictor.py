@@ -58,6 +58,29 @@ def trained(tmp_path_factory: pytest.TempPathFactory):
     torch.set_num_threads(threads)
 
 
+def test_prepare_computes_the_cached_tensors_on_one_thread(trained, monkeypatch) -> None:
+    """Loading (and ``prepare``) computes every GP's cached tensors on one thread whatever
+    torch's setting, and restores the setting: with the loading process's own count, the
+    same checkpoint forecast differently under two threads and under one."""
+    from iplanner_torch.prediction import svgp
+    from iplanner_torch.types import torch_threads
+
+    path, _ = trained
+    seen = []
+    original = svgp.SVGPRegressor._refresh_cache
+
+    def spy(self):
+        seen.append(torch.get_num_threads())
+        return original(self)
+
+    monkeypatch.setattr(svgp.SVGPRegressor, "_refresh_cache", spy)
+    with torch_threads(2):
+        pred = HumanMotionPredictor.load(path)
+        assert torch.get_num_threads() == 2
+    assert seen and set(seen) == {1}, seen
+    assert len(seen) == len(pred.gps) + len(pred.pooled)
+
+
 def test_forecast_is_gp_mean_plus_pose(trained) -> None:
     path, w = trained
     pred = HumanMotionPredictor.load(path)

@@ -485,12 +485,12 @@ def test_inputs_of_another_dtype_are_refused() -> None:
         SVGPRegressor.from_data(SVGPCfg(num_inducing=8), x.round().long(), y.round().long())
 
 
-def test_fast_path_tensors_do_not_depend_on_the_thread_count() -> None:
-    """The forecast's cached tensors came out of a Cholesky factor and a triangular solve
-    whose last bits depended on torch's CPU thread count: the same predictor loaded with two
-    threads (``iplanner-experiment``) or one (a joblib sweep job) forecast differently, and
-    episodes of the same seed differed. They are now computed on one thread whatever the
-    setting. M = 256: large enough that two threads split the factor's sums."""
+def test_fast_path_tensors_on_a_given_thread_count() -> None:
+    """The forecast's cached tensors come out of a Cholesky factor and a triangular solve
+    whose last bits depend on torch's CPU thread count; ``refresh_cache(threads=1)`` computes
+    them on one thread whatever the setting (the predictor's ``prepare`` does), so the same
+    predictor loaded with two threads (``iplanner-experiment``) or one (a joblib sweep job)
+    forecasts alike. M = 256: large enough that two threads split the factor's sums."""
     from iplanner_torch.types import torch_threads
 
     x, y, _ = _toy(300, 3, torch.float64)
@@ -506,7 +506,11 @@ def test_fast_path_tensors_do_not_depend_on_the_thread_count() -> None:
     caches = []
     for threads in (2, 1):
         with torch_threads(threads):
-            reg.refresh_cache()
+            reg.refresh_cache(threads=1)
+            assert torch.get_num_threads() == threads  # restored after
         caches.append({k: v.clone() for k, v in reg._cache.items()})
     for key, value in caches[0].items():
         assert torch.equal(value, caches[1][key]), key
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ConfigError, match="threads"):
+            reg.refresh_cache(threads=bad)
