@@ -5,14 +5,16 @@ unless ``run.timeline_plots=false``).
 Usage::
 
     python scripts/plot_episode.py <run dir, episodes folder or .mcap> [...] [--out DIR] [--force]
+        [--own-axes]
 
 Draws, for each ``*.mcap`` episode log given or found below the folders given, the four panels
 of :func:`iplanner_torch.eval.timeline.plot_episode_timeline` (closest robot-person distance,
 each plan's collision bound against ``1 - confidence``, the forecast action probabilities with
 the person's real reaches, the arm's speed; waits shaded) into ``<log stem>.png`` beside the
-log, or into ``--out``. An existing PNG is replaced only with ``--force``. A log cut short is
-drawn as far as it goes; a file that is not an episode log is named and left out (exit 2 when
-nothing could be drawn).
+log, or into ``--out``. The figures share their time, distance and arm-speed axes (those that
+hold every log given, as ``iplanner-experiment`` draws a run's), unless ``--own-axes``. An
+existing PNG is replaced only with ``--force``. A log cut short is drawn as far as it goes; a
+file that is not an episode log is named and left out (exit 2 when nothing could be drawn).
 """
 
 from __future__ import annotations
@@ -26,7 +28,12 @@ from _report import fail, main_guard
 
 from iplanner_torch.errors import DataError, DataWarning
 from iplanner_torch.eval.report import episode_logs
-from iplanner_torch.eval.timeline import plot_episode_timeline, timeline_path
+from iplanner_torch.eval.timeline import (
+    episode_timeline,
+    plot_episode_timeline,
+    shared_axes,
+    timeline_path,
+)
 
 
 def _logs(paths: list[Path]) -> list[Path]:
@@ -50,6 +57,11 @@ def main() -> None:
     parser.add_argument("paths", type=Path, nargs="+", help="run folders or .mcap logs")
     parser.add_argument("--out", type=Path, help="folder for the PNGs (default: beside each log)")
     parser.add_argument("--force", action="store_true", help="replace existing PNGs")
+    parser.add_argument(
+        "--own-axes",
+        action="store_true",
+        help="each figure on its own axes (default: the ranges that hold every log given)",
+    )
     args = parser.parse_args()
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         fail(f"--out must be a folder: {args.out} is a file")
@@ -68,18 +80,22 @@ def main() -> None:
             f"{len(existing)} PNG(s) exist, e.g. {existing[0]}: pass --force to replace them, "
             "or --out <folder>"
         )
-    written, skipped = 0, []
+    timelines, skipped = [], []
     for log, png in targets:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                plot_episode_timeline(log, png)
+                timelines.append((episode_timeline(log), png))
             except DataError as exc:
                 skipped.append(f"{log} ({exc})")
                 continue
         for w in caught:
             if issubclass(w.category, DataWarning):
                 print(f"warning: {log.name}: {str(w.message).splitlines()[0]}", file=sys.stderr)
+    axes = None if args.own_axes else shared_axes(tl for tl, _ in timelines)
+    written = 0
+    for tl, png in timelines:
+        plot_episode_timeline(tl, png, axes)
         written += 1
         print(png)
     if skipped:

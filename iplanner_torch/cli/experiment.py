@@ -1181,7 +1181,6 @@ def _app(cfg: DictConfig) -> None:
         report_groups,
         write_sweep_report,
     )
-    from iplanner_torch.eval.timeline import timeline_path
     from iplanner_torch.planning.replanner import PlanningOverrunWarning
 
     # overruns are counted per episode (plan/overruns in results.csv); one line each would
@@ -1269,9 +1268,8 @@ def _app(cfg: DictConfig) -> None:
         print(note)
         print()
     mcaps = sorted((out_dir / "episodes").glob("*.mcap"))
-    # a resumed run draws the logs that have no plot yet
-    drawn = [m for m in mcaps if not (resume and timeline_path(m).exists())]
-    timelines = write_timelines(drawn, progress, pool) if timeline_plots else []
+    # every log, also in a resumed run: the figures share their axes (write_timelines)
+    timelines = write_timelines(mcaps, progress, pool) if timeline_plots else []
     if pool is not None:
         pool.shutdown()
     print(f"results: {out_dir / 'results.md'} and {out_dir / 'results.csv'}")
@@ -1298,7 +1296,9 @@ def _app(cfg: DictConfig) -> None:
 def write_timelines(
     logs: list[Path], progress: bool = True, executor: Executor | None = None
 ) -> list[Path]:
-    """Draw the timeline of each episode log beside it (``<log stem>.png``).
+    """Draw the timeline of each episode log beside it (``<log stem>.png``), every figure with
+    the same time, distance and arm-speed axes (:func:`~iplanner_torch.eval.timeline.shared_axes`
+    over all the logs), so that episodes side by side compare by eye.
 
     A log that cannot be drawn (cut short before its first messages, say) is named in a
     warning and left out; the others are drawn.
@@ -1306,7 +1306,7 @@ def write_timelines(
     Args:
         logs: the MCAP episode logs.
         progress: show a progress bar (for two logs or more).
-        executor: draws the plots in its workers (the run's
+        executor: reads the logs and draws the plots in its workers (the run's
             :func:`~iplanner_torch.eval.experiment.episode_pool`); None: here.
 
     Returns:
@@ -1317,25 +1317,52 @@ def write_timelines(
     from tqdm.auto import tqdm
 
     from iplanner_torch.errors import DataError, DataWarning
-    from iplanner_torch.eval.timeline import plot_episode_timeline, timeline_path
+    from iplanner_torch.eval.timeline import (
+        episode_timeline,
+        plot_episode_timeline,
+        shared_axes,
+        timeline_path,
+    )
 
-    # with an executor, every plot is queued at once and collected in order below
-    queued = (
+    bar = tqdm(total=2 * len(logs), desc="timeline plots", disable=not progress or len(logs) < 2)
+
+    def collect(jobs: list, fn, *args) -> list:
+        """Each job's result (a DataError in its place), in order; done here without jobs."""
+        out = []
+        for i in range(len(args[0])):
+            try:
+                out.append(fn(*(a[i] for a in args)) if jobs is None else jobs[i].result())
+            except DataError as exc:
+                out.append(exc)
+            bar.update()
+        return out
+
+    # 1. every log's series (in the workers: reading a log is most of the work)
+    read = None if executor is None else [executor.submit(episode_timeline, log) for log in logs]
+    timelines = collect(read, episode_timeline, logs)
+    axes = shared_axes(tl for tl in timelines if not isinstance(tl, DataError))
+    # 2. the figures, on the axes of all
+    drawn_logs = [log for log, tl in zip(logs, timelines) if not isinstance(tl, DataError)]
+    drawn_tls = [tl for tl in timelines if not isinstance(tl, DataError)]
+    pngs = [timeline_path(log) for log in drawn_logs]
+    bar.update(len(logs) - len(drawn_logs))
+    plots = (
         None
         if executor is None
-        else [executor.submit(plot_episode_timeline, log, timeline_path(log)) for log in logs]
+        else [
+            executor.submit(plot_episode_timeline, tl, png, axes)
+            for tl, png in zip(drawn_tls, pngs)
+        ]
     )
-    written, failed = [], []
-    for i, log in enumerate(
-        tqdm(logs, desc="timeline plots", disable=not progress or len(logs) < 2)
-    ):
-        try:
-            if queued is None:
-                written.append(plot_episode_timeline(log, timeline_path(log)))
-            else:
-                written.append(queued[i].result())
-        except DataError as exc:
-            failed.append(f"{log.name} ({exc})")
+    results = collect(plots, plot_episode_timeline, drawn_tls, pngs, [axes] * len(pngs))
+    bar.close()
+    failed = [
+        f"{log.name} ({tl})" for log, tl in zip(logs, timelines) if isinstance(tl, DataError)
+    ]
+    failed += [
+        f"{log.name} ({r})" for log, r in zip(drawn_logs, results) if isinstance(r, DataError)
+    ]
+    written = [r for r in results if not isinstance(r, DataError)]
     if failed:
         warnings.warn(
             f"no timeline plot for {len(failed)} log(s): {'; '.join(failed)}",

@@ -28,6 +28,7 @@ A log cut short (``episode.complete`` False) is drawn as far as it goes, and say
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,15 +38,17 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import LogFormatter
 
 from iplanner_torch.checks import is_real
-from iplanner_torch.errors import DataError
+from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.eval.report import PLANNERS
 from iplanner_torch.recording.reader import Episode, read_episode
 
 __all__ = [
+    "SharedAxes",
     "Timeline",
     "action_colours",
     "episode_timeline",
     "plot_episode_timeline",
+    "shared_axes",
     "timeline_path",
 ]
 
@@ -314,12 +317,66 @@ def _metric(episode: Episode, key: str) -> float:
         return float("nan")
 
 
+@dataclass(frozen=True)
+class SharedAxes:
+    """Axis ranges that the timelines of several episodes share, so that their panels compare
+    at a glance (the same height is the same distance or speed in every figure of a run).
+
+    Attributes:
+        end_t: the right end of the time axis [s] (None: each episode's own end).
+        distance_cm: ``(bottom, top)`` of the distance panel [cm] (None: matplotlib's own).
+        speed: the top of the arm-speed panel [rad/s], whose bottom is 0 (None: its own).
+    """
+
+    end_t: float | None = None
+    distance_cm: tuple[float, float] | None = None
+    speed: float | None = None
+
+
+def shared_axes(timelines: Iterable[Timeline]) -> SharedAxes:
+    """The axis ranges that hold every given timeline's series, with a margin of 5 %.
+
+    The distance range spans the sampled distances and each episode's own minimum
+    (``min_distance_m``), and always holds 0 (where the sphere models touch); NaN and inf are
+    left out. A range no timeline has a finite value for is None (each figure's own).
+
+    Args:
+        timelines: the episodes' :class:`Timeline` (e.g. of one ``iplanner-experiment`` run).
+
+    Returns:
+        The :class:`SharedAxes` for :func:`plot_episode_timeline`.
+    """
+    ends, dist, speed = [], [], []
+    for tl in timelines:
+        if math.isfinite(tl.end_t):
+            ends.append(tl.end_t)
+        gaps = np.append(np.asarray(tl.gap_m, dtype=np.float64), tl.min_distance_m)
+        dist += [float(g) for g in 100.0 * gaps[np.isfinite(gaps)]]
+        sp = np.asarray(tl.speed, dtype=np.float64)
+        speed += [float(v) for v in sp[np.isfinite(sp)]]
+    distance = None
+    if dist:
+        lo, hi = min(min(dist), 0.0), max(max(dist), 0.0)
+        pad = 0.05 * (hi - lo) if hi > lo else 1.0
+        distance = (lo - pad, hi + pad)
+    top = max(speed) if speed else 0.0
+    return SharedAxes(
+        end_t=max(ends) if ends else None,
+        distance_cm=distance,
+        speed=1.05 * top if top > 0.0 else None,
+    )
+
+
 def timeline_path(log: str | Path) -> Path:
     """Where the timeline figure of an episode log goes: beside it, ``<log stem>.png``."""
     return Path(log).with_suffix(".png")
 
 
-def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: str | Path) -> Path:
+def plot_episode_timeline(
+    episode: Episode | str | Path | Timeline,
+    out_path: str | Path,
+    axes: SharedAxes | None = None,
+) -> Path:
     """Draw one episode as four panels sharing the time axis.
 
     1. closest distance between the robot's and the person's spheres [cm], at the scene
@@ -335,25 +392,33 @@ def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: st
 
     The planner's waits are shaded red in every panel and the robot's picks and deliveries
     are vertical lines. Every action has its own colour (:func:`action_colours`); the legends
-    stand to the right of their panels, outside the plotting area.
+    stand to the right of their panels, outside the plotting area. With ``axes`` the time,
+    distance and speed axes span the given ranges (``iplanner-experiment`` gives every figure
+    of a run the same, from :func:`shared_axes`), so figures side by side compare by eye.
 
     Args:
         episode: an :class:`~iplanner_torch.recording.Episode`, the path of its log, or a
             :class:`Timeline` already made.
         out_path: the PNG to write (its folder is created).
+        axes: ranges shared with other episodes' figures (:func:`shared_axes`); None: this
+            episode's own (time from 0 to its end).
 
     Returns:
         ``out_path`` as a Path.
 
     Raises:
         DataError: see :func:`episode_timeline`.
+        ConfigError: when ``axes`` is not a :class:`SharedAxes` or None.
     """
     tl = episode if isinstance(episode, Timeline) else episode_timeline(episode)
+    if axes is not None and not isinstance(axes, SharedAxes):
+        raise ConfigError(f"expected axes a SharedAxes or None, got {type(axes).__name__}")
+    shared = axes if axes is not None else SharedAxes()
     fig = Figure(figsize=(11.0, 8.0))
-    axes = fig.subplots(4, 1, sharex=True, height_ratios=[1.2, 1.0, 1.2, 0.8])
-    dist, bound, act, speed = axes
+    panels = fig.subplots(4, 1, sharex=True, height_ratios=[1.2, 1.0, 1.2, 0.8])
+    dist, bound, act, speed = panels
     end = max(tl.end_t, 1e-3)
-    for ax in axes:
+    for ax in panels:
         for i, (s, e) in enumerate(tl.waits):
             ax.axvspan(
                 s,
@@ -396,6 +461,8 @@ def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: st
             "(eval/min_distance, every sim step)",
         )
     dist.set_ylabel("robot-person\ndistance [cm]")
+    if shared.distance_cm is not None:
+        dist.set_ylim(*shared.distance_cm)
     for s, e, _ in tl.reaches:
         dist.axvspan(s, e if e == e else end, color="tab:blue", alpha=0.08, lw=0)
     handles, labels = dist.get_legend_handles_labels()
@@ -453,12 +520,14 @@ def plot_episode_timeline(episode: Episode | str | Path | Timeline, out_path: st
     else:
         _empty(speed, "no joint states")
     speed.set_ylabel("arm speed\n[rad/s]")
+    if shared.speed is not None:
+        speed.set_ylim(0.0, shared.speed)
     speed.set_xlabel(
         "time [s]   (shaded: red waits, the person's reaches; lines: "
         "robot picks ··· and deliveries - -)",
         fontsize="small",
     )
-    speed.set_xlim(0.0, end)
+    speed.set_xlim(0.0, max(end, shared.end_t or 0.0))
 
     title = tl.title + ("" if tl.complete else "  (log cut short: drawn as far as it goes)")
     fig.suptitle(title, fontsize="medium")

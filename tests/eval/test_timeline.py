@@ -323,3 +323,92 @@ def test_the_experiment_draws_each_log_and_names_those_it_cannot(tmp_path: Path)
     with pytest.warns(DataWarning, match=r"no timeline plot for 1 log\(s\): b.mcap"):
         written = write_timelines(sorted(tmp_path.glob("*.mcap")), progress=False)
     assert written == [tmp_path / "a.png"] and not (tmp_path / "b.png").exists()
+
+
+def test_shared_axes_hold_every_timeline(tmp_path: Path) -> None:
+    """The common ranges against the series' own extremes, found here with plain max/min."""
+    from dataclasses import replace
+
+    from iplanner_torch.eval.timeline import SharedAxes, shared_axes
+
+    _write(tmp_path / "a.mcap", metrics={"eval/min_distance": 0.031})
+    a = episode_timeline(tmp_path / "a.mcap")
+    b = replace(
+        a,
+        speed=np.append(3.0 * a.speed, np.nan),
+        robot_t=np.append(a.robot_t, 3.1),
+        gap_m=np.append(a.gap_m + 0.4, [np.nan, np.inf]),
+        min_distance_m=float("nan"),
+        end_t=7.0,
+    )
+    axes = shared_axes([a, b])
+    top = max(float(np.nanmax(a.speed)), float(np.nanmax(3.0 * a.speed)))
+    assert axes.speed == pytest.approx(1.05 * top)
+    values = [100.0 * g for g in list(a.gap_m) + list(a.gap_m + 0.4) + [0.031]]
+    lo, hi = min(values + [0.0]), max(values + [0.0])
+    assert lo == 0.0  # every gap is positive here: 0 (touching) is held all the same
+    pad = 0.05 * (hi - lo)
+    assert axes.distance_cm == pytest.approx((lo - pad, hi + pad))
+    assert axes.end_t == 7.0
+    # an overlap below 0 is held too
+    c = replace(a, gap_m=np.array([-0.02, 0.5]), min_distance_m=-0.03)
+    assert shared_axes([c]).distance_cm == pytest.approx((-3.0 - 2.65, 50.0 + 2.65))
+    # nothing finite to share: each figure's own ranges
+    empty = replace(a, gap_m=np.zeros(0), speed=np.full(3, np.nan), min_distance_m=np.nan)
+    assert shared_axes([empty]) == SharedAxes(end_t=a.end_t)
+    assert shared_axes([]) == SharedAxes()
+    # an arm that never moved: no speed range, one of 1 cm about a constant distance
+    still = replace(a, gap_m=np.array([0.0]), speed=np.zeros(4), min_distance_m=np.nan)
+    assert shared_axes([still]).speed is None
+    assert shared_axes([still]).distance_cm == (-1.0, 1.0)
+
+
+def test_the_figure_takes_the_shared_ranges(tmp_path: Path, monkeypatch) -> None:
+    from iplanner_torch.errors import ConfigError
+    from iplanner_torch.eval.timeline import SharedAxes
+
+    figures = _figures(monkeypatch)
+    _write(tmp_path / "a.mcap")
+    tl = episode_timeline(tmp_path / "a.mcap")
+    plot_episode_timeline(tl, tmp_path / "own.png")
+    own = figures[-1].axes
+    assert own[3].get_xlim() == pytest.approx((0.0, 3.0))
+    axes = SharedAxes(end_t=7.5, distance_cm=(-4.0, 90.0), speed=6.0)
+    plot_episode_timeline(tl, tmp_path / "shared.png", axes)
+    dist, _, _, speed = figures[-1].axes
+    assert dist.get_ylim() == pytest.approx((-4.0, 90.0))
+    assert speed.get_ylim() == pytest.approx((0.0, 6.0))
+    assert speed.get_xlim() == pytest.approx((0.0, 7.5))
+    # a shared time axis shorter than the episode does not cut it
+    plot_episode_timeline(tl, tmp_path / "short.png", SharedAxes(end_t=1.0))
+    assert figures[-1].axes[3].get_xlim() == pytest.approx((0.0, 3.0))
+    with pytest.raises(ConfigError, match="expected axes a SharedAxes or None, got dict"):
+        plot_episode_timeline(tl, tmp_path / "bad.png", {"speed": 1.0})
+
+
+@pytest.mark.filterwarnings("ignore:.*not an iplanner episode log")
+def test_the_experiments_figures_share_their_axes(tmp_path: Path, monkeypatch) -> None:
+    """Every figure of a run gets the ranges of all its logs, drawn here or in workers."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from iplanner_torch.cli.experiment import write_timelines
+    from iplanner_torch.errors import DataWarning
+    from iplanner_torch.eval.timeline import shared_axes
+
+    figures = _figures(monkeypatch)
+    _write(tmp_path / "a.mcap", metrics={"eval/min_distance": -0.01})
+    _write(tmp_path / "b.mcap", planner="itomp", forecasts=False)
+    write_foreign_mcap(tmp_path / "c.mcap")
+    logs = sorted(tmp_path.glob("*.mcap"))
+    want = shared_axes(episode_timeline(p) for p in logs[:2])
+    for executor in (None, ThreadPoolExecutor(2)):
+        figures.clear()
+        with pytest.warns(DataWarning, match=r"no timeline plot for 1 log\(s\): c.mcap"):
+            written = write_timelines(logs, progress=False, executor=executor)
+        assert written == [tmp_path / "a.png", tmp_path / "b.png"]
+        assert len(figures) == 2
+        for fig in figures:
+            assert fig.axes[0].get_ylim() == pytest.approx(want.distance_cm)
+            assert fig.axes[3].get_ylim() == pytest.approx((0.0, want.speed))
+            assert fig.axes[3].get_xlim() == pytest.approx((0.0, want.end_t))
+    assert want.distance_cm[0] < -1.0  # a's own minimum below 0 is held
