@@ -42,10 +42,12 @@ from iplanner_torch.recording.reader import EPISODE_METADATA_NAME, Episode, read
 
 __all__ = [
     "DEFAULT_METRICS",
+    "DISPLAY_SCALE",
     "PLANNERS",
     "PAPER_SCENARIOS",
     "gather_results",
     "summary_table",
+    "in_display_units",
     "comparison_table",
     "paired_differences",
     "paired_table",
@@ -85,15 +87,47 @@ HIGHER_IS_BETTER: dict[str, bool] = {
     "prediction_ms": False,
 }
 
-#: Metrics summarised by default, in display order, with their axis labels.
+#: Metrics summarised by default, in display order, with their axis labels (in the units
+#: they are shown in: see :data:`DISPLAY_SCALE`).
 DEFAULT_METRICS: dict[str, str] = {
     "smoothness": "smoothness [rad²/s⁴]",
     "jerkiness": "jerkiness [rad²/s⁴]",
-    "min_distance": "closest distance [m]",
+    "min_distance": "closest distance [cm]",
     "efficiency": "efficiency (alone / with robot)",
-    "mhd": "prediction MHD [m]",
+    "mhd": "prediction MHD [cm]",
     "prediction_ms": "prediction time [ms]",
 }
+
+#: Metrics that plots and ``results.md`` show in other units than their ``results.csv``
+#: columns (SI, as :func:`summary_table` returns them): metric -> (unit, factor from SI).
+#: Distances are shown in cm, as the comparison table and the paper give them.
+DISPLAY_SCALE: dict[str, tuple[str, float]] = {
+    "min_distance": ("cm", 100.0),
+    "body_distance": ("cm", 100.0),
+    "mhd": ("cm", 100.0),
+}
+
+
+def _shown(metric: str, values: Any) -> Any:
+    """``values`` of ``metric`` in the units plots and ``results.md`` show it in."""
+    return values * DISPLAY_SCALE[metric][1] if metric in DISPLAY_SCALE else values
+
+
+def in_display_units(summary: pd.DataFrame) -> pd.DataFrame:
+    """:func:`summary_table`'s output in the units of :data:`DISPLAY_SCALE`: each such
+    metric's ``<m>_mean`` and ``<m>_std`` scaled and renamed ``<m> <unit>_mean`` and
+    ``<m> <unit>_std`` (so :func:`to_markdown` heads the column ``min_distance cm``); the
+    other columns as they are."""
+    out = summary.copy()
+    renames = {}
+    for m, (unit, _) in DISPLAY_SCALE.items():
+        for part in ("mean", "std"):
+            col = f"{m}_{part}"
+            if col in out.columns:
+                out[col] = _shown(m, pd.to_numeric(out[col], errors="coerce"))
+                renames[col] = f"{m} {unit}_{part}"
+    return out.rename(columns=renames)
+
 
 #: Columns of :func:`comparison_table` in the paper's units: metric -> (header, scale from SI).
 #: ``distance cm`` is the closest distance of the sphere models (the paper's metric); ``body
@@ -1146,7 +1180,7 @@ def plot_comparison(
     did. The title's second line says how many episodes a bar averages (:func:`spread_note`);
     a bar of one episode has no whisker. The x axis is labelled with the grouping column
     (its unit for a swept setting, :data:`SETTING_LABELS`) and the legend stands outside the
-    plotting area.
+    plotting area. Distances are drawn in cm (:data:`DISPLAY_SCALE`).
 
     Args:
         df: per-episode results.
@@ -1170,7 +1204,7 @@ def plot_comparison(
     for m in metrics:
         if m not in df.columns:
             continue
-        v = df.assign(_v=pd.to_numeric(df[m], errors="coerce"))
+        v = df.assign(_v=_shown(m, pd.to_numeric(df[m], errors="coerce")))
         if not v["_v"].notna().any():
             continue  # nothing to draw: no empty chart
         groups = {
@@ -1236,7 +1270,8 @@ def plot_paired(
     Args:
         table: the output of :func:`paired_differences` (its group columns are those before
             ``planner``).
-        metric: the metric it compares (for the axis label).
+        metric: the metric it compares (for the axis label; a distance's differences are
+            drawn in cm, :data:`DISPLAY_SCALE`).
         out_path: PNG path (its folder is created).
         level: the intervals' confidence level (for the axis label).
         baseline: the planner the differences are taken from (named in the axis label, e.g.
@@ -1261,9 +1296,9 @@ def plot_paired(
     y = np.arange(len(table))[::-1]
     fig = Figure(figsize=(7.0, 1.2 + 0.32 * max(1, len(table))))
     ax = fig.add_subplot()
-    mean = table["mean_diff"].to_numpy(dtype=float)
-    lo = mean - table["ci_low"].to_numpy(dtype=float)
-    hi = table["ci_high"].to_numpy(dtype=float) - mean
+    mean = _shown(metric, table["mean_diff"].to_numpy(dtype=float))
+    lo = mean - _shown(metric, table["ci_low"].to_numpy(dtype=float))
+    hi = _shown(metric, table["ci_high"].to_numpy(dtype=float)) - mean
     by_planner = hue_colours(list(table.planner))
     colours = [by_planner[p] for p in table.planner]
     for yi, m, a, b, c in zip(y, mean, lo, hi, colours):
@@ -1301,7 +1336,8 @@ def plot_sweep(
     A line joins the means over the episodes at each ``x``; its band spans one sample
     standard deviation below and above, cut at the least and the largest episode value (so a
     metric that cannot be negative never gets a band below 0). The legend stands to the right
-    of the top-right panel, outside the plotting area.
+    of the top-right panel, outside the plotting area. Distances are drawn in cm
+    (:data:`DISPLAY_SCALE`).
 
     With ``facet_col`` (and ``facet_row``) the figure holds one panel per value (pair of
     values) of those columns, sharing both axes, so a sweep over several settings is shown
@@ -1328,7 +1364,7 @@ def plot_sweep(
     _check_columns(df, [x, y, hue, *facets], "columns")
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    v = df.assign(_y=pd.to_numeric(df[y], errors="coerce"))
+    v = df.assign(_y=_shown(y, pd.to_numeric(df[y], errors="coerce")))
     rows = ordered_values(facet_row, v[facet_row]) if facet_row else [None]
     cols = ordered_values(facet_col, v[facet_col]) if facet_col else [None]
     hues = ordered_values(hue, v[hue])
@@ -1504,11 +1540,24 @@ def _paired_section(
         "planner did better (a larger distance or efficiency, a smoother or less jerky "
         "trajectory; ties not counted).",
         "",
-        to_markdown(table),
+        to_markdown(_paired_in_display_units(table)),
     ]
     if plots:
         lines += ["", "Plots: " + ", ".join(f"`{p.name}`" for p in plots) + "."]
     return lines, plots
+
+
+def _paired_in_display_units(table: pd.DataFrame) -> pd.DataFrame:
+    """:func:`paired_table`'s rows of each :data:`DISPLAY_SCALE` metric with their
+    differences scaled and the metric named with its unit (``min_distance cm``)."""
+    out = table.copy()
+    for m, (unit, _) in DISPLAY_SCALE.items():
+        rows = out["metric"] == m
+        if rows.any():
+            for c in ("mean_diff", "ci_low", "ci_high"):
+                out.loc[rows, c] = _shown(m, pd.to_numeric(out.loc[rows, c], errors="coerce"))
+            out.loc[rows, "metric"] = f"{m} {unit}"
+    return out
 
 
 #: what the columns of :func:`comparison_table` are, as ``results.md`` says above the table
@@ -1535,7 +1584,8 @@ def write_sweep_report(
     ``results.md`` holds, under "Comparison", the table the console of ``iplanner-experiment``
     and ``iplanner-evaluate evaluate.mode=episode`` prints (:func:`comparison_table` by
     ``group_by``: the same columns, in the paper's units), then, under "Mean ± std", the
-    :func:`summary_table` (SI units, with standard deviations). It also compares each planner
+    :func:`summary_table` (with standard deviations; distances in cm,
+    :func:`in_display_units`). It also compares each planner
     with ``baseline`` seed by seed ("Paired by seed", :func:`paired_differences`, with
     ``paired_<metric>.png`` forest plots) when the results hold the baseline, another planner
     and two seeds they share, and says why not when they hold the baseline and another
@@ -1600,7 +1650,7 @@ def write_sweep_report(
     md += ["## Comparison", "", COMPARISON_NOTE, "", to_markdown(comparison_table(df, group_by))]
     md += ["## Mean ± std", ""]
     md += ["Means over episodes ± sample std: " + "; ".join(units) + ".", ""] if units else []
-    md += [to_markdown(summary)]
+    md += [to_markdown(in_display_units(summary))]
     # each plot is drawn on its own: one that cannot be drawn or saved (a folder in its
     # place, a full disk, a plotting error) is named in one warning at the end, the others
     # are still drawn, and the tables are written all the same

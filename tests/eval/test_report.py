@@ -465,9 +465,9 @@ def test_whiskers_stay_within_the_episodes_values(
     assert min(lo for lo, _ in ends) >= 0.0
     itomp = next(e for e in ends if e[0] == pytest.approx(0.0))
     assert itomp[1] == pytest.approx(2.0 + 4.0)  # the upper end is within the values: kept
-    d_ends = sorted(_whisker_ends(dist))
-    assert d_ends[0][0] >= -0.05 - 1e-12 and d_ends[0][0] < 0.0  # an episode overlapped
-    assert min(lo for lo, _ in d_ends[1:]) >= 0.01 - 1e-12  # itomp never went below 0.01
+    d_ends = sorted(_whisker_ends(dist))  # in cm
+    assert d_ends[0][0] >= -5.0 - 1e-9 and d_ends[0][0] < 0.0  # an episode overlapped
+    assert min(lo for lo, _ in d_ends[1:]) >= 1.0 - 1e-9  # itomp never went below 1 cm
     assert "whiskers ± 1 std within min-max" in jerk.get_title()
 
 
@@ -554,7 +554,52 @@ def test_write_sweep_report(results: pd.DataFrame, tmp_path: Path) -> None:
     assert len(back) == len(results)
     md = (tmp_path / "report" / "results.md").read_text()
     assert "| scenario |" in md
-    assert "smoothness [rad²/s⁴]" in md and "closest distance [m]" in md  # the units
+    assert "smoothness [rad²/s⁴]" in md and "closest distance [cm]" in md  # the units
+
+
+def test_distances_are_shown_in_cm(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """results.csv keeps metres; results.md's mean ± std and paired tables and the plots
+    show cm, as the comparison table does. Expected values from the rows, by hand."""
+    figures = _recorded_figures(monkeypatch)
+    d = {"itomp": (0.05, 0.07, 0.06), "iplanner_ni": (0.09, 0.10, 0.14)}
+    rows = [
+        {"scenario": "s", "planner": p, "seed": i, "min_distance": v, "smoothness": 1.0 + i,
+         "mhd": 0.031 if p != "itomp" else np.nan}
+        for p, vs in d.items()
+        for i, v in enumerate(vs)
+    ]  # fmt: skip
+    df = pd.DataFrame(rows)
+    write_sweep_report(df, tmp_path)
+    back = pd.read_csv(tmp_path / "results.csv")
+    assert back["min_distance"].tolist() == [v for vs in d.values() for v in vs]  # metres
+    md = (tmp_path / "results.md").read_text()
+    mean_std = md.split("## Mean ± std")[1].split("## Paired")[0]
+    header = next(ln for ln in mean_std.splitlines() if ln.startswith("| scenario"))
+    cells = [c.strip() for c in header.strip("|").split("|")]
+    assert "min_distance cm" in cells and "mhd cm" in cells and "min_distance" not in cells
+    ni = next(ln for ln in mean_std.splitlines() if "| iplanner_ni |" in ln)
+    ni_cells = [c.strip() for c in ni.strip("|").split("|")]
+    dist = ni_cells[cells.index("min_distance cm")]
+    sd = float(np.std([9.0, 10.0, 14.0], ddof=1))
+    assert [float(x) for x in dist.split(" ± ")] == pytest.approx([11.0, sd], rel=3e-3), dist
+    mhd = ni_cells[cells.index("mhd cm")]
+    assert [float(x) for x in mhd.split(" ± ")] == pytest.approx([3.1, 0.0], abs=1e-9), mhd
+    # paired: the NI minus ITOMP, seed by seed: +4, +3, +8 cm, mean 5
+    paired = md.split("## Paired by seed")[1]
+    phead = next(ln for ln in paired.splitlines() if ln.startswith("| scenario"))
+    pcells = [c.strip() for c in phead.strip("|").split("|")]
+    row = next(ln for ln in paired.splitlines() if "| min_distance cm |" in ln)
+    rcells = [c.strip() for c in row.strip("|").split("|")]
+    assert float(rcells[pcells.index("mean_diff")]) == pytest.approx(5.0), row
+    # the plots: bars at the means in cm, the paired point at +5 cm
+    bar = next(f for f in figures if "closest distance [cm]" == f.axes[0].get_ylabel())
+    heights = sorted(p.get_height() for p in bar.axes[0].patches)
+    assert heights == pytest.approx([6.0, 11.0])
+    forest = next(
+        f for f in figures if f.axes[0].get_xlabel().startswith("closest distance [cm]:")
+    )
+    (line,) = [ln for ln in forest.axes[0].get_lines() if ln.get_marker() == "o"]
+    assert line.get_xdata()[0] == pytest.approx(5.0)
 
 
 def _sweep_rows() -> pd.DataFrame:
@@ -1020,9 +1065,9 @@ def test_results_md_holds_the_table_the_console_prints(tmp_path: Path) -> None:
     assert (row["distance cm"], row["body cm"], row["MHD cm"], row["waits"]) == (
         "10.9", "12.9", "4.00", "5.00",  # means to 3 digits, trailing zeros kept
     )  # fmt: skip
-    # the summary with standard deviations is still there, after it, in SI units
+    # the summary with standard deviations is still there, after it, distances in cm too
     assert md.index("## Comparison") < md.index("## Mean ± std")
-    assert "| s1 | iplanner_ni | 2 | 2 | 0 | 2 | 2.00 ± 0 | 0.109 ± 0 |" in md
+    assert "| s1 | iplanner_ni | 2 | 2 | 0 | 2 | 2.00 ± 0 | 10.9 ± 0 |" in md
 
 
 def test_the_log_metadatas_second_names_give_no_second_column(tmp_path: Path) -> None:
@@ -1131,10 +1176,10 @@ def test_sweep_report_pairs_planners_with_itomp_by_seed(tmp_path: Path) -> None:
         assert matplotlib.image.imread(png).shape[2] in (3, 4)
     table = paired_differences(df, "min_distance")
     section = md.split("## Paired by seed")[1].splitlines()
-    line = next(ln for ln in section if ln.startswith("| s |") and "| min_distance |" in ln)
+    line = next(ln for ln in section if ln.startswith("| s |") and "| min_distance cm |" in ln)
     cells = [c.strip() for c in line.strip("|").split("|")]
-    assert cells[:4] == ["s", "iplanner_ni", "min_distance", "6"]
-    assert float(cells[4]) == pytest.approx(table.loc[0, "mean_diff"], rel=2e-3)
+    assert cells[:4] == ["s", "iplanner_ni", "min_distance cm", "6"]
+    assert float(cells[4]) == pytest.approx(100.0 * table.loc[0, "mean_diff"], rel=2e-3)
     assert cells[-1] == "6" and float(cells[5]) > 0  # all six larger, interval above 0
     # one seed: nothing to pair, which the section says (it was left out without a word)
     write_sweep_report(df[df.seed == 0], tmp_path / "b", ["scenario", "planner"])
@@ -1203,8 +1248,8 @@ def test_plot_paired_names_the_baseline(tmp_path: Path, monkeypatch: pytest.Monk
     plot_paired(table, "min_distance", tmp_path / "q.png", baseline="itomp@spread")
     labels = [f.axes[0].get_xlabel() for f in figures]
     assert labels == [
-        "closest distance [m]: planner minus ITOMP, 95% interval",
-        "closest distance [m]: planner minus itomp@spread, 95% interval",
+        "closest distance [cm]: planner minus ITOMP, 95% interval",
+        "closest distance [cm]: planner minus itomp@spread, 95% interval",
     ]
     assert (
         figures[0].axes[0].get_title() == "closest distance, paired by seed (5 pairs of episodes)"
