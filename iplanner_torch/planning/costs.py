@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Literal, Protocol
 
 import torch
 
@@ -39,6 +39,12 @@ from iplanner_torch.types import check_device, check_shape
 
 #: Mahalanobis distance beyond which a pair is pruned: its bound is below Phi(-5) < 3e-7.
 PRUNE_SIGMAS = 5.0
+#: Phi(-PRUNE_SIGMAS), the most a pruned pair (or a kept pair's pruned entries together) can
+#: add to the bound; ``reduce="sum"`` adds it for every sphere pair, so that the sum stays an
+#: upper bound (rounded up to 2.87e-7 from 2.8665e-7)
+PRUNED_PAIR_BOUND = 2.87e-7
+#: How :func:`human_collision_bound` combines the sphere pairs of a waypoint.
+BoundReduce = Literal["max", "sum"]
 #: Pair bounds (isotropic) above this get the exact diagonal-Gaussian bound.
 EXACT_FROM = 1e-6
 #: Relative slack [m per m] on the triangle-inequality pre-check of :func:`candidate_pairs`.
@@ -846,11 +852,18 @@ def human_collision_bound(
     *,
     exact: bool = True,
     entries: torch.Tensor | None = None,
+    reduce: BoundReduce = "max",
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-waypoint collision bound: max over sphere pairs of the action-weighted pair bound.
 
     Eq. max_collision_probability with the mixture over actions:
-    ``max_{j,l} sum_a p(a) P(B_j(q_i) cap C_l^a(t_i) != empty)``.
+    ``max_{j,l} sum_a p(a) P(B_j(q_i) cap C_l^a(t_i) != empty)``. That bounds each pair's
+    probability of touching, not the probability that some pair touches, which can be larger
+    (a robot sphere between two independently predicted hands). ``reduce="sum"`` gives
+    Boole's bound on that probability instead: ``sum_{j,l}`` of the same mixtures, plus the
+    left-out actions' weight once, plus :data:`PRUNED_PAIR_BOUND` for each of the S_r S_h
+    pairs when ``pairs`` is given (a pruned pair, or a kept pair's pruned entries, add at
+    most that), clamped at 1. Its gradient reaches every evaluated pair.
 
     Two pair bounds are available. The *isotropic* one, ``Phi(-(||mu - c|| - R) / s_max)``
     with ``s_max`` the largest standard deviation, is cheap (no secular equation) and never
@@ -892,7 +905,10 @@ def human_collision_bound(
             holding an index beyond S_r or S_h), or ``entries`` not a (K, 3) int64 tensor on
             that device given with ``pairs`` (or, on the CPU, holding an index beyond W_x, P
             or A).
+        ConfigError: when ``reduce`` is not ``"max"`` or ``"sum"``.
     """
+    if reduce not in ("max", "sum"):
+        raise ConfigError(f"expected reduce 'max' or 'sum', got {reduce!r}")
     _check_robot_spheres(robot_centers, robot_radii, human)
     if pairs is not None:
         check_shape("pairs", pairs, ("P", 2))
@@ -911,8 +927,11 @@ def human_collision_bound(
                 f"{entries.device}"
             )
     b, w = robot_centers.shape[:2]
+    s_r, s_h = robot_radii.shape[0], human.radii.shape[0]
+    summed = reduce == "sum"
+    # what the pairs and entries left out can add to a sum (nothing is left out without pairs)
+    slack = 0.0 if pairs is None or not summed else s_r * s_h * PRUNED_PAIR_BOUND
     if pairs is None:
-        s_r, s_h = robot_radii.shape[0], human.radii.shape[0]
         ii, jj = torch.meshgrid(
             torch.arange(s_r, device=robot_centers.device),
             torch.arange(s_h, device=robot_centers.device),
@@ -921,17 +940,22 @@ def human_collision_bound(
         pairs = torch.stack([ii.reshape(-1), jj.reshape(-1)], dim=-1)
     if pairs.shape[0] == 0 or (entries is not None and entries.shape[0] == 0):
         zero = robot_centers.sum() * 0.0
-        floor = min(human.residual, 1.0)
+        floor = min(human.residual + slack, 1.0)
         return robot_centers.new_zeros(b, w) + zero + floor, robot_centers.new_zeros(b) + zero
     ri = pairs[:, 0]
     weights = human.weights
     need_grad = torch.is_grad_enabled() and robot_centers.requires_grad
-    with torch.set_grad_enabled(torch.is_grad_enabled() and not need_grad):
+    # a sum depends on every pair: with a gradient, all are evaluated with autograd at once
+    with torch.set_grad_enabled(torch.is_grad_enabled() and not (need_grad and not summed)):
         if entries is None:
             mean_p, var_p, inv_s_p, rad_p = human.pair_tensors(pairs, robot_radii)
             bound, dist = _pair_bounds(
                 robot_centers[:, :, ri], mean_p.unsqueeze(0), var_p, inv_s_p, rad_p, exact
             )  # (B, W_x, P, A)
+            if summed:
+                pen = torch.relu(rad_p - dist).square()  # (B, W_x, P, A)
+                mixed = (bound @ weights).sum(-1) + (human.residual + slack)  # (B, W_x)
+                return mixed.clamp(max=1.0), (pen @ weights).sum(dim=(1, 2))
             mixed = bound @ weights + human.residual  # (B, W_x, P)
             if not need_grad:
                 pen = torch.relu(rad_p - dist).square()  # (B, W_x, P, A)
@@ -945,7 +969,7 @@ def human_collision_bound(
             planes = _entry_planes(robot_centers, wr_k)  # (3, B, K)
             c_k = planes.permute(1, 2, 0)  # (B, K, 3), a view
             # without a gradient, only the entries the maximum can depend on are refined
-            lazy = exact and not need_grad
+            lazy = exact and not need_grad and not summed
             bound_k, dist_k = _pair_bounds(
                 c_k, mean_k, var_k, inv_s_k, rad_k, exact and not lazy, (planes, mean_planes)
             )
@@ -956,8 +980,12 @@ def human_collision_bound(
                 )
             else:
                 mixed = _entry_mixture(bound_k, w_k, wp_k, shape)
-            mixed = mixed + human.residual  # (B, W_x, P)
             dist_k, rad_1 = dist_k[..., 0], rad_k[:, 0]  # (B, K), (K,)
+            if summed:
+                pen = (torch.relu(rad_1 - dist_k).square() * w_k).sum(-1)
+                mixed = mixed.sum(-1) + (human.residual + slack)  # (B, W_x)
+                return mixed.clamp(max=1.0), pen
+            mixed = mixed + human.residual  # (B, W_x, P)
             if not need_grad:
                 pen = (torch.relu(rad_1 - dist_k).square() * w_k).sum(-1)
                 return mixed.amax(-1).clamp(max=1.0), pen

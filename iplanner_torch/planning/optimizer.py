@@ -131,6 +131,11 @@ class OptimizerCfg:
     perturbation_std: float = 0.3
     # delta_CL: the bound must be <= 1 - confidence at every waypoint of the window
     confidence: float = 0.95
+    # how a waypoint's bound combines the robot-person sphere pairs: "max", the paper's (eq.
+    # max_collision_probability: the largest pair's probability of touching), or "sum",
+    # Boole's bound on the probability that any pair touches (never below "max"; stricter,
+    # so more waits). The penalty, the acceptance and the replanner's checks all use it
+    bound_reduce: C.BoundReduce = "max"
     # the penalty aims at bound <= penalty_target * (1 - confidence): a margin under the hard
     # limit (0.8 is smoother where the forecast is right, much less safe where it is wrong:
     # experiments/reach_across/, experiments/speed_response/)
@@ -216,6 +221,8 @@ class OptimizerCfg:
             raise ConfigError(f"expected confidence in (0, 1), got {self.confidence!r}")
         if not is_real(self.penalty_target) or not 0.0 < self.penalty_target <= 1.0:
             raise ConfigError(f"expected penalty_target in (0, 1], got {self.penalty_target!r}")
+        if self.bound_reduce not in ("max", "sum"):
+            raise ConfigError(f"expected bound_reduce 'max' or 'sum', got {self.bound_reduce!r}")
         if not is_real(self.drop_action_mass) or not 0.0 <= self.drop_action_mass < 1.0:
             raise ConfigError(
                 f"expected drop_action_mass in [0, 1), got {self.drop_action_mass!r}"
@@ -717,6 +724,7 @@ class TrajectoryOptimizer:
                     None if pairs is None else pairs[0],
                     exact=exact,
                     entries=None if pairs is None else pairs[1],
+                    reduce=self.cfg.bound_reduce,
                 )
                 bound = unsafe_if_not_finite(bound, human)
             if look_idx is not None:
@@ -1045,8 +1053,9 @@ class TrajectoryOptimizer:
             centers = self.robot.sphere_centers(q).unsqueeze(0)  # (1, N, S_r, 3)
             pairs, entries = self._candidates(centers, human, 0.0)
             bound, _ = C.human_collision_bound(
-                centers, self.radii, human, pairs, exact=True, entries=entries
-            )
+                centers, self.radii, human, pairs, exact=True, entries=entries,
+                reduce=self.cfg.bound_reduce,
+            )  # fmt: skip
             bound = unsafe_if_not_finite(bound, human)
         return bound[0]
 

@@ -899,3 +899,118 @@ def test_joint_velocity_limit_counts_both_directions() -> None:
     down = torch.tensor([0.0, -1.0, -1.0]).view(1, 3, 1)
     assert float(C.joint_vel_limit_violation(down, 0.1, v_max)) == pytest.approx(81.0)
     assert float(C.joint_vel_limit_violation(-down, 0.1, v_max)) == pytest.approx(81.0)
+
+
+def _brute_force_sum(
+    centers: torch.Tensor, radii: torch.Tensor, human: C.HumanObstacle
+) -> torch.Tensor:
+    """(B, W_x) Boole's bound by brute force: every (trajectory, waypoint, robot sphere,
+    human sphere) in loops, each action by the exact diagonal-Gaussian bound, summed."""
+    b_n, w_n, s_r, _ = centers.shape
+    ref = torch.zeros(b_n, w_n, dtype=torch.float64)
+    for b in range(b_n):
+        for w in range(w_n):
+            for j in range(s_r):
+                for ll in range(human.radii.shape[0]):
+                    d = human.mean[w, :, ll] - centers[b, w, j]
+                    r = (radii[j] + human.radii[ll]).expand(human.weights.shape[0])
+                    pb, _ = C.gaussian_ball_bound_diag(d, human.var[w, :, ll], r)
+                    ref[b, w] += float((pb * human.weights).sum())
+    return ref + human.residual
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_summed_bound_is_booles_bound_over_the_pairs(seed: int) -> None:
+    """reduce="sum" against loops over every pair: exact where nothing is pruned, and with
+    pruned pairs or entries never below it and at most the pruning allowance above."""
+    centers, radii, human = _spread_scene(seed)
+    human = C.HumanObstacle(
+        mean=human.mean, var=human.var, radii=human.radii, weights=human.weights, residual=0.01
+    )
+    ref = _brute_force_sum(centers, radii, human)
+    top = _brute_force_bound(centers, radii, human) + human.residual
+    assert bool((ref > top + 1e-3).any())  # the sum is not the maximum here
+    every, pen = C.human_collision_bound(centers, radii, human, reduce="sum")
+    # pairs below EXACT_FROM keep the (larger) isotropic bound: at most that each above
+    n_pairs = radii.shape[0] * human.radii.shape[0]
+    assert bool((every >= ref.clamp(max=1.0) - 1e-12).all())
+    assert torch.allclose(every, ref.clamp(max=1.0), atol=n_pairs * C.EXACT_FROM)
+    _, max_pen = C.human_collision_bound(centers, radii, human)
+    assert torch.equal(pen, max_pen)  # the penetration cost does not depend on the reduction
+    allowance = n_pairs * C.PRUNED_PAIR_BOUND
+    assert C.PRUNED_PAIR_BOUND >= math.erfc(C.PRUNE_SIGMAS / math.sqrt(2)) / 2
+    pairs, entries = C.candidate_entries(centers, radii, human, 0.0)
+    w_n, a_n = human.mean.shape[:2]
+    assert entries.shape[0] < n_pairs * w_n * a_n  # some pairs or entries are left out
+    for kept in (
+        C.human_collision_bound(centers, radii, human, pairs, reduce="sum")[0],
+        C.human_collision_bound(centers, radii, human, pairs, entries=entries, reduce="sum")[0],
+    ):
+        assert bool((kept >= ref.clamp(max=1.0) - 1e-12).all())
+        assert bool((kept <= (every + allowance).clamp(max=1.0) + 1e-12).all())
+    # "max" is unchanged by the option's presence
+    assert torch.equal(
+        C.human_collision_bound(centers, radii, human, reduce="max")[0],
+        C.human_collision_bound(centers, radii, human)[0],
+    )
+    with pytest.raises(ConfigError, match="expected reduce 'max' or 'sum', got 'mean'"):
+        C.human_collision_bound(centers, radii, human, reduce="mean")
+
+
+def test_the_summed_bound_covers_touching_any_sphere_where_the_maximum_does_not() -> None:
+    """A robot sphere among four person spheres, each touched with probability about 0.2:
+    the paper's maximum bounds each pair but not the chance that one of them touches, about
+    0.6 by Monte Carlo (the spheres drawn independently); Boole's sum does."""
+    dtype = torch.float64
+    around = torch.tensor([[0.12, 0, 0], [-0.12, 0, 0], [0, 0.12, 0], [0, -0.12, 0]], dtype=dtype)
+    human = C.HumanObstacle(
+        mean=around.view(1, 1, 4, 3),
+        var=torch.full((1, 1, 4, 3), 0.03**2, dtype=dtype),
+        radii=torch.full((4,), 0.03, dtype=dtype),
+        weights=torch.ones(1, dtype=dtype),
+    )
+    centers = torch.zeros(1, 1, 1, 3, dtype=dtype)
+    radii = torch.tensor([0.05], dtype=dtype)
+    gen = torch.Generator().manual_seed(0)
+    n = 200_000
+    x = around + 0.03 * torch.randn(n, 4, 3, generator=gen, dtype=dtype)
+    p_any = float((x.norm(dim=-1) <= 0.08).any(-1).double().mean())
+    se = math.sqrt(p_any * (1 - p_any) / n)
+    top, _ = C.human_collision_bound(centers, radii, human)
+    total, _ = C.human_collision_bound(centers, radii, human, reduce="sum")
+    assert float(top) < p_any - 10 * se  # the maximum is below the probability of touching
+    assert float(total) >= p_any - 4 * se  # Boole's bound is not
+    assert float(total) == pytest.approx(min(4 * float(top), 1.0), rel=1e-12)  # by symmetry
+
+
+@pytest.mark.parametrize("with_entries", [False, True])
+@pytest.mark.parametrize("exact", [True, False])
+def test_the_summed_bound_with_gradient_equals_plain_evaluation(
+    exact: bool, with_entries: bool
+) -> None:
+    """With autograd every evaluated pair passes its gradient (a sum depends on all): the
+    values equal the evaluation without autograd, the gradients finite differences."""
+    centers, radii, human = _spread_scene(1)
+    pairs, entries = C.candidate_entries(centers, radii, human, 0.15)
+    j, ll = (int(x) for x in pairs[0])
+    centers[1, 2, j] = human.mean[2, 0, ll] + 0.01  # one robot sphere penetrates a mean sphere
+
+    def bound_of(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return C.human_collision_bound(
+            x, radii, human, pairs, exact=exact, entries=entries if with_entries else None,
+            reduce="sum",
+        )  # fmt: skip
+
+    with torch.no_grad():
+        ref_bound, ref_pen = bound_of(centers)
+    assert bool(((ref_bound > 1e-6) & (ref_bound < 0.9)).any())
+    x = centers.clone().requires_grad_(True)
+    bound, pen = bound_of(x)
+    assert torch.allclose(bound, ref_bound, rtol=1e-12, atol=1e-15)
+    assert torch.allclose(pen, ref_pen, rtol=1e-12, atol=1e-15)
+    _fd_check(lambda y: bound_of(y)[0].sum(), centers, rtol=1e-3)
+    # more than one pair of a waypoint gets a gradient (the maximum passes it to one)
+    x.grad = None
+    bound[1].sum().backward()
+    moved = (x.grad[1].abs().sum(-1) > 0).sum(-1)  # (W_x,) robot spheres with a gradient
+    assert int(moved.max()) >= 2

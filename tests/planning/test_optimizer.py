@@ -1286,3 +1286,53 @@ def test_window_indices_by_hand() -> None:
     assert opt._window_indices(times, (0.0, 0.6)).tolist() == [1, 2, 3]
     assert opt._window_indices(times, (0.3, 0.3)).tolist() == [2]
     assert opt._window_indices(times, None).tolist() == [1, 2, 3, 4]
+
+
+def test_the_summed_bound_refuses_a_path_between_two_spheres_that_the_maximum_accepts(
+    point_robot: PointRobot,
+) -> None:
+    """A straight path through the gap between two person spheres: each is touched at the
+    middle with probability about 0.032 (Monte Carlo), either of them with about 0.064, over
+    the limit of 0.05. The paper's maximum (0.048) accepts the path; Boole's sum refuses it
+    and the plan waits before the gap."""
+    from iplanner_torch.planning.costs import PRUNED_PAIR_BOUND
+
+    std, n_f = 0.03, 30
+    mean = torch.tensor([[0.0, 0.2, 0.0], [0.0, -0.2, 0.0]], dtype=torch.float64)
+    mean = mean.view(1, 1, 1, 2, 3).expand(1, 1, n_f, 2, 3).clone()
+    forecast = Forecast(
+        weights=torch.ones(1, 1, dtype=torch.float64),
+        mean=mean,
+        var=torch.full_like(mean, std * std),
+        dt=0.1,
+        joint_names=("a", "b"),
+        action_names=("rest",),
+    )
+    spheres = HumanSphereMap(torch.eye(2), torch.tensor([0.1, 0.1]))
+    w = 11
+    x = torch.linspace(-1.0, 1.0, w, dtype=torch.float64)
+    line = torch.stack([x, torch.zeros_like(x)], -1)  # (W, 2), through (0, 0) at k = 5
+    gen = torch.Generator().manual_seed(0)
+    draws = mean[0, 0, 0] + std * torch.randn(400_000, 2, 3, generator=gen, dtype=torch.float64)
+    p_any = float((draws.norm(dim=-1) <= 0.15).any(-1).double().mean())  # robot radius 0.05
+    assert p_any > 0.06
+    plans = {}
+    for reduce in ("max", "sum"):
+        cfg = OptimizerCfg(
+            num_trajectories=1, num_waypoints=w, iterations=0, warm_iterations=0,
+            collision_substeps=1, bound_reduce=reduce,
+        )  # fmt: skip
+        opt = TrajectoryOptimizer(point_robot, cfg, human_spheres=spheres)
+        middle = opt.collision_bound(line[5:6], torch.tensor([1.0]), forecast, 0.0)
+        plans[reduce] = (float(middle), opt.solve(
+            line[0], line[-1], forecast=forecast, duration=2.0, q_init=line.unsqueeze(0)
+        ))  # fmt: skip
+    top, by_max = plans["max"]
+    total, by_sum = plans["sum"]
+    assert top < 0.05 < p_any <= total
+    assert total == pytest.approx(2.0 * top + 2 * PRUNED_PAIR_BOUND, rel=1e-6)  # symmetric
+    assert by_max.feasible and torch.allclose(by_max.q.double(), line, atol=1e-6)
+    assert not by_sum.feasible and by_sum.wait_s > 0.0
+    assert float(by_sum.q[:, 0].max()) < -0.1  # held before the gap
+    with pytest.raises(ConfigError, match="expected bound_reduce 'max' or 'sum', got 'mean'"):
+        OptimizerCfg(bound_reduce="mean")
