@@ -896,11 +896,12 @@ def trajectory_collision_bound(
     (S_r = 0 or S_h = 0) the bound is 0 (nothing can collide); B = 0 or W = 0 give an empty
     result. Inputs as :func:`pairwise_bound_matrix`.
 
-    The paper's maximum (the planner's acceptance test) bounds each pair's probability of
-    touching, not the probability that some pair touches, which can be larger: a robot
-    sphere between two independently predicted hands is touched by one or the other more
-    often than by either. ``reduce="sum"`` gives Boole's bound over the pairs, an upper bound
-    on that probability too (pruned pairs keep their cheap bound, never a lower one).
+    The paper's maximum (the planner's acceptance test by default) bounds each pair's
+    probability of touching, not the probability that some pair touches, which can be
+    larger: a robot sphere between two independently predicted hands is touched by one or
+    the other more often than by either. ``reduce="sum"`` gives Boole's bound over the
+    pairs, an upper bound on that probability too (pruned pairs keep their cheap bound, never
+    a lower one); the planner's ``OptimizerCfg.bound_reduce="sum"`` plans with it.
 
     Args:
         robot_centers: (B, W, S_r, 3) robot sphere centres [m], float32 or float64.
