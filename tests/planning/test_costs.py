@@ -243,22 +243,31 @@ def test_screen_distance_matches_norm_of_difference() -> None:
     assert torch.allclose(C._distance3(a, b), (a - b).norm(dim=-1), rtol=1e-12, atol=0.0)
 
 
-def _brute_force_bound(
+def _brute_force_pairs(
     centers: torch.Tensor, radii: torch.Tensor, human: C.HumanObstacle
 ) -> torch.Tensor:
-    """(B, W_x) the mixture bound by brute force: every (trajectory, waypoint, robot sphere,
-    human sphere) in loops, each action by the exact diagonal-Gaussian bound."""
+    """(B, W_x, S_r, S_h) the mixture bound of every (trajectory, waypoint, robot sphere, human
+    sphere) by brute force, in loops, each action by the exact diagonal-Gaussian bound."""
     b_n, w_n, s_r, _ = centers.shape
-    ref = torch.zeros(b_n, w_n, dtype=torch.float64)
+    s_h = human.radii.shape[0]
+    ref = torch.zeros(b_n, w_n, s_r, s_h, dtype=torch.float64)
     for b in range(b_n):
         for w in range(w_n):
             for j in range(s_r):
-                for ll in range(human.radii.shape[0]):
+                for ll in range(s_h):
                     d = human.mean[w, :, ll] - centers[b, w, j]
                     r = (radii[j] + human.radii[ll]).expand(human.weights.shape[0])
                     pb, _ = C.gaussian_ball_bound_diag(d, human.var[w, :, ll], r)
-                    ref[b, w] = max(ref[b, w], float((pb * human.weights).sum()))
+                    ref[b, w, j, ll] = float((pb * human.weights).sum())
     return ref
+
+
+def _brute_force_bound(
+    centers: torch.Tensor, radii: torch.Tensor, human: C.HumanObstacle
+) -> torch.Tensor:
+    """(B, W_x) the paper's bound by brute force: the largest pair of
+    :func:`_brute_force_pairs`."""
+    return _brute_force_pairs(centers, radii, human).flatten(2).amax(-1)
 
 
 def test_human_bound_is_max_over_pairs_of_weighted_sum_and_pruning_is_safe() -> None:
@@ -904,19 +913,9 @@ def test_joint_velocity_limit_counts_both_directions() -> None:
 def _brute_force_sum(
     centers: torch.Tensor, radii: torch.Tensor, human: C.HumanObstacle
 ) -> torch.Tensor:
-    """(B, W_x) Boole's bound by brute force: every (trajectory, waypoint, robot sphere,
-    human sphere) in loops, each action by the exact diagonal-Gaussian bound, summed."""
-    b_n, w_n, s_r, _ = centers.shape
-    ref = torch.zeros(b_n, w_n, dtype=torch.float64)
-    for b in range(b_n):
-        for w in range(w_n):
-            for j in range(s_r):
-                for ll in range(human.radii.shape[0]):
-                    d = human.mean[w, :, ll] - centers[b, w, j]
-                    r = (radii[j] + human.radii[ll]).expand(human.weights.shape[0])
-                    pb, _ = C.gaussian_ball_bound_diag(d, human.var[w, :, ll], r)
-                    ref[b, w] += float((pb * human.weights).sum())
-    return ref + human.residual
+    """(B, W_x) Boole's bound by brute force: the pairs of :func:`_brute_force_pairs` summed,
+    plus the left-out actions' weight."""
+    return _brute_force_pairs(centers, radii, human).flatten(2).sum(-1) + human.residual
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
