@@ -957,9 +957,10 @@ def test_the_summed_bound_is_booles_bound_over_the_pairs(seed: int) -> None:
 
 
 def test_the_summed_bound_covers_touching_any_sphere_where_the_maximum_does_not() -> None:
-    """A robot sphere among four person spheres, each touched with probability about 0.2:
-    the paper's maximum bounds each pair but not the chance that one of them touches, about
-    0.6 by Monte Carlo (the spheres drawn independently); Boole's sum does."""
+    """A robot sphere among four person spheres, each touched with probability about 0.05:
+    the paper's maximum (0.091) bounds each pair but not the chance that one of them
+    touches, 0.186 by Monte Carlo (the spheres drawn independently); Boole's sum (0.365)
+    does."""
     dtype = torch.float64
     around = torch.tensor([[0.12, 0, 0], [-0.12, 0, 0], [0, 0.12, 0], [0, -0.12, 0]], dtype=dtype)
     human = C.HumanObstacle(
