@@ -11,10 +11,11 @@ Draws, for each ``*.mcap`` episode log given or found below the folders given, t
 of :func:`iplanner_torch.eval.timeline.plot_episode_timeline` (closest robot-person distance,
 each plan's collision bound against ``1 - confidence``, the forecast action probabilities with
 the person's real reaches, the arm's speed; waits shaded) into ``<log stem>.png`` beside the
-log, or into ``--out``. The figures share their time, distance and arm-speed axes (those that
-hold every log given, as ``iplanner-experiment`` draws a run's), unless ``--own-axes``. An
-existing PNG is replaced only with ``--force``. A log cut short is drawn as far as it goes; a
-file that is not an episode log is named and left out (exit 2 when nothing could be drawn).
+log, or into ``--out``. The figures of a scenario share their time, distance and arm-speed
+axes (those that hold its logs given, as ``iplanner-experiment`` draws a run's), unless
+``--own-axes``. An existing PNG is replaced only with ``--force``. A log cut short is drawn
+as far as it goes; a file that is not an episode log is named and left out (exit 2 when
+nothing could be drawn).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from iplanner_torch.eval.report import episode_logs
 from iplanner_torch.eval.timeline import (
     episode_timeline,
     plot_episode_timeline,
-    shared_axes,
+    shared_axes_by_scenario,
     timeline_path,
 )
 
@@ -60,7 +61,7 @@ def main() -> None:
     parser.add_argument(
         "--own-axes",
         action="store_true",
-        help="each figure on its own axes (default: the ranges that hold every log given)",
+        help="each figure on its own axes (default: those of its scenario's logs given)",
     )
     args = parser.parse_args()
     if args.out is not None and args.out.exists() and not args.out.is_dir():
@@ -92,10 +93,10 @@ def main() -> None:
         for w in caught:
             if issubclass(w.category, DataWarning):
                 print(f"warning: {log.name}: {str(w.message).splitlines()[0]}", file=sys.stderr)
-    axes = None if args.own_axes else shared_axes(tl for tl, _ in timelines)
+    shared = shared_axes_by_scenario([tl for tl, _ in timelines])
     written = 0
-    for tl, png in timelines:
-        plot_episode_timeline(tl, png, axes)
+    for (tl, png), axes in zip(timelines, shared):
+        plot_episode_timeline(tl, png, None if args.own_axes else axes)
         written += 1
         print(png)
     if skipped:

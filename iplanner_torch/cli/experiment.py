@@ -1296,9 +1296,10 @@ def _app(cfg: DictConfig) -> None:
 def write_timelines(
     logs: list[Path], progress: bool = True, executor: Executor | None = None
 ) -> list[Path]:
-    """Draw the timeline of each episode log beside it (``<log stem>.png``), every figure with
-    the same time, distance and arm-speed axes (:func:`~iplanner_torch.eval.timeline.shared_axes`
-    over all the logs), so that episodes side by side compare by eye.
+    """Draw the timeline of each episode log beside it (``<log stem>.png``), the figures of a
+    scenario with the same time, distance and arm-speed axes
+    (:func:`~iplanner_torch.eval.timeline.shared_axes_by_scenario`), so that its planners
+    side by side compare by eye.
 
     A log that cannot be drawn (cut short before its first messages, say) is named in a
     warning and left out; the others are drawn.
@@ -1320,7 +1321,7 @@ def write_timelines(
     from iplanner_torch.eval.timeline import (
         episode_timeline,
         plot_episode_timeline,
-        shared_axes,
+        shared_axes_by_scenario,
         timeline_path,
     )
 
@@ -1340,21 +1341,21 @@ def write_timelines(
     # 1. every log's series (in the workers: reading a log is most of the work)
     read = None if executor is None else [executor.submit(episode_timeline, log) for log in logs]
     timelines = collect(read, episode_timeline, logs)
-    axes = shared_axes(tl for tl in timelines if not isinstance(tl, DataError))
-    # 2. the figures, on the axes of all
+    # 2. the figures, on the axes of their scenario's episodes
     drawn_logs = [log for log, tl in zip(logs, timelines) if not isinstance(tl, DataError)]
     drawn_tls = [tl for tl in timelines if not isinstance(tl, DataError)]
+    axes = shared_axes_by_scenario(drawn_tls)
     pngs = [timeline_path(log) for log in drawn_logs]
     bar.update(len(logs) - len(drawn_logs))
     plots = (
         None
         if executor is None
         else [
-            executor.submit(plot_episode_timeline, tl, png, axes)
-            for tl, png in zip(drawn_tls, pngs)
+            executor.submit(plot_episode_timeline, tl, png, ax)
+            for tl, png, ax in zip(drawn_tls, pngs, axes)
         ]
     )
-    results = collect(plots, plot_episode_timeline, drawn_tls, pngs, [axes] * len(pngs))
+    results = collect(plots, plot_episode_timeline, drawn_tls, pngs, axes)
     bar.close()
     failed = [
         f"{log.name} ({tl})" for log, tl in zip(logs, timelines) if isinstance(tl, DataError)

@@ -28,7 +28,7 @@ A log cut short (``episode.complete`` False) is drawn as far as it goes, and say
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -49,6 +49,7 @@ __all__ = [
     "episode_timeline",
     "plot_episode_timeline",
     "shared_axes",
+    "shared_axes_by_scenario",
     "timeline_path",
 ]
 
@@ -104,6 +105,8 @@ class Timeline:
             when the log holds no metrics (cut short) or no value.
         complete: whether the log holds every record (``Episode.complete``).
         notes: what is missing, in words (e.g. "no forecasts: itomp has no predictor").
+        scenario: the scenario's name, as the metadata says ("" when it says none): the
+            figures of one scenario share their axes (:func:`shared_axes_by_scenario`).
     """
 
     scene_t: np.ndarray
@@ -125,6 +128,7 @@ class Timeline:
     min_distance_m: float = float("nan")
     complete: bool = True
     notes: list[str] = field(default_factory=list)
+    scenario: str = ""
 
 
 def _frame(episode: Episode, topic: str) -> pd.DataFrame:
@@ -304,6 +308,7 @@ def episode_timeline(episode: Episode | str | Path) -> Timeline:
         end_t=end_t,
         title=title,
         min_distance_m=_metric(episode, "eval/min_distance"),
+        scenario=str(meta.get("scenario") or ""),
         complete=bool(episode.complete),
         notes=notes,
     )
@@ -365,6 +370,17 @@ def shared_axes(timelines: Iterable[Timeline]) -> SharedAxes:
         distance_cm=distance,
         speed=1.05 * top if top > 0.0 else None,
     )
+
+
+def shared_axes_by_scenario(timelines: Sequence[Timeline]) -> list[SharedAxes]:
+    """:func:`shared_axes` over the timelines of each scenario (``Timeline.scenario``), one
+    per timeline in order: the planners of a scenario compare on the same axes, and a short
+    scenario's episodes are not drawn on the time axis of a long one."""
+    by: dict[str, list[Timeline]] = {}
+    for tl in timelines:
+        by.setdefault(tl.scenario, []).append(tl)
+    axes = {name: shared_axes(group) for name, group in by.items()}
+    return [axes[tl.scenario] for tl in timelines]
 
 
 def timeline_path(log: str | Path) -> Path:

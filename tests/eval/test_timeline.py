@@ -63,10 +63,11 @@ def _write(
     forecasts: bool = True,
     actions: list[str] = ACTIONS,
     metrics: dict | None = None,
+    scenario: str = "s1",
 ) -> dict:
     """A short log with known values (forecasts over ``actions``; ``metrics`` as the
     episode's metrics message, none when None); returns them."""
-    meta = {"scenario": "s1", "planner": planner, "speed": "medium", "noise": 0.02, "seed": 4}
+    meta = {"scenario": scenario, "planner": planner, "speed": "medium", "noise": 0.02, "seed": 4}
     t_robot = np.round(np.arange(0.0, 3.0 + 1e-9, 0.1), 10)
     qd = np.stack([np.sin(t_robot), np.cos(t_robot), 0.5 * t_robot], 1)  # (T, 3)
     plans = [  # t, feasible, wait_s, bound per waypoint, confidence
@@ -136,6 +137,7 @@ def test_the_timeline_holds_what_the_log_was_given(tmp_path: Path) -> None:
     assert tl.end_t == pytest.approx(3.0)
     # the planner as the tables name it, and the tracker noise the file name carries
     assert tl.title == "I-Planner, NI · s1 · medium · noise 2 cm · seed 4"
+    assert tl.scenario == "s1"
     assert tl.complete and not tl.notes
 
 
@@ -386,9 +388,25 @@ def test_the_figure_takes_the_shared_ranges(tmp_path: Path, monkeypatch) -> None
         plot_episode_timeline(tl, tmp_path / "bad.png", {"speed": 1.0})
 
 
+def test_the_axes_are_shared_within_each_scenario(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from iplanner_torch.eval.timeline import shared_axes, shared_axes_by_scenario
+
+    _write(tmp_path / "a.mcap")
+    a = episode_timeline(tmp_path / "a.mcap")
+    b = replace(a, end_t=9.0, speed=2.0 * a.speed)
+    c = replace(a, scenario="other", end_t=4.0)
+    got = shared_axes_by_scenario([a, c, b])
+    assert got[0] == got[2] == shared_axes([a, b]) and got[0].end_t == 9.0
+    assert got[1] == shared_axes([c]) and got[1].end_t == 4.0
+    assert shared_axes_by_scenario([]) == []
+
+
 @pytest.mark.filterwarnings("ignore:.*not an iplanner episode log")
 def test_the_experiments_figures_share_their_axes(tmp_path: Path, monkeypatch) -> None:
-    """Every figure of a run gets the ranges of all its logs, drawn here or in workers."""
+    """Every figure of a scenario gets the ranges of all its logs, drawn here or in workers;
+    another scenario's logs have their own."""
     from concurrent.futures import ThreadPoolExecutor
 
     from iplanner_torch.cli.experiment import write_timelines
@@ -399,16 +417,21 @@ def test_the_experiments_figures_share_their_axes(tmp_path: Path, monkeypatch) -
     _write(tmp_path / "a.mcap", metrics={"eval/min_distance": -0.01})
     _write(tmp_path / "b.mcap", planner="itomp", forecasts=False)
     write_foreign_mcap(tmp_path / "c.mcap")
+    _write(tmp_path / "d.mcap", scenario="s2")
     logs = sorted(tmp_path.glob("*.mcap"))
     want = shared_axes(episode_timeline(p) for p in logs[:2])
+    own = shared_axes([episode_timeline(logs[3])])
+    assert own.distance_cm[0] > -1.0 > want.distance_cm[0]  # a's minimum is not s2's
     for executor in (None, ThreadPoolExecutor(2)):
         figures.clear()
         with pytest.warns(DataWarning, match=r"no timeline plot for 1 log\(s\): c.mcap"):
             written = write_timelines(logs, progress=False, executor=executor)
-        assert written == [tmp_path / "a.png", tmp_path / "b.png"]
-        assert len(figures) == 2
+        assert written == [tmp_path / f"{n}.png" for n in "abd"]
+        assert len(figures) == 3
+        by_title = {f._suptitle.get_text(): f for f in figures}
         for fig in figures:
-            assert fig.axes[0].get_ylim() == pytest.approx(want.distance_cm)
-            assert fig.axes[3].get_ylim() == pytest.approx((0.0, want.speed))
-            assert fig.axes[3].get_xlim() == pytest.approx((0.0, want.end_t))
-    assert want.distance_cm[0] < -1.0  # a's own minimum below 0 is held
+            axes = own if "s2" in fig._suptitle.get_text() else want
+            assert fig.axes[0].get_ylim() == pytest.approx(axes.distance_cm)
+            assert fig.axes[3].get_ylim() == pytest.approx((0.0, axes.speed))
+            assert fig.axes[3].get_xlim() == pytest.approx((0.0, axes.end_t))
+        assert sum("s2" in t for t in by_title) == 1
