@@ -93,10 +93,14 @@ def main() -> None:
         for w in caught:
             if issubclass(w.category, DataWarning):
                 print(f"warning: {log.name}: {str(w.message).splitlines()[0]}", file=sys.stderr)
-    shared = shared_axes_by_scenario([tl for tl, _ in timelines])
+    shared = (
+        [None] * len(timelines)
+        if args.own_axes
+        else shared_axes_by_scenario([tl for tl, _ in timelines])
+    )
     written = 0
     for (tl, png), axes in zip(timelines, shared):
-        plot_episode_timeline(tl, png, None if args.own_axes else axes)
+        plot_episode_timeline(tl, png, axes)
         written += 1
         print(png)
     if skipped:

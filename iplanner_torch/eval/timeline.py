@@ -325,7 +325,8 @@ def _metric(episode: Episode, key: str) -> float:
 @dataclass(frozen=True)
 class SharedAxes:
     """Axis ranges that the timelines of several episodes share, so that their panels compare
-    at a glance (the same height is the same distance or speed in every figure of a run).
+    at a glance (the same height is the same distance or speed in every figure of a
+    scenario).
 
     Attributes:
         end_t: the right end of the time axis [s] (None: each episode's own end).
@@ -351,20 +352,25 @@ def shared_axes(timelines: Iterable[Timeline]) -> SharedAxes:
     Returns:
         The :class:`SharedAxes` for :func:`plot_episode_timeline`.
     """
-    ends, dist, speed = [], [], []
+    ends, lows, highs, tops = [], [], [], []  # each timeline's finite extremes
     for tl in timelines:
         if math.isfinite(tl.end_t):
             ends.append(tl.end_t)
-        gaps = np.append(np.asarray(tl.gap_m, dtype=np.float64), tl.min_distance_m)
-        dist += [float(g) for g in 100.0 * gaps[np.isfinite(gaps)]]
+        gaps = 100.0 * np.append(np.asarray(tl.gap_m, dtype=np.float64), tl.min_distance_m)
+        gaps = gaps[np.isfinite(gaps)]
+        if gaps.size:
+            lows.append(float(gaps.min()))
+            highs.append(float(gaps.max()))
         sp = np.asarray(tl.speed, dtype=np.float64)
-        speed += [float(v) for v in sp[np.isfinite(sp)]]
+        sp = sp[np.isfinite(sp)]
+        if sp.size:
+            tops.append(float(sp.max()))
     distance = None
-    if dist:
-        lo, hi = min(min(dist), 0.0), max(max(dist), 0.0)
+    if lows:
+        lo, hi = min(min(lows), 0.0), max(max(highs), 0.0)
         pad = 0.05 * (hi - lo) if hi > lo else 1.0
         distance = (lo - pad, hi + pad)
-    top = max(speed) if speed else 0.0
+    top = max(tops) if tops else 0.0
     return SharedAxes(
         end_t=max(ends) if ends else None,
         distance_cm=distance,
@@ -409,8 +415,9 @@ def plot_episode_timeline(
     The planner's waits are shaded red in every panel and the robot's picks and deliveries
     are vertical lines. Every action has its own colour (:func:`action_colours`); the legends
     stand to the right of their panels, outside the plotting area. With ``axes`` the time,
-    distance and speed axes span the given ranges (``iplanner-experiment`` gives every figure
-    of a run the same, from :func:`shared_axes`), so figures side by side compare by eye.
+    distance and speed axes span the given ranges (``iplanner-experiment`` gives the figures
+    of a scenario the same, from :func:`shared_axes_by_scenario`), so figures side by side
+    compare by eye.
 
     Args:
         episode: an :class:`~iplanner_torch.recording.Episode`, the path of its log, or a

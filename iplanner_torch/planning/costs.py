@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Literal, Protocol, get_args
 
 import torch
 
@@ -45,6 +45,8 @@ PRUNE_SIGMAS = 5.0
 PRUNED_PAIR_BOUND = 2.87e-7
 #: How :func:`human_collision_bound` combines the sphere pairs of a waypoint.
 BoundReduce = Literal["max", "sum"]
+#: The values of :data:`BoundReduce`.
+BOUND_REDUCTIONS: tuple[str, ...] = get_args(BoundReduce)
 #: Pair bounds (isotropic) above this get the exact diagonal-Gaussian bound.
 EXACT_FROM = 1e-6
 #: Relative slack [m per m] on the triangle-inequality pre-check of :func:`candidate_pairs`.
@@ -907,7 +909,7 @@ def human_collision_bound(
             or A).
         ConfigError: when ``reduce`` is not ``"max"`` or ``"sum"``.
     """
-    if reduce not in ("max", "sum"):
+    if reduce not in BOUND_REDUCTIONS:
         raise ConfigError(f"expected reduce 'max' or 'sum', got {reduce!r}")
     _check_robot_spheres(robot_centers, robot_radii, human)
     if pairs is not None:
@@ -952,14 +954,15 @@ def human_collision_bound(
             bound, dist = _pair_bounds(
                 robot_centers[:, :, ri], mean_p.unsqueeze(0), var_p, inv_s_p, rad_p, exact
             )  # (B, W_x, P, A)
-            if summed:
+            if summed or not need_grad:
                 pen = torch.relu(rad_p - dist).square()  # (B, W_x, P, A)
+                pen_cost = (pen @ weights).sum(dim=(1, 2))
+            if summed:
                 mixed = (bound @ weights).sum(-1) + (human.residual + slack)  # (B, W_x)
-                return mixed.clamp(max=1.0), (pen @ weights).sum(dim=(1, 2))
+                return mixed.clamp(max=1.0), pen_cost
             mixed = bound @ weights + human.residual  # (B, W_x, P)
             if not need_grad:
-                pen = torch.relu(rad_p - dist).square()  # (B, W_x, P, A)
-                return mixed.amax(-1).clamp(max=1.0), (pen @ weights).sum(dim=(1, 2))
+                return mixed.amax(-1).clamp(max=1.0), pen_cost
             touch = _any_leading(dist < rad_p, 2).any(-1)  # (P,)
             touching = torch.nonzero(touch).squeeze(-1)  # (Q,)
         else:
@@ -981,14 +984,14 @@ def human_collision_bound(
             else:
                 mixed = _entry_mixture(bound_k, w_k, wp_k, shape)
             dist_k, rad_1 = dist_k[..., 0], rad_k[:, 0]  # (B, K), (K,)
+            if summed or not need_grad:
+                pen_cost = (torch.relu(rad_1 - dist_k).square() * w_k).sum(-1)
             if summed:
-                pen = (torch.relu(rad_1 - dist_k).square() * w_k).sum(-1)
                 mixed = mixed.sum(-1) + (human.residual + slack)  # (B, W_x)
-                return mixed.clamp(max=1.0), pen
+                return mixed.clamp(max=1.0), pen_cost
             mixed = mixed + human.residual  # (B, W_x, P)
             if not need_grad:
-                pen = (torch.relu(rad_1 - dist_k).square() * w_k).sum(-1)
-                return mixed.amax(-1).clamp(max=1.0), pen
+                return mixed.amax(-1).clamp(max=1.0), pen_cost
             touching = torch.unique(p_k[_any_leading(dist_k < rad_1, 1)])  # (Q,)
         top = mixed.argmax(-1)  # (B, W_x) index into the pairs
     mean_p, var_p, inv_s_p, rad_p = human.pair_tensors(pairs, robot_radii)  # cached

@@ -221,7 +221,7 @@ class OptimizerCfg:
             raise ConfigError(f"expected confidence in (0, 1), got {self.confidence!r}")
         if not is_real(self.penalty_target) or not 0.0 < self.penalty_target <= 1.0:
             raise ConfigError(f"expected penalty_target in (0, 1], got {self.penalty_target!r}")
-        if self.bound_reduce not in ("max", "sum"):
+        if self.bound_reduce not in C.BOUND_REDUCTIONS:
             raise ConfigError(f"expected bound_reduce 'max' or 'sum', got {self.bound_reduce!r}")
         if not is_real(self.drop_action_mass) or not 0.0 <= self.drop_action_mass < 1.0:
             raise ConfigError(
