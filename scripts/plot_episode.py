@@ -86,7 +86,7 @@ def main() -> None:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                timelines.append((episode_timeline(log), png))
+                timelines.append((episode_timeline(log), png, log))
             except DataError as exc:
                 skipped.append(f"{log} ({exc})")
                 continue
@@ -96,11 +96,11 @@ def main() -> None:
     shared = (
         [None] * len(timelines)
         if args.own_axes
-        else shared_axes_by_scenario([tl for tl, _ in timelines])
+        else shared_axes_by_scenario([tl for tl, _, _ in timelines])
     )
     written = 0
-    for (tl, png), axes in zip(timelines, shared):
-        plot_episode_timeline(tl, png, axes)
+    for (tl, png, log), axes in zip(timelines, shared):
+        plot_episode_timeline(tl, png, axes, source=log)
         written += 1
         print(png)
     if skipped:

@@ -1301,8 +1301,12 @@ def write_timelines(
     (:func:`~iplanner_torch.eval.timeline.shared_axes_by_scenario`), so that its planners
     side by side compare by eye.
 
-    A log that cannot be drawn (cut short before its first messages, say) is named in a
-    warning and left out; the others are drawn.
+    A figure already there (a resumed run's) is kept when its stamp
+    (:class:`~iplanner_torch.eval.timeline.TimelineStamp`) says it was drawn from this very
+    log (name, size and modification time) on the axes the scenario has now; its log is then
+    not read either, the stamp holding the extremes the axes need. Every other figure is
+    drawn. A log that cannot be drawn (cut short before its first messages, say) is named in
+    a warning and left out; the others are drawn.
 
     Args:
         logs: the MCAP episode logs.
@@ -1311,7 +1315,8 @@ def write_timelines(
             :func:`~iplanner_torch.eval.experiment.episode_pool`); None: here.
 
     Returns:
-        The written PNG paths, in the order of ``logs``.
+        The PNG paths beside the logs that have one now (drawn or kept), in the order of
+        ``logs``.
     """
     import warnings
 
@@ -1319,15 +1324,18 @@ def write_timelines(
 
     from iplanner_torch.errors import DataError, DataWarning
     from iplanner_torch.eval.timeline import (
+        axes_by_scenario,
         episode_timeline,
+        log_fingerprint,
         plot_episode_timeline,
-        shared_axes_by_scenario,
+        read_timeline_stamp,
+        timeline_extremes,
         timeline_path,
     )
 
     bar = tqdm(total=2 * len(logs), desc="timeline plots", disable=not progress or len(logs) < 2)
 
-    def collect(jobs: list, fn, *args) -> list:
+    def collect(jobs: list | None, fn, *args) -> list:
         """Each job's result (a DataError in its place), in order; done here without jobs."""
         out = []
         for i in range(len(args[0])):
@@ -1338,32 +1346,51 @@ def write_timelines(
             bar.update()
         return out
 
-    # 1. every log's series (in the workers: reading a log is most of the work)
-    read = None if executor is None else [executor.submit(episode_timeline, log) for log in logs]
-    timelines = collect(read, episode_timeline, logs)
-    # 2. the figures, on the axes of their scenario's episodes
-    drawn_logs = [log for log, tl in zip(logs, timelines) if not isinstance(tl, DataError)]
-    drawn_tls = [tl for tl in timelines if not isinstance(tl, DataError)]
-    axes = shared_axes_by_scenario(drawn_tls)
-    pngs = [timeline_path(log) for log in drawn_logs]
-    bar.update(len(logs) - len(drawn_logs))
+    # 1. each figure's stamp: one drawn from this very log gives its extremes unread
+    pngs = [timeline_path(log) for log in logs]
+    stamps = []
+    for log, png in zip(logs, pngs):
+        stamp = read_timeline_stamp(png)
+        try:
+            same = stamp is not None and stamp.source == log_fingerprint(log)
+        except OSError:
+            same = False
+        stamps.append(stamp if same else None)
+    # 2. the other logs' series (in the workers: reading a log is most of the work)
+    unread = [log for log, st in zip(logs, stamps) if st is None]
+    bar.update(len(logs) - len(unread))
+    jobs = None if executor is None else [executor.submit(episode_timeline, p) for p in unread]
+    read = iter(collect(jobs, episode_timeline, unread))
+    items = [next(read) if st is None else st for st in stamps]  # Timeline, stamp or error
+    # 3. the figures, on the axes of their scenario's episodes; kept where those did not move
+    ok = [i for i, it in enumerate(items) if not isinstance(it, DataError)]
+    extremes = [
+        stamps[i].extremes if stamps[i] is not None else timeline_extremes(items[i]) for i in ok
+    ]
+    axes = dict(zip(ok, axes_by_scenario(extremes)))
+    draw = [i for i in ok if stamps[i] is None or stamps[i].axes != axes[i]]
+    bar.update(len(logs) - len(draw))
+    # a log read above is drawn from its timeline; a kept one whose axes moved is read again
+    # (plot_episode_timeline takes its path), in the workers too
+    what = [items[i] if stamps[i] is None else logs[i] for i in draw]
+    args = ([pngs[i] for i in draw], [axes[i] for i in draw], [logs[i] for i in draw])
     plots = (
         None
         if executor is None
         else [
-            executor.submit(plot_episode_timeline, tl, png, ax)
-            for tl, png, ax in zip(drawn_tls, pngs, axes)
+            executor.submit(plot_episode_timeline, ep, png, ax, source=src)
+            for ep, png, ax, src in zip(what, *args)
         ]
     )
-    results = collect(plots, plot_episode_timeline, drawn_tls, pngs, axes)
+
+    def plot(ep, png, ax, src):
+        return plot_episode_timeline(ep, png, ax, source=src)
+
+    results = dict(zip(draw, collect(plots, plot, what, *args)))
     bar.close()
-    failed = [
-        f"{log.name} ({tl})" for log, tl in zip(logs, timelines) if isinstance(tl, DataError)
-    ]
-    failed += [
-        f"{log.name} ({r})" for log, r in zip(drawn_logs, results) if isinstance(r, DataError)
-    ]
-    written = [r for r in results if not isinstance(r, DataError)]
+    failed = [f"{logs[i].name} ({it})" for i, it in enumerate(items) if isinstance(it, DataError)]
+    failed += [f"{logs[i].name} ({r})" for i, r in results.items() if isinstance(r, DataError)]
+    written = [pngs[i] for i in ok if not isinstance(results.get(i), DataError)]
     if failed:
         warnings.warn(
             f"no timeline plot for {len(failed)} log(s): {'; '.join(failed)}",

@@ -23,11 +23,17 @@ Sources (channels of the log):
 - arm speed: ``/robot/joint_state`` (the norm of the joint velocities).
 
 A log cut short (``episode.complete`` False) is drawn as far as it goes, and says so.
+
+Each figure carries a :class:`TimelineStamp` in its PNG text (:data:`STAMP_KEY`): the log it
+was drawn from, that log's extremes and the axes drawn on, so that a resumed run keeps the
+figures that would come out the same (:func:`read_timeline_stamp`).
 """
 
 from __future__ import annotations
 
+import json
 import math
+import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,13 +49,22 @@ from iplanner_torch.eval.report import PLANNERS
 from iplanner_torch.recording.reader import Episode, read_episode
 
 __all__ = [
+    "STAMP_KEY",
+    "TIMELINE_FORMAT",
     "SharedAxes",
     "Timeline",
+    "TimelineExtremes",
+    "TimelineStamp",
     "action_colours",
+    "axes_by_scenario",
+    "axes_from_extremes",
     "episode_timeline",
+    "log_fingerprint",
     "plot_episode_timeline",
+    "read_timeline_stamp",
     "shared_axes",
     "shared_axes_by_scenario",
+    "timeline_extremes",
     "timeline_path",
 ]
 
@@ -339,32 +354,49 @@ class SharedAxes:
     speed: float | None = None
 
 
-def shared_axes(timelines: Iterable[Timeline]) -> SharedAxes:
-    """The axis ranges that hold every given timeline's series, with a margin of 5 %.
+@dataclass(frozen=True)
+class TimelineExtremes:
+    """What the shared axes need of one timeline: its finite extremes.
 
-    The distance range spans the sampled distances and each episode's own minimum
-    (``min_distance_m``), and always holds 0 (where the sphere models touch); NaN and inf are
-    left out. A range no timeline has a finite value for is None (each figure's own).
-
-    Args:
-        timelines: the episodes' :class:`Timeline` (e.g. of one ``iplanner-experiment`` run).
-
-    Returns:
-        The :class:`SharedAxes` for :func:`plot_episode_timeline`.
+    Attributes:
+        scenario: ``Timeline.scenario`` (the axes are shared per scenario).
+        end_t: the last time in the log [s], None when not finite.
+        gap_cm: ``(least, largest)`` of the sampled sphere-model distances and the episode's
+            own minimum [cm], None when none is finite.
+        speed: the largest finite arm speed [rad/s], None when there is none.
     """
-    ends, lows, highs, tops = [], [], [], []  # each timeline's finite extremes
-    for tl in timelines:
-        if math.isfinite(tl.end_t):
-            ends.append(tl.end_t)
-        gaps = 100.0 * np.append(np.asarray(tl.gap_m, dtype=np.float64), tl.min_distance_m)
-        gaps = gaps[np.isfinite(gaps)]
-        if gaps.size:
-            lows.append(float(gaps.min()))
-            highs.append(float(gaps.max()))
-        sp = np.asarray(tl.speed, dtype=np.float64)
-        sp = sp[np.isfinite(sp)]
-        if sp.size:
-            tops.append(float(sp.max()))
+
+    scenario: str = ""
+    end_t: float | None = None
+    gap_cm: tuple[float, float] | None = None
+    speed: float | None = None
+
+
+def timeline_extremes(tl: Timeline) -> TimelineExtremes:
+    """The finite extremes of one timeline's series (NaN and inf left out)."""
+    gaps = 100.0 * np.append(np.asarray(tl.gap_m, dtype=np.float64), tl.min_distance_m)
+    gaps = gaps[np.isfinite(gaps)]
+    sp = np.asarray(tl.speed, dtype=np.float64)
+    sp = sp[np.isfinite(sp)]
+    return TimelineExtremes(
+        scenario=tl.scenario,
+        end_t=float(tl.end_t) if math.isfinite(tl.end_t) else None,
+        gap_cm=(float(gaps.min()), float(gaps.max())) if gaps.size else None,
+        speed=float(sp.max()) if sp.size else None,
+    )
+
+
+def axes_from_extremes(extremes: Iterable[TimelineExtremes]) -> SharedAxes:
+    """:func:`shared_axes` from the timelines' :func:`timeline_extremes` (the same ranges)."""
+    ends, lows, highs, tops = [], [], [], []
+    for ex in extremes:
+        if ex.end_t is not None:
+            ends.append(ex.end_t)
+        if ex.gap_cm is not None:
+            lows.append(ex.gap_cm[0])
+            highs.append(ex.gap_cm[1])
+        if ex.speed is not None:
+            tops.append(ex.speed)
     distance = None
     if lows:
         lo, hi = min(min(lows), 0.0), max(max(highs), 0.0)
@@ -378,15 +410,36 @@ def shared_axes(timelines: Iterable[Timeline]) -> SharedAxes:
     )
 
 
+def shared_axes(timelines: Iterable[Timeline]) -> SharedAxes:
+    """The axis ranges that hold every given timeline's series, with a margin of 5 %.
+
+    The distance range spans the sampled distances and each episode's own minimum
+    (``min_distance_m``), and always holds 0 (where the sphere models touch); NaN and inf are
+    left out. A range no timeline has a finite value for is None (each figure's own).
+
+    Args:
+        timelines: the episodes' :class:`Timeline` (e.g. of one ``iplanner-experiment`` run).
+
+    Returns:
+        The :class:`SharedAxes` for :func:`plot_episode_timeline`.
+    """
+    return axes_from_extremes(timeline_extremes(tl) for tl in timelines)
+
+
 def shared_axes_by_scenario(timelines: Sequence[Timeline]) -> list[SharedAxes]:
     """:func:`shared_axes` over the timelines of each scenario (``Timeline.scenario``), one
     per timeline in order: the planners of a scenario compare on the same axes, and a short
     scenario's episodes are not drawn on the time axis of a long one."""
-    by: dict[str, list[Timeline]] = {}
-    for tl in timelines:
-        by.setdefault(tl.scenario, []).append(tl)
-    axes = {name: shared_axes(group) for name, group in by.items()}
-    return [axes[tl.scenario] for tl in timelines]
+    return axes_by_scenario([timeline_extremes(tl) for tl in timelines])
+
+
+def axes_by_scenario(extremes: Sequence[TimelineExtremes]) -> list[SharedAxes]:
+    """:func:`shared_axes_by_scenario` from the timelines' :func:`timeline_extremes`."""
+    by: dict[str, list[TimelineExtremes]] = {}
+    for ex in extremes:
+        by.setdefault(ex.scenario, []).append(ex)
+    axes = {name: axes_from_extremes(group) for name, group in by.items()}
+    return [axes[ex.scenario] for ex in extremes]
 
 
 def timeline_path(log: str | Path) -> Path:
@@ -394,10 +447,157 @@ def timeline_path(log: str | Path) -> Path:
     return Path(log).with_suffix(".png")
 
 
+#: the PNG text key under which :func:`plot_episode_timeline` records what a figure was drawn
+#: from (:class:`TimelineStamp`)
+STAMP_KEY = "iplanner:timeline"
+#: the figures' drawing; a figure stamped with another is drawn again by a resumed run (raise
+#: it when :func:`plot_episode_timeline` draws differently)
+TIMELINE_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class TimelineStamp:
+    """What a timeline figure was drawn from, kept in its PNG (:data:`STAMP_KEY`): a resumed
+    ``iplanner-experiment`` keeps a figure whose log and axes have not changed, and takes the
+    log's extremes from here instead of reading the log again.
+
+    Attributes:
+        extremes: the episode's :func:`timeline_extremes`.
+        axes: the ranges the figure was drawn on.
+        source: the log's :func:`log_fingerprint` (None: drawn from a timeline or an episode
+            without its file).
+    """
+
+    extremes: TimelineExtremes
+    axes: SharedAxes
+    source: tuple[str, int, int] | None = None
+
+    def to_json(self) -> str:
+        """The stamp as one line of JSON (floats written to the last bit)."""
+        return json.dumps(
+            {
+                "format": TIMELINE_FORMAT,
+                "extremes": {
+                    "scenario": self.extremes.scenario,
+                    "end_t": self.extremes.end_t,
+                    "gap_cm": self.extremes.gap_cm,
+                    "speed": self.extremes.speed,
+                },
+                "axes": {
+                    "end_t": self.axes.end_t,
+                    "distance_cm": self.axes.distance_cm,
+                    "speed": self.axes.speed,
+                },
+                "source": self.source,
+            }
+        )
+
+    @classmethod
+    def from_json(cls, text: str) -> TimelineStamp | None:
+        """The stamp in ``text``, or None when it is not one of this format."""
+        try:
+            raw = json.loads(text)
+            if raw.get("format") != TIMELINE_FORMAT:
+                return None
+            ex, ax, src = raw["extremes"], raw["axes"], raw["source"]
+            extremes = TimelineExtremes(
+                scenario=_str(ex["scenario"]),
+                end_t=_opt_float(ex["end_t"]),
+                gap_cm=_opt_pair(ex["gap_cm"]),
+                speed=_opt_float(ex["speed"]),
+            )
+            axes = SharedAxes(
+                end_t=_opt_float(ax["end_t"]),
+                distance_cm=_opt_pair(ax["distance_cm"]),
+                speed=_opt_float(ax["speed"]),
+            )
+            source = None
+            if src is not None:
+                name, size, mtime = src
+                if not (isinstance(size, int) and isinstance(mtime, int)):
+                    raise TypeError("size and mtime are integers")
+                source = (_str(name), size, mtime)
+        except (ValueError, TypeError, KeyError, AttributeError):
+            return None
+        return cls(extremes=extremes, axes=axes, source=source)
+
+
+def _str(x: object) -> str:
+    if not isinstance(x, str):
+        raise TypeError(f"expected a string, got {type(x).__name__}")
+    return x
+
+
+def _opt_float(x: object) -> float | None:
+    if x is None:
+        return None
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise TypeError(f"expected a number, got {type(x).__name__}")
+    return float(x)
+
+
+def _opt_pair(x: object) -> tuple[float, float] | None:
+    if x is None:
+        return None
+    if not isinstance(x, list) or len(x) != 2:
+        raise TypeError("expected a pair")
+    lo, hi = (_opt_float(v) for v in x)
+    if lo is None or hi is None:
+        raise TypeError("expected two numbers")
+    return (lo, hi)
+
+
+def log_fingerprint(log: str | Path) -> tuple[str, int, int]:
+    """``(file name, size [bytes], modification time [ns])`` of an episode log: a log that
+    was written again (a re-run episode) has another, so its figure is drawn again.
+
+    Raises:
+        OSError: when the file cannot be read.
+    """
+    st = os.stat(log)
+    return (Path(log).name, int(st.st_size), int(st.st_mtime_ns))
+
+
+#: the first bytes of every PNG file
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def read_timeline_stamp(png: str | Path) -> TimelineStamp | None:
+    """The :class:`TimelineStamp` of a figure that :func:`plot_episode_timeline` drew, or
+    None when the file is missing, not a PNG, cut short, or holds no stamp of this format
+    (then the figure is drawn again). Reads the PNG's chunk headers and its text chunks only,
+    not the image."""
+    key = STAMP_KEY.encode("latin-1") + b"\x00"
+    try:
+        with open(png, "rb") as f:
+            if f.read(8) != _PNG_SIGNATURE:
+                return None
+            while True:
+                head = f.read(8)
+                if len(head) < 8:
+                    return None
+                n, kind = int.from_bytes(head[:4], "big"), head[4:]
+                if kind == b"IEND":
+                    return None
+                if kind == b"tEXt":
+                    data = f.read(n)
+                    if len(data) < n:
+                        return None
+                    if data.startswith(key):
+                        return TimelineStamp.from_json(data[len(key) :].decode("latin-1"))
+                    f.seek(4, os.SEEK_CUR)  # CRC
+                else:
+                    f.seek(n + 4, os.SEEK_CUR)
+    except OSError:
+        return None
+
+
 def plot_episode_timeline(
     episode: Episode | str | Path | Timeline,
     out_path: str | Path,
     axes: SharedAxes | None = None,
+    *,
+    source: str | Path | None = None,
 ) -> Path:
     """Draw one episode as four panels sharing the time axis.
 
@@ -425,6 +625,9 @@ def plot_episode_timeline(
         out_path: the PNG to write (its folder is created).
         axes: ranges shared with other episodes' figures (:func:`shared_axes`); None: this
             episode's own (time from 0 to its end).
+        source: the log the timeline was read from, when ``episode`` is not its path; its
+            :func:`log_fingerprint` goes into the figure's :class:`TimelineStamp` (the PNG
+            text :data:`STAMP_KEY`, with the extremes and the axes drawn on).
 
     Returns:
         ``out_path`` as a Path.
@@ -433,9 +636,12 @@ def plot_episode_timeline(
         DataError: see :func:`episode_timeline`.
         ConfigError: when ``axes`` is not a :class:`SharedAxes` or None.
     """
-    tl = episode if isinstance(episode, Timeline) else episode_timeline(episode)
     if axes is not None and not isinstance(axes, SharedAxes):
         raise ConfigError(f"expected axes a SharedAxes or None, got {type(axes).__name__}")
+    if source is None and isinstance(episode, (str, Path)):
+        source = episode
+    fingerprint = None if source is None else log_fingerprint(source)
+    tl = episode if isinstance(episode, Timeline) else episode_timeline(episode)
     shared = axes if axes is not None else SharedAxes()
     fig = Figure(figsize=(11.0, 8.0))
     panels = fig.subplots(4, 1, sharex=True, height_ratios=[1.2, 1.0, 1.2, 0.8])
@@ -557,7 +763,8 @@ def plot_episode_timeline(
     fig.tight_layout()
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=100)
+    stamp = TimelineStamp(timeline_extremes(tl), shared, fingerprint)
+    fig.savefig(out, dpi=100, metadata={STAMP_KEY: stamp.to_json()})
     return out
 
 

@@ -424,6 +424,8 @@ def test_the_experiments_figures_share_their_axes(tmp_path: Path, monkeypatch) -
     assert own.distance_cm[0] > -1.0 > want.distance_cm[0]  # a's minimum is not s2's
     for executor in (None, ThreadPoolExecutor(2)):
         figures.clear()
+        for png in tmp_path.glob("*.png"):  # drawn afresh each time (kept ones: the next test)
+            png.unlink()
         with pytest.warns(DataWarning, match=r"no timeline plot for 1 log\(s\): c.mcap"):
             written = write_timelines(logs, progress=False, executor=executor)
         assert written == [tmp_path / f"{n}.png" for n in "abd"]
@@ -435,3 +437,139 @@ def test_the_experiments_figures_share_their_axes(tmp_path: Path, monkeypatch) -
             assert fig.axes[3].get_ylim() == pytest.approx((0.0, axes.speed))
             assert fig.axes[3].get_xlim() == pytest.approx((0.0, axes.end_t))
         assert sum("s2" in t for t in by_title) == 1
+
+
+def test_the_stamp_goes_into_the_png_and_back(tmp_path: Path) -> None:
+    """What a figure was drawn from is read back from its PNG text, exactly; anything else
+    (no stamp, another format, not a PNG, cut short, missing) reads as no stamp."""
+    import json
+
+    from iplanner_torch.eval.timeline import (
+        STAMP_KEY,
+        TIMELINE_FORMAT,
+        SharedAxes,
+        TimelineExtremes,
+        TimelineStamp,
+        log_fingerprint,
+        read_timeline_stamp,
+        shared_axes,
+        timeline_extremes,
+    )
+
+    log = tmp_path / "a.mcap"
+    _write(log, metrics={"eval/min_distance": 0.031})
+    tl = episode_timeline(log)
+    axes = SharedAxes(end_t=7.25, distance_cm=(-1.0 / 3.0, 90.1), speed=6.0)
+    png = plot_episode_timeline(log, tmp_path / "a.png", axes)
+    stamp = read_timeline_stamp(png)
+    assert stamp == TimelineStamp(timeline_extremes(tl), axes, log_fingerprint(log))
+    assert stamp.axes.distance_cm[0] == -1.0 / 3.0  # to the last bit
+    assert stamp.source[0] == "a.mcap" and stamp.source[1] == log.stat().st_size
+    # the extremes against the series, here with plain max/min
+    gaps = [100.0 * g for g in tl.gap_m] + [3.1]
+    assert stamp.extremes == TimelineExtremes(
+        "s1", 3.0, (min(gaps), max(gaps)), float(max(tl.speed))
+    )
+    assert shared_axes([tl]) == shared_axes([tl, tl])
+    # drawn from a Timeline: no source unless given
+    assert read_timeline_stamp(plot_episode_timeline(tl, tmp_path / "t.png")).source is None
+    got = read_timeline_stamp(plot_episode_timeline(tl, tmp_path / "u.png", source=log))
+    assert got.source == log_fingerprint(log) and got.axes == SharedAxes()
+    # not stamps
+    raw = json.loads(stamp.to_json())
+    assert TimelineStamp.from_json(json.dumps(raw)) == stamp
+    for bad in (
+        {**raw, "format": TIMELINE_FORMAT + 1},
+        {**raw, "axes": {**raw["axes"], "speed": "fast"}},
+        {**raw, "axes": {**raw["axes"], "distance_cm": [1.0]}},
+        {**raw, "source": ["a.mcap", 1.5, 2]},
+        {k: v for k, v in raw.items() if k != "extremes"},
+    ):
+        assert TimelineStamp.from_json(json.dumps(bad)) is None
+    assert TimelineStamp.from_json("not json") is None
+    assert TimelineStamp.from_json("[1, 2]") is None
+    from matplotlib.figure import Figure
+
+    fig = Figure()
+    fig.savefig(tmp_path / "plain.png")
+    assert read_timeline_stamp(tmp_path / "plain.png") is None
+    fig.savefig(tmp_path / "other.png", metadata={STAMP_KEY: "{}"})
+    assert read_timeline_stamp(tmp_path / "other.png") is None
+    data = png.read_bytes()
+    (tmp_path / "cut.png").write_bytes(data[: data.index(STAMP_KEY.encode()) + 10])
+    assert read_timeline_stamp(tmp_path / "cut.png") is None
+    (tmp_path / "text.png").write_text("hello")
+    assert read_timeline_stamp(tmp_path / "text.png") is None
+    assert read_timeline_stamp(tmp_path / "missing.png") is None
+
+
+def test_a_resumed_run_keeps_the_figures_whose_log_and_axes_did_not_change(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """write_timelines again over the same logs reads and draws nothing; a new log that
+    widens its scenario's axes redraws that scenario's figures only; a log written again, a
+    figure without a stamp and a damaged figure are drawn again."""
+    import os
+
+    import iplanner_torch.eval.timeline as timeline
+    from iplanner_torch.cli.experiment import write_timelines
+    from iplanner_torch.eval.timeline import read_timeline_stamp, shared_axes
+
+    figures = _figures(monkeypatch)
+    reads: list[str] = []
+    real_read = timeline.episode_timeline
+
+    def counted(episode):
+        reads.append(Path(episode).name)
+        return real_read(episode)
+
+    monkeypatch.setattr(timeline, "episode_timeline", counted)
+
+    def drawn() -> list[str]:
+        """The titles of the figures drawn, and the logs read, since the last call."""
+        names = sorted(f._suptitle.get_text() for f in figures) + sorted(reads)
+        figures.clear()
+        reads.clear()
+        return names
+
+    _write(tmp_path / "a.mcap")
+    _write(tmp_path / "b.mcap", planner="itomp", forecasts=False)
+    _write(tmp_path / "d.mcap", scenario="s2")
+    logs = [tmp_path / f"{n}.mcap" for n in "abd"]
+    pngs = [tmp_path / f"{n}.png" for n in "abd"]
+    assert write_timelines(logs, progress=False) == pngs
+    assert len(drawn()) == 6  # three read, three drawn
+    before = {p: p.read_bytes() for p in pngs}
+    # 1. nothing changed: nothing read, nothing drawn, every figure as it was
+    assert write_timelines(logs, progress=False) == pngs
+    assert drawn() == [] and all(p.read_bytes() == b for p, b in before.items())
+    # 2. a new s1 episode that came closer: s1's three figures on the new axes, s2's kept
+    _write(tmp_path / "c.mcap", metrics={"eval/min_distance": -0.2})
+    logs.insert(2, tmp_path / "c.mcap")
+    pngs.insert(2, tmp_path / "c.png")
+    assert write_timelines(logs, progress=False) == pngs
+    got = drawn()  # c read; a and b read again by plot_episode_timeline for the new axes
+    assert sum("s1" in t for t in got) == 3 and got[3:] == ["a.mcap", "b.mcap", "c.mcap"]
+    want = shared_axes(real_read(p) for p in logs[:3])
+    assert want.distance_cm[0] < -20.0
+    for p in pngs[:3]:
+        assert read_timeline_stamp(p).axes == want
+    assert pngs[3].read_bytes() == before[pngs[3]]
+    # in workers the same: nothing left to do
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(2) as pool:
+        assert write_timelines(logs, progress=False, executor=pool) == pngs
+    assert drawn() == []
+    # 3. a log written again (another modification time), a figure without a stamp, a
+    # damaged figure: those three drawn, the fourth kept
+    st = logs[0].stat()
+    os.utime(logs[0], ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
+    from matplotlib.figure import Figure
+
+    Figure().savefig(pngs[1])
+    pngs[3].write_bytes(pngs[3].read_bytes()[:100])
+    assert write_timelines(logs, progress=False) == pngs
+    got = drawn()
+    assert len(got) == 6 and got[3:] == ["a.mcap", "b.mcap", "d.mcap"]
+    assert read_timeline_stamp(pngs[1]) is not None and read_timeline_stamp(pngs[3]) is not None
