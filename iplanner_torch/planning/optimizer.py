@@ -155,6 +155,11 @@ class OptimizerCfg:
     # filtered tracking clips to): below 1 the arm moves slower everywhere, as a speed
     # reduction for working beside a person; 1: the limits
     speed_scale: float = 1.0
+    # the plan's duration is the shortest whose least-acceleration path (the cubic the
+    # optimiser starts from) peaks at this share of the velocity limits: room for the
+    # iterations to bend it (round the table, the person) before the acceptance's VEL_TOL
+    # refuses it; at 1 a bent cubic can pass the limits and a rougher candidate is chosen
+    duration_vel_fraction: float = 1.0
     # static-obstacle clearance below which the hinge cost starts [m]
     static_margin: float = 0.02
     # distance robot spheres may move before the pruned sphere pairs are refreshed [m]
@@ -211,6 +216,10 @@ class OptimizerCfg:
         positive("lr", self.lr)  # NaN and inf refused too
         if not is_real(self.speed_scale) or not 0.0 < self.speed_scale <= 1.0:
             raise ConfigError(f"expected speed_scale in (0, 1], got {self.speed_scale!r}")
+        if not is_real(self.duration_vel_fraction) or not 0.0 < self.duration_vel_fraction <= 1.0:
+            raise ConfigError(
+                f"expected duration_vel_fraction in (0, 1], got {self.duration_vel_fraction!r}"
+            )
         if not is_real(self.lr_final_ratio) or not 0.0 < self.lr_final_ratio <= 1.0:
             raise ConfigError(f"expected lr_final_ratio in (0, 1], got {self.lr_final_ratio!r}")
         if not is_real(self.perturbation_std) or not 0.0 <= self.perturbation_std < math.inf:
@@ -551,7 +560,8 @@ class TrajectoryOptimizer:
         self._check_ends(q_start, q_goal, qd_start)
         q_start = q_start.to(self.device, self.dtype)
         d = q_goal.to(q_start) - q_start  # (J,)
-        t_line = float(1.5 * (d.abs() / self.v_max).max())
+        v_plan = self.cfg.duration_vel_fraction * self.v_max  # (J,) the path's peak speeds
+        t_line = float(1.5 * (d.abs() / v_plan).max())
         if qd_start is None and self.cfg.acc_max is None:
             return t_line
         v0 = torch.zeros_like(d) if qd_start is None else qd_start.to(d)
@@ -563,7 +573,7 @@ class TrajectoryOptimizer:
         # the cubic's velocity v(s) = 6 s (1 - s) D / T + (3 s^2 - 4 s + 1) v0, on a grid of s
         s = torch.linspace(0.0, 1.0, 33, device=d.device, dtype=d.dtype).view(-1, 1, 1)
         vel = 6 * s * (1 - s) * d / t + (3 * s * s - 4 * s + 1) * v0  # (S, N, J)
-        v_lim = torch.maximum(self.v_max, v0.abs())
+        v_lim = torch.maximum(v_plan, v0.abs())
         ok = (vel.abs() <= v_lim * (1.0 + 1e-9)).all(0).all(-1)  # (N,)
         if self.cfg.acc_max is not None:
             a0 = (6 * d - 4 * v0 * t) / (t * t)

@@ -685,6 +685,38 @@ def test_min_duration_keeps_the_cubic_within_velocity_and_acceleration_limits(qd
         opt.min_duration(q_s, q_g, qd[:2])
 
 
+@pytest.mark.parametrize("qd_s", [[0.0, 0.0, 0.0], [-1.0, 0.8, 0.3], [3.0, 0.0, -2.5]])
+def test_min_duration_keeps_the_cubic_within_a_share_of_the_velocity_limits(qd_s) -> None:
+    """With ``duration_vel_fraction`` f the cubic of the returned duration peaks within f
+    times the velocity limits (or the start speed, where that is higher), one grid step
+    shorter above them (scipy's clamped CubicSpline as reference); from rest, the line at
+    2/3 of f times the limits; bad fractions are refused."""
+    from iplanner_torch.planning.optimizer import DURATION_GRID
+
+    arm = PlanarArm(dtype=torch.float64)
+    f = 0.8
+    opt = TrajectoryOptimizer(arm, OptimizerCfg(duration_vel_fraction=f))
+    q_s = torch.tensor([0.0, -0.2, 0.1], dtype=torch.float64)
+    q_g = torch.tensor([0.5, 0.9, -0.4], dtype=torch.float64)
+    qd = torch.tensor(qd_s, dtype=torch.float64)
+    t_min = opt.min_duration(q_s, q_g, qd)
+    v_lim = np.maximum(f * opt.v_max.numpy(), np.abs(qd.numpy()))
+    v_peak, _ = _cubic_peaks(q_s, q_g, qd, t_min)
+    assert np.all(v_peak <= v_lim * (1 + 1e-6))
+    # the search starts at the line at 2/3 of f times the limits; above it, the shortest
+    line = float(1.5 * ((q_g - q_s).abs() / opt.v_max).max()) / f
+    assert t_min >= line * (1 - 1e-12)
+    if t_min > line * (1 + 1e-9):
+        v_short, _ = _cubic_peaks(q_s, q_g, qd, t_min / DURATION_GRID)
+        assert np.any(v_short > v_lim * (1 + 1e-6))
+    full = TrajectoryOptimizer(arm, OptimizerCfg()).min_duration(q_s, q_g, qd)
+    assert t_min >= full
+    assert opt.min_duration(q_s, q_g) == pytest.approx(line, rel=1e-12)
+    for bad in (0.0, 1.5, float("nan"), "0.9"):
+        with pytest.raises(ConfigError, match="expected duration_vel_fraction in"):
+            OptimizerCfg(duration_vel_fraction=bad)
+
+
 def test_one_kinematics_call_gives_the_collision_point_spheres() -> None:
     """The merged forward kinematics equals sphere_centers of _collision_points (reference)."""
     arm = PlanarArm(dtype=torch.float64)
