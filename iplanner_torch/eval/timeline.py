@@ -640,8 +640,11 @@ def plot_episode_timeline(
         raise ConfigError(f"expected axes a SharedAxes or None, got {type(axes).__name__}")
     if source is None and isinstance(episode, (str, Path)):
         source = episode
-    fingerprint = None if source is None else log_fingerprint(source)
     tl = episode if isinstance(episode, Timeline) else episode_timeline(episode)
+    try:  # after the read, whose DataError names a missing log
+        fingerprint = None if source is None else log_fingerprint(source)
+    except OSError:  # gone since: the figure is stamped without it and drawn again next time
+        fingerprint = None
     shared = axes if axes is not None else SharedAxes()
     fig = Figure(figsize=(11.0, 8.0))
     panels = fig.subplots(4, 1, sharex=True, height_ratios=[1.2, 1.0, 1.2, 0.8])

@@ -475,6 +475,12 @@ def test_the_stamp_goes_into_the_png_and_back(tmp_path: Path) -> None:
     assert read_timeline_stamp(plot_episode_timeline(tl, tmp_path / "t.png")).source is None
     got = read_timeline_stamp(plot_episode_timeline(tl, tmp_path / "u.png", source=log))
     assert got.source == log_fingerprint(log) and got.axes == SharedAxes()
+    # a log that is not there: the read's DataError, no figure; a source gone since: no source
+    with pytest.raises(DataError, match="no such episode log"):
+        plot_episode_timeline(tmp_path / "gone.mcap", tmp_path / "gone.png")
+    assert not (tmp_path / "gone.png").exists()
+    got = plot_episode_timeline(tl, tmp_path / "v.png", source=tmp_path / "gone.mcap")
+    assert read_timeline_stamp(got).source is None
     # not stamps
     raw = json.loads(stamp.to_json())
     assert TimelineStamp.from_json(json.dumps(raw)) == stamp
