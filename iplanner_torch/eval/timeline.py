@@ -531,7 +531,7 @@ def _str(x: object) -> str:
 def _opt_float(x: object) -> float | None:
     if x is None:
         return None
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
+    if not is_real(x):
         raise TypeError(f"expected a number, got {type(x).__name__}")
     return float(x)
 

@@ -75,9 +75,10 @@ class CostWeights:
     joint_limit_violation: float = 100.0
     # squared joint-velocity-limit violation [(rad/s)^2]; 100 (10 until 8ba7343) keeps the
     # paths the iterations bend (round the table, the person) within the limits, where the
-    # acceptance would refuse the smoothest for speed and take a rougher candidate: over 10
-    # seeds of 7 table scenarios both planners were smoother on average, by up to 4 rad^2/s^4
-    # in 2x2 and 2x4, with no contact (experiments/speed_scale/)
+    # acceptance would refuse the smoothest for speed and take a rougher candidate: over 20
+    # seeds of the 7 table scenarios on the iiwa both planners became smoother in 2x2 and 2x4
+    # (by 2.2-5.1 rad^2/s^4), with no contact; the Fetch arm's hardly changed
+    # (experiments/safety_seeds/, experiments/speed_scale/)
     joint_vel_limit_violation: float = 100.0
     # squared violation of the acceleration limit the robot's controller tracks [(rad/s^2)^2]
     # (only with OptimizerCfg.acc_max)
