@@ -124,7 +124,7 @@ class OptimizerCfg:
     warm_iterations: int = 10
     # Adam step size on the waypoints' second differences [rad] (a step moves a waypoint up to
     # about lr (W - 2)^2 / 8)
-    lr: float = 0.001
+    lr: float = 0.005
     # step size at the last iteration relative to the first (exponential decay)
     lr_final_ratio: float = 0.1
     # std of the amplitude of the smooth random perturbations of the initial trajectories [rad]
