@@ -152,8 +152,10 @@ class OptimizerCfg:
     # limit
     acc_max: float | None = None
     # share of the robot's joint velocity limits the plans may use (and the replanner's
-    # filtered tracking clips to): below 1 the arm moves slower everywhere, as a speed
-    # reduction for working beside a person; 1: the limits
+    # filtered tracking clips to), a speed reduction for working beside a person; 1: the
+    # limits. It caps speeds only: a move short enough to take horizon_s at full speed takes
+    # as long below 1; divide horizon_s by it too to slow every move (smoother at lr 0.001,
+    # rougher at the default 0.005: experiments/speed_scale/)
     speed_scale: float = 1.0
     # the plan's duration is the shortest whose least-acceleration path (the cubic the
     # optimiser starts from) peaks at this share of the velocity limits: room for the
