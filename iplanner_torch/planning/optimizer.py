@@ -26,7 +26,10 @@ waypoints after the window, so a plan bends around where the person is predicted
 that part of it is executed, and ``OptimizerCfg.check_ahead_s`` (opt-in) makes the constraint
 itself cover the waypoints up to that many seconds after the window (the forecast held at its
 last frame beyond its horizon), so that no plan takes the robot where the person is
-predicted to be just after the window.
+predicted to be just after the window. ``OptimizerCfg.keep_start`` (opt-in; the
+``conf/planner`` files turn it on) sends each trajectory to the acceptance as iterated or as
+it started, whichever has the lower cost: Adam's normalised steps move every waypoint by
+about the step size, so the iterations can leave a start that needed no change rougher.
 """
 
 from __future__ import annotations
@@ -192,6 +195,12 @@ class OptimizerCfg:
     # there is unsafe). A plan unsafe only there runs up to its last safe waypoint. 0: the
     # window alone (the paper)
     check_ahead_s: float = 0.0
+    # each trajectory goes to the acceptance as iterated or as it started (the cubic of a
+    # cold start, the previous cycle's plan of a warm one), whichever has the lower cost,
+    # every term the iterations minimise included: Adam's normalised steps move every
+    # waypoint by about the step size whatever its gradient, which can leave a smooth start
+    # rougher or past the acceleration limit (experiments/speed_scale/); False: as iterated
+    keep_start: bool = False
     # seed of the random initial perturbations (same seed -> same plan)
     seed: int = 0
     # device of the plan; None follows the robot model's tensors
@@ -248,6 +257,7 @@ class OptimizerCfg:
         if not isinstance(self.weights, C.CostWeights):
             raise ConfigError(f"expected weights to be CostWeights, got {type(self.weights)}")
         flag("safe_hold", self.safe_hold)
+        flag("keep_start", self.keep_start)
         if self.human_spheres not in ("inner", "cover"):
             raise ConfigError(
                 f"expected human_spheres 'inner' or 'cover', got {self.human_spheres!r}"
@@ -998,6 +1008,18 @@ class TrajectoryOptimizer:
             q_all = torch.cat([head, x, tail], dim=1)  # (B, W, J)
             if not all_finite(q_all):
                 raise PlanningError("the optimisation produced non-finite waypoints")
+            if cfg.keep_start and ran > 0:
+                q_all = self._better_of_start(
+                    q_all,
+                    torch.cat([head, q0[:, 1:n_goal], tail], dim=1),
+                    dt,
+                    qd_start,
+                    q_goal,
+                    human,
+                    win_idx,
+                    collision_timer,
+                    look_idx,
+                )
             t_accept = time.perf_counter()
             result = self._accept(
                 q_all,
@@ -1022,6 +1044,39 @@ class TrajectoryOptimizer:
             "iterations": float(ran),
         }
         return result
+
+    def _better_of_start(
+        self,
+        q_end: torch.Tensor,
+        q_begin: torch.Tensor,
+        dt: float,
+        qd_start: torch.Tensor | None,
+        q_goal: torch.Tensor,
+        human: C.HumanObstacle | None,
+        win_idx: torch.Tensor,
+        timer: _Timer,
+        look_idx: torch.Tensor | None,
+    ) -> torch.Tensor:
+        """(B, W, J) each trajectory as iterated (q_end) or as it started (q_begin, both
+        (B, W, J)), whichever has the lower weighted cost, every term the iterations
+        minimise included (``OptimizerCfg.keep_start``); ties keep the iterated one."""
+        both = torch.cat([q_end, q_begin])  # (2 B, W, J)
+        terms, _, _, _ = self._terms(
+            both,
+            dt,
+            qd_start,
+            q_goal,
+            human,
+            win_idx,
+            None,
+            timer,
+            prune=self.cfg.prune_margin,
+            look_idx=look_idx,
+        )
+        cost = self._weighted(terms)  # (2 B,)
+        b = q_end.shape[0]
+        take = cost[b:] < cost[:b]  # (B,)
+        return torch.where(take.view(-1, 1, 1), q_begin, q_end)
 
     def collision_bound(
         self,

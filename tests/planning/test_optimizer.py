@@ -1254,6 +1254,37 @@ def test_speed_scale_slows_every_plan_to_its_share_of_the_velocity_limits() -> N
             OptimizerCfg(speed_scale=bad)
 
 
+def test_keep_start_takes_the_start_when_the_iterations_made_it_rougher() -> None:
+    """``keep_start``: with a step size large enough for Adam's normalised steps to throw the
+    cubic cold start off, the plan is that start itself (the least-acceleration cubic, rebuilt
+    here with the solve's seed and duration), not the rougher iterated trajectory the default
+    takes; the next cycle's warm starts hold the plan."""
+    arm = PlanarArm(dtype=torch.float64)
+    q_s = torch.tensor([0.1, -0.5, 0.3], dtype=torch.float64)
+    q_g = torch.tensor([0.5, -0.1, 0.0], dtype=torch.float64)
+    plans = {}
+    for keep in (False, True):
+        cfg = OptimizerCfg(lr=0.05, keep_start=keep, num_trajectories=4)
+        opt = TrajectoryOptimizer(arm, cfg)
+        res = opt.solve(q_s, q_g)
+        assert res.feasible
+        assert res.candidates.shape == (4, cfg.num_waypoints, 3)
+        assert any(torch.equal(row, res.q) for row in res.candidates)
+        plans[keep] = res
+    duration = max(cfg.horizon_s, opt.min_duration(q_s, q_g))
+    cubic = opt.initial_trajectories(q_s, q_g, 4, cfg.seed, duration)[0]
+    dt = duration / (cfg.num_waypoints - 1)
+
+    def rough(q: torch.Tensor) -> float:
+        return float(accelerations(q, dt).square().sum())
+
+    assert rough(plans[False].q) > 2.0 * rough(cubic)  # the iterations made it rougher
+    torch.testing.assert_close(plans[True].q, cubic, rtol=0.0, atol=1e-12)
+    for bad in (1, "yes", None):
+        with pytest.raises(ConfigError, match="keep_start"):
+            OptimizerCfg(keep_start=bad)
+
+
 class _TimedOptimizer(TrajectoryOptimizer):
     """On a fake clock, every optimiser iteration takes 10 ms and every acceptance check
     30 ms (the clock only moves here, so the counts do not depend on the machine)."""
