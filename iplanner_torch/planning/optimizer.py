@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Literal, Protocol, runtime_checkable
 
 import torch
 
@@ -73,6 +73,9 @@ BETA1 = 0.9
 #: Adam's second-moment decay: short memory, so steps do not stall once the large early
 #: gradients are gone (with 0.999 the smoothness bowl stalls about 1e-2 rad from its minimum).
 BETA2 = 0.9
+#: How an iteration steps (``OptimizerCfg.step_rule``).
+StepRule = Literal["adam", "covariant"]
+STEP_RULES: tuple[str, ...] = ("adam", "covariant")
 
 
 @runtime_checkable
@@ -125,9 +128,18 @@ class OptimizerCfg:
     iterations: int = 40
     # Adam iterations when warm-started from a previous plan
     warm_iterations: int = 10
-    # Adam step size on the waypoints' second differences [rad] (a step moves a waypoint up to
-    # about lr (W - 2)^2 / 8)
+    # step size on the waypoints' second differences [rad] (Adam's, or the covariant step's
+    # largest entry; a step moves a waypoint up to about lr (W - 2)^2 / 8)
     lr: float = 0.005
+    # how an iteration steps on the waypoints' second differences: "adam", Adam's per-entry
+    # normalised steps (every entry moves by about lr, whatever its gradient, so a step adds
+    # about lr of second difference at every waypoint); "covariant", the gradient's own
+    # direction (CHOMP's and ITOMP's covariant update, as the second differences are the
+    # smoothness metric's coordinates) with momentum, scaled per trajectory so that its
+    # largest entry moves by lr: entries the costs hardly push stay where they are. In the
+    # closed loop it was no smoother than Adam at 0.001-0.002 and rougher at 0.005-0.01
+    # (experiments/step_size/)
+    step_rule: StepRule = "adam"
     # step size at the last iteration relative to the first (exponential decay)
     lr_final_ratio: float = 0.1
     # std of the amplitude of the smooth random perturbations of the initial trajectories [rad]
@@ -225,6 +237,8 @@ class OptimizerCfg:
             if integer(name, getattr(self, name)) < 0:
                 raise ConfigError(f"expected {name} >= 0, got {getattr(self, name)}")
         positive("lr", self.lr)  # NaN and inf refused too
+        if self.step_rule not in STEP_RULES:
+            raise ConfigError(f"expected step_rule 'adam' or 'covariant', got {self.step_rule!r}")
         if not is_real(self.speed_scale) or not 0.0 < self.speed_scale <= 1.0:
             raise ConfigError(f"expected speed_scale in (0, 1], got {self.speed_scale!r}")
         if not is_real(self.duration_vel_fraction) or not 0.0 < self.duration_vel_fraction <= 1.0:
@@ -958,6 +972,7 @@ class TrajectoryOptimizer:
         adam_m = torch.zeros_like(z)
         adam_v = torch.zeros_like(z)
         decay = cfg.lr_final_ratio ** (1.0 / max(iterations - 1, 1))
+        covariant = cfg.step_rule == "covariant"
         pairs = None
         x = q0[:, 1:n_goal]
         ran = 0
@@ -993,10 +1008,15 @@ class TrajectoryOptimizer:
             with torch.no_grad():
                 step = it + 1
                 adam_m.mul_(BETA1).add_(grad, alpha=1 - BETA1)
-                adam_v.mul_(BETA2).addcmul_(grad, grad, value=1 - BETA2)
                 m_hat = adam_m / (1.0 - BETA1**step)
-                v_hat = adam_v / (1.0 - BETA2**step)
-                z -= cfg.lr * decay**it * m_hat / (v_hat.sqrt() + 1e-12)
+                if covariant:  # the largest entry of each trajectory's step is lr
+                    scale = m_hat.abs().amax(dim=(1, 2), keepdim=True)
+                    scale.clamp_min_(torch.finfo(z.dtype).tiny)
+                    z -= cfg.lr * decay**it * m_hat / scale
+                else:
+                    adam_v.mul_(BETA2).addcmul_(grad, grad, value=1 - BETA2)
+                    v_hat = adam_v / (1.0 - BETA2**step)
+                    z -= cfg.lr * decay**it * m_hat / (v_hat.sqrt() + 1e-12)
                 x = d_inv @ (z - b_vec)
                 x_c = torch.maximum(torch.minimum(x, self.q_max), self.q_min)
                 if not torch.equal(x_c, x):

@@ -1399,3 +1399,49 @@ def test_the_summed_bound_refuses_a_path_between_two_spheres_that_the_maximum_ac
     assert float(by_sum.q[:, 0].max()) < -0.1  # held before the gap
     with pytest.raises(ConfigError, match="expected bound_reduce 'max' or 'sum', got 'mean'"):
         OptimizerCfg(bound_reduce="mean")
+
+
+def test_covariant_step_is_chomps_update_and_adams_is_not() -> None:
+    """``step_rule="covariant"``: one iteration moves the free waypoints x of every trajectory
+    by ``-s A^-1 grad_x U`` (CHOMP's covariant update; A = D^T D with D the second-difference
+    matrix, built here), with s such that the step's largest second difference is lr; Adam's
+    normalised step (the default) is not along that direction. U is the smoothness cost alone
+    (a slow path inside the joint limits), written out here."""
+    arm = PlanarArm(dtype=torch.float64)
+    w, j, b, lr, duration = 12, 3, 2, 1e-3, 4.0
+    dt = duration / (w - 1)
+    gen = torch.Generator().manual_seed(3)
+    s = torch.linspace(0.0, 1.0, w, dtype=torch.float64).view(1, w, 1)
+    q_s = torch.tensor([0.1, -0.5, 0.3], dtype=torch.float64)
+    q_g = torch.tensor([0.5, -0.1, 0.0], dtype=torch.float64)
+    bump = torch.sin(math.pi * s) * torch.randn(b, 1, j, generator=gen, dtype=torch.float64)
+    q_init = q_s + s * (q_g - q_s) + 0.2 * bump  # (B, W, J)
+
+    n = w - 2
+    d = torch.zeros(n + 2, n + 2, dtype=torch.float64)  # second differences, all waypoints
+    for i in range(1, n + 1):
+        d[i, i - 1 : i + 2] = torch.tensor([1.0, -2.0, 1.0], dtype=torch.float64)
+    d = d[1 : n + 1]  # (n, W): one row per interior waypoint
+    x = q_init.clone().requires_grad_(True)
+    acc = torch.einsum("iw,bwj->bij", d, x) / dt**2
+    u = CostWeights().joint_acc_l2 * dt * acc.square().sum()
+    (grad,) = torch.autograd.grad(u, x)
+    g_x = grad[:, 1:-1]  # (B, n, J) the free waypoints' gradient
+    d_free = d[:, 1:-1]  # (n, n)
+    a_inv = torch.linalg.inv(d_free.T @ d_free)
+
+    steps = {}
+    for rule in ("covariant", "adam"):
+        cfg = OptimizerCfg(
+            num_trajectories=b, num_waypoints=w, warm_iterations=1, lr=lr, step_rule=rule
+        )
+        res = TrajectoryOptimizer(arm, cfg).solve(q_s, q_g, duration=duration, q_init=q_init)
+        steps[rule] = (res.candidates - q_init)[:, 1:-1]  # (B, n, J)
+    want = -torch.einsum("mn,bnj->bmj", a_inv, g_x)
+    z_step = torch.einsum("mn,bnj->bmj", d_free, want)
+    want = want * lr / z_step.abs().amax(dim=(1, 2), keepdim=True)
+    torch.testing.assert_close(steps["covariant"], want, rtol=1e-9, atol=1e-12)
+    cos = torch.nn.functional.cosine_similarity(steps["adam"].flatten(1), want.flatten(1))
+    assert bool((cos < 0.99).all())  # Adam's step leaves the covariant direction
+    with pytest.raises(ConfigError, match="step_rule"):
+        OptimizerCfg(step_rule="sgd")
