@@ -5,7 +5,9 @@ The formats are documented in ``datasets/README.md``. In short:
 * **NPZ** (one demonstration per file): ``positions`` (T, K, 3) float, ``labels`` (T,) int,
   ``joint_names`` (K,) str, ``action_names`` (A,) str, ``fps`` scalar, optional
   ``timestamps`` (T,) float seconds, optional ``clean_positions`` (T, K, 3) float, optional
-  ``metadata`` (a JSON object as a string). Saved without pickling.
+  ``metadata`` (a JSON object as a string). Saved without pickling. Those are the only keys
+  (:data:`NPZ_KEYS`): any other (``timestamp``, a misspelt ``clean_position``) is an error
+  naming it, never dropped silently.
 * **CSV** (one demonstration per file): optional header comment lines starting with ``#``
   at the top, whose text after the ``#`` joined together is a JSON object with ``fps``,
   ``action_names`` and ``metadata``; then a column header row
@@ -38,6 +40,12 @@ A demonstration read from a folder is named by its path there without the suffix
 files of one stem in different sub-folders stay apart; two files of one name (``a.csv``
 beside ``a.npz``) are an error. LEGO trial errors name the file line a text editor shows.
 
+Timestamps must be strictly increasing with a median spacing of 1 / fps (within
+:data:`TIMESTAMP_TOLERANCE`); a single step that strays from 1 / fps by more than
+:data:`GAP_TOLERANCE` of a frame (a pause, a dropped frame) loads with a
+:class:`~iplanner_torch.errors.DataWarning` naming the frames and the step, since the frames
+are used at 1 / fps.
+
 A CSV or LEGO trial file whose last line has no line terminator may have been cut short (a
 copy or a recording stopped mid-write: ``0.841`` of ``0.8410000205``); that last row is
 dropped with a :class:`~iplanner_torch.errors.DataWarning` naming the file (every file the
@@ -67,10 +75,20 @@ from iplanner_torch.checks import path_argument
 from iplanner_torch.checks import short_repr as _show
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.errors import ConfigError, DataError, DataWarning
+from iplanner_torch.files import whole_file
 from iplanner_torch.types import MAX_POSITION_M
 
 SUFFIXES: tuple[str, ...] = (".npz", ".csv")
 _REQUIRED_NPZ = ("positions", "labels", "joint_names", "action_names")
+#: Every key an NPZ demonstration may hold (:func:`save_demonstration` writes them all, but
+#: ``clean_positions`` only when there are some); the loader refuses any other.
+NPZ_KEYS: tuple[str, ...] = (
+    *_REQUIRED_NPZ,
+    "fps",
+    "timestamps",
+    "clean_positions",
+    "metadata",
+)
 _AXES = ("x", "y", "z")
 #: The first bytes of a zip archive (an NPZ file is one): a local file header or an empty one.
 _ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
@@ -297,6 +315,9 @@ def save_demonstration(demo: Demonstration, path: str | Path) -> Path:
             comma or a line break, starts or ends with white space, or starts with
             ``clean_``), a joint named twice, no action names, or metadata that is not
             JSON-serialisable; nothing is written then.
+        OSError: when the file cannot be written (no permission, disk full). The file is
+            written whole or not at all (:func:`iplanner_torch.files.whole_file`): a write
+            that fails or is interrupted leaves an earlier file at ``path`` as it was.
     """
     path = Path(path)
     if path.suffix not in SUFFIXES:
@@ -316,7 +337,9 @@ def save_demonstration(demo: Demonstration, path: str | Path) -> Path:
         }
         if demo.clean_positions is not None:
             arrays["clean_positions"] = demo.clean_positions.astype(np.float32)
-        with open(path, "wb") as fh:
+        # written through a handle: np.savez given a path would append ".npz" to the
+        # temporary name
+        with whole_file(path) as tmp, open(tmp, "wb") as fh:
             np.savez(fh, **arrays)
     elif path.suffix == ".csv":
         header = {
@@ -334,8 +357,27 @@ def save_demonstration(demo: Demonstration, path: str | Path) -> Path:
         lines = ["# " + json.dumps(header), ",".join(cols)]
         for ts, label, row in zip(np.asarray(demo.timestamps), demo.labels, cells, strict=True):
             lines.append(",".join([repr(float(ts)), str(int(label)), *row]))
-        path.write_text("\n".join(lines) + "\n")
+        with whole_file(path) as tmp:
+            tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
+
+
+def _check_npz_keys(path: Path, keys: Sequence[str]) -> None:
+    """Raise a DataError naming the keys of ``path`` that are none of :data:`NPZ_KEYS` (a
+    misspelt ``timestamp`` must not leave the frames timed at 1 / fps by default), with a
+    close accepted spelling as a hint and the accepted keys listed."""
+    unknown = [k for k in keys if k not in NPZ_KEYS]
+    if not unknown:
+        return
+    shown = []
+    for k in unknown:
+        hint = next(iter(difflib.get_close_matches(k.lower(), NPZ_KEYS, n=1, cutoff=0.6)), None)
+        shown.append(f"{k!r}" + (f" (did you mean {hint!r}?)" if hint else ""))
+    raise DataError(
+        f"{path}: unknown key(s) {', '.join(shown)}; the accepted keys are "
+        f"{', '.join(map(repr, NPZ_KEYS))} (see datasets/README.md): rename or remove the "
+        "others, which are never dropped silently"
+    )
 
 
 def _read_npz(path: Path) -> dict[str, Any]:
@@ -353,6 +395,7 @@ def _read_npz(path: Path) -> dict[str, Any]:
         # the file opened here, so that it is closed when the archive is damaged (np.load
         # given a path leaves its own file open when the zip cannot be read)
         with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
+            _check_npz_keys(path, z.files)  # before reading: an unknown key is never read
             data = {}
             for k in z.files:
                 try:
@@ -714,6 +757,10 @@ def _read_csv(path: Path) -> dict[str, Any]:
 
 #: how far the median timestamp spacing may stray from 1 / fps (relative)
 TIMESTAMP_TOLERANCE = 0.05
+#: how far one timestamp step may stray from 1 / fps (in frames) before it is a gap that warns:
+#: half a frame, far above clock jitter (a 15 fps file jittering by 2 ms strays 0.03 frame),
+#: and below a dropped frame (a step of 2 / fps strays one frame)
+GAP_TOLERANCE = 0.5
 
 
 #: How each file format marks a lost joint (for the message refusing an Inf).
@@ -753,6 +800,26 @@ def lost_joints(demo: Demonstration) -> tuple[str, ...]:
     """The joints of ``demo`` that are lost (NaN in a coordinate) in every frame."""
     lost = np.isnan(demo.positions).any(axis=-1).all(axis=0)  # (K,)
     return tuple(j for j, gone in zip(demo.joint_names, lost, strict=True) if gone)
+
+
+def _warn_timestamp_gaps(path: Path, steps: np.ndarray, fps: float) -> None:
+    """Warn (:class:`DataWarning`, at the caller of :func:`load_demonstration`) when a step
+    of ``steps`` (the (T - 1,) timestamp differences [s]) strays from 1 / ``fps`` by more than
+    :data:`GAP_TOLERANCE` of a frame, naming the first such step's frames and size."""
+    off = np.abs(steps * fps - 1.0) > GAP_TOLERANCE
+    if not off.any():
+        return
+    k = int(np.argmax(off)) + 1  # the frame after the first stray step
+    step = float(steps[k - 1])
+    warnings.warn(
+        f"{path}: field 'timestamps' steps {step:.4g} s ({step * fps:.3g} frames) from frame "
+        f"{k - 1} to frame {k} (counting from 0), but fps {fps:g} means {1.0 / fps:.4g} s; "
+        f"{int(off.sum())} step(s) stray from 1 / fps by more than {GAP_TOLERANCE:g} frame "
+        "(a pause, or dropped frames). The frames are used at 1 / fps, so a window across a "
+        "gap joins motion from either side of it as if no time passed",
+        DataWarning,
+        stacklevel=4,  # the caller of load_demonstration
+    )
 
 
 def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstration:
@@ -847,12 +914,14 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
                 "complete (leave the field out when there are none)"
             )
     if ts is not None and t >= 2:
-        spacing = float(np.median(np.diff(ts)))
+        steps = np.diff(ts)
+        spacing = float(np.median(steps))
         if abs(spacing * the_fps - 1.0) > TIMESTAMP_TOLERANCE:
             raise DataError(
                 f"{path}: field 'timestamps' is spaced {spacing:.4g} s apart (median), but fps "
                 f"{the_fps:g} means {1.0 / the_fps:.4g} s; the frames are used at 1 / fps"
             )
+        _warn_timestamp_gaps(path, steps, the_fps)
     return Demonstration(
         positions=pos,
         labels=labels,
@@ -1065,16 +1134,23 @@ def load_demonstrations(
             fps missing or contradicting ``fps``, an ``fps`` argument that is not one finite
             number > 0, a CSV column of no accepted form (named, with the accepted forms), a
             CSV whose first row holds numbers rather than column names, a ``#`` line after a
-            CSV's column header row, a CSV cell overflowing a float (``1e400``), two files
-            that would get the same name (both named); also for a ``path`` that is not a
-            str or os.PathLike, or that the system cannot look up (a name too long).
+            CSV's column header row, a CSV cell overflowing a float (``1e400``), an NPZ key
+            of no accepted field (named, with the accepted keys :data:`NPZ_KEYS`), timestamps
+            whose median spacing is not 1 / fps, two files that would get the same name
+            (both named); also for a ``path`` that is not a str or os.PathLike, or that the
+            system cannot look up (a name too long).
         ConfigError: for a ``joints`` argument that is not a non-empty sequence of unique
             names (a single string included).
 
     Warns:
         DataWarning: for a CSV without a ``label`` column whose header names actions (every
             frame is then unlabelled, -1); for a CSV whose last line has no line terminator
-            (it may be cut short: that row is dropped).
+            (it may be cut short: that row is dropped); for timestamps with a gap, a step
+            that strays from 1 / fps by more than :data:`GAP_TOLERANCE` of a frame (a pause,
+            a dropped frame: 2 / fps), naming the first such step's frames and size and the
+            count. The file loads with its timestamps as they are, but the frames are used
+            at 1 / fps, so a window across the gap joins motion from both sides of it. Clock
+            jitter within half a frame does not warn; the LEGO recording states no times.
     """
     path = path_argument(path, "of demonstrations", kind="file or folder path")
     fps = _fps_argument(path, fps)

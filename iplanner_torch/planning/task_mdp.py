@@ -29,6 +29,7 @@ import numpy as np
 
 from iplanner_torch import checks
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
+from iplanner_torch.files import whole_file
 
 
 class TaskOrderLike(Protocol):
@@ -496,8 +497,14 @@ class TaskPlanner:
     def save(self, path: str | Path) -> None:
         """Write the settings, H and the Q table as JSON.
 
+        The file is written whole or not at all (:func:`iplanner_torch.files.whole_file`): a
+        temporary file beside ``path`` replaces it in one step, so a save that fails or is
+        interrupted (a full disk) leaves an earlier file at ``path`` as it was.
+
         Raises:
             ConfigError: when ``path`` is not a file path (str or os.PathLike).
+            OSError: when the file cannot be written (a missing folder, no permission, a
+                full disk); ``path`` is then unchanged.
         """
         _check_path(path)
         data = {
@@ -506,7 +513,9 @@ class TaskPlanner:
             "h_table": self.h_table.tolist(),
             "q": {str(k): v.tolist() for k, v in self.q.items()},
         }
-        Path(path).write_text(json.dumps(data))
+        text = json.dumps(data)
+        with whole_file(path) as tmp:
+            tmp.write_text(text, encoding="utf-8")
 
     @classmethod
     def load(
@@ -521,13 +530,25 @@ class TaskPlanner:
         Raises:
             ConfigError: when ``path`` is not a file path (str or os.PathLike).
             CheckpointError: when the file is missing, not a task-planner file, or malformed
-                (unknown or invalid settings, an H or a Q table that does not fit them).
+                (not JSON, JSON nested too deep to decode or holding an integer of too many
+                digits to read, unknown or invalid settings, an H or a Q table that does not
+                fit them).
         """
         _check_path(path)
         try:
-            data = json.loads(Path(path).read_text())
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise CheckpointError(f"cannot read task planner {path}: {exc}") from exc
+        except ValueError as exc:  # an integer of more digits than int() reads (4300)
+            raise CheckpointError(
+                f"cannot read task planner {path}: malformed JSON (an integer of too many "
+                "digits to read, a corrupted number)"
+            ) from exc
+        except RecursionError as exc:  # "[" * 100000: the decoder recursed too deep
+            raise CheckpointError(
+                f"cannot read task planner {path}: malformed JSON (nested too deep to decode; "
+                "a task planner file nests three levels)"
+            ) from exc
         if not isinstance(data, dict):
             raise CheckpointError(
                 f"{path} is not a task planner file (expected a JSON object, got "

@@ -1093,11 +1093,12 @@ def test_csv_without_a_column_header_row_says_so(tmp_path, header, line):
 
 def test_timestamps_are_checked_by_their_median_spacing_within_the_tolerance(tmp_path):
     """The spacing test takes the median, so one pause does not refuse a 15 Hz file (its mean
-    spacing is 1.7 frames); 12 Hz under fps 15 (20 % off) is refused; two equal times are
-    not increasing."""
+    spacing is 1.7 frames; the pause warns as a gap); 12 Hz under fps 15 (20 % off) is refused;
+    two equal times are not increasing."""
     ts = np.arange(12) / 15.0
     ts[8:] += 1.0  # a 1 s pause after frame 7
-    (d,) = load_demonstrations(_npz(tmp_path / "pause.npz", timestamps=ts))
+    with pytest.warns(DataWarning, match="from frame 7 to frame 8"):
+        (d,) = load_demonstrations(_npz(tmp_path / "pause.npz", timestamps=ts))
     np.testing.assert_array_equal(d.timestamps, ts)
     with pytest.raises(DataError, match=r"slow\.npz: field 'timestamps' is spaced 0\.08333 s"):
         load_demonstrations(_npz(tmp_path / "slow.npz", timestamps=np.arange(12) / 12.0))
