@@ -777,7 +777,7 @@ def _episode(cfg: DictConfig) -> None:
             df = df.assign(planner=df["planner"].where(~named, df["planner"] + "@" + labels[i]))
         frames.append(df)
     df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
-    if labels is None and (len(paths) > 1 or paths[0].is_dir()):
+    if labels is None:  # one results CSV can repeat rows too (two tables pasted together)
         _warn_repeated_episodes(df, swept)
     if baseline is None:
         baseline = "itomp"

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import re
 import sys
 import time
@@ -736,9 +737,50 @@ def check_run(cfg: DictConfig) -> tuple[Any, list[str], bool]:
         )
     variants = sorted({v for p in planners if (v := PLANNER_KINDS[p]) in CHECKPOINT_VARIANTS})
     experiment = build_experiment(cfg, {})
+    if variants and str(cfg.run.train_data) == "data":
+        check_train_data(cfg.data, experiment.episode.sim.tracker_fps)
     timeline_plots = cfg_scalar(cfg.run, "timeline_plots", bool)  # checked before any episode
     run_jobs(cfg)
     return experiment, variants, timeline_plots
+
+
+def check_train_data(data_cfg: DictConfig, tracker_fps: float) -> None:
+    """With ``run.train_data=data``, refuse a ``data`` group whose predictor the closed loop
+    could not use, before anything is trained: one of a subset of the joints
+    (``data.windows.joints``), one of the LEGO recording's arm joints, or one at a stated
+    frame rate (``data.fps``) other than the tracker's. The trained predictor is checked
+    again before the episodes (its rate and joints, whatever the data stated).
+
+    Raises:
+        ConfigError: naming the setting.
+    """
+    from iplanner_torch.cli._common import data_format, data_fps
+    from iplanner_torch.data.skeleton import JOINT_NAMES
+    from iplanner_torch.errors import ConfigError
+
+    if data_format(data_cfg) == "lego_assembly":
+        raise ConfigError(
+            "run.train_data=data with a LEGO assembly recording (data.format=lego_assembly): "
+            "its 6 arm joints are not the simulated person's "
+            f"{len(JOINT_NAMES)} ({', '.join(JOINT_NAMES)}); train on the reaching or task "
+            "demonstrations (run.train_data=tasks, the default)"
+        )
+    windows = data_cfg.get("windows", None)
+    joints = windows.get("joints", None) if OmegaConf.is_config(windows) else None
+    if joints is not None:
+        joints = OmegaConf.to_container(joints) if OmegaConf.is_config(joints) else joints
+        if not isinstance(joints, list) or [str(j) for j in joints] != list(JOINT_NAMES):
+            raise ConfigError(
+                f"data.windows.joints={joints}: the closed loop forecasts every joint of the "
+                f"simulated person ({', '.join(JOINT_NAMES)}), so its predictor learns from "
+                "all of them; leave data.windows.joints unset (null)"
+            )
+    fps = data_fps(data_cfg)
+    if fps is not None and not math.isclose(fps, float(tracker_fps), rel_tol=1e-6):
+        raise ConfigError(
+            f"data.fps={fps:g}, but the tracker samples the person at sim.tracker_fps="
+            f"{float(tracker_fps):g} Hz and the predictor must be trained at that rate"
+        )
 
 
 def run_jobs(cfg: DictConfig) -> int:

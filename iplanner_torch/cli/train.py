@@ -59,6 +59,7 @@ from iplanner_torch.cli._common import (
     write_job_record,
 )
 from iplanner_torch.errors import ConfigError, DataError, DataWarning
+from iplanner_torch.files import whole_file
 
 
 def train_from_config(
@@ -122,6 +123,10 @@ def train_from_config(
             DataWarning,
             stacklevel=2,
         )
+    resume = cfg_scalar(cfg.train, "resume", bool)
+    # a resumed folder's earlier runs trained part (or all) of the predictor: their time
+    # (what the last of them recorded) counts in this one's
+    before = _recorded_seconds(out_dir / "heldout_metrics.json") if resume else 0.0
     t0 = time.perf_counter()
     ckpt = train_predictor(
         (train_w, val_w),
@@ -129,11 +134,11 @@ def train_from_config(
         trainer_cfg=trainer_cfg,
         out_dir=out_dir,
         progress=cfg_scalar(cfg, "progress", bool),
-        resume=cfg_scalar(cfg.train, "resume", bool),
+        resume=resume,
         split=split,
         overwrite=cfg_scalar(cfg.train, "overwrite", bool),
     )
-    seconds = time.perf_counter() - t0
+    seconds = time.perf_counter() - t0 + before
     metrics: dict = {"train_seconds": seconds, "train_windows": len(train_w)}
     if test:
         predictor = HumanMotionPredictor.load(ckpt)
@@ -148,8 +153,20 @@ def train_from_config(
             DataWarning,
             stacklevel=2,
         )
-    (out_dir / "heldout_metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
+    with whole_file(out_dir / "heldout_metrics.json") as tmp:
+        tmp.write_text(json.dumps(metrics, indent=2, default=float) + "\n")
     return ckpt, metrics
+
+
+def _recorded_seconds(path: Path) -> float:
+    """``train_seconds`` of an earlier run's ``heldout_metrics.json``, or 0 when there is
+    none (a run interrupted before it wrote the file) or it does not read as one."""
+    try:
+        value = json.loads(path.read_text(encoding="utf-8")).get("train_seconds", 0.0)
+    except (OSError, ValueError, RecursionError, AttributeError):
+        return 0.0
+    ok = isinstance(value, int | float) and not isinstance(value, bool)
+    return float(value) if ok and math.isfinite(value) and value >= 0 else 0.0
 
 
 def check_training(

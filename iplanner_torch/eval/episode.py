@@ -546,6 +546,29 @@ def check_predictor_rate(predictor: object, tracker_fps: float) -> None:
             )
 
 
+def check_predictor_joints(predictor: object) -> None:
+    """Refuse a predictor of other joints than the simulated person's.
+
+    The closed loop feeds the predictor the tracked frames of every joint of
+    :data:`~iplanner_torch.data.skeleton.JOINT_NAMES` and needs a forecast of each; one
+    trained on a subset (``data.windows.joints``) or on another skeleton (the LEGO
+    recording's arm joints) would fail only at the episode's first forecast. A predictor that
+    names no ``joint_names`` (a custom one) is checked on its forecasts instead
+    (:func:`check_predicted`).
+
+    Raises:
+        ConfigError: when the predictor's ``joint_names`` differ from ``JOINT_NAMES``.
+    """
+    names = getattr(predictor, "joint_names", None)
+    if isinstance(names, tuple | list) and tuple(names) != tuple(JOINT_NAMES):
+        raise ConfigError(
+            f"the predictor forecasts the joints {list(names)}, but the simulated person "
+            f"has the {len(JOINT_NAMES)} joints {list(JOINT_NAMES)}, each of which the "
+            "closed loop forecasts: train it on data of that skeleton with every joint "
+            "(data.windows.joints=null)"
+        )
+
+
 def _action_names(predictor: object) -> tuple[str, ...]:
     for owner in (predictor, getattr(predictor, "cfg", None)):
         names = getattr(owner, "action_names", None)
@@ -1060,6 +1083,7 @@ def _run_episode(
     human_cfg = replace(cfg.sim.human, mode="blocking" if blocking else "tasks")
     if use_prediction:
         check_predictor_rate(predictor, cfg.sim.tracker_fps)
+        check_predictor_joints(predictor)
     window = (
         _predictor_window(predictor, cfg.sim.tracker_window)
         if use_prediction

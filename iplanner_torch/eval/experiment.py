@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import glob
 import importlib
+import io
 import multiprocessing
 import os
 import signal
@@ -20,11 +21,12 @@ from typing import Any
 import pandas as pd
 
 from iplanner_torch import checks
-from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.eval.episode import (
     CHECKPOINT_VARIANTS,
     PLANNER_KINDS,
     EpisodeCfg,
+    check_predictor_joints,
     check_predictor_rate,
     run_episode,
 )
@@ -304,6 +306,10 @@ def read_finished(results_csv: Path) -> dict[str, dict[str, Any]]:
         short names (:func:`~iplanner_torch.eval.report.gather_results`), is read back with
         the prefix.
 
+    Warns:
+        DataWarning: when the file's last row has no line end (it was cut short while
+            written): that row is left out, so its episode runs again.
+
     Raises:
         DataError: when the file cannot be read as a results table, lacks a column of
             :data:`EPISODE_KEY`, or names an episode twice.
@@ -312,7 +318,21 @@ def read_finished(results_csv: Path) -> dict[str, dict[str, Any]]:
     if not path.exists():
         return {}
     try:
-        df = pd.read_csv(path, dtype={c: str for c in TEXT_COLUMNS})
+        text = path.read_text(encoding="utf-8-sig")
+        if text and not text.endswith(("\n", "\r")):
+            # every table this project writes ends its last row with a line end: a file
+            # without one was cut short while written (a full disk, a killed report), and
+            # even the last row's full count of cells may hold a cut number
+            head, _, last = text.rstrip("\r\n").rpartition("\n")
+            if head:
+                warnings.warn(
+                    f"{path}: the last row has no line end (the file was cut short while "
+                    f"written): its episode is run again ({last[:80]!r})",
+                    DataWarning,
+                    stacklevel=2,
+                )
+                text = head + "\n"
+        df = pd.read_csv(io.StringIO(text), dtype={c: str for c in TEXT_COLUMNS})
     except pd.errors.EmptyDataError:
         return {}
     except (pd.errors.ParserError, UnicodeDecodeError, OSError) as exc:
@@ -578,6 +598,7 @@ def start_experiment(
             raise ConfigError(f"planner {kind!r} needs predictor_paths[{variant!r}], none given")
         predictors[variant] = _load_predictor(cfg.predictor_paths[variant], cfg.device)
         check_predictor_rate(predictors[variant], cfg.episode.sim.tracker_fps)  # before episodes
+        check_predictor_joints(predictors[variant])
     base = cfg.episode
     grid = grid_episodes(cfg)
     stems = [e[0] for e in grid]

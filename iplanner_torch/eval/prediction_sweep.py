@@ -25,6 +25,7 @@ from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.reaching import add_tracker_noise
 from iplanner_torch.errors import ConfigError, DataError
 from iplanner_torch.eval.report import PLANNERS
+from iplanner_torch.files import whole_file
 
 #: predictor names as the plots give them (the planners' display names; the baseline's own)
 _NAMES = {**PLANNERS, "constant_velocity": "constant velocity"}
@@ -211,7 +212,8 @@ def write_noise_report(df: pd.DataFrame, out_dir: str | Path, command: str = "")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     written = [out_dir / "prediction_vs_noise.csv"]
-    df.to_csv(written[0], index=False)
+    with whole_file(written[0]) as tmp:  # an earlier table survives a failed write whole
+        df.to_csv(tmp, index=False)
     metrics = [m for m in PLOTTED if m in df.columns]
     fig, axes = plt.subplots(
         1, len(metrics), figsize=(4.2 * len(metrics) + 2.0, 3.6), squeeze=False,
@@ -265,6 +267,7 @@ def write_noise_report(df: pd.DataFrame, out_dir: str | Path, command: str = "")
         cells = [f"{v:.4g}" if isinstance(v, float) else str(v) for v in r.tolist()]
         lines.append("| " + " | ".join(cells) + " |")
     readme = out_dir / "README.md"
-    readme.write_text("\n".join(lines) + "\n")
+    with whole_file(readme) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
     written.append(readme)
     return written

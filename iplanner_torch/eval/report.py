@@ -38,6 +38,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from iplanner_torch.errors import ConfigError, DataError, DataWarning
+from iplanner_torch.files import whole_file
 from iplanner_torch.recording.reader import EPISODE_METADATA_NAME, Episode, read_episode
 
 __all__ = [
@@ -495,29 +496,64 @@ def _is_metric_column(col: Any) -> bool:
     return "/" in str(col) or _metric_name(str(col)) in DEFAULT_METRICS
 
 
+#: the episode columns (as :func:`gather_results` names them) that count or measure something
+#: that cannot be negative: a negative value is read as missing, with a warning
+NON_NEGATIVE: frozenset[str] = frozenset(
+    {
+        "smoothness", "jerkiness", "efficiency", "mhd", "mhd_count", "prediction_ms",
+        "task_time_s", "human_alone_s", "contact", "completed", "sim/duration_s",
+        "sim/realtime_factor", "sim/contacts", "sim/contact_steps", "plan/cycles",
+        "plan/overruns", "plan/cut_short", "plan/waits", "plan/wait_s", "plan/evasions",
+        "plan/escapes", "plan/emergencies", "plan/stall_cycles", "plan/mean_solve_ms",
+        "task/deferred_fetches", "task/held_s",
+    }
+)  # fmt: skip
+#: columns read as numbers beside the metric columns: the episode's flags
+_FLAG_COLUMNS = ("contact", "completed")
+
+
+def _where(df: pd.DataFrame, bad: pd.Series) -> str:
+    """The first rows of ``bad`` (their ``path`` where they have one), for a warning."""
+    where = (
+        [str(v) for v in df.loc[bad, "path"][:3]]
+        if "path" in df.columns
+        else [f"row {int(i)}" for i in df.index[bad][:3]]
+    )
+    return ", ".join(where) + (" ..." if int(bad.sum()) > 3 else "")
+
+
 def _numeric_metrics(df: pd.DataFrame) -> pd.DataFrame:
-    """``df`` with every metric column (:func:`_is_metric_column`) read as numbers: a value
-    that is not a number (a string, a list, a dict from a result dict or JSON file) becomes
-    NaN, with one :class:`DataWarning` per column naming the rows (their ``path`` where they
-    have one), so that no mean silently leaves it out."""
+    """``df`` with every metric column (:func:`_is_metric_column`) and the ``contact`` and
+    ``completed`` flags read as numbers: a value that is not a number (a string, a list, a
+    dict from a result dict or JSON file) becomes NaN, and so does a negative value of a
+    :data:`NON_NEGATIVE` column, with one :class:`DataWarning` per column naming the rows
+    (their ``path`` where they have one), so that no mean or count silently leaves it out
+    or takes it in."""
     for col in df.columns:
-        if not _is_metric_column(col) or pd.api.types.is_numeric_dtype(df[col]):
+        if not (_is_metric_column(col) or col in _FLAG_COLUMNS):
             continue
-        values = pd.to_numeric(df[col], errors="coerce")
-        bad = values.isna() & df[col].notna()
-        if bool(bad.any()):
-            where = (
-                [str(v) for v in df.loc[bad, "path"][:3]]
-                if "path" in df.columns
-                else [f"row {int(i)}" for i in df.index[bad][:3]]
-            )
-            more = " ..." if int(bad.sum()) > 3 else ""
-            warnings.warn(
-                f"{int(bad.sum())} value(s) of {col!r} are not numbers ({', '.join(where)}"
-                f"{more}: e.g. {reprlib.repr(df.loc[bad, col].iloc[0])}); read as missing",
-                DataWarning,
-                stacklevel=3,
-            )
+        values = df[col]
+        if not pd.api.types.is_numeric_dtype(values):
+            values = pd.to_numeric(df[col], errors="coerce")
+            bad = values.isna() & df[col].notna()
+            if bool(bad.any()):
+                warnings.warn(
+                    f"{int(bad.sum())} value(s) of {col!r} are not numbers ({_where(df, bad)}"
+                    f": e.g. {reprlib.repr(df.loc[bad, col].iloc[0])}); read as missing",
+                    DataWarning,
+                    stacklevel=3,
+                )
+        if _metric_name(str(col)) in NON_NEGATIVE and not pd.api.types.is_bool_dtype(values):
+            negative = values < 0
+            if bool(negative.any()):
+                warnings.warn(
+                    f"{int(negative.sum())} value(s) of {col!r} are negative "
+                    f"({_where(df, negative)}: e.g. {values[negative].iloc[0]!r}), which it "
+                    "cannot be; read as missing",
+                    DataWarning,
+                    stacklevel=3,
+                )
+                values = values.mask(negative)
         df[col] = values
     return df
 
@@ -1404,6 +1440,14 @@ def plot_sweep(
                 ax.set_xlabel(SETTING_LABELS.get(x, x))
             if k == 0:
                 ax.set_ylabel(_label(y))
+    # ticks at the swept values, written as given (0.02, not 0.0200 between 0.0025-steps
+    # whose labels ran into each other); slanted when there are many
+    swept = sorted({float(xv) for xv in pd.to_numeric(v[x], errors="coerce").dropna()})
+    if 0 < len(swept) <= 12:
+        for ax in axes[-1]:
+            ax.set_xticks(swept, [f"{xv:g}" for xv in swept])
+            if len(swept) > 4:
+                ax.tick_params(axis="x", labelrotation=35)
     _legend_outside(axes[0][-1], title=hue, fontsize="small")
     fig.suptitle(
         f"{name} against {x}"
@@ -1664,8 +1708,12 @@ def write_sweep_report(
         names = ", ".join(f"`{p.name}`" for p in paired)
         paired_md = paired_md[:-2] + (["", f"Plots: {names}."] if paired else [])
     md += paired_md
-    df.to_csv(written[0], index=False)  # both once every table is built
-    written[1].write_text("\n".join(md))
+    # both once every table is built, each replacing its file in one step: a full disk or
+    # an interrupt leaves the earlier table (an experiment's record of its episodes) whole
+    with whole_file(written[0]) as tmp:
+        df.to_csv(tmp, index=False)
+    with whole_file(written[1]) as tmp:
+        tmp.write_text("\n".join(md) + "\n")
     written += paired
 
     def varies(c: str) -> bool:

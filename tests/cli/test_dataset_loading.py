@@ -358,3 +358,46 @@ def test_override_word_reaches_hydra_as_the_string_given(value: str) -> None:
     (word,) = shlex.split(override_word("data.path", value))
     (parsed,) = OverridesParser.create().parse_overrides([word])
     assert parsed.key_or_group == "data.path" and parsed.value() == value
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (
+            ["data=lego", "data.path={lego}"],
+            r"error: ConfigError: run\.train_data=data with a LEGO assembly recording .*its 6 "
+            r"arm joints are not the simulated person's 10",
+        ),
+        (
+            ["data.path={lego}", "data.windows.joints=[left_hand,right_hand]"],
+            r"error: ConfigError: data\.windows\.joints=\['left_hand', 'right_hand'\]: the "
+            r"closed loop forecasts every joint",
+        ),
+        (
+            ["data.path={lego}", "+data.fps=30"],
+            r"error: ConfigError: data\.fps=30, but the tracker samples the person at "
+            r"sim\.tracker_fps=15 Hz",
+        ),
+    ],
+)
+def test_an_experiment_refuses_training_data_its_loop_cannot_use(
+    args: list[str], message: str, lego: Path, tmp_path: Path
+) -> None:
+    """With run.train_data=data, a predictor of other joints or another rate than the
+    simulated person's is refused before anything is trained or run (it failed with a shape
+    error in the first I-Planner episode, after training and the ITOMP episodes)."""
+    args = [a.format(lego=lego) for a in args]
+    ck = tmp_path / "ck"
+    res = _run(
+        "experiment",
+        [
+            "run.train_data=data",
+            *args,
+            "run.planners=[itomp,iplanner_ni]",
+            f"paths.checkpoints={ck}",
+        ],
+        tmp_path,
+    )
+    assert re.fullmatch(message + ".*", _error_line(res))
+    assert not ck.exists()
+    assert not list((tmp_path / "run").glob("episodes/*"))

@@ -169,3 +169,28 @@ def test_mcap_files_that_are_not_episode_logs_are_left_out_of_a_folder(
         _evaluate(monkeypatch, foreign, tmp_path / "out_foreign")
     with pytest.raises(DataError, match="text.mcap is not an MCAP file"):
         _evaluate(monkeypatch, text, tmp_path / "out_text")
+
+
+def test_one_results_csv_is_checked_as_a_folder_is(monkeypatch, tmp_path: Path) -> None:
+    """A single results CSV whose rows repeat an episode (two tables pasted together) is
+    warned about as two sources are; a ``completed`` that is no number and a negative count
+    or efficiency are read as missing, each with a warning, not counted or averaged."""
+    head = "planner,scenario,speed,seed,smoothness,efficiency,sim/contacts,completed\n"
+    rows = ["itomp,s,medium,0,1.0,1.5,0,1\n", "itomp,s,medium,1,2.0,1.6,0,1\n"]
+    twice = tmp_path / "twice.csv"
+    twice.write_text(head + "".join(rows + rows))
+    caught = _evaluate(monkeypatch, twice, tmp_path / "out1")
+    assert any("2 of the 4 episodes repeat the settings" in str(w.message) for w in caught)
+    bad = tmp_path / "bad.csv"
+    bad.write_text(head + rows[0] + "itomp,s,medium,1,2.0,-1,-3,maybe\n")
+    caught = _evaluate(monkeypatch, bad, tmp_path / "out2")
+    said = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+    assert any("value(s) of 'completed' are not numbers" in m for m in said), said
+    assert any("value(s) of 'efficiency' are negative" in m for m in said), said
+    assert any("value(s) of 'sim/contacts' are negative" in m for m in said), said
+    assert not any("repeat the settings" in m for m in said)
+    import pandas as pd
+
+    back = pd.read_csv(tmp_path / "out2" / "results.csv")
+    assert back["efficiency"].tolist()[0] == 1.5 and pd.isna(back["efficiency"].tolist()[1])
+    assert pd.isna(back["sim/contacts"].tolist()[1]) and pd.isna(back["completed"].tolist()[1])

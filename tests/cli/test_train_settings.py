@@ -193,3 +193,19 @@ def test_windows_longer_than_every_demonstration_are_named(
                        r"the longest demonstration has \d+ frames"):  # fmt: skip
         train_from_config(cfg, cfg.predictor, tmp_path / "ck", trainer_node=cfg.trainer)
     assert not called
+
+
+def test_a_resumed_runs_training_time_adds_the_recorded_one(tmp_path: Path) -> None:
+    """train_seconds of a resumed folder adds what its earlier run recorded (a resume that
+    reused every sub-model recorded well under a second as the predictor's training time);
+    a missing, unreadable or nonsensical record adds nothing."""
+    from iplanner_torch.cli.train import _recorded_seconds
+
+    path = tmp_path / "heldout_metrics.json"
+    assert _recorded_seconds(path) == 0.0
+    path.write_text(json.dumps({"train_seconds": 12.5, "mhd_1s": 0.05}))
+    assert _recorded_seconds(path) == 12.5
+    for text in ("{", "[1]", '{"train_seconds": "12"}', '{"train_seconds": -1}',
+                 '{"train_seconds": NaN}', '{"train_seconds": true}', "[" * 100000):  # fmt: skip
+        path.write_text(text)
+        assert _recorded_seconds(path) == 0.0, text

@@ -783,6 +783,28 @@ def test_a_predictor_sets_the_tracker_window_and_must_match_the_tracker_rate() -
         check_predictor_rate(SimpleNamespace(fps=15.0), 30.0)
 
 
+def test_a_predictor_of_other_joints_is_refused_before_the_episode(tmp_path: Path) -> None:
+    """A predictor trained on a subset of the joints (data.windows.joints) or on another
+    skeleton is refused by name before the loop runs, not by a shape error at its first
+    forecast; one that names no joints is left to the forecast check."""
+    from iplanner_torch.data.skeleton import JOINT_NAMES
+    from iplanner_torch.eval.episode import check_predictor_joints
+
+    check_predictor_joints(SimpleNamespace(joint_names=tuple(JOINT_NAMES)))
+    check_predictor_joints(SimpleNamespace(joint_names=list(JOINT_NAMES)))
+    check_predictor_joints(object())
+    for names in (("left_hand", "right_hand"), tuple(reversed(JOINT_NAMES))):
+        with pytest.raises(ConfigError, match=r"forecasts the joints \[.*but the simulated "
+                           r"person has the 10 joints"):  # fmt: skip
+            check_predictor_joints(SimpleNamespace(joint_names=names))
+    predictor = fakes.ConstantPredictor()
+    predictor.joint_names = ("left_hand", "right_hand")
+    with pytest.raises(ConfigError, match="data.windows.joints=null"):
+        _fake_episode(
+            tmp_path, _cfg(0.5), "iplanner_ni", fakes.LinearReplanner(), predictor=predictor
+        )
+
+
 def test_an_unreachable_crossing_is_refused_before_the_episode(tmp_path: Path) -> None:
     cfg = replace(
         _cfg(2.0), scenario=ScenarioCfg(name="b", kind="blocking", crossing_start=(5.0, 5.0, 5.0))

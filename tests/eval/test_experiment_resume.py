@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import os
 import shutil
+import warnings
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
 import iplanner_torch.eval.experiment as experiment_mod
-from iplanner_torch.errors import ConfigError, DataError
+from iplanner_torch.errors import ConfigError, DataError, DataWarning
 from iplanner_torch.eval.episode import EpisodeCfg
 from iplanner_torch.eval.experiment import (
     ExperimentCfg,
@@ -132,6 +133,24 @@ def test_read_finished_keeps_text_and_names(tmp_path) -> None:
     assert row["sim/contacts"] == 0 and "smoothness" not in row
     assert read_finished(csv).keys() == {episode_stem("b", "fast", 0.0, "itomp", 3)}
     assert read_finished(tmp_path / "none.csv") == {}
+
+
+def test_read_finished_leaves_out_a_last_row_cut_short(tmp_path) -> None:
+    """A table without its last line end was cut short while written (even a row with every
+    cell may end in a cut number): that row's episode runs again, with a warning."""
+    csv = tmp_path / "results.csv"
+    head = "planner,scenario,speed,noise,seed,smoothness\n"
+    whole = "itomp,s,medium,0.0,0,1.5\n"
+    csv.write_text(head + whole + "itomp,s,medium,0.0,1,2.25")
+    with pytest.warns(DataWarning, match="no line end.*run again"):
+        got = read_finished(csv)
+    assert got.keys() == {episode_stem("s", "medium", 0.0, "itomp", 0)}
+    csv.write_text(head + whole)  # the same table whole: no warning, both ways
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert read_finished(csv).keys() == got.keys()
+    csv.write_text(head.rstrip("\n"))  # a header alone: nothing finished, nothing dropped
+    assert read_finished(csv) == {}
 
 
 @pytest.mark.parametrize(

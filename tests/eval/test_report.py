@@ -555,6 +555,29 @@ def test_write_sweep_report(results: pd.DataFrame, tmp_path: Path) -> None:
     md = (tmp_path / "report" / "results.md").read_text()
     assert "| scenario |" in md
     assert "smoothness [rad²/s⁴]" in md and "closest distance [cm]" in md  # the units
+    assert md.endswith("\n") and not md.endswith("\n\n")
+
+
+def test_a_failed_report_write_keeps_the_earlier_table(
+    results: pd.DataFrame, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """results.csv is an experiment's record of its episodes: a write that fails midway
+    (a full disk) leaves the earlier file as it was, not cut short."""
+    out = tmp_path / "report"
+    out.mkdir()
+    earlier = "planner,scenario,speed,noise,seed\nitomp,s,medium,0.0,0\n"
+    (out / "results.csv").write_text(earlier)
+    real = pd.DataFrame.to_csv
+
+    def full_disk(self, path, *args, **kwargs):
+        Path(path).write_text(real(self, None, *args, **kwargs)[:50])
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        write_sweep_report(results, out, sweep="confidence")
+    assert (out / "results.csv").read_text() == earlier
+    assert [p.name for p in out.iterdir()] == ["results.csv"]  # no temporary file left
 
 
 def test_distances_are_shown_in_cm(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
