@@ -1154,7 +1154,11 @@ def run_app(app: Callable[[], Any]) -> None:
     except Exception as exc:  # noqa: BLE001 - what is not a config error is raised again
         if _SET_BY_RUN_APP not in os.environ:  # raised by the command after it started
             raise
-        text = composition_error_text(exc) or _launcher_error_text(exc)
+        text = composition_error_text(exc)
+        if text is None and (text := _launcher_error_text(exc)) is not None:
+            from iplanner_torch.cli.callbacks import drop_unlaunched_sweep
+
+            drop_unlaunched_sweep()  # no job ran: no dated sweep folder is left behind
         os_error = _os_error_of(exc)
         if text is not None:
             line = f"error: ConfigError: {text}"
@@ -1474,13 +1478,44 @@ def dump_config(cfg: DictConfig) -> str:
 #: frame rate of a LEGO assembly recording when ``data.fps`` does not say
 LEGO_FPS = 30.0
 
+#: the keys a ``data`` node may hold (conf/data/*.yaml, ``+data.fps``, ``+data.format``): the
+#: commands read them key by key, so any other key (``fsp: 60.0``) would be ignored
+DATA_KEYS = ("path", "format", "fps", "split", "overwrite", "generator", "windows")
+
+
+def check_data_keys(data_cfg: DictConfig) -> None:
+    """Refuse a key of a ``data`` node that no command reads (not in :data:`DATA_KEYS`): a
+    misspelt ``fsp: 60.0`` in a ``conf/data`` file would otherwise leave ``data.fps`` at its
+    default without a word, where every other config group refuses an unknown key.
+
+    Raises:
+        ConfigError: naming the key (with the closest known one, and the ``data`` option
+            when this run chose one) and listing the known keys.
+    """
+    import difflib
+
+    unknown = [str(k) for k in data_cfg if str(k) not in DATA_KEYS]
+    if not unknown:
+        return
+    key = unknown[0]
+    close = difflib.get_close_matches(key, DATA_KEYS, n=1, cutoff=0.6)
+    hint = f" (did you mean 'data.{close[0]}'?)" if close else ""
+    choice = _group_choice("data") if _full_key(data_cfg, None) == "data" else None
+    where = f" (data={choice})" if choice is not None else ""
+    raise ConfigError(
+        f"unknown key 'data.{key}'{hint} in the data config{where}, which nothing reads; "
+        f"data keys: {', '.join(DATA_KEYS)}"
+    )
+
 
 def data_fps(data_cfg: DictConfig) -> float | None:
     """``data.fps`` (the frame rate of files that do not state theirs), or None when unset.
 
     Raises:
-        ConfigError: when it is not a finite number > 0.
+        ConfigError: when it is not a finite number > 0, or the node holds a key no command
+            reads (:func:`check_data_keys`).
     """
+    check_data_keys(data_cfg)
     fps = data_cfg.get("fps", None)
     if fps is None:
         return None
@@ -1498,8 +1533,10 @@ def data_format(data_cfg: DictConfig) -> str:
     """``data.format``: ``native`` when unset (or null), else one of :data:`DATA_FORMATS`.
 
     Raises:
-        ConfigError: for any other value (``+data.format=lego`` was read as ``native``).
+        ConfigError: for any other value (``+data.format=lego`` was read as ``native``), or
+            when the node holds a key no command reads (:func:`check_data_keys`).
     """
+    check_data_keys(data_cfg)
     fmt = data_cfg.get("format", None)
     if fmt is None:
         return "native"
@@ -1940,12 +1977,13 @@ def dataset_generator(data_cfg: DictConfig, name: str | None = None) -> tuple[An
         :func:`~iplanner_torch.data.tasks.generate_task_dataset`.
 
     Raises:
-        ConfigError: when the node has no generator, it builds something else, or a setting
-            is bad.
+        ConfigError: when the node has no generator, it builds something else, a setting
+            is bad, or the node holds a key no command reads (:func:`check_data_keys`).
     """
     from iplanner_torch.data.reaching import ReachingCfg, generate_reaching_dataset
     from iplanner_torch.data.tasks import TaskDatasetCfg, generate_task_dataset
 
+    check_data_keys(data_cfg)
     if data_cfg.get("generator") is None:
         raise ConfigError(
             f"data config has no generator (a recorded dataset at {data_cfg.path}): "

@@ -196,6 +196,8 @@ PLOTTED_METRICS = {
 def job_metrics_rows(root: Path) -> Any:
     """One row per job folder of the multirun folder ``root`` that holds a metrics file
     (:data:`JOB_METRICS_FILES`): ``job`` (the folder's name), the file's numbers and ``path``.
+    A file that does not read as a JSON object (damaged, or nested too deep for the parser)
+    only loses its row.
 
     Returns:
         A DataFrame in job order; empty when no job wrote one.
@@ -216,8 +218,8 @@ def job_metrics_rows(root: Path) -> Any:
             continue
         try:
             record = json.loads(file.read_text(encoding="utf-8"))
-        except (OSError, ValueError):  # a damaged file only loses its row
-            continue
+        except (OSError, ValueError, RecursionError):  # a damaged file only loses its row
+            continue  # RecursionError: arrays or objects nested too deep for the parser
         if not isinstance(record, dict):
             continue
         values = {k: v for k, v in record.items() if isinstance(v, int | float | str)}
@@ -462,6 +464,42 @@ def _unescaped(override: str) -> str:
     return re.sub(r"\\([\\{}:=,\[\]()'\" ])", r"\1", override)
 
 
+#: (sweep folder, whether it existed before) of each multirun this process began
+#: (:meth:`GatherSweepResults.on_multirun_start`), for :func:`drop_unlaunched_sweep`
+STARTED_SWEEPS: list[tuple[Path, bool]] = []
+#: what Hydra writes into a sweep folder before its launcher starts a job
+_UNLAUNCHED_SWEEP_FILES = frozenset({"multirun.yaml", ".submitit"})
+
+
+def drop_unlaunched_sweep() -> Path | None:
+    """Delete the folder of the sweep this process began when its launcher failed before any
+    job (``hydra/launcher=slurm`` off a cluster): a folder this sweep made, holding nothing
+    but Hydra's ``multirun.yaml`` (and an empty ``.submitit/``), then its parents left empty
+    up to the working folder, as a refused single run's folder is
+    (:func:`~iplanner_torch.cli._common.delete_run_dir`). A folder that existed before, or
+    holds anything else, is kept.
+
+    Returns:
+        The deleted folder, or None.
+    """
+    from iplanner_torch.cli._common import delete_run_dir
+
+    if not STARTED_SWEEPS:
+        return None
+    folder, existed = STARTED_SWEEPS[-1]
+    try:
+        names = {p.name for p in folder.iterdir()}
+        submitit = folder / ".submitit"
+        if existed or not names <= _UNLAUNCHED_SWEEP_FILES:
+            return None
+        if submitit.exists() and any(p.is_file() for p in submitit.rglob("*")):
+            return None
+    except OSError:
+        return None
+    delete_run_dir(folder, Path.cwd())
+    return folder
+
+
 def _refuse_sweep(text: str) -> NoReturn:
     """Print ``error: ConfigError: <text>`` and end the sweep with exit code 2 before any job
     runs (Hydra turns an exception raised in a callback into a warning; an exit is not one)."""
@@ -602,6 +640,7 @@ class GatherSweepResults(Callback):
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         sweep_dir = Path(str(config.hydra.sweep.dir))
+        STARTED_SWEEPS.append((sweep_dir, sweep_dir.exists()))
         used = used_sweep_dir_text(sweep_dir)
         # an experiment sweep with run.resume=true continues the earlier one: each job checks
         # its folder against the run it resumes

@@ -936,7 +936,10 @@ def _read_run_inputs(out_dir: Path) -> dict[str, Any]:
             "folder of the run to continue with hydra.run.dir=<folder> (hydra.sweep.dir for -m)"
         )
     try:
-        inputs = json.loads(path.read_text())
+        try:
+            inputs = json.loads(path.read_text(encoding="utf-8"))
+        except RecursionError:  # "[" * 100000: the JSON decoder recursed too deep
+            raise ValueError("JSON nested too deep") from None
         if not isinstance(inputs, dict) or not isinstance(inputs.get("settings"), dict):
             raise ValueError("no settings")
     except (ValueError, OSError) as exc:

@@ -293,6 +293,10 @@ def episode_stem(scenario: str, speed: str, noise: float, planner: str, seed: in
     return f"{scenario}_{speed}_n{noise:g}_{planner}_s{seed}"
 
 
+#: the cut results tables :func:`read_finished` has warned of (path, length)
+_WARNED_CUT: set[tuple[str, int]] = set()
+
+
 def read_finished(results_csv: Path) -> dict[str, dict[str, Any]]:
     """The episodes an earlier run of a grid finished: the rows of its ``results.csv`` by
     :func:`episode_stem` (a row is written when its episode has ended).
@@ -324,13 +328,16 @@ def read_finished(results_csv: Path) -> dict[str, dict[str, Any]]:
             # without one was cut short while written (a full disk, a killed report), and
             # even the last row's full count of cells may hold a cut number
             head, _, last = text.rstrip("\r\n").rpartition("\n")
-            if head:
+            seen = (str(path.resolve()), len(text))  # a resume reads it twice: warn once
+            if head and seen not in _WARNED_CUT:
+                _WARNED_CUT.add(seen)
                 warnings.warn(
                     f"{path}: the last row has no line end (the file was cut short while "
                     f"written): its episode is run again ({last[:80]!r})",
                     DataWarning,
                     stacklevel=2,
                 )
+            if head:
                 text = head + "\n"
         df = pd.read_csv(io.StringIO(text), dtype={c: str for c in TEXT_COLUMNS})
     except pd.errors.EmptyDataError:

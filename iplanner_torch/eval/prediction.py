@@ -141,6 +141,8 @@ def read_training_inputs(folder: str | Path) -> dict[str, Any] | None:
         record = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as err:
         raise CheckpointError(f"{path} is unreadable ({type(err).__name__}: {err})") from None
+    except RecursionError:  # "[" * 100000: the JSON decoder recursed too deep
+        raise CheckpointError(f"{path} is unreadable (JSON nested too deep)") from None
     if not isinstance(record, dict):
         raise CheckpointError(
             f"{path} is unreadable (expected a JSON object, got {type(record).__name__})"

@@ -494,7 +494,8 @@ class TimelineStamp:
 
     @classmethod
     def from_json(cls, text: str) -> TimelineStamp | None:
-        """The stamp in ``text``, or None when it is not one of this format."""
+        """The stamp in ``text``, or None when it is not one of this format (malformed JSON,
+        JSON nested too deep for the parser, or another record)."""
         try:
             raw = json.loads(text)
             if raw.get("format") != TIMELINE_FORMAT:
@@ -517,7 +518,7 @@ class TimelineStamp:
                 if not (isinstance(size, int) and isinstance(mtime, int)):
                     raise TypeError("size and mtime are integers")
                 source = (_str(name), size, mtime)
-        except (ValueError, TypeError, KeyError, AttributeError):
+        except (ValueError, TypeError, KeyError, AttributeError, RecursionError):
             return None
         return cls(extremes=extremes, axes=axes, source=source)
 

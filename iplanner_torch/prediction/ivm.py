@@ -52,7 +52,7 @@ from torch import Tensor
 from iplanner_torch import checks
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.dtw import KernelLike, kernel_from_state
-from iplanner_torch.types import check_finite, check_shape
+from iplanner_torch.types import check_finite, check_shape, resolve_device
 
 __all__ = ["ActionClassifier", "IVMClassifier", "feature_columns"]
 
@@ -91,8 +91,9 @@ class IVMClassifier:
         seed: seed of the candidate sampler, an integer in [0, 2^32 - 1].
 
     Raises:
-        ConfigError: when a setting is not of the type and range above (a float ``2.5`` or a
-            string ``"2"`` for an integer, NaN or inf included).
+        ConfigError: when ``kernel`` is not callable (None), or a setting is not of the type
+            and range above (a float ``2.5`` or a string ``"2"`` for an integer, NaN or inf
+            included).
 
     Attributes (after ``fit``):
         loss_history_: H after the bias-only start, after each import, and after the final
@@ -112,6 +113,11 @@ class IVMClassifier:
         newton_steps: int = 3,
         seed: int = 0,
     ) -> None:
+        if not callable(kernel):
+            raise ConfigError(
+                "expected kernel a callable (x1 (B1, T, D), x2 (B2, T, D)) -> (B1, B2), e.g. "
+                f"iplanner_torch.prediction.dtw.DTWKernel, got {kernel!r}"
+            )
         self.kernel = kernel
         self.num_classes = checks.integer("num_classes", num_classes, minimum=1)
         self.lam = checks.positive("lam", lam)  # NaN and inf refused too
@@ -311,7 +317,13 @@ class IVMClassifier:
 
         Predictions then run where the windows are without copies per call; the coefficients
         stay float64.
+
+        Raises:
+            ConfigError: for a device that :func:`~iplanner_torch.types.resolve_device`
+                refuses (an unknown name, CUDA where there is none, ``meta``, which holds no
+                numbers, or another device type), before anything is moved.
         """
+        device = resolve_device(device)
         for name in ("import_vectors_", "weights_", "classes_"):
             val = getattr(self, name)
             if val is not None:
@@ -597,7 +609,14 @@ class ActionClassifier:
         return x[..., self.feature_index]
 
     def to(self, device: torch.device | str) -> ActionClassifier:
-        """Move every per-state model to ``device`` (predictions then run there)."""
+        """Move every per-state model to ``device`` (predictions then run there).
+
+        Raises:
+            ConfigError: for a device that :func:`~iplanner_torch.types.resolve_device`
+                refuses (an unknown name, CUDA where there is none, ``meta``, which holds no
+                numbers, or another device type), before anything is moved.
+        """
+        device = resolve_device(device)
         for model in self.models_.values():
             model.to(device)
         return self

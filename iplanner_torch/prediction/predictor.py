@@ -45,9 +45,19 @@ from iplanner_torch.errors import (
 from iplanner_torch.files import whole_file
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
-from iplanner_torch.types import MAX_POSITION_M, all_finite, check_finite, check_shape
+from iplanner_torch.types import (
+    MAX_POSITION_M,
+    all_finite,
+    check_finite,
+    check_shape,
+    resolve_device,
+)
 
 CHECKPOINT_VERSION = 1
+#: the magnitude from which finite windows can overflow float32 inside the predictor (their
+#: squares, which the kernels take, do): a NaN or inf that appears inside from windows this
+#: large is reported as their overflow (sqrt of float32's largest value, about 1.8e19)
+_OVERFLOW_FROM = math.sqrt(torch.finfo(torch.float32).max)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -329,7 +339,15 @@ class HumanMotionPredictor:
         return self.feat_mean.device
 
     def to(self, device: torch.device | str) -> HumanMotionPredictor:
-        """Move every tensor (GPs, normalisation, classifier when it can) to ``device``."""
+        """Move every tensor (GPs, normalisation, classifier when it can) to ``device``
+        (``"cpu"``, ``"cuda"``, ``"cuda:<index>"`` or ``"auto"``).
+
+        Raises:
+            ConfigError: for a device that :func:`~iplanner_torch.types.resolve_device`
+                refuses (an unknown name, CUDA where there is none, ``meta``, which holds no
+                numbers, or another device type), before anything is moved.
+        """
+        device = resolve_device(device)
         self.feat_mean = self.feat_mean.to(device)
         self.feat_std = self.feat_std.to(device)
         for reg in list(self.gps.values()) + list(self.pooled.values()):
@@ -405,13 +423,17 @@ class HumanMotionPredictor:
         Raises:
             ShapeError: as :meth:`predict`, for shapes, dtypes and an empty batch.
             ConfigError: as :meth:`predict`, for progress states out of range.
-            DataError: as :meth:`predict`, for windows that are not finite.
+            DataError: as :meth:`predict`, for windows that are not finite, or finite ones so
+                large that the classifier's input overflows.
         """
         f_prev, progress = self._checked_windows(f_prev, progress, positions_checked=False)
         return self._action_weights(f_prev, progress)
 
-    def _action_weights(self, f_prev: torch.Tensor, progress: torch.Tensor) -> torch.Tensor:
-        """:meth:`action_weights` of checked windows."""
+    def _action_weights(
+        self, f_prev: torch.Tensor, progress: torch.Tensor, name: str = "f_prev"
+    ) -> torch.Tensor:
+        """:meth:`action_weights` of checked windows (``name``: the argument they came from,
+        for messages)."""
         b = f_prev.shape[0]
         if self.classifier is None:
             return torch.full(
@@ -423,8 +445,31 @@ class HumanMotionPredictor:
         x = self._normalise(f_prev)
         if not hasattr(self.classifier, "to"):  # a CPU-only classifier: evaluate it there
             x, progress = x.cpu(), progress.cpu()
-        w = self.classifier.predict_proba(x, progress)
+        try:
+            w = self.classifier.predict_proba(x, progress)
+        except DataError:  # the windows are finite: x is not when their scaling overflowed
+            overflow = None if all_finite(x) else self._overflow_error(name, f_prev)
+            if overflow is None:
+                raise
+            raise overflow from None
         return w.to(f_prev)
+
+    def _overflow_error(self, name: str, f_prev: torch.Tensor) -> DataError | None:
+        """The DataError for windows ``f_prev`` (B, n_p, D) that are finite as the caller gave
+        them (``name``: the argument, as the public method calls it) but overflow to inf in
+        the predictor's float32 arithmetic, naming the entry of largest magnitude; None when
+        no finite entry reaches :data:`_OVERFLOW_FROM` (a NaN or inf of another cause)."""
+        size = torch.where(torch.isfinite(f_prev), f_prev.abs(), 0).to(torch.float64)
+        if not float(size.max()) >= _OVERFLOW_FROM:
+            return None
+        b_i, t_i, d_i = (size == size.max()).nonzero()[0].tolist()
+        what = "the features computed from them overflow" if name != "f_prev" else "they overflow"
+        return DataError(
+            f"{name} holds values too large for the predictor: finite as given, {what} to inf "
+            f"in its float32 arithmetic (overflow; largest: window {b_i}, frame {t_i}, "
+            f"{self.feature_names[d_i]!r}: {float(f_prev[b_i, t_i, d_i]):g}); positions are "
+            "metres, velocities m/s and accelerations m/s^2: check the units"
+        )
 
     def _fallback(self, f_prev: torch.Tensor, pose: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """Constant-velocity mean (B, n_f, K, 3) and the large fallback variance."""
@@ -506,15 +551,24 @@ class HumanMotionPredictor:
                 integer dtype.
             ConfigError: for a negative ``progress`` or one with a bit of no progress action.
             DataError: when ``f_prev`` holds NaN or inf (naming window, frame and feature), or
-                a position beyond :data:`MAX_POSITION_M`.
+                a position beyond :data:`MAX_POSITION_M`, or values finite but so large that
+                they overflow float32 inside the predictor (``f_prev holds values too large
+                for the predictor: ... (overflow; largest: ...)``).
         """
         return self._predict(f_prev, progress, positions_checked=False)
 
     def _checked_windows(
-        self, f_prev: torch.Tensor, progress: torch.Tensor, *, positions_checked: bool
+        self,
+        f_prev: torch.Tensor,
+        progress: torch.Tensor,
+        *,
+        positions_checked: bool,
+        name: str = "f_prev",
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """``f_prev`` (B, n_p, D) as float32 and ``progress`` (B,) on the predictor's device,
-        checked as :meth:`predict` checks them (``positions_checked``: only finiteness)."""
+        checked as :meth:`predict` checks them (``positions_checked``: only finiteness, of
+        features computed from the argument ``name``). Windows finite as given that are not
+        in float32 (float64 beyond its range) are refused as an overflow."""
         check_shape("f_prev", f_prev, ("B", self.n_prev, self.num_features))
         if f_prev.shape[0] == 0:
             raise ShapeError(
@@ -523,24 +577,41 @@ class HumanMotionPredictor:
             )
         _check_floating("f_prev", f_prev)
         check_shape("progress", progress, (f_prev.shape[0],))
-        f_prev = f_prev.detach().to(self.device, torch.float32)
+        given = f_prev.detach()
+        f_prev = given.to(self.device, torch.float32)
         progress = self._check_progress(progress.to(self.device))
-        self._check_window_values(f_prev, check_range=not positions_checked)
+        try:
+            self._check_window_values(f_prev, check_range=not positions_checked)
+        except DataError:
+            if not positions_checked:
+                if not all_finite(given):  # NaN or inf as given: that message stands
+                    raise
+                # finite as given: a far position is named as such, else it is an overflow
+                self._check_window_values(given.to(self.device), check_range=True)
+            overflow = self._overflow_error(name, given.to(self.device))
+            if overflow is None:
+                raise
+            raise overflow from None
         return f_prev, progress
 
     def _predict(
-        self, f_prev: torch.Tensor, progress: torch.Tensor, *, positions_checked: bool
+        self,
+        f_prev: torch.Tensor,
+        progress: torch.Tensor,
+        *,
+        positions_checked: bool,
+        name: str = "f_prev",
     ) -> Forecast:
         """:meth:`predict`; ``positions_checked``: the caller has already refused positions
         beyond :data:`MAX_POSITION_M` (:meth:`predict_positions`), so only finiteness is
-        checked here."""
+        checked here; ``name``: the caller's argument, for messages."""
         f_prev, progress = self._checked_windows(
-            f_prev, progress, positions_checked=positions_checked
+            f_prev, progress, positions_checked=positions_checked, name=name
         )
         b, k, a_n = f_prev.shape[0], self.num_joints, self.num_actions
         pose = f_prev[:, -1, : 3 * k].reshape(b, k, 3)  # (B, K, 3) current pose
         x = gp_inputs(f_prev, k, self.cfg.gp_input)  # (B, n_p * D)
-        weights = self._action_weights(f_prev, progress)
+        weights = self._action_weights(f_prev, progress, name)
         uniq = torch.unique(progress).tolist()
         banks = {p: self._bank(int(p)) for p in uniq}
         if all(len(have) == a_n for _, have in banks.values()):
@@ -572,14 +643,21 @@ class HumanMotionPredictor:
                 m, v = self.model_for(p, a).predict(xr)  # (b, n_f K 3) each
                 mean[rows, a] = m.view(nb, self.n_future, k, 3) + pr.unsqueeze(1)
                 var[rows, a] = v.view(nb, self.n_future, k, 3)
-        return Forecast(
-            weights=weights,
-            mean=mean,
-            var=var,
-            dt=1.0 / self.fps,
-            joint_names=self.joint_names,
-            action_names=self.action_names,
-        )
+        try:
+            return Forecast(
+                weights=weights,
+                mean=mean,
+                var=var,
+                dt=1.0 / self.fps,
+                joint_names=self.joint_names,
+                action_names=self.action_names,
+            )
+        except DataError:  # the windows are finite: a non-finite forecast may be an overflow
+            finite = all_finite(weights, mean, var)
+            overflow = None if finite else self._overflow_error(name, f_prev)
+            if overflow is None:
+                raise
+            raise overflow from None
 
     def predict_positions(self, positions: torch.Tensor, progress: torch.Tensor) -> Forecast:
         """Forecast from raw tracked positions (features computed here).
@@ -600,7 +678,8 @@ class HumanMotionPredictor:
             ShapeError: for wrong shapes (as :meth:`predict`) or a dtype that is not floating.
             ConfigError: as :meth:`predict`.
             DataError: when every joint is NaN in every frame of a window, or on inf or a
-                coordinate beyond :data:`MAX_POSITION_M`.
+                coordinate beyond :data:`MAX_POSITION_M`; naming ``positions`` when the
+                features computed from them overflow (as :meth:`predict`).
         """
         from iplanner_torch.data.windows import compute_features
 
@@ -637,7 +716,7 @@ class HumanMotionPredictor:
             self.feature_kinds,
             joint_names=self.joint_names,
         )
-        return self._predict(f, progress, positions_checked=True)
+        return self._predict(f, progress, positions_checked=True, name="positions")
 
     def next_action(self, progress: int, current: int) -> torch.Tensor:
         """(A,) p(n | p, c) (eq. next_action); uniform without a next-action model.
@@ -833,7 +912,7 @@ class HumanMotionPredictor:
         if map_location is not None:
             try:
                 pred.to(map_location)
-            except (RuntimeError, AssertionError) as err:  # e.g. CUDA not available
+            except (ConfigError, RuntimeError, AssertionError) as err:  # no CUDA here
                 raise ConfigError(
                     f"cannot move predictor checkpoint {path} to map_location "
                     f"{map_location!r}: {err}"

@@ -149,6 +149,20 @@ def test_the_slurm_launcher_off_a_cluster_is_one_line(tmp_path: Path) -> None:
     lines = res.stderr.strip().splitlines()
     assert lines[-1].startswith("error: ConfigError: hydra/launcher=slurm submits jobs to a SLURM")
     assert "no `srun` is on the PATH" in lines[-1] and "hydra/launcher=joblib" in lines[-1]
+    assert not (tmp_path / "sweep").exists()  # no job ran: no sweep folder is left behind
+    # nor a dated one under multirun/; a sweep folder that existed before is kept as it was
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    (kept / "notes.txt").write_text("mine")
+    for sweep_dir in ([], [f"hydra.sweep.dir={kept}"]):
+        res = subprocess.run(
+            [sys.executable, "-m", "iplanner_torch.cli.experiment", "-m", "hydra/launcher=slurm",
+             *sweep_dir, "tracker.noise=0"],
+            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        assert res.returncode == 2, res.stderr[-2000:]
+    assert not (tmp_path / "multirun").exists()
+    assert sorted(p.name for p in kept.iterdir()) == ["multirun.yaml", "notes.txt"]
 
 
 def test_a_sweep_runs_through_sbatch_on_a_stand_in_cluster(tmp_path: Path) -> None:

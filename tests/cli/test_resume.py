@@ -308,3 +308,11 @@ def test_resume_continues_a_run_of_several_scenarios(tmp_path: Path) -> None:
         "confidence_0.99_medium_n0.01_itomp_s0.mcap"
     ]
     pd.testing.assert_frame_equal(_table(run / "results.csv"), full)
+
+
+def test_a_run_record_nested_too_deep_is_one_config_error(tmp_path: Path) -> None:
+    """A damaged run_inputs.json ("[" * 100000) is refused as any unreadable record is,
+    not with the JSON decoder's RecursionError."""
+    (tmp_path / cli.RUN_INPUTS).write_text("[" * 100000)
+    with pytest.raises(ConfigError, match=r"cannot be read \(JSON nested too deep\), so the run"):
+        cli._read_run_inputs(tmp_path)

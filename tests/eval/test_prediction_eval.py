@@ -347,6 +347,7 @@ def test_training_inputs_record_reads_or_is_refused_by_name(tmp_path) -> None:
     bad = {"fingerprint": "abc", "split": dict(split, fractions=[0.5, 0.5, 0.5])}
     for text, why in (
         ("\xff", "JSONDecodeError"),
+        ("[" * 100000, "JSON nested too deep"),  # a raw RecursionError before
         ("null", "expected a JSON object, got NoneType"),
         (json.dumps(bad), r"ConfigError: fractions: expected 3 non-negative shares"),
         (json.dumps({"fingerprint": "abc", "split": {"fractions": [1, 0, 0]}}), "KeyError"),
