@@ -795,9 +795,12 @@ class SVGPRegressor(nn.Module):
 
         With ``r_i`` the mean over channels of the squared normalised validation residuals and
         ``b_i = var_f(x_i) + e_test``, the floor ``f`` maximises
-        ``sum_i -(log(b_i + f) + r_i / (b_i + f)) / 2`` (bisection on its derivative); it is
-        never lowered below the ELBO's floor. q is then recomputed from the training points
-        with the new floor (``rounds`` times, since q depends on the floor).
+        ``sum_i -(log(b_i + f) + r_i / (b_i + f)) / 2`` (bisection on its derivative). q is
+        then recomputed from the training points with the new floor, and the next round
+        (``rounds`` in all, since q depends on the floor) maximises again with it. A round
+        only raises the floor: where the maximiser lies below the current floor (the ELBO's,
+        or an earlier round's) the floor is kept and the rounds end, so the result may sit a
+        little above the last round's maximiser (wider, the safe side).
 
         Args:
             x_val: (N_v, D_in) raw validation inputs (other demonstrations than training).
