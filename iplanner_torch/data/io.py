@@ -848,6 +848,13 @@ def _validate(path: Path, raw: dict[str, Any], fps: float | None) -> Demonstrati
     n_act = len(raw["action_names"])
     if n_act == 0:
         raise DataError(f"{path}: field 'action_names' is empty")
+    actions = list(raw["action_names"])
+    twice = sorted({a for a in actions if actions.count(a) > 1})
+    if twice:
+        # two labels of one name would be one action to a reader and two to the predictor
+        raise DataError(f"{path}: field 'action_names' names {twice} more than once: {actions}")
+    if any(not str(a).strip() for a in actions):
+        raise DataError(f"{path}: field 'action_names' holds an empty name: {actions}")
     if labels.size and (labels.min() < -1 or labels.max() >= n_act):
         raise DataError(
             f"{path}: field 'labels' out of range: values in [{labels.min()}, {labels.max()}], "

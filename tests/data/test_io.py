@@ -1141,3 +1141,23 @@ def test_a_lego_trial_with_one_coordinate_lost_everywhere_is_refused(tmp_path):
     with pytest.raises(DataError, match=r"trial3\.txt: field 'positions' is NaN in every frame "
                        r"for every joint"):  # fmt: skip
         load_lego_assembly(tmp_path, fps=30.0)
+
+
+@pytest.mark.parametrize(
+    ("names", "match"),
+    [
+        (["idle", "idle", "reach"], r"names \['idle'\] more than once"),
+        (["idle", "", "reach"], "holds an empty name"),
+        (["idle", "  ", "reach"], "holds an empty name"),
+    ],
+)
+def test_action_names_given_twice_or_empty_are_refused(tmp_path, names, match):
+    """Duplicate joint names were refused but duplicate or empty action names loaded: two
+    labels of one name are one action to a reader and two to the predictor."""
+    p = _npz(tmp_path / "x.npz", action_names=np.array(names))
+    with pytest.raises(DataError, match=rf"x\.npz: field 'action_names' {match}"):
+        load_demonstrations(p)
+    header = "# " + json.dumps({"fps": 15.0, "action_names": names})
+    c = _csv(tmp_path / "y.csv", header, "t,label,a_x,a_y,a_z", "0.0,0,1,2,3")
+    with pytest.raises(DataError, match=rf"y\.csv: field 'action_names' {match}"):
+        load_demonstrations(c)
