@@ -192,7 +192,13 @@ LINE_PRIMITIVE = _primitive(
         "type": {
             "title": "foxglove.LineType",
             "description": "0: LINE_STRIP, 1: LINE_LOOP, 2: LINE_LIST",
-            "enum": [0, 1, 2],
+            # the published schema's form: Foxglove's JSON-schema loader reads an enum only
+            # as a oneOf of numeric consts (a bare "enum" made it drop the whole channel)
+            "oneOf": [
+                {"title": "LINE_STRIP", "const": 0},
+                {"title": "LINE_LOOP", "const": 1},
+                {"title": "LINE_LIST", "const": 2},
+            ],
         },
         "thickness": _number("Line thickness"),
         "scale_invariant": {"type": "boolean"},
@@ -271,7 +277,7 @@ SCENE_ENTITY_DELETION = _object(
         "type": {
             "title": "foxglove.SceneEntityDeletionType",
             "description": "0: MATCHING_ID, 1: ALL",
-            "enum": [0, 1],
+            "oneOf": [{"title": "MATCHING_ID", "const": 0}, {"title": "ALL", "const": 1}],
         },
         "id": {"type": "string"},
     },
@@ -368,7 +374,8 @@ _ANY_JSON: dict[str, Any] = {}
 TASK_EVENT = _object(
     "iplanner.TaskEvent",
     "A task-level event (action started or finished, object handed over, ...)",
-    {**_STAMP, "kind": {"type": "string"}, "detail": {"type": "object"}},
+    # "properties": {} (no fields named, any allowed): Foxglove's loader needs the key
+    {**_STAMP, "kind": {"type": "string"}, "detail": {"type": "object", "properties": {}}},
 )
 
 EPISODE_METRICS = _object(
@@ -379,6 +386,7 @@ EPISODE_METRICS = _object(
         **_STAMP,
         "metrics": {
             "type": "object",
+            "properties": {},
             "additionalProperties": {
                 "anyOf": [
                     {"type": ["number", "null", "boolean", "string"]},

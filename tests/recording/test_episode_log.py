@@ -215,6 +215,88 @@ def test_scene_is_a_foxglove_scene_update(log_path: Path) -> None:
     assert robot["size"]["x"] == robot["size"]["y"] == robot["size"]["z"] > 0
 
 
+def _foxglove_datatypes(schema: dict, name: str) -> dict[str, list[str]]:
+    """What Foxglove's JSON-schema loader makes of a channel's schema, or the error it raises.
+
+    A line-by-line Python port of ``parseJsonSchema`` in foxglove/studio
+    ``packages/mcap-support/src/parseJsonSchema.ts`` (commit 9abf665; the same in its fork
+    Lichtblick): a channel whose schema it rejects is dropped, topic and all. It accepts an
+    object's ``properties`` of type boolean, string (base64 content: bytes), number,
+    integer, object, or array of one of those; an enum only as a ``oneOf`` of numeric
+    ``const``; nothing else (no ``anyOf``, no ``enum``, no type lists, no arrays of arrays,
+    no object without ``properties``)."""
+    types: dict[str, list[str]] = {}
+
+    def add(node: dict, type_name: str, path: list[str]) -> None:
+        if node.get("type") != "object":
+            raise ValueError(f'Expected "type": "object" for schema {type_name}')
+        if not isinstance(node.get("properties"), dict):  # Object.entries(undefined) throws
+            raise TypeError(f"no properties at {'.'.join(path) or type_name}")
+        fields = []
+        for field, sub in node["properties"].items():
+            where = ".".join([*path, field])
+            if isinstance(sub.get("oneOf"), list):
+                if not all(isinstance(a.get("const"), int | float) for a in sub["oneOf"]):
+                    raise ValueError(f"oneOf alternatives must have number values: {where}")
+                fields.append(f"{field}: uint32 enum")
+                continue
+            kind = sub.get("type")
+            if kind in ("boolean", "number", "integer"):
+                fields.append(f"{field}: {kind}")
+            elif kind == "string":
+                if sub.get("contentEncoding") not in (None, "base64"):
+                    raise ValueError(f"unsupported contentEncoding in {where}")
+                fields.append(f"{field}: string")
+            elif kind == "object":
+                add(sub, f"{type_name}.{field}", [*path, field])
+                fields.append(f"{field}: {type_name}.{field}")
+            elif kind == "array":
+                item = sub.get("items", {})
+                item_kind = item.get("type")
+                if item_kind == "object":
+                    add(item, f"{type_name}.{field}", [*path, field])
+                elif item_kind == "string" and item.get("contentEncoding") is not None:
+                    raise ValueError(f"unsupported contentEncoding for array item {where}")
+                elif item_kind not in ("boolean", "string", "number", "integer"):
+                    raise ValueError(f"Unsupported type {item_kind!r} for array item {where}")
+                fields.append(f"{field}: {item_kind}[]")
+            else:
+                raise ValueError(f"Unsupported type {kind!r} for {where}")
+        types[type_name] = fields
+
+    add(schema, name, [])
+    return types
+
+
+def test_foxglove_loads_the_scene_and_frame_channels(log_path: Path) -> None:
+    """Foxglove's own JSON-schema loader (ported: :func:`_foxglove_datatypes`) accepts the
+    schemas of /scene and /tf as written in the log: a bare "enum" on the deletion and line
+    types (the published schema writes a oneOf of consts) made it drop /scene, so no
+    sphere was drawn. The task events and metrics load too; the numeric channels use arrays
+    of arrays and nullable numbers (NaN), which that loader does not take (README)."""
+    with open(log_path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    loaded, refused = set(), set()
+    for ch in summary.channels.values():
+        schema = summary.schemas[ch.schema_id]
+        try:
+            _foxglove_datatypes(json.loads(schema.data), schema.name)
+        except (ValueError, TypeError):
+            refused.add(ch.topic)
+        else:
+            loaded.add(ch.topic)
+    assert {"/scene", "/tf", "/task/events", "/episode/metrics"} <= loaded, refused
+    scene = _foxglove_datatypes(json.loads(json.dumps(TOPIC_SCHEMAS["/scene"])), "s")
+    assert "type: uint32 enum" in scene["s.deletions"]
+    assert "spheres: object[]" in scene["s.entities"] and "s.entities.spheres.pose" in scene
+    # the port refuses what Foxglove refuses: the form that dropped /scene
+    bare = json.loads(json.dumps(TOPIC_SCHEMAS["/scene"]))
+    bare["properties"]["deletions"]["items"]["properties"]["type"] = {"enum": [0, 1]}
+    with pytest.raises(ValueError, match="Unsupported type None for deletions.type"):
+        _foxglove_datatypes(bare, "s")
+
+
 def test_scene_spheres_left_out_read_back_in_their_slots(tmp_path: Path) -> None:
     """Rows with NaN or an infinity are not drawn (Foxglove has no NaN sphere), yet every other
     sphere reads back in its own row, with NaN rows where some were left out."""
