@@ -41,3 +41,26 @@ class DataWarning(UserWarning):
 
 class ConfigWarning(UserWarning):
     """A setting is valid but probably not what was meant (it is used as given)."""
+
+
+def checkpoint_load_error(err: BaseException) -> tuple[bool, str]:
+    """What ``torch.load(..., weights_only=True)`` failing with ``err`` says of the file, in
+    one line: ``(True, text)`` when the file holds an object other than tensors and plain
+    values (a pickled class, refused because unpickling it could run code), ``(False, text)``
+    when it is damaged or no torch file (torch's several-line message cut to its cause)."""
+    text = str(err)
+    if "Weights only load failed" in text:
+        lines = [ln.strip() for ln in text.splitlines()[1:] if ln.strip()]
+        # torch names a pickled class as a GLOBAL ("Unsupported global: GLOBAL numpy...",
+        # "Trying to load unsupported GLOBAL posix.system ..."), damage otherwise
+        named = next((ln for ln in lines if "GLOBAL" in ln), None)
+        if named is not None:
+            return True, (
+                "it holds objects other than tensors and plain values, which are not loaded "
+                f"(unpickling them could run code: {named.split('. ')[0][:200]})"
+            )
+        after = text.split("WeightsUnpickler error:", 1)[1:]  # its cause, when it names one
+        detail = after[0].strip().splitlines()[0].strip() if after and after[0].strip() else ""
+        return False, f"UnpicklingError: {detail[:200] or 'not a torch checkpoint'}"
+    first = text.strip().splitlines()[0] if text.strip() else ""
+    return False, f"{type(err).__name__}: {first[:300]}"

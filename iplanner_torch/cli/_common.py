@@ -16,6 +16,7 @@ from yaml import YAMLError
 
 from iplanner_torch.checks import field_kind, fits_kind
 from iplanner_torch.errors import ConfigError, IPlannerError
+from iplanner_torch.files import json_text
 from iplanner_torch.sim.tracker import MAX_NOISE_M
 
 #: conf/ at the repository root (the package is installed editable from the clone).
@@ -744,14 +745,13 @@ def write_job_record(name: str, values: dict[str, Any]) -> Path | None:
     its summary table (:data:`~iplanner_torch.cli.callbacks.JOB_METRICS_FILES`); floats of
     other kinds (numpy, torch) are written as floats. None (nothing written) outside a Hydra
     run."""
-    import json
 
     from hydra.core.hydra_config import HydraConfig
 
     if not HydraConfig.initialized():
         return None
     path = Path(HydraConfig.get().runtime.output_dir) / name
-    path.write_text(json.dumps(values, indent=2, default=float) + "\n", encoding="utf-8")
+    path.write_text(json_text(values, indent=2) + "\n", encoding="utf-8")
     return path
 
 

@@ -56,7 +56,6 @@ anything is evaluated, rather than written over.
 from __future__ import annotations
 
 import contextlib
-import json
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -95,6 +94,7 @@ from iplanner_torch.cli._common import (
     task_overrides as _task_overrides,
 )
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError
+from iplanner_torch.files import json_text
 
 if TYPE_CHECKING:
     from iplanner_torch.eval.prediction import SplitRecord
@@ -406,7 +406,7 @@ def _prediction(cfg: DictConfig) -> None:
     split = _evaluation_split(cfg, {ckpt: record}, [])
     held_out = _held_out(cfg, split, _split_source(record, [ckpt]), recorded=record is not None)
     metrics = evaluate_prediction(predictor, held_out)
-    out.write_text(json.dumps(metrics, indent=2, default=float))
+    out.write_text(json_text(metrics, indent=2) + "\n")
     print(f"{ckpt} on held-out demonstrations of {cfg.data.path}:")
     for key, value in metrics.items():
         print(metric_line(key, value))

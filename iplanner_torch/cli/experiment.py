@@ -79,7 +79,7 @@ from iplanner_torch.cli._common import (
 from iplanner_torch.cli._common import (
     task_overrides as _task_overrides,
 )
-from iplanner_torch.files import whole_file
+from iplanner_torch.files import json_text, whole_file
 from iplanner_torch.types import resolve_device
 
 #: predictor variant of a planner (see eval.episode.PLANNER_KINDS) -> conf/predictor option
@@ -306,7 +306,7 @@ def checkpoint_differences(ckpt: Path, data_node: DictConfig, keys: set[str]) ->
     if not keys:
         return []
     try:
-        saved = dict(torch.load(ckpt, map_location="cpu", weights_only=False)["window_cfg"])
+        saved = dict(torch.load(ckpt, map_location="cpu", weights_only=True)["window_cfg"])
     except Exception:  # noqa: BLE001 - HumanMotionPredictor.load says what is wrong
         return []
     now = asdict(instantiate(data_node.windows, WindowCfg, name="data.windows"))
@@ -366,7 +366,7 @@ def training_differences(
     if record is None or not isinstance(record.get("trainer_cfg"), dict):
         return []
     try:
-        saved = torch.load(ckpt, map_location="cpu", weights_only=False)
+        saved = torch.load(ckpt, map_location="cpu", weights_only=True)
         own = str(saved.get("inputs_digest") or "")
         own_seed = saved["cfg"].get("seed")
     except Exception:  # noqa: BLE001 - HumanMotionPredictor.load says what is wrong
@@ -1300,9 +1300,7 @@ def _app(cfg: DictConfig) -> None:
     sweep = "noise" if len(experiment.noises) > 1 else None
     written = write_sweep_report(df, out_dir, group_by=report_groups(df), sweep=sweep)
     table = comparison_table(df)
-    (out_dir / "comparison.json").write_text(
-        json.dumps(table.to_dict("records"), indent=2, default=float)
-    )
+    (out_dir / "comparison.json").write_text(json_text(table.to_dict("records"), indent=2) + "\n")
     print()
     print_table(table)
     print()

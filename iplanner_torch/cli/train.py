@@ -59,7 +59,7 @@ from iplanner_torch.cli._common import (
     write_job_record,
 )
 from iplanner_torch.errors import ConfigError, DataError, DataWarning
-from iplanner_torch.files import whole_file
+from iplanner_torch.files import json_text, whole_file
 
 
 def train_from_config(
@@ -154,7 +154,7 @@ def train_from_config(
             stacklevel=2,
         )
     with whole_file(out_dir / "heldout_metrics.json") as tmp:
-        tmp.write_text(json.dumps(metrics, indent=2, default=float) + "\n")
+        tmp.write_text(json_text(metrics, indent=2) + "\n")
     return ckpt, metrics
 
 

@@ -41,6 +41,7 @@ from iplanner_torch.errors import (
     DataError,
     DataWarning,
     ShapeError,
+    checkpoint_load_error,
 )
 from iplanner_torch.files import whole_file
 from iplanner_torch.prediction.forecast import Forecast
@@ -863,10 +864,19 @@ class HumanMotionPredictor:
         if not path.is_file():
             raise CheckpointError(f"predictor checkpoint {path} does not exist")
         try:
-            d = torch.load(path, map_location="cpu", weights_only=False)
+            # weights_only: tensors and plain containers only; a pickled object (which could
+            # run code while it loads) is refused. Every checkpoint this project writes is
+            # of that kind.
+            d = torch.load(path, map_location="cpu", weights_only=True)
         except Exception as err:  # noqa: BLE001 - any unpickling failure means corrupt
+            pickled, why = checkpoint_load_error(err)
+            if pickled:
+                raise CheckpointError(
+                    f"cannot read predictor checkpoint {path}: {why}; it is no checkpoint "
+                    "this project wrote: train it again"
+                ) from None
             raise CheckpointError(
-                f"cannot read predictor checkpoint {path} ({type(err).__name__}: {err}): the "
+                f"cannot read predictor checkpoint {path} ({why}): the "
                 "file is cut short, damaged or not a torch checkpoint; train it again"
             ) from err
         if not isinstance(d, dict) or not _equals(d.get("kind"), "HumanMotionPredictor"):

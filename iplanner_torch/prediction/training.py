@@ -38,7 +38,13 @@ from tqdm.auto import tqdm
 
 from iplanner_torch import checks
 from iplanner_torch.data.windows import WindowSet, compute_features
-from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
+from iplanner_torch.errors import (
+    CheckpointError,
+    ConfigError,
+    DataError,
+    DataWarning,
+    checkpoint_load_error,
+)
 from iplanner_torch.eval.prediction import (
     INPUTS_FILE,
     RESUME_RECORD_KEYS,
@@ -299,8 +305,15 @@ def _trainer(
     progress: bool,
     max_epochs: int = -1,
 ) -> L.Trainer:
+    import shutil
+
     from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
+    # the sub-model is trained anew: the logs of the one it replaces go first (TensorBoard
+    # added this run's events beside the earlier run's in version_0, so the curves ran back
+    # to step 0 and on again; the CSV logger replaced its file with a warning per sub-model)
+    for root in (out_dir / "logs", out_dir / "tb"):
+        shutil.rmtree(root / name / "version_0", ignore_errors=True)
     loggers: list[Any] = [CSVLogger(out_dir / "logs", name=name, version=0)]
     if tcfg.tensorboard:
         loggers.append(TensorBoardLogger(out_dir / "tb", name=name, version=0))
@@ -352,7 +365,7 @@ def _resume(ckpt: Path, key: str, build: Any, digest: str) -> Any:
     written before the stamps is used as it is, unchecked, with a DataWarning.
     """
     try:
-        d = torch.load(ckpt, map_location="cpu", weights_only=False)
+        d = torch.load(ckpt, map_location="cpu", weights_only=True)
         if not isinstance(d, dict) or key not in d:
             raise KeyError(key)
         if "model_digest" in d and d["model_digest"] != content_digest(
@@ -380,7 +393,7 @@ def _resume(ckpt: Path, key: str, build: Any, digest: str) -> Any:
         return build(d)
     except Exception as err:  # noqa: BLE001 - a broken file is an error the user must see
         # our own CheckpointError says what is wrong already; another error is named by type
-        why = str(err) if isinstance(err, CheckpointError) else f"{type(err).__name__}: {err}"
+        why = str(err) if isinstance(err, CheckpointError) else checkpoint_load_error(err)[1]
         raise CheckpointError(
             f"cannot resume from {ckpt}: {why}; delete the file to retrain that sub-model, or "
             "run with train.resume=false"

@@ -551,3 +551,17 @@ def test_hydra_keys_added_under_a_free_mapping_pass(
     code, lines = _main("data", args, monkeypatch, capsys)
     assert code == 2
     assert len(lines) == 1 and lines[0].startswith("error: DataError:"), lines
+
+
+@pytest.mark.parametrize("module", ["train", "experiment"])
+def test_the_hydra_config_prints_resolved(module: str, tmp_path: Path) -> None:
+    """``--cfg hydra --resolve`` printed a traceback (exit 1): the sweep's job folder was
+    ``${hydra:job.num}``, which a single run cannot resolve; Hydra's own form resolves."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env.pop("HYDRA_FULL_ERROR", None)
+    res = subprocess.run(
+        [sys.executable, "-m", f"iplanner_torch.cli.{module}", "--cfg", "hydra", "--resolve"],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "Traceback" not in res.stderr and "subdir:" in res.stdout

@@ -4,6 +4,8 @@ when the classifier is made."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 import torch
 
@@ -218,3 +220,26 @@ def test_a_state_dict_with_a_kernel_that_is_not_callable_is_a_checkpoint_error(t
     ivm = next(m for m in pred.classifier.models_.values() if isinstance(m, IVMClassifier))
     with pytest.raises(CheckpointError, match="invalid IVM state dict: expected kernel"):
         IVMClassifier.from_state_dict(ivm.state_dict(), kernel="rbf")  # type: ignore[arg-type]
+
+
+class _RunsCode:
+    """Pickles to a call of ``marker.write_text``: loading it with unpickling runs code."""
+
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def __reduce__(self):
+        return (Path.write_text, (self.marker, "ran"))
+
+
+def test_a_checkpoint_that_would_run_code_is_refused_without_running_it(tmp_path: Path) -> None:
+    """HumanMotionPredictor.load reads tensors and plain values only (weights_only): a file
+    holding a pickled object ran it before any check (a file from anywhere could run any
+    code); now it is a CheckpointError and the object is never built."""
+    marker = tmp_path / "ran.txt"
+    path = tmp_path / "predictor.ckpt"
+    torch.save({"kind": "HumanMotionPredictor", "version": 1, "x": _RunsCode(marker)}, path)
+    refused = r"holds objects other than tensors and plain values, which are not loaded"
+    with pytest.raises(CheckpointError, match=refused):
+        HumanMotionPredictor.load(path)
+    assert not marker.exists()

@@ -509,3 +509,22 @@ def test_a_resume_at_another_frame_rate_names_it(tmp_path: Path) -> None:
     with pytest.raises(CheckpointError, match=r"frame rate \(15\.0 -> 30\.0 fps\)"):
         train_predictor((faster, va), predictor_cfg=_cfg(), trainer_cfg=tcfg, out_dir=tmp_path,
                         progress=False, resume=True)  # fmt: skip
+
+
+def test_training_again_replaces_the_logs_of_the_models_it_replaces(tmp_path: Path) -> None:
+    """The same inputs trained again into a folder replace its predictor, and now its logs:
+    TensorBoard had added the second run's events beside the first's in version_0 (its
+    curves ran from the last step back to 0), and the CSV logger warned once per sub-model."""
+    tr, va = _windows(("torso", "left_hand", "right_hand"))
+    tcfg = TrainerCfg(accelerator="cpu", log_every_n_steps=1, tensorboard=True)
+    for _ in range(2):
+        train_predictor(
+            (tr, va), predictor_cfg=_cfg(), trainer_cfg=tcfg, out_dir=tmp_path, progress=False
+        )
+    runs = sorted((tmp_path / "tb").glob("*/version_0"))
+    assert runs
+    for run in runs:
+        assert len(list(run.glob("events.out.tfevents*"))) == 1, run
+    for log in (tmp_path / "logs").glob("gp_*/version_0/metrics.csv"):
+        steps = pd.read_csv(log)["step"].dropna()
+        assert steps.is_monotonic_increasing, log  # one run's rows, not two
