@@ -286,7 +286,28 @@ def main() -> None:
             raise SystemExit(2)
         _command = args.pop(at)
         sys.argv = [sys.argv[0], *args]
+    _drop_command_from_completion_line()
     run_app(_app)
+
+
+def _drop_command_from_completion_line() -> None:
+    """Hydra's shell completion (``-sc query=bash``) reads the line typed so far from
+    ``COMP_LINE``, where the command word (``iplanner-data generate data.gen``) read as an
+    override it cannot parse: no suggestion came once a command was typed. The word is
+    taken out of the line (and ``COMP_POINT``, the cursor, moved back by it)."""
+    import os
+
+    line = os.environ.get("COMP_LINE")
+    if not line:
+        return
+    words = line.split(" ")
+    if len(words) < 2 or words[1] not in COMMANDS:
+        return
+    os.environ["COMP_LINE"] = " ".join([words[0], *words[2:]])
+    point = os.environ.get("COMP_POINT")
+    if point is not None and point.isdigit():
+        cut = len(words[0]) + 1  # where the command word starts
+        os.environ["COMP_POINT"] = str(max(cut, int(point) - len(words[1]) - 1))
 
 
 #: Hydra's flags that take the next word as their value (``--cfg job``, ``-cn config``)

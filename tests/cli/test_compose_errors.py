@@ -565,3 +565,23 @@ def test_the_hydra_config_prints_resolved(module: str, tmp_path: Path) -> None:
     )  # fmt: skip
     assert res.returncode == 0, res.stderr[-2000:]
     assert "Traceback" not in res.stderr and "subdir:" in res.stdout
+
+
+@pytest.mark.parametrize(
+    ("line", "offered"),
+    [
+        ("iplanner-data generate data.gen", "data.generator."),
+        ("iplanner-data info data=", "data=lego"),
+        ("iplanner-data data=", "data=lego"),  # no command typed: generate, as before
+    ],
+)
+def test_shell_completion_after_a_data_command(line: str, offered: str, tmp_path: Path) -> None:
+    """``-sc query=bash`` offered nothing once ``generate`` or ``info`` was typed (the word
+    read as an override it could not parse, exit 2)."""
+    env = dict(os.environ, COMP_LINE=line, COMP_POINT=str(len(line)))
+    res = subprocess.run(
+        [sys.executable, "-m", "iplanner_torch.cli.data", "-sc", "query=bash"],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert offered in res.stdout.split()
