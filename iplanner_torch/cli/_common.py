@@ -1414,14 +1414,14 @@ def _group_names() -> list[str]:
     return sorted(d.name for d in conf.iterdir() if d.is_dir() and d.name != "hydra")
 
 
-def _closest(key: str, candidates: list[str]) -> str | None:
-    """The candidate closest to ``key`` (:func:`difflib.get_close_matches`), among those as
-    deep as ``key`` when there are any; None when none is close."""
+def _closest(key: str, candidates: list[str], cutoff: float = 0.75) -> str | None:
+    """The candidate closest to ``key`` (:func:`difflib.get_close_matches` at ``cutoff``),
+    among those as deep as ``key`` when there are any; None when none is close."""
     import difflib
 
     depth = key.count(".")
     same = [c for c in candidates if c.count(".") == depth]
-    matches = difflib.get_close_matches(key, same or candidates, n=1, cutoff=0.75)
+    matches = difflib.get_close_matches(key, same or candidates, n=1, cutoff=cutoff)
     return matches[0] if matches else None
 
 
@@ -1492,14 +1492,13 @@ def check_data_keys(data_cfg: DictConfig) -> None:
         ConfigError: naming the key (with the closest known one, and the ``data`` option
             when this run chose one) and listing the known keys.
     """
-    import difflib
-
     unknown = [str(k) for k in data_cfg if str(k) not in DATA_KEYS]
     if not unknown:
         return
     key = unknown[0]
-    close = difflib.get_close_matches(key, DATA_KEYS, n=1, cutoff=0.6)
-    hint = f" (did you mean 'data.{close[0]}'?)" if close else ""
+    # a lower cutoff than for dotted keys: the data keys are short (fsp for fps is 0.67)
+    close = _closest(key, list(DATA_KEYS), cutoff=0.6)
+    hint = f" (did you mean 'data.{close}'?)" if close else ""
     choice = _group_choice("data") if _full_key(data_cfg, None) == "data" else None
     where = f" (data={choice})" if choice is not None else ""
     raise ConfigError(
