@@ -10,9 +10,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig, OmegaConf, open_dict
+from root_config import root_config
 
 from iplanner_torch.cli._common import (
     CONF_DIR,
@@ -29,32 +28,23 @@ DATA_OPTIONS = sorted(p.stem for p in (Path(CONF_DIR) / "data").glob("*.yaml"))
 EXPERIMENTS = sorted(p.stem for p in (Path(CONF_DIR) / "experiment").glob("*.yaml"))
 
 
-def _config(*overrides: str) -> DictConfig:
-    """The root config with ``overrides`` (composed outside a Hydra run)."""
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        cfg = compose(config_name="config", overrides=[*overrides, "progress=false"])
-    GlobalHydra.instance().clear()
-    return cfg
-
-
 @pytest.mark.parametrize("option", DATA_OPTIONS)
 def test_every_shipped_data_option_passes(option: str) -> None:
     """Every conf/data file, composed or loaded alone (as iplanner-experiment loads the task
     and reaching sets), holds only known keys; so do the optional keys a command line adds."""
-    cfg = _config(f"data={option}")
+    cfg = root_config(f"data={option}")
     check_data_keys(cfg.data)
     data_settings(cfg.data)
     check_data_keys(OmegaConf.load(Path(CONF_DIR) / "data" / f"{option}.yaml"))
     added = ["+data.format=native"] if "format" not in cfg.data else []
     added += ["+data.fps=60"] if "fps" not in cfg.data else ["data.fps=60"]
-    cfg = _config(f"data={option}", *added)
+    cfg = root_config(f"data={option}", *added)
     assert data_fps(cfg.data) == 60.0
 
 
 @pytest.mark.parametrize("experiment", EXPERIMENTS)
 def test_every_experiment_leaves_only_known_data_keys(experiment: str) -> None:
-    check_data_keys(_config(f"experiment={experiment}").data)
+    check_data_keys(root_config(f"experiment={experiment}").data)
 
 
 def _with(cfg: DictConfig, **changes: object) -> DictConfig:
@@ -68,7 +58,7 @@ def _with(cfg: DictConfig, **changes: object) -> DictConfig:
 
 
 def test_a_misspelt_data_key_is_refused_naming_it_and_the_known_keys() -> None:
-    cfg = _with(_config("data=lego"), fps=None, fsp=60.0)
+    cfg = _with(root_config("data=lego"), fps=None, fsp=60.0)
     known = ", ".join(DATA_KEYS)
     for read in (data_fps, data_format, data_settings, check_data_keys):
         with pytest.raises(ConfigError) as err:
@@ -77,10 +67,10 @@ def test_a_misspelt_data_key_is_refused_naming_it_and_the_known_keys() -> None:
             "unknown key 'data.fsp' (did you mean 'data.fps'?) in the data config, which "
             f"nothing reads; data keys: {known}"
         )
-    cfg = _with(_config("data=reaching"), overwrite=None, overwrit=True)
+    cfg = _with(root_config("data=reaching"), overwrite=None, overwrit=True)
     with pytest.raises(ConfigError, match=r"unknown key 'data\.overwrit' \(did you mean "):
         dataset_generator(cfg.data)  # iplanner-data generate reads the node through here
-    cfg = _with(_config("data=tasks"), colour="blue")
+    cfg = _with(root_config("data=tasks"), colour="blue")
     with pytest.raises(ConfigError, match=r"^unknown key 'data\.colour' in the data config, "):
         data_settings(cfg.data)
 

@@ -11,26 +11,15 @@ import sys
 from pathlib import Path
 
 import pytest
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
-from omegaconf import DictConfig
+from root_config import root_config
 
 import iplanner_torch.cli._common as common
-from iplanner_torch.cli._common import CONF_DIR, instantiate, load_dataset
+from iplanner_torch.cli._common import instantiate, load_dataset
 from iplanner_torch.data.windows import WindowCfg
 from iplanner_torch.errors import ConfigError, DataError
 
 #: a generator small enough to write in a moment (2 reaching demonstrations)
 TINY = ["data.generator.n_targets=2", "data.generator.reaches_per_target=1"]
-
-
-def _config(*overrides: str) -> DictConfig:
-    """The root config with ``overrides`` (composed outside a Hydra run)."""
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        cfg = compose(config_name="config", overrides=[*overrides, "progress=false"])
-    GlobalHydra.instance().clear()
-    return cfg
 
 
 def _run(module: str, args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
@@ -132,13 +121,13 @@ def test_the_data_options_own_folder_is_still_generated(
 
     given = [f"paths.datasets={tmp_path / 'sets'}", *TINY]
     monkeypatch.setattr(common, "task_overrides", lambda: given)
-    cfg = _config(*given)
+    cfg = root_config(*given)
     (tmp_path / "sets" / "reaching").mkdir(parents=True)  # empty: generated too
     assert len(load_dataset(cfg.data, generate_if_missing=True, progress=False)) == 2
     assert len(list((tmp_path / "sets" / "reaching").glob("*.npz"))) == 2
     # the rule reads the command line: the same folder given as data.path is refused
     given[:] = [f"data.path={tmp_path / 'other'}", *TINY]
-    cfg = _config(*given)
+    cfg = root_config(*given)
     with pytest.raises(DataError, match=r"other: no such dataset folder \(or empty\); to "
                        r"generate the synthetic set there, run `iplanner-data generate "
                        r"data\.generator\.n_targets=2 data\.generator\.reaches_per_target=1 "
@@ -163,11 +152,11 @@ def test_a_data_path_in_the_generated_data_home_is_generated(
     home = tmp_path / "sets"
     given = [f"paths.datasets={home}", f"data.path={home / 'tasks_1x4'}", *TINY]
     monkeypatch.setattr(common, "task_overrides", lambda: given)
-    cfg = _config(*given)
+    cfg = root_config(*given)
     assert len(load_dataset(cfg.data, generate_if_missing=True, progress=False)) == 2
     assert len(list((home / "tasks_1x4").glob("*.npz"))) == 2
     given[1] = f"data.path={tmp_path / 'sets_mine'}"  # shares the prefix, not the folder
-    cfg = _config(*given)
+    cfg = root_config(*given)
     with pytest.raises(DataError, match=r"sets_mine: no such dataset folder \(or empty\)"):
         load_dataset(cfg.data, generate_if_missing=True, progress=False)
     assert not (tmp_path / "sets_mine").exists()
@@ -183,7 +172,7 @@ def test_a_single_joint_string_is_refused_for_every_format(
     """``data.windows.joints=right_hand`` (no list): refused for NPZ / CSV folders and, as it
     was not, for the LEGO recording, with the message instantiating the windows gives."""
     path = lego if fmt == "lego_assembly" else tiny_reaching.ds  # type: ignore[attr-defined]
-    cfg = _config("data=lego" if fmt == "lego_assembly" else "data=reaching",
+    cfg = root_config("data=lego" if fmt == "lego_assembly" else "data=reaching",
                   f"data.path={path}", "data.windows.joints=right_hand")  # fmt: skip
     text = re.escape(
         "data.windows.joints: expected a list of joint names, got the single string "
@@ -225,10 +214,12 @@ def test_info_and_loading_select_the_joints_of_a_lego_recording(lego: Path) -> N
     res = _run("data", ["info", "data=lego", f"data.path={lego}"], lego.parent)
     assert res.returncode == 0, res.stderr
     assert "joints (6): " in res.stdout and "NaN values: 2\n" in res.stdout
-    cfg = _config("data=lego", f"data.path={lego}", "data.windows.joints=[right_hand,left_hand]")
+    cfg = root_config(
+        "data=lego", f"data.path={lego}", "data.windows.joints=[right_hand,left_hand]"
+    )
     demos = load_dataset(cfg.data, progress=False)
     assert [d.joint_names for d in demos] == [("right_hand", "left_hand")] * 2
-    cfg = _config("data=lego", f"data.path={lego}", "data.windows.joints=[head,right_hand]")
+    cfg = root_config("data=lego", f"data.path={lego}", "data.windows.joints=[head,right_hand]")
     lacks = r"lego: data\.windows\.joints names \['head'\], which the LEGO assembly recording "
     with pytest.raises(DataError, match=lacks + r"lacks; its joints: \['left_shoulder'"):
         load_dataset(cfg.data, progress=False)
@@ -246,7 +237,7 @@ def test_info_and_loading_select_the_joints_of_a_lego_recording(lego: Path) -> N
 def test_a_bad_window_setting_names_its_own_key(override: str, message: str) -> None:
     """``data.windows.n_future=0`` was reported as ``data.windows.n_prev: need n_prev >= 3,
     n_future >= 1, stride >= 1; got 30, 0, 2``."""
-    cfg = _config("data=lego", f"data.windows.{override}")
+    cfg = root_config("data=lego", f"data.windows.{override}")
     with pytest.raises(ConfigError, match=rf"^{message}$"):
         instantiate(cfg.data.windows, WindowCfg, name="data.windows")
 
@@ -255,12 +246,12 @@ def test_a_bad_window_setting_names_its_own_key(override: str, message: str) -> 
 def test_an_unknown_data_format_is_refused(value: str, tiny_reaching: object) -> None:
     """``+data.format=lego`` was read as native files without a word."""
     path = tiny_reaching.ds  # type: ignore[attr-defined]
-    cfg = _config(f"data.path={path}", f"+data.format={value}")
+    cfg = root_config(f"data.path={path}", f"+data.format={value}")
     got = repr(int(value)) if value.isdigit() else repr(value)
     with pytest.raises(ConfigError, match=rf"^data\.format: expected one of native, "
                        rf"lego_assembly, got {got} \(native: "):  # fmt: skip
         load_dataset(cfg.data, progress=False)
-    cfg = _config(f"data.path={path}", "+data.format=native")  # the default, spelt out
+    cfg = root_config(f"data.path={path}", "+data.format=native")  # the default, spelt out
     assert len(load_dataset(cfg.data, progress=False)) == 10
 
 
@@ -268,7 +259,7 @@ def test_the_format_is_checked_before_anything_is_generated(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setattr(common, "task_overrides", lambda: [f"paths.datasets={tmp_path}"])
-    cfg = _config(f"paths.datasets={tmp_path}", "+data.format=lego", *TINY)
+    cfg = root_config(f"paths.datasets={tmp_path}", "+data.format=lego", *TINY)
     with pytest.raises(ConfigError, match=r"^data\.format: expected one of"):
         load_dataset(cfg.data, generate_if_missing=True, progress=False)
     assert not (tmp_path / "reaching").exists()
@@ -286,7 +277,7 @@ def test_a_folder_of_txt_trials_read_as_files_says_to_use_data_lego(lego: Path) 
     assert line.endswith(
         f"; it holds 2 .txt files: for LEGO-assembly trials use data=lego data.path={lego}"
     )
-    cfg = _config(f"data.path={lego}")
+    cfg = root_config(f"data.path={lego}")
     with pytest.raises(DataError, match=r"; it holds 2 \.txt files: for LEGO-assembly trials "):
         load_dataset(cfg.data, progress=False)
     (lego / "Task1" / "Human1" / "trial2.txt").unlink()
@@ -296,7 +287,7 @@ def test_a_folder_of_txt_trials_read_as_files_says_to_use_data_lego(lego: Path) 
     (empty / "sub").mkdir(parents=True)
     (empty / "sub" / "notes.md").write_text("no data\n")
     with pytest.raises(DataError, match=r"no \.npz or \.csv demonstration files") as err:
-        load_dataset(_config(f"data.path={empty}").data, progress=False)
+        load_dataset(root_config(f"data.path={empty}").data, progress=False)
     assert ".txt" not in str(err.value)  # no hint without .txt files
 
 

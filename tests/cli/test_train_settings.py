@@ -11,12 +11,11 @@ from typing import Any
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig
+from root_config import root_config
 
 import iplanner_torch.prediction.training as training
-from iplanner_torch.cli._common import CONF_DIR, config_split
+from iplanner_torch.cli._common import config_split
 from iplanner_torch.cli.train import train_from_config
 from iplanner_torch.data.io import load_demonstrations
 from iplanner_torch.data.windows import split_by_demonstration
@@ -28,14 +27,8 @@ FRACTIONS = (0.6, 0.2, 0.2)
 
 
 def _config(*overrides: str) -> DictConfig:
-    """The root config with ``trainer=fast progress=false`` and ``overrides``."""
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        cfg = compose(
-            config_name="config", overrides=[*overrides, "trainer=fast", "progress=false"]
-        )
-    GlobalHydra.instance().clear()
-    return cfg
+    """The root config with ``overrides``, then ``trainer=fast``."""
+    return root_config(*overrides, "trainer=fast")
 
 
 @pytest.fixture

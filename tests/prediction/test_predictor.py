@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
-from iplanner_torch.data.windows import WindowCfg, build_windows, compute_features
+from iplanner_torch.data.windows import compute_features
 from iplanner_torch.errors import (
     CheckpointError,
     ConfigError,
@@ -21,41 +20,11 @@ from iplanner_torch.errors import (
 from iplanner_torch.prediction.predictor import (
     CHECKPOINT_VERSION,
     HumanMotionPredictor,
-    PredictorCfg,
     content_digest,
     gp_inputs,
 )
-from iplanner_torch.prediction.svgp import SVGPCfg
-from iplanner_torch.prediction.training import TrainerCfg, train_predictor
 
 JOINTS = ("torso", "left_hand", "right_hand")
-
-
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory: pytest.TempPathFactory):
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    rc = ReachingCfg(n_targets=2, reaches_per_target=5)
-    demos = [d for t in range(2) for r in range(5) for d in reaching_demonstrations(rc, t, r)]
-    wc = WindowCfg(n_prev=6, n_future=8, stride=2, joints=JOINTS)
-    windows = build_windows(demos, wc)
-    cfg = PredictorCfg(
-        svgp=SVGPCfg(num_inducing=20, epochs=3, max_steps=20),
-        classifier_kernel="rbf",
-        ivm_max_import=8,
-        ivm_candidates=16,
-        min_group_size=10,
-    )
-    out = tmp_path_factory.mktemp("pred")
-    path = train_predictor(
-        windows,
-        predictor_cfg=cfg,
-        trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False),
-        out_dir=out,
-        progress=False,
-    )
-    yield path, windows
-    torch.set_num_threads(threads)
 
 
 def test_prepare_computes_the_cached_tensors_on_one_thread(trained, monkeypatch) -> None:

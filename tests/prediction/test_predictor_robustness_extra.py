@@ -9,43 +9,14 @@ from pathlib import Path
 import pytest
 import torch
 
-from iplanner_torch.data.reaching import ReachingCfg, reaching_demonstrations
-from iplanner_torch.data.windows import WindowCfg, build_windows
 from iplanner_torch.errors import CheckpointError, ConfigError, DataError
 from iplanner_torch.prediction.dtw import RBFKernel
 from iplanner_torch.prediction.ivm import ActionClassifier, IVMClassifier
-from iplanner_torch.prediction.predictor import HumanMotionPredictor, PredictorCfg
-from iplanner_torch.prediction.svgp import SVGPCfg
-from iplanner_torch.prediction.training import TrainerCfg, train_predictor
+from iplanner_torch.prediction.predictor import HumanMotionPredictor
 
 JOINTS = ("torso", "left_hand", "right_hand")
 #: the feature columns of the K = 3 joints: positions 0..8, velocities 9..17, accelerations
 VELOCITIES = slice(9, 18)
-
-
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory: pytest.TempPathFactory):
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    rc = ReachingCfg(n_targets=2, reaches_per_target=5)
-    demos = [d for t in range(2) for r in range(5) for d in reaching_demonstrations(rc, t, r)]
-    windows = build_windows(demos, WindowCfg(n_prev=6, n_future=8, stride=2, joints=JOINTS))
-    cfg = PredictorCfg(
-        svgp=SVGPCfg(num_inducing=20, epochs=3, max_steps=20),
-        classifier_kernel="rbf",
-        ivm_max_import=8,
-        ivm_candidates=16,
-        min_group_size=10,
-    )
-    path = train_predictor(
-        windows,
-        predictor_cfg=cfg,
-        trainer_cfg=TrainerCfg(accelerator="cpu", tensorboard=False),
-        out_dir=tmp_path_factory.mktemp("pred"),
-        progress=False,
-    )
-    yield path, windows
-    torch.set_num_threads(threads)
 
 
 def _bad_devices() -> list[object]:
