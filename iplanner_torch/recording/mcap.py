@@ -1,7 +1,8 @@
 """EpisodeWriter: one MCAP log per closed-loop episode, replayable in Foxglove.
 
 Every channel is JSON (``message_encoding="json"``, schema encoding ``"jsonschema"``), with the
-schemas of :mod:`iplanner_torch.recording.schemas`:
+schemas of :mod:`iplanner_torch.recording.schemas`, each one Foxglove's JSON-schema loader takes
+(numbers finite, arrays flat and row-major, human joints as named objects: see there):
 
 =========================  =========================  =========================================
 topic                      schema                     written by
@@ -26,7 +27,10 @@ Checks: every argument is checked before anything of its message is written (sha
 numbers, strings, bools; a ``ShapeError`` or ``DataError`` naming it), and the names of a
 channel (its joint and action names) are fixed by its first message that is written: a
 message with other names is refused, so the arrays of a channel always stack into one tensor
-when read. A refused message fixes nothing.
+when read. A refused message fixes nothing. JSON has no NaN: a NaN or infinity in the robot
+state, a plan or a bound is refused (the simulation and the planner give finite ones; the
+forecast's values are checked as a :class:`Forecast` checks them), and a human joint with one
+is left out of its message (a tracker dropout), read back as NaN.
 
 Scene spheres: a sphere row with NaN or an infinity is not drawn (Foxglove has no NaN
 sphere). When rows are left out, the entity's metadata says which rows its spheres are
@@ -66,7 +70,6 @@ from iplanner_torch.recording.codec import (
     VALUE_CODEC,
     as_numpy,
     dumps,
-    encode_array,
     encode_value,
 )
 from iplanner_torch.recording.reader import (
@@ -521,6 +524,20 @@ class EpisodeWriter:
                 raise DataError(f"{self.path}: expected {name} a finite number, got {value}")
         raise DataError(f"{self.path}: expected {name} a number, got {reprlib.repr(x)}")
 
+    def _finite(self, name: str, x: np.ndarray) -> list[float]:
+        """``x`` flattened (row-major) as a list of floats; a DataError naming the argument and
+        its first entry that is NaN or infinite (these arrays are plain JSON numbers in their
+        schemas, as Foxglove reads them)."""
+        bad = ~np.isfinite(x)
+        if bad.any():
+            where = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise DataError(
+                f"{self.path}: expected {name} finite, got {x[where]} at index "
+                f"{where if len(where) != 1 else where[0]} ({int(bad.sum())} of {x.size} not "
+                "finite)"
+            )
+        return x.ravel().tolist()
+
     def _string(self, name: str, x: Any) -> str:
         """``x`` when it is a string; a DataError naming the argument otherwise."""
         if isinstance(x, str):
@@ -626,15 +643,20 @@ class EpisodeWriter:
             q: (J,) joint positions [rad].
             qd: (J,) joint velocities [rad/s].
             joint_names: the J joint names (the same in every message).
+
+        Raises:
+            ShapeError: for shapes other than those above.
+            DataError: for a NaN or infinite ``q`` or ``qd`` (JSON numbers carry neither).
         """
         q_np = _as_tensor("q", q, ("J",))
         qd_np = _as_tensor("qd", qd, (q_np.shape[0],))
+        position, velocity = self._finite("q", q_np), self._finite("qd", qd_np)
         topic = "/robot/joint_state"
         names = self._checked_names(topic, "joint_names", joint_names, len(q_np))
         ns, msg = self._stamped(t)
         msg["joint_names"] = names
-        msg["position"] = encode_array(q_np)
-        msg["velocity"] = encode_array(qd_np)
+        msg["position"] = position
+        msg["velocity"] = velocity
         self._write(topic, ns, msg, {"joint_names": names})
 
     def human_joints(
@@ -647,6 +669,9 @@ class EpisodeWriter:
             true: (K, 3) ground-truth joint positions [m], or None to skip.
             tracked: (K, 3) tracker output [m], NaN where a joint dropped out, or None to skip.
             joint_names: the K joint names (the same in every message of a channel).
+
+        A joint with a NaN or infinite coordinate is left out of its message's ``positions``
+        (Foxglove then plots a gap) and reads back as NaN.
         """
         checked = []  # both messages are checked before either is written
         for topic, name, x in (
@@ -661,7 +686,11 @@ class EpisodeWriter:
         for topic, p, names in checked:
             msg = dict(base)
             msg["joint_names"] = names
-            msg["positions"] = encode_array(p)
+            msg["positions"] = [  # a joint not tracked (NaN) is left out: read back as NaN
+                {"joint": n, "x": float(r[0]), "y": float(r[1]), "z": float(r[2])}
+                for n, r in zip(names, p, strict=True)
+                if np.isfinite(r).all()
+            ]
             self._write(topic, ns, msg, {"joint_names": names})
 
     def forecast(
@@ -722,9 +751,9 @@ class EpisodeWriter:
         msg["dt"] = dt
         msg["action_names"] = actions
         msg["joint_names"] = joints
-        msg["weights"] = encode_array(w)
-        msg["mean"] = encode_array(m)
-        msg["var"] = encode_array(v)
+        msg["weights"] = self._finite("weights", w)  # finite: the Forecast above checked
+        msg["mean"] = self._finite("mean", m)
+        msg["var"] = self._finite("var", v)
         self._write(topic, ns, msg, {"action_names": actions, "joint_names": joints})
 
     def log_forecast(self, t: float, forecast: Forecast, index: int = 0) -> None:
@@ -756,18 +785,21 @@ class EpisodeWriter:
 
         Raises:
             ShapeError: for shapes other than those above.
-            DataError: for a ``confidence`` that is not a number in (0, 1).
+            DataError: for a ``confidence`` that is not a number in (0, 1), or a NaN or
+                infinite entry of ``times`` or ``bound``.
         """
         tw = _as_tensor("times", times, ("W",))
         b = _as_tensor("bound", bound, (tw.shape[0],))
         confidence = self._number("confidence", confidence)
         if not 0.0 < confidence < 1.0:  # as the planner and ellipsoid_pose take it
             raise DataError(f"{self.path}: expected confidence in (0, 1), got {confidence}")
+        times_list, bound_list = self._finite("times", tw), self._finite("bound", b)
         ns, msg = self._stamped(t)
-        msg["times"] = encode_array(tw)
-        msg["bound"] = encode_array(b)
+        msg["times"] = times_list
+        msg["bound"] = bound_list
         msg["confidence"] = confidence
-        msg["max_bound"] = encode_array(np.nanmax(b) if b.size else np.nan)
+        if b.size:  # left out without waypoints (read back as NaN)
+            msg["max_bound"] = float(b.max())
         self._write("/planner/bound", ns, msg)
 
     def plan(
@@ -782,15 +814,21 @@ class EpisodeWriter:
             feasible: whether the plan met the bound (else the robot waits).
             wait_s: time the robot waits before executing [s].
             solve_ms: planner wall time [ms].
+
+        Raises:
+            ShapeError: for shapes other than those above.
+            DataError: for a NaN or infinite entry of ``times`` or ``q``, or a ``wait_s`` or
+                ``solve_ms`` that is not a finite number.
         """
         tw = _as_tensor("times", times, ("W",))
         qw = _as_tensor("q", q, (tw.shape[0], "J"))
         feasible = self._flag("feasible", feasible)
         wait_s = self._number("wait_s", wait_s)
         solve_ms = self._number("solve_ms", solve_ms)
+        times_list, q_list = self._finite("times", tw), self._finite("q", qw)
         ns, msg = self._stamped(t)
-        msg["times"] = encode_array(tw)
-        msg["q"] = encode_array(qw)
+        msg["times"] = times_list
+        msg["q"] = q_list
         msg["feasible"] = feasible
         msg["wait_s"] = wait_s
         msg["solve_ms"] = solve_ms

@@ -9,6 +9,11 @@ A complete MCAP file with no ``iplanner.episode`` metadata record is another pro
 not an episode log: it is read, marked ``Episode.foreign`` (and incomplete), with a
 ``DataWarning`` saying so (not one saying it is truncated).
 
+Numeric arrays are read in either form a writer has used: flat and row-major with finite
+numbers, human joints as ``{joint, x, y, z}`` objects (a joint left out of a message reads as
+NaN), as the writer writes them now; or nested, with NaN as ``null`` and infinities as
+``"inf"`` / ``"-inf"``, every joint a row, as earlier writers wrote them.
+
 Scene spheres: the writer leaves out sphere rows with NaN or an infinity (Foxglove draws no NaN
 sphere) and then names, in the entity's metadata, the number of rows (``sphere_count``) and
 the rows of its spheres in order (``sphere_rows``, comma-separated indices), so every sphere
@@ -207,9 +212,28 @@ def _row_joint_state(m: dict[str, Any], _: int) -> dict[str, Any]:
     }
 
 
+def _joint_positions(m: dict[str, Any], names: tuple[str, ...]) -> np.ndarray:
+    """(K, 3) positions of ``m["positions"]``: objects ``{joint, x, y, z}`` of the joints that
+    have one (the others NaN), or, in logs of earlier writers, a (K, 3) nested list."""
+    items = m["positions"]
+    if not (isinstance(items, list) and all(isinstance(i, dict) for i in items)):
+        return _sized(m, "positions", (len(names), 3))  # a nested list
+    index = {n: k for k, n in enumerate(names)}
+    out = np.full((len(names), 3), np.nan)
+    for item in items:
+        k = index.get(item.get("joint"))  # type: ignore[arg-type]
+        if k is None or not np.isnan(out[k, 0]):
+            raise ValueError(
+                f"field 'positions' names joint {item.get('joint')!r}, which is not one of "
+                f"joint_names or comes twice"
+            )
+        out[k] = [_number(item, c) for c in "xyz"]
+    return out
+
+
 def _row_human(m: dict[str, Any], _: int) -> dict[str, Any]:
     names = _names(m, "joint_names")
-    p = _sized(m, "positions", (len(names), 3))
+    p = _joint_positions(m, names)
     return {"t": _number(m, "t"), "positions": p, "joint_names": names}
 
 
@@ -235,7 +259,7 @@ def _row_bound(m: dict[str, Any], _: int) -> dict[str, Any]:
         "times": times,
         "bound": _sized(m, "bound", times.shape),
         "confidence": _number(m, "confidence"),
-        "max_bound": _number(m, "max_bound"),
+        "max_bound": _number(m, "max_bound") if "max_bound" in m else math.nan,
     }
 
 

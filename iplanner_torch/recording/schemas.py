@@ -5,8 +5,20 @@ JSON schemas (field names, nesting and required fields as Foxglove publishes the
 without the optional lineage fields), so Foxglove replays an episode in its 3D panel. The other
 channels use small schemas of our own, named ``iplanner.*``.
 
-Numeric arrays may hold NaN (tracking dropouts): see :mod:`iplanner_torch.recording.codec`; the
-schemas say so by allowing ``null`` and the strings ``"inf"`` / ``"-inf"`` as array items.
+Every channel's schema is one that Foxglove's JSON-schema loader takes (objects with
+``properties``; arrays of numbers, strings or objects; enums as a ``oneOf`` of numeric consts),
+so Foxglove shows and plots every channel (e.g. ``/robot/joint_state.position[0]``,
+``/human/joints_tracked.positions[:]{joint=="right_hand"}.x``, ``/planner/bound.max_bound``):
+
+- numeric fields hold finite numbers only (the writer refuses others, as JSON has no NaN);
+- an array of more than one axis is written flat in row-major order (its shape follows from
+  the names and sizes in the same message: ``mean`` of a forecast is (A, n_f, K, 3));
+- human joints are objects ``{joint, x, y, z}``, and a joint not tracked in a frame (NaN) is
+  left out of that message (read back as NaN).
+
+Logs of writers before this form (nested arrays, NaN written as ``null`` and infinities as
+``"inf"`` / ``"-inf"``, every human joint written) read back alike
+(:mod:`iplanner_torch.recording.reader`).
 """
 
 from __future__ import annotations
@@ -127,23 +139,13 @@ def _object(
     }
 
 
-#: One numeric item of a logged array: a number, null (NaN) or "inf" / "-inf".
-NUMBER_OR_NAN: dict[str, Any] = {
-    "anyOf": [{"type": "number"}, {"type": "null"}, {"enum": ["inf", "-inf"]}]
-}
+#: One numeric item of a logged array: a finite number (JSON has no NaN or infinity).
+NUMBER: dict[str, Any] = {"type": "number"}
 
 
-def nd_array(ndim: int, description: str = "", last: int | None = None) -> dict[str, Any]:
-    """Schema of a nested ``ndim``-deep array of numbers (``last``: fixed innermost length)."""
-    inner: dict[str, Any] = dict(NUMBER_OR_NAN)
-    for level in range(ndim):
-        inner = {"type": "array", "items": inner}
-        if level == 0 and last is not None:
-            inner["minItems"] = last
-            inner["maxItems"] = last
-    if description:
-        inner["description"] = description
-    return inner
+def flat_array(description: str) -> dict[str, Any]:
+    """Schema of a (flattened, row-major) array of finite numbers."""
+    return _array(dict(NUMBER), description)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -315,18 +317,24 @@ ROBOT_JOINT_STATE = _object(
     {
         **_STAMP,
         "joint_names": _NAMES,
-        "position": nd_array(1, "(J,) joint positions [rad]"),
-        "velocity": nd_array(1, "(J,) joint velocities [rad/s]"),
+        "position": flat_array("(J,) joint positions [rad]"),
+        "velocity": flat_array("(J,) joint velocities [rad/s]"),
     },
+)
+
+JOINT_POSITION = _object(
+    "iplanner.JointPosition",
+    "A joint's position [m], world frame",
+    {"joint": {"type": "string"}, **{k: _number(f"{k} [m]") for k in "xyz"}},
 )
 
 HUMAN_JOINTS = _object(
     "iplanner.HumanJoints",
-    "Human joint positions (null where a joint is not tracked)",
+    "Human joint positions; a joint not tracked in this frame is left out of positions",
     {
         **_STAMP,
-        "joint_names": _NAMES,
-        "positions": nd_array(2, "(K, 3) joint positions [m], world frame", last=3),
+        "joint_names": _array({"type": "string"}, "The K joints of the channel, in order"),
+        "positions": _array(JOINT_POSITION, "The joints of joint_names that have a position"),
     },
 )
 
@@ -338,9 +346,9 @@ FORECAST = _object(
         "dt": _number("Seconds between predicted frames"),
         "action_names": _NAMES,
         "joint_names": _NAMES,
-        "weights": nd_array(1, "(A,) action probabilities"),
-        "mean": nd_array(4, "(A, n_f, K, 3) predicted joint positions [m]", last=3),
-        "var": nd_array(4, "(A, n_f, K, 3) per-coordinate variances [m^2]", last=3),
+        "weights": flat_array("(A,) action probabilities, in the order of action_names"),
+        "mean": flat_array("(A, n_f, K, 3) predicted joint positions [m], row-major"),
+        "var": flat_array("(A, n_f, K, 3) per-coordinate variances [m^2], row-major"),
     },
 )
 
@@ -349,11 +357,12 @@ COLLISION_BOUND = _object(
     "Upper bound of the human collision probability along the planned trajectory",
     {
         **_STAMP,
-        "times": nd_array(1, "(W,) waypoint times [s]"),
-        "bound": nd_array(1, "(W,) collision probability bound"),
+        "times": flat_array("(W,) waypoint times [s]"),
+        "bound": flat_array("(W,) collision probability bound"),
         "confidence": _number("Confidence level; a plan is safe where bound <= 1 - confidence"),
-        "max_bound": {**NUMBER_OR_NAN, "description": "Largest bound over the waypoints"},
+        "max_bound": _number("Largest bound over the waypoints (absent without waypoints)"),
     },
+    required=["timestamp", "t", "times", "bound", "confidence"],
 )
 
 PLAN = _object(
@@ -361,8 +370,8 @@ PLAN = _object(
     "The trajectory chosen by the planner",
     {
         **_STAMP,
-        "times": nd_array(1, "(W,) waypoint times [s]"),
-        "q": nd_array(2, "(W, J) waypoint joint positions [rad]"),
+        "times": flat_array("(W,) waypoint times [s]"),
+        "q": flat_array("(W, J) waypoint joint positions [rad], row-major"),
         "feasible": {"type": "boolean"},
         "wait_s": _number("Time the robot waits before executing [s]"),
         "solve_ms": _number("Planner wall time [ms]"),

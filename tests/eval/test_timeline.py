@@ -72,7 +72,7 @@ def _write(
     qd = np.stack([np.sin(t_robot), np.cos(t_robot), 0.5 * t_robot], 1)  # (T, 3)
     plans = [  # t, feasible, wait_s, bound per waypoint, confidence
         (0.0, True, 0.0, [1e-4, 3e-3, 0.0], 0.95),
-        (0.5, False, 0.4, [0.2, 0.01, np.nan], 0.95),
+        (0.5, False, 0.4, [0.2, 0.01, 0.05], 0.95),
         (1.0, True, 0.0, [1e-30, 2e-7, 1e-8], 0.99),
     ]
     events = [

@@ -268,33 +268,170 @@ def _foxglove_datatypes(schema: dict, name: str) -> dict[str, list[str]]:
     return types
 
 
-def test_foxglove_loads_the_scene_and_frame_channels(log_path: Path) -> None:
+def test_foxglove_loads_every_channel(log_path: Path) -> None:
     """Foxglove's own JSON-schema loader (ported: :func:`_foxglove_datatypes`) accepts the
-    schemas of /scene and /tf as written in the log: a bare "enum" on the deletion and line
-    types (the published schema writes a oneOf of consts) made it drop /scene, so no
-    sphere was drawn. The task events and metrics load too; the numeric channels use arrays
-    of arrays and nullable numbers (NaN), which that loader does not take (README)."""
+    schema of every channel as written in the log, so every channel shows and plots there: a
+    bare "enum" on the deletion and line types (the published schema writes a oneOf of
+    consts) made it drop /scene, and the numeric channels' arrays of arrays and nullable
+    items (NaN as null) made it drop those six channels."""
     with open(log_path, "rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None
-    loaded, refused = set(), set()
+    loaded: dict[str, dict[str, list[str]]] = {}
     for ch in summary.channels.values():
         schema = summary.schemas[ch.schema_id]
-        try:
-            _foxglove_datatypes(json.loads(schema.data), schema.name)
-        except (ValueError, TypeError):
-            refused.add(ch.topic)
-        else:
-            loaded.add(ch.topic)
-    assert {"/scene", "/tf", "/task/events", "/episode/metrics"} <= loaded, refused
+        loaded[ch.topic] = _foxglove_datatypes(json.loads(schema.data), schema.name)
+    assert set(loaded) == set(TOPIC_SCHEMAS)
+    state = loaded["/robot/joint_state"]["iplanner.RobotJointState"]
+    assert {"position: number[]", "velocity: number[]", "joint_names: string[]"} <= set(state)
+    human = loaded["/human/joints_tracked"]
+    assert "positions: object[]" in human["iplanner.HumanJoints"]
+    assert human["iplanner.HumanJoints.positions"] == [
+        "joint: string",
+        "x: number",
+        "y: number",
+        "z: number",
+    ]
+    forecast = loaded["/prediction/forecast"]["iplanner.Forecast"]
+    assert {"weights: number[]", "mean: number[]", "var: number[]"} <= set(forecast)
+    assert "max_bound: number" in loaded["/planner/bound"]["iplanner.CollisionBound"]
+    assert "q: number[]" in loaded["/planner/plan"]["iplanner.Plan"]
     scene = _foxglove_datatypes(json.loads(json.dumps(TOPIC_SCHEMAS["/scene"])), "s")
     assert "type: uint32 enum" in scene["s.deletions"]
     assert "spheres: object[]" in scene["s.entities"] and "s.entities.spheres.pose" in scene
-    # the port refuses what Foxglove refuses: the form that dropped /scene
+    # the port refuses what Foxglove refuses: the forms that dropped /scene and the numbers
     bare = json.loads(json.dumps(TOPIC_SCHEMAS["/scene"]))
     bare["properties"]["deletions"]["items"]["properties"]["type"] = {"enum": [0, 1]}
     with pytest.raises(ValueError, match="Unsupported type None for deletions.type"):
         _foxglove_datatypes(bare, "s")
+    nested = {"type": "object", "properties": {"q": {"type": "array", "items": {"type": "array"}}}}
+    with pytest.raises(ValueError, match="Unsupported type 'array' for array item q"):
+        _foxglove_datatypes(nested, "n")
+    nullable = {
+        "type": "object",
+        "properties": {"q": {"type": "array", "items": {"anyOf": [{"type": "number"}]}}},
+    }
+    with pytest.raises(ValueError, match="Unsupported type None for array item q"):
+        _foxglove_datatypes(nullable, "n")
+
+
+def test_numeric_channels_are_plain_numbers_and_named_joints(log_path: Path, data: dict):
+    """As Foxglove plots them: flat arrays of numbers (row-major) and the human joints as
+    ``{joint, x, y, z}`` objects, a joint that dropped out left out of its frame."""
+    with open(log_path, "rb") as f:
+        msgs: dict[str, list[dict]] = {}
+        for _, ch, m in make_reader(f).iter_messages():
+            msgs.setdefault(ch.topic, []).append(json.loads(m.data))
+    state = msgs["/robot/joint_state"][3]
+    assert state["position"] == data["q"][3].astype(np.float64).tolist()
+    plan = msgs["/planner/plan"][2]
+    assert plan["q"] == data["plan_q"][2].ravel().tolist()  # (W, J) row-major
+    forecast = msgs["/prediction/forecast"][1]
+    assert forecast["mean"] == data["mean"][1].ravel().tolist()  # (A, n_f, K, 3) row-major
+    for i, m in enumerate(msgs["/human/joints_tracked"]):
+        kept = [k for k in range(K) if np.isfinite(data["tracked"][i, k]).all()]
+        assert [p["joint"] for p in m["positions"]] == [HUMAN[k] for k in kept]
+        assert [[p[c] for c in "xyz"] for p in m["positions"]] == data["tracked"][i, kept].tolist()
+    assert all(len(m["positions"]) == K for m in msgs["/human/joints_true"])
+
+
+def test_logs_of_the_earlier_nested_form_read_back_alike(tmp_path: Path) -> None:
+    """Logs written before the Foxglove-plottable form (nested arrays; NaN as null and
+    infinities as "inf"/"-inf"; every human joint, null where it dropped out; max_bound
+    null without waypoints) read back as they did."""
+    nan = None
+    messages = [
+        ("/robot/joint_state", {"t": 0.0, "joint_names": ["a", "b"], "position": [1.0, nan],
+                                "velocity": ["inf", "-inf"]}),
+        ("/human/joints_tracked", {"t": 0.0, "joint_names": ["h0", "h1"],
+                                   "positions": [[0.1, 0.2, 0.3], [nan, nan, nan]]}),
+        ("/prediction/forecast", {"t": 0.0, "dt": 0.5, "action_names": ["x", "y"],
+                                  "joint_names": ["h0"], "weights": [0.25, 0.75],
+                                  "mean": [[[[1.0, 2.0, 3.0]]], [[[4.0, 5.0, 6.0]]]],
+                                  "var": [[[[0.1, 0.2, 0.3]]], [[[0.4, 0.5, 0.6]]]]}),
+        ("/planner/bound", {"t": 0.0, "times": [], "bound": [], "confidence": 0.95,
+                            "max_bound": nan}),
+        ("/planner/plan", {"t": 0.0, "times": [0.0, 1.0], "q": [[0.0, 1.0], [2.0, 3.0]],
+                           "feasible": True, "wait_s": 0.0, "solve_ms": 1.0}),
+    ]  # fmt: skip
+    ep = read_episode(_raw_log(tmp_path / "v1.mcap", messages, metadata={"planner": "x"}))
+    np.testing.assert_array_equal(ep.robot_q()[1].numpy(), [[1.0, np.nan]])
+    np.testing.assert_array_equal(ep.robot_qd()[1].numpy(), [[np.inf, -np.inf]])
+    np.testing.assert_array_equal(ep.human_tracked()[1].numpy(), [[[0.1, 0.2, 0.3], [np.nan] * 3]])
+    _, fc = ep.forecasts(dtype=torch.float64)
+    np.testing.assert_array_equal(fc.mean.numpy(), [[[[[1.0, 2.0, 3.0]]], [[[4.0, 5.0, 6.0]]]]])
+    np.testing.assert_array_equal(fc.var.numpy()[0, 1, 0, 0], [0.4, 0.5, 0.6])
+    assert math.isnan(ep.frames["/planner/bound"]["max_bound"].iloc[0])
+    np.testing.assert_array_equal(ep.frames["/planner/plan"]["q"].iloc[0], [[0, 1], [2, 3]])
+
+
+def test_a_joint_with_any_coordinate_not_finite_reads_back_as_nan(tmp_path: Path) -> None:
+    """JSON has no NaN: a joint with one NaN or infinite coordinate is left out of the message
+    whole (reads back NaN in every coordinate); a frame with no joint tracked reads all NaN."""
+    tracked = np.array([[0.1, np.nan, 0.3], [1.0, 2.0, np.inf], [4.0, 5.0, 6.0]])
+    path = tmp_path / "p.mcap"
+    with EpisodeWriter(path, metadata={}) as log:
+        log.human_joints(0.0, None, tracked, ["a", "b", "c"])
+        log.human_joints(0.1, None, np.full((3, 3), np.nan), ["a", "b", "c"])
+    _, got = read_episode(path).human_tracked()
+    expected = np.full((2, 3, 3), np.nan)
+    expected[0, 2] = [4.0, 5.0, 6.0]
+    np.testing.assert_array_equal(got.numpy(), expected)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda log: log.robot_state(0.0, [0.0, math.nan], [0.0, 0.0], ["a", "b"]),
+         r"expected q finite, got nan at index 1 \(1 of 2 not finite\)"),
+        (lambda log: log.robot_state(0.0, [0.0, 0.0], [math.inf, 0.0], ["a", "b"]),
+         "expected qd finite, got inf at index 0"),
+        (lambda log: log.plan(0.0, [0.0, 1.0], [[0.0], [-math.inf]], True, 0.0, 1.0),
+         r"expected q finite, got -inf at index \(1, 0\)"),
+        (lambda log: log.collision_bound(0.0, [0.0, 1.0], [0.0, math.nan], 0.95),
+         "expected bound finite, got nan at index 1"),
+        (lambda log: log.collision_bound(0.0, [math.nan, 1.0], [0.0, 0.0], 0.95),
+         "expected times finite"),
+    ],
+)  # fmt: skip
+def test_numbers_json_cannot_carry_are_refused_and_nothing_is_lost(
+    tmp_path: Path, call, match: str
+) -> None:
+    """NaN and infinities in the robot state, plans and bounds (always finite from the
+    simulation and the planner) are refused by name, before anything is written: the log
+    keeps what came before and takes what comes after."""
+    path = tmp_path / "bad.mcap"
+    with EpisodeWriter(path, metadata={}) as log:
+        log.robot_state(0.0, [0.0, 1.0], [0.0, 0.0], ["a", "b"])
+        with pytest.raises(DataError, match=match):
+            call(log)
+        log.robot_state(0.1, [2.0, 3.0], [0.0, 0.0], ["a", "b"])
+        log.plan(0.1, [0.0, 1.0], [[0.0, 1.0], [2.0, 3.0]], True, 0.0, 1.0)
+        log.collision_bound(0.1, [], [], 0.95)
+    ep = read_episode(path)
+    np.testing.assert_array_equal(ep.robot_q()[1].numpy(), [[0.0, 1.0], [2.0, 3.0]])
+    assert len(ep.frames["/planner/plan"]) == 1
+    assert math.isnan(ep.frames["/planner/bound"]["max_bound"].iloc[0])  # no waypoints
+
+
+@pytest.mark.parametrize(
+    ("positions", "error"),
+    [
+        ([{"joint": "c", "x": 0.0, "y": 0.0, "z": 0.0}], "names joint 'c'"),
+        ([{"joint": "a", "x": 0.0, "y": 0.0, "z": 0.0}] * 2, "names joint 'a'.*twice"),
+        ([{"joint": "a", "x": 0.0, "y": "0", "z": 0.0}], "'y' must be a number"),
+        ([{"joint": "a", "x": 0.0, "y": 0.0}], "'z'"),
+    ],
+)
+def test_joint_objects_that_do_not_fit_their_names_are_named(
+    tmp_path: Path, positions: list, error: str
+) -> None:
+    message = {"t": 0.0, "joint_names": ["a", "b"], "positions": positions}
+    path = _raw_log(tmp_path / "bad.mcap", [("/human/joints_true", message)], metadata={})
+    with pytest.raises(
+        DataError, match=rf"cannot decode a message on /human/joints_true.*{error}"
+    ):
+        read_episode(path)
 
 
 def test_scene_spheres_left_out_read_back_in_their_slots(tmp_path: Path) -> None:
