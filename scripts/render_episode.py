@@ -29,6 +29,11 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+# first: the package loads MuJoCo whatever MUJOCO_GL says (a backend whose library is missing
+# made ``import mujoco`` raise before this script could say what to install)
+import iplanner_torch  # noqa: F401
+
+# isort: split
 import mujoco
 import numpy as np
 import torch

@@ -13,8 +13,10 @@ jobs differ in, e.g. ``planner.itomp_spread_mps``, as ``iplanner-evaluate
 evaluate.mode=episode`` keeps them apart) and planner, the means of
 :func:`iplanner_torch.eval.smoothness.episode_breakdown`:
 
-- ``smoothness_log``: the paper's smoothness of the logged robot states (sampled more sparsely
-  than ``eval/smoothness``, so lower; compare planners, not absolute values);
+- ``smoothness_log``: the paper's smoothness of the logged robot states (``eval/smoothness``
+  itself in logs written at the metric rate, the default, whose metadata names ``log_hz``;
+  earlier logs hold 14.3 Hz samples, which give lower values: compare planners there, not
+  absolute values);
 - ``waits``: plans that stopped to wait;
 - ``wait_time`` / ``wait_share``: the share of the time, and of ``int sum_i qdd_i^2 dt``, in
   the wait windows (a wait's stop and the start after it, ``--settle`` seconds);

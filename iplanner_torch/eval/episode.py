@@ -232,9 +232,10 @@ class EpisodeCfg:
     # sampling rate of the metric trajectories (smoothness, distance) [Hz]
     metrics_hz: float = 25.0
     # rate of the robot state and true human joints in the MCAP log [Hz], as a whole number
-    # of control steps (15 Hz at 0.01 s: every 7th step, 14.3 Hz); the tracked joints are
-    # logged frame by frame at the tracker's own times
-    log_hz: float = 15.0
+    # of control steps; None: metrics_hz, so the log holds the very samples the smoothness,
+    # jerkiness and closest distance are computed from (the episode's log metadata records
+    # both rates); the tracked joints are logged frame by frame at the tracker's own times
+    log_hz: float | None = None
     # rate of the log's 3D scene (/scene: robot and human spheres, the latest forecast's
     # joint ellipsoids at SCENE_HORIZONS_S) for Foxglove's 3D panel [Hz], as a whole number of
     # control steps, as log_hz (40 Hz at 0.01 s: every 2nd step, 50 Hz); 0: none
@@ -332,7 +333,8 @@ class EpisodeCfg:
         positive("mhd_horizon_s", self.mhd_horizon_s)
         non_negative("mhd_min_motion", self.mhd_min_motion)
         positive("metrics_hz", self.metrics_hz)
-        positive("log_hz", self.log_hz)
+        if self.log_hz is not None:
+            positive("log_hz", self.log_hz)
         non_negative("scene_hz", self.scene_hz)
         non_negative("blocking_tail_s", self.blocking_tail_s)
         optional(integer, "torch_threads", self.torch_threads, minimum=1)
@@ -1140,6 +1142,10 @@ def _run_episode(
         def task_policy(taken: set[int], fetched: set[int]) -> int | None:
             return next((i for i in human.order if i not in fetched), None)
 
+    # whole numbers of control steps between the metric samples and the logged states
+    n_sub_metrics = max(1, round(1.0 / (cfg.metrics_hz * env.control_dt)))
+    log_hz = cfg.metrics_hz if cfg.log_hz is None else cfg.log_hz
+    n_sub_log = max(1, round(1.0 / (log_hz * env.control_dt)))
     events: list[tuple[float, str, int]] = []
     writer = None
     if writer_path is not None:
@@ -1161,6 +1167,10 @@ def _run_episode(
                 "human_speed": human_cfg.speed,
                 "tracker_noise": sim_cfg.tracker_noise,
                 "human_order": list(human.order),
+                # the rates actually sampled [Hz]: the metric trajectories (smoothness,
+                # jerkiness, closest distance) and the logged robot and true human states
+                "metrics_hz": 1.0 / (n_sub_metrics * env.control_dt),
+                "log_hz": 1.0 / (n_sub_log * env.control_dt),
             },
         )
 
@@ -1264,8 +1274,6 @@ def _run_episode(
     replanner.reset(tens(env.robot_q()), goal_q, 0.0)
     m = pcfg.replan_step_s
     next_cycle = 0.0
-    n_sub_metrics = max(1, round(1.0 / (cfg.metrics_hz * env.control_dt)))
-    n_sub_log = max(1, round(1.0 / (cfg.log_hz * env.control_dt)))
     logged_frames = 0  # tracker frames written to /human/joints_tracked
     n_sub_scene = max(1, round(1.0 / (cfg.scene_hz * env.control_dt))) if cfg.scene_hz else 0
     scene_map = HumanSphereMap.from_segments(JOINT_NAMES) if n_sub_scene else None

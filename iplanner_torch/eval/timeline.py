@@ -12,9 +12,10 @@ Sources (channels of the log):
 
 - closest distance: ``/scene`` (the robot's and the person's spheres, a few times a second),
   the least ``|c_r - c_h| - r_r - r_h`` over all sphere pairs: the sphere-model distance of
-  ``eval/min_distance``, sampled at the scene channel's rate, so its least value is at or above
-  that metric (measured every simulation sample), which the figure states beside it (the
-  episode's ``/metrics`` message);
+  ``eval/min_distance``, sampled at the scene channel's rate, which the figure states beside
+  it (the episode's ``/metrics`` message; that metric is sampled at ``metrics_hz``, 25 Hz, so
+  where the scene's samples are some of the metric's, as at the default 5 Hz, their least
+  value is at or above it; at another scene rate it may fall between two metric samples);
 - collision bound: ``/planner/plan`` and ``/planner/bound`` (each plan's largest per-waypoint
   bound, and ``1 - confidence``, the most it may be);
 - action probabilities: ``/prediction/forecast`` (absent for ``itomp``, which has no
@@ -116,7 +117,7 @@ class Timeline:
         end_t: the last time in the log [s].
         title: planner, scenario, speed and seed, as the metadata says.
         min_distance_m: the episode's own closest distance of the sphere models
-            (``eval/min_distance`` of its metrics message, every simulation sample) [m]; NaN
+            (``eval/min_distance`` of its metrics message, at the metric samples) [m]; NaN
             when the log holds no metrics (cut short) or no value.
         complete: whether the log holds every record (``Episode.complete``).
         notes: what is missing, in words (e.g. "no forecasts: itomp has no predictor").
@@ -604,7 +605,7 @@ def plot_episode_timeline(
 
     1. closest distance between the robot's and the person's spheres [cm], at the scene
        samples, with their least value marked and the episode's own minimum
-       (``eval/min_distance``, every simulation sample; at or below the sampled one) drawn
+       (``eval/min_distance``, at the metric samples, 25 Hz by default) drawn
        as a dotted line, both named in the legend;
     2. each plan's largest collision bound against ``1 - confidence`` (log scale, values below
        1e-12 drawn at 1e-12; plans that were not feasible, cut short by a wait or evasive,
@@ -691,7 +692,7 @@ def plot_episode_timeline(
             lw=1.0,
             ls=":",
             label=f"episode minimum {100.0 * tl.min_distance_m:.1f} cm\n"
-            "(eval/min_distance, every sim step)",
+            "(eval/min_distance, at the metric samples)",
         )
     dist.set_ylabel("robot-person\ndistance [cm]")
     if shared.distance_cm is not None:

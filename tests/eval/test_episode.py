@@ -24,6 +24,7 @@ from iplanner_torch.eval.episode import (
     run_episode,
     tracked_hands,
 )
+from iplanner_torch.eval.metrics import jerkiness, smoothness
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.sim.scene import SceneCfg
 from iplanner_torch.sim.tasks import ScenarioCfg
@@ -74,7 +75,7 @@ def test_distance_prediction_time_and_realtime_factor_from_the_log(
 
     predictor = ClockedPredictor()
     path = tmp_path / "ep.mcap"
-    cfg = replace(_cfg(3.0), metrics_hz=25.0, log_hz=25.0)
+    cfg = replace(_cfg(3.0), metrics_hz=25.0)  # the log follows the metric rate
     res = _fake_episode(tmp_path, cfg, "iplanner_ni", fakes.LinearReplanner(speed=1.5),
                         predictor=predictor, path=path, seed=1)  # fmt: skip
     m = res.metrics
@@ -86,6 +87,10 @@ def test_distance_prediction_time_and_realtime_factor_from_the_log(
     t_q, q = ep.robot_q()
     t_h, joints = ep.human_true()
     assert torch.equal(t_q, t_h) and len(t_q) == pytest.approx(25 * 3.0, abs=2)
+    assert ep.metadata["metrics_hz"] == ep.metadata["log_hz"] == pytest.approx(25.0)
+    # the log holds the metric's own samples: smoothness and jerkiness follow from it
+    assert smoothness(t_q, q) == pytest.approx(m["eval/smoothness"], rel=1e-12)
+    assert jerkiness(t_q, q) == pytest.approx(m["eval/jerkiness"], rel=1e-12)
     arm = fakes.FakeArm(tmp_path)
     smap = HumanSphereMap.from_segments(JOINT_NAMES)
     robot_c = arm.sphere_centers(q.to(arm.q_home.dtype)).double()  # (T, 5, 3)
@@ -224,9 +229,10 @@ def test_tracked_joints_are_logged_frame_by_frame_at_their_own_times(tmp_path: P
     assert len(both) >= 5
     for i, j in both:
         torch.testing.assert_close(tracked[i], true[j], atol=1e-6, rtol=0)
-    # the robot state and the true joints stay on the log grid (every 7th 0.01 s step)
+    # the robot state and the true joints stay on the log grid: the metric rate, 25 Hz
+    # (every 4th 0.01 s step)
     t_r, _ = ep.robot_q()
-    np.testing.assert_allclose(np.diff(t_r.numpy()), 0.07, atol=1e-9)
+    np.testing.assert_allclose(np.diff(t_r.numpy()), 0.04, atol=1e-9)
     torch.testing.assert_close(t_h, t_r)
 
 

@@ -173,7 +173,7 @@ def test_the_distance_panel_names_the_episodes_own_minimum(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The panel marked "least 11.7 cm at 3.6 s (scene samples)" while the run's table said
-    10.9 cm (eval/min_distance, every simulation sample): both are now named, apart."""
+    10.9 cm (eval/min_distance, at the metric samples): both are now named, apart."""
     figures = _figures(monkeypatch)
     path = tmp_path / "ep.mcap"
     _write(path, metrics={"eval/min_distance": 0.031, "eval/smoothness": 1.0})
