@@ -38,3 +38,11 @@ def bounded_omp_spin() -> bool:
 
 
 bounded_omp_spin()
+
+
+def experiment_config(*overrides: str):  # noqa: ANN201 - the ExperimentCfg, imported late
+    """The ``ExperimentCfg`` that ``iplanner-experiment <overrides>`` runs: see
+    :func:`iplanner_torch.cli.experiment.experiment_config`."""
+    from iplanner_torch.cli.experiment import experiment_config as compose_experiment
+
+    return compose_experiment(*overrides)

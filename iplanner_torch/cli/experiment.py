@@ -587,10 +587,13 @@ def merged_episode_node(cfg: DictConfig, overrides: list[str] | None = None) -> 
 
 
 def _check_scenario_name(name: str) -> None:
-    """Refuse a ``scenario=<option>`` whose scenario is named otherwise (a new file that sets
-    no ``name`` of its own: it took ScenarioCfg's default, or the file it starts from), unless
-    the command line sets ``scenario.name``: the name labels the table, results.csv and the
-    logs, and the episodes of another scenario would be filed under it."""
+    """Refuse a ``scenario=<option>`` whose name its file does not set (a new file without a
+    ``name`` of its own: it took ScenarioCfg's default, or that of the file it starts from),
+    unless the command line sets ``scenario.name``: the name labels the table, results.csv
+    and the logs, and the episodes of another scenario would be filed under it. A name the
+    file sets itself (``name: my_label``) is the user's label, and taken."""
+    import yaml
+
     from iplanner_torch.cli._common import _group_choice
     from iplanner_torch.errors import ConfigError
 
@@ -599,10 +602,18 @@ def _check_scenario_name(name: str) -> None:
         return
     if any(override_key(o) == "scenario.name" for o in _task_overrides()):
         return
+    path = Path(CONF_DIR) / "scenario" / f"{choice}.yaml"
+    try:
+        own = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError):  # another search path's file: the rule as it stands
+        own = None
+    if isinstance(own, dict) and own.get("name") == name:
+        return
     raise ConfigError(
-        f"scenario={choice}: its scenario is named {name!r} (not set in its file: from "
-        f"ScenarioCfg's default or the file it starts from), which labels the results; add "
-        f"'name: {choice}' to conf/scenario/{choice}.yaml"
+        f"scenario={choice}: its scenario is named {name!r}, a name its file does not set "
+        f"(ScenarioCfg's default, or that of the file it starts from), which labels the "
+        f"results; add 'name: <label>' (e.g. 'name: {choice}') to "
+        f"conf/scenario/{choice}.yaml, or set scenario.name=<label>"
     )
 
 
@@ -1441,6 +1452,74 @@ def write_timelines(
             stacklevel=2,
         )
     return written
+
+
+def experiment_config(*overrides: str) -> Any:
+    """The :class:`~iplanner_torch.eval.experiment.ExperimentCfg` that ``iplanner-experiment
+    <overrides>`` runs, for Python: the shipped planner, sim and scenario settings of
+    ``conf/`` (the dataclasses' own defaults are the paper's and differ: e.g.
+    ``OptimizerCfg()`` runs 40 and 10 iterations, ``conf/planner`` 25 and 16, with
+    ``safe_hold`` and ``keep_start``), checked as the command checks them.
+
+    Example::
+
+        from iplanner_torch.cli import experiment_config
+        from iplanner_torch.eval.episode import run_episode
+        from iplanner_torch.robot.model import RobotModel
+
+        exp = experiment_config("robot=fetch", "scenario=arrangement_2x2")
+        res = run_episode(exp.episode, robot=RobotModel.from_cfg(exp.robot),
+                          predictor=mine, planner_kind="iplanner_ni", writer_path=None,
+                          seed=0)
+
+    Args:
+        overrides: command-line overrides, as typed (``"planner.optimizer.lr=0.001"``,
+            ``"experiment=speed_response"``, ``"run.seeds=[0,1]"``).
+
+    Returns:
+        The run's grid (robot, scenarios, planners, seeds, speeds, noises) and its
+        ``episode`` settings; ``predictor_paths`` is empty (the command fills it with the
+        checkpoints it finds or trains; :func:`~iplanner_torch.eval.experiment.run_experiment`
+        also takes predictor objects).
+
+    Raises:
+        ConfigError: for an override the command would refuse (an unknown key or option, a
+            bad value), named as the command names it, or when called inside a Hydra app.
+    """
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    from iplanner_torch.cli._common import (
+        check_added_hydra_keys,
+        composition_error_text,
+    )
+    from iplanner_torch.errors import ConfigError
+
+    if not all(isinstance(o, str) for o in overrides):
+        raise ConfigError(f"expected overrides as strings such as 'robot=fetch', got {overrides}")
+    if GlobalHydra.instance().is_initialized():
+        raise ConfigError("experiment_config composes conf/ itself: call it outside a Hydra app")
+    hydra_config = HydraConfig.instance()
+    try:
+        with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+            try:
+                cfg = compose("config", overrides=list(overrides), return_hydra_config=True)
+            except Exception as exc:  # noqa: BLE001 - Hydra's own, one line where it has one
+                text = composition_error_text(exc)
+                if text is None:
+                    raise
+                raise ConfigError(text) from None
+            hydra_config.set_config(cfg)  # the overrides, as task_overrides reads them
+            with open_dict(cfg):
+                del cfg["hydra"]
+            check_added_keys(cfg)
+            check_added_hydra_keys()
+            check_root_keys(cfg)
+            experiment, _, _ = check_run(cfg)
+    finally:
+        hydra_config.cfg = None
+        GlobalHydra.instance().clear()
+    return experiment
 
 
 def dump_config_safe(cfg: DictConfig) -> str:

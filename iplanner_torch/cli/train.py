@@ -233,20 +233,38 @@ def _refuse_unread_svgp_fields(cfg: DictConfig) -> None:
     """Refuse a command-line ``predictor.svgp`` field that the chosen ``noisy_input`` does not
     read (:data:`~iplanner_torch.prediction.svgp.UNREAD_BY_NOISY_INPUT`):
     ``predictor.svgp.nigp_iterations=4`` with ``noisy_input=simple`` would change nothing."""
-    from iplanner_torch.prediction.svgp import UNREAD_BY_NOISY_INPUT
+    from dataclasses import fields
+
+    from iplanner_torch.errors import ConfigWarning
+    from iplanner_torch.prediction.svgp import UNREAD_BY_NOISY_INPUT, SVGPCfg
 
     svgp = cfg.predictor.get("svgp")
     if not isinstance(svgp, DictConfig):  # not a predictor config: instantiating it says so
         return
     mode = str(svgp.get("noisy_input", "simple"))
-    unread = sorted(overridden_fields("predictor.svgp") & set(UNREAD_BY_NOISY_INPUT.get(mode, ())))
+    not_read = set(UNREAD_BY_NOISY_INPUT.get(mode, ()))
+    which = (
+        "nigp_iterations and nigp_refit_steps are read with noisy_input=nigp, "
+        "input_noise_sigma with simple or nigp, velocity_limit with simple"
+    )
+    unread = sorted(overridden_fields("predictor.svgp") & not_read)
     if unread:
         keys = ", ".join(f"predictor.svgp.{k}" for k in unread)
         raise ConfigError(
-            f"{keys}: not read with predictor.svgp.noisy_input={mode} (nigp_iterations and "
-            "nigp_refit_steps are read with noisy_input=nigp, input_noise_sigma with simple "
-            "or nigp, velocity_limit with simple); set predictor.svgp.noisy_input too, or "
-            "leave them out"
+            f"{keys}: not read with predictor.svgp.noisy_input={mode} ({which}); set "
+            "predictor.svgp.noisy_input too, or leave them out"
+        )
+    # a predictor option file (a variant) that sets them to other than the defaults: the
+    # shipped files list them at their defaults, for a switch of noisy_input
+    defaults = {f.name: f.default for f in fields(SVGPCfg)}
+    changed = [k for k in sorted(not_read) if k in svgp and svgp[k] != defaults.get(k)]
+    if changed:
+        keys = ", ".join(f"svgp.{k}: {svgp[k]}" for k in changed)
+        warnings.warn(
+            f"the predictor option sets {keys}, which noisy_input={mode} does not read "
+            f"({which}): they change nothing",
+            ConfigWarning,
+            stacklevel=2,
         )
 
 

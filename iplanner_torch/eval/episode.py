@@ -117,6 +117,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -138,7 +139,7 @@ from iplanner_torch.checks import (
 )
 from iplanner_torch.collision.human_spheres import HumanSphereMap
 from iplanner_torch.data.skeleton import JOINT_INDEX, JOINT_NAMES
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataWarning, ShapeError
 from iplanner_torch.eval import metrics as M
 from iplanner_torch.planning.itomp import path_forecast, static_human_forecast
 from iplanner_torch.planning.replanner import PlannerCfg, build_replanner
@@ -180,10 +181,23 @@ _OPTIMIZER_KIND: dict[str, str] = {"itomp": "itomp", "oracle": "oracle", "blind"
 
 
 class PredictorLike(Protocol):
-    """What the loop needs of :class:`iplanner_torch.prediction.predictor.HumanMotionPredictor`."""
+    """What the loop needs of :class:`iplanner_torch.prediction.predictor.HumanMotionPredictor`
+    (the README's "Another predictor model" spells the contract out).
+
+    The loop calls :meth:`predict_positions` with B = 1 and the K joints of
+    :data:`~iplanner_torch.data.skeleton.JOINT_NAMES` in that order, and checks the forecast
+    (:func:`check_predicted`): batch 1, those joints in that order, at least one frame, the
+    object's ``action_names`` when it names them. Read when present: ``n_prev`` / ``n_p``
+    (window frames, :func:`_predictor_window`), ``fps`` (:func:`check_predictor_rate`),
+    ``joint_names`` (:func:`check_predictor_joints`), ``action_names`` and ``next_action``
+    (:func:`predictor_task_policy`). A forecast shorter than the plans' reach is warned about
+    once an episode (:func:`warn_short_horizon`).
+    """
 
     def predict_positions(self, positions: torch.Tensor, progress: torch.Tensor) -> Forecast:
-        """(B, n_p, K, 3) positions with NaN, (B,) int64 progress -> Forecast."""
+        """(B, n_p, K, 3) tracked positions [m], table frame, NaN where lost; (B,) int64
+        bitmask of the completed actions (``ScriptedHuman.progress_bitmask``) -> Forecast
+        whose frame ``f`` lies ``(f + 1) dt`` after the last tracked frame."""
         ...
 
 
@@ -613,6 +627,30 @@ def check_predicted(forecast: object, action_names: tuple[str, ...]) -> Forecast
     return forecast
 
 
+def warn_short_horizon(forecast: Forecast, replan_step_s: float) -> bool:
+    """Warn (:class:`~iplanner_torch.errors.DataWarning`) when a forecast ends before the
+    plans it serves are checked to: a plan's execution window ends up to ``2 m`` after the
+    forecast's last observed frame (``m = replan_step_s``), and past its last frame the
+    person is held there (:func:`~iplanner_torch.planning.costs.forecast_to_obstacle`), which is
+    not conservative. The shipped predictors forecast 1 s, as long as ``2 m`` at m = 0.5 s.
+
+    Returns:
+        Whether it warned.
+    """
+    covered = forecast.horizon * forecast.dt
+    if covered >= 2.0 * replan_step_s - 1e-9:
+        return False
+    warnings.warn(
+        f"the predictor forecasts {forecast.horizon} frames of {forecast.dt:g} s "
+        f"({covered:.3g} s), less than the {2.0 * replan_step_s:g} s (2 x replan_step_s) the "
+        "plans are checked over: past its last frame the person is taken to stay there, which "
+        "is not conservative; forecast further ahead",
+        DataWarning,
+        stacklevel=2,
+    )
+    return True
+
+
 def action_mask(action_names: tuple[str, ...], available: set[int]) -> torch.Tensor:
     """(A,) bool: False for ``take_<i>`` / ``reach_<i>`` actions whose block ``i`` is not
     available to the human (not on its delivery spot and not in the human's hand); other
@@ -869,7 +907,11 @@ def run_episode(
         The metrics, the log path and the task events.
 
     Raises:
-        ConfigError: on an unknown planner kind or an I-Planner without a predictor.
+        ConfigError: on an unknown planner kind or an I-Planner without a predictor, or a
+            predictor whose ``fps`` or ``joint_names`` do not fit the simulation.
+        ShapeError: when the predictor's forecast is not one of the simulated person's
+            joints in their order, of batch 1 and at least one frame, or of the actions it
+            names (:func:`check_predicted`).
     """
     with torch_threads(cfg.torch_threads):
         return _run_episode(
@@ -1273,6 +1315,7 @@ def _run_episode(
         goal_q = start_next(0.0)
     replanner.reset(tens(env.robot_q()), goal_q, 0.0)
     m = pcfg.replan_step_s
+    warned_horizon = False  # a forecast shorter than the plans' reach: said once an episode
     next_cycle = 0.0
     logged_frames = 0  # tracker frames written to /human/joints_tracked
     n_sub_scene = max(1, round(1.0 / (cfg.scene_hz * env.control_dt))) if cfg.scene_hz else 0
@@ -1340,6 +1383,8 @@ def _run_episode(
                         action_names,
                     )
                     predict_ms.append(1e3 * (time.perf_counter() - w0))
+                    if not warned_horizon:
+                        warned_horizon = warn_short_horizon(forecast, m)
                     if cfg.mask_unavailable_actions and action_names and not blocking:
                         available = available_blocks(
                             set(env.delivered),

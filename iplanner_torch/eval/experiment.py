@@ -12,7 +12,7 @@ import multiprocessing
 import os
 import signal
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -520,6 +520,7 @@ def run_experiment(
     resume: bool = False,
     on_done: Callable[[int], None] | None = None,
     executor: Executor | None = None,
+    predictors: Mapping[str, Any] | None = None,
 ) -> pd.DataFrame:
     """Run every episode of the grid and gather one metric row per episode:
     :func:`start_experiment`, then :func:`finish_experiments` on it alone (see there).
@@ -535,6 +536,7 @@ def run_experiment(
         resume=resume,
         on_done=on_done,
         executor=executor,
+        predictors=predictors,
     )
     return finish_experiments([run])[0]
 
@@ -547,6 +549,7 @@ def start_experiment(
     resume: bool = False,
     on_done: Callable[[int], None] | None = None,
     executor: Executor | None = None,
+    predictors: Mapping[str, Any] | None = None,
 ) -> ExperimentRun:
     """Begin every episode of the grid, to gather one metric row per episode: without an
     executor they run here, one after the other, before this returns; with one they are
@@ -577,13 +580,20 @@ def start_experiment(
             timings (which then measure a machine shared by the workers). The rows are
             written after each episode as above, in the grid's order, by
             :func:`finish_experiments`, which also says what an episode's failure does.
+        predictors: planner kind (``"iplanner_ni"``, ``"iplanner_no_ni"``) -> a predictor
+            object to drive that planner instead of the checkpoint of ``predictor_paths``
+            (any object with ``predict_positions``, the ``PredictorLike`` protocol of
+            :mod:`~iplanner_torch.eval.episode`; its rows and logs keep the planner's name).
+            They run in this process: not with an ``executor``.
 
     Returns:
         The grid's run, for :func:`finish_experiments`.
 
     Raises:
-        ConfigError: when an I-Planner variant has no predictor checkpoint, or as
-            :func:`kept_episodes` when resuming.
+        ConfigError: when an I-Planner variant has neither a predictor checkpoint nor a
+            predictor object, ``predictors`` names a planner of no learned predictor or not
+            in the grid, or comes with an ``executor``; or as :func:`kept_episodes` when
+            resuming.
         DataError: as :func:`kept_episodes` when resuming.
         (and, without an executor, what an episode raises)
     """
@@ -596,16 +606,32 @@ def start_experiment(
     table = kept_episodes(cfg, out_dir, episodes) if resume else {}
     assert isinstance(cfg.robot, RobotCfg)  # a name became one in __post_init__
     robot = RobotModel.from_cfg(cfg.robot, device=cfg.device)
-    predictors: dict[str, Any] = {}
+    given = dict(predictors or {})
+    learned = [k for k in cfg.planners if PLANNER_KINDS[k] in CHECKPOINT_VARIANTS]
+    odd = [k for k in given if k not in learned]
+    if odd:
+        raise ConfigError(
+            f"predictors: {odd} are not planners of this grid that use a learned predictor "
+            f"(those are {learned})"
+        )
+    if given and executor is not None:
+        raise ConfigError(
+            "predictors: predictor objects run in this process; run without an executor "
+            "(or give checkpoints in predictor_paths, which the workers load)"
+        )
+    loaded: dict[str, Any] = {}  # by variant
     for kind in cfg.planners:
         variant = PLANNER_KINDS[kind]
-        if variant not in CHECKPOINT_VARIANTS or variant in predictors:
+        if variant not in CHECKPOINT_VARIANTS or variant in loaded:
             continue  # (iplanner_cv's forecast is built by the episode)
-        if variant not in cfg.predictor_paths:
+        if kind in given:
+            loaded[variant] = given[kind]
+        elif variant not in cfg.predictor_paths:
             raise ConfigError(f"planner {kind!r} needs predictor_paths[{variant!r}], none given")
-        predictors[variant] = _load_predictor(cfg.predictor_paths[variant], cfg.device)
-        check_predictor_rate(predictors[variant], cfg.episode.sim.tracker_fps)  # before episodes
-        check_predictor_joints(predictors[variant])
+        else:
+            loaded[variant] = _load_predictor(cfg.predictor_paths[variant], cfg.device)
+        check_predictor_rate(loaded[variant], cfg.episode.sim.tracker_fps)  # before episodes
+        check_predictor_joints(loaded[variant])
     base = cfg.episode
     grid = grid_episodes(cfg)
     stems = [e[0] for e in grid]
@@ -638,7 +664,7 @@ def start_experiment(
                 _episode_in_worker,
                 cfg.robot,
                 cfg.device,
-                cfg.predictor_paths[variant] if variant in predictors else None,
+                cfg.predictor_paths[variant] if variant in loaded else None,
                 replace(episode, progress_bar=False),
                 kind,
                 log if cfg.write_mcap else None,
@@ -649,7 +675,7 @@ def start_experiment(
         res = run_episode(
             episode,
             robot=robot,
-            predictor=predictors.get(variant) if variant else None,
+            predictor=loaded.get(variant) if variant else None,
             planner_kind=kind,  # type: ignore[arg-type]
             writer_path=log if cfg.write_mcap else None,
             seed=seed,

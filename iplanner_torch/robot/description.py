@@ -24,8 +24,9 @@ carries no velocity limits: the planner enforces :attr:`JointSpec.velocity` itse
 
 from __future__ import annotations
 
+import inspect
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -38,7 +39,6 @@ from iplanner_torch.robot.geometry import Box, Capsule, Cylinder, Geometry, Vec3
 
 ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 
-ROBOT_NAMES: tuple[str, ...] = ("kuka_iiwa14", "fetch")
 
 FETCH_TORSO_RANGE: tuple[float, float] = (0.0, 0.38615)
 # Torso lift putting the Fetch shoulder about 0.3 m above a 0.75 m table.
@@ -380,24 +380,44 @@ def fetch_description(torso_height: float = FETCH_DEFAULT_TORSO_HEIGHT) -> Robot
     )
 
 
+#: Robot name -> the function that builds its description (a robot with a torso lift takes
+#: ``torso_height``). A robot added here is in :data:`ROBOT_NAMES`: ``python -m
+#: iplanner_torch.robot.description`` writes its URDF and MJCF, and the asset tests (FK against
+#: MuJoCo's) cover it.
+DESCRIPTIONS: dict[str, Callable[..., RobotDescription]] = {
+    "kuka_iiwa14": iiwa14_description,
+    "fetch": fetch_description,
+}
+#: The robots there are descriptions (and assets) of.
+ROBOT_NAMES: tuple[str, ...] = tuple(DESCRIPTIONS)
+
+
 def robot_description(name: str, torso_height: float | None = None) -> RobotDescription:
-    """The description of robot ``name`` (one of :data:`ROBOT_NAMES`).
+    """The description of robot ``name`` (one of :data:`ROBOT_NAMES`, from
+    :data:`DESCRIPTIONS`).
 
     Args:
-        name: "kuka_iiwa14" or "fetch".
-        torso_height: Fetch torso lift [m]; None for the default. Must be None for the iiwa.
+        name: a robot name, e.g. "kuka_iiwa14" or "fetch".
+        torso_height: torso lift [m] of a robot that has one (the Fetch); None for its
+            default. Must be None for a robot without.
 
     Raises:
         ConfigError: for an unknown name, or a torso height given for a robot without a torso.
     """
-    if name == "kuka_iiwa14":
-        if torso_height is not None:
-            raise ConfigError("kuka_iiwa14 has no torso: expected torso_height=None")
-        return iiwa14_description()
-    if name == "fetch":
-        h = FETCH_DEFAULT_TORSO_HEIGHT if torso_height is None else float(torso_height)
-        return fetch_description(torso_height=h)
-    raise ConfigError(f"unknown robot {name!r}; available: {', '.join(ROBOT_NAMES)}")
+    build = DESCRIPTIONS.get(name) if isinstance(name, str) else None
+    if build is None:
+        raise ConfigError(f"unknown robot {name!r}; available: {', '.join(ROBOT_NAMES)}")
+    if torso_height is None:
+        return build()
+    if not has_torso(name):
+        raise ConfigError(f"{name} has no torso: expected torso_height=None")
+    return build(torso_height=float(torso_height))
+
+
+def has_torso(name: str) -> bool:
+    """Whether robot ``name`` (of :data:`ROBOT_NAMES`) has a torso lift: its description
+    function takes ``torso_height``."""
+    return "torso_height" in inspect.signature(DESCRIPTIONS[name]).parameters
 
 
 # --------------------------------------------------------------------------- math helpers

@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
 
 import torch
 
@@ -35,6 +34,7 @@ from iplanner_torch.robot.description import (
     ROBOT_NAMES,
     RobotDescription,
     asset_paths,
+    has_torso,
     mjcf_string,
     robot_description,
     urdf_string,
@@ -43,7 +43,8 @@ from iplanner_torch.robot.kinematics import SerialChainKinematics
 from iplanner_torch.robot.spheres import fit_link_spheres
 from iplanner_torch.types import check_finite, check_shape, resolve_device
 
-RobotName = Literal["kuka_iiwa14", "fetch"]
+#: a robot name: one of :data:`~iplanner_torch.robot.description.ROBOT_NAMES`
+RobotName = str
 
 
 def _check_device_dtype(device: torch.device | str, dtype: torch.dtype) -> torch.device:
@@ -63,7 +64,7 @@ MAX_SPHERE_EXCESS = 0.2
 class RobotCfg:
     """Which robot, where it stands, and how tightly spheres bound its links."""
 
-    name: RobotName  # "kuka_iiwa14" or "fetch"
+    name: RobotName  # one of ROBOT_NAMES: "kuka_iiwa14", "fetch", or one added there
     base_position: tuple[float, float, float] | None = None  # table frame [m]; None: default
     base_yaw: float | None = None  # rotation about the table's z axis [rad]; None: default
     torso_height: float | None = None  # Fetch torso lift in [0, 0.38615] m; None: default
@@ -78,7 +79,7 @@ class RobotCfg:
             object.__setattr__(self, "base_position", _base_position(self.base_position))
         _check_base_yaw(self.base_yaw)
         checks.optional(checks.finite, "torso_height", self.torso_height)
-        if self.torso_height is not None and self.name != "fetch":
+        if self.torso_height is not None and not has_torso(self.name):
             raise ConfigError(f"{self.name} has no torso: expected torso_height=None")
         excess = self.max_sphere_excess
         # NaN and inf fail too

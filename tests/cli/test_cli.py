@@ -781,20 +781,35 @@ def test_device_auto_keeps_the_closed_loop_on_the_cpu(monkeypatch: pytest.Monkey
             assert exp.device == want, overrides
 
 
-def test_a_scenario_option_named_otherwise_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_scenario_option_named_otherwise_is_refused(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
     """A new conf/scenario file without its own name took ScenarioCfg's default
     ('arrangement_1x4'), and its episodes were filed under that scenario; a name set on the
-    command line is taken."""
+    command line is taken, and so is one the file sets itself (a label of the user's: it was
+    refused with a message saying the file set none)."""
     import iplanner_torch.cli._common as common
     import iplanner_torch.cli.experiment as experiment
     from iplanner_torch.errors import ConfigError
 
+    (tmp_path / "scenario").mkdir()
+    monkeypatch.setattr(experiment, "CONF_DIR", str(tmp_path))
     monkeypatch.setattr(common, "_group_choice", lambda key: "mine")
     monkeypatch.setattr(experiment, "_task_overrides", lambda: ["scenario=mine"])
-    named = r"'arrangement_1x4' .*; add 'name: mine' to conf/scenario/mine.yaml$"
+    (tmp_path / "scenario" / "mine.yaml").write_text("defaults: [arrangement_2x4, _self_]\n")
+    named = (
+        r"'arrangement_1x4', a name its file does not set .*; add 'name: <label>' "
+        r"\(e.g. 'name: mine'\) to conf/scenario/mine.yaml, or set scenario.name=<label>$"
+    )
     with pytest.raises(ConfigError, match=r"^scenario=mine: its scenario is named " + named):
         experiment._check_scenario_name("arrangement_1x4")
     experiment._check_scenario_name("mine")
+    (tmp_path / "scenario" / "mine.yaml").write_text(
+        "defaults: [arrangement_2x4, _self_]\nname: my_label\n"
+    )
+    experiment._check_scenario_name("my_label")  # the file's own label
+    with pytest.raises(ConfigError, match="its scenario is named 'arrangement_2x4'"):
+        experiment._check_scenario_name("arrangement_2x4")  # not the file's
     given = ["scenario=mine", "+scenario.name=x"]
     monkeypatch.setattr(experiment, "_task_overrides", lambda: given)
     experiment._check_scenario_name("x")

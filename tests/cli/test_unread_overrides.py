@@ -190,6 +190,37 @@ def test_train_refuses_svgp_fields_its_noisy_input_does_not_read(
         cli_train._refuse_unread_svgp_fields(cfg)
 
 
+@pytest.mark.parametrize("option", ["iplanner_ni", "iplanner_no_ni"])
+def test_a_predictor_file_that_sets_unread_svgp_fields_is_warned(
+    option: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A variant file (``defaults: [iplanner_ni, _self_]`` then ``svgp: {nigp_iterations:
+    3}``) trained without a word, the value doing nothing; the shipped files list those
+    fields at their defaults (for a switch of noisy_input) and stay quiet."""
+    import warnings
+
+    from omegaconf import open_dict
+    from root_config import root_config
+
+    import iplanner_torch.cli._common as common
+    import iplanner_torch.cli.train as cli_train
+    from iplanner_torch.errors import ConfigWarning
+
+    monkeypatch.setattr(common, "task_overrides", lambda: [])  # set in the file, not typed
+    cfg = root_config(f"predictor={option}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cli_train._refuse_unread_svgp_fields(cfg)  # the shipped file: quiet
+    with open_dict(cfg):
+        cfg.predictor.svgp.nigp_iterations = 3
+    mode = cfg.predictor.svgp.noisy_input
+    with pytest.warns(
+        ConfigWarning,
+        match=rf"sets svgp.nigp_iterations: 3, which noisy_input={mode} does not read",
+    ):
+        cli_train._refuse_unread_svgp_fields(cfg)
+
+
 def test_a_predictor_file_that_is_not_a_predictor_config_is_named(tmp_path: Path) -> None:
     """A user's conf/predictor file without ``defaults:`` or ``_target_`` (and without an
     ``svgp`` node) gets the one-line refusal the README promises, not a KeyError from the

@@ -21,10 +21,14 @@ from iplanner_torch.robot.description import (
     urdf_string,
 )
 
-ROBOTS = ("kuka_iiwa14", "fetch")
-TOOL = {"kuka_iiwa14": "iiwa_flange", "fetch": "gripper_link"}
+#: the robots the FK-versus-MuJoCo tests below cover: every one of ROBOT_NAMES (a robot added
+#: to ``description.DESCRIPTIONS`` is tested with no edit here)
+ROBOTS = ROBOT_NAMES
+#: the shipped robots' tool links, typed in independently (a new robot's comes from its
+#: description)
+SHIPPED_TOOL = {"kuka_iiwa14": "iiwa_flange", "fetch": "gripper_link"}
 
-# Published numbers (ROBOTS.md), typed in independently of the description module.
+# Published numbers (shared/ROBOTS.md), typed in independently of the description module.
 IIWA_RANGE_DEG = (170, 120, 170, 120, 170, 120, 175)
 IIWA_VEL_DEG = (85, 85, 100, 75, 130, 135, 135)
 IIWA_EFFORT = (320, 320, 176, 176, 110, 40, 40)
@@ -42,15 +46,19 @@ FETCH_RANGE = (
 )
 
 
-def test_every_listed_robot_is_tested() -> None:
-    """A robot added to ``ROBOT_NAMES`` needs its tool link here, so that the FK-versus-MuJoCo
-    tests below cover it."""
-    assert set(ROBOTS) == set(ROBOT_NAMES) == set(TOOL)
+def _tool(name: str) -> str:
+    return SHIPPED_TOOL.get(name) or robot_description(name).tool_link
+
+
+def test_the_shipped_robots_are_listed_with_their_tool_links() -> None:
+    assert set(SHIPPED_TOOL) <= set(ROBOT_NAMES)
+    for name, tool in SHIPPED_TOOL.items():
+        assert robot_description(name).tool_link == tool
 
 
 def _pk_chain(name: str) -> pk.SerialChain:
     urdf_path, _ = asset_paths(name)
-    chain = pk.build_serial_chain_from_urdf(urdf_path.read_text(), TOOL[name])
+    chain = pk.build_serial_chain_from_urdf(urdf_path.read_text(), _tool(name))
     return chain.to(dtype=torch.float64)
 
 
@@ -179,12 +187,13 @@ def test_mjcf_conventions(name: str) -> None:
     desc = robot_description(name)
     assert model.body(1).name == desc.base_link  # top body is the robot's base
     assert model.body(1).parentid[0] == 0
-    assert model.nu == model.njnt == 7
+    n = len(desc.actuated_joints)
+    assert model.nu == model.njnt == n
     assert [model.actuator(i).name for i in range(model.nu)] == [
         model.joint(i).name for i in range(model.njnt)
     ]
-    assert model.actuator_trnid[:, 0].tolist() == list(range(7))
-    assert model.site("ee_site").bodyid[0] == model.body(TOOL[name]).id
+    assert model.actuator_trnid[:, 0].tolist() == list(range(n))
+    assert model.site("ee_site").bodyid[0] == model.body(_tool(name)).id
     assert model.ngeom >= len(desc.sphere_links) + 1  # no floor, only robot geoms
     assert np.all(model.body_gravcomp[1:] == 1.0)
     data = mujoco.MjData(model)
@@ -209,3 +218,24 @@ def test_position_actuators_track_a_step(name: str) -> None:
     assert np.all(np.isfinite(data.qpos))
     assert np.abs(data.qpos - target).max() < 0.02
     assert np.abs(data.qvel).max() < 0.05
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_the_home_pose_holds_the_tool_over_the_table_clear_of_it(name: str) -> None:
+    """Every robot's home (where episodes start and end), at its default base pose, has its
+    tool point over the table top and above it, by MuJoCo's own kinematics of the scene: a
+    new robot with a home pose below the table or off it is caught here, not in an episode."""
+    from iplanner_torch.robot.model import RobotModel
+    from iplanner_torch.sim.scene import SceneCfg, SceneHandles, build_scene
+
+    robot = RobotModel.load(name)
+    cfg = SceneCfg()
+    model = build_scene(cfg, robot)
+    handles = SceneHandles.resolve(model, cfg, robot)
+    data = mujoco.MjData(model)
+    data.qpos[handles.qpos_adr] = robot.q_home.numpy()
+    mujoco.mj_forward(model, data)
+    x, y, z = data.site_xpos[handles.ee_site]  # table frame: the top at z = 0
+    assert z > 0.05, (x, y, z)
+    assert abs(x - cfg.table_center_x) < cfg.table_size[0] / 2, (x, y, z)
+    assert abs(y) < cfg.table_size[1] / 2, (x, y, z)
