@@ -28,6 +28,7 @@ import functools
 import json
 import math
 import reprlib
+import struct
 import warnings
 import zlib
 from collections.abc import Callable, Iterator
@@ -38,6 +39,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import torch
+from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
 from mcap.records import (
     Channel,
@@ -581,6 +583,9 @@ def _check_summary_crc(f: Any) -> None:
     n = f.tell()
     if n < len(_MAGIC) * 2 + _FOOTER_SIZE:
         raise DataError("too short for a footer")
+    f.seek(n - len(_MAGIC))
+    if f.read(len(_MAGIC)) != _MAGIC:  # (a file cut short ends in the middle of a record)
+        raise DataError("no closing magic bytes: the file ends before its footer")
     f.seek(n - len(_MAGIC) - _FOOTER_SIZE)
     footer = f.read(_FOOTER_SIZE)
     if footer[0] != 0x02:
@@ -589,6 +594,8 @@ def _check_summary_crc(f: Any) -> None:
     crc = int.from_bytes(footer[25:29], "little")
     if start == 0 or crc == 0:
         return
+    if not len(_MAGIC) <= start <= n - len(_MAGIC) - _FOOTER_SIZE:
+        raise DataError(f"the footer places the summary section at byte {start}, outside the file")
     f.seek(start)
     covered = f.read(n - len(_MAGIC) - 4 - start)
     if zlib.crc32(covered) != crc:
@@ -645,6 +652,10 @@ def _error_text(err: BaseException) -> str:
     reading the bytes that a damaged length field declares ("byte string is too large", or
     no message at all): it says so."""
     text = str(err).strip()
+    if isinstance(err, DataError) and text:  # our own words already
+        return text
+    if isinstance(err, EndOfFile | struct.error):  # the mcap library ran out of bytes
+        return "the last record is cut short (the file ends inside it)"
     if isinstance(err, MemoryError | OverflowError):
         text = "a length field declares more bytes than can be read (damaged)" + (
             f" ({text})" if text else ""
@@ -753,7 +764,9 @@ def read_episode(path: str | Path) -> Episode:
                     f.seek(0)
                     raw = _read_stream(f, size)
                     first = _error_text(err)
-                    raw.problem = f"{first}; then {raw.problem}" if raw.problem else first
+                    raw.problem = (
+                        f"{first}; read record by record: {raw.problem}" if raw.problem else first
+                    )
     except OSError as err:
         raise DataError(f"{path}: cannot read the episode log: {err}") from err
     # the episode metadata record is written before any message: a file without it is

@@ -73,9 +73,9 @@ def test_a_chunk_of_unknown_compression_without_checksum_stops_the_read(tmp_path
     with pytest.warns(DataWarning) as caught:
         ep = read_episode(path)
     assert [str(w.message) for w in caught] == [
-        f"{path}: episode log is truncated or damaged (DataError: the chunks hold 4 messages, "
-        "the summary counts 5; then DataError: a chunk has unknown compression 'zstx'); read "
-        "2 messages from its complete chunks"
+        f"{path}: episode log is truncated or damaged (the chunks hold 4 messages, the "
+        "summary counts 5; read record by record: a chunk has unknown compression 'zstx'); "
+        "read 2 messages from its complete chunks"
     ]
     assert not ep.complete and ep.robot_q()[1].tolist() == [[0.0]]
 
@@ -251,3 +251,32 @@ def test_scene_sphere_rows_must_increase() -> None:
     for rows in ("0,0", "2,1", "0,3"):
         with pytest.raises(ValueError, match="are not 2 increasing rows"):
             _sphere_slots(entity(rows), 2)
+
+
+@pytest.mark.parametrize("keep", [0.3, 0.99, 0.999])
+def test_a_log_cut_short_says_so_in_words_of_its_own(tmp_path: Path, keep: float) -> None:
+    """A cut whose last byte before the would-be footer happened to read as a footer's
+    opcode sent the summary check to a random offset: the warning said "OSError: [Errno 22]
+    Invalid argument", and other cuts the mcap library's "EndOfFile" or struct's "unpack
+    requires a buffer of 8 bytes". Now: no closing magic bytes, the last record cut short."""
+    whole = _four_states(tmp_path / "whole.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(whole[: int(len(whole) * keep)])
+    with pytest.warns(DataWarning) as caught:
+        read_episode(cut)
+    (text,) = [str(w.message) for w in caught]
+    assert "no closing magic bytes: the file ends before its footer" in text
+    for library_word in ("Errno", "EndOfFile", "unpack", "OSError"):
+        assert library_word not in text, text
+
+
+def test_a_footer_that_points_outside_the_file_is_named(tmp_path: Path) -> None:
+    path = _four_states(tmp_path / "far.mcap")
+    blob = bytearray(path.read_bytes())
+    footer = len(blob) - 8 - 29  # opcode 0x02, length, summary start, offset start, crc
+    assert blob[footer] == 0x02
+    blob[footer + 9 : footer + 17] = (2**50).to_bytes(8, "little")
+    path.write_bytes(bytes(blob))
+    with pytest.warns(DataWarning, match=r"places the summary section at byte 1125899906842624"):
+        ep = read_episode(path)
+    assert ep.robot_q()[1].shape[0] >= 1  # every record still read, in order
