@@ -28,7 +28,7 @@ ROBOTS = ROBOT_NAMES
 #: description)
 SHIPPED_TOOL = {"kuka_iiwa14": "iiwa_flange", "fetch": "gripper_link"}
 
-# Published numbers (shared/ROBOTS.md), typed in independently of the description module.
+# Published numbers, typed in independently of the description module.
 IIWA_RANGE_DEG = (170, 120, 170, 120, 170, 120, 175)
 IIWA_VEL_DEG = (85, 85, 100, 75, 130, 135, 135)
 IIWA_EFFORT = (320, 320, 176, 176, 110, 40, 40)

@@ -9,12 +9,20 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
+from iplanner_torch.robot.description import ROBOT_NAMES
 from iplanner_torch.robot.model import RobotCfg, RobotModel
 
 CONF = Path(__file__).resolve().parents[2] / "conf" / "robot"
 
 
-@pytest.mark.parametrize("name", ["kuka_iiwa14", "fetch"])
+OPTIONS = sorted(p.stem for p in CONF.glob("*.yaml"))
+
+
+def test_every_robot_has_an_option_named_after_it() -> None:
+    assert set(OPTIONS) == set(ROBOT_NAMES)
+
+
+@pytest.mark.parametrize("name", OPTIONS)
 def test_robot_option_instantiates_to_the_defaults(name: str) -> None:
     cfg = instantiate(OmegaConf.load(CONF / f"{name}.yaml"))
     assert isinstance(cfg, RobotCfg) and cfg.name == name
