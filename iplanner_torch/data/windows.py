@@ -29,7 +29,8 @@ from typing import Literal
 import numpy as np
 import torch
 
-from iplanner_torch.checks import is_real
+from iplanner_torch.checks import is_real, positive
+from iplanner_torch.checks import seed as check_seed
 from iplanner_torch.data.demonstration import Demonstration
 from iplanner_torch.data.skeleton import BONES
 from iplanner_torch.errors import ConfigError, DataError, DataWarning, ShapeError
@@ -184,7 +185,8 @@ def compute_features(
 
     Raises:
         ShapeError: when positions is not (..., T, K, 3) or T is too short.
-        ConfigError: for unknown kinds or kinds not starting with "position".
+        ConfigError: for unknown kinds or kinds not starting with "position", or an
+            ``fps`` that is not a finite number > 0.
         DataError: from :func:`impute_nan`.
     """
     x = torch.as_tensor(positions)
@@ -202,8 +204,7 @@ def compute_features(
         )
     if len(set(kinds)) != len(kinds):
         raise ConfigError(f"kinds has duplicates: {kinds}")
-    if not fps > 0:
-        raise ConfigError(f"fps must be > 0, got {fps}")
+    fps = positive("fps", fps)  # inf would make the derivatives' spacing 0: inf and NaN
     t_len, k = x.shape[-3], x.shape[-2]
     if len(kinds) > 1 and t_len < 3:
         raise ShapeError(f"expected positions with T >= 3 frames for derivatives, got T={t_len}")
@@ -285,8 +286,27 @@ def next_action_labels(labels: np.ndarray) -> np.ndarray:
 
     The next action is the first label after the current segment that differs from the
     current one; unlabelled (-1) frames are skipped.
+
+    Args:
+        labels: (T,) integer action labels, -1 for unlabelled (an array or a tensor).
+
+    Raises:
+        ShapeError: when ``labels`` is not (T,) of an integer dtype (floats were cut to
+            integers, NaN to a large negative one), as :func:`progress_bitmask`.
+        DataError: for a label below -1.
     """
-    lab = np.asarray(labels, dtype=np.int64)
+    raw = np.asarray(labels.cpu() if isinstance(labels, torch.Tensor) else labels)
+    if raw.ndim != 1:
+        raise ShapeError(f"expected labels (T,), got shape {raw.shape}")
+    if raw.size and raw.dtype.kind not in "iu":
+        raise ShapeError(f"expected labels (T,) of an integer dtype, got {raw.dtype}")
+    lab = raw.astype(np.int64)
+    if lab.size and int(lab.min()) < -1:
+        first = int(np.flatnonzero(lab < -1)[0])
+        raise DataError(
+            f"labels: frame {first} has label {int(lab[first])}; expected an action index "
+            ">= 0, or -1 for an unlabelled frame"
+        )
     if lab.size == 0:
         return lab.copy()
     starts = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]])
@@ -619,10 +639,10 @@ def split_by_demonstration(
         (train, val, test) lists, each in the input order.
 
     Raises:
-        ConfigError: for bad fractions.
+        ConfigError: for bad fractions, or a seed that is not an integer in [0, 2^32 - 1].
     """
     fr = check_split_fractions(fractions)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))  # None would split differently each call
     groups: dict[str, list[int]] = {}
     for i, d in enumerate(demos):
         groups.setdefault(_stratum(d), []).append(i)

@@ -192,7 +192,7 @@ def closest_distance(
     Raises:
         ShapeError: for mismatched shapes or anything but real numbers.
         DataError: for an infinite centre coordinate (it was reported as 1.8e308 m) or a
-            radius that is not finite.
+            radius that is not finite or is negative.
     """
     rc = _f64("robot_centers", robot_centers, ("T", "S_r", 3))
     n_t, s_r = rc.shape[:2]
@@ -205,6 +205,8 @@ def closest_distance(
     for name, x in (("robot_radii", rr), ("human_radii", hr)):
         if not bool(torch.isfinite(x).all()):
             raise DataError(f"expected finite {name}, got {x.tolist()}")
+        if bool((x < 0).any()):  # a negative radius inflated the distance, hiding a contact
+            raise DataError(f"expected {name} >= 0 [m], got {x.tolist()}")
     diff = rc[:, :, None, :] - hc[:, None, :, :]  # (T, S_r, S_h, 3)
     gap = diff.norm(dim=-1) - rr[None, :, None] - hr[None, None, :]  # (T, S_r, S_h)
     gap = torch.nan_to_num(gap, nan=math.inf, posinf=math.inf).flatten(1)  # (T, S_r*S_h)
@@ -408,6 +410,10 @@ def classification_precision(probs: Any, labels: Any, threshold: float = 0.5) ->
         raise DataError(
             f"expected labels integers in [0, {n_a}), got {lab[i].item()!r} at frame {i}"
         )
+    if p.shape[0] == 0:  # no frame: nothing counted (max over no action would raise)
+        return math.nan, 0
+    if n_a == 0:
+        raise DataError("expected probs over at least one action, got (T, 0)")
     top, arg = p.max(dim=1)
     keep = top > threshold
     n = int(keep.sum())

@@ -48,7 +48,13 @@ from iplanner_torch.data.windows import (
     check_split_fractions,
     split_by_demonstration,
 )
-from iplanner_torch.errors import CheckpointError, ConfigError, DataError, DataWarning
+from iplanner_torch.errors import (
+    CheckpointError,
+    ConfigError,
+    DataError,
+    DataWarning,
+    ShapeError,
+)
 from iplanner_torch.eval.metrics import modified_hausdorff_batch as modified_hausdorff
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import check_shape
@@ -379,9 +385,24 @@ def window_metrics(
         Dict of (B,) tensors: top_prob, correct, reg_precision, reg_accuracy, mhd_1s,
         hand_motion (the moving hand's largest distance from ``pose_now`` within the first
         second [m]) and ``inside{90,95,99}`` (B, n_f, K) bool.
+
+    Raises:
+        ShapeError: when ``fc`` is not a Forecast, ``xi_true`` is not (B, n_f, K, 3) of the
+            forecast's dtype, ``pose_now`` not (B, K, 3), or ``current`` not a (B,) integer
+            tensor (a (1,) one was broadcast: every window scored against its one label; a
+            label no action of the forecast has, such as -1, scores as not correct).
     """
+    if not isinstance(fc, Forecast):
+        raise ShapeError(f"expected fc a Forecast, got {type(fc).__name__}")
     check_shape("xi_true", xi_true, tuple(fc.mean.shape[:1]) + tuple(fc.mean.shape[2:]))
+    if xi_true.dtype != fc.mean.dtype:
+        raise ShapeError(
+            f"expected xi_true of the forecast's dtype {fc.mean.dtype}, got {xi_true.dtype}"
+        )
     check_shape("pose_now", pose_now, (xi_true.shape[0], xi_true.shape[2], 3))
+    check_shape("current", current, (xi_true.shape[0],))
+    if current.is_floating_point() or current.is_complex() or current.dtype == torch.bool:
+        raise ShapeError(f"expected current (B,) integer action indices, got {current.dtype}")
     w = fc.weights  # (B, A)
     mean = fc.expected_mean()  # (B, n_f, K, 3)
     second = torch.einsum("ba,bafkc->bfkc", w, fc.var + fc.mean**2)

@@ -30,13 +30,23 @@ from typing import Literal, Protocol, get_args
 
 import torch
 
-from iplanner_torch.checks import finite, finite_time, integer, is_real, non_negative
+from iplanner_torch.checks import (
+    finite,
+    finite_time,
+    integer,
+    is_real,
+    non_negative,
+    positive,
+)
 from iplanner_torch.collision.gaussian import RADIUS_FLOOR, secular_multiplier
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.planning.trajectory import accelerations, velocities
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import check_device, check_shape
 
+#: how far an obstacle's weights plus its residual may sum from 1 (float32 sums of a softmax
+#: and masked renormalisations stay well within it)
+WEIGHT_SUM_TOL = 1e-3
 #: Mahalanobis distance beyond which a pair is pruned: its bound is below Phi(-5) < 3e-7.
 PRUNE_SIGMAS = 5.0
 #: Phi(-PRUNE_SIGMAS), the most a pruned pair (or a kept pair's pruned entries together) can
@@ -199,9 +209,11 @@ def joint_acc_limit_violation(
 
     Raises:
         ShapeError: when ``q`` is not (B, W, J) or ``qd_start`` does not end in J.
-        ConfigError: when ``dt`` (a Python number) is not finite and > 0.
+        ConfigError: when ``dt`` (a Python number) is not finite and > 0, or ``a_max`` not a
+            finite number > 0 (NaN gave NaN costs, -1 a cost on a path at rest).
     """
     check_shape("q", q, ("B", "W", "J"))
+    a_max = positive("a_max", a_max)
     acc = accelerations(q, dt, qd_start)
     return torch.relu(acc.abs() - a_max).square().sum(dim=(-2, -1))
 
@@ -313,7 +325,8 @@ class HumanObstacle:
         residual: weight of the actions left out, a finite number >= 0.
 
     Shapes, dtypes and devices are checked at construction (no host synchronisation; the
-    values are not: :meth:`all_finite` tells whether they can be trusted).
+    values are not: :meth:`trusted` tells whether they can be, and
+    :func:`human_collision_bound` counts an obstacle that cannot as a bound of 1).
 
     Raises:
         ShapeError: when the tensors' shapes disagree, or they are not all of one floating
@@ -328,16 +341,24 @@ class HumanObstacle:
     # total weight of actions left out (see :func:`drop_light_actions`); every pair's mixture
     # bound adds it, as those actions' collision probabilities are at most 1
     residual: float = 0.0
+    # caches (init=False: dataclasses.replace makes a new obstacle without them, so a copy with
+    # other values is never judged by the old ones)
     # the per-pair tensors of the last ``pairs`` seen (the optimiser reuses one pair set for
     # several iterations): (pairs, robot radii), then (mean, var, 1 / s_max, radius sums)
-    _pair_cache: tuple[tuple, tuple] | None = field(default=None, repr=False, compare=False)
+    _pair_cache: tuple[tuple, tuple] | None = field(
+        default=None, repr=False, compare=False, init=False
+    )
     # the per-entry tensors of the last ``entries`` seen (see :meth:`entry_tensors`):
     # (entries, pairs, robot radii), then the tensors
-    _entry_cache: tuple[tuple, tuple] | None = field(default=None, repr=False, compare=False)
+    _entry_cache: tuple[tuple, tuple] | None = field(
+        default=None, repr=False, compare=False, init=False
+    )
     # (W_x, A, S_h) largest standard deviations (computed once, see :meth:`max_std`)
-    _max_std: torch.Tensor | None = field(default=None, repr=False, compare=False)
+    _max_std: torch.Tensor | None = field(default=None, repr=False, compare=False, init=False)
     # () bool tensor: whether mean, var and weights are all finite (computed once)
-    _finite: torch.Tensor | None = field(default=None, repr=False, compare=False)
+    _finite: torch.Tensor | None = field(default=None, repr=False, compare=False, init=False)
+    # () bool tensor: whether the values can make a probability (see :meth:`trusted`)
+    _trusted: torch.Tensor | None = field(default=None, repr=False, compare=False, init=False)
 
     def __post_init__(self) -> None:
         check_shape("HumanObstacle.mean", self.mean, ("W_x", "A", "S_h", 3))
@@ -367,6 +388,23 @@ class HumanObstacle:
                 & torch.isfinite(self.weights).all()
             )
         return self._finite
+
+    def trusted(self) -> torch.Tensor:
+        """() bool tensor: the values can make a probability: every mean, variance and weight
+        finite (:meth:`all_finite`), the variances, radii and weights >= 0, and the weights
+        with ``residual`` summing to 1 (within :data:`WEIGHT_SUM_TOL`). Weights of 0 made the
+        bound 0, "no person", and a negative variance NaN. Computed on the first call only,
+        without a host synchronisation (a tensor, for ``torch.where``)."""
+        if self._trusted is None:
+            total = self.weights.sum() + self.residual
+            self._trusted = (
+                self.all_finite()
+                & (self.var >= 0).all()
+                & (self.radii >= 0).all()
+                & (self.weights >= 0).all()
+                & ((total - 1.0).abs() <= WEIGHT_SUM_TOL)
+            )
+        return self._trusted
 
     def max_std(self) -> torch.Tensor:
         """(W_x, A, S_h) the largest standard deviation of each sphere centre [m] (computed on
@@ -863,6 +901,31 @@ def human_collision_bound(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-waypoint collision bound: max over sphere pairs of the action-weighted pair bound.
 
+    An obstacle whose values cannot make a probability (:meth:`HumanObstacle.trusted`: not
+    finite, a negative variance, radius or weight, weights that do not sum to 1) gives a
+    bound of 1 at every waypoint (unsafe; weights of 0 gave 0, as if there were no person).
+    See :func:`_human_collision_bound` for the rest.
+    """
+    bound, pen = _human_collision_bound(
+        robot_centers, robot_radii, human, pairs, exact=exact, entries=entries, reduce=reduce
+    )
+    trusted = human.trusted().to(bound.device)
+    return torch.where(trusted, bound, torch.ones_like(bound)), pen
+
+
+def _human_collision_bound(
+    robot_centers: torch.Tensor,
+    robot_radii: torch.Tensor,
+    human: HumanObstacle,
+    pairs: torch.Tensor | None = None,
+    *,
+    exact: bool = True,
+    entries: torch.Tensor | None = None,
+    reduce: BoundReduce = "max",
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-waypoint collision bound: max over sphere pairs of the action-weighted pair bound
+    (:func:`human_collision_bound` without its check of the obstacle's values).
+
     Eq. max_collision_probability with the mixture over actions:
     ``max_{j,l} sum_a p(a) P(B_j(q_i) cap C_l^a(t_i) != empty)``. That bounds each pair's
     probability of touching, not the probability that some pair touches, which can be larger
@@ -1062,14 +1125,17 @@ def forecast_to_obstacle(
         The Gaussian human spheres at ``times`` on the device/dtype of ``times``.
 
     Raises:
-        ShapeError: when ``forecast`` is not a :class:`Forecast`, or ``times`` is not a (W_x,)
-            tensor of a floating dtype (integer times would round the forecast to integers).
+        ShapeError: when ``forecast`` is not a :class:`Forecast` or has no frame (n_f = 0:
+            nothing to place the person at), or ``times`` is not a (W_x,) tensor of a
+            floating dtype (integer times would round the forecast to integers).
         ConfigError: when ``forecast_t0`` is not a finite number, or ``index`` not an integer
             in [0, B).
         DataError: (``validate``) when ``times`` holds NaN (it selects no frame).
     """
     if not isinstance(forecast, Forecast):
         raise ShapeError(f"expected forecast a Forecast, got {type(forecast).__name__}")
+    if forecast.horizon < 1:
+        raise ShapeError("expected a forecast with at least one frame (n_f >= 1), got n_f = 0")
     check_shape("times", times, ("W_x",))
     if not times.is_floating_point():
         raise ShapeError(f"expected times of a floating dtype, got {times.dtype}")

@@ -446,7 +446,7 @@ def unsafe_if_not_finite(bound: torch.Tensor, human: C.HumanObstacle) -> torch.T
     Returns:
         (..., W_x) bounds, equal to ``bound`` where it is finite and the human is finite.
     """
-    human_ok = human.all_finite().to(bound.device)
+    human_ok = human.trusted().to(bound.device)
     return torch.where(human_ok & torch.isfinite(bound), bound, torch.ones_like(bound))
 
 
@@ -544,7 +544,14 @@ class TrajectoryOptimizer:
 
         A goal outside them cannot be pinned: every plan would stop at the limit, never reach
         it and be infeasible, and a replanning robot would wait there for good.
+
+        Raises:
+            ShapeError: when ``q_goal`` is not a (J,) tensor.
+            DataError: when it holds NaN or inf (NaN compared as within the limits), or a
+                joint outside its limits.
         """
+        check_shape("q_goal", q_goal, (self.num_joints,))
+        check_finite("q_goal", q_goal, ("joint",))
         q = q_goal.to(self.device, self.dtype)
         out = (q < self.q_min - GOAL_LIMIT_TOL) | (q > self.q_max + GOAL_LIMIT_TOL)  # (J,)
         if bool(out.any()):
@@ -612,7 +619,15 @@ class TrajectoryOptimizer:
 
     def arrival_index(self, duration: float, travel: float | None) -> int:
         """Index of the first waypoint pinned to the goal for a plan of ``duration`` seconds
-        that arrives ``travel`` seconds after its start (None: at its end), in [2, W - 1]."""
+        that arrives ``travel`` seconds after its start (None: at its end), in [2, W - 1].
+
+        Raises:
+            DataError: when ``duration`` is not a finite number > 0 or ``travel`` not a
+                finite number >= 0 (NaN gave the last waypoint without a word).
+        """
+        positive("duration", duration, error=DataError)
+        if travel is not None:
+            non_negative("travel", travel, error=DataError)
         w = self.cfg.num_waypoints
         if travel is None:
             return w - 1

@@ -16,6 +16,8 @@ import math
 import numpy as np
 import torch
 
+from iplanner_torch.checks import finite, finite_tuple
+from iplanner_torch.errors import ConfigError
 from iplanner_torch.robot.description import RobotDescription, rpy_to_matrix
 
 
@@ -38,6 +40,10 @@ class SerialChainKinematics:
         base_yaw: base rotation about the world z axis [rad].
         sphere_centers_local: link name -> (S_l, 3) sphere centres in that link's frame [m];
             spheres are returned in this mapping's order.
+
+    Raises:
+        ConfigError: when ``base_position`` is not 3 finite numbers, ``base_yaw`` not a
+            finite number, or a sphere link is not in the chain or out of chain order.
     """
 
     def __init__(
@@ -52,14 +58,22 @@ class SerialChainKinematics:
         spheres = {} if sphere_centers_local is None else dict(sphere_centers_local)
         unknown = set(spheres) - set(self.link_names)
         if unknown:
-            raise ValueError(f"sphere links not in the chain: {sorted(unknown)}")
+            raise ConfigError(f"sphere links not in the chain: {sorted(unknown)}")
         link_order = {n: i for i, n in enumerate(self.link_names)}
         if list(spheres) != sorted(spheres, key=lambda n: link_order[n]):
-            raise ValueError("sphere links must be given in chain order")
+            raise ConfigError("sphere links must be given in chain order")
         self.num_spheres = sum(len(c) for c in spheres.values())
+        if isinstance(base_yaw, torch.Tensor | np.ndarray) and base_yaw.ndim == 0:
+            base_yaw = base_yaw.item()
+        base_yaw = finite("base_yaw", base_yaw)
+        base = finite_tuple(
+            "base_position",
+            base_position.tolist() if hasattr(base_position, "tolist") else base_position,
+            3,
+        )
         c, s = math.cos(base_yaw), math.sin(base_yaw)
         self._rot_world_base = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        self._p_world_base = np.asarray(base_position, dtype=np.float64)
+        self._p_world_base = np.asarray(base, dtype=np.float64)
         # One block per link: the link's child joint (if any) and its spheres (if any).
         self._kinds: list[str | None] = []
         self._blocks: list[np.ndarray] = []

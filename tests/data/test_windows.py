@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -427,3 +429,23 @@ def test_joints_as_near_as_each_other_are_taken_in_name_order():
         x[:, order.index("head")] = float("nan")
         out = impute_nan(x, order)
         torch.testing.assert_close(out[:, neck], x[:, order.index("left_shoulder")])
+
+
+@pytest.mark.parametrize("fps", [math.inf, math.nan, 0.0, -15.0, "30", None, True])
+def test_compute_features_refuses_a_frame_rate_that_is_no_positive_number(fps) -> None:
+    """An infinite fps made the derivatives' spacing 0 (inf and NaN features, no error); a
+    string or None fps was Python's TypeError."""
+    with pytest.raises(ConfigError, match="expected fps > 0 and finite"):
+        compute_features(torch.randn(5, 2, 3), fps, ("position", "velocity"))
+
+
+@pytest.mark.parametrize("seed", [None, -1, 2.5, "0", 2**32])
+def test_split_by_demonstration_refuses_a_seed_that_would_not_repeat(seed, reach_demos) -> None:
+    """``seed=None`` split differently at every call (5 different test sets in 5 calls);
+    -1 and 2.5 were numpy's ValueError and TypeError."""
+    demos = reach_demos
+    with pytest.raises(ConfigError, match="seed"):
+        split_by_demonstration(demos, DEFAULT_SPLIT, seed)
+    assert split_by_demonstration(demos, DEFAULT_SPLIT, 7) == split_by_demonstration(
+        demos, DEFAULT_SPLIT, 7
+    )

@@ -405,3 +405,13 @@ def test_spheres_that_just_touch_count_as_a_contact() -> None:
         )  # fmt: skip
         assert m["eval/contact"] == contact, (gap, m["eval/min_distance"])
     assert m["eval/min_distance"] == pytest.approx(0.001)
+
+
+def test_closest_distance_refuses_negative_radii() -> None:
+    """A negative radius was taken: the distance came out larger than the spheres' (1.73 m
+    for touching spheres), hiding the contact."""
+    rc, hc = torch.zeros(2, 1, 3), torch.ones(2, 1, 3)
+    with pytest.raises(DataError, match=r"expected robot_radii >= 0 \[m\]"):
+        closest_distance(rc, -torch.ones(1), hc, torch.ones(1))
+    with pytest.raises(DataError, match="human_radii >= 0"):
+        closest_distance(rc, torch.ones(1), hc, torch.tensor([-0.1]))

@@ -471,3 +471,20 @@ def test_a_top_probability_of_exactly_one_half_is_not_confident() -> None:
 
     got = evaluate_prediction(Split(), windows)
     assert got["n_confident"] == (len(windows) + 1) // 2 and len(windows) > 2
+
+
+def test_window_metrics_refuses_labels_that_would_be_broadcast_or_are_not_indices() -> None:
+    """A (1,) ``current`` for two windows was broadcast: every window scored against its one
+    label, with no error; a float one was taken; a float64 ``xi_true`` was refused with the
+    names of an internal function's arguments."""
+    fc = _forecast(2)
+    truth = fc.mean[:, 0].clone()
+    now = truth[:, 0]
+    with pytest.raises(ShapeError, match="current"):
+        window_metrics(fc, truth, torch.tensor([1]), now)
+    with pytest.raises(ShapeError, match="current"):
+        window_metrics(fc, truth, torch.tensor([1.0, 0.0]), now)
+    with pytest.raises(ShapeError, match="xi_true of the forecast's dtype"):
+        window_metrics(fc, truth.double(), torch.tensor([1, 0]), now)
+    m = window_metrics(fc, truth, torch.tensor([0, -1]), now)  # -1: no label, not correct
+    assert m["correct"].tolist() == [True, False]

@@ -4,6 +4,7 @@ against finite differences, pruning, forecast interpolation, sphere maps."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import pytest
 import torch
@@ -923,8 +924,12 @@ def test_the_summed_bound_is_booles_bound_over_the_pairs(seed: int) -> None:
     """reduce="sum" against loops over every pair: exact where nothing is pruned, and with
     pruned pairs or entries never below it and at most the pruning allowance above."""
     centers, radii, human = _spread_scene(seed)
-    human = C.HumanObstacle(
-        mean=human.mean, var=human.var, radii=human.radii, weights=human.weights, residual=0.01
+    human = C.HumanObstacle(  # 1 % of the weight left out: the kept actions hold 99 %
+        mean=human.mean,
+        var=human.var,
+        radii=human.radii,
+        weights=0.99 * human.weights,
+        residual=0.01,
     )
     ref = _brute_force_sum(centers, radii, human)
     top = _brute_force_bound(centers, radii, human) + human.residual
@@ -1014,3 +1019,35 @@ def test_the_summed_bound_with_gradient_equals_plain_evaluation(
     bound[1].sum().backward()
     moved = (x.grad[1].abs().sum(-1) > 0).sum(-1)  # (W_x,) robot spheres with a gradient
     assert int(moved.max()) >= 2
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"weights": torch.zeros(2, dtype=torch.float64)},  # was 0 everywhere: "no person"
+        {"weights": torch.tensor([0.4, 0.1], dtype=torch.float64)},  # sums to 0.5
+        {"weights": torch.tensor([1.2, -0.2], dtype=torch.float64)},
+        {"radii": torch.tensor([0.05, -0.08, 0.1, 0.06], dtype=torch.float64)},
+        {"var": None},  # one negative variance: was NaN
+    ],
+    ids=["zero-weights", "half-weights", "negative-weight", "negative-radius", "negative-var"],
+)
+def test_an_obstacle_that_cannot_make_a_probability_is_unsafe_everywhere(change: dict) -> None:
+    """The public bound on values no Forecast would give: 1 at every waypoint (unsafe),
+    never 0 (a person who is not there) nor NaN; a trusted obstacle's bound is unchanged."""
+    human = _obstacle()
+    gen = torch.Generator().manual_seed(6)
+    centers = torch.randn(2, 3, 5, 3, generator=gen, dtype=torch.float64) * 0.3 + 0.25
+    radii = torch.full((5,), 0.04, dtype=torch.float64)
+    good, _ = C.human_collision_bound(centers, radii, human)
+    assert bool(human.trusted()) and bool((good < 1).any())
+    if change.get("var", 0) is None:
+        var = human.var.clone()
+        var[0, 0, 0, 0] = -1e-4
+        change = {"var": var}
+    bad = replace(human, **change)
+    assert not bool(bad.trusted())
+    bound, _ = C.human_collision_bound(centers, radii, bad)
+    assert torch.equal(bound, torch.ones_like(bound))
+    lost = replace(human, weights=0.99 * human.weights, residual=0.01)  # 1 % left out: fine
+    assert bool(lost.trusted())

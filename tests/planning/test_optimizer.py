@@ -4,6 +4,7 @@ the iiwa beside a Gaussian human sphere, and the infeasible case that waits."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -429,7 +430,7 @@ def test_unsafe_if_not_finite_keeps_finite_bounds_and_their_gradients() -> None:
     for name in ("mean", "var", "weights"):
         t = getattr(human, name).clone()
         t.view(-1)[-1] = float("inf")
-        bad = HumanObstacle(**{**vars(human), name: t, "_pair_cache": None, "_finite": None})
+        bad = replace(human, **{name: t})  # the caches are not copied (init=False)
         assert unsafe_if_not_finite(raw.detach()[:, :2], bad).tolist() == [[1.0, 1.0]]
 
 
