@@ -57,10 +57,11 @@ class PlanRecord:
         limit: the confidence limit ``1 - confidence`` the plan was held to, or NaN.
 
     Raises:
-        ShapeError: for ``times`` or ``q`` that are not arrays of real numbers, or ``times``
-            that is not 1-D with at least one entry.
-        DataError: for a ``wait_s`` that is not a finite number, or a ``max_bound`` or
-            ``limit`` that is not a number (NaN allowed).
+        ShapeError: for ``times`` or ``q`` that are not arrays of real numbers, ``times``
+            that is not 1-D with at least one entry, or ``q`` not (W, J).
+        DataError: for ``times`` that are not finite and strictly increasing, a ``wait_s``
+            that is not a finite number, or a ``max_bound`` or ``limit`` that is not a number
+            (NaN allowed).
     """
 
     times: np.ndarray
@@ -73,8 +74,14 @@ class PlanRecord:
         times = real_array("times", self.times).astype(np.float64)
         if times.ndim != 1 or times.shape[0] == 0:
             raise ShapeError(f"expected plan times (W,) with W >= 1, got shape {times.shape}")
+        if not (np.isfinite(times).all() and (np.diff(times) > 0).all()):
+            # (a later error named smoothness_breakdown's t, not the plan)
+            raise DataError(f"expected plan times finite and strictly increasing, got {times}")
+        q = real_array("q", self.q).astype(np.float64)
+        if q.ndim != 2 or q.shape[0] != times.shape[0]:
+            raise ShapeError(f"expected plan q (W, J) with W = {times.shape[0]}, got {q.shape}")
         object.__setattr__(self, "times", times)
-        object.__setattr__(self, "q", real_array("q", self.q).astype(np.float64))
+        object.__setattr__(self, "q", q)
         object.__setattr__(self, "wait_s", finite("wait_s", self.wait_s, error=DataError))
         for name in ("max_bound", "limit"):
             value = getattr(self, name)

@@ -37,7 +37,7 @@ import numpy as np
 import torch
 
 from iplanner_torch import checks
-from iplanner_torch.errors import ConfigError, ShapeError
+from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.prediction.forecast import Forecast
 
 #: the joints scored by default: the arm parts that reach into the shared workspace
@@ -114,8 +114,13 @@ class SpreadCalibrator:
         """Keep ``forecast`` (batch row 0), made from frames up to ``t0`` [s], for scoring.
 
         Raises:
-            ShapeError: when the forecast's joints are not the calibrator's K.
+            ShapeError: when ``forecast`` is not a Forecast or its joints are not the
+                calibrator's K.
+            DataError: when ``t0`` is not a finite time (NaN was kept and never scored).
         """
+        if not isinstance(forecast, Forecast):
+            raise ShapeError(f"expected forecast a Forecast, got {type(forecast).__name__}")
+        t0 = checks.finite_time("t0", t0, error=DataError)
         k = int(forecast.mean.shape[3])
         if k != self._k:
             raise ShapeError(f"expected a forecast of {self._k} joints, got {k}")
@@ -137,15 +142,23 @@ class SpreadCalibrator:
                 scored).
 
         Raises:
-            ShapeError: when ``frames`` is not (T, K, 3) for the ``times`` given.
+            ShapeError: when ``times`` or ``frames`` are not numbers, or ``frames`` is not
+                (T, K, 3) for the ``times`` given.
+            DataError: when ``times`` are not finite and strictly increasing (a frame out of
+                order moved the frames seen back, and frames were scored twice).
         """
-        times = np.asarray(times, dtype=np.float64)
-        frames = np.asarray(frames, dtype=np.float64)
+        try:
+            times = np.asarray(times, dtype=np.float64)
+            frames = np.asarray(frames, dtype=np.float64)
+        except (TypeError, ValueError) as err:
+            raise ShapeError(f"expected times and frames arrays of numbers ({err})") from None
         if times.ndim != 1 or frames.shape != (times.shape[0], self._k, 3):
             raise ShapeError(
                 f"expected times (T,) and frames (T, {self._k}, 3), got {times.shape} and "
                 f"{frames.shape}"
             )
+        if not (np.isfinite(times).all() and (np.diff(times) > 0).all()):
+            raise DataError(f"expected times finite and strictly increasing, got {times}")
         new = times > self._last_frame_t
         if not new.any():
             return

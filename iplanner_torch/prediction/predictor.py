@@ -55,6 +55,8 @@ from iplanner_torch.types import (
 )
 
 CHECKPOINT_VERSION = 1
+#: the GP input kinds of :func:`gp_inputs` (``PredictorCfg.gp_input``)
+GP_INPUTS = ("window", "relative")
 #: the magnitude from which finite windows can overflow float32 inside the predictor (their
 #: squares, which the kernels take, do): a NaN or inf that appears inside from windows this
 #: large is reported as their overflow (sqrt of float32's largest value, about 1.8e19)
@@ -120,7 +122,7 @@ class PredictorCfg:
         checks.non_negative("coherence_smoothing", self.coherence_smoothing)
         checks.integer("min_group_size", self.min_group_size, minimum=2)
         checks.integer("max_gp_points", self.max_gp_points, minimum=2)
-        if self.gp_input not in ("window", "relative"):
+        if self.gp_input not in GP_INPUTS:
             raise ConfigError(f"gp_input must be window or relative, got {self.gp_input!r}")
         checks.positive("fallback_sigma0", self.fallback_sigma0)
         checks.non_negative("fallback_sigma_rate", self.fallback_sigma_rate)
@@ -183,7 +185,21 @@ def gp_inputs(f_prev: torch.Tensor, num_joints: int, kind: str = "relative") -> 
 
     Returns:
         (B, n_p * D) inputs.
+
+    Raises:
+        ConfigError: for a ``kind`` other than "window" or "relative" (a misspelt one gave
+            "window"'s inputs), or ``num_joints`` not an integer >= 1.
+        ShapeError: when ``f_prev`` is not (B, n_p, D) with D >= 3 K.
     """
+    if kind not in GP_INPUTS:
+        raise ConfigError(f"expected kind one of {GP_INPUTS}, got {kind!r}")
+    checks.integer("num_joints", num_joints, minimum=1)
+    check_shape("f_prev", f_prev, ("B", "n_p", "D"))
+    if f_prev.shape[-1] < 3 * num_joints:
+        raise ShapeError(
+            f"expected f_prev (B, n_p, D) with D >= 3 K = {3 * num_joints} position columns "
+            f"first, got D = {f_prev.shape[-1]}"
+        )
     b = f_prev.shape[0]
     if kind == "relative":
         k3 = 3 * num_joints

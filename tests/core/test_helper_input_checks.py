@@ -109,3 +109,44 @@ def test_classification_precision_of_no_frame_counts_none() -> None:
     assert math.isnan(classification_precision(torch.zeros(0, 0), torch.zeros(0))[0])
     with pytest.raises(DataError):
         classification_precision(torch.zeros(2, 0), torch.zeros(2))
+
+
+def test_gp_inputs_refuses_a_misspelt_kind_and_too_few_columns() -> None:
+    from iplanner_torch.prediction.predictor import gp_inputs
+
+    f = torch.randn(2, 5, 36)  # 10 joints: 30 position columns, then 6 more
+    with pytest.raises(ConfigError, match="kind"):  # 'absolute' gave 'window''s inputs
+        gp_inputs(f, 10, "absolute")
+    with pytest.raises(ShapeError, match="D >= 3 K = 30"):
+        gp_inputs(torch.randn(2, 5, 6), 10)
+    with pytest.raises(ShapeError, match="f_prev"):  # was an IndexError
+        gp_inputs(torch.randn(5, 36), 10)
+    assert gp_inputs(f, 10, "window").shape == (2, 180)
+
+
+@pytest.mark.parametrize(
+    ("times", "error"),
+    [([1.0, 0.5, 0.0], DataError), ([math.nan, 0.5, 1.0], DataError), ([0.0, 1.0], ShapeError)],
+)
+def test_a_plan_record_of_times_out_of_order_is_named_as_the_plans(times, error) -> None:
+    """Times out of order or NaN were taken, and a later error named the trajectory's own
+    times; q of another length than the times was taken too."""
+    from iplanner_torch.eval.smoothness import PlanRecord
+
+    with pytest.raises(error, match="plan"):
+        PlanRecord(times=times, q=np.zeros((3, 2)), wait_s=0.0)
+
+
+def test_the_spread_calibrator_refuses_times_it_cannot_score() -> None:
+    from iplanner_torch.prediction.calibration import CalibrationCfg, SpreadCalibrator
+
+    cal = SpreadCalibrator(CalibrationCfg(), JOINT_NAMES, noise_std=0.01)
+    frames = np.zeros((2, len(JOINT_NAMES), 3))
+    with pytest.raises(DataError, match="strictly increasing"):  # was scored twice
+        cal.observe(np.array([0.9, 1 / 30]), frames)
+    with pytest.raises(DataError, match="strictly increasing"):
+        cal.observe(np.array([math.nan, math.nan]), frames)
+    with pytest.raises(ShapeError, match="numbers"):  # was numpy's ValueError
+        cal.observe(np.array([0.1]), [["a"]])
+    with pytest.raises(ShapeError, match="Forecast"):  # was an AttributeError
+        cal.record("x", 0.0)  # type: ignore[arg-type]
