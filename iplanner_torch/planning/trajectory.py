@@ -181,8 +181,8 @@ class Trajectory:
         qd_start: (J,) velocity at the first waypoint [rad/s], finite; None means rest.
 
     Raises:
-        ShapeError: for mismatched shapes, fewer than 2 waypoints, or a dtype that is not
-            floating or differs from ``q``'s.
+        ShapeError: for mismatched shapes, fewer than 2 waypoints, a dtype that is not
+            floating or differs from ``q``'s, or a device other than ``q``'s (or ``meta``).
         DataError: for a NaN or infinite waypoint, time or start velocity.
         ConfigError: for times that are not strictly increasing.
     """
@@ -208,6 +208,10 @@ class Trajectory:
             x = getattr(self, name)
             if x is not None and x.dtype != self.q.dtype:
                 raise ShapeError(f"expected {name} {self.q.dtype} (as q), got {x.dtype}")
+            if x is not None and x.device != self.q.device:  # (torch's error named neither)
+                raise ShapeError(f"expected {name} on {self.q.device} (as q), got {x.device}")
+        if self.q.device.type == "meta":  # no values to check or sample
+            raise ShapeError("expected q with values, got a tensor on the 'meta' device")
         # one host synchronisation for all checks (a trajectory is built once per cycle)
         checks = [
             torch.isfinite(self.times).all(),

@@ -76,7 +76,7 @@ from torch import nn
 from iplanner_torch import checks
 from iplanner_torch.errors import CheckpointError, ConfigError, ShapeError
 from iplanner_torch.seeds import SVGP_MINIBATCHES, derive_seed
-from iplanner_torch.types import check_shape, torch_threads
+from iplanner_torch.types import check_finite, check_shape, torch_threads
 
 KernelName = Literal["rbf", "matern", "gak", "dtw"]
 NoisyInput = Literal["none", "simple", "nigp"]
@@ -432,6 +432,8 @@ class SVGPRegressor(nn.Module):
         Raises:
             ShapeError: when shapes disagree, N == 0, or x and y are not of one floating
                 dtype.
+            DataError: when x or y hold NaN or inf (one NaN input was gpytorch's error on a
+                constraint; an infinite output made every prediction NaN).
         """
         check_shape("x", x, ("N", "D_in"))
         check_shape("y", y, (x.shape[0], "C"))
@@ -439,6 +441,8 @@ class SVGPRegressor(nn.Module):
             raise ShapeError(f"expected x and y of one floating dtype, got {x.dtype}, {y.dtype}")
         if x.shape[0] == 0:
             raise ShapeError("expected x (N, D_in) with N >= 1, got N = 0")
+        check_finite("x", x, ("window", "input"))
+        check_finite("y", y, ("window", "output"))
         g = torch.Generator().manual_seed(cfg.seed)
         m = min(cfg.num_inducing, x.shape[0])
         x_mean, x_std = x.mean(0), x.std(0, unbiased=False).clamp_min(1e-6)
@@ -679,11 +683,18 @@ class SVGPRegressor(nn.Module):
 
         Returns:
             The loss (negative ELBO per datum and channel) of every step.
+
+        Raises:
+            ShapeError: when ``x`` or ``y`` is not of the shapes above, or of the regressor's
+                dtype and device.
+            DataError: when they hold NaN or inf (the fit would learn NaN).
         """
         check_shape("x", x, ("N", self.input_dim))
         check_shape("y", y, (x.shape[0], self.num_channels))
         self._check_dtype(x)
         self._check_dtype(y, "y")
+        check_finite("x", x, ("window", "input"))
+        check_finite("y", y, ("window", "output"))
         rounds = self.cfg.nigp_iterations + 1 if self.cfg.noisy_input == "nigp" else 1
         losses: list[float] = []
         extra = (
@@ -1071,8 +1082,22 @@ class SVGPBank:
 
         Returns:
             mean: (B, G, C) [output units]; var: (B, G, C) [output units^2].
+
+        Raises:
+            ShapeError: when ``x`` is not (B, D_in) of the bank's dtype and device.
+            ConfigError: when ``chunk`` is not an integer >= 1.
         """
         check_shape("x", x, ("B", self.z.shape[-1]))
+        if x.dtype != self.z.dtype or x.device != self.z.device:
+            raise ShapeError(
+                f"expected x {self.z.dtype} on {self.z.device} (the bank's), got {x.dtype} on "
+                f"{x.device}"
+            )
+        checks.integer("chunk", chunk, minimum=1)
+        if x.shape[0] == 0:
+            g, c = self.mw.shape[0], self.mw.shape[-1]
+            empty = x.new_zeros(0, g, c)
+            return empty, empty.clone()
         means, vars_ = [], []
         for s in range(0, x.shape[0], chunk):
             xs = x[s : s + chunk].unsqueeze(0) * self.scale.unsqueeze(1) - self.shift.unsqueeze(

@@ -150,3 +150,40 @@ def test_the_spread_calibrator_refuses_times_it_cannot_score() -> None:
         cal.observe(np.array([0.1]), [["a"]])
     with pytest.raises(ShapeError, match="Forecast"):  # was an AttributeError
         cal.record("x", 0.0)  # type: ignore[arg-type]
+
+
+def test_a_trajectory_names_tensors_on_another_device() -> None:
+    from iplanner_torch.planning.trajectory import Trajectory
+
+    q, t = torch.zeros(3, 2), torch.tensor([0.0, 0.5, 1.0])
+    with pytest.raises(ShapeError, match="times on cpu"):  # was torch's RuntimeError
+        Trajectory(q=q, times=t.to("meta"))
+    with pytest.raises(ShapeError, match="meta"):
+        Trajectory(q=q.to("meta"), times=t.to("meta"))
+
+
+def test_svgp_fit_inputs_and_bank_predictions_are_checked() -> None:
+    from iplanner_torch.prediction.svgp import SVGPBank, SVGPCfg, SVGPRegressor
+
+    g = torch.Generator().manual_seed(0)
+    x, y = torch.randn(40, 6, generator=g), torch.randn(40, 3, generator=g)
+    bad_x, bad_y = x.clone(), y.clone()
+    bad_x[3, 2], bad_y[5, 1] = math.nan, math.inf
+    cfg = SVGPCfg(num_inducing=8)
+    with pytest.raises(DataError, match="x"):  # was gpytorch's constraint error
+        SVGPRegressor.from_data(cfg, bad_x, y)
+    with pytest.raises(DataError, match="y"):  # every prediction came out NaN
+        SVGPRegressor.from_data(cfg, x, bad_y)
+    reg = SVGPRegressor.from_data(cfg, x, y)
+    with pytest.raises(DataError, match="y"):
+        reg.fit(x, bad_y)
+    bank = SVGPBank([reg, reg])
+    with pytest.raises(ShapeError, match="bank"):  # float64: torch's 'expected scalar type'
+        bank.predict(x.double())
+    with pytest.raises(ShapeError, match="bank"):  # int64 was taken
+        bank.predict(x.long())
+    with pytest.raises(ConfigError, match="chunk"):  # 0: range()'s ValueError
+        bank.predict(x, chunk=0)
+    mean, var = bank.predict(x[:0])  # no window: empty (was torch.cat's ValueError)
+    assert mean.shape == var.shape == (0, 2, 3)
+    assert bank.predict(x[:5])[0].shape == (5, 2, 3)
