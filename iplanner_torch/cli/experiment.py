@@ -1189,10 +1189,32 @@ def _refuse_changed_predictor(
         )
 
 
+def _checkpoint_settings(paths: dict[str, str]) -> dict[str, Any]:
+    """Variant -> ``{"path", "predictor"}``: each checkpoint's file and the predictor settings
+    it was trained with (its ``cfg``), which can differ from the ``predictor`` config group
+    that :data:`RUN_INPUTS` records with the run's settings (a variant trained on purpose into
+    the folder the run reads). A file that does not read records its path alone."""
+    import torch
+
+    out: dict[str, Any] = {}
+    for variant, path in sorted(paths.items()):
+        entry: dict[str, Any] = {"path": str(path)}
+        try:
+            cfg = torch.load(path, map_location="cpu", weights_only=True).get("cfg")
+        except Exception:  # noqa: BLE001 - loading the predictor says what is wrong
+            cfg = None
+        if isinstance(cfg, dict):
+            entry["predictor"] = cfg
+        out[variant] = entry
+    return out
+
+
 def record_predictors(out_dir: Path, scenario: str, paths: dict[str, str]) -> None:
-    """Record the checkpoints a scenario's episodes use (SHA-256 of each file) in the run's
-    :data:`RUN_INPUTS`; refuse checkpoints that differ from the ones recorded when the run
-    began that scenario (trained again since: the kept episodes used the others).
+    """Record the checkpoints a scenario's episodes use (SHA-256 of each file, under
+    ``predictors``; their paths and the settings they were trained with, under
+    ``predictor_checkpoints``) in the run's :data:`RUN_INPUTS`; refuse checkpoints that
+    differ from the ones recorded when the run began that scenario (trained again since: the
+    kept episodes used the others).
 
     Raises:
         ConfigError: naming the checkpoint that changed.
@@ -1208,6 +1230,8 @@ def record_predictors(out_dir: Path, scenario: str, paths: dict[str, str]) -> No
         _put_back_record(out_dir)
         raise
     inputs["predictors"][scenario] = {**(recorded or {}), **digests}
+    checkpoints = inputs.setdefault("predictor_checkpoints", {})
+    checkpoints[scenario] = {**checkpoints.get(scenario, {}), **_checkpoint_settings(paths)}
     _write_json(out_dir / RUN_INPUTS, inputs)
 
 

@@ -316,3 +316,27 @@ def test_a_run_record_nested_too_deep_is_one_config_error(tmp_path: Path) -> Non
     (tmp_path / cli.RUN_INPUTS).write_text("[" * 100000)
     with pytest.raises(ConfigError, match=r"cannot be read \(JSON nested too deep\), so the run"):
         cli._read_run_inputs(tmp_path)
+
+
+def test_record_predictors_keeps_the_settings_each_checkpoint_was_trained_with(
+    tmp_path: Path,
+) -> None:
+    """A variant trained on purpose into the folder a run reads (ivm_max_import 30 against the
+    config group's 60) was recorded only by its SHA-256, beside the group's settings: now its
+    own settings are recorded with its path."""
+    import torch
+
+    cli.begin_run(_cfg(False), tmp_path)
+    ckpt = tmp_path / "predictor.ckpt"
+    torch.save({"cfg": {"ivm_max_import": 30, "svgp": {"num_inducing": 50}}}, ckpt)
+    broken = tmp_path / "broken.ckpt"
+    broken.write_bytes(b"not a checkpoint")
+    cli.record_predictors(tmp_path, "s", {"ni": str(ckpt), "no_ni": str(broken)})
+    inputs = json.loads((tmp_path / cli.RUN_INPUTS).read_text())
+    entry = inputs["predictor_checkpoints"]["s"]
+    assert entry["ni"] == {
+        "path": str(ckpt),
+        "predictor": {"ivm_max_import": 30, "svgp": {"num_inducing": 50}},
+    }
+    assert entry["no_ni"] == {"path": str(broken)}  # a file that does not read: its path
+    assert set(inputs["predictors"]["s"]) == {"ni", "no_ni"}
