@@ -243,6 +243,10 @@ def secular_multiplier(d: torch.Tensor, var: torch.Tensor, rad: torch.Tensor) ->
 
     Returns:
         (...) lambda [m^-2].
+
+    Inputs are not checked (an inner loop of the planner's collision bound, fed checked
+    obstacles): a variance that is not > 0 gives NaN, and ``d``, ``var``, ``rad`` must be
+    tensors of one floating dtype; :func:`sphere_collision_bound` is the checked entry point.
     """
     with torch.no_grad():
         shape = d.shape[:-1]

@@ -297,6 +297,12 @@ def gaussian_ball_bound_diag(
     Returns:
         bound (...) in [0, 1], ``min(4/3 pi R^3 f(x_max), Phi(-m), 1)``, and ``m^2`` (...)
         the squared Mahalanobis distance from the mean to the ball (0 inside).
+
+    Inputs are not checked: this is the inner loop of :func:`human_collision_bound`, whose
+    obstacle is checked (:meth:`HumanObstacle.trusted`). Called directly, a variance that is
+    not > 0 gives NaN; ``d``, ``var`` and ``rad`` must be tensors of one floating dtype
+    (:func:`iplanner_torch.collision.gaussian.sphere_collision_bound` is the checked entry
+    point for one Gaussian and ball).
     """
     rad = rad.clamp_min(RADIUS_FLOOR)
     with torch.no_grad():
