@@ -1128,11 +1128,64 @@ def _label(metric: str) -> str:
     return DEFAULT_METRICS.get(metric, metric)
 
 
-def spread_note(counts: Sequence[int] | np.ndarray) -> str:
-    """The line under a bar chart's title saying what a bar and its whisker are.
+#: How to read a metric's axis, in a plot's title: which way is better, what a line means.
+READING_HINTS: dict[str, str] = {
+    "smoothness": "lower is smoother",
+    "jerkiness": "lower is smoother; a peak of squared accelerations, not a jerk",
+    "efficiency": "above 1 (dashed): the robot helps",
+    "min_distance": "below 0 (dashed): the sphere models overlapped",
+    "body_distance": "below 0: the bodies overlapped",
+    "mhd": "lower is a better forecast",
+}
+
+
+def _reading_hint(metric: str) -> str:
+    """`` (<hint>)`` for a metric of :data:`READING_HINTS` (by its name without its stage
+    prefix), else ``""``."""
+    hint = READING_HINTS.get(metric.split("/")[-1])
+    return f" ({hint})" if hint else ""
+
+
+def _reference_line(ax: Any, metric: str) -> None:
+    """A dashed line at the value a metric is read against: 1 for efficiency (alone as fast
+    as with the robot), 0 for the closest distance (touching); none for the others."""
+    level = {"efficiency": 1.0, "min_distance": 0.0}.get(metric.split("/")[-1])
+    if level is not None:
+        ax.axhline(level, color="0.4", lw=0.9, ls="--", zorder=0.5)
+
+
+def _from_zero(ax: Any) -> None:
+    """Let the y axis include 0 (a narrow autoscaled range made a few percent of noise look
+    like a trend)."""
+    lo, hi = ax.get_ylim()
+    if lo > 0:
+        ax.set_ylim(0.0, hi)
+    elif hi < 0:
+        ax.set_ylim(lo, 0.0)
+
+
+def _pooled_note(pooled: Sequence[str], what: str) -> str:
+    """The title's words on the settings a bar or point averages over: their differences are
+    in its spread, not episode-to-episode scatter alone."""
+    if not pooled:
+        return ""
+    names = ", ".join(pooled)
+    return (
+        f"\naveraged over {names}: each {what} pools every {names}, so its spread holds "
+        f"their differences too (the sweep_* plots keep them apart)"
+    )
+
+
+def spread_note(
+    counts: Sequence[int] | np.ndarray, *, item: str = "bar", spread: str = "whiskers"
+) -> str:
+    """The line under a bar chart's title saying what a bar and its whisker are (``item``
+    "point" and ``spread`` "bands" for a line plot's).
 
     Args:
         counts: episodes with a value behind each bar (any order).
+        item: what one mean is drawn as.
+        spread: what its spread is drawn as.
 
     Returns:
         e.g. ``"mean of 3 episodes per bar, whiskers ± 1 std within min-max"`` (the whiskers of
@@ -1146,9 +1199,9 @@ def spread_note(counts: Sequence[int] | np.ndarray) -> str:
     lo, hi = min(n), max(n)
     many = f"{lo}-{hi}" if lo != hi else f"{lo}"
     if hi == 1:
-        return "one episode per bar (no spread to show)"
-    note = f"mean of {many} episodes per bar, whiskers ± 1 std within min-max"
-    return note + (" (none for a bar of one episode)" if lo == 1 else "")
+        return f"one episode per {item} (no spread to show)"
+    note = f"mean of {many} episodes per {item}, {spread} ± 1 std within min-max"
+    return note + (f" (none for a {item} of one episode)" if lo == 1 else "")
 
 
 def _spread(values: pd.Series) -> tuple[float, float, float]:
@@ -1278,11 +1331,12 @@ def plot_comparison(
         ax.set_xlabel(SETTING_LABELS.get(x_col, x_col))
         ax.set_ylabel(_label(m))
         ax.set_title(
-            f"{_label(m).split(' [')[0]} by {x_col} and {bar_col}\n"
+            f"{_label(m).split(' [')[0]} by {x_col} and {bar_col}{_reading_hint(m)}\n"
             + spread_note(counts)
-            + (f"; averaged over {', '.join(pooled)}" if pooled else ""),
+            + _pooled_note(pooled, "bar"),
             fontsize="medium",
         )
+        _reference_line(ax, m)
         ax.grid(axis="y", alpha=0.3)
         _legend_outside(ax, title=bar_col, fontsize="small")
         fig.tight_layout()
@@ -1407,6 +1461,7 @@ def plot_sweep(
     fig = Figure(figsize=(max(6.4, 3.6 * len(cols) + 1.0), max(4.2, 2.9 * len(rows) + 0.8)))
     axes = fig.subplots(len(rows), len(cols), sharex=True, sharey=True, squeeze=False)
     name = _label(y).split(" [")[0]
+    counts: list[int] = []  # episodes with a value behind each point
     for i, rv in enumerate(rows):
         for k, cv in enumerate(cols):
             ax = axes[i][k]
@@ -1424,6 +1479,7 @@ def plot_sweep(
                     ((float(xv), *_spread(gy)) for xv, gy in g.groupby(x)["_y"]),
                     key=lambda p: p[0],
                 )
+                counts += [int(gy.notna().sum()) for _, gy in g.groupby(x)["_y"]]
                 xs, mean, low, high = (np.asarray(c, dtype=float) for c in zip(*points))
                 low = np.where(np.isnan(low), mean, low)  # one episode: no band
                 high = np.where(np.isnan(high), mean, high)
@@ -1435,6 +1491,7 @@ def plot_sweep(
             )
             if title:
                 ax.set_title(title, fontsize="medium")
+            _reference_line(ax, y)
             ax.grid(alpha=0.3)
             if i == len(rows) - 1:
                 ax.set_xlabel(SETTING_LABELS.get(x, x))
@@ -1448,12 +1505,17 @@ def plot_sweep(
             ax.set_xticks(swept, [f"{xv:g}" for xv in swept])
             if len(swept) > 4:
                 ax.tick_params(axis="x", labelrotation=35)
+    for ax in axes.ravel():  # (shared y: one call sets every panel)
+        _from_zero(ax)
+        break
     _legend_outside(axes[0][-1], title=hue, fontsize="small")
     fig.suptitle(
         f"{name} against {x}"
         + (f" by {' and '.join(facets)}" if facets else "")
-        + "\nlines: mean over episodes, bands ± 1 std within min-max"
-        + (f"; averaged over {', '.join(pooled)}" if pooled else ""),
+        + _reading_hint(y)
+        + "\n"
+        + spread_note(counts, item="point", spread="bands")
+        + _pooled_note(pooled, "point"),
         fontsize="medium",
     )
     fig.tight_layout()

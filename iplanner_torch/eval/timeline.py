@@ -115,7 +115,8 @@ class Timeline:
         robot_t: (T_r,) times of the robot joint states.
         speed: (T_r,) the norm of the joint velocities [rad/s].
         end_t: the last time in the log [s].
-        title: planner, scenario, speed and seed, as the metadata says.
+        title: planner, robot, scenario, speed, noise, confidence and seed, as the metadata
+            says.
         min_distance_m: the episode's own closest distance of the sphere models
             (``eval/min_distance`` of its metrics message, at the metric samples) [m]; NaN
             when the log holds no metrics (cut short) or no value.
@@ -288,15 +289,20 @@ def episode_timeline(episode: Episode | str | Path) -> Timeline:
     end_t = float(max(ends))
     meta = episode.metadata
     noise, planner = meta.get("noise"), meta.get("planner")
+    confidence = meta.get("confidence")
     title = (
         " · ".join(
             str(v)
             for v in (
                 PLANNERS.get(str(planner), planner),  # as the tables name it
+                meta.get("robot"),  # (the file names of two robots' runs are the same)
                 meta.get("scenario"),
-                meta.get("speed"),
+                f"{meta['speed']} speed" if meta.get("speed") is not None else None,
                 f"noise {100 * float(noise):g} cm"
                 if is_real(noise) and math.isfinite(noise)
+                else None,
+                f"confidence {float(confidence):g}"
+                if is_real(confidence) and math.isfinite(confidence)
                 else None,
                 f"seed {meta['seed']}" if "seed" in meta else None,
             )

@@ -799,7 +799,11 @@ def test_charts_say_what_they_average_over_and_draw_only_what_has_values(
     # one chart per metric, each pooling the same settings
     assert seen["bars"] == [["speed", "noise"]] * 4
     titles = [f.axes[0].get_title() for f in figures if f.axes and f.axes[0].get_title()]
-    assert any(t.endswith("; averaged over speed, noise") for t in titles)
+    pooled_note = (
+        "\naveraged over speed, noise: each bar pools every speed, noise, so its spread holds "
+        "their differences too (the sweep_* plots keep them apart)"
+    )
+    assert any(t.endswith(pooled_note) for t in titles)
     # the lines over noise: speed and confidence lay out the panels, nothing is pooled
     assert {m for m, _ in seen["lines"]} >= {"smoothness", "mhd"}
     assert all(pooled == [] for _, pooled in seen["lines"])
@@ -1431,3 +1435,32 @@ def test_a_planner_keeps_its_colour_whichever_others_a_plot_shows(
     plot_comparison(pd.DataFrame(rows), tmp_path / "a", metrics=("smoothness",))
     plot_comparison(pd.DataFrame(rows[1:]), tmp_path / "b", metrics=("smoothness",))
     assert drawn == [("ITOMP", "C0"), ("I-Planner, NI", "C2"), ("I-Planner, NI", "C2")]
+
+
+def test_sweep_lines_start_at_zero_say_their_count_and_how_to_read_them(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With one seed the line plots said "bands ± 1 std" over crisp lines, and autoscaled a
+    few percent of jitter (1.59-1.65 efficiency) to the panel's full height; nothing said
+    which way is better or where the robot starts to help."""
+    from iplanner_torch.eval.report import plot_comparison, plot_sweep
+
+    figures = _recorded_figures(monkeypatch)
+    df = pd.DataFrame(
+        {
+            "planner": ["itomp", "iplanner_ni"] * 2,
+            "noise": [0.0, 0.0, 0.05, 0.05],
+            "scenario": ["s"] * 4,
+            "efficiency": [1.65, 1.62, 1.59, 1.64],
+            "smoothness": [8.0, 19.9, 8.1, 21.0],
+        }
+    )
+    plot_sweep(df, "noise", "efficiency", "planner", tmp_path / "eff.png")
+    eff = figures[-1]
+    title = eff._suptitle.get_text()
+    assert "one episode per point (no spread to show)" in title
+    assert "above 1 (dashed): the robot helps" in title
+    assert eff.axes[0].get_ylim()[0] == 0.0
+    assert any(list(ln.get_ydata()) == [1.0, 1.0] for ln in eff.axes[0].get_lines())
+    plot_comparison(df, tmp_path, metrics=("smoothness",), group_by=("noise", "planner"))
+    assert "(lower is smoother)" in figures[-1].axes[0].get_title()

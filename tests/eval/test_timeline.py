@@ -136,7 +136,7 @@ def test_the_timeline_holds_what_the_log_was_given(tmp_path: Path) -> None:
     )
     assert tl.end_t == pytest.approx(3.0)
     # the planner as the tables name it, and the tracker noise the file name carries
-    assert tl.title == "I-Planner, NI · s1 · medium · noise 2 cm · seed 4"
+    assert tl.title == "I-Planner, NI · s1 · medium speed · noise 2 cm · seed 4"
     assert tl.scenario == "s1"
     assert tl.complete and not tl.notes
 
