@@ -1300,21 +1300,37 @@ def plot_comparison(
             (_hashable(x), _hashable(b)): g["_v"]
             for (x, b), g in v.groupby([x_col, bar_col], sort=False, dropna=False)
         }
-        fig = Figure(figsize=(max(6.0, 1.1 * len(xs) * max(1, len(bars)) * 0.45 + 2), 4.2))
+        # the bars each group has (labelled runs: each label's planners under its own group),
+        # side by side and centred on the group, so no group keeps slots for absent bars
+        present = {
+            _hashable(x): [
+                b
+                for b in bars
+                if (g := groups.get((_hashable(x), _hashable(b)))) is not None and g.notna().any()
+            ]
+            for x in xs
+        }
+        per_group = max([1, *(len(v) for v in present.values())])
+        fig = Figure(figsize=(max(6.0, 1.1 * len(xs) * per_group * 0.45 + 2), 4.2))
         ax = fig.add_subplot()
-        width = 0.8 / max(1, len(bars))
+        width = 0.8 / per_group
         counts = []
         colours = hue_colours(bars)
-        for j, b in enumerate(bars):
-            spreads = []
-            for x in xs:
+        for b in bars:
+            pos, spreads = [], []
+            for i, x in enumerate(xs):
+                here = present[_hashable(x)]
                 g = groups.get((_hashable(x), _hashable(b)))
-                spreads.append(_spread(g) if g is not None else (math.nan,) * 3)
                 counts.append(int(g.notna().sum()) if g is not None else 0)
+                if b not in here:
+                    continue
+                pos.append(i - 0.5 * width * len(here) + width * (here.index(b) + 0.5))
+                spreads.append(_spread(g))
+            if not pos:
+                continue
             means, lows, highs = (np.asarray(c, dtype=float) for c in zip(*spreads))
-            pos = np.arange(len(xs)) - 0.4 + width * (j + 0.5)
             ax.bar(
-                pos,
+                np.asarray(pos),
                 means,
                 width,
                 yerr=np.vstack([means - lows, highs - means]),  # NaN (one episode): none
@@ -1574,6 +1590,17 @@ def paired_skip_note(df: pd.DataFrame, group_by: Sequence[str], baseline: str = 
         One line, e.g. ``"paired comparison skipped: needs at least 2 seeds shared by
         itomp@spread and another planner in one setting; found 1"``, or ''.
     """
+    head = "paired comparison skipped: "
+    if "planner" in group_by and "planner" in df.columns and not (df["planner"] == baseline).any():
+        # labelled runs rename the baseline (itomp@iiwa): say so instead of nothing
+        labelled = sorted(
+            {str(p) for p in df["planner"].dropna() if str(p).startswith(f"{baseline}@")}
+        )
+        if labelled:
+            return head + (
+                f"no planner is named {baseline} (the labelled runs name it "
+                f"{', '.join(labelled)}); choose one with evaluate.baseline=<name>"
+            )
     if (
         "planner" not in group_by
         or "planner" not in df.columns
@@ -1581,7 +1608,6 @@ def paired_skip_note(df: pd.DataFrame, group_by: Sequence[str], baseline: str = 
         or df["planner"].dropna().nunique() < 2
     ):
         return ""
-    head = "paired comparison skipped: "
     if "seed" not in df.columns:
         return head + "the results have no seed column to pair episodes on"
     keys = [c for c in group_by if c != "planner" and c in df.columns]

@@ -1262,6 +1262,11 @@ def test_paired_skip_note_counts_the_seeds_a_baseline_shares(tmp_path: Path) -> 
     assert paired_skip_note(one, groups, "oracle") == ""
     assert paired_skip_note(one, ("scenario",), "itomp@spread") == ""
     assert "no seed column" in paired_skip_note(one.drop(columns="seed"), groups, "itomp@held")
+    # the default baseline, renamed by the labels: the section said nothing at all
+    assert paired_skip_note(runs([0, 1], [0, 1]), groups) == (
+        "paired comparison skipped: no planner is named itomp (the labelled runs name it "
+        "itomp@held, itomp@spread); choose one with evaluate.baseline=<name>"
+    )
 
 
 def test_plot_paired_names_the_baseline(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -1464,3 +1469,27 @@ def test_sweep_lines_start_at_zero_say_their_count_and_how_to_read_them(
     assert any(list(ln.get_ydata()) == [1.0, 1.0] for ln in eff.axes[0].get_lines())
     plot_comparison(df, tmp_path, metrics=("smoothness",), group_by=("noise", "planner"))
     assert "(lower is smoother)" in figures[-1].axes[0].get_title()
+
+
+def test_bars_of_labelled_runs_sit_on_their_own_group(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two labelled runs, each with its own planners under its own group: every group kept a
+    slot for all six bars and filled three, so the bars sat off their group's tick."""
+    from iplanner_torch.eval.report import plot_comparison
+
+    figures = _recorded_figures(monkeypatch)
+    rows = [
+        {"robot": robot, "planner": f"{p}@{label}", "smoothness": v}
+        for robot, label in (("kuka_iiwa14", "iiwa"), ("fetch", "fetch"))
+        for p, v in (("itomp", 8.0), ("iplanner_no_ni", 17.0), ("iplanner_ni", 20.0))
+    ]
+    plot_comparison(pd.DataFrame(rows), tmp_path, ("smoothness",), ("robot", "planner"))
+    ax = figures[-1].axes[0]
+    centres = [(r.get_x() + r.get_width() / 2, r.get_height()) for r in ax.patches]
+    assert len(centres) == 6
+    for x, _ in centres:  # each bar within its own group, three to a group
+        assert abs(x - round(x)) < 0.4
+    assert sorted(round(x) for x, _ in centres) == [0, 0, 0, 1, 1, 1]
+    # centred: the middle bar of each group on its tick
+    assert sorted(abs(x - round(x)) for x, _ in centres)[:2] == pytest.approx([0.0, 0.0])
