@@ -909,14 +909,38 @@ def human_collision_bound(
 
     An obstacle whose values cannot make a probability (:meth:`HumanObstacle.trusted`: not
     finite, a negative variance, radius or weight, weights that do not sum to 1) gives a
-    bound of 1 at every waypoint (unsafe; weights of 0 gave 0, as if there were no person).
-    See :func:`_human_collision_bound` for the rest.
+    bound of 1 at every waypoint (unsafe; weights of 0 gave 0, as if there were no person),
+    as does a bound that is not finite (:func:`unsafe_if_not_finite`). See
+    :func:`_human_collision_bound` for the rest.
     """
     bound, pen = _human_collision_bound(
         robot_centers, robot_radii, human, pairs, exact=exact, entries=entries, reduce=reduce
     )
-    trusted = human.trusted().to(bound.device)
-    return torch.where(trusted, bound, torch.ones_like(bound)), pen
+    return unsafe_if_not_finite(bound, human), pen
+
+
+def unsafe_if_not_finite(bound: torch.Tensor, human: HumanObstacle) -> torch.Tensor:
+    """The collision bound with every value that cannot be trusted set to 1 (unsafe).
+
+    A NaN or inf in the predicted human does not show up as a NaN bound: the sphere-pair
+    pruning (:func:`candidate_pairs`, :func:`candidate_entries`) drops every pair it cannot
+    compare (for all times, as it reduces over them), and the bound without pairs is the
+    dropped actions' weight, usually 0 ("no human"). So the bound counts as 1 everywhere
+    when the obstacle's values cannot make a probability (:meth:`HumanObstacle.trusted`: not
+    finite, a negative variance, radius or weight, weights that do not sum to 1), and so does
+    a non-finite bound itself; :func:`human_collision_bound` applies it to what it returns.
+    Otherwise the values and their gradients are unchanged. (:class:`Forecast` rejects
+    non-finite values when built; this is the planner's own second line of defence.)
+
+    Args:
+        bound: (..., W_x) collision bounds in [0, 1].
+        human: the obstacle the bound was computed for.
+
+    Returns:
+        (..., W_x) bounds, equal to ``bound`` where it is finite and the human is finite.
+    """
+    human_ok = human.trusted().to(bound.device)
+    return torch.where(human_ok & torch.isfinite(bound), bound, torch.ones_like(bound))
 
 
 def _human_collision_bound(

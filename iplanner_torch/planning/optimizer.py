@@ -46,6 +46,7 @@ from iplanner_torch.checks import seed as check_seed
 from iplanner_torch.collision.human_spheres import HumanSphereMap, SphereLayout
 from iplanner_torch.errors import ConfigError, DataError, PlanningError, ShapeError
 from iplanner_torch.planning import costs as C
+from iplanner_torch.planning.costs import unsafe_if_not_finite  # noqa: F401 (its old home)
 from iplanner_torch.planning.trajectory import Trajectory, accelerations, uniform_times
 from iplanner_torch.prediction.forecast import Forecast
 from iplanner_torch.types import all_finite, check_finite, check_shape
@@ -427,29 +428,6 @@ def _held(q: torch.Tensor, hold: int) -> torch.Tensor:
     return out
 
 
-def unsafe_if_not_finite(bound: torch.Tensor, human: C.HumanObstacle) -> torch.Tensor:
-    """The collision bound with every value that cannot be trusted set to 1 (unsafe).
-
-    A NaN or inf in the predicted human does not show up as a NaN bound: the sphere-pair
-    pruning (:func:`costs.candidate_pairs`, :func:`costs.candidate_entries`) drops every pair
-    it cannot compare (for all times, as it reduces over them), and the bound without pairs is
-    the dropped actions' weight, usually 0 ("no human"). So the bound counts as 1 everywhere
-    when any mean, variance or weight of the human obstacle is not finite, and so does a
-    non-finite bound itself. Otherwise the values and their gradients are unchanged.
-    (:class:`Forecast` rejects non-finite values when built; this is the planner's own second
-    line of defence.)
-
-    Args:
-        bound: (..., W_x) collision bounds in [0, 1].
-        human: the obstacle the bound was computed for.
-
-    Returns:
-        (..., W_x) bounds, equal to ``bound`` where it is finite and the human is finite.
-    """
-    human_ok = human.trusted().to(bound.device)
-    return torch.where(human_ok & torch.isfinite(bound), bound, torch.ones_like(bound))
-
-
 class TrajectoryOptimizer:
     """Optimises B space-time trajectories against the probabilistic human-collision bound.
 
@@ -777,7 +755,6 @@ class TrajectoryOptimizer:
                     entries=None if pairs is None else pairs[1],
                     reduce=self.cfg.bound_reduce,
                 )
-                bound = unsafe_if_not_finite(bound, human)
             if look_idx is not None:
                 excess = self._excess(bound[:, n_x:])
                 terms["human_lookahead_penalty"] = excess.square().sum(-1)
@@ -1130,7 +1107,8 @@ class TrajectoryOptimizer:
 
         Returns:
             (N,) upper bounds of the collision probability (exact pair bounds); 1 (unsafe)
-            everywhere when the human is not finite (:func:`unsafe_if_not_finite`).
+            everywhere when the human is not finite
+            (:func:`~iplanner_torch.planning.costs.unsafe_if_not_finite`).
 
         Raises:
             ShapeError: on inputs of the wrong shape, for N = 0 (no batch of the optimiser
@@ -1158,7 +1136,6 @@ class TrajectoryOptimizer:
                 centers, self.radii, human, pairs, exact=True, entries=entries,
                 reduce=self.cfg.bound_reduce,
             )  # fmt: skip
-            bound = unsafe_if_not_finite(bound, human)
         return bound[0]
 
     def _human_obstacle(
