@@ -219,6 +219,29 @@ def compute_features(
     return torch.cat(flat, dim=-1)
 
 
+def _checked_labels(labels: torch.Tensor | np.ndarray) -> torch.Tensor:
+    """(T,) int64 action labels, on their device, after the checks :func:`progress_bitmask`
+    and :func:`next_action_labels` make.
+
+    Raises:
+        ShapeError: when ``labels`` is not (T,) of an integer dtype (floats would be cut to
+            integers, NaN to a large negative one).
+        DataError: for a label below -1.
+    """
+    raw = torch.as_tensor(labels)
+    check_shape("labels", raw, ("T",))
+    if raw.is_floating_point() or raw.is_complex() or raw.dtype == torch.bool:
+        raise ShapeError(f"expected labels (T,) of an integer dtype, got {raw.dtype}")
+    lab = raw.long()
+    if lab.numel() and int(lab.min()) < -1:
+        first = int(torch.nonzero(lab < -1)[0, 0])
+        raise DataError(
+            f"labels: frame {first} has label {int(lab[first])}; expected an action index "
+            ">= 0, or -1 for an unlabelled frame"
+        )
+    return lab
+
+
 def progress_bitmask(
     labels: torch.Tensor | np.ndarray, progress_actions: Sequence[int] | None = None
 ) -> torch.Tensor:
@@ -244,17 +267,7 @@ def progress_bitmask(
         ConfigError: for an action index outside 0..62.
         DataError: for a label below -1.
     """
-    raw = torch.as_tensor(labels)
-    check_shape("labels", raw, ("T",))
-    if raw.is_floating_point() or raw.is_complex() or raw.dtype == torch.bool:
-        raise ShapeError(f"expected labels (T,) of an integer dtype, got {raw.dtype}")
-    lab = raw.long()
-    if lab.numel() and int(lab.min()) < -1:
-        first = int(torch.nonzero(lab < -1)[0, 0])
-        raise DataError(
-            f"labels: frame {first} has label {int(lab[first])}; expected an action index "
-            ">= 0, or -1 for an unlabelled frame"
-        )
+    lab = _checked_labels(labels)
     t_len = lab.shape[0]
     out = torch.zeros(t_len, dtype=torch.int64, device=lab.device)
     if t_len < 2:
@@ -295,18 +308,7 @@ def next_action_labels(labels: np.ndarray) -> np.ndarray:
             integers, NaN to a large negative one), as :func:`progress_bitmask`.
         DataError: for a label below -1.
     """
-    raw = np.asarray(labels.cpu() if isinstance(labels, torch.Tensor) else labels)
-    if raw.ndim != 1:
-        raise ShapeError(f"expected labels (T,), got shape {raw.shape}")
-    if raw.size and raw.dtype.kind not in "iu":
-        raise ShapeError(f"expected labels (T,) of an integer dtype, got {raw.dtype}")
-    lab = raw.astype(np.int64)
-    if lab.size and int(lab.min()) < -1:
-        first = int(np.flatnonzero(lab < -1)[0])
-        raise DataError(
-            f"labels: frame {first} has label {int(lab[first])}; expected an action index "
-            ">= 0, or -1 for an unlabelled frame"
-        )
+    lab = _checked_labels(labels).cpu().numpy()
     if lab.size == 0:
         return lab.copy()
     starts = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]])
