@@ -875,6 +875,20 @@ def copy_output_to(path: Path | None) -> Iterator[None]:
             err.close_line()
 
 
+def check_composed_keys(
+    cfg: DictConfig, before: Callable[[DictConfig], None] | None = None
+) -> None:
+    """The checks every command makes of its composed config before anything else: keys
+    added with ``+`` (:func:`check_added_keys`, :func:`check_added_hydra_keys`), then
+    ``before(cfg)`` when given (a command's refusal of overrides it does not read), then the
+    root keys' values (:func:`check_root_keys`)."""
+    check_added_keys(cfg)
+    check_added_hydra_keys()
+    if before is not None:
+        before(cfg)
+    check_root_keys(cfg)
+
+
 def friendly_errors(
     fn: F | None = None,
     *,
@@ -932,11 +946,7 @@ def friendly_errors(
         with copy_output_to(log_path), _terminate_as_interrupt():
             try:
                 if args and isinstance(args[0], DictConfig):
-                    check_added_keys(args[0])
-                    check_added_hydra_keys()
-                    if before is not None:
-                        before(args[0])
-                    check_root_keys(args[0])
+                    check_composed_keys(args[0], before)
                 return fn(*args, **kwargs)
             except (IPlannerError, OSError, YAMLError) as exc:  # OSError: a path that is a file
                 line = (

@@ -1513,10 +1513,7 @@ def experiment_config(*overrides: str) -> Any:
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
 
-    from iplanner_torch.cli._common import (
-        check_added_hydra_keys,
-        composition_error_text,
-    )
+    from iplanner_torch.cli._common import check_composed_keys, composition_error_text
     from iplanner_torch.errors import ConfigError
 
     if not all(isinstance(o, str) for o in overrides):
@@ -1536,9 +1533,7 @@ def experiment_config(*overrides: str) -> Any:
             hydra_config.set_config(cfg)  # the overrides, as task_overrides reads them
             with open_dict(cfg):
                 del cfg["hydra"]
-            check_added_keys(cfg)
-            check_added_hydra_keys()
-            check_root_keys(cfg)
+            check_composed_keys(cfg)
             experiment, _, _ = check_run(cfg)
     finally:
         hydra_config.cfg = None

@@ -1521,9 +1521,7 @@ def plot_sweep(
             ax.set_xticks(swept, [f"{xv:g}" for xv in swept])
             if len(swept) > 4:
                 ax.tick_params(axis="x", labelrotation=35)
-    for ax in axes.ravel():  # (shared y: one call sets every panel)
-        _from_zero(ax)
-        break
+    _from_zero(axes[0][0])  # (shared y: one call sets every panel)
     _legend_outside(axes[0][-1], title=hue, fontsize="small")
     fig.suptitle(
         f"{name} against {x}"
