@@ -30,18 +30,18 @@ def _fresh(overrides: list[str], kind: str) -> float:
 def test_every_planner_option_has_the_same_entries(option: str) -> None:
     cfg = compose(config_name="config", overrides=[f"planner={option}"])
     assert OmegaConf.to_container(cfg.planner.per_kind) == {
-        "iplanner_no_ni": {"replanner": {"fresh_fraction": 0.0}},
-        "iplanner_ni": {"replanner": {"fresh_fraction": 0.0}},
-        "iplanner_cv": {"replanner": {"fresh_fraction": 0.0}},
+        "iplanner_no_ni": {"replanner": {"fresh_fraction": 0.125}},
+        "iplanner_ni": {"replanner": {"fresh_fraction": 0.125}},
+        "iplanner_cv": {"replanner": {"fresh_fraction": 0.125}},
     }
 
 
 def test_defaults_differ_per_planner() -> None:
     assert _fresh([], "itomp") == 0.5
     assert _fresh([], "oracle") == 0.5
-    assert _fresh([], "iplanner_ni") == 0.0
-    assert _fresh([], "iplanner_no_ni") == 0.0
-    assert _fresh([], "iplanner_cv") == 0.0  # the I-Planners' settings, on another forecast
+    assert _fresh([], "iplanner_ni") == 0.125
+    assert _fresh([], "iplanner_no_ni") == 0.125
+    assert _fresh([], "iplanner_cv") == 0.125  # the I-Planners' settings, on another forecast
 
 
 def test_command_line_value_serves_every_planner() -> None:
@@ -53,7 +53,7 @@ def test_command_line_value_serves_every_planner() -> None:
 def test_command_line_entry_changes_one_planner() -> None:
     given = ["planner.per_kind.iplanner_ni.replanner.fresh_fraction=0.75"]
     assert _fresh(given, "iplanner_ni") == 0.75
-    assert _fresh(given, "iplanner_no_ni") == 0.0
+    assert _fresh(given, "iplanner_no_ni") == 0.125
     assert _fresh(given, "itomp") == 0.5
     added = ["+planner.per_kind.itomp.replanner.fresh_fraction=0.0"]
     assert _fresh(added, "itomp") == 0.0

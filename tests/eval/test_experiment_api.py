@@ -45,7 +45,7 @@ def test_experiment_config_is_the_shipped_planner_not_the_dataclass_defaults() -
         OptimizerCfg().safe_hold,
         OptimizerCfg().keep_start,
     )
-    assert exp.episode.planner.per_kind["iplanner_ni"] == {"replanner": {"fresh_fraction": 0.0}}
+    assert exp.episode.planner.per_kind["iplanner_ni"] == {"replanner": {"fresh_fraction": 0.125}}
     assert exp.planners == ["itomp", "iplanner_no_ni", "iplanner_ni"] and exp.seeds == [0]
     assert exp.robot.name == "kuka_iiwa14" and exp.predictor_paths == {}
     assert not GlobalHydra.instance().is_initialized()  # left as found: it can run again

@@ -101,6 +101,45 @@ def test_cycles_every_m_and_warm_starts_from_the_shifted_plan(
     assert rp.stats.overruns == 0
 
 
+def test_one_fresh_candidate_is_the_least_acceleration_cubic(point_robot: PointRobot) -> None:
+    """``fresh_fraction`` 1/8 of 8 candidates (the I-Planners' setting): seven warm starts and
+    one fresh candidate, the cubic from the plan's start state to rest at the goal, arriving
+    where the solve is told to (checked against the cubic's coefficients solved here from its
+    four end conditions), with no perturbation."""
+    import numpy as np
+
+    opt = _spy(point_robot)
+    rp = Replanner(opt, ReplannerCfg(replan_step_s=0.5, fresh_fraction=0.125, tracking="exact"))
+    q0, qg = torch.tensor([-1.0, 0.0]), torch.tensor([1.0, 0.3])
+    rp.reset(q0, qg, t=0.0)
+    first = rp.step(0.0, q0, None)
+    assert first is not None
+    second = rp.step(0.5, rp.command(0.5)[0], None)
+    assert second is not None
+    call = opt.calls[1]
+    q_init, w = call["q_init"], opt.cfg.num_waypoints
+    assert q_init.shape[0] == 8
+    dt = call["duration"] / (w - 1)
+    n_a = opt.arrival_index(call["duration"], call["arrive"] - call["t0"])
+    t_a = n_a * dt
+    q_s = call["q_start"].double().numpy()
+    qd_s = call["qd_start"].double().numpy()
+    # q(t) = c0 + c1 t + c2 t^2 + c3 t^3 with q(0) = q_s, q'(0) = qd_s, q(t_a) = goal,
+    # q'(t_a) = 0, then the goal held
+    ends = np.array(
+        [[1, 0, 0, 0], [0, 1, 0, 0], [1, t_a, t_a**2, t_a**3], [0, 1, 2 * t_a, 3 * t_a**2]]
+    )
+    coef = np.linalg.solve(ends, np.stack([q_s, qd_s, qg.double().numpy(), np.zeros(2)]))
+    ts = np.minimum(np.arange(w) * dt, t_a)
+    cubic = np.stack([ts**0, ts, ts**2, ts**3], axis=1) @ coef  # (W, J)
+    assert np.allclose(q_init[-1].double().numpy(), cubic, atol=1e-5)
+    # the others are the last cycle's candidates shifted (row 0 its plan), not fresh ones
+    ref = resample_linear(first.candidates[1:], first.times, call["t0"] + dt * torch.arange(w))
+    ref = ref + torch.linspace(1.0, 0.0, w).view(1, w, 1) * (call["q_start"] - ref[:, :1])
+    assert torch.allclose(q_init[1:7], ref[:6].to(q_init), atol=1e-5)
+    assert not np.allclose(q_init[6].double().numpy(), cubic, atol=1e-3)
+
+
 def _drive(
     rp: Replanner,
     q: torch.Tensor,
