@@ -229,6 +229,17 @@ def real_array(name: str, value: object) -> np.ndarray:
     return arr
 
 
+def increasing_times(name: str, times: np.ndarray) -> np.ndarray:
+    """``times`` (a 1-D numpy array [s]), checked finite and strictly increasing.
+
+    Raises:
+        DataError: naming ``name``, for a NaN or infinite time or one not after the last.
+    """
+    if not (np.isfinite(times).all() and (np.diff(times) > 0).all()):
+        raise DataError(f"expected {name} finite and strictly increasing, got {times}")
+    return times
+
+
 #: The scalar types :func:`field_kind` reports.
 SCALAR_TYPES: tuple[type, ...] = (bool, int, float, str)
 

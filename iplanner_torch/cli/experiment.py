@@ -1162,15 +1162,23 @@ def extend_run(cfg: DictConfig, out_dir: Path, experiment: Any) -> dict[str, int
     return kept
 
 
-def _digests(paths: dict[str, str]) -> dict[str, str]:
-    """SHA-256 of each checkpoint file of ``paths`` (variant -> path) that exists."""
-    import hashlib
-
+def _checkpoint_bytes(paths: dict[str, str]) -> dict[str, bytes]:
+    """The contents of each checkpoint file of ``paths`` (variant -> path) that exists, read
+    once for its digest and its settings."""
     return {
-        variant: hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        variant: Path(path).read_bytes()
         for variant, path in sorted(paths.items())
         if Path(path).is_file()
     }
+
+
+def _digests(paths: dict[str, str], data: dict[str, bytes] | None = None) -> dict[str, str]:
+    """SHA-256 of each checkpoint file of ``paths`` (variant -> path) that exists; ``data``:
+    their contents when already read (:func:`_checkpoint_bytes`)."""
+    import hashlib
+
+    data = _checkpoint_bytes(paths) if data is None else data
+    return {variant: hashlib.sha256(raw).hexdigest() for variant, raw in data.items()}
 
 
 def _refuse_changed_predictor(
@@ -1189,18 +1197,22 @@ def _refuse_changed_predictor(
         )
 
 
-def _checkpoint_settings(paths: dict[str, str]) -> dict[str, Any]:
+def _checkpoint_settings(paths: dict[str, str], data: dict[str, bytes]) -> dict[str, Any]:
     """Variant -> ``{"path", "predictor"}``: each checkpoint's file and the predictor settings
-    it was trained with (its ``cfg``), which can differ from the ``predictor`` config group
-    that :data:`RUN_INPUTS` records with the run's settings (a variant trained on purpose into
-    the folder the run reads). A file that does not read records its path alone."""
+    it was trained with (its ``cfg``, from ``data``, the files' contents), which can differ
+    from the ``predictor`` config group that :data:`RUN_INPUTS` records with the run's
+    settings (a variant trained on purpose into the folder the run reads). A file that is
+    missing or does not read records its path alone."""
+    import io
+
     import torch
 
     out: dict[str, Any] = {}
     for variant, path in sorted(paths.items()):
         entry: dict[str, Any] = {"path": str(path)}
         try:
-            cfg = torch.load(path, map_location="cpu", weights_only=True).get("cfg")
+            raw = io.BytesIO(data[variant])
+            cfg = torch.load(raw, map_location="cpu", weights_only=True).get("cfg")
         except Exception:  # noqa: BLE001 - loading the predictor says what is wrong
             cfg = None
         if isinstance(cfg, dict):
@@ -1222,7 +1234,8 @@ def record_predictors(out_dir: Path, scenario: str, paths: dict[str, str]) -> No
     from iplanner_torch.errors import ConfigError
 
     inputs = _read_run_inputs(out_dir)
-    digests = _digests(paths)
+    data = _checkpoint_bytes(paths)
+    digests = _digests(paths, data)
     recorded = inputs["predictors"].get(scenario)
     try:
         _refuse_changed_predictor(scenario, recorded, digests, paths)
@@ -1231,7 +1244,7 @@ def record_predictors(out_dir: Path, scenario: str, paths: dict[str, str]) -> No
         raise
     inputs["predictors"][scenario] = {**(recorded or {}), **digests}
     checkpoints = inputs.setdefault("predictor_checkpoints", {})
-    checkpoints[scenario] = {**checkpoints.get(scenario, {}), **_checkpoint_settings(paths)}
+    checkpoints[scenario] = {**checkpoints.get(scenario, {}), **_checkpoint_settings(paths, data)}
     _write_json(out_dir / RUN_INPUTS, inputs)
 
 

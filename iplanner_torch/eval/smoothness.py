@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from iplanner_torch.checks import finite, is_real, real_array
+from iplanner_torch.checks import finite, increasing_times, is_real, real_array
 from iplanner_torch.errors import ConfigError, DataError, ShapeError
 from iplanner_torch.eval.metrics import joint_accelerations
 
@@ -74,9 +74,7 @@ class PlanRecord:
         times = real_array("times", self.times).astype(np.float64)
         if times.ndim != 1 or times.shape[0] == 0:
             raise ShapeError(f"expected plan times (W,) with W >= 1, got shape {times.shape}")
-        if not (np.isfinite(times).all() and (np.diff(times) > 0).all()):
-            # (a later error named smoothness_breakdown's t, not the plan)
-            raise DataError(f"expected plan times finite and strictly increasing, got {times}")
+        increasing_times("plan times", times)  # (a later error named the breakdown's t)
         q = real_array("q", self.q).astype(np.float64)
         if q.ndim != 2 or q.shape[0] != times.shape[0]:
             raise ShapeError(f"expected plan q (W, J) with W = {times.shape[0]}, got {q.shape}")

@@ -157,8 +157,7 @@ class SpreadCalibrator:
                 f"expected times (T,) and frames (T, {self._k}, 3), got {times.shape} and "
                 f"{frames.shape}"
             )
-        if not (np.isfinite(times).all() and (np.diff(times) > 0).all()):
-            raise DataError(f"expected times finite and strictly increasing, got {times}")
+        checks.increasing_times("times", times)
         new = times > self._last_frame_t
         if not new.any():
             return
